@@ -28,9 +28,16 @@ impl fmt::Display for Location {
 #[derive(Debug)]
 pub enum Error {
     /// A file could not be read at all.
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     /// A file was read but its content is wrong.
-    Parse { path: PathBuf, location: Location, message: String },
+    Parse {
+        path: PathBuf,
+        location: Location,
+        message: String,
+    },
     /// The scene as a whole is unusable (no triangles left, NaN camera, ...).
     Scene(String),
     /// A caller passed bad arguments (bad ray data, bad grid dims, ...).
@@ -43,10 +50,17 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
     pub fn parse(path: &Path, location: Location, message: impl Into<String>) -> Self {
-        Error::Parse { path: path.to_path_buf(), location, message: message.into() }
+        Error::Parse {
+            path: path.to_path_buf(),
+            location,
+            message: message.into(),
+        }
     }
     pub fn io(path: &Path, source: std::io::Error) -> Self {
-        Error::Io { path: path.to_path_buf(), source }
+        Error::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     }
 }
 
@@ -54,10 +68,18 @@ impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Error::Io { path, source } => write!(f, "{}: {source}", path.display()),
-            Error::Parse { path, location: Location::Whole, message } => {
+            Error::Parse {
+                path,
+                location: Location::Whole,
+                message,
+            } => {
                 write!(f, "{}: {message}", path.display())
             }
-            Error::Parse { path, location, message } => {
+            Error::Parse {
+                path,
+                location,
+                message,
+            } => {
                 write!(f, "{}:{location}: {message}", path.display())
             }
             Error::Scene(m) => write!(f, "scene: {m}"),

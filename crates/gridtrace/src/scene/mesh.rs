@@ -13,7 +13,11 @@ pub struct Material {
 
 impl Default for Material {
     fn default() -> Self {
-        Material { name: "default".into(), diffuse: Vec3::splat(0.75), reflectivity: 0.0 }
+        Material {
+            name: "default".into(),
+            diffuse: Vec3::splat(0.75),
+            reflectivity: 0.0,
+        }
     }
 }
 

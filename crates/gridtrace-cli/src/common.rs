@@ -1,0 +1,89 @@
+//! Options shared by several commands: choosing the scene and the grid.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use glam::Vec3;
+use gridtrace::scene::{Scene, builtin, file::load_scene};
+use gridtrace::{AccelKind, Resolution};
+
+#[derive(Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// A scene file (TOML) or a mesh file (OBJ, PLY, glTF/GLB, STL, OFF).
+    pub file: Option<PathBuf>,
+    /// A built-in scene: knot-box, mirror-spheres, sparse-room.
+    #[arg(long, conflicts_with_all = ["file", "mesh"])]
+    pub scene: Option<String>,
+    /// Any mesh, in an auto-framed scene with a floor, a light and a camera.
+    #[arg(long, conflicts_with = "file")]
+    pub mesh: Option<PathBuf>,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct GridArgs {
+    /// Acceleration: plain uniform grid or grid with proximity clouds.
+    #[arg(long, default_value = "grid", value_parser = |s: &str| s.parse::<AccelKind>())]
+    pub accel: AccelKind,
+    /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.
+    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Resolution>())]
+    pub grid: Resolution,
+}
+
+impl SceneArgs {
+    /// Loads the scene the arguments name; a plain mesh file gets the auto-framed scene.
+    pub fn load(&self) -> gridtrace::Result<(Scene, String)> {
+        if let Some(name) = &self.scene {
+            let s = builtin::scene(name).ok_or_else(|| {
+                let names: Vec<_> = builtin::SCENES.iter().map(|(n, _)| *n).collect();
+                gridtrace::Error::InvalidInput(format!(
+                    "unknown scene '{name}'; built-in scenes: {}",
+                    names.join(", ")
+                ))
+            })?;
+            return Ok((s, name.clone()));
+        }
+        let path = match (&self.file, &self.mesh) {
+            (Some(p), _) | (None, Some(p)) => p,
+            (None, None) => return Ok((builtin::knot_box(), "knot-box".into())),
+        };
+        let is_scene = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        let scene = if is_scene && self.mesh.is_none() {
+            load_scene(path)?
+        } else {
+            builtin::mesh_scene(gridtrace::io::load_mesh(path)?)
+        };
+        Ok((scene, path.display().to_string()))
+    }
+}
+
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let v: Result<Vec<f32>, _> = s.split(',').map(|p| p.trim().parse::<f32>()).collect();
+    match v.as_deref() {
+        Ok([x, y, z]) if x.is_finite() && y.is_finite() && z.is_finite() => {
+            Ok(Vec3::new(*x, *y, *z))
+        }
+        _ => Err(format!("expected x,y,z with finite numbers, got '{s}'")),
+    }
+}
+
+pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
+    let parts: Vec<&str> = s.split(['x', 'X']).collect();
+    let nums: Result<Vec<u32>, _> = parts.iter().map(|p| p.trim().parse::<u32>()).collect();
+    match nums.as_deref() {
+        Ok([n]) if *n > 0 => Ok((*n, *n)),
+        Ok([w, h]) if *w > 0 && *h > 0 => Ok((*w, *h)),
+        _ => Err(format!("expected WxH (or N), got '{s}'")),
+    }
+}
+
+pub fn fmt_bytes(b: usize) -> String {
+    if b >= 1 << 20 {
+        format!("{:.2} MiB", b as f64 / (1 << 20) as f64)
+    } else if b >= 1 << 10 {
+        format!("{:.1} KiB", b as f64 / 1024.0)
+    } else {
+        format!("{b} B")
+    }
+}

@@ -1,0 +1,55 @@
+//! `gridtrace info`: mesh, grid and memory statistics.
+
+use clap::Args;
+
+use crate::common::{GridArgs, SceneArgs, fmt_bytes};
+
+#[derive(Args)]
+pub struct InfoArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    #[command(flatten)]
+    grid: GridArgs,
+}
+
+pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
+    let (scene, name) = a.scene.load()?;
+    let prepared = scene.prepare(a.grid.grid)?;
+    let g = &prepared.accel.grid;
+    let s = &g.stats;
+    println!("scene            {name}");
+    println!("vertices         {}", scene.mesh.positions.len());
+    println!(
+        "triangles        {} ({} degenerate dropped)",
+        prepared.accel.tris.len(),
+        prepared.degenerate_dropped
+    );
+    println!("materials        {}", prepared.materials.len());
+    println!("lights           {}", prepared.lights.len());
+    println!("bounds           {} .. {}", g.bounds.min, g.bounds.max);
+    println!(
+        "grid             {}x{}x{} = {} cells",
+        s.dims[0], s.dims[1], s.dims[2], s.cells
+    );
+    println!("empty cells      {:.1}%", s.empty_fraction() * 100.0);
+    println!(
+        "references       {} ({:.2} per triangle, max {} in a cell)",
+        s.references,
+        s.refs_per_triangle(),
+        s.max_refs_in_cell
+    );
+    println!("build            {:.2} ms", s.build_ms);
+    println!("memory:");
+    let mut total = 0;
+    for (k, b) in prepared.memory() {
+        println!("  {k:<14} {:>12}", fmt_bytes(b));
+        total += b;
+    }
+    println!("  {:<14} {:>12}", "total", fmt_bytes(total));
+    println!(
+        "  {:<14} {:>12}   (paper's model M = n*96 + cells*16)",
+        "paper model",
+        fmt_bytes(prepared.paper_memory_model())
+    );
+    Ok(())
+}

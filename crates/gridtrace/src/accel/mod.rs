@@ -1,0 +1,16 @@
+//! The acceleration structure: the paper's uniform grid with proximity clouds, and its traversal.
+
+pub mod aabb;
+pub mod grid;
+pub mod proximity;
+pub mod traverse;
+pub mod tri_box;
+pub mod triangle;
+
+pub use aabb::Aabb;
+pub use grid::{Cell, Grid, GridStats, Resolution};
+pub use traverse::{
+    AccelKind, Counters, GridAccel, Hit, NoCounters, Ray, TraversalCounters, brute_force_intersect,
+    brute_force_occluded,
+};
+pub use triangle::{TriAccel, TriHit};

@@ -1,0 +1,349 @@
+//! Amanatides-Woo 3D-DDA through the grid, with optional proximity-cloud jumps, and the closest-
+//! hit and any-hit queries on top of it.
+
+use std::ops::ControlFlow;
+
+use glam::{IVec3, Vec3};
+
+use super::{Cell, Grid, TriAccel};
+
+/// A ray `origin + t * dir`. `dir` need not be normalised: `t` is in units of its length.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3) -> Ray {
+        Ray { origin, dir }
+    }
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// Closest hit. A miss is explicit: `t = INFINITY`, `tri = u32::MAX`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub tri: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Hit {
+    pub const MISS: Hit = Hit {
+        t: f32::INFINITY,
+        tri: u32::MAX,
+        u: 0.0,
+        v: 0.0,
+    };
+    pub fn is_hit(&self) -> bool {
+        self.tri != u32::MAX
+    }
+}
+
+/// Which acceleration the traversal uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AccelKind {
+    /// Plain uniform grid: one DDA step per cell.
+    Grid,
+    /// Uniform grid with proximity clouds: empty space is crossed in jumps.
+    ProximityCloud,
+}
+
+impl std::str::FromStr for AccelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "grid" | "g" => Ok(AccelKind::Grid),
+            "pc" | "proximity" => Ok(AccelKind::ProximityCloud),
+            _ => Err(format!("accel must be 'grid' or 'pc', got '{s}'")),
+        }
+    }
+}
+
+impl AccelKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            AccelKind::Grid => "grid",
+            AccelKind::ProximityCloud => "pc",
+        }
+    }
+}
+
+/// Traversal counters. The no-op implementation compiles to nothing, so the hot loop pays for
+/// statistics only when they are asked for.
+pub trait Counters {
+    fn cell(&mut self) {}
+    fn jump(&mut self) {}
+    fn tri_test(&mut self) {}
+}
+
+/// Counters that cost nothing.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoCounters;
+impl Counters for NoCounters {}
+
+/// Counters that count.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct TraversalCounters {
+    /// Cells visited (DDA steps plus landing cells of jumps).
+    pub cells: u64,
+    /// Proximity-cloud jumps taken.
+    pub jumps: u64,
+    /// Ray/triangle tests.
+    pub tri_tests: u64,
+}
+
+impl Counters for TraversalCounters {
+    #[inline(always)]
+    fn cell(&mut self) {
+        self.cells += 1;
+    }
+    #[inline(always)]
+    fn jump(&mut self) {
+        self.jumps += 1;
+    }
+    #[inline(always)]
+    fn tri_test(&mut self) {
+        self.tri_tests += 1;
+    }
+}
+
+impl std::ops::AddAssign for TraversalCounters {
+    fn add_assign(&mut self, o: Self) {
+        self.cells += o.cells;
+        self.jumps += o.jumps;
+        self.tri_tests += o.tri_tests;
+    }
+}
+
+/// The grid together with the triangles it references: everything a ray query needs.
+#[derive(Debug, Clone)]
+pub struct GridAccel {
+    pub grid: Grid,
+    pub tris: Vec<TriAccel>,
+}
+
+impl GridAccel {
+    /// Closest hit with `t_min < t < t_max`.
+    pub fn intersect<C: Counters>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+    ) -> Hit {
+        let mut best = Hit {
+            t: t_max,
+            ..Hit::MISS
+        };
+        self.walk(
+            ray,
+            t_min,
+            t_max,
+            kind,
+            counters,
+            |refs, t_cell_exit, counters| {
+                for &tri in refs {
+                    counters.tri_test();
+                    if let Some(h) =
+                        self.tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t)
+                    {
+                        best = Hit {
+                            t: h.t,
+                            tri,
+                            u: h.u,
+                            v: h.v,
+                        };
+                    }
+                }
+                // A hit beyond this cell's exit may be beaten by a triangle in a later cell; only a
+                // hit inside the cell (or before it) is final.
+                if best.tri != u32::MAX && best.t <= t_cell_exit {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            },
+        );
+        if best.tri == u32::MAX {
+            Hit::MISS
+        } else {
+            best
+        }
+    }
+
+    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
+    pub fn occluded<C: Counters>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+    ) -> bool {
+        let mut hit = false;
+        self.walk(ray, t_min, t_max, kind, counters, |refs, _, counters| {
+            for &tri in refs {
+                counters.tri_test();
+                if self.tris[tri as usize]
+                    .intersect(ray.origin, ray.dir, t_min, t_max)
+                    .is_some()
+                {
+                    hit = true;
+                    return ControlFlow::Break(());
+                }
+            }
+            ControlFlow::Continue(())
+        });
+        hit
+    }
+
+    /// Visits the non-empty cells pierced by the ray within `[t_min, t_max]`, front to back,
+    /// calling `visit(refs, t_cell_exit)` until it breaks.
+    ///
+    /// Boundary distances are recomputed from the integer cell coordinate at every step
+    /// (`t = (grid_min + k * cell_size - origin) / dir`) instead of accumulating `t_delta`, so
+    /// they do not drift, and re-entering the DDA after a proximity jump is the same computation.
+    #[inline]
+    pub fn walk<C: Counters>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+        mut visit: impl FnMut(&[u32], f32, &mut C) -> ControlFlow<()>,
+    ) {
+        let g = &self.grid;
+        let inv_dir = ray.dir.recip();
+        let Some((t_enter, t_leave)) = g.bounds.clip(ray.origin, inv_dir, t_min, t_max) else {
+            return;
+        };
+        let dims = g.dims.as_ivec3();
+        let step = IVec3::new(sign(ray.dir.x), sign(ray.dir.y), sign(ray.dir.z));
+        // Offset of the boundary ahead of a cell: +1 cell when stepping up, 0 when stepping down.
+        let ahead = step.max(IVec3::ZERO);
+        let world_to_grid = |p: Vec3| ((p - g.bounds.min) * g.inv_cell_size).floor().as_ivec3();
+        let mut cell = world_to_grid(ray.at(t_enter)).clamp(IVec3::ZERO, dims - 1);
+        let boundary_t = |axis: usize, k: i32| {
+            if step[axis] == 0 {
+                f32::INFINITY
+            } else {
+                (g.bounds.min[axis] + k as f32 * g.cell_size[axis] - ray.origin[axis])
+                    * inv_dir[axis]
+            }
+        };
+        let mut t_next = Vec3::new(
+            boundary_t(0, cell.x + ahead.x),
+            boundary_t(1, cell.y + ahead.y),
+            boundary_t(2, cell.z + ahead.z),
+        );
+        let use_pc = kind == AccelKind::ProximityCloud;
+        // Every iteration moves at least one cell forward along some axis, so this bounds the
+        // loop even if floating point misbehaves: never a hang.
+        let mut budget = (dims.x + dims.y + dims.z) as u32 * 2 + 8;
+        loop {
+            counters.cell();
+            let t_exit = t_next.min_element();
+            let Cell { start, count, dist } = g.cells[g.cell_index(cell.as_uvec3())];
+            if count > 0 {
+                let refs = &g.refs[start as usize..(start + count) as usize];
+                if visit(refs, t_exit.min(t_leave), counters).is_break() {
+                    return;
+                }
+            } else if use_pc && dist >= 2 {
+                // The cube of cells within Chebyshev distance dist-1 is empty: leave it at once.
+                let k = (dist - 1).min(1 << 20) as i32;
+                let t_cube = Vec3::new(
+                    boundary_t(0, cell.x + ahead.x + step.x * k),
+                    boundary_t(1, cell.y + ahead.y + step.y * k),
+                    boundary_t(2, cell.z + ahead.z + step.z * k),
+                );
+                let t_jump = t_cube.min_element();
+                if t_jump >= t_leave {
+                    return;
+                }
+                counters.jump();
+                let axis = t_cube.min_position();
+                // Land in the cell where the ray leaves the cube: the exit axis moves k+1 cells,
+                // the others take the cell of the exit point, kept inside the cube's range
+                // (rounding at a cube edge must not move the ray sideways out of it).
+                let landing = world_to_grid(ray.at(t_jump)).clamp(cell - k, cell + k);
+                let mut next = landing;
+                next[axis] = cell[axis] + step[axis] * (k + 1);
+                cell = next;
+                if cell.cmplt(IVec3::ZERO).any() || cell.cmpge(dims).any() {
+                    return;
+                }
+                t_next = Vec3::new(
+                    boundary_t(0, cell.x + ahead.x),
+                    boundary_t(1, cell.y + ahead.y),
+                    boundary_t(2, cell.z + ahead.z),
+                );
+                budget = budget.saturating_sub(1);
+                if budget == 0 {
+                    return;
+                }
+                continue;
+            }
+            if t_exit >= t_leave {
+                return;
+            }
+            let axis = t_next.min_position();
+            cell[axis] += step[axis];
+            if cell[axis] < 0 || cell[axis] >= dims[axis] {
+                return;
+            }
+            t_next[axis] = boundary_t(axis, cell[axis] + ahead[axis]);
+            budget -= 1;
+            if budget == 0 {
+                return;
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn sign(x: f32) -> i32 {
+    if x > 0.0 {
+        1
+    } else if x < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Reference closest hit: every triangle tested. The ground truth for all traversal tests.
+pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> Hit {
+    let mut best = Hit {
+        t: t_max,
+        ..Hit::MISS
+    };
+    for (i, tri) in tris.iter().enumerate() {
+        if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
+            best = Hit {
+                t: h.t,
+                tri: i as u32,
+                u: h.u,
+                v: h.v,
+            };
+        }
+    }
+    if best.tri == u32::MAX {
+        Hit::MISS
+    } else {
+        best
+    }
+}
+
+/// Reference any hit.
+pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    tris.iter()
+        .any(|t| t.intersect(ray.origin, ray.dir, t_min, t_max).is_some())
+}

@@ -1,0 +1,250 @@
+//! CPU renderer. Each pixel follows exactly the steps the GPU wavefront kernels take (eye ray,
+//! shading with shadow rays, up to two reflection rays), so the two images agree.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::Result;
+use crate::accel::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
+use crate::render::{Image, Mode, RayCounts, RenderOptions, RenderStats};
+use crate::scene::{CameraFrame, PreparedScene};
+
+/// Shading geometry at a hit, both normals facing the incoming ray.
+#[derive(Debug, Clone, Copy)]
+pub struct Surface {
+    pub position: Vec3,
+    /// Unit geometric normal.
+    pub ng: Vec3,
+    /// Unit interpolated vertex normal (the geometric one where interpolation degenerates).
+    pub ns: Vec3,
+}
+
+/// Surface at a hit of `ray` on triangle `hit.tri`.
+#[inline]
+pub fn surface_at(scene: &PreparedScene, ray: &Ray, hit: &Hit) -> Surface {
+    let tri = &scene.accel.tris[hit.tri as usize];
+    let mut ng = tri.normal().normalize();
+    let [i0, i1, i2] = scene.tri_vertices[hit.tri as usize];
+    let w = 1.0 - hit.u - hit.v;
+    let mut ns = (scene.normals[i0 as usize] * w
+        + scene.normals[i1 as usize] * hit.u
+        + scene.normals[i2 as usize] * hit.v)
+        .normalize_or_zero();
+    if ns == Vec3::ZERO {
+        ns = ng;
+    }
+    // Two-sided surfaces: face both normals towards the viewer.
+    if ng.dot(ray.dir) > 0.0 {
+        ng = -ng;
+    }
+    if ns.dot(ng) < 0.0 {
+        ns = -ns;
+    }
+    Surface {
+        position: ray.at(hit.t),
+        ng,
+        ns,
+    }
+}
+
+/// Renders the scene with its own camera and lights.
+pub fn render(
+    scene: &PreparedScene,
+    opts: &RenderOptions,
+    progress: Option<&(dyn Fn(u32) + Sync)>,
+) -> Result<(Image, RenderStats)> {
+    if opts.mode == Mode::Heat {
+        render_generic::<TraversalCounters>(scene, opts, progress)
+    } else {
+        render_generic::<NoCounters>(scene, opts, progress)
+    }
+}
+
+/// Renders and also counts traversal work (cells, jumps, triangle tests).
+pub fn render_with_counters(
+    scene: &PreparedScene,
+    opts: &RenderOptions,
+) -> Result<(Image, RenderStats)> {
+    render_generic::<TraversalCounters>(scene, opts, None)
+}
+
+trait Collect: Counters + Default + Send {
+    fn total(&self) -> TraversalCounters;
+    fn cost(&self) -> u64 {
+        let t = self.total();
+        t.cells + t.tri_tests
+    }
+}
+impl Collect for NoCounters {
+    fn total(&self) -> TraversalCounters {
+        TraversalCounters::default()
+    }
+}
+impl Collect for TraversalCounters {
+    fn total(&self) -> TraversalCounters {
+        *self
+    }
+}
+
+fn render_generic<C: Collect>(
+    scene: &PreparedScene,
+    opts: &RenderOptions,
+    progress: Option<&(dyn Fn(u32) + Sync)>,
+) -> Result<(Image, RenderStats)> {
+    opts.validate()?;
+    let t0 = Instant::now();
+    let cam = scene.camera.frame(opts.width, opts.height);
+    let mut img = Image::new(opts.width, opts.height);
+    const BAND: usize = 4;
+    let width = opts.width as usize;
+    let (rays, counters) = img
+        .pixels
+        .par_chunks_mut(width * BAND)
+        .enumerate()
+        .map(|(band, rows)| {
+            let mut rays = RayCounts::default();
+            let mut total = TraversalCounters::default();
+            for (i, px) in rows.iter_mut().enumerate() {
+                let x = (i % width) as u32;
+                let y = (band * BAND + i / width) as u32;
+                let mut c = C::default();
+                *px = trace_pixel(scene, &cam, x, y, opts, &mut rays, &mut c);
+                if opts.mode == Mode::Heat {
+                    *px = Vec3::splat(c.cost() as f32);
+                }
+                total += c.total();
+            }
+            if let Some(p) = progress {
+                p((rows.len() / width) as u32);
+            }
+            (rays, total)
+        })
+        .reduce(
+            || (RayCounts::default(), TraversalCounters::default()),
+            |(mut ra, mut ca), (rb, cb)| {
+                ra += rb;
+                ca += cb;
+                (ra, ca)
+            },
+        );
+    let stats = RenderStats {
+        rays,
+        counters,
+        render_ms: t0.elapsed().as_secs_f64() * 1e3,
+    };
+    Ok((img, stats))
+}
+
+/// One pixel: eye ray, then shading and reflections, accumulating `weight * colour` as the GPU
+/// wavefront does (a reflection ray carries the weight `reflectivity` of its parent).
+#[inline]
+fn trace_pixel<C: Counters>(
+    scene: &PreparedScene,
+    cam: &CameraFrame,
+    x: u32,
+    y: u32,
+    opts: &RenderOptions,
+    rays: &mut RayCounts,
+    counters: &mut C,
+) -> Vec3 {
+    let accel = &scene.accel;
+    let mut ray = cam.ray(x, y);
+    let mut weight = Vec3::ONE;
+    let mut color = Vec3::ZERO;
+    rays.eye += 1;
+    for depth in 0..=opts.mode.reflection_depth() {
+        let hit = accel.intersect(&ray, 0.0, f32::INFINITY, opts.accel, counters);
+        if !hit.is_hit() {
+            color += weight * scene.background;
+            break;
+        }
+        if opts.mode == Mode::Heat {
+            break;
+        }
+        let s = surface_at(scene, &ray, &hit);
+        let mat = &scene.materials[scene.tri_material[hit.tri as usize] as usize];
+        let reflect = if opts.mode == Mode::Trace {
+            mat.reflectivity
+        } else {
+            0.0
+        };
+        let local = weight * (1.0 - reflect) * mat.diffuse;
+        color += local * scene.ambient;
+        let origin = s.position + s.ng * scene.ray_epsilon;
+        for light in &scene.lights {
+            let (contrib, to_light, dist) = match light_contribution(&s, origin, light) {
+                Some(v) => v,
+                None => continue,
+            };
+            if opts.mode.shadows() {
+                rays.shadow += 1;
+                if accel.occluded(&Ray::new(origin, to_light), 0.0, dist, opts.accel, counters) {
+                    continue;
+                }
+            }
+            color += local * contrib;
+        }
+        if reflect > 0.0 && depth < opts.mode.reflection_depth() {
+            weight *= reflect;
+            let d = ray.dir - 2.0 * ray.dir.dot(s.ns) * s.ns;
+            ray = Ray::new(origin, d.normalize());
+            rays.reflection += 1;
+        } else {
+            break;
+        }
+    }
+    color
+}
+
+/// Diffuse irradiance from a point light: `intensity * max(0, N.L) / d^2`, with the unit
+/// direction and distance for the shadow ray. `None` when the light is behind the surface
+/// (then no shadow ray is spent: the paper's masking of rays known not to contribute).
+#[inline]
+fn light_contribution(
+    s: &crate::cpu::Surface,
+    origin: Vec3,
+    light: &crate::scene::PointLight,
+) -> Option<(Vec3, Vec3, f32)> {
+    let to = Vec3::from(light.position) - origin;
+    let d2 = to.length_squared();
+    if d2 == 0.0 {
+        return None;
+    }
+    let dist = d2.sqrt();
+    let l = to / dist;
+    let ndl = s.ns.dot(l);
+    if ndl <= 0.0 || s.ng.dot(l) <= 0.0 {
+        return None;
+    }
+    Some((Vec3::from(light.intensity) * (ndl / d2), l, dist))
+}
+
+/// Closest hits for a batch of rays, in parallel.
+pub fn intersect_batch(
+    accel: &crate::GridAccel,
+    rays: &[Ray],
+    t_min: f32,
+    t_max: f32,
+    kind: AccelKind,
+) -> Vec<Hit> {
+    rays.par_iter()
+        .with_min_len(256)
+        .map(|r| accel.intersect(r, t_min, t_max, kind, &mut NoCounters))
+        .collect()
+}
+
+/// Occlusion for a batch of rays, in parallel.
+pub fn occluded_batch(
+    accel: &crate::GridAccel,
+    rays: &[Ray],
+    t_min: f32,
+    t_max: f32,
+    kind: AccelKind,
+) -> Vec<bool> {
+    rays.par_iter()
+        .with_min_len(256)
+        .map(|r| accel.occluded(r, t_min, t_max, kind, &mut NoCounters))
+        .collect()
+}

@@ -1,0 +1,198 @@
+//! What a render is, independent of the backend: modes, options, images, statistics, and the
+//! shading rules both backends follow (so their images agree).
+
+use glam::Vec3;
+
+use crate::accel::{AccelKind, TraversalCounters};
+
+/// The paper's three workloads plus a traversal-cost view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Mode {
+    /// Eye rays, diffuse N.L shading, no shadows (Table 1).
+    Cast,
+    /// Plus one shadow ray per light per hit (Table 2).
+    Shadow,
+    /// Plus mirror reflection rays, two levels; every hit shaded with shadows (Table 3).
+    Trace,
+    /// Eye rays coloured by traversal cost (cells visited + triangle tests).
+    Heat,
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "cast" => Ok(Mode::Cast),
+            "shadow" => Ok(Mode::Shadow),
+            "trace" => Ok(Mode::Trace),
+            "heat" => Ok(Mode::Heat),
+            _ => Err(format!(
+                "mode must be cast, shadow, trace or heat; got '{s}'"
+            )),
+        }
+    }
+}
+
+impl Mode {
+    pub const ALL: [Mode; 4] = [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat];
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Cast => "cast",
+            Mode::Shadow => "shadow",
+            Mode::Trace => "trace",
+            Mode::Heat => "heat",
+        }
+    }
+    /// Reflection levels traced after the eye ray.
+    pub fn reflection_depth(self) -> u32 {
+        if self == Mode::Trace {
+            MAX_REFLECTION_DEPTH
+        } else {
+            0
+        }
+    }
+    pub fn shadows(self) -> bool {
+        matches!(self, Mode::Shadow | Mode::Trace)
+    }
+}
+
+/// Two levels of reflection: at most three path segments per pixel, as in the paper.
+pub const MAX_REFLECTION_DEPTH: u32 = 2;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
+    pub mode: Mode,
+    pub accel: AccelKind,
+}
+
+impl RenderOptions {
+    pub fn new(width: u32, height: u32, mode: Mode, accel: AccelKind) -> Self {
+        RenderOptions {
+            width,
+            height,
+            mode,
+            accel,
+        }
+    }
+    pub fn validate(&self) -> crate::Result<()> {
+        if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
+            return Err(crate::Error::InvalidInput(format!(
+                "image size {}x{} must be between 1x1 and 16384x16384",
+                self.width, self.height
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Rays traced, by kind.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct RayCounts {
+    pub eye: u64,
+    pub shadow: u64,
+    pub reflection: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.eye + self.shadow + self.reflection
+    }
+}
+
+impl std::ops::AddAssign for RayCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.eye += o.eye;
+        self.shadow += o.shadow;
+        self.reflection += o.reflection;
+    }
+}
+
+/// A linear-RGB float image, row 0 at the top. In heat mode each pixel holds the raw cost
+/// (cells + triangle tests) in all three channels until `heat_to_color`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+}
+
+impl Image {
+    pub fn new(width: u32, height: u32) -> Self {
+        Image {
+            width,
+            height,
+            pixels: vec![Vec3::ZERO; (width * height) as usize],
+        }
+    }
+
+    /// 8-bit sRGB, clamped.
+    pub fn to_rgb8(&self) -> Vec<u8> {
+        self.pixels
+            .iter()
+            .flat_map(|p| p.to_array().map(linear_to_srgb8))
+            .collect()
+    }
+
+    pub fn save_png(&self, path: &std::path::Path) -> crate::Result<()> {
+        image::save_buffer(
+            path,
+            &self.to_rgb8(),
+            self.width,
+            self.height,
+            image::ColorType::Rgb8,
+        )
+        .map_err(|e| crate::Error::io(path, std::io::Error::other(e)))
+    }
+
+    /// Maps raw per-pixel traversal cost to a colour ramp, normalised by the image's maximum.
+    pub fn heat_to_color(&self) -> Image {
+        let max = self.pixels.iter().map(|p| p.x).fold(1.0f32, f32::max);
+        let ramp = |v: f32| {
+            // Black - blue - green - yellow - red - white, on a square-root scale so that low
+            // costs remain distinguishable.
+            let stops = [
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(0.05, 0.1, 0.6),
+                Vec3::new(0.0, 0.6, 0.3),
+                Vec3::new(0.95, 0.85, 0.1),
+                Vec3::new(0.9, 0.15, 0.05),
+                Vec3::new(1.0, 1.0, 1.0),
+            ];
+            let x = v.clamp(0.0, 1.0).sqrt() * (stops.len() - 1) as f32;
+            let i = (x.floor() as usize).min(stops.len() - 2);
+            stops[i].lerp(stops[i + 1], x - i as f32)
+        };
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels: self.pixels.iter().map(|p| ramp(p.x / max)).collect(),
+        }
+    }
+}
+
+pub fn linear_to_srgb8(c: f32) -> u8 {
+    let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Per-render statistics.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct RenderStats {
+    pub rays: RayCounts,
+    /// Filled only when counters were asked for (CPU) or in heat mode.
+    pub counters: TraversalCounters,
+    pub render_ms: f64,
+}
+
+impl RenderStats {
+    pub fn mrays_per_s(&self) -> f64 {
+        self.rays.total() as f64 / (self.render_ms * 1e3).max(1e-9)
+    }
+}
