@@ -313,13 +313,12 @@ pub fn auto_dims(extent: Vec3, n_tris: usize, lambda: f32) -> UVec3 {
             break;
         }
     }
-    let d = UVec3::new(
+    UVec3::new(
         dims[0].round() as u32,
         dims[1].round() as u32,
         dims[2].round() as u32,
     )
-    .clamp(UVec3::ONE, UVec3::splat(1024));
-    d
+    .clamp(UVec3::ONE, UVec3::splat(1024))
 }
 
 #[cfg(test)]

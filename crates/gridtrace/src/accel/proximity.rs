@@ -153,6 +153,6 @@ mod tests {
         let d = chebyshev_distance_transform([5, 4, 3], &occ);
         assert_eq!(d[0], 0);
         assert_eq!(d[4 + 5 * (3 + 4 * 2)], 4);
-        assert_eq!(d[1 + 5 * (3 + 4 * 1)], 3);
+        assert_eq!(d[1 + 5 * (3 + 4)], 3); // cell (1, 3, 1)
     }
 }
