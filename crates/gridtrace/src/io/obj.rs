@@ -6,6 +6,8 @@
 //! as a metallic hint mapped to reflectivity), `#` comments, tabs / runs of spaces, `\r\n` line
 //! endings and `\` line continuations. Everything else (`vt`, `o`, `g`, `s`, `l`, ...) is ignored.
 //!
+//! Face indices must refer to vertices (and normals) defined earlier in the file.
+//!
 //! Normals are kept only when every face corner names one and no position is used with two
 //! different normals; otherwise `normals` is left empty for the scene to compute.
 

@@ -448,13 +448,19 @@ fn read_body(header: &Header, r: &mut dyn Reader, path: &Path) -> Result<Mesh> {
         if element.props.is_empty() {
             continue; // nothing stored per record, whatever the count
         }
-        let min_size = match header.format {
-            Format::Ascii => 2 * element.props.len(), // a digit and a separator per value
-            _ => element.min_binary_size(),
-        };
-        let capacity = capped_capacity(element.count, r.remaining(), min_size);
         let is_vertex = std::ptr::eq(element, vertex);
         let is_face = face.is_some_and(|f| std::ptr::eq(element, f));
+        // Smallest valid record; a face holds at least 3 indices.
+        let face_item = match face_list.map(|k| &element.props[k].kind) {
+            Some(Kind::List { item, .. }) if is_face => Some(*item),
+            _ => None,
+        };
+        let min_size = match header.format {
+            // A digit and a separator per value.
+            Format::Ascii => 2 * (element.props.len() + if face_item.is_some() { 3 } else { 0 }),
+            _ => element.min_binary_size() + face_item.map_or(0, |item| 3 * item.size()),
+        };
+        let capacity = capped_capacity(element.count, r.remaining(), min_size);
         if is_vertex {
             mesh.positions.reserve_exact(capacity);
             if normal_props.is_some() {
@@ -795,6 +801,30 @@ mod tests {
             e.starts_with(&format!("bad.ply:byte {}:", n - 12)) && e.contains("9"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn random_mutations_never_panic() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for base in [
+            binary_quad(false, "uchar", "int"),
+            binary_quad(true, "uint", "ushort"),
+        ] {
+            for _ in 0..3000 {
+                let mut data = base.clone();
+                for _ in 0..1 + next() % 4 {
+                    let i = (next() % data.len() as u64) as usize;
+                    data[i] = next() as u8;
+                }
+                let _ = parse(&data, Path::new("m.ply"));
+            }
+        }
     }
 
     #[test]
