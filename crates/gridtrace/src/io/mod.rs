@@ -1,20 +1,305 @@
 //! Mesh loaders. Each format has its own module with a `parse` function over bytes, so tests
 //! and fuzzers can feed them data without touching the file system.
+//!
+//! Every parser ends with [`finish`], which checks the invariants the rest of the library relies
+//! on (indices in range, finite coordinates, at least one triangle). Degenerate triangles are
+//! kept: the scene layer drops and counts them.
 
 use std::path::Path;
 
+use glam::Vec3;
+
 use crate::{Error, Location, Mesh, Result};
 
-/// Loads a mesh, choosing the format from the file extension.
+pub mod gltf;
+pub mod obj;
+pub mod off;
+pub mod ply;
+pub mod stl;
+
+/// Loads a mesh, choosing the format from the file extension (case-insensitive): `obj`, `ply`,
+/// `gltf`, `glb`, `stl`, `off`. OBJ material libraries and glTF external buffers are resolved
+/// relative to the file's folder.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    Err(Error::parse(
-        path,
-        Location::Whole,
-        format!("unsupported mesh format '.{ext}'"),
-    ))
+    if !matches!(ext.as_str(), "obj" | "ply" | "gltf" | "glb" | "stl" | "off") {
+        return Err(Error::parse(
+            path,
+            Location::Whole,
+            format!("unsupported mesh format '.{ext}'"),
+        ));
+    }
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    match ext.as_str() {
+        "obj" => {
+            let resolve = |name: &str| std::fs::read(dir.join(name)).ok();
+            obj::parse(&data, path, &resolve)
+        }
+        "ply" => ply::parse(&data, path),
+        "gltf" | "glb" => gltf::parse_with_base(&data, path, Some(dir)),
+        "stl" => stl::parse(&data, path),
+        "off" => off::parse(&data, path),
+        _ => unreachable!("extension checked above"),
+    }
+}
+
+/// Fails with a located error unless all components of `v` are finite.
+pub(crate) fn check_finite(path: &Path, location: Location, what: &str, v: Vec3) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::parse(
+            path,
+            location,
+            format!("non-finite {what} ({}, {}, {})", v.x, v.y, v.z),
+        ))
+    }
+}
+
+/// Final check shared by all loaders. Parsers report problems with a precise location as they
+/// find them; this catches whatever is left (and is the only check for glTF input):
+///
+/// * at least one triangle ("no triangles" otherwise),
+/// * every index `< positions.len()`,
+/// * every position finite,
+/// * `normals` empty or one per position (a mismatched or non-finite set is dropped, since
+///   normals can always be recomputed),
+/// * `triangle_materials` empty or one per triangle, each indexing `materials`.
+pub(crate) fn finish(mut mesh: Mesh, path: &Path) -> Result<Mesh> {
+    if mesh.triangles.is_empty() {
+        return Err(Error::parse(path, Location::Whole, "no triangles"));
+    }
+    let n = mesh.positions.len();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for &i in tri {
+            if i as usize >= n {
+                return Err(Error::parse(
+                    path,
+                    Location::Whole,
+                    format!("triangle {t}: vertex index {i} out of range ({n} vertices)"),
+                ));
+            }
+        }
+    }
+    for (i, &p) in mesh.positions.iter().enumerate() {
+        check_finite(path, Location::Whole, &format!("position of vertex {i}"), p)?;
+    }
+    if mesh.normals.len() != n || !mesh.normals.iter().all(|v| v.is_finite()) {
+        mesh.normals.clear();
+    }
+    if !mesh.triangle_materials.is_empty() {
+        if mesh.triangle_materials.len() != mesh.triangles.len() {
+            return Err(Error::parse(
+                path,
+                Location::Whole,
+                format!(
+                    "{} triangle materials for {} triangles",
+                    mesh.triangle_materials.len(),
+                    mesh.triangles.len()
+                ),
+            ));
+        }
+        let m = mesh.materials.len();
+        if let Some((t, &id)) = mesh
+            .triangle_materials
+            .iter()
+            .enumerate()
+            .find(|(_, id)| **id as usize >= m)
+        {
+            return Err(Error::parse(
+                path,
+                Location::Whole,
+                format!("triangle {t}: material {id} out of range ({m} materials)"),
+            ));
+        }
+    }
+    Ok(mesh)
+}
+
+/// How many records of at least `min_record_size` bytes could still fit in `remaining` bytes:
+/// the most a parser may preallocate for `declared` records announced by a header.
+pub(crate) fn capped_capacity(declared: u64, remaining: usize, min_record_size: usize) -> usize {
+    let fit = remaining / min_record_size.max(1);
+    usize::try_from(declared).unwrap_or(usize::MAX).min(fit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    /// A fresh empty folder under the system temp dir, removed on drop.
+    pub(crate) struct TempDir(pub PathBuf);
+
+    impl TempDir {
+        pub(crate) fn new(tag: &str) -> Self {
+            use std::sync::atomic::{AtomicUsize, Ordering};
+            static N: AtomicUsize = AtomicUsize::new(0);
+            let dir = std::env::temp_dir().join(format!(
+                "gridtrace-io-{tag}-{}-{}",
+                std::process::id(),
+                N.fetch_add(1, Ordering::Relaxed)
+            ));
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir).unwrap();
+            TempDir(dir)
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn tri_mesh() -> Mesh {
+        Mesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+            ..Mesh::default()
+        }
+    }
+
+    #[test]
+    fn finish_checks_invariants() {
+        let p = Path::new("m.obj");
+        assert!(finish(tri_mesh(), p).is_ok());
+
+        let err = finish(Mesh::default(), p).unwrap_err().to_string();
+        assert!(
+            err.contains("m.obj") && err.contains("no triangles"),
+            "{err}"
+        );
+
+        let mut m = tri_mesh();
+        m.triangles[0][2] = 3;
+        let err = finish(m, p).unwrap_err().to_string();
+        assert!(err.contains("out of range"), "{err}");
+
+        let mut m = tri_mesh();
+        m.positions[1].y = f32::NAN;
+        assert!(finish(m, p).unwrap_err().to_string().contains("non-finite"));
+
+        // Degenerate triangles are kept.
+        let mut m = tri_mesh();
+        m.triangles.push([0, 0, 0]);
+        assert_eq!(finish(m, p).unwrap().triangles.len(), 2);
+
+        // Mismatched normals are dropped, not an error.
+        let mut m = tri_mesh();
+        m.normals = vec![Vec3::Z];
+        assert!(finish(m, p).unwrap().normals.is_empty());
+
+        let mut m = tri_mesh();
+        m.triangle_materials = vec![1];
+        assert!(finish(m, p).is_err());
+    }
+
+    #[test]
+    fn capacity_is_capped_by_remaining_bytes() {
+        assert_eq!(capped_capacity(4_000_000_000, 36, 12), 3);
+        assert_eq!(capped_capacity(2, 1000, 12), 2);
+        assert_eq!(capped_capacity(u64::MAX, 10, 0), 10);
+    }
+
+    #[test]
+    fn load_mesh_dispatches_on_extension() {
+        let dir = TempDir::new("dispatch");
+        let obj = dir.0.join("quad.OBJ");
+        std::fs::write(
+            &obj,
+            b"mtllib quad.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl red\nf 1 2 3 4\n",
+        )
+        .unwrap();
+        std::fs::write(dir.0.join("quad.mtl"), b"newmtl red\nKd 1 0 0\n").unwrap();
+        let m = load_mesh(&obj).unwrap();
+        assert_eq!(m.triangles.len(), 2);
+        assert_eq!(m.materials.len(), 1);
+        assert_eq!(m.materials[0].diffuse, Vec3::new(1.0, 0.0, 0.0));
+
+        let off = dir.0.join("t.off");
+        std::fs::write(&off, b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+        assert_eq!(load_mesh(&off).unwrap().triangles.len(), 1);
+
+        let stl = dir.0.join("t.Stl");
+        std::fs::write(
+            &stl,
+            b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n\
+              endloop\nendfacet\nendsolid t\n",
+        )
+        .unwrap();
+        assert_eq!(load_mesh(&stl).unwrap().triangles.len(), 1);
+
+        let ply = dir.0.join("t.ply");
+        std::fs::write(
+            &ply,
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+              property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+              0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        )
+        .unwrap();
+        assert_eq!(load_mesh(&ply).unwrap().triangles.len(), 1);
+
+        let err = load_mesh(&dir.0.join("x.fbx")).unwrap_err().to_string();
+        assert!(
+            err.contains("x.fbx") && err.contains("unsupported"),
+            "{err}"
+        );
+
+        let missing = dir.0.join("missing.obj");
+        let err = load_mesh(&missing).unwrap_err();
+        assert!(matches!(err, Error::Io { .. }));
+        assert!(err.to_string().contains("missing.obj"));
+    }
+
+    /// Real-world meshes from the shared data folder, when it is present.
+    #[test]
+    fn shared_meshes_when_present() {
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/meshes/");
+        let cases: [(&str, Option<usize>, usize); 5] = [
+            ("bunny/bun_zipper.ply", Some(35_947), 69_451),
+            ("dragon/dragon_vrip_res4.ply", Some(5_205), 11_102),
+            ("sibenik/sibenik.obj", None, 73_564),
+            ("knight/knight_456.stl", None, 456),
+            ("armadillo/armadillo_cgal_52k.off", None, 52_000),
+        ];
+        for (file, verts, tris) in cases {
+            let path = PathBuf::from(root).join(file);
+            if !path.exists() {
+                continue;
+            }
+            let m = load_mesh(&path).unwrap_or_else(|e| panic!("{e}"));
+            if let Some(v) = verts {
+                assert_eq!(m.positions.len(), v, "{file}");
+            }
+            assert_eq!(m.triangles.len(), tris, "{file}");
+            if file.ends_with("sibenik.obj") {
+                assert!(!m.materials.is_empty());
+                assert_eq!(m.triangle_materials.len(), tris);
+            }
+        }
+        // The other shared meshes must at least load.
+        for file in [
+            "bunny/bun_zipper_res2.ply",
+            "bunny/bun_zipper_res4.ply",
+            "bunny/stanford-bunny.obj",
+            "bunny_lowpoly/bunny_1k.obj",
+            "bunny_lowpoly/bunny_npm_3674.obj",
+            "dragon/dragon_vrip_res2_binary.ply",
+            "dragon/dragon_vrip_res3.ply",
+            "knight/knight_422.obj",
+            "knight/knight_chess_blend_384.obj",
+        ] {
+            let path = PathBuf::from(root).join(file);
+            if path.exists() {
+                let m = load_mesh(&path).unwrap_or_else(|e| panic!("{e}"));
+                assert!(!m.triangles.is_empty(), "{file}");
+            }
+        }
+    }
 }
