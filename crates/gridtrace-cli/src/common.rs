@@ -35,10 +35,7 @@ impl SceneArgs {
         if let Some(name) = &self.scene {
             let s = builtin::scene(name).ok_or_else(|| {
                 let names: Vec<_> = builtin::SCENES.iter().map(|(n, _)| *n).collect();
-                gridtrace::Error::InvalidInput(format!(
-                    "unknown scene '{name}'; built-in scenes: {}",
-                    names.join(", ")
-                ))
+                gridtrace::Error::InvalidInput(format!("unknown scene '{name}'; built-in scenes: {}", names.join(", ")))
             })?;
             return Ok((s, name.clone()));
         }
@@ -46,9 +43,7 @@ impl SceneArgs {
             (Some(p), _) | (None, Some(p)) => p,
             (None, None) => return Ok((builtin::knot_box(), "knot-box".into())),
         };
-        let is_scene = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        let is_scene = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
         let scene = if is_scene && self.mesh.is_none() {
             load_scene(path)?
         } else {
@@ -61,9 +56,7 @@ impl SceneArgs {
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     let v: Result<Vec<f32>, _> = s.split(',').map(|p| p.trim().parse::<f32>()).collect();
     match v.as_deref() {
-        Ok([x, y, z]) if x.is_finite() && y.is_finite() && z.is_finite() => {
-            Ok(Vec3::new(*x, *y, *z))
-        }
+        Ok([x, y, z]) if x.is_finite() && y.is_finite() && z.is_finite() => Ok(Vec3::new(*x, *y, *z)),
         _ => Err(format!("expected x,y,z with finite numbers, got '{s}'")),
     }
 }

@@ -87,14 +87,11 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
 
     let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, a.grid.accel);
     println!("backend cpu ({} threads)", rayon::current_num_threads());
-    let bar = (std::io::stderr().is_terminal() && (a.res.0 as u64 * a.res.1 as u64) >= 512 * 512)
-        .then(|| {
-            let b = ProgressBar::new(a.res.1 as u64);
-            b.set_style(
-                ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap(),
-            );
-            b
-        });
+    let bar = (std::io::stderr().is_terminal() && (a.res.0 as u64 * a.res.1 as u64) >= 512 * 512).then(|| {
+        let b = ProgressBar::new(a.res.1 as u64);
+        b.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap());
+        b
+    });
     let tick = |rows: u32| {
         if let Some(b) = &bar {
             b.inc(rows as u64);

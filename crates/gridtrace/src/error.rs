@@ -28,10 +28,7 @@ impl fmt::Display for Location {
 #[derive(Debug)]
 pub enum Error {
     /// A file could not be read at all.
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Io { path: PathBuf, source: std::io::Error },
     /// A file was read but its content is wrong.
     Parse {
         path: PathBuf,

@@ -26,9 +26,7 @@ impl std::str::FromStr for Mode {
             "shadow" => Ok(Mode::Shadow),
             "trace" => Ok(Mode::Trace),
             "heat" => Ok(Mode::Heat),
-            _ => Err(format!(
-                "mode must be cast, shadow, trace or heat; got '{s}'"
-            )),
+            _ => Err(format!("mode must be cast, shadow, trace or heat; got '{s}'")),
         }
     }
 }
@@ -45,11 +43,7 @@ impl Mode {
     }
     /// Reflection levels traced after the eye ray.
     pub fn reflection_depth(self) -> u32 {
-        if self == Mode::Trace {
-            MAX_REFLECTION_DEPTH
-        } else {
-            0
-        }
+        if self == Mode::Trace { MAX_REFLECTION_DEPTH } else { 0 }
     }
     pub fn shadows(self) -> bool {
         matches!(self, Mode::Shadow | Mode::Trace)
@@ -136,14 +130,8 @@ impl Image {
     }
 
     pub fn save_png(&self, path: &std::path::Path) -> crate::Result<()> {
-        image::save_buffer(
-            path,
-            &self.to_rgb8(),
-            self.width,
-            self.height,
-            image::ColorType::Rgb8,
-        )
-        .map_err(|e| crate::Error::io(path, std::io::Error::other(e)))
+        image::save_buffer(path, &self.to_rgb8(), self.width, self.height, image::ColorType::Rgb8)
+            .map_err(|e| crate::Error::io(path, std::io::Error::other(e)))
     }
 
     /// Maps raw per-pixel traversal cost to a colour ramp, normalised by the image's maximum.

@@ -12,19 +12,9 @@ pub fn triangle_soup(n: usize, seed: u64) -> Vec<TriAccel> {
     let mut rng = Rng::new(seed);
     (0..n)
         .map(|i| {
-            let c = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            );
+            let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
             let size = [0.02, 0.1, 0.4][i % 3];
-            let mut p = || {
-                c + Vec3::new(
-                    rng.range(-size, size),
-                    rng.range(-size, size),
-                    rng.range(-size, size),
-                )
-            };
+            let mut p = || c + Vec3::new(rng.range(-size, size), rng.range(-size, size), rng.range(-size, size));
             let (a, b, mut cc) = (p(), p(), p());
             if i % 17 == 0 {
                 // Long thin sliver.
@@ -61,11 +51,7 @@ pub fn flat_scene(seed: u64) -> Vec<TriAccel> {
 
 fn unit_dir(rng: &mut Rng) -> Vec3 {
     loop {
-        let v = Vec3::new(
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-        );
+        let v = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
         let l = v.length_squared();
         if l > 1e-4 && l <= 1.0 {
             return v / l.sqrt();
@@ -103,10 +89,7 @@ pub fn ray_set(accel: &GridAccel, n: usize, seed: u64) -> Vec<Ray> {
             // Random origin around the grid (often outside it), random direction.
             0 => Ray::new(point_in(&big, &mut rng), unit_dir(&mut rng)),
             // Origin inside the grid.
-            1 => Ray::new(
-                point_in(&b, &mut rng),
-                unit_dir(&mut rng) * rng.range(0.1, 10.0),
-            ),
+            1 => Ray::new(point_in(&b, &mut rng), unit_dir(&mut rng) * rng.range(0.1, 10.0)),
             // Aimed exactly at a vertex.
             2 => {
                 let o = point_in(&big, &mut rng);

@@ -22,22 +22,14 @@ fn golden_path(name: &str) -> PathBuf {
 /// Compares two RGB8 buffers; returns a description of the failure, if any.
 pub fn compare_rgb8(got: &[u8], want: &[u8]) -> Result<(), String> {
     if got.len() != want.len() {
-        return Err(format!(
-            "size differs: {} vs {} bytes",
-            got.len(),
-            want.len()
-        ));
+        return Err(format!("size differs: {} vs {} bytes", got.len(), want.len()));
     }
     let pixels = got.len() / 3;
     let mut bad = 0;
     let mut sum = 0u64;
     for (g, w) in got.chunks(3).zip(want.chunks(3)) {
         let d = g.iter().zip(w).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
-        sum += g
-            .iter()
-            .zip(w)
-            .map(|(a, b)| a.abs_diff(*b) as u64)
-            .sum::<u64>();
+        sum += g.iter().zip(w).map(|(a, b)| a.abs_diff(*b) as u64).sum::<u64>();
         if d > 2 {
             bad += 1;
         }
@@ -64,37 +56,21 @@ fn golden_images() {
             let name = format!("{scene_name}_{}", mode.name());
             let opts = RenderOptions::new(SIZE, SIZE, mode, AccelKind::Grid);
             let (img, stats) = gridtrace::cpu::render(&prepared, &opts, None).unwrap();
-            let img = if mode == Mode::Heat {
-                img.heat_to_color()
-            } else {
-                img
-            };
+            let img = if mode == Mode::Heat { img.heat_to_color() } else { img };
             let rgb = img.to_rgb8();
             assert_eq!(stats.rays.eye, (SIZE * SIZE) as u64);
             // The picture is not blank: a scene that renders all background is a bug too.
             let distinct: std::collections::HashSet<&[u8]> = rgb.chunks(3).collect();
-            assert!(
-                distinct.len() > 50,
-                "{name}: only {} distinct colours",
-                distinct.len()
-            );
+            assert!(distinct.len() > 50, "{name}: only {} distinct colours", distinct.len());
             let path = golden_path(&name);
             if bless {
                 image::save_buffer(&path, &rgb, SIZE, SIZE, image::ColorType::Rgb8).unwrap();
                 continue;
             }
-            let want = image::open(&path).unwrap_or_else(|e| {
-                panic!("{}: {e} (bless with GRIDTRACE_BLESS=1)", path.display())
-            });
+            let want =
+                image::open(&path).unwrap_or_else(|e| panic!("{}: {e} (bless with GRIDTRACE_BLESS=1)", path.display()));
             if let Err(e) = compare_rgb8(&rgb, want.to_rgb8().as_raw()) {
-                image::save_buffer(
-                    path.with_extension("png.new"),
-                    &rgb,
-                    SIZE,
-                    SIZE,
-                    image::ColorType::Rgb8,
-                )
-                .unwrap();
+                image::save_buffer(path.with_extension("png.new"), &rgb, SIZE, SIZE, image::ColorType::Rgb8).unwrap();
                 failures.push(format!("{name}: {e}"));
             }
         }
@@ -113,15 +89,9 @@ fn comparison_detects_differences() {
     let mut b = a.clone();
     assert!(compare_rgb8(&a, &b).is_ok());
     b[0] = 110;
-    assert!(
-        compare_rgb8(&a, &b).is_err(),
-        "1 of 100 pixels off by 10 exceeds 0.5%"
-    );
+    assert!(compare_rgb8(&a, &b).is_err(), "1 of 100 pixels off by 10 exceeds 0.5%");
     let c: Vec<u8> = a.iter().map(|v| v + 1).collect();
-    assert!(
-        compare_rgb8(&a, &c).is_err(),
-        "mean difference 1 exceeds 0.5"
-    );
+    assert!(compare_rgb8(&a, &c).is_err(), "mean difference 1 exceeds 0.5");
 }
 
 /// Proximity clouds change speed, never pictures.
@@ -132,12 +102,8 @@ fn pc_renders_the_same_image() {
         .prepare(Resolution::default())
         .unwrap();
     let render = |accel| {
-        let (img, stats) = gridtrace::cpu::render(
-            &prepared,
-            &RenderOptions::new(64, 64, Mode::Trace, accel),
-            None,
-        )
-        .unwrap();
+        let (img, stats) =
+            gridtrace::cpu::render(&prepared, &RenderOptions::new(64, 64, Mode::Trace, accel), None).unwrap();
         (img.to_rgb8(), stats.rays)
     };
     let (g, rg) = render(AccelKind::Grid);

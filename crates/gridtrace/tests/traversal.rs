@@ -2,8 +2,7 @@
 //! scene, for the plain grid and for proximity clouds; any-hit agrees with closest hit.
 
 use gridtrace::accel::{
-    AccelKind, Grid, GridAccel, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect,
-    brute_force_occluded,
+    AccelKind, Grid, GridAccel, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
 };
 use gridtrace::scene::builtin;
 use gridtrace::testing::{flat_scene, ray_set, triangle_soup};
@@ -49,12 +48,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                 }
                 if got.is_hit() && got.tri != want.tri {
                     // A tie must really be a tie: the other triangle is hit at the same t.
-                    let alt = accel.tris[want.tri as usize].intersect(
-                        r.origin,
-                        r.dir,
-                        0.0,
-                        f32::INFINITY,
-                    );
+                    let alt = accel.tris[want.tri as usize].intersect(r.origin, r.dir, 0.0, f32::INFINITY);
                     if alt.is_none() {
                         errs.push("tie partner not hit".into());
                     }
@@ -65,15 +59,10 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                 }
                 if want.is_hit() {
                     // Nothing strictly before the closest hit; something just past it.
-                    let before =
-                        accel.occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
+                    let before = accel.occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
                     let past = accel.occluded(r, 0.0, want.t * (1.0 + 1e-5), kind, &mut NoCounters);
-                    if before != brute_force_occluded(&accel.tris, r, 0.0, want.t * (1.0 - 1e-5))
-                        || !past
-                    {
-                        errs.push(format!(
-                            "occluded window wrong: before {before} past {past}"
-                        ));
+                    if before != brute_force_occluded(&accel.tris, r, 0.0, want.t * (1.0 - 1e-5)) || !past {
+                        errs.push(format!("occluded window wrong: before {before} past {past}"));
                     }
                 }
                 (!errs.is_empty()).then(|| format!("{r:?}: {}", errs.join("; ")))
@@ -106,21 +95,13 @@ fn knot_box_auto_grid() {
 #[test]
 fn knot_box_paper_grid() {
     // The paper's hand-tuned 16^3 grid for this scene.
-    check(
-        "knot-box-16",
-        scene_tris("knot-box"),
-        Resolution::Fixed([16, 16, 16]),
-    );
+    check("knot-box-16", scene_tris("knot-box"), Resolution::Fixed([16, 16, 16]));
 }
 
 #[test]
 fn triangle_soup_auto_and_fine() {
     check("soup", triangle_soup(3000, 1), Resolution::default());
-    check(
-        "soup-fine",
-        triangle_soup(3000, 2),
-        Resolution::Fixed([40, 7, 23]),
-    );
+    check("soup-fine", triangle_soup(3000, 2), Resolution::Fixed([40, 7, 23]));
 }
 
 #[test]
@@ -139,11 +120,7 @@ fn sparse_room_proximity_jumps() {
 
 #[test]
 fn mirror_spheres_auto() {
-    check(
-        "mirror-spheres",
-        scene_tris("mirror-spheres"),
-        Resolution::default(),
-    );
+    check("mirror-spheres", scene_tris("mirror-spheres"), Resolution::default());
 }
 
 /// Proximity clouds must actually skip: fewer cells visited on a sparse scene, same answers.
@@ -161,12 +138,7 @@ fn proximity_cloud_visits_fewer_cells() {
     }
     assert_eq!(g.jumps, 0);
     assert!(p.jumps > 0);
-    assert!(
-        p.cells * 2 < g.cells,
-        "pc visited {} cells, grid {}",
-        p.cells,
-        g.cells
-    );
+    assert!(p.cells * 2 < g.cells, "pc visited {} cells, grid {}", p.cells, g.cells);
     // The same non-empty cells are visited either way, up to extra cells at exact corner ties.
     assert!(
         p.tri_tests.abs_diff(g.tri_tests) * 1000 <= g.tri_tests,

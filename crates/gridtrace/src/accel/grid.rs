@@ -45,9 +45,7 @@ pub enum Resolution {
 
 impl Default for Resolution {
     fn default() -> Self {
-        Resolution::Auto {
-            lambda: DEFAULT_LAMBDA,
-        }
+        Resolution::Auto { lambda: DEFAULT_LAMBDA }
     }
 }
 
@@ -67,8 +65,7 @@ impl std::str::FromStr for Resolution {
             return Ok(Resolution::Auto { lambda });
         }
         let parts: Vec<&str> = s.split(['x', 'X']).collect();
-        let nums: std::result::Result<Vec<u32>, _> =
-            parts.iter().map(|p| p.trim().parse::<u32>()).collect();
+        let nums: std::result::Result<Vec<u32>, _> = parts.iter().map(|p| p.trim().parse::<u32>()).collect();
         match nums.as_deref() {
             Ok([n]) if *n > 0 => Ok(Resolution::Fixed([*n; 3])),
             Ok([a, b, c]) if *a > 0 && *b > 0 && *c > 0 => Ok(Resolution::Fixed([*a, *b, *c])),
@@ -132,9 +129,7 @@ impl Grid {
             scene_bounds
         };
         if !scene_bounds.min.is_finite() || !scene_bounds.max.is_finite() {
-            return Err(Error::InvalidInput(
-                "triangle coordinates are not finite".into(),
-            ));
+            return Err(Error::InvalidInput("triangle coordinates are not finite".into()));
         }
         let bounds = pad_bounds(scene_bounds);
         let dims = match resolution {
@@ -157,8 +152,7 @@ impl Grid {
         // rounding error is referenced from both cells. Traversal accepts a hit in a cell only up
         // to that cell's exit distance; a hit computed a hair beyond the face it truly lies on
         // is then found again in the next cell instead of being lost.
-        let margin = cell_size * 1e-3
-            + Vec3::splat(1e-6 * bounds.min.abs().max(bounds.max.abs()).max_element());
+        let margin = cell_size * 1e-3 + Vec3::splat(1e-6 * bounds.min.abs().max(bounds.max.abs()).max_element());
 
         let keys: Vec<u64> = tris
             .par_iter()
@@ -182,11 +176,8 @@ impl Grid {
                             let cell = UVec3::new(x, y, z);
                             let box_min = bounds.min + cell.as_vec3() * cell_size;
                             let half = cell_size * 0.5 + margin;
-                            if single
-                                || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c)
-                            {
-                                let idx = x as u64
-                                    + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
+                            if single || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c) {
+                                let idx = x as u64 + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
                                 out.push(idx << 32 | i as u64);
                             }
                         }
@@ -313,12 +304,8 @@ pub fn auto_dims(extent: Vec3, n_tris: usize, lambda: f32) -> UVec3 {
             break;
         }
     }
-    UVec3::new(
-        dims[0].round() as u32,
-        dims[1].round() as u32,
-        dims[2].round() as u32,
-    )
-    .clamp(UVec3::ONE, UVec3::splat(1024))
+    UVec3::new(dims[0].round() as u32, dims[1].round() as u32, dims[2].round() as u32)
+        .clamp(UVec3::ONE, UVec3::splat(1024))
 }
 
 #[cfg(test)]
@@ -332,10 +319,7 @@ mod tests {
         // A planar scene gets a 2-D grid with about lambda*N cells.
         let d = auto_dims(Vec3::new(2.0, 0.0, 1.0), 1000, 2.0);
         assert_eq!(d.y, 1);
-        assert!(
-            (d.x * d.z) as f32 > 1500.0 && ((d.x * d.z) as f32) < 2500.0,
-            "{d}"
-        );
+        assert!((d.x * d.z) as f32 > 1500.0 && ((d.x * d.z) as f32) < 2500.0, "{d}");
         // A nearly flat scene does too, rather than a budget wasted on the thin axis.
         let d = auto_dims(Vec3::new(1.0, 1e-4, 1.0), 1000, 4.0);
         assert_eq!(d.y, 1);
@@ -351,10 +335,7 @@ mod tests {
             "20x16x14".parse::<Resolution>().unwrap(),
             Resolution::Fixed([20, 16, 14])
         );
-        assert_eq!(
-            "16".parse::<Resolution>().unwrap(),
-            Resolution::Fixed([16; 3])
-        );
+        assert_eq!("16".parse::<Resolution>().unwrap(), Resolution::Fixed([16; 3]));
         assert_eq!("auto".parse::<Resolution>().unwrap(), Resolution::default());
         assert!("0x1x1".parse::<Resolution>().is_err());
         assert!("1x2".parse::<Resolution>().is_err());
@@ -368,11 +349,7 @@ mod tests {
         let mut rng = crate::util::Rng::new(3);
         let tris: Vec<TriAccel> = (0..300)
             .map(|_| {
-                let p = Vec3::new(
-                    rng.range(0.0, 10.0),
-                    rng.range(0.0, 10.0),
-                    rng.range(0.0, 10.0),
-                );
+                let p = Vec3::new(rng.range(0.0, 10.0), rng.range(0.0, 10.0), rng.range(0.0, 10.0));
                 let q = |r: &mut crate::util::Rng| {
                     p + Vec3::new(r.range(-2.0, 2.0), r.range(-2.0, 2.0), r.range(-2.0, 2.0))
                 };

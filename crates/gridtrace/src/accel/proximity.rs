@@ -37,18 +37,14 @@ pub fn chebyshev_distance_transform(dims: [u32; 3], occupied: &[bool]) -> Vec<u3
             }
         }
     }
-    g.into_iter()
-        .map(|d| if d >= inf { FAR } else { d as u32 })
-        .collect()
+    g.into_iter().map(|d| if d >= inf { FAR } else { d as u32 }).collect()
 }
 
 /// Start indices of all lines along `axis`.
 fn lines(nx: usize, ny: usize, nz: usize, axis: usize) -> Vec<usize> {
     match axis {
         0 => (0..ny * nz).map(|yz| yz * nx).collect(),
-        1 => (0..nz)
-            .flat_map(|z| (0..nx).map(move |x| x + z * nx * ny))
-            .collect(),
+        1 => (0..nz).flat_map(|z| (0..nx).map(move |x| x + z * nx * ny)).collect(),
         _ => (0..nx * ny).collect(),
     }
 }
@@ -144,11 +140,7 @@ mod tests {
     #[test]
     fn single_cell_and_empty() {
         let mut occ = vec![false; 5 * 4 * 3];
-        assert!(
-            chebyshev_distance_transform([5, 4, 3], &occ)
-                .iter()
-                .all(|&d| d == FAR)
-        );
+        assert!(chebyshev_distance_transform([5, 4, 3], &occ).iter().all(|&d| d == FAR));
         occ[0] = true;
         let d = chebyshev_distance_transform([5, 4, 3], &occ);
         assert_eq!(d[0], 0);

@@ -129,63 +129,33 @@ pub struct GridAccel {
 
 impl GridAccel {
     /// Closest hit with `t_min < t < t_max`.
-    pub fn intersect<C: Counters>(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit {
-        let mut best = Hit {
-            t: t_max,
-            ..Hit::MISS
-        };
-        self.walk(
-            ray,
-            t_min,
-            t_max,
-            kind,
-            counters,
-            |refs, t_cell_exit, counters| {
-                for &tri in refs {
-                    counters.tri_test();
-                    if let Some(h) =
-                        self.tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t)
-                    {
-                        best = Hit {
-                            t: h.t,
-                            tri,
-                            u: h.u,
-                            v: h.v,
-                        };
-                    }
+    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
+        let mut best = Hit { t: t_max, ..Hit::MISS };
+        self.walk(ray, t_min, t_max, kind, counters, |refs, t_cell_exit, counters| {
+            for &tri in refs {
+                counters.tri_test();
+                if let Some(h) = self.tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
+                    best = Hit {
+                        t: h.t,
+                        tri,
+                        u: h.u,
+                        v: h.v,
+                    };
                 }
-                // A hit beyond this cell's exit may be beaten by a triangle in a later cell; only a
-                // hit inside the cell (or before it) is final.
-                if best.tri != u32::MAX && best.t <= t_cell_exit {
-                    ControlFlow::Break(())
-                } else {
-                    ControlFlow::Continue(())
-                }
-            },
-        );
-        if best.tri == u32::MAX {
-            Hit::MISS
-        } else {
-            best
-        }
+            }
+            // A hit beyond this cell's exit may be beaten by a triangle in a later cell; only a
+            // hit inside the cell (or before it) is final.
+            if best.tri != u32::MAX && best.t <= t_cell_exit {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        });
+        if best.tri == u32::MAX { Hit::MISS } else { best }
     }
 
     /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
-    pub fn occluded<C: Counters>(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        counters: &mut C,
-    ) -> bool {
+    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
         let mut hit = false;
         self.walk(ray, t_min, t_max, kind, counters, |refs, _, counters| {
             for &tri in refs {
@@ -234,8 +204,7 @@ impl GridAccel {
             if step[axis] == 0 {
                 f32::INFINITY
             } else {
-                (g.bounds.min[axis] + k as f32 * g.cell_size[axis] - ray.origin[axis])
-                    * inv_dir[axis]
+                (g.bounds.min[axis] + k as f32 * g.cell_size[axis] - ray.origin[axis]) * inv_dir[axis]
             }
         };
         let mut t_next = Vec3::new(
@@ -321,10 +290,7 @@ fn sign(x: f32) -> i32 {
 
 /// Reference closest hit: every triangle tested. The ground truth for all traversal tests.
 pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> Hit {
-    let mut best = Hit {
-        t: t_max,
-        ..Hit::MISS
-    };
+    let mut best = Hit { t: t_max, ..Hit::MISS };
     for (i, tri) in tris.iter().enumerate() {
         if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
             best = Hit {
@@ -335,11 +301,7 @@ pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f3
             };
         }
     }
-    if best.tri == u32::MAX {
-        Hit::MISS
-    } else {
-        best
-    }
+    if best.tri == u32::MAX { Hit::MISS } else { best }
 }
 
 /// Reference any hit.

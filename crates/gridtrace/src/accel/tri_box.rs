@@ -103,9 +103,7 @@ mod tests {
         let h = Vec3::splat(0.5);
         let mut yes = 0;
         for _ in 0..20_000 {
-            let p = |r: &mut crate::util::Rng| {
-                Vec3::new(r.range(-2.0, 2.0), r.range(-2.0, 2.0), r.range(-2.0, 2.0))
-            };
+            let p = |r: &mut crate::util::Rng| Vec3::new(r.range(-2.0, 2.0), r.range(-2.0, 2.0), r.range(-2.0, 2.0));
             let (a, b, c) = (p(&mut rng), p(&mut rng), p(&mut rng));
             let overlap = triangle_overlaps_box(Vec3::ZERO, h, a, b, c);
             let mut sampled = false;

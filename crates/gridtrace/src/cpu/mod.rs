@@ -2,6 +2,4 @@
 
 mod render;
 
-pub use render::{
-    Surface, intersect_batch, occluded_batch, render, render_with_counters, surface_at,
-};
+pub use render::{Surface, intersect_batch, occluded_batch, render, render_with_counters, surface_at};

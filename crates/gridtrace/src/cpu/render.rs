@@ -28,10 +28,9 @@ pub fn surface_at(scene: &PreparedScene, ray: &Ray, hit: &Hit) -> Surface {
     let mut ng = tri.normal().normalize();
     let [i0, i1, i2] = scene.tri_vertices[hit.tri as usize];
     let w = 1.0 - hit.u - hit.v;
-    let mut ns = (scene.normals[i0 as usize] * w
-        + scene.normals[i1 as usize] * hit.u
-        + scene.normals[i2 as usize] * hit.v)
-        .normalize_or_zero();
+    let mut ns =
+        (scene.normals[i0 as usize] * w + scene.normals[i1 as usize] * hit.u + scene.normals[i2 as usize] * hit.v)
+            .normalize_or_zero();
     if ns == Vec3::ZERO {
         ns = ng;
     }
@@ -63,10 +62,7 @@ pub fn render(
 }
 
 /// Renders and also counts traversal work (cells, jumps, triangle tests).
-pub fn render_with_counters(
-    scene: &PreparedScene,
-    opts: &RenderOptions,
-) -> Result<(Image, RenderStats)> {
+pub fn render_with_counters(scene: &PreparedScene, opts: &RenderOptions) -> Result<(Image, RenderStats)> {
     render_generic::<TraversalCounters>(scene, opts, None)
 }
 
@@ -222,13 +218,7 @@ fn light_contribution(
 }
 
 /// Closest hits for a batch of rays, in parallel.
-pub fn intersect_batch(
-    accel: &crate::GridAccel,
-    rays: &[Ray],
-    t_min: f32,
-    t_max: f32,
-    kind: AccelKind,
-) -> Vec<Hit> {
+pub fn intersect_batch(accel: &crate::GridAccel, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Vec<Hit> {
     rays.par_iter()
         .with_min_len(256)
         .map(|r| accel.intersect(r, t_min, t_max, kind, &mut NoCounters))
@@ -236,13 +226,7 @@ pub fn intersect_batch(
 }
 
 /// Occlusion for a batch of rays, in parallel.
-pub fn occluded_batch(
-    accel: &crate::GridAccel,
-    rays: &[Ray],
-    t_min: f32,
-    t_max: f32,
-    kind: AccelKind,
-) -> Vec<bool> {
+pub fn occluded_batch(accel: &crate::GridAccel, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Vec<bool> {
     rays.par_iter()
         .with_min_len(256)
         .map(|r| accel.occluded(r, t_min, t_max, kind, &mut NoCounters))

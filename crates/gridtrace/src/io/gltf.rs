@@ -51,15 +51,8 @@ pub(crate) fn parse_with_base(data: &[u8], path: &Path, base: Option<&Path>) -> 
     let buffers = ::gltf::import_buffers(&document, base, blob).map_err(wrap)?;
     // The crate's accessor readers index and do arithmetic on file-provided offsets and counts;
     // a panic there must become an error, not take the program down.
-    let mesh = catch_unwind(AssertUnwindSafe(|| build(&document, &buffers, path))).unwrap_or_else(
-        |_| {
-            Err(Error::parse(
-                path,
-                Location::Whole,
-                "glTF: malformed accessor data",
-            ))
-        },
-    )?;
+    let mesh = catch_unwind(AssertUnwindSafe(|| build(&document, &buffers, path)))
+        .unwrap_or_else(|_| Err(Error::parse(path, Location::Whole, "glTF: malformed accessor data")))?;
     finish(mesh, path)
 }
 
@@ -104,13 +97,8 @@ fn build(doc: &::gltf::Document, buffers: &[::gltf::buffer::Data], path: &Path) 
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if let Some(mesh) = node.mesh() {
             for prim in mesh.primitives() {
-                out.primitive(&prim, world, buffers).map_err(|m| {
-                    err(format!(
-                        "mesh {} primitive {}: {m}",
-                        mesh.index(),
-                        prim.index()
-                    ))
-                })?;
+                out.primitive(&prim, world, buffers)
+                    .map_err(|m| err(format!("mesh {} primitive {}: {m}", mesh.index(), prim.index())))?;
             }
         }
         let first_child = stack.len();
@@ -139,10 +127,7 @@ impl Builder {
         buffers: &[::gltf::buffer::Data],
     ) -> std::result::Result<(), String> {
         let mode = prim.mode();
-        if !matches!(
-            mode,
-            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-        ) {
+        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
             return Ok(());
         }
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
@@ -182,18 +167,14 @@ impl Builder {
             Mode::TriangleStrip => {
                 for k in 0..indices.len().saturating_sub(2) {
                     let (a, b, c) = (indices[k], indices[k + 1], indices[k + 2]);
-                    self.mesh.triangles.push(if k % 2 == 0 {
-                        tri(a, b, c)
-                    } else {
-                        tri(b, a, c)
-                    });
+                    self.mesh
+                        .triangles
+                        .push(if k % 2 == 0 { tri(a, b, c) } else { tri(b, a, c) });
                 }
             }
             _ => {
                 for k in 1..indices.len().saturating_sub(1) {
-                    self.mesh
-                        .triangles
-                        .push(tri(indices[0], indices[k], indices[k + 1]));
+                    self.mesh.triangles.push(tri(indices[0], indices[k], indices[k + 1]));
                 }
             }
         }
@@ -222,9 +203,7 @@ impl Builder {
                     let pbr = material.pbr_metallic_roughness();
                     let [r, g, b, _] = pbr.base_color_factor();
                     Material {
-                        name: material
-                            .name()
-                            .map_or_else(|| format!("material{i}"), str::to_string),
+                        name: material.name().map_or_else(|| format!("material{i}"), str::to_string),
                         diffuse: Vec3::new(r, g, b),
                         reflectivity: pbr.metallic_factor().clamp(0.0, 1.0),
                     }
@@ -232,9 +211,7 @@ impl Builder {
             });
         }
         let added = self.mesh.triangles.len() - first_triangle;
-        self.mesh
-            .triangle_materials
-            .extend(std::iter::repeat_n(id, added));
+        self.mesh.triangle_materials.extend(std::iter::repeat_n(id, added));
         Ok(())
     }
 }
@@ -348,11 +325,7 @@ mod tests {
         let m = parse_slice(&triangle_glb(), Path::new("t.glb")).unwrap();
         assert_eq!(
             m.positions,
-            vec![
-                Vec3::new(1., 2., 3.),
-                Vec3::new(2., 2., 3.),
-                Vec3::new(1., 3., 3.)
-            ]
+            vec![Vec3::new(1., 2., 3.), Vec3::new(2., 2., 3.), Vec3::new(1., 3., 3.)]
         );
         assert_eq!(m.triangles, vec![[0, 1, 2]]);
         assert!(m.normals.is_empty());
@@ -371,22 +344,10 @@ mod tests {
         // Scene 1: the strip 0,1,2,0,2,3 → 4 triangles, translated by 10 in x.
         assert_eq!(m.positions.len(), 8);
         assert_eq!(m.triangles.len(), 6);
-        assert!(
-            close(m.positions[2], Vec3::new(2., 0., 2.)),
-            "{}",
-            m.positions[2]
-        );
-        assert!(
-            close(m.positions[6], Vec3::new(11., 1., 0.)),
-            "{}",
-            m.positions[6]
-        );
+        assert!(close(m.positions[2], Vec3::new(2., 0., 2.)), "{}", m.positions[2]);
+        assert!(close(m.positions[6], Vec3::new(11., 1., 0.)), "{}", m.positions[6]);
         assert_eq!(m.normals.len(), 8);
-        assert!(
-            close(m.normals[0], Vec3::new(0., -1., 0.)),
-            "{}",
-            m.normals[0]
-        );
+        assert!(close(m.normals[0], Vec3::new(0., -1., 0.)), "{}", m.normals[0]);
         assert!(close(m.normals[7], Vec3::Z));
         assert_eq!(&m.triangles[..2], &[[0, 1, 2], [0, 2, 3]]);
         assert_eq!(m.triangles[2], [4, 5, 6]);
@@ -416,32 +377,16 @@ mod tests {
         std::fs::write(dir.0.join("quad.bin"), hierarchy_bin()).unwrap();
         std::fs::write(dir.0.join("x.gltf"), &json).unwrap();
         assert_eq!(load(&dir.0.join("x.gltf")).unwrap().triangles.len(), 6);
-        assert_eq!(
-            crate::io::load_mesh(&dir.0.join("x.gltf"))
-                .unwrap()
-                .triangles
-                .len(),
-            6
-        );
+        assert_eq!(crate::io::load_mesh(&dir.0.join("x.gltf")).unwrap().triangles.len(), 6);
         std::fs::write(dir.0.join("t.GLB"), triangle_glb()).unwrap();
-        assert_eq!(
-            crate::io::load_mesh(&dir.0.join("t.GLB"))
-                .unwrap()
-                .triangles
-                .len(),
-            1
-        );
+        assert_eq!(crate::io::load_mesh(&dir.0.join("t.GLB")).unwrap().triangles.len(), 1);
     }
 
     fn base64(data: &[u8]) -> String {
         const ABC: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
         let mut out = String::new();
         for chunk in data.chunks(3) {
-            let b = [
-                chunk[0],
-                *chunk.get(1).unwrap_or(&0),
-                *chunk.get(2).unwrap_or(&0),
-            ];
+            let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
             let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
             for k in 0..4 {
                 if k <= chunk.len() {
@@ -472,8 +417,7 @@ mod tests {
         let e = parse_slice(b"glTF\x02\x00\x00\x00garbage", Path::new("bad.glb")).unwrap_err();
         assert!(e.to_string().starts_with("bad.glb: glTF:"), "{e}");
         // No meshes at all.
-        let e =
-            parse_slice(br#"{"asset": {"version": "2.0"}}"#, Path::new("bad.gltf")).unwrap_err();
+        let e = parse_slice(br#"{"asset": {"version": "2.0"}}"#, Path::new("bad.gltf")).unwrap_err();
         assert!(e.to_string().contains("no triangles"));
         // Index out of range.
         let mut bin = hierarchy_bin();

@@ -171,10 +171,7 @@ mod tests {
         assert!(finish(tri_mesh(), p).is_ok());
 
         let err = finish(Mesh::default(), p).unwrap_err().to_string();
-        assert!(
-            err.contains("m.obj") && err.contains("no triangles"),
-            "{err}"
-        );
+        assert!(err.contains("m.obj") && err.contains("no triangles"), "{err}");
 
         let mut m = tri_mesh();
         m.triangles[0][2] = 3;
@@ -246,10 +243,7 @@ mod tests {
         assert_eq!(load_mesh(&ply).unwrap().triangles.len(), 1);
 
         let err = load_mesh(&dir.0.join("x.fbx")).unwrap_err().to_string();
-        assert!(
-            err.contains("x.fbx") && err.contains("unsupported"),
-            "{err}"
-        );
+        assert!(err.contains("x.fbx") && err.contains("unsupported"), "{err}");
 
         let missing = dir.0.join("missing.obj");
         let err = load_mesh(&missing).unwrap_err();

@@ -101,9 +101,7 @@ impl Parser<'_> {
         let text = match std::str::from_utf8(raw) {
             Ok(t) => std::borrow::Cow::Borrowed(t),
             Err(_) => {
-                let kw = raw
-                    .split(|b| b.is_ascii_whitespace())
-                    .find(|t| !t.is_empty());
+                let kw = raw.split(|b| b.is_ascii_whitespace()).find(|t| !t.is_empty());
                 if matches!(kw, Some(b"v" | b"vn" | b"vt" | b"f")) {
                     return Err(self.err(n, "invalid UTF-8"));
                 }
@@ -149,20 +147,13 @@ impl Parser<'_> {
         Ok(())
     }
 
-    fn vec3<'a>(
-        &self,
-        n: usize,
-        tokens: &mut impl Iterator<Item = &'a str>,
-        what: &str,
-    ) -> Result<Vec3> {
+    fn vec3<'a>(&self, n: usize, tokens: &mut impl Iterator<Item = &'a str>, what: &str) -> Result<Vec3> {
         let mut c = [0.0f32; 3];
         for (k, slot) in c.iter_mut().enumerate() {
             let t = tokens
                 .next()
                 .ok_or_else(|| self.err(n, format!("{what} has {k} coordinates, expected 3")))?;
-            *slot = t
-                .parse()
-                .map_err(|_| self.err(n, format!("invalid number '{t}'")))?;
+            *slot = t.parse().map_err(|_| self.err(n, format!("invalid number '{t}'")))?;
         }
         Ok(Vec3::from_array(c))
     }
@@ -191,12 +182,7 @@ impl Parser<'_> {
         face.clear();
         for t in tokens {
             let mut parts = t.split('/');
-            let v = self.index(
-                n,
-                parts.next().unwrap_or(""),
-                self.positions.len(),
-                "vertex",
-            )?;
+            let v = self.index(n, parts.next().unwrap_or(""), self.positions.len(), "vertex")?;
             if let Some(vt) = parts.next()
                 && !vt.is_empty()
             {
@@ -213,10 +199,7 @@ impl Parser<'_> {
             face.push((v, vn));
         }
         if face.len() < 3 {
-            return Err(self.err(
-                n,
-                format!("face with {} vertices (need at least 3)", face.len()),
-            ));
+            return Err(self.err(n, format!("face with {} vertices (need at least 3)", face.len())));
         }
         if !self.any_face {
             self.any_face = true;
@@ -335,10 +318,8 @@ fn parse_mtl(data: &[u8], out: &mut HashMap<String, Material>) {
                 }
             }
             "Pm" => {
-                if let (Some(m), Some(&pm)) = (
-                    current.as_ref().and_then(|c| out.get_mut(c)),
-                    numbers.first(),
-                ) && pm.is_finite()
+                if let (Some(m), Some(&pm)) = (current.as_ref().and_then(|c| out.get_mut(c)), numbers.first())
+                    && pm.is_finite()
                 {
                     m.reflectivity = pm.clamp(0.0, 1.0);
                 }
@@ -361,9 +342,7 @@ mod tests {
     }
 
     fn err(src: &[u8]) -> String {
-        parse(src, Path::new("bad.obj"), &no_mtl)
-            .unwrap_err()
-            .to_string()
+        parse(src, Path::new("bad.obj"), &no_mtl).unwrap_err().to_string()
     }
 
     #[test]
@@ -410,15 +389,8 @@ mod tests {
         assert_eq!(m.triangles, vec![[0, 1, 2]]);
 
         // Non-UTF-8 in a comment or an ignored line is fine.
-        let mut bytes =
-            b"# caf\xe9\no na\xefve\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3 # \xff\n".to_vec();
-        assert_eq!(
-            parse(&bytes, Path::new("t.obj"), &no_mtl)
-                .unwrap()
-                .triangles
-                .len(),
-            1
-        );
+        let mut bytes = b"# caf\xe9\no na\xefve\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3 # \xff\n".to_vec();
+        assert_eq!(parse(&bytes, Path::new("t.obj"), &no_mtl).unwrap().triangles.len(), 1);
         bytes.extend_from_slice(b"v 1 \xff 0\n");
         let e = err(&bytes);
         assert!(e.contains("bad.obj:line 7") && e.contains("UTF-8"), "{e}");
@@ -430,10 +402,8 @@ mod tests {
                    f 1 2 3\nusemtl red\nf 1 2 3\nf 2 4 3\nusemtl blue\nf 1 2 4\n\
                    usemtl red\nf 1 3 4\nusemtl unknown\nf 1 2 3\n";
         let mtl = |name: &str| {
-            (name == "scene.mtl").then(|| {
-                b"newmtl red\nKd 1 0 0\nKs 1 1 1\nillum 2\n\nnewmtl blue\nKd 0 0 0.5\nPm 0.25\n"
-                    .to_vec()
-            })
+            (name == "scene.mtl")
+                .then(|| b"newmtl red\nKd 1 0 0\nKs 1 1 1\nillum 2\n\nnewmtl blue\nKd 0 0 0.5\nPm 0.25\n".to_vec())
         };
         let m = parse(src.as_bytes(), Path::new("t.obj"), &mtl).unwrap();
         assert_eq!(m.triangles.len(), 6);
@@ -470,16 +440,11 @@ mod tests {
         ];
         for (src, loc) in cases {
             let e = err(src);
-            assert!(
-                e.starts_with(&format!("bad.obj:{loc}:")),
-                "{e} (wanted {loc})"
-            );
+            assert!(e.starts_with(&format!("bad.obj:{loc}:")), "{e} (wanted {loc})");
         }
         assert!(err(b"").contains("no triangles"));
         assert!(err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n").contains("no triangles"));
-        let garbage: Vec<u8> = (0..2000u32)
-            .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
-            .collect();
+        let garbage: Vec<u8> = (0..2000u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect();
         let _ = parse(&garbage, Path::new("g.obj"), &no_mtl);
     }
 
@@ -491,12 +456,6 @@ mod tests {
         for len in 0..=src.len() {
             let _ = parse(&src[..len], Path::new("p.obj"), &mtl);
         }
-        assert_eq!(
-            parse(src, Path::new("p.obj"), &mtl)
-                .unwrap()
-                .triangles
-                .len(),
-            3
-        );
+        assert_eq!(parse(src, Path::new("p.obj"), &mtl).unwrap().triangles.len(), 3);
     }
 }

@@ -22,34 +22,25 @@ pub fn parse(data: &[u8], path: &Path) -> Result<Mesh> {
     // The last line, for errors about missing data (a final newline does not start a line).
     let total_lines = data.split(|&b| b == b'\n').count() - usize::from(data.ends_with(b"\n"));
     // Non-empty lines without comments, with their 1-based numbers.
-    let mut lines = data
-        .split(|&b| b == b'\n')
-        .enumerate()
-        .filter_map(|(i, raw)| {
-            let raw = raw.split(|&b| b == b'#').next().unwrap_or(raw);
-            let text = String::from_utf8_lossy(raw).into_owned();
-            (!text.trim().is_empty()).then_some((i + 1, text))
-        });
+    let mut lines = data.split(|&b| b == b'\n').enumerate().filter_map(|(i, raw)| {
+        let raw = raw.split(|&b| b == b'#').next().unwrap_or(raw);
+        let text = String::from_utf8_lossy(raw).into_owned();
+        (!text.trim().is_empty()).then_some((i + 1, text))
+    });
     let Some((first_no, first)) = lines.next() else {
         return Err(Error::parse(path, Location::Whole, "empty file"));
     };
     let mut tokens = first.split_ascii_whitespace();
     let keyword = tokens.next().unwrap_or("");
     let Some(prefix) = keyword.strip_suffix("OFF") else {
-        return Err(err(
-            first_no,
-            format!("not an OFF file (starts with '{keyword}')"),
-        ));
+        return Err(err(first_no, format!("not an OFF file (starts with '{keyword}')")));
     };
     if tokens.clone().next() == Some("BINARY") {
         return Err(err(first_no, "binary OFF is not supported".into()));
     }
     let has_normals = prefix.contains('N');
     if prefix.contains('4') || prefix.contains('n') {
-        return Err(err(
-            first_no,
-            format!("'{keyword}' (non-3D OFF) is not supported"),
-        ));
+        return Err(err(first_no, format!("'{keyword}' (non-3D OFF) is not supported")));
     }
     // Counts on the keyword line, or on the next line.
     let mut rest: Vec<String> = tokens.map(str::to_string).collect();
@@ -65,8 +56,7 @@ pub fn parse(data: &[u8], path: &Path) -> Result<Mesh> {
         let s = rest
             .get(k)
             .ok_or_else(|| err(counts_no, "expected 'vertices faces edges'".into()))?;
-        s.parse()
-            .map_err(|_| err(counts_no, format!("invalid count '{s}'")))
+        s.parse().map_err(|_| err(counts_no, format!("invalid count '{s}'")))
     };
     let (nv, nf) = (count(0)?, count(1)?);
     if nv > u64::from(u32::MAX) {
@@ -78,20 +68,16 @@ pub fn parse(data: &[u8], path: &Path) -> Result<Mesh> {
 
     let mut mesh = Mesh::default();
     // A vertex line is at least "0 0 0\n", a face line at least "3 0 0 0\n".
-    mesh.positions
-        .reserve_exact(capped_capacity(nv, data.len(), 6));
-    mesh.triangles
-        .reserve_exact(capped_capacity(nf, data.len(), 8));
+    mesh.positions.reserve_exact(capped_capacity(nv, data.len(), 6));
+    mesh.triangles.reserve_exact(capped_capacity(nf, data.len(), 8));
     let truncated = |what: &str, declared: u64, found: u64| {
         err(
             total_lines,
             format!("unexpected end of file: {declared} {what} declared, found {found}"),
         )
     };
-    let number = |no: usize, s: &str| -> Result<f32> {
-        s.parse()
-            .map_err(|_| err(no, format!("invalid number '{s}'")))
-    };
+    let number =
+        |no: usize, s: &str| -> Result<f32> { s.parse().map_err(|_| err(no, format!("invalid number '{s}'"))) };
     for done in 0..nv {
         let Some((no, line)) = lines.next() else {
             return Err(truncated("vertices", nv, done));
@@ -99,20 +85,14 @@ pub fn parse(data: &[u8], path: &Path) -> Result<Mesh> {
         let t: Vec<&str> = line.split_ascii_whitespace().collect();
         let want = if has_normals { 6 } else { 3 };
         if t.len() < want {
-            return Err(err(
-                no,
-                format!("vertex has {} values, expected {want}", t.len()),
-            ));
+            return Err(err(no, format!("vertex has {} values, expected {want}", t.len())));
         }
         let v = Vec3::new(number(no, t[0])?, number(no, t[1])?, number(no, t[2])?);
         check_finite(path, Location::Line(no), "vertex", v)?;
         mesh.positions.push(v);
         if has_normals {
-            mesh.normals.push(Vec3::new(
-                number(no, t[3])?,
-                number(no, t[4])?,
-                number(no, t[5])?,
-            ));
+            mesh.normals
+                .push(Vec3::new(number(no, t[3])?, number(no, t[4])?, number(no, t[5])?));
         }
     }
     let mut face: Vec<u32> = Vec::new();
@@ -133,14 +113,9 @@ pub fn parse(data: &[u8], path: &Path) -> Result<Mesh> {
             let s = t
                 .next()
                 .ok_or_else(|| err(no, format!("face lists {k} of {n} vertices")))?;
-            let i: i64 = s
-                .parse()
-                .map_err(|_| err(no, format!("invalid vertex index '{s}'")))?;
+            let i: i64 = s.parse().map_err(|_| err(no, format!("invalid vertex index '{s}'")))?;
             if i < 0 || i >= nv as i64 {
-                return Err(err(
-                    no,
-                    format!("vertex index {i} out of range ({nv} vertices)"),
-                ));
+                return Err(err(no, format!("vertex index {i} out of range ({nv} vertices)")));
             }
             face.push(i as u32);
         }
@@ -194,10 +169,7 @@ mod tests {
     fn malformed_inputs() {
         let oob = CUBE_TOP.replace("3 0 2 3", "3 0 2 4");
         let e = err(oob.as_bytes());
-        assert!(
-            e.starts_with("bad.off:line 10:") && e.contains("out of range"),
-            "{e}"
-        );
+        assert!(e.starts_with("bad.off:line 10:") && e.contains("out of range"), "{e}");
         let two = CUBE_TOP.replace("3 0 2 3", "2 0 2");
         assert!(err(two.as_bytes()).starts_with("bad.off:line 10:"));
         let nan = CUBE_TOP.replace("1 0 1\n", "1 nan 1\n");

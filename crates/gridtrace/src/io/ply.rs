@@ -147,10 +147,7 @@ fn parse_header(data: &[u8], path: &Path) -> Result<Header> {
                     Some("binary_little_endian") => Format::BinaryLe,
                     Some("binary_big_endian") => Format::BinaryBe,
                     other => {
-                        return Err(err(
-                            line_no,
-                            format!("unknown format {:?}", other.unwrap_or("")),
-                        ));
+                        return Err(err(line_no, format!("unknown format {:?}", other.unwrap_or(""))));
                     }
                 });
             }
@@ -173,8 +170,7 @@ fn parse_header(data: &[u8], path: &Path) -> Result<Header> {
                 };
                 let ty = |name: Option<&str>| {
                     let name = name.unwrap_or("");
-                    Scalar::from_name(name)
-                        .ok_or_else(|| err(line_no, format!("unknown property type '{name}'")))
+                    Scalar::from_name(name).ok_or_else(|| err(line_no, format!("unknown property type '{name}'")))
                 };
                 let first = t.next();
                 let kind = if first == Some("list") {
@@ -202,11 +198,7 @@ fn parse_header(data: &[u8], path: &Path) -> Result<Header> {
         }
     }
     let Some(format) = format else {
-        return Err(Error::parse(
-            path,
-            Location::Whole,
-            "header has no 'format' line",
-        ));
+        return Err(Error::parse(path, Location::Whole, "header has no 'format' line"));
     };
     Ok(Header {
         format,
@@ -313,11 +305,7 @@ impl<'a> Ascii<'a> {
     fn token(&mut self) -> std::result::Result<&'a [u8], String> {
         self.skip_whitespace();
         let start = self.pos;
-        while self
-            .data
-            .get(self.pos)
-            .is_some_and(|b| !b.is_ascii_whitespace())
-        {
+        while self.data.get(self.pos).is_some_and(|b| !b.is_ascii_whitespace()) {
             self.pos += 1;
         }
         if start == self.pos {
@@ -404,11 +392,7 @@ fn read_body(header: &Header, r: &mut dyn Reader, path: &Path) -> Result<Mesh> {
         ));
     }
     let [Some(x), Some(y), Some(z)] = ["x", "y", "z"].map(|n| vertex.find(n)) else {
-        return Err(Error::parse(
-            path,
-            Location::Whole,
-            "vertex element lacks x, y or z",
-        ));
+        return Err(Error::parse(path, Location::Whole, "vertex element lacks x, y or z"));
     };
     let normal_props = match ["nx", "ny", "nz"].map(|n| vertex.find(n)) {
         [Some(nx), Some(ny), Some(nz)] => Some([nx, ny, nz]),
@@ -418,10 +402,7 @@ fn read_body(header: &Header, r: &mut dyn Reader, path: &Path) -> Result<Mesh> {
     let face_list = match face {
         None => None,
         Some(face) => {
-            let Some(list) = face
-                .find("vertex_indices")
-                .or_else(|| face.find("vertex_index"))
-            else {
+            let Some(list) = face.find("vertex_indices").or_else(|| face.find("vertex_index")) else {
                 return Err(Error::parse(
                     path,
                     Location::Whole,
@@ -484,9 +465,7 @@ fn read_body(header: &Header, r: &mut dyn Reader, path: &Path) -> Result<Mesh> {
             };
             for (k, p) in element.props.iter().enumerate() {
                 match p.kind {
-                    Kind::Scalar(s) if is_vertex => {
-                        values[k] = r.read(s).map_err(|m| fail(r, m))?
-                    }
+                    Kind::Scalar(s) if is_vertex => values[k] = r.read(s).map_err(|m| fail(r, m))?,
                     Kind::Scalar(s) => r.skip(s, 1).map_err(|m| fail(r, m))?,
                     Kind::List { count, item } if is_face && Some(k) == face_list => {
                         let at = r.next_location();
@@ -506,16 +485,13 @@ fn read_body(header: &Header, r: &mut dyn Reader, path: &Path) -> Result<Mesh> {
                                 return Err(Error::parse(
                                     path,
                                     at,
-                                    format!(
-                                        "vertex index {v} out of range ({vertex_count} vertices)"
-                                    ),
+                                    format!("vertex index {v} out of range ({vertex_count} vertices)"),
                                 ));
                             }
                             indices.push(v as u32);
                         }
                         for j in 1..indices.len() - 1 {
-                            mesh.triangles
-                                .push([indices[0], indices[j], indices[j + 1]]);
+                            mesh.triangles.push([indices[0], indices[j], indices[j + 1]]);
                         }
                     }
                     Kind::List { count, item } => read_count(r, count)
@@ -604,12 +580,7 @@ mod tests {
              end_header\r\n"
         )
         .into_bytes();
-        let verts = [
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [0.0, 1.0, 5.0],
-        ];
+        let verts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 5.0]];
         for (i, v) in verts.iter().enumerate() {
             put(&mut out, "double", v[0], be);
             put(&mut out, "float", v[1], be);
@@ -678,8 +649,7 @@ mod tests {
                 ("char", "uchar"),
             ] {
                 let data = binary_quad(be, count_ty, index_ty);
-                let m = parse(&data, Path::new("b.ply"))
-                    .unwrap_or_else(|e| panic!("{be} {count_ty} {index_ty}: {e}"));
+                let m = parse(&data, Path::new("b.ply")).unwrap_or_else(|e| panic!("{be} {count_ty} {index_ty}: {e}"));
                 assert_eq!(m.positions.len(), 4);
                 assert_eq!(m.positions[3], Vec3::new(0.0, 1.0, 5.0));
                 assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 2, 3]]);
@@ -691,11 +661,7 @@ mod tests {
     #[test]
     fn truncated_binary_names_the_byte() {
         let data = binary_quad(false, "uchar", "int");
-        let header_len = data
-            .windows(12)
-            .position(|w| w == b"end_header\r\n")
-            .unwrap()
-            + 12;
+        let header_len = data.windows(12).position(|w| w == b"end_header\r\n").unwrap() + 12;
         // Cut inside the third vertex: 8+4+2+12+3+1 = 30 bytes per vertex plus 0,1,2 tags.
         let cut = header_len + 30 + 34 + 10;
         let e = err(&data[..cut]);
@@ -706,10 +672,7 @@ mod tests {
         assert!(e.contains("unexpected end of data"), "{e}");
         // Cut in the last face.
         let e = err(&data[..data.len() - 3]);
-        assert!(
-            e.starts_with(&format!("bad.ply:byte {}:", data.len() - 8)),
-            "{e}"
-        );
+        assert!(e.starts_with(&format!("bad.ply:byte {}:", data.len() - 8)), "{e}");
     }
 
     #[test]
@@ -725,25 +688,17 @@ mod tests {
             }
         }
         let e = err(&data);
-        assert!(
-            e.starts_with(&format!("bad.ply:byte {}:", start + 36)),
-            "{e}"
-        );
+        assert!(e.starts_with(&format!("bad.ply:byte {}:", start + 36)), "{e}");
         assert!(e.contains("4000000000") && e.contains("found 3"), "{e}");
 
-        let e = err(
-            b"ply\nformat ascii 1.0\nelement vertex 18446744073709551615\n\
-            property float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n",
-        );
+        let e = err(b"ply\nformat ascii 1.0\nelement vertex 18446744073709551615\n\
+            property float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n");
         assert!(e.contains("bad.ply"), "{e}");
         let e = err(b"ply\nformat ascii 1.0\nelement vertex 3\n\
             property float x\nproperty float y\nproperty float z\n\
             element face 4000000000\nproperty list uchar int vertex_indices\nend_header\n\
             0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
-        assert!(
-            e.starts_with("bad.ply:line 13:") && e.contains("found 1"),
-            "{e}"
-        );
+        assert!(e.starts_with("bad.ply:line 13:") && e.contains("found 1"), "{e}");
         // Unknown element with a huge count and a huge binary list length.
         let mut data = b"ply\nformat binary_big_endian 1.0\nelement vertex 3\n\
             property uchar x\nproperty uchar y\nproperty uchar z\n\
@@ -758,18 +713,12 @@ mod tests {
         let quad = ascii_quad();
         let index_oob = quad.replace("4 0 1 2 3", "4 0 1 2 4");
         let e = err(index_oob.as_bytes());
-        assert!(
-            e.starts_with("bad.ply:line 15:") && e.contains("out of range"),
-            "{e}"
-        );
+        assert!(e.starts_with("bad.ply:line 15:") && e.contains("out of range"), "{e}");
         let nan = quad.replace("1 1 0\n", "1 nan 0\n");
         assert!(err(nan.as_bytes()).starts_with("bad.ply:line 13:"));
         let two = quad.replace("4 0 1 2 3", "2 0 1");
         let e = err(two.as_bytes());
-        assert!(
-            e.starts_with("bad.ply:line 15:") && e.contains("face with 2"),
-            "{e}"
-        );
+        assert!(e.starts_with("bad.ply:line 15:") && e.contains("face with 2"), "{e}");
         let bad_num = quad.replace("1 0 0\n", "1 x 0\n");
         assert!(err(bad_num.as_bytes()).starts_with("bad.ply:line 12:"));
         let bad_type = quad.replace("property float y", "property flot y");
@@ -782,17 +731,10 @@ mod tests {
 
         // Binary: NaN coordinate and out-of-range index name their byte offsets.
         let mut data = binary_quad(false, "uchar", "int");
-        let header_len = data
-            .windows(12)
-            .position(|w| w == b"end_header\r\n")
-            .unwrap()
-            + 12;
+        let header_len = data.windows(12).position(|w| w == b"end_header\r\n").unwrap() + 12;
         data[header_len + 30 + 8..header_len + 30 + 12].copy_from_slice(&f32::NAN.to_le_bytes());
         let e = err(&data);
-        assert!(
-            e.starts_with(&format!("bad.ply:byte {}:", header_len + 30)),
-            "{e}"
-        );
+        assert!(e.starts_with(&format!("bad.ply:byte {}:", header_len + 30)), "{e}");
         let mut data = binary_quad(true, "uchar", "int");
         let n = data.len();
         data[n - 12..n - 8].copy_from_slice(&9i32.to_be_bytes());
@@ -812,10 +754,7 @@ mod tests {
             seed ^= seed << 17;
             seed
         };
-        for base in [
-            binary_quad(false, "uchar", "int"),
-            binary_quad(true, "uint", "ushort"),
-        ] {
+        for base in [binary_quad(false, "uchar", "int"), binary_quad(true, "uint", "ushort")] {
             for _ in 0..3000 {
                 let mut data = base.clone();
                 for _ in 0..1 + next() % 4 {
@@ -829,10 +768,7 @@ mod tests {
 
     #[test]
     fn every_prefix_never_panics() {
-        for data in [
-            binary_quad(false, "uchar", "int"),
-            binary_quad(true, "ushort", "uint"),
-        ] {
+        for data in [binary_quad(false, "uchar", "int"), binary_quad(true, "ushort", "uint")] {
             for len in 0..data.len() {
                 let _ = parse(&data[..len], Path::new("p.ply"));
             }

@@ -19,15 +19,10 @@ pub fn parse(data: &[u8], path: &Path) -> Result<Mesh> {
     if data.is_empty() {
         return Err(Error::parse(path, Location::Whole, "empty file"));
     }
-    let declared = data
-        .get(80..84)
-        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let declared = data.get(80..84).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
     let binary_len = declared.map(|n| 84 + 50 * n as u64);
     let starts_with_solid = {
-        let start = data
-            .iter()
-            .position(|b| !b.is_ascii_whitespace())
-            .unwrap_or(data.len());
+        let start = data.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(data.len());
         data[start..].starts_with(b"solid")
     };
     if binary_len == Some(data.len() as u64) || !starts_with_solid {
@@ -69,10 +64,7 @@ fn parse_binary(data: &[u8], path: &Path) -> Result<Mesh> {
         return Err(Error::parse(
             path,
             Location::Byte(data.len() as u64),
-            format!(
-                "not an STL file: {} bytes, too short for a binary header",
-                data.len()
-            ),
+            format!("not an STL file: {} bytes, too short for a binary header", data.len()),
         ));
     }
     let n = u32::from_le_bytes([data[80], data[81], data[82], data[83]]) as u64;
@@ -130,12 +122,8 @@ fn parse_ascii(data: &[u8], path: &Path) -> Result<Mesh> {
                 }
                 let mut c = [0.0f32; 3];
                 for slot in &mut c {
-                    let s = t
-                        .next()
-                        .ok_or_else(|| err(n, "vertex needs 3 coordinates".into()))?;
-                    *slot = s
-                        .parse()
-                        .map_err(|_| err(n, format!("invalid number '{s}'")))?;
+                    let s = t.next().ok_or_else(|| err(n, "vertex needs 3 coordinates".into()))?;
+                    *slot = s.parse().map_err(|_| err(n, format!("invalid number '{s}'")))?;
                 }
                 let v = Vec3::from_array(c);
                 check_finite(path, Location::Line(n), "vertex", v)?;
@@ -147,15 +135,10 @@ fn parse_ascii(data: &[u8], path: &Path) -> Result<Mesh> {
                 }
                 in_loop = false;
                 if corners.len() < 3 {
-                    return Err(err(
-                        n,
-                        format!("facet with {} vertices (need 3)", corners.len()),
-                    ));
+                    return Err(err(n, format!("facet with {} vertices (need 3)", corners.len())));
                 }
                 for k in 1..corners.len() - 1 {
-                    w.mesh
-                        .triangles
-                        .push([corners[0], corners[k], corners[k + 1]]);
+                    w.mesh.triangles.push([corners[0], corners[k], corners[k + 1]]);
                 }
             }
             other => return Err(err(n, format!("unexpected '{other}'"))),
@@ -226,10 +209,7 @@ mod tests {
     fn malformed_inputs() {
         let data = binary(b"x", &QUAD);
         let e = err(&data[..data.len() - 1]);
-        assert!(
-            e.starts_with("bad.stl:byte 134:") && e.contains("declares 2"),
-            "{e}"
-        );
+        assert!(e.starts_with("bad.stl:byte 134:") && e.contains("declares 2"), "{e}");
         let mut data = binary(b"x", &QUAD);
         data[84 + 50 + 12 + 12 + 4..84 + 50 + 12 + 12 + 8].copy_from_slice(&f32::NAN.to_le_bytes());
         let e = err(&data);
@@ -246,10 +226,7 @@ mod tests {
         assert!(err(nan.as_bytes()).starts_with("bad.stl:line 5:"));
         let two = ASCII.replace("vertex 1 1 0\n  endloop", "  endloop");
         let e = err(two.as_bytes());
-        assert!(
-            e.starts_with("bad.stl:line 6:") && e.contains("2 vertices"),
-            "{e}"
-        );
+        assert!(e.starts_with("bad.stl:line 6:") && e.contains("2 vertices"), "{e}");
         let junk = ASCII.replace("endfacet\r\n", "endfacet\r\nbogus\r\n");
         assert!(err(junk.as_bytes()).starts_with("bad.stl:line 16:"));
         assert!(err(b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n").contains("line 4"));

@@ -69,12 +69,7 @@ pub fn knot_box() -> Scene {
 pub fn mirror_spheres() -> Scene {
     let mut s = Scene::default();
     s.add_mesh(
-        box_mesh(
-            Vec3::new(-6.0, -0.001, -6.0),
-            Vec3::new(6.0, 6.0, 6.0),
-            2,
-            true,
-        ),
+        box_mesh(Vec3::new(-6.0, -0.001, -6.0), Vec3::new(6.0, 6.0, 6.0), 2, true),
         Mat4::IDENTITY,
         mat("room", [0.7, 0.72, 0.8], 0.0),
     );
@@ -135,10 +130,7 @@ pub fn sparse_room() -> Scene {
         up: Vec3::Y,
         vfov_deg: 30.0,
     };
-    s.lights = vec![PointLight::new(
-        Vec3::new(-5.0, 15.0, 10.0),
-        Vec3::splat(400.0),
-    )];
+    s.lights = vec![PointLight::new(Vec3::new(-5.0, 15.0, 10.0), Vec3::splat(400.0))];
     s
 }
 
@@ -165,9 +157,6 @@ pub fn mesh_scene(mesh: Mesh) -> Scene {
         vfov_deg: vfov,
     };
     let light = c + Vec3::new(-1.2, 2.2, 1.6) * r;
-    s.lights = vec![PointLight::new(
-        light,
-        Vec3::splat((light - c).length_squared() * 1.1),
-    )];
+    s.lights = vec![PointLight::new(light, Vec3::splat((light - c).length_squared() * 1.1))];
     s
 }

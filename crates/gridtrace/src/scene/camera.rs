@@ -51,11 +51,7 @@ impl Camera {
     /// view direction, 0 < vfov < 180.
     pub fn validate(&self) -> Result<(), String> {
         let f = self.target - self.eye;
-        if !(self.eye.is_finite()
-            && self.target.is_finite()
-            && self.up.is_finite()
-            && self.vfov_deg.is_finite())
-        {
+        if !(self.eye.is_finite() && self.target.is_finite() && self.up.is_finite() && self.vfov_deg.is_finite()) {
             return Err("camera has non-finite values".into());
         }
         if f.length_squared() == 0.0 {
@@ -65,10 +61,7 @@ impl Camera {
             return Err("camera up is parallel to the view direction".into());
         }
         if !(self.vfov_deg > 0.0 && self.vfov_deg < 180.0) {
-            return Err(format!(
-                "vfov must be in (0, 180) degrees, got {}",
-                self.vfov_deg
-            ));
+            return Err(format!("vfov must be in (0, 180) degrees, got {}", self.vfov_deg));
         }
         Ok(())
     }
@@ -98,9 +91,7 @@ impl CameraFrame {
     pub fn ray(&self, x: u32, y: u32) -> Ray {
         let px = 2.0 * (x as f32 + 0.5) / self.width as f32 - 1.0;
         let py = 1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32;
-        let dir = Vec3::from(self.forward)
-            + px * Vec3::from(self.right_scaled)
-            + py * Vec3::from(self.up_scaled);
+        let dir = Vec3::from(self.forward) + px * Vec3::from(self.right_scaled) + py * Vec3::from(self.up_scaled);
         Ray {
             origin: Vec3::from(self.eye),
             dir: dir.normalize(),

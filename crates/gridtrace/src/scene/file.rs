@@ -133,13 +133,9 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             "scene file is not valid UTF-8",
         )
     })?;
-    let line_of =
-        |offset: usize| Location::Line(text[..offset.min(text.len())].matches('\n').count() + 1);
+    let line_of = |offset: usize| Location::Line(text[..offset.min(text.len())].matches('\n').count() + 1);
     let def: SceneFile = toml::from_str(text).map_err(|e| {
-        let loc = e
-            .span()
-            .map(|s| line_of(s.start))
-            .unwrap_or(Location::Whole);
+        let loc = e.span().map(|s| line_of(s.start)).unwrap_or(Location::Whole);
         Error::parse(path, loc, e.message().to_string())
     })?;
     // Semantic errors name the item; find its table header's line for the location.
@@ -223,9 +219,7 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             .filter(|b| **b)
             .count();
         if given != 1 {
-            return Err(err(
-                "an object needs exactly one of 'mesh', 'shape' or 'builtin'".into(),
-            ));
+            return Err(err("an object needs exactly one of 'mesh', 'shape' or 'builtin'".into()));
         }
         let mesh = if let Some(file) = &o.mesh {
             crate::io::load_mesh(&base.join(file))?
@@ -238,11 +232,7 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             let min = Vec3::from(o.min.unwrap_or([-1.0; 3]));
             let max = Vec3::from(o.max.unwrap_or([1.0; 3]));
             match shape {
-                "icosphere" | "sphere" => icosphere(
-                    Vec3::ZERO,
-                    o.radius.unwrap_or(1.0),
-                    o.level.unwrap_or(3).min(8),
-                ),
+                "icosphere" | "sphere" => icosphere(Vec3::ZERO, o.radius.unwrap_or(1.0), o.level.unwrap_or(3).min(8)),
                 "box" => box_mesh(min, max, o.subdiv.unwrap_or(1).min(1024), false),
                 "room" => box_mesh(min, max, o.subdiv.unwrap_or(1).min(1024), true),
                 "plane" => plane(o.size.unwrap_or(2.0), o.subdiv.unwrap_or(1).min(4096)),
@@ -305,24 +295,16 @@ scale = 3
             s.mesh.materials[s.mesh.triangle_materials[0] as usize].reflectivity,
             0.25
         );
-        assert!(
-            s.mesh.positions[..42]
-                .iter()
-                .all(|p| (p.y - 1.0).abs() <= 1.0 + 1e-6)
-        );
+        assert!(s.mesh.positions[..42].iter().all(|p| (p.y - 1.0).abs() <= 1.0 + 1e-6));
     }
 
     #[test]
     fn errors_name_file_and_line() {
-        let text =
-            "[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n\n[[object]]\nshape = \"cube\"\n";
+        let text = "[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n\n[[object]]\nshape = \"cube\"\n";
         let e = parse_scene(text.as_bytes(), Path::new("s.toml"))
             .unwrap_err()
             .to_string();
-        assert!(
-            e.contains("s.toml:line 5") && e.contains("unknown shape"),
-            "{e}"
-        );
+        assert!(e.contains("s.toml:line 5") && e.contains("unknown shape"), "{e}");
         let text = "[camera]\neye = [0, 1, 4]\ntarget = [0, 0, \"x\"]\n";
         let e = parse_scene(text.as_bytes(), Path::new("s.toml"))
             .unwrap_err()
@@ -333,12 +315,9 @@ scale = 3
             .unwrap_err()
             .to_string();
         assert!(e.contains("eye equals target"), "{e}");
-        let e = parse_scene(b"\xff\xfe", Path::new("s.toml"))
-            .unwrap_err()
-            .to_string();
+        let e = parse_scene(b"\xff\xfe", Path::new("s.toml")).unwrap_err().to_string();
         assert!(e.contains("byte 0"), "{e}");
-        let text =
-            "[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n[[object]]\nmesh = \"missing.ply\"\n";
+        let text = "[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n[[object]]\nmesh = \"missing.ply\"\n";
         let e = parse_scene(text.as_bytes(), Path::new("dir/s.toml"))
             .unwrap_err()
             .to_string();

@@ -76,13 +76,11 @@ impl Scene {
         match material {
             Some(m) => {
                 dst.materials.push(m);
-                dst.triangle_materials
-                    .extend(std::iter::repeat_n(mbase, n_tris));
+                dst.triangle_materials.extend(std::iter::repeat_n(mbase, n_tris));
             }
             None if mesh.materials.is_empty() => {
                 dst.materials.push(Material::default());
-                dst.triangle_materials
-                    .extend(std::iter::repeat_n(mbase, n_tris));
+                dst.triangle_materials.extend(std::iter::repeat_n(mbase, n_tris));
             }
             None => {
                 dst.materials.extend(mesh.materials.iter().cloned());
@@ -106,9 +104,7 @@ impl Scene {
         self.camera.validate().map_err(Error::Scene)?;
         for (i, l) in self.lights.iter().enumerate() {
             if !(Vec3::from(l.position).is_finite() && Vec3::from(l.intensity).is_finite()) {
-                return Err(Error::Scene(format!(
-                    "light {i} has non-finite position or intensity"
-                )));
+                return Err(Error::Scene(format!("light {i} has non-finite position or intensity")));
             }
         }
         let m = &self.mesh;
@@ -119,21 +115,16 @@ impl Scene {
             )));
         }
         let n_pos = m.positions.len() as u32;
-        if let Some(t) = m
-            .triangles
-            .iter()
-            .position(|t| t.iter().any(|&i| i >= n_pos))
-        {
+        if let Some(t) = m.triangles.iter().position(|t| t.iter().any(|&i| i >= n_pos)) {
             return Err(Error::Scene(format!(
                 "triangle {t} indexes a vertex out of range (vertices: {n_pos})"
             )));
         }
-        let normals =
-            if m.normals.len() == m.positions.len() && m.normals.iter().all(|n| n.is_finite()) {
-                m.normals.iter().map(|n| n.normalize_or_zero()).collect()
-            } else {
-                vertex_normals(&m.positions, &m.triangles)
-            };
+        let normals = if m.normals.len() == m.positions.len() && m.normals.iter().all(|n| n.is_finite()) {
+            m.normals.iter().map(|n| n.normalize_or_zero()).collect()
+        } else {
+            vertex_normals(&m.positions, &m.triangles)
+        };
         let mut tris = Vec::with_capacity(m.triangles.len());
         let mut tri_vertices = Vec::with_capacity(m.triangles.len());
         let mut tri_material = Vec::with_capacity(m.triangles.len());
@@ -142,11 +133,7 @@ impl Scene {
             let [a, b, c] = t.map(|i| m.positions[i as usize]);
             // Zero area (repeated vertex or collinear) is "degenerate": such a triangle can never
             // be hit by a two-sided MT test with det != 0 and only costs traversal time.
-            if t[0] == t[1]
-                || t[1] == t[2]
-                || t[0] == t[2]
-                || (b - a).cross(c - a).length_squared() == 0.0
-            {
+            if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || (b - a).cross(c - a).length_squared() == 0.0 {
                 dropped += 1;
                 continue;
             }
@@ -164,10 +151,7 @@ impl Scene {
         if materials.is_empty() {
             materials.push(Material::default());
         }
-        if let Some(&bad) = tri_material
-            .iter()
-            .find(|&&id| id as usize >= materials.len())
-        {
+        if let Some(&bad) = tri_material.iter().find(|&&id| id as usize >= materials.len()) {
             return Err(Error::Scene(format!(
                 "material index {bad} out of range ({} materials)",
                 materials.len()
@@ -179,9 +163,7 @@ impl Scene {
         // Secondary rays start this far off the surface (along the geometric normal, towards
         // the side they leave on). It scales with the scene size, and with the magnitude of the
         // coordinates, because f32 hit points far from the origin carry larger absolute error.
-        let ray_epsilon = (bounds.diagonal() * 1e-4)
-            .max(max_coord * 4e-6)
-            .max(f32::MIN_POSITIVE);
+        let ray_epsilon = (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE);
         Ok(PreparedScene {
             accel: GridAccel { grid, tris },
             normals,
@@ -222,27 +204,12 @@ impl PreparedScene {
     /// Bytes of every CPU-side array that tracing uses.
     pub fn memory(&self) -> Vec<(&'static str, usize)> {
         vec![
-            (
-                "cells",
-                std::mem::size_of_val(self.accel.grid.cells.as_slice()),
-            ),
-            (
-                "refs",
-                std::mem::size_of_val(self.accel.grid.refs.as_slice()),
-            ),
-            (
-                "triangles",
-                std::mem::size_of_val(self.accel.tris.as_slice()),
-            ),
-            (
-                "tri_vertices",
-                std::mem::size_of_val(self.tri_vertices.as_slice()),
-            ),
+            ("cells", std::mem::size_of_val(self.accel.grid.cells.as_slice())),
+            ("refs", std::mem::size_of_val(self.accel.grid.refs.as_slice())),
+            ("triangles", std::mem::size_of_val(self.accel.tris.as_slice())),
+            ("tri_vertices", std::mem::size_of_val(self.tri_vertices.as_slice())),
             ("normals", std::mem::size_of_val(self.normals.as_slice())),
-            (
-                "tri_material",
-                std::mem::size_of_val(self.tri_material.as_slice()),
-            ),
+            ("tri_material", std::mem::size_of_val(self.tri_material.as_slice())),
         ]
     }
 

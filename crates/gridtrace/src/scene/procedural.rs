@@ -28,12 +28,7 @@ fn tube(curve: impl Fn(f32) -> Vec3, radius: f32, rings: u32, sides: u32) -> Mes
         let i1 = (i + 1) % rings;
         for j in 0..sides {
             let j1 = (j + 1) % sides;
-            let (a, b, c, d) = (
-                i * sides + j,
-                i1 * sides + j,
-                i1 * sides + j1,
-                i * sides + j1,
-            );
+            let (a, b, c, d) = (i * sides + j, i1 * sides + j, i1 * sides + j1, i * sides + j1);
             m.triangles.push([a, b, c]);
             m.triangles.push([a, c, d]);
         }
@@ -62,11 +57,7 @@ pub fn uv_sphere(center: Vec3, radius: f32, stacks: u32, slices: u32) -> Mesh {
         let theta = i as f32 / stacks as f32 * std::f32::consts::PI;
         for j in 0..slices {
             let phi = j as f32 / slices as f32 * TAU;
-            let n = Vec3::new(
-                theta.sin() * phi.cos(),
-                theta.cos(),
-                theta.sin() * phi.sin(),
-            );
+            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
             m.positions.push(center + n * radius);
             m.normals.push(n);
         }
