@@ -4,6 +4,7 @@
 pub mod accel;
 pub mod cpu;
 pub mod error;
+pub mod gpu;
 pub mod io;
 pub mod render;
 pub mod scene;

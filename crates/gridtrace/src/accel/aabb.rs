@@ -48,21 +48,29 @@ impl Aabb {
         self.extent().length()
     }
 
-    /// Clips the ray `origin + t * dir` against the box: returns the parametric interval
+    /// Clips the ray `origin + t * dir` against the closed box: returns the parametric interval
     /// `[t_enter, t_exit]` intersected with `[t_min, t_max]`, or `None` if it is empty.
     ///
-    /// `inv_dir` is `1 / dir` per component; a zero component gives +-inf, and the slab test then
-    /// yields +-inf or NaN. NaN arises only when the origin lies exactly on a slab plane of a
-    /// parallel axis (0 * inf); `f32::max`/`min` ignore NaN, which treats that slab as "no
-    /// constraint" - the right answer for a ray lying in the boundary plane (the box is closed).
+    /// An axis with `dir == 0` constrains nothing if the origin lies within that slab (boundary
+    /// included) and empties the interval otherwise; it is handled apart because the slab
+    /// formula would give `0 * inf = NaN` for an origin on the slab plane. The GPU kernels do
+    /// the same (`clip_box` in common.wgsl).
     #[inline]
     pub fn clip(&self, origin: Vec3, inv_dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, f32)> {
-        let t0 = (self.min - origin) * inv_dir;
-        let t1 = (self.max - origin) * inv_dir;
-        let near = t0.min(t1);
-        let far = t0.max(t1);
-        let t_enter = t_min.max(near.x).max(near.y).max(near.z);
-        let t_exit = t_max.min(far.x).min(far.y).min(far.z);
+        let mut t_enter = t_min;
+        let mut t_exit = t_max;
+        for a in 0..3 {
+            if inv_dir[a].is_infinite() {
+                if origin[a] < self.min[a] || origin[a] > self.max[a] {
+                    return None;
+                }
+            } else {
+                let t0 = (self.min[a] - origin[a]) * inv_dir[a];
+                let t1 = (self.max[a] - origin[a]) * inv_dir[a];
+                t_enter = t_enter.max(t0.min(t1));
+                t_exit = t_exit.min(t0.max(t1));
+            }
+        }
         (t_enter <= t_exit).then_some((t_enter, t_exit))
     }
 }

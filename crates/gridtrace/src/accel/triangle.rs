@@ -22,6 +22,12 @@ pub struct TriHit {
     pub v: f32,
 }
 
+/// Barycentric slack: a hit within this fraction of the triangle's size outside an edge still
+/// counts. Exactly on a shared edge, rounding (which differs between the CPU and GPU compilers,
+/// e.g. fused multiply-adds) can put the point a hair outside *both* triangles and let the ray
+/// through; the slack makes both accept it instead.
+pub const BARY_EPS: f32 = 1.0e-6;
+
 /// Squared cosine bound for "ray parallel to the triangle" (see `TriAccel::intersect`).
 pub const PARALLEL_COS2: f32 = 1.0 / (1u64 << 40) as f32;
 
@@ -52,7 +58,8 @@ impl TriAccel {
     /// returns arbitrary t, u, v (seen: a "hit" 0.6 units off the triangle). An absolute
     /// epsilon would depend on the scene's scale and reject small, valid triangles. A grazing
     /// ray through a closed mesh still hits the neighbouring triangles, so nothing leaks.
-    /// The barycentric bounds are inclusive, so a ray through a shared edge hits both triangles.
+    /// The barycentric bounds are inclusive and slightly widened (`BARY_EPS`), so a ray through a
+    /// shared edge hits both triangles.
     #[inline(always)]
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<TriHit> {
         let e1 = Vec3::from(self.e1);
@@ -65,12 +72,12 @@ impl TriAccel {
         let inv_det = 1.0 / det;
         let s = origin - Vec3::from(self.v0);
         let u = s.dot(p) * inv_det;
-        if !(0.0..=1.0).contains(&u) {
+        if !(-BARY_EPS..=1.0 + BARY_EPS).contains(&u) {
             return None;
         }
         let q = s.cross(e1);
         let v = dir.dot(q) * inv_det;
-        if v < 0.0 || u + v > 1.0 {
+        if v < -BARY_EPS || u + v > 1.0 + BARY_EPS {
             return None;
         }
         let t = e2.dot(q) * inv_det;

@@ -1,0 +1,188 @@
+//! Adapter and device: chosen once, described on every run (so a software adapter can never
+//! pass for a GPU), with errors captured instead of panicking and waits that cannot hang.
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use crate::{Error, Result};
+
+/// How long a submission may run before it is reported as a hang.
+pub const GPU_TIMEOUT: Duration = Duration::from_secs(120);
+
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    /// Timestamp queries are available (per-stage GPU times).
+    pub timestamps: bool,
+    /// First uncaptured device error, if any (validation, out of memory, lost device).
+    errors: Arc<Mutex<Option<String>>>,
+}
+
+/// Adapter kinds in order of preference.
+fn rank(t: wgpu::DeviceType) -> u32 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+impl GpuContext {
+    /// Opens the best adapter (discrete first, software last). `GRIDTRACE_ADAPTER=text` picks the
+    /// first adapter whose name contains `text` (case-insensitive).
+    pub fn new() -> Result<GpuContext> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<GpuContext> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::PRIMARY.with_env();
+        desc.flags = wgpu::InstanceFlags::empty().with_env();
+        let instance = wgpu::Instance::new(desc);
+        let mut adapters = instance.enumerate_adapters(wgpu::Backends::PRIMARY.with_env()).await;
+        if adapters.is_empty() {
+            return Err(Error::Gpu(
+                "no GPU adapter found (for a software one on Linux, install Mesa's lavapipe: \
+                 Debian/Ubuntu package mesa-vulkan-drivers)"
+                    .into(),
+            ));
+        }
+        if let Ok(want) = std::env::var("GRIDTRACE_ADAPTER") {
+            let want = want.to_lowercase();
+            let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&want));
+            if adapters.is_empty() {
+                return Err(Error::Gpu(format!(
+                    "GRIDTRACE_ADAPTER={want} matches none of: {}",
+                    names.join(", ")
+                )));
+            }
+        }
+        adapters.sort_by_key(|a| rank(a.get_info().device_type));
+        let adapter = adapters.remove(0);
+        let info = adapter.get_info();
+        let features = adapter.features();
+        let timestamps = features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        let required_features = if timestamps {
+            wgpu::Features::TIMESTAMP_QUERY
+        } else {
+            wgpu::Features::empty()
+        };
+        // Ask for what the adapter really has, not the conservative defaults (8 storage buffers,
+        // 128 MiB bindings): large scenes need the real limits.
+        let limits = adapter.limits();
+        if limits.max_storage_buffers_per_shader_stage < 14 {
+            return Err(Error::Gpu(format!(
+                "adapter '{}' allows {} storage buffers per shader stage; gridtrace needs 14 \
+                 (limit max_storage_buffers_per_shader_stage)",
+                info.name, limits.max_storage_buffers_per_shader_stage
+            )));
+        }
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("gridtrace"),
+                required_features,
+                required_limits: limits,
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| Error::Gpu(format!("cannot open device on '{}': {e}", info.name)))?;
+        let errors = Arc::new(Mutex::new(None::<String>));
+        let sink = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            let mut slot = sink.lock().unwrap_or_else(|p| p.into_inner());
+            slot.get_or_insert_with(|| e.to_string());
+        }));
+        let lost = errors.clone();
+        device.set_device_lost_callback(move |reason, msg| {
+            let mut slot = lost.lock().unwrap_or_else(|p| p.into_inner());
+            slot.get_or_insert_with(|| format!("device lost ({reason:?}): {msg}"));
+        });
+        Ok(GpuContext {
+            adapter,
+            device,
+            queue,
+            info,
+            timestamps,
+            errors,
+        })
+    }
+
+    /// One line naming the adapter: name, backend, type, driver.
+    pub fn describe(&self) -> String {
+        let i = &self.info;
+        let driver = if i.driver.is_empty() {
+            String::new()
+        } else {
+            format!(", driver {} {}", i.driver, i.driver_info)
+        };
+        format!("{} ({:?}, {:?}{driver})", i.name, i.backend, i.device_type)
+    }
+
+    /// True for software rasterisers such as lavapipe or llvmpipe.
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    pub fn limits(&self) -> wgpu::Limits {
+        self.device.limits()
+    }
+
+    /// Returns the first device error since the last call, as an `Error`.
+    pub fn check_errors(&self) -> Result<()> {
+        let mut slot = self.errors.lock().unwrap_or_else(|p| p.into_inner());
+        match slot.take() {
+            Some(e) => Err(Error::Gpu(e)),
+            None => Ok(()),
+        }
+    }
+
+    /// Waits for all submitted work, with a time limit: a hung or lost device is an error.
+    pub fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: None,
+                timeout: Some(GPU_TIMEOUT),
+            })
+            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+        self.check_errors()
+    }
+
+    /// Copies `size` bytes of `src` (from offset 0) back to the CPU.
+    pub fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(src, 0, &staging, 0, Some(size));
+        self.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        match rx.recv_timeout(Duration::from_secs(5)) {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(Error::Gpu(format!("mapping a result buffer failed: {e}"))),
+            Err(_) => return Err(Error::Gpu("mapping a result buffer did not complete".into())),
+        }
+        let data = staging
+            .get_mapped_range(..)
+            .map_err(|e| Error::Gpu(format!("reading a result buffer failed: {e}")))?
+            .to_vec();
+        staging.unmap();
+        Ok(data)
+    }
+}

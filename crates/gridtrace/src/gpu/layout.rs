@@ -1,0 +1,89 @@
+//! GPU-only storage and uniform layouts. Each is `#[repr(C)]` and `Pod`, and is declared once
+//! more in `shaders/common.wgsl`; `tests/gpu_layout.rs` parses that file and checks every size
+//! and field offset against these structs (and against `Cell`, `TriAccel`, `PointLight` and
+//! `CameraFrame`, which the CPU path shares).
+
+use bytemuck::{Pod, Zeroable};
+
+/// Per-triangle shading data: the three vertex normals and the material (40 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TriShade {
+    pub n0: [f32; 3],
+    pub n1: [f32; 3],
+    pub n2: [f32; 3],
+    pub material: u32,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GpuMaterial {
+    pub diffuse: [f32; 3],
+    pub reflectivity: f32,
+}
+
+/// A queued ray (eye, reflection or shadow), 48 bytes.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct RayRec {
+    pub origin: [f32; 3],
+    /// Index into the tile's accumulation buffer (batch queries: the ray's index).
+    pub pixel: u32,
+    pub dir: [f32; 3],
+    pub t_max: f32,
+    /// Path throughput; for shadow rays the contribution if unoccluded (zeroed if occluded).
+    pub weight: [f32; 3],
+    pub t_min: f32,
+}
+
+/// A closest hit; a miss has `t = inf`, `tri = u32::MAX`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GpuHit {
+    pub t: f32,
+    pub tri: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+/// Scene constants (uniform; vec3 fields are 16-byte aligned in WGSL uniforms, so each is
+/// followed by a 4-byte scalar).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct SceneUniform {
+    pub bounds_min: [f32; 3],
+    pub ray_epsilon: f32,
+    pub bounds_max: [f32; 3],
+    pub n_lights: u32,
+    pub cell_size: [f32; 3],
+    pub n_tris: u32,
+    pub inv_cell_size: [f32; 3],
+    pub _pad0: u32,
+    pub dims: [u32; 3],
+    pub _pad1: u32,
+    pub background: [f32; 3],
+    pub _pad2: u32,
+    pub ambient: [f32; 3],
+    pub _pad3: u32,
+}
+
+/// Per-pass constants: which bounce, which counter slots are the input and output queues.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+pub struct PassUniform {
+    pub depth: u32,
+    pub in_slot: u32,
+    pub out_slot: u32,
+    pub tile_offset: u32,
+    pub tile_pixels: u32,
+    pub mode: u32,
+    pub accel: u32,
+    pub max_depth: u32,
+}
+
+/// Counter slots, as in common.wgsl.
+pub const SLOT_QUEUE_A: usize = 0;
+pub const SLOT_SHADOW: usize = 2;
+pub const SLOT_SHADOW_TOTAL: usize = 3;
+pub const SLOT_REFLECT_TOTAL: usize = 4;
+pub const COUNTER_SLOTS: usize = 16;

@@ -1,0 +1,255 @@
+// Shared declarations and functions of all gridtrace kernels. Every kernel's module is this file
+// followed by the kernel's own file (WGSL has no includes).
+//
+// The structs below mirror #[repr(C)] Rust structs in src/gpu/layout.rs (and accel/scene); a
+// test (tests/gpu_layout.rs) parses this file with naga and checks every size and offset.
+// Storage structs use array<f32, 3> (4-byte aligned) rather than vec3<f32> (16-byte aligned)
+// so that they match the packed Rust layouts.
+
+struct Cell { start: u32, count: u32, dist: u32 }
+struct TriAccel { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
+struct TriShade { n0: array<f32, 3>, n1: array<f32, 3>, n2: array<f32, 3>, material: u32 }
+struct GpuMaterial { diffuse: array<f32, 3>, reflectivity: f32 }
+struct PointLight { position: array<f32, 3>, _pad0: f32, intensity: array<f32, 3>, _pad1: f32 }
+// A queued ray: eye, reflection or shadow. `pixel` indexes the tile's accumulation buffer;
+// `weight` is the path throughput (shadow rays: the contribution if unoccluded).
+struct RayRec { origin: array<f32, 3>, pixel: u32, dir: array<f32, 3>, t_max: f32, weight: array<f32, 3>, t_min: f32 }
+struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
+
+struct SceneUniform {
+    bounds_min: vec3<f32>, ray_epsilon: f32,
+    bounds_max: vec3<f32>, n_lights: u32,
+    cell_size: vec3<f32>, n_tris: u32,
+    inv_cell_size: vec3<f32>, _pad0: u32,
+    dims: vec3<u32>, _pad1: u32,
+    background: vec3<f32>, _pad2: u32,
+    ambient: vec3<f32>, _pad3: u32,
+}
+struct CameraFrame {
+    eye: vec3<f32>, width: u32,
+    forward: vec3<f32>, height: u32,
+    right_scaled: vec3<f32>, _pad0: u32,
+    up_scaled: vec3<f32>, _pad1: u32,
+}
+struct PassUniform {
+    depth: u32, in_slot: u32, out_slot: u32, tile_offset: u32,
+    tile_pixels: u32, mode: u32, accel: u32, max_depth: u32,
+}
+
+// Counter slots (array<atomic<u32>> `counters`).
+const SLOT_QUEUE_A: u32 = 0u;   // ray queue A length (slots 0 and 1 alternate as in/out)
+const SLOT_SHADOW: u32 = 2u;    // shadow queue length, this bounce
+const SLOT_SHADOW_TOTAL: u32 = 3u;
+const SLOT_REFLECT_TOTAL: u32 = 4u;
+const MODE_CAST: u32 = 0u;
+const MODE_SHADOW: u32 = 1u;
+const MODE_TRACE: u32 = 2u;
+const MODE_HEAT: u32 = 3u;
+const ACCEL_PC: u32 = 1u;
+const MISS: u32 = 0xffffffffu;
+const WORKGROUP: u32 = 64u;
+// Squared cosine below which a ray counts as parallel to a triangle (TriAccel::intersect).
+// Barycentric slack at edges (TriAccel::intersect).
+const BARY_EPS: f32 = 1.0e-6;
+const PARALLEL_COS2: f32 = 9.094947e-13; // 2^-40
+
+// Set per pipeline: the heat pipeline counts traversal work, the others compile it away.
+override COUNT_WORK: bool = false;
+
+@group(0) @binding(0) var<uniform> scene: SceneUniform;
+@group(0) @binding(1) var<uniform> camera: CameraFrame;
+@group(0) @binding(2) var<uniform> pass_: PassUniform;
+@group(0) @binding(3) var<storage, read> cells: array<Cell>;
+@group(0) @binding(4) var<storage, read> refs: array<u32>;
+@group(0) @binding(5) var<storage, read> tris: array<TriAccel>;
+@group(0) @binding(6) var<storage, read> tri_shade: array<TriShade>;
+@group(0) @binding(7) var<storage, read> materials: array<GpuMaterial>;
+@group(0) @binding(8) var<storage, read> lights: array<PointLight>;
+@group(0) @binding(9) var<storage, read_write> rays_in: array<RayRec>;
+@group(0) @binding(10) var<storage, read_write> rays_out: array<RayRec>;
+@group(0) @binding(11) var<storage, read_write> hits: array<GpuHit>;
+@group(0) @binding(12) var<storage, read_write> shadow_rays: array<RayRec>;
+@group(0) @binding(13) var<storage, read_write> resolve: array<vec2<u32>>;
+@group(0) @binding(14) var<storage, read_write> accum: array<vec4<f32>>;
+@group(0) @binding(15) var<storage, read_write> counters: array<atomic<u32>, 16>;
+
+fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
+fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }
+fn inf() -> f32 { return bitcast<f32>(0x7f800000u); }
+
+// Invocation index in a 2-D grid of 64-wide workgroups (dispatches may exceed 65535 groups in x).
+fn flat_index(wg: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
+    return (wg.y * nwg.x + wg.x) * WORKGROUP + lid;
+}
+
+// Two-sided Möller-Trumbore on stored edges; mirrors TriAccel::intersect. Returns t, u, v in
+// xyz and w = 1 for a hit with t_min < t < t_max.
+fn intersect_tri(tri: TriAccel, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec4<f32> {
+    let e1 = v3(tri.e1);
+    let e2 = v3(tri.e2);
+    let p = cross(d, e2);
+    let det = dot(e1, p);
+    if (det * det <= PARALLEL_COS2 * dot(e1, e1) * dot(p, p)) { return vec4<f32>(0.0); }
+    let inv_det = 1.0 / det;
+    let s = o - v3(tri.v0);
+    let u = dot(s, p) * inv_det;
+    if (!(u >= -BARY_EPS && u <= 1.0 + BARY_EPS)) { return vec4<f32>(0.0); }
+    let q = cross(s, e1);
+    let v = dot(d, q) * inv_det;
+    if (v < -BARY_EPS || u + v > 1.0 + BARY_EPS) { return vec4<f32>(0.0); }
+    let t = dot(e2, q) * inv_det;
+    if (t > t_min && t < t_max) { return vec4<f32>(t, u, v, 1.0); }
+    return vec4<f32>(0.0);
+}
+
+// Ray/box slab clip; mirrors Aabb::clip (axes with d == 0 handled apart: no 0 * inf).
+// Returns (t_enter, t_exit, ok).
+fn clip_box(o: vec3<f32>, inv_d: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec3<f32> {
+    var t_enter = t_min;
+    var t_exit = t_max;
+    for (var a = 0; a < 3; a++) {
+        if (d[a] == 0.0 || abs(inv_d[a]) == inf()) {
+            if (o[a] < scene.bounds_min[a] || o[a] > scene.bounds_max[a]) { return vec3<f32>(0.0, 0.0, 0.0); }
+        } else {
+            let t0 = (scene.bounds_min[a] - o[a]) * inv_d[a];
+            let t1 = (scene.bounds_max[a] - o[a]) * inv_d[a];
+            t_enter = max(t_enter, min(t0, t1));
+            t_exit = min(t_exit, max(t0, t1));
+        }
+    }
+    return vec3<f32>(t_enter, t_exit, select(0.0, 1.0, t_enter <= t_exit));
+}
+
+// 3D-DDA state; mirrors GridAccel::walk.
+struct Dda {
+    o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>,
+    cell: vec3<i32>, step: vec3<i32>, ahead: vec3<i32>,
+    t_next: vec3<f32>, t_leave: f32, budget: u32,
+    cells_visited: u32, jumps: u32,
+}
+
+fn boundary_t(s: ptr<function, Dda>, axis: i32, k: i32) -> f32 {
+    if ((*s).step[axis] == 0) { return inf(); }
+    return (scene.bounds_min[axis] + f32(k) * scene.cell_size[axis] - (*s).o[axis]) * (*s).inv_d[axis];
+}
+
+fn world_to_grid(p: vec3<f32>) -> vec3<i32> {
+    // Clamp before converting: f32 -> i32 of huge values is best kept away from.
+    let g = clamp(floor((p - scene.bounds_min) * scene.inv_cell_size), vec3<f32>(-2.0), vec3<f32>(scene.dims) + 1.0);
+    return vec3<i32>(g);
+}
+
+fn refresh_t_next(s: ptr<function, Dda>) {
+    (*s).t_next = vec3<f32>(
+        boundary_t(s, 0, (*s).cell.x + (*s).ahead.x),
+        boundary_t(s, 1, (*s).cell.y + (*s).ahead.y),
+        boundary_t(s, 2, (*s).cell.z + (*s).ahead.z));
+}
+
+fn min_position(v: vec3<f32>) -> i32 {
+    var m = v.x;
+    var i = 0;
+    if (v.y < m) { m = v.y; i = 1; }
+    if (v.z < m) { i = 2; }
+    return i;
+}
+
+fn min3(v: vec3<f32>) -> f32 { return min(v.x, min(v.y, v.z)); }
+
+// Starts the walk; returns false if the ray misses the grid within [t_min, t_max].
+fn dda_start(s: ptr<function, Dda>, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    (*s).o = o;
+    (*s).d = d;
+    (*s).inv_d = 1.0 / d;
+    let c = clip_box(o, (*s).inv_d, d, t_min, t_max);
+    if (c.z == 0.0) { return false; }
+    (*s).t_leave = c.y;
+    (*s).step = vec3<i32>(sign(d));
+    (*s).ahead = max((*s).step, vec3<i32>(0));
+    let dims = vec3<i32>(scene.dims);
+    (*s).cell = clamp(world_to_grid(o + d * c.x), vec3<i32>(0), dims - 1);
+    refresh_t_next(s);
+    (*s).budget = u32(dims.x + dims.y + dims.z) * 2u + 8u;
+    (*s).cells_visited = 0u;
+    (*s).jumps = 0u;
+    return true;
+}
+
+fn cell_index(c: vec3<i32>) -> u32 {
+    return u32(c.x) + scene.dims.x * (u32(c.y) + scene.dims.y * u32(c.z));
+}
+
+// Leaves the current cell (whose record is `cell`): a proximity-cloud jump over the empty cube
+// around an empty cell with dist >= 2, else one DDA step. Returns false when the walk is over.
+fn dda_advance(s: ptr<function, Dda>, cell: Cell, t_exit: f32, use_pc: bool) -> bool {
+    let dims = vec3<i32>(scene.dims);
+    if (use_pc && cell.count == 0u && cell.dist >= 2u) {
+        let k = i32(min(cell.dist - 1u, 1048576u));
+        let cur = (*s).cell;
+        let t_cube = vec3<f32>(
+            boundary_t(s, 0, cur.x + (*s).ahead.x + (*s).step.x * k),
+            boundary_t(s, 1, cur.y + (*s).ahead.y + (*s).step.y * k),
+            boundary_t(s, 2, cur.z + (*s).ahead.z + (*s).step.z * k));
+        let t_jump = min3(t_cube);
+        if (t_jump >= (*s).t_leave) { return false; }
+        (*s).jumps += 1u;
+        let axis = min_position(t_cube);
+        var next = clamp(world_to_grid((*s).o + (*s).d * t_jump), cur - k, cur + k);
+        next[axis] = cur[axis] + (*s).step[axis] * (k + 1);
+        (*s).cell = next;
+        if (any(next < vec3<i32>(0)) || any(next >= dims)) { return false; }
+        refresh_t_next(s);
+        if ((*s).budget <= 1u) { return false; }
+        (*s).budget -= 1u;
+        return true;
+    }
+    if (t_exit >= (*s).t_leave) { return false; }
+    let axis = min_position((*s).t_next);
+    (*s).cell[axis] += (*s).step[axis];
+    if ((*s).cell[axis] < 0 || (*s).cell[axis] >= dims[axis]) { return false; }
+    (*s).t_next[axis] = boundary_t(s, axis, (*s).cell[axis] + (*s).ahead[axis]);
+    if ((*s).budget <= 1u) { return false; }
+    (*s).budget -= 1u;
+    return true;
+}
+
+// Closest hit with t_min < t < t_max; mirrors GridAccel::intersect. `work` gets the cost
+// (cells visited + triangle tests) when COUNT_WORK is set.
+fn closest_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(t_max, MISS, 0.0, 0.0);
+    var s: Dda;
+    if (!dda_start(&s, o, d, t_min, t_max)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    loop {
+        if (COUNT_WORK) { *work += 1u; }
+        let t_exit = min3(s.t_next);
+        let cell = cells[cell_index(s.cell)];
+        if (cell.count > 0u) {
+            for (var i = cell.start; i < cell.start + cell.count; i++) {
+                if (COUNT_WORK) { *work += 1u; }
+                let tri = refs[i];
+                let h = intersect_tri(tris[tri], o, d, t_min, best.t);
+                if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
+            }
+            if (best.tri != MISS && best.t <= min(t_exit, s.t_leave)) { break; }
+        }
+        if (!dda_advance(&s, cell, t_exit, use_pc)) { break; }
+    }
+    if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    return best;
+}
+
+// Any hit with t_min < t < t_max; mirrors GridAccel::occluded.
+fn any_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool) -> bool {
+    var s: Dda;
+    if (!dda_start(&s, o, d, t_min, t_max)) { return false; }
+    loop {
+        let t_exit = min3(s.t_next);
+        let cell = cells[cell_index(s.cell)];
+        for (var i = cell.start; i < cell.start + cell.count; i++) {
+            let h = intersect_tri(tris[refs[i]], o, d, t_min, t_max);
+            if (h.w != 0.0) { return true; }
+        }
+        if (!dda_advance(&s, cell, t_exit, use_pc)) { break; }
+    }
+    return false;
+}

@@ -1,0 +1,91 @@
+// Shading: for each ray of the input queue and its hit, add ambient (and, in cast mode, direct
+// light) to the pixel, emit shadow rays into the shadow queue and a reflection ray into the
+// output queue. Mirrors trace_pixel in src/cpu/render.rs step for step.
+
+struct Surface { p: vec3<f32>, ng: vec3<f32>, ns: vec3<f32> }
+
+fn surface_at(o: vec3<f32>, d: vec3<f32>, h: GpuHit) -> Surface {
+    let tri = tris[h.tri];
+    var ng = normalize(cross(v3(tri.e1), v3(tri.e2)));
+    let sh = tri_shade[h.tri];
+    let w = 1.0 - h.u - h.v;
+    var ns = v3(sh.n0) * w + v3(sh.n1) * h.u + v3(sh.n2) * h.v;
+    let len2 = dot(ns, ns);
+    if (len2 > 0.0) { ns = ns / sqrt(len2); } else { ns = ng; }
+    if (dot(ng, d) > 0.0) { ng = -ng; }
+    if (dot(ns, ng) < 0.0) { ns = -ns; }
+    return Surface(o + d * h.t, ng, ns);
+}
+
+// Light contribution factor (intensity * N.L / d^2) in xyz and the distance in w; w = -1 when
+// the light is behind the surface (no shadow ray spent).
+fn light_term(s: Surface, origin: vec3<f32>, l: PointLight, dir_out: ptr<function, vec3<f32>>) -> vec4<f32> {
+    let to = v3(l.position) - origin;
+    let d2 = dot(to, to);
+    if (d2 == 0.0) { return vec4<f32>(0.0, 0.0, 0.0, -1.0); }
+    let dist = sqrt(d2);
+    let dir = to / dist;
+    let ndl = dot(s.ns, dir);
+    if (ndl <= 0.0 || dot(s.ng, dir) <= 0.0) { return vec4<f32>(0.0, 0.0, 0.0, -1.0); }
+    *dir_out = dir;
+    return vec4<f32>(v3(l.intensity) * (ndl / d2), dist);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wg, nwg, lid);
+    if (i >= atomicLoad(&counters[pass_.in_slot])) { return; }
+    let r = rays_in[i];
+    let h = hits[i];
+    let weight = v3(r.weight);
+    resolve[i] = vec2<u32>(0u, 0u);
+    if (h.tri == MISS) {
+        accum[r.pixel] += vec4<f32>(weight * scene.background, 0.0);
+        return;
+    }
+    let d = v3(r.dir);
+    let s = surface_at(v3(r.origin), d, h);
+    let mat = materials[tri_shade[h.tri].material];
+    var reflect = 0.0;
+    if (pass_.mode == MODE_TRACE) { reflect = mat.reflectivity; }
+    let local = weight * (1.0 - reflect) * v3(mat.diffuse);
+    // Summed term by term into the pixel, in the CPU's order, so both round alike.
+    var color = accum[r.pixel].xyz + local * scene.ambient;
+    let origin = s.p + s.ng * scene.ray_epsilon;
+    if (pass_.mode == MODE_CAST) {
+        for (var l = 0u; l < scene.n_lights; l++) {
+            var dir: vec3<f32>;
+            let lt = light_term(s, origin, lights[l], &dir);
+            if (lt.w >= 0.0) { color += local * lt.xyz; }
+        }
+    } else {
+        // Two passes over the lights: count, reserve contiguous slots, fill. Contiguous slots
+        // let the resolve kernel add the visible contributions in light order, as the CPU does.
+        var n = 0u;
+        for (var l = 0u; l < scene.n_lights; l++) {
+            var dir: vec3<f32>;
+            if (light_term(s, origin, lights[l], &dir).w >= 0.0) { n += 1u; }
+        }
+        if (n > 0u) {
+            let base = atomicAdd(&counters[SLOT_SHADOW], n);
+            atomicAdd(&counters[SLOT_SHADOW_TOTAL], n);
+            var k = 0u;
+            for (var l = 0u; l < scene.n_lights; l++) {
+                var dir: vec3<f32>;
+                let lt = light_term(s, origin, lights[l], &dir);
+                if (lt.w >= 0.0) {
+                    shadow_rays[base + k] = RayRec(a3(origin), r.pixel, a3(dir), lt.w, a3(local * lt.xyz), 0.0);
+                    k += 1u;
+                }
+            }
+            resolve[i] = vec2<u32>(base, n);
+        }
+    }
+    accum[r.pixel] = vec4<f32>(color, 0.0);
+    if (reflect > 0.0 && pass_.depth < pass_.max_depth) {
+        let rd = d - 2.0 * dot(d, s.ns) * s.ns;
+        let slot = atomicAdd(&counters[pass_.out_slot], 1u);
+        atomicAdd(&counters[SLOT_REFLECT_TOTAL], 1u);
+        rays_out[slot] = RayRec(a3(origin), r.pixel, a3(normalize(rd)), inf(), a3(weight * reflect), 0.0);
+    }
+}

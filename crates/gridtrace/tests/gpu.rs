@@ -1,0 +1,214 @@
+//! GPU backend against the CPU path, on whatever adapter is present (lavapipe in CI).
+//!
+//! These tests fail, not skip, when no adapter is found: CI installs lavapipe, and a GPU test
+//! that silently skips proves nothing. Set GRIDTRACE_SKIP_GPU=1 to skip them knowingly.
+
+use std::sync::Mutex;
+
+use glam::Vec3;
+use gridtrace::accel::{AccelKind, GridAccel, Hit, NoCounters, Resolution};
+use gridtrace::gpu::{GpuContext, GpuRenderer};
+use gridtrace::scene::{PointLight, PreparedScene, builtin};
+use gridtrace::testing::ray_set;
+use gridtrace::{Mode, RenderOptions};
+
+// One test at a time on the device: lavapipe uses every core for each dispatch anyway.
+static GPU_LOCK: Mutex<()> = Mutex::new(());
+
+fn renderer(scene: &PreparedScene) -> Option<GpuRenderer> {
+    if std::env::var_os("GRIDTRACE_SKIP_GPU").is_some() {
+        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
+        return None;
+    }
+    let ctx =
+        GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
+    eprintln!("adapter: {}", ctx.describe());
+    Some(GpuRenderer::new(ctx, scene).expect("upload scene"))
+}
+
+/// Same hit or miss; t within a relative 1e-4 (the GPU compiler may fuse multiply-adds);
+/// same triangle except at ties, where the CPU's triangle is hit at the GPU's t.
+fn agree(accel: &GridAccel, r: &gridtrace::Ray, cpu: &Hit, gpu: &Hit) -> bool {
+    if cpu.is_hit() != gpu.is_hit() {
+        return false;
+    }
+    if !cpu.is_hit() {
+        return true;
+    }
+    let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
+    if !close(cpu.t, gpu.t) {
+        return false;
+    }
+    // A different triangle is a tie if the CPU also hits it at that t, or if the CPU's hit lies
+    // on an edge or vertex (where neighbours share the point).
+    let on_edge = cpu.u.min(cpu.v).min(1.0 - cpu.u - cpu.v) < 1e-5;
+    cpu.tri == gpu.tri
+        || on_edge
+        || accel.tris[gpu.tri as usize]
+            .intersect(r.origin, r.dir, 0.0, f32::INFINITY)
+            .is_some_and(|h| close(h.t, cpu.t))
+}
+
+fn per_ray_agreement(scene_name: &str, res: Resolution) {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene(scene_name).unwrap().prepare(res).unwrap();
+    let Some(mut gpu) = renderer(&scene) else { return };
+    let accel = &scene.accel;
+    let rays = ray_set(accel, 100_000, 77);
+    for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+        let cpu_hits: Vec<Hit> = rays
+            .iter()
+            .map(|r| accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
+            .collect();
+        let gpu_hits = gpu.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+        assert_eq!(gpu_hits.len(), rays.len());
+        let bad: Vec<_> = (0..rays.len())
+            .filter(|&i| !agree(accel, &rays[i], &cpu_hits[i], &gpu_hits[i]))
+            .collect();
+        // Rays through exact edges and corners may round either way on different hardware; a
+        // handful (1 in 10,000) may differ, never more.
+        assert!(
+            bad.len() <= rays.len() / 10_000,
+            "{scene_name} {}: {} rays disagree; first: {:?}",
+            kind.name(),
+            bad.len(),
+            bad.iter()
+                .take(3)
+                .map(|&i| (rays[i], cpu_hits[i], gpu_hits[i]))
+                .collect::<Vec<_>>()
+        );
+        let hits = cpu_hits.iter().filter(|h| h.is_hit()).count();
+        assert!(hits > rays.len() / 10);
+        // Any hit, with t_max at the CPU's closest hit (+-) and unbounded.
+        let cpu_occ: Vec<bool> = rays
+            .iter()
+            .map(|r| accel.occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
+            .collect();
+        let gpu_occ = gpu.occluded(&rays, 0.0, f32::INFINITY, kind).unwrap();
+        let bad_occ = cpu_occ.iter().zip(&gpu_occ).filter(|(a, b)| a != b).count();
+        assert!(
+            bad_occ <= rays.len() / 10_000,
+            "{scene_name} {}: {bad_occ} occlusion results disagree",
+            kind.name()
+        );
+        assert_eq!(
+            gpu_occ.iter().filter(|o| **o).count().abs_diff(hits) <= rays.len() / 10_000,
+            true
+        );
+    }
+}
+
+#[test]
+fn per_ray_knot_box() {
+    per_ray_agreement("knot-box", Resolution::default());
+}
+
+#[test]
+fn per_ray_mirror_spheres() {
+    per_ray_agreement("mirror-spheres", Resolution::default());
+}
+
+#[test]
+fn per_ray_sparse_room_pc() {
+    per_ray_agreement("sparse-room", Resolution::Fixed([48, 48, 48]));
+}
+
+/// Fraction of pixels whose 8-bit sRGB channels differ by more than `tol` levels.
+fn differing(a: &[u8], b: &[u8], tol: u8) -> f64 {
+    let n = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > tol))
+        .count();
+    n as f64 / (a.len() / 3) as f64
+}
+
+/// Images of the built-in scenes in every mode equal the CPU's: at most 0.5% of pixels may
+/// differ by more than 2 levels (rays through exact edges, shadow boundaries), and ray counts
+/// by kind are equal up to those pixels.
+#[test]
+fn images_match_cpu() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    for name in ["knot-box", "mirror-spheres"] {
+        let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
+        let Some(mut gpu) = renderer(&scene) else { return };
+        for mode in Mode::ALL {
+            for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
+                let opts = RenderOptions::new(160, 120, mode, accel);
+                let (ci, cs) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
+                let (gi, gs) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
+                let (ci, gi) = if mode == Mode::Heat {
+                    // Heat values are raw counts: compare them directly.
+                    let same = ci.pixels.iter().zip(&gi.pixels).filter(|(a, b)| a.x != b.x).count();
+                    assert!(
+                        same * 200 <= ci.pixels.len(),
+                        "{name} heat {}: {same} pixels differ",
+                        accel.name()
+                    );
+                    (ci.heat_to_color(), gi.heat_to_color())
+                } else {
+                    (ci, gi)
+                };
+                let frac = differing(&ci.to_rgb8(), &gi.to_rgb8(), 2);
+                assert!(
+                    frac <= 0.005,
+                    "{name} {} {}: {:.3}% of pixels differ",
+                    mode.name(),
+                    accel.name(),
+                    frac * 100.0
+                );
+                assert_eq!(cs.rays.eye, gs.render.rays.eye);
+                let tol = |a: u64, b: u64| a.abs_diff(b) * 200 <= a.max(1);
+                assert!(
+                    tol(cs.rays.shadow, gs.render.rays.shadow),
+                    "{name} {}: shadow rays {} vs {}",
+                    mode.name(),
+                    cs.rays.shadow,
+                    gs.render.rays.shadow
+                );
+                assert!(
+                    tol(cs.rays.reflection, gs.render.rays.reflection),
+                    "{name}: reflection rays {} vs {}",
+                    cs.rays.reflection,
+                    gs.render.rays.reflection
+                );
+                if mode == Mode::Trace && name == "mirror-spheres" {
+                    assert!(gs.render.rays.reflection > 1000);
+                }
+            }
+        }
+    }
+}
+
+/// Camera and lights changed between frames give the same images as a fresh renderer.
+#[test]
+fn dynamic_camera_and_lights() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("mirror-spheres")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let Some(mut gpu) = renderer(&scene) else { return };
+    let opts = RenderOptions::new(96, 96, Mode::Trace, AccelKind::Grid);
+    let mut cam2 = scene.camera;
+    cam2.eye = Vec3::new(-3.0, 1.5, 4.0);
+    let lights2 = vec![
+        PointLight::new(Vec3::new(2.0, 4.0, 2.0), Vec3::splat(15.0)),
+        PointLight::new(Vec3::new(-2.0, 2.0, 3.0), Vec3::new(3.0, 1.0, 1.0)),
+        PointLight::new(Vec3::new(0.0, 5.0, -3.0), Vec3::splat(8.0)),
+    ];
+    let (first, _) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
+    let (second, _) = gpu.render(&cam2, &lights2, &opts).unwrap();
+    let (third, _) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
+    assert_eq!(first, third, "returning to the first camera gives the first image");
+    assert_ne!(first, second);
+    let mut moved = scene.clone();
+    moved.camera = cam2;
+    moved.lights = lights2;
+    let Some(mut fresh) = renderer(&moved) else { return };
+    let (want, _) = fresh.render(&moved.camera, &moved.lights, &opts).unwrap();
+    assert_eq!(second, want);
+    // And the CPU agrees with the changed frame.
+    let (cpu, _) = gridtrace::cpu::render(&moved, &opts, None).unwrap();
+    assert!(differing(&cpu.to_rgb8(), &second.to_rgb8(), 2) <= 0.005);
+}
