@@ -80,3 +80,27 @@ pub fn fmt_bytes(b: usize) -> String {
         format!("{b} B")
     }
 }
+
+/// Which tracer runs the work.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    /// The GPU if an adapter is found, else the CPU (and it says so).
+    Auto,
+    Gpu,
+    Cpu,
+}
+
+/// Opens the GPU for `backend`: `Ok(None)` means use the CPU. Prints the adapter, or why not.
+pub fn open_gpu(backend: Backend) -> gridtrace::Result<Option<gridtrace::gpu::GpuContext>> {
+    match backend {
+        Backend::Cpu => Ok(None),
+        Backend::Gpu => gridtrace::gpu::GpuContext::new().map(Some),
+        Backend::Auto => match gridtrace::gpu::GpuContext::new() {
+            Ok(c) => Ok(Some(c)),
+            Err(e) => {
+                eprintln!("note: no usable GPU ({e}); using the CPU");
+                Ok(None)
+            }
+        },
+    }
+}

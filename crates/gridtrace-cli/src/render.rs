@@ -10,7 +10,7 @@ use gridtrace::scene::PointLight;
 use gridtrace::{Mode, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::common::{GridArgs, SceneArgs, parse_res, parse_vec3};
+use crate::common::{Backend, GridArgs, SceneArgs, open_gpu, parse_res, parse_vec3};
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -40,6 +40,9 @@ pub struct RenderArgs {
     /// so that it lights the scene centre with unit irradiance.
     #[arg(long, value_parser = parse_vec3)]
     light: Vec<Vec3>,
+    /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: Backend,
     /// Count traversal work (cells, jumps, triangle tests) and print it.
     #[arg(long)]
     stats: bool,
@@ -86,25 +89,51 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     println!("build   {build_ms:.1} ms (grid {:.1} ms)", g.build_ms);
 
     let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, a.grid.accel);
-    println!("backend cpu ({} threads)", rayon::current_num_threads());
-    let bar = (std::io::stderr().is_terminal() && (a.res.0 as u64 * a.res.1 as u64) >= 512 * 512).then(|| {
-        let b = ProgressBar::new(a.res.1 as u64);
-        b.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap());
-        b
-    });
-    let tick = |rows: u32| {
-        if let Some(b) = &bar {
-            b.inc(rows as u64);
+    let (image, stats) = match open_gpu(a.backend)? {
+        Some(ctx) => {
+            println!("backend gpu: {}", ctx.describe());
+            if ctx.is_software() {
+                println!("        (a software adapter: CPU speed, not GPU speed)");
+            }
+            let mut gpu = gridtrace::gpu::GpuRenderer::new(ctx, &prepared)?;
+            let (image, s) = gpu.render(&prepared.camera, &prepared.lights, &opts)?;
+            let source = if s.timings.from_timestamps {
+                "GPU timestamps"
+            } else {
+                "wall clock, no timestamp queries"
+            };
+            let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
+            println!(
+                "stages  {} ms ({source}; {} tile{})",
+                stages.join(", "),
+                s.tiles,
+                if s.tiles == 1 { "" } else { "s" }
+            );
+            (image, s.render)
+        }
+        None => {
+            println!("backend cpu ({} threads)", rayon::current_num_threads());
+            let bar = (std::io::stderr().is_terminal() && (a.res.0 as u64 * a.res.1 as u64) >= 512 * 512).then(|| {
+                let b = ProgressBar::new(a.res.1 as u64);
+                b.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap());
+                b
+            });
+            let tick = |rows: u32| {
+                if let Some(b) = &bar {
+                    b.inc(rows as u64);
+                }
+            };
+            let result = if a.stats {
+                gridtrace::cpu::render_with_counters(&prepared, &opts)?
+            } else {
+                gridtrace::cpu::render(&prepared, &opts, Some(&tick))?
+            };
+            if let Some(b) = bar {
+                b.finish_and_clear();
+            }
+            result
         }
     };
-    let (image, stats) = if a.stats {
-        gridtrace::cpu::render_with_counters(&prepared, &opts)?
-    } else {
-        gridtrace::cpu::render(&prepared, &opts, Some(&tick))?
-    };
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
     let r = stats.rays;
     println!(
         "render  {:.1} ms, {} rays (eye {}, shadow {}, reflection {}), {:.2} Mrays/s  [{} {} {}x{}]",
@@ -119,7 +148,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         a.res.0,
         a.res.1
     );
-    if a.stats || a.mode == Mode::Heat {
+    if a.stats && stats.counters.cells > 0 {
         let c = stats.counters;
         let n = r.total().max(1) as f64;
         println!(
