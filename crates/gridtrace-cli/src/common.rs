@@ -17,6 +17,9 @@ pub struct SceneArgs {
     /// Any mesh, in an auto-framed scene with a floor, a light and a camera.
     #[arg(long, conflicts_with = "file")]
     pub mesh: Option<PathBuf>,
+    /// With a mesh file: leave out the floor of the auto-framed scene (the mesh alone).
+    #[arg(long)]
+    pub no_floor: bool,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -47,7 +50,7 @@ impl SceneArgs {
         let scene = if is_scene && self.mesh.is_none() {
             load_scene(path)?
         } else {
-            builtin::mesh_scene(gridtrace::io::load_mesh(path)?)
+            builtin::mesh_scene(gridtrace::io::load_mesh(path)?, !self.no_floor)
         };
         Ok((scene, path.display().to_string()))
     }

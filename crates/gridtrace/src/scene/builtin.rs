@@ -134,20 +134,24 @@ pub fn sparse_room() -> Scene {
     s
 }
 
-/// Puts any mesh into an auto-framed scene: a floor under it (+Y up), one light, a camera that
-/// sees the whole mesh from the front and slightly above.
-pub fn mesh_scene(mesh: Mesh) -> Scene {
+/// Puts any mesh into an auto-framed scene: optionally a floor under it (+Y up), one light, a
+/// camera that sees the whole mesh from the front and slightly above. Without the floor the mesh
+/// is alone, as in the paper's Stanford Bunny scene (a floor 8x the mesh's size also makes the
+/// grid 8x wider and the mesh's share of cells small).
+pub fn mesh_scene(mesh: Mesh, floor: bool) -> Scene {
     let mut s = Scene::default();
     let b = super::Aabb::from_points(&mesh.positions);
     let c = b.center();
     let r = (b.diagonal() * 0.5).max(1e-6);
     s.add_mesh(mesh, Mat4::IDENTITY, None);
-    let floor_y = b.min.y - r * 1e-3;
-    s.add_mesh(
-        plane(r * 8.0, 1),
-        Mat4::from_translation(Vec3::new(c.x, floor_y, c.z)),
-        mat("floor", [0.55, 0.55, 0.55], 0.0),
-    );
+    if floor {
+        let floor_y = b.min.y - r * 1e-3;
+        s.add_mesh(
+            plane(r * 8.0, 1),
+            Mat4::from_translation(Vec3::new(c.x, floor_y, c.z)),
+            mat("floor", [0.55, 0.55, 0.55], 0.0),
+        );
+    }
     let vfov = 40.0f32;
     let dist = r / (vfov.to_radians() * 0.5).sin() * 1.05;
     s.camera = Camera {
