@@ -194,32 +194,39 @@ impl GridAccel {
         let Some((t_enter, t_leave)) = g.bounds.clip(ray.origin, inv_dir, t_min, t_max) else {
             return;
         };
-        let dims = g.dims.as_ivec3();
-        let step = IVec3::new(sign(ray.dir.x), sign(ray.dir.y), sign(ray.dir.z));
+        // Plain arrays, not glam vectors: the loop indexes by a runtime axis, which on a Vec3
+        // is a three-way branch per access.
+        let dims = g.dims.as_ivec3().to_array();
+        let grid_min = g.bounds.min.to_array();
+        let cell_size = g.cell_size.to_array();
+        let origin = ray.origin.to_array();
+        let inv = inv_dir.to_array();
+        let step = [sign(ray.dir.x), sign(ray.dir.y), sign(ray.dir.z)];
         // Offset of the boundary ahead of a cell: +1 cell when stepping up, 0 when stepping down.
-        let ahead = step.max(IVec3::ZERO);
+        let ahead = step.map(|s| s.max(0));
         let world_to_grid = |p: Vec3| ((p - g.bounds.min) * g.inv_cell_size).floor().as_ivec3();
-        let mut cell = world_to_grid(ray.at(t_enter)).clamp(IVec3::ZERO, dims - 1);
+        let mut cell = world_to_grid(ray.at(t_enter))
+            .clamp(IVec3::ZERO, IVec3::from(dims) - 1)
+            .to_array();
         let boundary_t = |axis: usize, k: i32| {
             if step[axis] == 0 {
                 f32::INFINITY
             } else {
-                (g.bounds.min[axis] + k as f32 * g.cell_size[axis] - ray.origin[axis]) * inv_dir[axis]
+                (grid_min[axis] + k as f32 * cell_size[axis] - origin[axis]) * inv[axis]
             }
         };
-        let mut t_next = Vec3::new(
-            boundary_t(0, cell.x + ahead.x),
-            boundary_t(1, cell.y + ahead.y),
-            boundary_t(2, cell.z + ahead.z),
-        );
+        let next_boundaries = |cell: &[i32; 3]| std::array::from_fn::<f32, 3, _>(|a| boundary_t(a, cell[a] + ahead[a]));
+        let mut t_next = next_boundaries(&cell);
         let use_pc = kind == AccelKind::ProximityCloud;
+        let (nx, nxy) = (dims[0] as usize, (dims[0] * dims[1]) as usize);
         // Every iteration moves at least one cell forward along some axis, so this bounds the
         // loop even if floating point misbehaves: never a hang.
-        let mut budget = (dims.x + dims.y + dims.z) as u32 * 2 + 8;
+        let mut budget = (dims[0] + dims[1] + dims[2]) as u32 * 2 + 8;
         loop {
             counters.cell();
-            let t_exit = t_next.min_element();
-            let Cell { start, count, dist } = g.cells[g.cell_index(cell.as_uvec3())];
+            let t_exit = t_next[0].min(t_next[1]).min(t_next[2]);
+            let Cell { start, count, dist } =
+                g.cells[cell[0] as usize + nx * cell[1] as usize + nxy * cell[2] as usize];
             if count > 0 {
                 let refs = &g.refs[start as usize..(start + count) as usize];
                 if visit(refs, t_exit.min(t_leave), counters).is_break() {
@@ -228,32 +235,24 @@ impl GridAccel {
             } else if use_pc && dist >= 2 {
                 // The cube of cells within Chebyshev distance dist-1 is empty: leave it at once.
                 let k = (dist - 1).min(1 << 20) as i32;
-                let t_cube = Vec3::new(
-                    boundary_t(0, cell.x + ahead.x + step.x * k),
-                    boundary_t(1, cell.y + ahead.y + step.y * k),
-                    boundary_t(2, cell.z + ahead.z + step.z * k),
-                );
-                let t_jump = t_cube.min_element();
+                let t_cube: [f32; 3] = std::array::from_fn(|a| boundary_t(a, cell[a] + ahead[a] + step[a] * k));
+                let t_jump = t_cube[0].min(t_cube[1]).min(t_cube[2]);
                 if t_jump >= t_leave {
                     return;
                 }
                 counters.jump();
-                let axis = t_cube.min_position();
+                let axis = min_position(t_cube);
                 // Land in the cell where the ray leaves the cube: the exit axis moves k+1 cells,
                 // the others take the cell of the exit point, kept inside the cube's range
                 // (rounding at a cube edge must not move the ray sideways out of it).
-                let landing = world_to_grid(ray.at(t_jump)).clamp(cell - k, cell + k);
-                let mut next = landing;
+                let here = IVec3::from(cell);
+                let mut next = world_to_grid(ray.at(t_jump)).clamp(here - k, here + k).to_array();
                 next[axis] = cell[axis] + step[axis] * (k + 1);
                 cell = next;
-                if cell.cmplt(IVec3::ZERO).any() || cell.cmpge(dims).any() {
+                if (0..3).any(|a| cell[a] < 0 || cell[a] >= dims[a]) {
                     return;
                 }
-                t_next = Vec3::new(
-                    boundary_t(0, cell.x + ahead.x),
-                    boundary_t(1, cell.y + ahead.y),
-                    boundary_t(2, cell.z + ahead.z),
-                );
+                t_next = next_boundaries(&cell);
                 budget = budget.saturating_sub(1);
                 if budget == 0 {
                     return;
@@ -263,7 +262,7 @@ impl GridAccel {
             if t_exit >= t_leave {
                 return;
             }
-            let axis = t_next.min_position();
+            let axis = min_position(t_next);
             cell[axis] += step[axis];
             if cell[axis] < 0 || cell[axis] >= dims[axis] {
                 return;
@@ -275,6 +274,22 @@ impl GridAccel {
             }
         }
     }
+}
+
+/// Index of the smallest element, the first on ties (glam's `min_position`; the WGSL
+/// `min_position` in common.wgsl is the same).
+#[inline(always)]
+fn min_position(v: [f32; 3]) -> usize {
+    let mut m = v[0];
+    let mut i = 0;
+    if v[1] < m {
+        m = v[1];
+        i = 1;
+    }
+    if v[2] < m {
+        i = 2;
+    }
+    i
 }
 
 #[inline(always)]

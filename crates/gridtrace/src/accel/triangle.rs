@@ -66,7 +66,7 @@ impl TriAccel {
         let e2 = Vec3::from(self.e2);
         let p = dir.cross(e2);
         let det = e1.dot(p);
-        if det * det <= PARALLEL_COS2 * e1.length_squared() * p.length_squared() {
+        if det == 0.0 {
             return None;
         }
         let inv_det = 1.0 / det;
@@ -81,6 +81,13 @@ impl TriAccel {
             return None;
         }
         let t = e2.dot(q) * inv_det;
-        (t > t_min && t < t_max).then_some(TriHit { t, u, v })
+        if !(t > t_min && t < t_max) {
+            return None;
+        }
+        // The grazing test last: it is a pure filter, and most candidates never get here.
+        if det * det <= PARALLEL_COS2 * e1.length_squared() * p.length_squared() {
+            return None;
+        }
+        Some(TriHit { t, u, v })
     }
 }

@@ -89,7 +89,7 @@ fn intersect_tri(tri: TriAccel, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f
     let e2 = v3(tri.e2);
     let p = cross(d, e2);
     let det = dot(e1, p);
-    if (det * det <= PARALLEL_COS2 * dot(e1, e1) * dot(p, p)) { return vec4<f32>(0.0); }
+    if (det == 0.0) { return vec4<f32>(0.0); }
     let inv_det = 1.0 / det;
     let s = o - v3(tri.v0);
     let u = dot(s, p) * inv_det;
@@ -98,8 +98,9 @@ fn intersect_tri(tri: TriAccel, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f
     let v = dot(d, q) * inv_det;
     if (v < -BARY_EPS || u + v > 1.0 + BARY_EPS) { return vec4<f32>(0.0); }
     let t = dot(e2, q) * inv_det;
-    if (t > t_min && t < t_max) { return vec4<f32>(t, u, v, 1.0); }
-    return vec4<f32>(0.0);
+    if (!(t > t_min && t < t_max)) { return vec4<f32>(0.0); }
+    if (det * det <= PARALLEL_COS2 * dot(e1, e1) * dot(p, p)) { return vec4<f32>(0.0); }
+    return vec4<f32>(t, u, v, 1.0);
 }
 
 // Ray/box slab clip; mirrors Aabb::clip (axes with d == 0 handled apart: no 0 * inf).
