@@ -136,8 +136,8 @@ pub fn sparse_room() -> Scene {
 
 /// Puts any mesh into an auto-framed scene: optionally a floor under it (+Y up), one light, a
 /// camera that sees the whole mesh from the front and slightly above. Without the floor the mesh
-/// is alone, as in the paper's Stanford Bunny scene (a floor 8x the mesh's size also makes the
-/// grid 8x wider and the mesh's share of cells small).
+/// is alone, as in the paper's Stanford Bunny scene (a floor 3x the mesh's size also makes the
+/// grid 3x wider and the mesh's share of cells small).
 pub fn mesh_scene(mesh: Mesh, floor: bool) -> Scene {
     let mut s = Scene::default();
     let b = super::Aabb::from_points(&mesh.positions);
@@ -147,7 +147,7 @@ pub fn mesh_scene(mesh: Mesh, floor: bool) -> Scene {
     if floor {
         let floor_y = b.min.y - r * 1e-3;
         s.add_mesh(
-            plane(r * 8.0, 1),
+            plane(r * 3.0, 1),
             Mat4::from_translation(Vec3::new(c.x, floor_y, c.z)),
             mat("floor", [0.55, 0.55, 0.55], 0.0),
         );
