@@ -1,10 +1,22 @@
 #!/usr/bin/env bash
-# Runs every test of the project: the Rust workspace (CPU and GPU; the GPU tests need a Vulkan
-# adapter, lavapipe will do: `apt-get install mesa-vulkan-drivers`).
+# Runs every test of the project: the Rust workspace (CPU and GPU) and the Python package.
+# Needs Rust, python3 (with venv) and, for the GPU tests, a Vulkan adapter: lavapipe will do
+# (`apt-get install mesa-vulkan-drivers`). Python packages go into .venv/ (created here).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Mesa's software Vulkan complains loudly when this is unset; give it a private directory.
 if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
     export XDG_RUNTIME_DIR="$(mktemp -d)"
 fi
+
 cargo test --workspace --locked
+
+# Python: build the extension into a virtual environment, then pytest (the tests compare with
+# the release CLI on the same rays).
+cargo build --release --locked -p gridtrace-cli
+if [ ! -x .venv/bin/python ]; then
+    python3 -m venv .venv
+fi
+.venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.7,<2" numpy pytest
+VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" maturin develop --release --locked -q -m crates/gridtrace-py/Cargo.toml
+GRIDTRACE_BIN="$PWD/target/release/gridtrace" .venv/bin/python -m pytest -q crates/gridtrace-py/tests

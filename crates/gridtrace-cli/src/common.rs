@@ -84,14 +84,7 @@ pub fn fmt_bytes(b: usize) -> String {
     }
 }
 
-/// Which tracer runs the work.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Backend {
-    /// The GPU if an adapter is found, else the CPU (and it says so).
-    Auto,
-    Gpu,
-    Cpu,
-}
+pub use gridtrace::query::Backend;
 
 /// Opens the GPU for `backend`: `Ok(None)` means use the CPU. Prints the adapter, or why not.
 pub fn open_gpu(backend: Backend) -> gridtrace::Result<Option<gridtrace::gpu::GpuContext>> {

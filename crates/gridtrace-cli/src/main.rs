@@ -3,6 +3,7 @@
 
 mod common;
 mod info;
+mod rays;
 mod render;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Print mesh and grid statistics and memory use.
     Info(info::InfoArgs),
+    /// Cast rays from a file at a mesh and write the hits to a file.
+    Rays(rays::RaysArgs),
 }
 
 fn main() {
@@ -31,6 +34,7 @@ fn main() {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Info(a) => info::run(a),
+        Command::Rays(a) => rays::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

@@ -41,7 +41,7 @@ pub struct RenderArgs {
     #[arg(long, value_parser = parse_vec3)]
     light: Vec<Vec3>,
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Backend>())]
     backend: Backend,
     /// Count traversal work (cells, jumps, triangle tests) and print it.
     #[arg(long)]

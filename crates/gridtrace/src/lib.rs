@@ -6,6 +6,7 @@ pub mod cpu;
 pub mod error;
 pub mod gpu;
 pub mod io;
+pub mod query;
 pub mod render;
 pub mod scene;
 pub mod testing;

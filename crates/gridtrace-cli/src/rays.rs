@@ -1,0 +1,129 @@
+//! `gridtrace rays`: cast rays from a file at a mesh, write hits to a file.
+//!
+//! Rays: little-endian float32 records `ox oy oz dx dy dz` (24 bytes; the format of hagrid and of
+//! `gridtrace bench --export-rays`). Hits: little-endian records `t: f32, tri: u32, u: f32,
+//! v: f32` (16 bytes; a miss is `t = inf`, `tri = 0xFFFFFFFF`); with `--occluded`, one byte per
+//! ray (1 = occluded). Both files are streamed in chunks, so memory stays bounded.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use gridtrace::query::{CHUNK, QueryOptions, TraceMesh};
+use gridtrace::{Error, Ray};
+
+use crate::common::{Backend, GridArgs};
+
+#[derive(Args)]
+pub struct RaysArgs {
+    /// The mesh (OBJ, PLY, glTF/GLB, STL, OFF).
+    mesh: PathBuf,
+    /// Ray file: float32 records ox oy oz dx dy dz.
+    #[arg(long)]
+    rays: PathBuf,
+    #[arg(long, default_value_t = 0.0)]
+    tmin: f32,
+    #[arg(long, default_value_t = f32::INFINITY)]
+    tmax: f32,
+    /// Any-hit occlusion instead of closest hits (one byte per ray).
+    #[arg(long)]
+    occluded: bool,
+    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Backend>())]
+    backend: Backend,
+    #[command(flatten)]
+    grid: GridArgs,
+    /// Output file.
+    #[arg(long)]
+    hits_out: PathBuf,
+}
+
+pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
+    let size = std::fs::metadata(&a.rays).map_err(|e| Error::io(&a.rays, e))?.len();
+    if size % 24 != 0 {
+        return Err(Error::parse(
+            &a.rays,
+            gridtrace::Location::Byte(size - size % 24),
+            format!("ray file is {size} bytes, not a whole number of 24-byte records (6 float32 per ray)"),
+        ));
+    }
+    let n = size / 24;
+    let opts = QueryOptions {
+        accel: a.grid.accel,
+        grid: a.grid.grid,
+        backend: a.backend,
+    };
+    let t_build = Instant::now();
+    let mesh = TraceMesh::load(&a.mesh, &opts)?;
+    println!(
+        "mesh    {}: {} triangles, built in {:.1} ms",
+        a.mesh.display(),
+        mesh.triangle_count(),
+        t_build.elapsed().as_secs_f64() * 1e3
+    );
+    println!("backend {}", mesh.device());
+    let mut input = BufReader::new(File::open(&a.rays).map_err(|e| Error::io(&a.rays, e))?);
+    let mut output = BufWriter::new(File::create(&a.hits_out).map_err(|e| Error::io(&a.hits_out, e))?);
+    let write_err = |e| Error::io(&a.hits_out, e);
+    let mut buf = vec![0u8; CHUNK * 24];
+    let (mut done, mut hits) = (0u64, 0u64);
+    let mut trace_s = 0.0;
+    while done < n {
+        let count = (n - done).min(CHUNK as u64) as usize;
+        let bytes = &mut buf[..count * 24];
+        input.read_exact(bytes).map_err(|e| Error::io(&a.rays, e))?;
+        let floats: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let mut rays = Vec::with_capacity(count);
+        for (i, r) in floats.chunks_exact(6).enumerate() {
+            let ray = Ray::new(glam::Vec3::new(r[0], r[1], r[2]), glam::Vec3::new(r[3], r[4], r[5]));
+            if !ray.origin.is_finite() || !ray.dir.is_finite() || ray.dir == glam::Vec3::ZERO {
+                let k = done + i as u64;
+                return Err(Error::parse(
+                    &a.rays,
+                    gridtrace::Location::Byte(k * 24),
+                    format!("ray {k} is not finite or has a zero direction: {r:?}"),
+                ));
+            }
+            rays.push(ray);
+        }
+        let t0 = Instant::now();
+        if a.occluded {
+            let occ = mesh.occluded_rays(&rays, a.tmin, a.tmax)?;
+            trace_s += t0.elapsed().as_secs_f64();
+            hits += occ.iter().filter(|o| **o).count() as u64;
+            let out: Vec<u8> = occ.iter().map(|&o| o as u8).collect();
+            output.write_all(&out).map_err(write_err)?;
+        } else {
+            let found = mesh.intersect_rays(&rays, a.tmin, a.tmax)?;
+            trace_s += t0.elapsed().as_secs_f64();
+            let mut out = Vec::with_capacity(found.len() * 16);
+            for h in &found {
+                let tri = if h.is_hit() {
+                    mesh.original_index(h.tri)
+                } else {
+                    u32::MAX
+                };
+                hits += h.is_hit() as u64;
+                out.extend_from_slice(&h.t.to_le_bytes());
+                out.extend_from_slice(&tri.to_le_bytes());
+                out.extend_from_slice(&h.u.to_le_bytes());
+                out.extend_from_slice(&h.v.to_le_bytes());
+            }
+            output.write_all(&out).map_err(write_err)?;
+        }
+        done += count as u64;
+    }
+    output.flush().map_err(write_err)?;
+    println!(
+        "rays    {n} ({}), {hits} hit, {:.1} ms, {:.2} Mrays/s",
+        if a.occluded { "occlusion" } else { "closest hit" },
+        trace_s * 1e3,
+        n as f64 / trace_s.max(1e-9) / 1e6
+    );
+    println!("wrote   {}", a.hits_out.display());
+    Ok(())
+}

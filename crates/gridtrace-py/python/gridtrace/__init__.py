@@ -1,0 +1,141 @@
+"""gridtrace: fast, correct ray queries and rendering for triangle meshes, on any GPU or the CPU.
+
+Built around the uniform grid with proximity clouds (Ralovich, "Implementing and Analyzing a GPU
+Ray Tracer"). Example::
+
+    import numpy as np, gridtrace
+    mesh = gridtrace.Mesh.load("bunny.ply")
+    origins = np.random.rand(1_000_000, 3).astype(np.float32) - 0.5
+    hits = mesh.intersect(origins, [0.0, 0.0, -1.0])      # one direction for all rays
+    print((hits.tri != gridtrace.MISS).sum(), "hits")
+"""
+
+from __future__ import annotations
+
+import math
+from os import PathLike
+from typing import NamedTuple, Optional, Sequence, Union
+
+import numpy as np
+
+from ._gridtrace import NativeMesh as _NativeMesh
+from ._gridtrace import __version__
+from ._gridtrace import render as _render
+
+__all__ = ["Mesh", "Hits", "render", "MISS", "__version__"]
+
+#: Triangle index of a miss.
+MISS = np.uint32(0xFFFFFFFF)
+
+ArrayLike = Union[np.ndarray, Sequence[float], Sequence[Sequence[float]]]
+
+
+class Hits(NamedTuple):
+    """Closest hits, one entry per ray. A miss has ``t = inf`` and ``tri = MISS``."""
+
+    t: np.ndarray
+    """(N,) float32 ray parameter, in units of the direction's length."""
+    tri: np.ndarray
+    """(N,) uint32 index of the hit face."""
+    u: np.ndarray
+    """(N,) float32 barycentric weight of the face's second vertex."""
+    v: np.ndarray
+    """(N,) float32 barycentric weight of the face's third vertex."""
+    normal: np.ndarray
+    """(N, 3) float32 unit geometric normal of the hit face (input winding); zeros for a miss."""
+
+
+def _points(a: ArrayLike, name: str) -> np.ndarray:
+    arr = np.asarray(a)
+    if arr.dtype.kind not in "fiu":
+        raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
+    if arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) or (3,), got {np.shape(a)}")
+    arr = np.ascontiguousarray(arr, dtype=np.float32)
+    if not np.isfinite(arr).all():
+        bad = int(np.argwhere(~np.isfinite(arr).all(axis=1))[0][0])
+        raise ValueError(f"{name}[{bad}] is not finite: {arr[bad]}")
+    return arr
+
+
+def _rays(origins: ArrayLike, directions: ArrayLike):
+    o = _points(origins, "origins")
+    d = _points(directions, "directions")
+    if len(o) != len(d) and len(o) != 1 and len(d) != 1:
+        raise ValueError(f"{len(o)} origins and {len(d)} directions: lengths must match or one be 1")
+    return o, d
+
+
+def _interval(t_min: float, t_max: float):
+    t_min, t_max = float(t_min), float(t_max)
+    if math.isnan(t_min) or math.isnan(t_max) or t_min < 0 or t_min > t_max:
+        raise ValueError(f"need 0 <= t_min <= t_max, got t_min={t_min}, t_max={t_max}")
+    return t_min, t_max
+
+
+class Mesh:
+    """An accelerated triangle mesh for ray queries.
+
+    ``vertices`` is an (N, 3) float array, ``faces`` an (M, 3) integer array of vertex indices.
+    ``accel`` is ``"grid"`` or ``"pc"`` (proximity clouds), ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
+    or ``"AxBxC"``, ``backend`` is ``"auto"`` (GPU if present, else CPU), ``"gpu"`` or ``"cpu"``.
+    Degenerate faces are kept in the numbering but can never be hit.
+    """
+
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "grid", grid: str = "auto", backend: str = "auto"):
+        v = _points(vertices, "vertices")
+        f = np.asarray(faces)
+        if f.ndim != 2 or f.shape[1] != 3:
+            raise ValueError(f"faces must have shape (M, 3), got {f.shape}")
+        if f.dtype.kind not in "iu":
+            raise TypeError(f"faces must be an integer array, got dtype {f.dtype}")
+        if f.size and (f.min() < 0 or f.max() >= len(v)):
+            raise ValueError(f"faces index vertices out of range 0..{len(v) - 1}")
+        self._backend = backend
+        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, backend)
+
+    @classmethod
+    def load(cls, path: Union[str, PathLike], accel: str = "grid", grid: str = "auto", backend: str = "auto") -> "Mesh":
+        """Loads an OBJ, PLY, glTF/GLB, STL or OFF file."""
+        self = cls.__new__(cls)
+        self._backend = backend
+        self._native = _NativeMesh.load(str(path), accel, grid, backend)
+        return self
+
+    @property
+    def triangle_count(self) -> int:
+        """Faces with non-zero area (the ones rays can hit)."""
+        return self._native.triangle_count
+
+    def device(self, backend: Optional[str] = None) -> str:
+        """Where queries run: ``"cpu (N threads)"`` or the GPU adapter's name and driver."""
+        return self._native.device(backend or self._backend)
+
+    def intersect(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None) -> Hits:
+        """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max``.
+
+        ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
+        a single point (3,) used for every ray. Directions need not be normalised.
+        """
+        o, d = _rays(origins, directions)
+        t_min, t_max = _interval(t_min, t_max)
+        return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend))
+
+    def occluded(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None) -> np.ndarray:
+        """Whether each ray hits anything with ``t_min < t < t_max`` (boolean array)."""
+        o, d = _rays(origins, directions)
+        t_min, t_max = _interval(t_min, t_max)
+        return self._native.occluded(o, d, t_min, t_max, backend or self._backend)
+
+
+def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "grid", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None) -> np.ndarray:
+    """Renders a built-in scene (``"knot-box"``, ``"mirror-spheres"``, ``"sparse-room"``), a TOML
+    scene file or a mesh file; returns an (height, width, 3) uint8 sRGB image.
+    ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``."""
+    if width <= 0 or height <= 0:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
+    e = None if eye is None else [float(x) for x in eye]
+    t = None if target is None else [float(x) for x in target]
+    return _render(str(scene), int(width), int(height), mode, accel, grid, backend, e, t)

@@ -1,0 +1,233 @@
+//! Python bindings: `gridtrace._gridtrace`, wrapped by the pure-Python `gridtrace` package
+//! (which handles broadcasting and dtypes). Every call releases the GIL while it works.
+
+use std::path::PathBuf;
+
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+use gridtrace::query::{Backend, QueryOptions, TraceMesh};
+use gridtrace::{AccelKind, Error, Mode, RenderOptions, Resolution};
+
+fn to_py(e: Error) -> PyErr {
+    match e {
+        Error::InvalidInput(_) | Error::Parse { .. } | Error::Scene(_) => PyValueError::new_err(e.to_string()),
+        Error::Io { .. } => pyo3::exceptions::PyOSError::new_err(e.to_string()),
+        Error::Gpu(_) => PyRuntimeError::new_err(e.to_string()),
+    }
+}
+
+fn parse<T: std::str::FromStr<Err = String>>(what: &str, s: &str) -> PyResult<T> {
+    s.parse::<T>()
+        .map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
+}
+
+fn options(accel: &str, grid: &str, backend: &str) -> PyResult<QueryOptions> {
+    Ok(QueryOptions {
+        accel: parse("accel", accel)?,
+        grid: parse("grid", grid)?,
+        backend: parse("backend", backend)?,
+    })
+}
+
+/// (N, 3) float32 C-contiguous array as a slice of points.
+fn points<'a>(a: &'a PyReadonlyArray2<'_, f32>, what: &str) -> PyResult<&'a [[f32; 3]]> {
+    let shape = a.shape();
+    if shape.len() != 2 || shape[1] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{what} must have shape (N, 3), got {shape:?}"
+        )));
+    }
+    let flat = a
+        .as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous")))?;
+    Ok(bytemuck_points(flat))
+}
+
+fn bytemuck_points(flat: &[f32]) -> &[[f32; 3]] {
+    // SAFETY-free reinterpretation: chunks_exact would copy; [f32; 3] has the layout of three f32.
+    let (head, body, _) = unsafe { flat.align_to::<[f32; 3]>() };
+    debug_assert!(head.is_empty());
+    body
+}
+
+/// An accelerated triangle mesh (native part of `gridtrace.Mesh`).
+#[pyclass(module = "gridtrace._gridtrace", frozen)]
+struct NativeMesh {
+    inner: TraceMesh,
+}
+
+#[pymethods]
+impl NativeMesh {
+    #[new]
+    fn new(
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f32>,
+        faces: PyReadonlyArray2<'_, u32>,
+        accel: &str,
+        grid: &str,
+        backend: &str,
+    ) -> PyResult<Self> {
+        let opts = options(accel, grid, backend)?;
+        let v = points(&vertices, "vertices")?;
+        let fshape = faces.shape();
+        if fshape.len() != 2 || fshape[1] != 3 {
+            return Err(PyValueError::new_err(format!(
+                "faces must have shape (M, 3), got {fshape:?}"
+            )));
+        }
+        let fflat = faces
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("faces must be C-contiguous"))?;
+        let f: Vec<[u32; 3]> = fflat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let v = v.to_vec();
+        let inner = py
+            .detach(move || TraceMesh::from_arrays(&v, &f, &opts))
+            .map_err(to_py)?;
+        Ok(NativeMesh { inner })
+    }
+
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf, accel: &str, grid: &str, backend: &str) -> PyResult<Self> {
+        let opts = options(accel, grid, backend)?;
+        let inner = py.detach(move || TraceMesh::load(&path, &opts)).map_err(to_py)?;
+        Ok(NativeMesh { inner })
+    }
+
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.inner.triangle_count()
+    }
+
+    fn device(&self, py: Python<'_>, backend: &str) -> PyResult<String> {
+        let b: Backend = parse("backend", backend)?;
+        Ok(py.detach(|| self.inner.device_for(b)))
+    }
+
+    /// Returns (t, tri, u, v, normal) as numpy arrays.
+    #[allow(clippy::type_complexity)]
+    fn intersect<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        t_min: f32,
+        t_max: f32,
+        backend: &str,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<u32>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray2<f32>>,
+    )> {
+        let b: Backend = parse("backend", backend)?;
+        let o = points(&origins, "origins")?;
+        let d = points(&directions, "directions")?;
+        let hits = py
+            .detach(|| self.inner.intersect_with(b, o, d, t_min, t_max))
+            .map_err(to_py)?;
+        let n = hits.len();
+        let normal: Vec<f32> = hits.normal.iter().flatten().copied().collect();
+        let normal = normal.into_pyarray(py).reshape([n, 3])?;
+        Ok((
+            hits.t.into_pyarray(py),
+            hits.tri.into_pyarray(py),
+            hits.u.into_pyarray(py),
+            hits.v.into_pyarray(py),
+            normal,
+        ))
+    }
+
+    fn occluded<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        t_min: f32,
+        t_max: f32,
+        backend: &str,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let b: Backend = parse("backend", backend)?;
+        let o = points(&origins, "origins")?;
+        let d = points(&directions, "directions")?;
+        let occ = py
+            .detach(|| self.inner.occluded_with(b, o, d, t_min, t_max))
+            .map_err(to_py)?;
+        Ok(occ.into_pyarray(py))
+    }
+}
+
+/// Renders a built-in scene, a scene file or a mesh file; returns (H, W, 3) uint8 sRGB.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &str,
+    width: u32,
+    height: u32,
+    mode: &str,
+    accel: &str,
+    grid: &str,
+    backend: &str,
+    eye: Option<[f32; 3]>,
+    target: Option<[f32; 3]>,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let mode: Mode = parse("mode", mode)?;
+    let accel: AccelKind = parse("accel", accel)?;
+    let grid: Resolution = parse("grid", grid)?;
+    let backend: Backend = parse("backend", backend)?;
+    let scene_name = scene.to_string();
+    let rgb = py
+        .detach(move || -> gridtrace::Result<Vec<u8>> {
+            let mut s = match gridtrace::scene::builtin::scene(&scene_name) {
+                Some(s) => s,
+                None => {
+                    let path = std::path::Path::new(&scene_name);
+                    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
+                        gridtrace::scene::file::load_scene(path)?
+                    } else {
+                        gridtrace::scene::builtin::mesh_scene(gridtrace::io::load_mesh(path)?, true)
+                    }
+                }
+            };
+            if let Some(e) = eye {
+                s.camera.eye = e.into();
+            }
+            if let Some(t) = target {
+                s.camera.target = t.into();
+            }
+            let prepared = s.prepare(grid)?;
+            let opts = RenderOptions::new(width, height, mode, accel);
+            let gpu = match backend {
+                Backend::Cpu => None,
+                Backend::Gpu => Some(gridtrace::gpu::GpuContext::new()?),
+                Backend::Auto => gridtrace::gpu::GpuContext::new().ok(),
+            };
+            let image = match gpu {
+                Some(ctx) => {
+                    gridtrace::gpu::GpuRenderer::new(ctx, &prepared)?
+                        .render(&prepared.camera, &prepared.lights, &opts)?
+                        .0
+                }
+                None => gridtrace::cpu::render(&prepared, &opts, None)?.0,
+            };
+            let image = if mode == Mode::Heat {
+                image.heat_to_color()
+            } else {
+                image
+            };
+            Ok(image.to_rgb8())
+        })
+        .map_err(to_py)?;
+    Ok(rgb.into_pyarray(py).reshape([height as usize, width as usize, 3])?)
+}
+
+#[pymodule]
+fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<NativeMesh>()?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

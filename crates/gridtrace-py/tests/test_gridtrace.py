@@ -1,0 +1,237 @@
+"""Tests of the Python package: brute-force numpy references, agreement with the Rust CLI on the
+same rays, CPU/GPU agreement, occlusion vs closest hit, and clear errors for bad input."""
+
+import math
+import os
+import pathlib
+import struct
+import subprocess
+import tempfile
+import threading
+
+import numpy as np
+import pytest
+
+import gridtrace
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+
+
+def cli_binary():
+    env = os.environ.get("GRIDTRACE_BIN")
+    if env:
+        return env
+    for p in (ROOT / "target/release/gridtrace", ROOT / "target/debug/gridtrace"):
+        if p.exists():
+            return str(p)
+    pytest.fail("gridtrace CLI not built (cargo build --release) and GRIDTRACE_BIN not set")
+
+
+def sphere_soup(n_tris=300, seed=1):
+    """Random triangles around the origin plus a closed octahedron."""
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform(-1, 1, (n_tris, 1, 3))
+    tris = centers + rng.uniform(-0.25, 0.25, (n_tris, 3, 3))
+    vertices = tris.reshape(-1, 3).astype(np.float32)
+    faces = np.arange(len(vertices), dtype=np.int64).reshape(-1, 3)
+    octa_v = np.array([[1.5, 0, 0], [-1.5, 0, 0], [0, 1.5, 0], [0, -1.5, 0], [0, 0, 1.5], [0, 0, -1.5]], np.float32) * 0.5
+    octa_f = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]) + len(vertices)
+    return np.vstack([vertices, octa_v]), np.vstack([faces, octa_f])
+
+
+def random_rays(n, seed=2):
+    rng = np.random.default_rng(seed)
+    o = rng.uniform(-2.5, 2.5, (n, 3)).astype(np.float32)
+    target = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    d = (target - o).astype(np.float32)
+    return o, d
+
+
+def brute_force(vertices, faces, o, d):
+    """Möller-Trumbore over every (ray, triangle) pair in float64: closest t, tri, and the
+    smallest barycentric margin of the closest hit (how far it is from an edge)."""
+    v = vertices.astype(np.float64)[faces]  # (M, 3, 3)
+    v0, e1, e2 = v[:, 0], v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    o = o.astype(np.float64)[:, None, :]
+    d = d.astype(np.float64)[:, None, :]
+    p = np.cross(d, e2[None])
+    det = np.einsum("nmk,mk->nm", p, e1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        s = o - v0[None]
+        u = np.einsum("nmk,nmk->nm", s, p) * inv
+        q = np.cross(s, e1[None])
+        w = np.einsum("nmk,nmk->nm", d, q) * inv
+        t = np.einsum("mk,nmk->nm", e2, q) * inv
+    ok = (det != 0) & (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0)
+    t = np.where(ok, t, np.inf)
+    tri = np.argmin(t, axis=1)
+    best = t[np.arange(len(t)), tri]
+    margin = np.minimum.reduce([u, w, 1 - u - w])[np.arange(len(t)), tri]
+    tsorted = np.sort(t, axis=1)
+    with np.errstate(invalid="ignore"):  # inf - inf for rays with fewer than two hits
+        gap = np.nan_to_num(tsorted[:, 1] - tsorted[:, 0], nan=np.inf)
+    tri = np.where(np.isfinite(best), tri, 0xFFFFFFFF).astype(np.uint32)
+    return best, tri, margin, gap
+
+
+@pytest.mark.parametrize("accel", ["grid", "pc"])
+def test_closest_hits_equal_brute_force(accel):
+    vertices, faces = sphere_soup()
+    mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
+    o, d = random_rays(4000)
+    hits = mesh.intersect(o, d)
+    t_ref, tri_ref, margin, gap = brute_force(vertices, faces, o, d)
+    clear = (margin > 1e-4) | ~np.isfinite(t_ref)  # hits not within a hair of an edge
+    unique = clear & (gap > 1e-4 * np.maximum(1.0, np.abs(t_ref)))
+    assert (np.isfinite(hits.t) == np.isfinite(t_ref))[clear].all()
+    both = np.isfinite(t_ref) & clear
+    np.testing.assert_allclose(hits.t[both], t_ref[both], rtol=2e-5)
+    assert (hits.tri[unique] == tri_ref[unique]).all()
+    assert both.sum() > 1000 and (~np.isfinite(t_ref)).sum() > 100
+    # Barycentrics and normals describe the hit.
+    k = np.flatnonzero(both)[:200]
+    f = faces[hits.tri[k]]
+    p = (1 - hits.u[k] - hits.v[k])[:, None] * vertices[f[:, 0]] + hits.u[k][:, None] * vertices[f[:, 1]] + hits.v[k][:, None] * vertices[f[:, 2]]
+    np.testing.assert_allclose(p, o[k] + hits.t[k][:, None] * d[k], atol=1e-4)
+    n = np.cross(vertices[f[:, 1]] - vertices[f[:, 0]], vertices[f[:, 2]] - vertices[f[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    np.testing.assert_allclose(hits.normal[k], n, atol=1e-5)
+    miss = ~np.isfinite(hits.t)
+    assert (hits.tri[miss] == gridtrace.MISS).all() and (hits.normal[miss] == 0).all()
+
+
+def test_occlusion_agrees_with_closest_hit():
+    vertices, faces = sphere_soup(seed=5)
+    mesh = gridtrace.Mesh(vertices, faces, backend="cpu")
+    o, d = random_rays(5000, seed=6)
+    hits = mesh.intersect(o, d)
+    hit = np.isfinite(hits.t)
+    assert (mesh.occluded(o, d) == hit).all()
+    # Per-ray windows: with t_max just before / after each hit (one t_max per call, so group).
+    for i in np.flatnonzero(hit)[:300]:
+        t = float(hits.t[i])
+        assert not mesh.occluded(o[i], d[i], 0.0, t * (1 - 1e-4))[0]
+        assert mesh.occluded(o[i], d[i], 0.0, t * (1 + 1e-4))[0]
+
+
+def test_equals_rust_cli_on_same_rays(tmp_path):
+    vertices, faces = sphere_soup(seed=9)
+    obj = tmp_path / "m.obj"
+    with open(obj, "w") as fh:
+        for v in vertices:
+            fh.write("v %r %r %r\n" % tuple(float(x) for x in v))
+        for f in faces:
+            fh.write("f %d %d %d\n" % tuple(int(x) + 1 for x in f))
+    o, d = random_rays(20000, seed=10)
+    rays = tmp_path / "rays.bin"
+    np.hstack([o, d]).astype("<f4").tofile(rays)
+    out = tmp_path / "hits.bin"
+    r = subprocess.run([cli_binary(), "rays", str(obj), "--rays", str(rays), "--hits-out", str(out), "--backend", "cpu"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    rec = np.fromfile(out, dtype=np.dtype([("t", "<f4"), ("tri", "<u4"), ("u", "<f4"), ("v", "<f4")]))
+    # OBJ text round-trips float32 exactly (repr of the float64 of a float32), so same mesh.
+    mesh = gridtrace.Mesh.load(obj, backend="cpu")
+    hits = mesh.intersect(o, d)
+    assert len(rec) == len(o)
+    np.testing.assert_array_equal(rec["t"], hits.t)
+    np.testing.assert_array_equal(rec["tri"], hits.tri)
+    np.testing.assert_array_equal(rec["u"], hits.u)
+    out_occ = tmp_path / "occ.bin"
+    r = subprocess.run([cli_binary(), "rays", str(obj), "--rays", str(rays), "--hits-out", str(out_occ), "--occluded", "--tmax", "1.0", "--backend", "cpu"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_array_equal(np.fromfile(out_occ, dtype=np.uint8).astype(bool), mesh.occluded(o, d, 0.0, 1.0))
+
+
+def test_gpu_agrees_with_cpu():
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        pytest.skip("GRIDTRACE_SKIP_GPU set")
+    vertices, faces = sphere_soup(seed=11)
+    mesh = gridtrace.Mesh(vertices, faces, backend="cpu")
+    assert "cpu" in mesh.device()
+    gpu_dev = mesh.device("gpu")
+    assert not gpu_dev.startswith("unavailable"), gpu_dev  # fail, not skip, without an adapter
+    o, d = random_rays(20000, seed=12)
+    c = mesh.intersect(o, d)
+    g = mesh.intersect(o, d, backend="gpu")
+    with np.errstate(invalid="ignore"):  # inf - inf for rays both miss
+        same = (c.tri == g.tri) | (np.abs(c.t - g.t) <= 1e-4 * np.abs(c.t))
+    assert same.mean() > 0.9999
+    np.testing.assert_allclose(g.t[np.isfinite(c.t)], c.t[np.isfinite(c.t)], rtol=1e-4)
+    assert (mesh.occluded(o, d, backend="gpu") == mesh.occluded(o, d)).mean() > 0.9999
+
+
+def test_broadcasting_and_dtypes():
+    vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+    faces = [[0, 1, 2], [0, 2, 3]]
+    mesh = gridtrace.Mesh(np.array(vertices, dtype=np.int32), np.array(faces, dtype=np.int64), backend="cpu")
+    origins = np.array([[0.25, 0.75, 2.0], [0.75, 0.25, 2.0], [3.0, 3.0, 2.0]], dtype=np.float64)
+    hits = mesh.intersect(origins, [0, 0, -2])  # one direction for all, not unit length
+    np.testing.assert_array_equal(hits.t, [1.0, 1.0, np.inf])
+    np.testing.assert_array_equal(hits.tri, [1, 0, gridtrace.MISS])
+    hits = mesh.intersect([0.5, 0.5, 1.0], [[0, 0, -1], [0, 0, 1]])  # one origin
+    assert hits.t[0] == 1.0 and np.isinf(hits.t[1])
+    assert hits.t.dtype == np.float32 and hits.tri.dtype == np.uint32 and hits.normal.shape == (2, 3)
+
+
+def test_bad_input_raises_clear_errors():
+    v = np.zeros((3, 3), np.float32)
+    v[1, 0] = v[2, 1] = 1
+    mesh = gridtrace.Mesh(v, [[0, 1, 2]], backend="cpu")
+    with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
+        mesh.intersect(np.zeros((4, 2)), np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="not finite"):
+        mesh.intersect([[0, 0, np.nan]], [0, 0, 1])
+    with pytest.raises(ValueError, match="lengths must match"):
+        mesh.intersect(np.zeros((3, 3)), np.ones((2, 3)))
+    with pytest.raises(TypeError, match="numeric"):
+        mesh.intersect(np.array([["a", "b", "c"]]), [0, 0, 1])
+    with pytest.raises(ValueError, match="zero direction"):
+        mesh.intersect([0, 0, 1], [0, 0, 0])
+    with pytest.raises(ValueError, match="t_min"):
+        mesh.intersect([0, 0, 1], [0, 0, -1], t_min=2.0, t_max=1.0)
+    with pytest.raises(ValueError, match="out of range"):
+        gridtrace.Mesh(v, [[0, 1, 3]])
+    with pytest.raises(ValueError, match="no triangles"):
+        gridtrace.Mesh(v, [[0, 1, 1]], backend="cpu")
+    with pytest.raises(ValueError, match="not finite"):
+        gridtrace.Mesh([[0, 0, np.inf], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    with pytest.raises(ValueError, match="backend"):
+        gridtrace.Mesh(v, [[0, 1, 2]], backend="tpu")
+    with tempfile.TemporaryDirectory() as d:
+        bad = pathlib.Path(d) / "bad.ply"
+        bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
+        with pytest.raises(ValueError, match=r"bad\.ply"):
+            gridtrace.Mesh.load(bad)
+        with pytest.raises(OSError, match="missing.obj"):
+            gridtrace.Mesh.load(pathlib.Path(d) / "missing.obj")
+
+
+def test_render_returns_image():
+    img = gridtrace.render("knot-box", 64, 48, mode="shadow", backend="cpu")
+    assert img.shape == (48, 64, 3) and img.dtype == np.uint8
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50
+    with pytest.raises(ValueError, match="mode"):
+        gridtrace.render("knot-box", 8, 8, mode="nope")
+
+
+def test_releases_the_gil():
+    """A query on one thread does not block the interpreter: another thread keeps counting."""
+    vertices, faces = sphere_soup(n_tris=2000, seed=3)
+    mesh = gridtrace.Mesh(vertices, faces, backend="cpu")
+    o, d = random_rays(400_000, seed=4)
+    done = threading.Event()
+    ticks = [0]
+
+    def spin():
+        while not done.is_set():
+            ticks[0] += 1
+
+    t = threading.Thread(target=spin)
+    t.start()
+    before = ticks[0]
+    mesh.intersect(o, d)
+    during = ticks[0] - before
+    done.set()
+    t.join()
+    assert during > 1000, f"the other thread ran only {during} iterations while the query ran"

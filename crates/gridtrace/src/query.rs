@@ -1,0 +1,399 @@
+//! Ray queries for programs: build an accelerated mesh from plain arrays (or a file) and cast
+//! batches of rays at it, on the CPU or the GPU, with the same answers either way.
+//!
+//! ```
+//! use gridtrace::query::{Backend, QueryOptions, TraceMesh};
+//!
+//! // A unit square in the z = 0 plane, two triangles.
+//! let vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+//! let faces = [[0, 1, 2], [0, 2, 3]];
+//! let opts = QueryOptions { backend: Backend::Cpu, ..Default::default() };
+//! let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts)?;
+//!
+//! // One ray straight down through (0.25, 0.75), one that misses. Directions need not be unit
+//! // length: t is in units of the direction's length.
+//! let origins = [[0.25, 0.75, 2.0], [5.0, 5.0, 2.0]];
+//! let dirs = [[0.0, 0.0, -2.0], [0.0, 0.0, -1.0]];
+//! let hits = mesh.intersect(&origins, &dirs, 0.0, f32::INFINITY)?;
+//! assert_eq!(hits.t[0], 1.0);
+//! assert_eq!(hits.tri[0], 1);
+//! assert_eq!(hits.t[1], f32::INFINITY);
+//! assert_eq!(hits.tri[1], u32::MAX);
+//! assert_eq!(hits.normal[0], [0.0, 0.0, 1.0]);
+//!
+//! // Occlusion within [t_min, t_max]: the first ray's hit lies at t = 1.
+//! assert_eq!(mesh.occluded(&origins, &dirs, 0.0, 0.5)?, vec![false, false]);
+//! assert_eq!(mesh.occluded(&origins, &dirs, 0.0, 1.5)?, vec![true, false]);
+//! # Ok::<(), gridtrace::Error>(())
+//! ```
+
+use std::path::Path;
+use std::sync::{Mutex, OnceLock};
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+use crate::accel::{AccelKind, Hit, NoCounters, Ray, Resolution};
+use crate::gpu::{GpuContext, GpuRenderer};
+use crate::scene::{Mesh, PreparedScene, Scene};
+use crate::{Error, Result};
+
+/// Where ray queries run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Backend {
+    /// The GPU when an adapter can be opened, else the CPU.
+    #[default]
+    Auto,
+    Gpu,
+    Cpu,
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(Backend::Auto),
+            "gpu" => Ok(Backend::Gpu),
+            "cpu" => Ok(Backend::Cpu),
+            _ => Err(format!("backend must be auto, gpu or cpu; got '{s}'")),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QueryOptions {
+    pub accel: AccelKind,
+    pub grid: Resolution,
+    pub backend: Backend,
+}
+
+impl Default for QueryOptions {
+    fn default() -> Self {
+        QueryOptions {
+            accel: AccelKind::Grid,
+            grid: Resolution::default(),
+            backend: Backend::Auto,
+        }
+    }
+}
+
+/// Closest hits, one entry per ray (structure of arrays). A miss has `t = inf`,
+/// `tri = u32::MAX`, `u = v = 0` and a zero normal.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Hits {
+    pub t: Vec<f32>,
+    /// Index of the hit triangle in the input faces.
+    pub tri: Vec<u32>,
+    /// Barycentric coordinates of the hit: weight of the face's second (`u`) and third (`v`)
+    /// vertex.
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    /// Unit geometric normal of the hit triangle, `normalize((v1 - v0) x (v2 - v0))` in input
+    /// winding order (not flipped towards the ray).
+    pub normal: Vec<[f32; 3]>,
+}
+
+impl Hits {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+}
+
+/// Rays are processed in chunks of this many, so temporary memory stays bounded however large
+/// the batch.
+pub const CHUNK: usize = 1 << 20;
+
+/// An accelerated triangle mesh for ray queries.
+pub struct TraceMesh {
+    scene: PreparedScene,
+    /// Input face index of each kept (non-degenerate) triangle.
+    original: Vec<u32>,
+    accel: AccelKind,
+    backend: Backend,
+    /// The GPU renderer, opened on first use (or the reason it could not be).
+    gpu: OnceLock<std::result::Result<(Mutex<GpuRenderer>, String), String>>,
+}
+
+impl TraceMesh {
+    /// Builds from vertex positions and triangles (indices into `vertices`). Degenerate
+    /// triangles are skipped (they can never be hit); indices out of range and non-finite
+    /// coordinates are errors.
+    pub fn from_arrays(vertices: &[[f32; 3]], faces: &[[u32; 3]], opts: &QueryOptions) -> Result<TraceMesh> {
+        let n = vertices.len() as u32;
+        if let Some(i) = vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+            return Err(Error::InvalidInput(format!(
+                "vertex {i} has a non-finite coordinate {:?}",
+                vertices[i]
+            )));
+        }
+        if let Some(i) = faces.iter().position(|f| f.iter().any(|&x| x >= n)) {
+            return Err(Error::InvalidInput(format!(
+                "face {i} {:?} indexes a vertex out of range ({n} vertices)",
+                faces[i]
+            )));
+        }
+        let mesh = Mesh {
+            positions: vertices.iter().map(|&v| Vec3::from(v)).collect(),
+            triangles: faces.to_vec(),
+            ..Default::default()
+        };
+        Self::from_mesh(mesh, opts)
+    }
+
+    /// Loads a mesh file (OBJ, PLY, glTF/GLB, STL, OFF).
+    pub fn load(path: &Path, opts: &QueryOptions) -> Result<TraceMesh> {
+        Self::from_mesh(crate::io::load_mesh(path)?, opts)
+    }
+
+    pub fn from_mesh(mesh: Mesh, opts: &QueryOptions) -> Result<TraceMesh> {
+        // Keep the input face order: drop degenerate faces here and remember where each kept
+        // one came from, so hits report input indices.
+        let mut original = Vec::with_capacity(mesh.triangles.len());
+        let mut kept = Vec::with_capacity(mesh.triangles.len());
+        for (i, t) in mesh.triangles.iter().enumerate() {
+            let [a, b, c] = t.map(|k| mesh.positions[k as usize]);
+            if (b - a).cross(c - a).length_squared() > 0.0 {
+                original.push(i as u32);
+                kept.push(*t);
+            }
+        }
+        if kept.is_empty() {
+            return Err(Error::InvalidInput(format!(
+                "mesh has no triangles with non-zero area ({} faces given)",
+                mesh.triangles.len()
+            )));
+        }
+        let mut scene = Scene::default();
+        scene.add_mesh(
+            Mesh {
+                positions: mesh.positions,
+                normals: Vec::new(),
+                triangles: kept,
+                ..Default::default()
+            },
+            Mat4::IDENTITY,
+            None,
+        );
+        // Ray queries do not use the camera, but preparing validates one: aim it at the mesh.
+        let b = scene.bounds();
+        scene.camera.target = b.center();
+        scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
+        let prepared = scene.prepare(opts.grid)?;
+        debug_assert_eq!(prepared.accel.tris.len(), original.len());
+        let mesh = TraceMesh {
+            scene: prepared,
+            original,
+            accel: opts.accel,
+            backend: opts.backend,
+            gpu: OnceLock::new(),
+        };
+        // Open the GPU now when it was asked for, so a missing adapter is reported at once.
+        if opts.backend == Backend::Gpu {
+            mesh.renderer(Backend::Gpu)?;
+        }
+        Ok(mesh)
+    }
+
+    /// Triangles kept (non-degenerate).
+    pub fn triangle_count(&self) -> usize {
+        self.original.len()
+    }
+
+    /// The GPU renderer for `backend`: `None` means the CPU. `Gpu` without an adapter is an
+    /// error; `Auto` falls back to the CPU.
+    fn renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
+        if backend == Backend::Cpu {
+            return Ok(None);
+        }
+        let opened = self.gpu.get_or_init(|| {
+            let ctx = GpuContext::new().map_err(|e| e.to_string())?;
+            let d = format!("gpu: {}", ctx.describe());
+            GpuRenderer::new(ctx, &self.scene)
+                .map(|r| (Mutex::new(r), d))
+                .map_err(|e| e.to_string())
+        });
+        match (opened, backend) {
+            (Ok((r, _)), _) => Ok(Some(r)),
+            (Err(e), Backend::Gpu) => Err(Error::Gpu(e.clone())),
+            (Err(_), _) => Ok(None),
+        }
+    }
+
+    /// Where queries with this mesh's default backend run: "cpu (N threads)" or the adapter.
+    pub fn device(&self) -> String {
+        self.device_for(self.backend)
+    }
+
+    /// Where queries with `backend` run (opens the GPU if needed).
+    pub fn device_for(&self, backend: Backend) -> String {
+        let cpu = || format!("cpu ({} threads)", rayon::current_num_threads());
+        match self.renderer(backend) {
+            Ok(Some(_)) => self
+                .gpu
+                .get()
+                .and_then(|r| r.as_ref().ok())
+                .map(|(_, d)| d.clone())
+                .unwrap_or_else(cpu),
+            Ok(None) => match self.gpu.get() {
+                Some(Err(e)) => format!("{} (no GPU: {e})", cpu()),
+                _ => cpu(),
+            },
+            Err(e) => format!("unavailable: {e}"),
+        }
+    }
+
+    pub fn prepared(&self) -> &PreparedScene {
+        &self.scene
+    }
+
+    /// Closest hits for rays `origins[i] + t * dirs[i]` with `t_min < t < t_max`. Either array
+    /// may have length 1 and is then used for every ray.
+    pub fn intersect(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<Hits> {
+        self.intersect_with(self.backend, origins, dirs, t_min, t_max)
+    }
+
+    /// `intersect` on a given backend.
+    pub fn intersect_with(
+        &self,
+        backend: Backend,
+        origins: &[[f32; 3]],
+        dirs: &[[f32; 3]],
+        t_min: f32,
+        t_max: f32,
+    ) -> Result<Hits> {
+        let n = batch_len(origins, dirs)?;
+        check_interval(t_min, t_max)?;
+        let mut out = Hits::default();
+        for start in (0..n).step_by(CHUNK) {
+            let rays = make_rays(origins, dirs, start, (start + CHUNK).min(n))?;
+            let hits = self.intersect_rays_with(backend, &rays, t_min, t_max)?;
+            for h in hits {
+                if h.is_hit() {
+                    out.t.push(h.t);
+                    out.tri.push(self.original[h.tri as usize]);
+                    out.u.push(h.u);
+                    out.v.push(h.v);
+                    out.normal
+                        .push(self.scene.accel.tris[h.tri as usize].normal().normalize().to_array());
+                } else {
+                    out.t.push(f32::INFINITY);
+                    out.tri.push(u32::MAX);
+                    out.u.push(0.0);
+                    out.v.push(0.0);
+                    out.normal.push([0.0; 3]);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Whether anything is hit with `t_min < t < t_max`, per ray (broadcasting as `intersect`).
+    pub fn occluded(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
+        self.occluded_with(self.backend, origins, dirs, t_min, t_max)
+    }
+
+    /// `occluded` on a given backend.
+    pub fn occluded_with(
+        &self,
+        backend: Backend,
+        origins: &[[f32; 3]],
+        dirs: &[[f32; 3]],
+        t_min: f32,
+        t_max: f32,
+    ) -> Result<Vec<bool>> {
+        let n = batch_len(origins, dirs)?;
+        check_interval(t_min, t_max)?;
+        let mut out = Vec::with_capacity(n.min(CHUNK));
+        for start in (0..n).step_by(CHUNK) {
+            let rays = make_rays(origins, dirs, start, (start + CHUNK).min(n))?;
+            out.extend(self.occluded_rays_with(backend, &rays, t_min, t_max)?);
+        }
+        Ok(out)
+    }
+
+    /// Closest hits for prepared rays; triangle indices are the kept triangles' (see
+    /// `original_index`).
+    pub fn intersect_rays(&self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
+        self.intersect_rays_with(self.backend, rays, t_min, t_max)
+    }
+
+    pub fn intersect_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
+        match self.renderer(backend)? {
+            Some(g) => g
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .intersect(rays, t_min, t_max, self.accel),
+            None => Ok(rays
+                .par_iter()
+                .with_min_len(1024)
+                .map(|r| self.scene.accel.intersect(r, t_min, t_max, self.accel, &mut NoCounters))
+                .collect()),
+        }
+    }
+
+    pub fn occluded_rays(&self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
+        self.occluded_rays_with(self.backend, rays, t_min, t_max)
+    }
+
+    pub fn occluded_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
+        match self.renderer(backend)? {
+            Some(g) => g
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .occluded(rays, t_min, t_max, self.accel),
+            None => Ok(rays
+                .par_iter()
+                .with_min_len(1024)
+                .map(|r| self.scene.accel.occluded(r, t_min, t_max, self.accel, &mut NoCounters))
+                .collect()),
+        }
+    }
+
+    /// Input face index of a kept triangle index.
+    pub fn original_index(&self, kept: u32) -> u32 {
+        self.original[kept as usize]
+    }
+}
+
+fn batch_len(origins: &[[f32; 3]], dirs: &[[f32; 3]]) -> Result<usize> {
+    match (origins.len(), dirs.len()) {
+        (a, b) if a == b => Ok(a),
+        (1, b) => Ok(b),
+        (a, 1) => Ok(a),
+        (a, b) => Err(Error::InvalidInput(format!(
+            "{a} origins and {b} directions: lengths must match (or one be 1)"
+        ))),
+    }
+}
+
+fn check_interval(t_min: f32, t_max: f32) -> Result<()> {
+    if t_min.is_nan() || t_max.is_nan() || t_min < 0.0 || t_min > t_max {
+        return Err(Error::InvalidInput(format!(
+            "need 0 <= t_min <= t_max, got t_min = {t_min}, t_max = {t_max}"
+        )));
+    }
+    Ok(())
+}
+
+/// Rays `start..end` of a (possibly broadcast) batch; non-finite values and zero directions are
+/// errors naming the ray.
+fn make_rays(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Result<Vec<Ray>> {
+    (start..end)
+        .map(|i| {
+            let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
+            let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
+            if !o.is_finite() || !d.is_finite() {
+                return Err(Error::InvalidInput(format!(
+                    "ray {i} has a non-finite origin {o} or direction {d}"
+                )));
+            }
+            if d == Vec3::ZERO {
+                return Err(Error::InvalidInput(format!("ray {i} has a zero direction")));
+            }
+            Ok(Ray::new(o, d))
+        })
+        .collect()
+}
