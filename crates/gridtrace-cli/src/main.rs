@@ -1,6 +1,7 @@
 //! `gridtrace`: the command-line tool. Thin: parsing, printing and files; the work is in the
 //! library.
 
+mod bench;
 mod common;
 mod info;
 mod render;
@@ -24,6 +25,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Print mesh and grid statistics and memory use.
     Info(info::InfoArgs),
+    /// Benchmark the paper's scenes and modes (and grid sweeps, scaling, proximity clouds).
+    Bench(bench::BenchArgs),
 }
 
 fn main() {
@@ -31,6 +34,7 @@ fn main() {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Info(a) => info::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");
