@@ -337,6 +337,16 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
     if let Some(dir) = &a.out {
         let mut files = bench::report::write_reports(&report, dir)?;
         files.extend(bench::charts::write_charts(&report, dir)?);
+        // One ray-traced picture per scene that ran, to see what was measured.
+        for s in &report.matrix.scenes {
+            let bs = scenes::build_paper_scene(&s.name, data_dir.as_deref())?;
+            let prepared = bs.scene.prepare(bs.resolution(cfg.paper_grids, cfg.grid))?;
+            let opts = RenderOptions::new(first_res.0, first_res.1, Mode::Trace, AccelKind::Grid);
+            let (image, _) = gridtrace::cpu::render(&prepared, &opts, None)?;
+            let path = dir.join(format!("scene_{}.png", s.name));
+            image.save_png(&path)?;
+            files.push(path);
+        }
         for f in files {
             println!("wrote {}", f.display());
         }

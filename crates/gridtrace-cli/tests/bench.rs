@@ -100,11 +100,17 @@ fn quick_bench_writes_consistent_reports() {
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "png"))
         .collect();
+    let named = |prefix: &str| {
+        pngs.iter()
+            .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with(prefix))
+            .count()
+    };
     assert_eq!(
-        pngs.len(),
+        named("time_vs_resolution_"),
         scenes.len(),
-        "one time-vs-resolution chart per scene: {pngs:?}"
+        "one chart per scene: {pngs:?}"
     );
+    assert_eq!(named("scene_"), scenes.len(), "one picture per scene: {pngs:?}");
     for p in pngs {
         let img = image::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         assert!(img.width() > 100 && img.height() > 100);

@@ -139,7 +139,8 @@ pub struct Scaling {
 }
 
 fn family(name: &str) -> String {
-    name.split(['_', '-']).next().unwrap_or(name).to_string()
+    let f = name.split(['_', '-']).next().unwrap_or(name);
+    if f == "bun" { "bunny" } else { f }.to_string()
 }
 
 /// The meshes of the scaling series found in `data_dir`, plus procedural ones; at most
