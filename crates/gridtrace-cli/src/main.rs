@@ -1,6 +1,7 @@
 //! `gridtrace`: the command-line tool. Thin: parsing, printing and files; the work is in the
 //! library.
 
+mod bench;
 mod common;
 mod info;
 mod rays;
@@ -27,6 +28,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Cast rays from a file at a mesh and write the hits to a file.
     Rays(rays::RaysArgs),
+    /// Benchmark the paper's scenes and modes (and grid sweeps, scaling, proximity clouds).
+    Bench(bench::BenchArgs),
 }
 
 fn main() {
@@ -35,6 +38,7 @@ fn main() {
         Command::Render(a) => render::run(a),
         Command::Info(a) => info::run(a),
         Command::Rays(a) => rays::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

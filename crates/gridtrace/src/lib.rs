@@ -2,6 +2,7 @@
 //! clouds (K. Ralovich, "Implementing and Analyzing a GPU Ray Tracer"), on the CPU and on any GPU.
 
 pub mod accel;
+pub mod bench;
 pub mod cpu;
 pub mod error;
 pub mod gpu;

@@ -1,0 +1,356 @@
+//! `gridtrace bench`: the paper's benchmark matrix and studies; the work is in
+//! `gridtrace::bench`, this file parses, prints and writes.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use gridtrace::bench::{self, BenchBackend, BenchConfig, BenchReport, Machine, scenes, studies};
+use gridtrace::gpu::GpuContext;
+use gridtrace::{AccelKind, Mode, RenderOptions, Resolution};
+
+use crate::common::parse_res;
+
+/// Where the benchmark runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchBackendArg {
+    /// The CPU, and the GPU too if a hardware adapter is found (else it says so).
+    Auto,
+    /// The GPU only (fails without an adapter).
+    Gpu,
+    /// The CPU only.
+    Cpu,
+    /// Both (fails without an adapter).
+    Both,
+}
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Small and fast (well under a minute): torus knot and Stanford bunny at 128x128, 1 warm-up,
+    /// 3 repetitions, CPU only unless --backend says otherwise. Explicit options still apply.
+    #[arg(long)]
+    quick: bool,
+    /// Scenes, comma separated: knight, torus-knot, bunny, stanford-bunny (default: all four).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Resolutions, comma separated, each N or WxH (default: 256,512,768).
+    #[arg(long, value_delimiter = ',', value_parser = parse_res)]
+    res: Vec<(u32, u32)>,
+    /// Accelerations, comma separated: grid, pc (default: both).
+    #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<AccelKind>())]
+    accel: Vec<AccelKind>,
+    /// Modes, comma separated: cast, shadow, trace (default: all three).
+    #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<Mode>())]
+    mode: Vec<Mode>,
+    /// auto (CPU, plus the GPU if found), cpu, gpu or both. Default: auto (cpu with --quick).
+    #[arg(long, value_enum)]
+    backend: Option<BenchBackendArg>,
+    /// Untimed runs before the timed ones.
+    #[arg(long)]
+    warmup: Option<u32>,
+    /// Timed repetitions per cell (median and best are reported).
+    #[arg(long)]
+    reps: Option<u32>,
+    /// Use the paper's hand-tuned grid dims (14x16x14, 16^3, 20^3, 128^3) instead of --grid.
+    #[arg(long)]
+    paper_grids: bool,
+    /// Grid resolution for the scenes: auto, auto:LAMBDA, N or AxBxC.
+    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Resolution>())]
+    grid: Resolution,
+    /// Folder of the mesh files (default: ../shared/data/meshes from the current directory or
+    /// beside the checkout the executable was built in; or $GRIDTRACE_DATA_DIR).
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+    /// Write bench.json, bench.csv, bench.md and PNG charts into this folder.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Also sweep the grid resolution (cells per triangle 0.5..32 and the paper's dims) for each
+    /// scene, at the first resolution, first mode and first accel.
+    #[arg(long)]
+    sweep_grid: bool,
+    /// Also measure time per ray against triangle count (bunny and dragon series, icospheres
+    /// up to 1.3 M triangles) and against pixel count, with fitted growth exponents.
+    #[arg(long)]
+    scaling: bool,
+    /// Also count traversal work (cells, jumps, triangle tests per ray) grid vs pc on sparse
+    /// scenes (sparse-room, a mesh seen from far away) and the torus knot.
+    #[arg(long)]
+    pc_study: bool,
+    /// Write the rays of a CPU run (first scene and resolution, the most complete mode asked
+    /// for, first accel) as 6 little-endian f32 per ray: origin xyz, direction xyz.
+    #[arg(long)]
+    export_rays: Option<PathBuf>,
+    /// Write the hit t of each exported ray as one little-endian f32 (inf for a miss).
+    #[arg(long)]
+    export_hits: Option<PathBuf>,
+}
+
+/// Opens the GPU for the chosen backend; `Ok(None)` means CPU only. Prints the adapter.
+fn open_gpu(b: BenchBackendArg) -> gridtrace::Result<Option<GpuContext>> {
+    match b {
+        BenchBackendArg::Cpu => Ok(None),
+        BenchBackendArg::Gpu | BenchBackendArg::Both => {
+            let c = GpuContext::new()?;
+            println!("GPU adapter: {}", c.describe());
+            if c.is_software() {
+                println!("  (a software adapter: its times are CPU speed, not GPU speed)");
+            }
+            Ok(Some(c))
+        }
+        BenchBackendArg::Auto => match GpuContext::new() {
+            Ok(c) if c.is_software() => {
+                println!(
+                    "note: only a software adapter ({}); benchmarking the CPU only (--backend gpu forces it)",
+                    c.describe()
+                );
+                Ok(None)
+            }
+            Ok(c) => {
+                println!("GPU adapter: {}", c.describe());
+                Ok(Some(c))
+            }
+            Err(e) => {
+                println!("note: no usable GPU ({e}); benchmarking the CPU only");
+                Ok(None)
+            }
+        },
+    }
+}
+
+pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
+    let t0 = Instant::now();
+    let mut cfg = if a.quick {
+        BenchConfig::quick()
+    } else {
+        BenchConfig::paper()
+    };
+    if !a.scenes.is_empty() {
+        cfg.scenes = a.scenes.clone();
+    }
+    for s in &cfg.scenes {
+        if scenes::paper_scene(s).is_none() {
+            let names: Vec<_> = scenes::PAPER_SCENES.iter().map(|s| s.name).collect();
+            return Err(bench::invalid(format!(
+                "unknown scene '{s}'; scenes: {}",
+                names.join(", ")
+            )));
+        }
+    }
+    if !a.res.is_empty() {
+        cfg.resolutions = a.res.clone();
+    }
+    if !a.accel.is_empty() {
+        cfg.accels = a.accel.clone();
+    }
+    if !a.mode.is_empty() {
+        cfg.modes = a.mode.clone();
+    }
+    if cfg.modes.contains(&Mode::Heat) {
+        return Err(bench::invalid(
+            "heat is not a benchmark mode; use cast, shadow or trace",
+        ));
+    }
+    if let Some(w) = a.warmup {
+        cfg.warmup = w;
+    }
+    if let Some(r) = a.reps {
+        if r == 0 {
+            return Err(bench::invalid("--reps must be at least 1"));
+        }
+        cfg.reps = r;
+    }
+    cfg.paper_grids = a.paper_grids;
+    cfg.grid = a.grid;
+    cfg.data_dir = a.data_dir.clone();
+    if let Some(d) = &cfg.data_dir
+        && !d.is_dir()
+    {
+        return Err(bench::invalid(format!("--data-dir {} is not a folder", d.display())));
+    }
+
+    let backend = a.backend.unwrap_or(if a.quick {
+        BenchBackendArg::Cpu
+    } else {
+        BenchBackendArg::Auto
+    });
+    let gpu = open_gpu(backend)?;
+    let run_cpu = backend != BenchBackendArg::Gpu;
+    let mut backends = Vec::new();
+    if run_cpu {
+        backends.push(BenchBackend::Cpu);
+    }
+    if gpu.is_some() {
+        backends.push(BenchBackend::Gpu);
+    }
+    let machine = Machine::detect(gpu.as_ref());
+    println!(
+        "CPU: {} ({} logical cores, {} threads); OS: {}",
+        machine.cpu_model, machine.logical_cores, machine.threads, machine.os
+    );
+    let data_dir = scenes::find_data_dir(cfg.data_dir.as_deref());
+    println!(
+        "mesh data: {}",
+        data_dir
+            .as_ref()
+            .map_or("not found (scenes that need files are skipped)".into(), |p| p
+                .display()
+                .to_string())
+    );
+    println!(
+        "matrix: {} scene(s) x {} resolution(s) x {} accel x {} mode(s) x backend {}; {} warm-up, {} reps",
+        cfg.scenes.len(),
+        cfg.resolutions.len(),
+        cfg.accels.len(),
+        cfg.modes.len(),
+        backends.iter().map(|b| b.name()).collect::<Vec<_>>().join("+"),
+        cfg.warmup,
+        cfg.reps
+    );
+    let mut log = |s: &str| println!("{s}");
+    let matrix = bench::run_matrix(&cfg, gpu, run_cpu, &mut log)?;
+    let mut report = BenchReport::new(&cfg, &backends, machine, matrix);
+
+    let first_res = cfg.resolutions[0];
+    if a.sweep_grid {
+        println!(
+            "grid sweep ({} {} {}x{}):",
+            cfg.modes[0].name(),
+            cfg.accels[0].name(),
+            first_res.0,
+            first_res.1
+        );
+        let opts = RenderOptions::new(first_res.0, first_res.1, cfg.modes[0], cfg.accels[0]);
+        for name in &cfg.scenes {
+            match scenes::build_paper_scene(name, data_dir.as_deref()) {
+                Ok(bs) => {
+                    let sw = studies::grid_sweep(&bs, &opts, cfg.warmup, cfg.reps, &mut log)?;
+                    println!(
+                        "  {}: best {} {}x{}x{} {:.2} ms; automatic {}x{}x{} {:.2} ms",
+                        sw.scene,
+                        sw.best,
+                        sw.best_dims[0],
+                        sw.best_dims[1],
+                        sw.best_dims[2],
+                        sw.best_ms,
+                        sw.auto_dims[0],
+                        sw.auto_dims[1],
+                        sw.auto_dims[2],
+                        sw.auto_ms
+                    );
+                    report.grid_sweep.push(sw);
+                }
+                Err(e) => println!("  sweep: skipping {name}: {e}"),
+            }
+        }
+    }
+    if a.scaling {
+        let (max_tris, sides): (usize, &[u32]) = if a.quick {
+            (100_000, &[64, 128, 256])
+        } else {
+            (2_000_000, &[128, 256, 512, 768, 1024])
+        };
+        println!(
+            "scaling (cast {} {}x{}):",
+            cfg.accels[0].name(),
+            first_res.0,
+            first_res.1
+        );
+        let meshes = studies::scaling_meshes(data_dir.as_deref(), max_tris, &mut log);
+        let sc = studies::scaling(
+            meshes,
+            first_res,
+            sides,
+            Mode::Cast,
+            cfg.accels[0],
+            cfg.warmup,
+            cfg.reps,
+            &mut log,
+        )?;
+        for f in &sc.fits {
+            println!("  exponent {:<32} {:.3} ({} points)", f.series, f.exponent, f.points);
+        }
+        report.scaling = Some(sc);
+    }
+    if a.pc_study {
+        println!("proximity-cloud study ({}x{}):", first_res.0, first_res.1);
+        let far_mesh = data_dir
+            .as_ref()
+            .and_then(|d| gridtrace::io::load_mesh(&d.join("bunny_lowpoly/bunny_1k.obj")).ok());
+        let far_name = if far_mesh.is_some() { "far-bunny" } else { "far-knot" };
+        let study_scenes = vec![
+            ("sparse-room".to_string(), gridtrace::scene::builtin::sparse_room()),
+            (far_name.to_string(), studies::far_mesh_scene(far_mesh)),
+            ("torus-knot".to_string(), gridtrace::scene::builtin::knot_box()),
+        ];
+        report.pc_study = studies::pc_study(
+            &study_scenes,
+            &[Mode::Cast, Mode::Shadow],
+            first_res,
+            cfg.warmup,
+            cfg.reps,
+            &mut log,
+        )?;
+    }
+    if a.export_rays.is_some() || a.export_hits.is_some() {
+        let mode = [Mode::Trace, Mode::Shadow, Mode::Cast]
+            .into_iter()
+            .find(|m| cfg.modes.contains(m))
+            .unwrap_or(Mode::Cast);
+        let name = &cfg.scenes[0];
+        let bs = scenes::build_paper_scene(name, data_dir.as_deref())?;
+        let prepared = bs.scene.prepare(bs.resolution(cfg.paper_grids, cfg.grid))?;
+        let opts = RenderOptions::new(first_res.0, first_res.1, mode, cfg.accels[0]);
+        let set = bench::rays::collect_rays(&prepared, &opts)?;
+        let c = set.counts();
+        if let Some(p) = &a.export_rays {
+            set.write_rays(p)?;
+        }
+        if let Some(p) = &a.export_hits {
+            set.write_hits(p)?;
+        }
+        let hits = set.records.iter().filter(|r| r.t.is_finite()).count() as u64;
+        println!(
+            "exported {} rays of {name} {} {} {}x{} (eye {}, shadow {}, reflection {}; {hits} with a hit)",
+            c.total(),
+            mode.name(),
+            opts.accel.name(),
+            opts.width,
+            opts.height,
+            c.eye,
+            c.shadow,
+            c.reflection
+        );
+        report.ray_export = Some(studies::RayExport {
+            scene: name.clone(),
+            mode: mode.name().into(),
+            accel: opts.accel.name().into(),
+            width: opts.width,
+            height: opts.height,
+            rays_file: a.export_rays.as_ref().map(|p| p.display().to_string()),
+            hits_file: a.export_hits.as_ref().map(|p| p.display().to_string()),
+            eye: c.eye,
+            shadow: c.shadow,
+            reflection: c.reflection,
+            hits,
+        });
+    }
+    if let Some(dir) = &a.out {
+        let mut files = bench::report::write_reports(&report, dir)?;
+        files.extend(bench::charts::write_charts(&report, dir)?);
+        // One ray-traced picture per scene that ran, to see what was measured.
+        for s in &report.matrix.scenes {
+            let bs = scenes::build_paper_scene(&s.name, data_dir.as_deref())?;
+            let prepared = bs.scene.prepare(bs.resolution(cfg.paper_grids, cfg.grid))?;
+            let opts = RenderOptions::new(first_res.0, first_res.1, Mode::Trace, AccelKind::Grid);
+            let (image, _) = gridtrace::cpu::render(&prepared, &opts, None)?;
+            let path = dir.join(format!("scene_{}.png", s.name));
+            image.save_png(&path)?;
+            files.push(path);
+        }
+        for f in files {
+            println!("wrote {}", f.display());
+        }
+    }
+    println!("bench finished in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}

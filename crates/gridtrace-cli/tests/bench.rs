@@ -1,0 +1,133 @@
+//! `gridtrace bench --quick`: the reports are written, well formed and agree with each other.
+
+use std::process::Command;
+
+fn gridtrace(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
+        .args(args)
+        .output()
+        .expect("run gridtrace");
+    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.success(), text)
+}
+
+#[test]
+fn quick_bench_writes_consistent_reports() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-bench-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let rays = dir.join("rays.bin");
+    let hits = dir.join("hits.bin");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (ok, text) = gridtrace(&[
+        "bench",
+        "--quick",
+        "--backend",
+        "cpu",
+        "--out",
+        dir.to_str().unwrap(),
+        "--export-rays",
+        rays.to_str().unwrap(),
+        "--export-hits",
+        hits.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("scene torus-knot: 1020 triangles"), "{text}");
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).expect("bench.json parses");
+    assert!(json["machine"]["cpu_model"].as_str().is_some_and(|s| !s.is_empty()));
+    assert!(json["machine"]["logical_cores"].as_u64().unwrap() >= 1);
+    assert!(json["gridtrace_version"].as_str().is_some());
+    assert!(json["command_line"].as_array().unwrap().len() > 2);
+    let rows = json["rows"].as_array().unwrap();
+    let scenes = json["scenes"].as_array().unwrap();
+    assert!(!scenes.is_empty());
+    // Every scene that ran: 3 modes x 2 accels at one resolution on the CPU.
+    assert_eq!(rows.len(), scenes.len() * 6, "{text}");
+    for s in scenes {
+        assert!(s["triangles"].as_u64().unwrap() > 0);
+        assert!(s["memory_cpu_total"].as_u64().unwrap() > 0);
+        assert!(s["memory_paper_model"].as_u64().unwrap() > 0);
+    }
+    for r in rows {
+        let best = r["best_ms"].as_f64().unwrap();
+        let median = r["median_ms"].as_f64().unwrap();
+        assert!(best > 0.0 && median >= best, "{r}");
+        let times = r["times_ms"].as_array().unwrap();
+        assert_eq!(times.len(), 3);
+        let min = times.iter().map(|t| t.as_f64().unwrap()).fold(f64::INFINITY, f64::min);
+        assert_eq!(min, best);
+        assert_eq!((r["width"].as_u64(), r["height"].as_u64()), (Some(128), Some(128)));
+        let eye = r["rays"]["eye"].as_u64().unwrap();
+        assert_eq!(eye, 128 * 128, "one eye ray per pixel: {r}");
+        let total = r["rays"]["total"].as_u64().unwrap();
+        let shadow = r["rays"]["shadow"].as_u64().unwrap();
+        let refl = r["rays"]["reflection"].as_u64().unwrap();
+        assert_eq!(total, eye + shadow + refl);
+        match r["mode"].as_str().unwrap() {
+            "cast" => assert_eq!(total, 128 * 128, "cast: eye rays only"),
+            "shadow" => assert!(shadow > 0 && refl == 0),
+            "trace" => assert!(shadow > 0),
+            m => panic!("unexpected mode {m}"),
+        }
+        // Not the paper's resolutions: no paper figure to compare with.
+        assert!(r["paper_ms"].is_null());
+    }
+
+    let csv = std::fs::read_to_string(dir.join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert!(lines[0].starts_with("scene,backend,mode,accel,width,height"));
+    assert_eq!(lines.len(), rows.len() + 1);
+    let cols = lines[0].split(',').count();
+    assert!(lines.iter().all(|l| l.split(',').count() == cols));
+
+    let md = std::fs::read_to_string(dir.join("bench.md")).unwrap();
+    for h in [
+        "Table 1: ray casting",
+        "Table 2: shadow casting",
+        "Table 3: ray tracing",
+    ] {
+        assert!(md.contains(h), "missing {h}: {md}");
+    }
+    assert!(
+        md.contains("| rendering resolution |") && md.contains("| 128 x 128 |"),
+        "{md}"
+    );
+    assert!(md.contains("Torus knot n = 1020 (paper 1024) g"), "{md}");
+
+    let pngs: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    let named = |prefix: &str| {
+        pngs.iter()
+            .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with(prefix))
+            .count()
+    };
+    assert_eq!(
+        named("time_vs_resolution_"),
+        scenes.len(),
+        "one chart per scene: {pngs:?}"
+    );
+    assert_eq!(named("scene_"), scenes.len(), "one picture per scene: {pngs:?}");
+    for p in pngs {
+        let img = image::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        assert!(img.width() > 100 && img.height() > 100);
+    }
+
+    // Exported rays: the trace mode of the first scene at 128x128.
+    let export = &json["ray_export"];
+    let n =
+        export["eye"].as_u64().unwrap() + export["shadow"].as_u64().unwrap() + export["reflection"].as_u64().unwrap();
+    assert_eq!(export["eye"].as_u64(), Some(128 * 128));
+    assert_eq!(std::fs::metadata(&rays).unwrap().len(), n * 24);
+    assert_eq!(std::fs::metadata(&hits).unwrap().len(), n * 4);
+}
+
+#[test]
+fn bench_rejects_unknown_scene() {
+    let (ok, text) = gridtrace(&["bench", "--quick", "--scenes", "teapot", "--backend", "cpu"]);
+    assert!(!ok);
+    assert!(text.contains("unknown scene 'teapot'"), "{text}");
+}

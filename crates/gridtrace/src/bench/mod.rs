@@ -1,0 +1,614 @@
+//! Benchmarks: the paper's matrix (scenes x resolutions x accel x mode x backend), grid-resolution
+//! sweeps, scaling with triangle and pixel count, the proximity-cloud study, and the reports
+//! (JSON, CSV, a Markdown table laid out like the paper's Tables 1-3, PNG charts).
+//!
+//! Every timing is repeated after warm-up runs; rows keep all repetitions, their median and the
+//! best (the paper reports best values of several runs).
+
+pub mod charts;
+pub mod rays;
+pub mod report;
+pub mod scenes;
+pub mod studies;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::accel::{AccelKind, Resolution};
+use crate::gpu::{GpuContext, GpuRenderer};
+use crate::render::{Mode, RayCounts, RenderOptions};
+use crate::scene::PreparedScene;
+use crate::{Error, Result};
+
+pub use scenes::{BenchScene, PAPER_SCENES, build_paper_scene, find_data_dir, paper_ms};
+
+/// Where a benchmark row ran.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BenchBackend {
+    Cpu,
+    Gpu,
+}
+
+impl BenchBackend {
+    pub fn name(self) -> &'static str {
+        match self {
+            BenchBackend::Cpu => "cpu",
+            BenchBackend::Gpu => "gpu",
+        }
+    }
+}
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct BenchConfig {
+    pub scenes: Vec<String>,
+    pub resolutions: Vec<(u32, u32)>,
+    pub accels: Vec<AccelKind>,
+    pub modes: Vec<Mode>,
+    pub warmup: u32,
+    pub reps: u32,
+    /// Use the paper's hand-tuned grid dims for its scenes (else `grid`).
+    pub paper_grids: bool,
+    pub grid: Resolution,
+    pub data_dir: Option<PathBuf>,
+}
+
+impl BenchConfig {
+    /// The paper's matrix: four scenes, 256/512/768 squared, grid and pc, three modes.
+    pub fn paper() -> Self {
+        BenchConfig {
+            scenes: PAPER_SCENES.iter().map(|s| s.name.to_string()).collect(),
+            resolutions: vec![(256, 256), (512, 512), (768, 768)],
+            accels: vec![AccelKind::Grid, AccelKind::ProximityCloud],
+            modes: vec![Mode::Cast, Mode::Shadow, Mode::Trace],
+            warmup: 1,
+            reps: 5,
+            paper_grids: false,
+            grid: Resolution::default(),
+            data_dir: None,
+        }
+    }
+
+    /// Small and fast: torus knot and Stanford bunny at 128x128, 1 warm-up, 3 repetitions.
+    pub fn quick() -> Self {
+        BenchConfig {
+            scenes: vec!["torus-knot".into(), "stanford-bunny".into()],
+            resolutions: vec![(128, 128)],
+            warmup: 1,
+            reps: 3,
+            ..Self::paper()
+        }
+    }
+}
+
+/// Median, best (minimum) and mean of a set of timings.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct Summary {
+    pub median_ms: f64,
+    pub best_ms: f64,
+    pub mean_ms: f64,
+}
+
+impl Summary {
+    pub fn of(times: &[f64]) -> Summary {
+        if times.is_empty() {
+            return Summary::default();
+        }
+        let mut t = times.to_vec();
+        t.sort_by(f64::total_cmp);
+        let n = t.len();
+        let median = if n % 2 == 1 {
+            t[n / 2]
+        } else {
+            0.5 * (t[n / 2 - 1] + t[n / 2])
+        };
+        Summary {
+            median_ms: median,
+            best_ms: t[0],
+            mean_ms: t.iter().sum::<f64>() / n as f64,
+        }
+    }
+}
+
+/// Ray counts in a report.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct Rays {
+    pub eye: u64,
+    pub shadow: u64,
+    pub reflection: u64,
+    pub total: u64,
+}
+
+impl From<RayCounts> for Rays {
+    fn from(r: RayCounts) -> Self {
+        Rays {
+            eye: r.eye,
+            shadow: r.shadow,
+            reflection: r.reflection,
+            total: r.total(),
+        }
+    }
+}
+
+/// One cell of the matrix.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub scene: String,
+    pub backend: BenchBackend,
+    pub mode: String,
+    pub accel: String,
+    pub width: u32,
+    pub height: u32,
+    pub grid_dims: [u32; 3],
+    /// Every timed repetition (ms): CPU wall time, or GPU time (timestamps where available).
+    pub times_ms: Vec<f64>,
+    #[serde(flatten)]
+    pub summary: Summary,
+    pub rays: Rays,
+    /// Rays per microsecond of the best run.
+    pub mrays_per_s: f64,
+    pub paper_ms: Option<f64>,
+    /// Paper ms / our best ms.
+    pub speedup: Option<f64>,
+    /// GPU only: wall-clock time of the best repetition's frame and per-stage GPU times.
+    pub gpu_wall_ms: Option<f64>,
+    pub gpu_stages_ms: Option<BTreeMap<String, f64>>,
+    pub gpu_timestamps: Option<bool>,
+}
+
+/// A scene as benchmarked: counts, grid and memory.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneInfo {
+    pub name: String,
+    pub title: String,
+    pub description: String,
+    /// Triangles in the scene's mesh.
+    pub triangles: usize,
+    /// Triangles traced (zero-area ones dropped).
+    pub triangles_traced: usize,
+    pub degenerate_dropped: usize,
+    pub paper_triangles: Option<usize>,
+    pub grid: GridInfo,
+    /// Bytes of each CPU array.
+    pub memory_cpu: BTreeMap<String, u64>,
+    pub memory_cpu_total: u64,
+    /// Bytes of each GPU buffer (scene and work buffers of the largest frame), when run there.
+    pub memory_gpu: Option<BTreeMap<String, u64>>,
+    pub memory_gpu_total: Option<u64>,
+    /// The paper's model `M = n*96 + cells*16`.
+    pub memory_paper_model: u64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct GridInfo {
+    /// `paper` (hand-tuned dims), `auto:LAMBDA` or `fixed`.
+    pub choice: String,
+    pub dims: [u32; 3],
+    pub cells: usize,
+    pub empty_cells: usize,
+    pub references: usize,
+    pub refs_per_triangle: f64,
+    pub build_ms: f64,
+}
+
+impl GridInfo {
+    pub fn of(prepared: &PreparedScene, choice: String) -> Self {
+        let s = &prepared.accel.grid.stats;
+        GridInfo {
+            choice,
+            dims: s.dims,
+            cells: s.cells,
+            empty_cells: s.empty_cells,
+            references: s.references,
+            refs_per_triangle: s.refs_per_triangle(),
+            build_ms: s.build_ms,
+        }
+    }
+}
+
+pub fn resolution_name(r: Resolution) -> String {
+    match r {
+        Resolution::Auto { lambda } => format!("auto:{lambda}"),
+        Resolution::Fixed(d) => format!("{}x{}x{}", d[0], d[1], d[2]),
+    }
+}
+
+/// Times `f` `warmup + reps` times, keeping the last `reps` results.
+pub fn repeat<T>(warmup: u32, reps: u32, mut f: impl FnMut() -> Result<(f64, T)>) -> Result<(Vec<f64>, Vec<T>)> {
+    for _ in 0..warmup {
+        f()?;
+    }
+    let mut times = Vec::new();
+    let mut outs = Vec::new();
+    for _ in 0..reps.max(1) {
+        let (t, o) = f()?;
+        times.push(t);
+        outs.push(o);
+    }
+    Ok((times, outs))
+}
+
+/// One CPU measurement: best, median and all times of a render, with its ray counts.
+pub fn time_cpu(
+    prepared: &PreparedScene,
+    opts: &RenderOptions,
+    warmup: u32,
+    reps: u32,
+) -> Result<(Vec<f64>, Summary, RayCounts)> {
+    let (times, outs) = repeat(warmup, reps, || {
+        let (_, s) = crate::cpu::render(prepared, opts, None)?;
+        Ok((s.render_ms, s.rays))
+    })?;
+    Ok((times.clone(), Summary::of(&times), outs[0]))
+}
+
+fn cpu_row(scene: &str, prepared: &PreparedScene, opts: &RenderOptions, cfg: &BenchConfig) -> Result<Row> {
+    let (times, summary, rays) = time_cpu(prepared, opts, cfg.warmup, cfg.reps)?;
+    Ok(make_row(scene, BenchBackend::Cpu, prepared, opts, times, summary, rays))
+}
+
+fn make_row(
+    scene: &str,
+    backend: BenchBackend,
+    prepared: &PreparedScene,
+    opts: &RenderOptions,
+    times: Vec<f64>,
+    summary: Summary,
+    rays: RayCounts,
+) -> Row {
+    let paper = paper_ms(scene, opts.mode, (opts.width, opts.height), opts.accel);
+    Row {
+        scene: scene.into(),
+        backend,
+        mode: opts.mode.name().into(),
+        accel: opts.accel.name().into(),
+        width: opts.width,
+        height: opts.height,
+        grid_dims: prepared.accel.grid.stats.dims,
+        times_ms: times,
+        summary,
+        rays: rays.into(),
+        mrays_per_s: rays.total() as f64 / (summary.best_ms * 1e3).max(1e-9),
+        paper_ms: paper,
+        speedup: paper.map(|p| p / summary.best_ms.max(1e-9)),
+        gpu_wall_ms: None,
+        gpu_stages_ms: None,
+        gpu_timestamps: None,
+    }
+}
+
+fn gpu_row(
+    scene: &str,
+    prepared: &PreparedScene,
+    gpu: &mut GpuRenderer,
+    opts: &RenderOptions,
+    cfg: &BenchConfig,
+) -> Result<Row> {
+    let (times, outs) = repeat(cfg.warmup, cfg.reps, || {
+        let (_, s) = gpu.render(&prepared.camera, &prepared.lights, opts)?;
+        let t = if s.timings.from_timestamps {
+            s.timings.total_ms
+        } else {
+            s.render.render_ms
+        };
+        Ok((t, s))
+    })?;
+    let summary = Summary::of(&times);
+    let best = times
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    let s = &outs[best];
+    let mut row = make_row(scene, BenchBackend::Gpu, prepared, opts, times, summary, s.render.rays);
+    row.gpu_wall_ms = Some(s.render.render_ms);
+    row.gpu_stages_ms = Some(s.timings.stages_ms.iter().map(|(k, v)| (k.to_string(), *v)).collect());
+    row.gpu_timestamps = Some(s.timings.from_timestamps);
+    Ok(row)
+}
+
+/// Results of the matrix.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct MatrixResult {
+    pub scenes: Vec<SceneInfo>,
+    pub rows: Vec<Row>,
+    /// Scenes left out, with the reason.
+    pub skipped: Vec<String>,
+}
+
+/// Runs the matrix on the CPU and, when `gpu` is given, on the GPU too. The GPU context is used
+/// for the first scene; later scenes open their own (the renderer owns its context). `log`
+/// receives one line per scene and per row.
+pub fn run_matrix(
+    cfg: &BenchConfig,
+    mut gpu: Option<GpuContext>,
+    cpu: bool,
+    log: &mut dyn FnMut(&str),
+) -> Result<MatrixResult> {
+    let data_dir = find_data_dir(cfg.data_dir.as_deref());
+    let use_gpu = gpu.is_some();
+    let mut out = MatrixResult::default();
+    for name in &cfg.scenes {
+        let bs = match build_paper_scene(name, data_dir.as_deref()) {
+            Ok(s) => s,
+            Err(e) => {
+                let msg = format!("skipping scene {name}: {e}");
+                log(&msg);
+                out.skipped.push(msg);
+                continue;
+            }
+        };
+        let res = bs.resolution(cfg.paper_grids, cfg.grid);
+        let prepared = bs.scene.prepare(res)?;
+        let choice = if cfg.paper_grids && bs.paper_grid.is_some() {
+            "paper".to_string()
+        } else {
+            resolution_name(res)
+        };
+        let mut info = scene_info(&bs, &prepared, choice);
+        log(&format!(
+            "scene {}: {} triangles ({} traced; paper {}), grid {}x{}x{} ({}), {}",
+            bs.name,
+            bs.triangles,
+            prepared.accel.tris.len(),
+            bs.paper_tris.map_or("-".into(), |n| n.to_string()),
+            info.grid.dims[0],
+            info.grid.dims[1],
+            info.grid.dims[2],
+            info.grid.choice,
+            bs.description
+        ));
+        if cpu {
+            for &(w, h) in &cfg.resolutions {
+                for &mode in &cfg.modes {
+                    for &accel in &cfg.accels {
+                        let opts = RenderOptions::new(w, h, mode, accel);
+                        let row = cpu_row(&bs.name, &prepared, &opts, cfg)?;
+                        log(&row_line(&row));
+                        out.rows.push(row);
+                    }
+                }
+            }
+        }
+        if use_gpu {
+            let ctx = match gpu.take() {
+                Some(c) => c,
+                None => GpuContext::new()?,
+            };
+            let mut r = GpuRenderer::new(ctx, &prepared)?;
+            let mut largest = 0u64;
+            for &(w, h) in &cfg.resolutions {
+                for &mode in &cfg.modes {
+                    for &accel in &cfg.accels {
+                        let opts = RenderOptions::new(w, h, mode, accel);
+                        let row = gpu_row(&bs.name, &prepared, &mut r, &opts, cfg)?;
+                        log(&row_line(&row));
+                        out.rows.push(row);
+                        let mem: BTreeMap<String, u64> =
+                            r.memory().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+                        let total = mem.values().sum();
+                        if total > largest {
+                            largest = total;
+                            info.memory_gpu = Some(mem);
+                            info.memory_gpu_total = Some(total);
+                        }
+                    }
+                }
+            }
+        }
+        out.scenes.push(info);
+    }
+    Ok(out)
+}
+
+pub fn scene_info(bs: &BenchScene, prepared: &PreparedScene, choice: String) -> SceneInfo {
+    let memory_cpu: BTreeMap<String, u64> = prepared
+        .memory()
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v as u64))
+        .collect();
+    SceneInfo {
+        name: bs.name.clone(),
+        title: bs.title.clone(),
+        description: bs.description.clone(),
+        triangles: bs.triangles,
+        triangles_traced: prepared.accel.tris.len(),
+        degenerate_dropped: prepared.degenerate_dropped,
+        paper_triangles: bs.paper_tris,
+        grid: GridInfo::of(prepared, choice),
+        memory_cpu_total: memory_cpu.values().sum(),
+        memory_cpu,
+        memory_gpu: None,
+        memory_gpu_total: None,
+        memory_paper_model: prepared.paper_memory_model() as u64,
+    }
+}
+
+/// One line per row for the console.
+pub fn row_line(r: &Row) -> String {
+    let paper = match (r.paper_ms, r.speedup) {
+        (Some(p), Some(s)) => format!("  paper {p:.0} ms, speed-up {s:.2}x"),
+        _ => String::new(),
+    };
+    format!(
+        "  {:<14} {} {:<6} {:<4} {:>4}x{:<4} best {:>9.2} ms  median {:>9.2} ms  {:>8} rays  {:>7.2} Mrays/s{paper}",
+        r.scene,
+        r.backend.name(),
+        r.mode,
+        r.accel,
+        r.width,
+        r.height,
+        r.summary.best_ms,
+        r.summary.median_ms,
+        r.rays.total,
+        r.mrays_per_s
+    )
+}
+
+/// Least-squares slope of `log y` against `log x` (the growth exponent), with its intercept;
+/// `None` with fewer than two usable points.
+pub fn loglog_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let p: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite())
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
+    if p.len() < 2 {
+        return None;
+    }
+    let n = p.len() as f64;
+    let mx = p.iter().map(|q| q.0).sum::<f64>() / n;
+    let my = p.iter().map(|q| q.1).sum::<f64>() / n;
+    let sxx: f64 = p.iter().map(|q| (q.0 - mx).powi(2)).sum();
+    if sxx == 0.0 {
+        return None;
+    }
+    let sxy: f64 = p.iter().map(|q| (q.0 - mx) * (q.1 - my)).sum();
+    let slope = sxy / sxx;
+    Some((slope, my - slope * mx))
+}
+
+/// The machine the benchmark ran on.
+#[derive(Debug, Clone, Serialize)]
+pub struct Machine {
+    pub cpu_model: String,
+    pub logical_cores: usize,
+    pub threads: usize,
+    pub os: String,
+    pub adapter: Option<String>,
+    pub adapter_is_software: Option<bool>,
+}
+
+impl Machine {
+    pub fn detect(gpu: Option<&GpuContext>) -> Machine {
+        let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+        let cpu_model = cpuinfo
+            .lines()
+            .find(|l| l.starts_with("model name"))
+            .and_then(|l| l.split(':').nth(1))
+            .map(|s| s.trim().to_string())
+            .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+        let pretty = std::fs::read_to_string("/etc/os-release")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("PRETTY_NAME="))
+                    .map(|l| l["PRETTY_NAME=".len()..].trim_matches('"').to_string())
+            })
+            .unwrap_or_else(|| std::env::consts::OS.to_string());
+        let kernel = std::fs::read_to_string("/proc/sys/kernel/osrelease").unwrap_or_default();
+        let os = if kernel.trim().is_empty() {
+            pretty
+        } else {
+            format!("{pretty}, kernel {}", kernel.trim())
+        };
+        Machine {
+            cpu_model,
+            logical_cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            threads: rayon::current_num_threads(),
+            os,
+            adapter: gpu.map(|g| g.describe()),
+            adapter_is_software: gpu.map(|g| g.is_software()),
+        }
+    }
+}
+
+/// Everything one `gridtrace bench` run measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    pub gridtrace_version: String,
+    pub command_line: Vec<String>,
+    /// Seconds since the Unix epoch when the report was made.
+    pub unix_time: u64,
+    pub machine: Machine,
+    pub config: ConfigInfo,
+    #[serde(flatten)]
+    pub matrix: MatrixResult,
+    pub grid_sweep: Vec<studies::Sweep>,
+    pub scaling: Option<studies::Scaling>,
+    pub pc_study: Vec<studies::PcStudyRow>,
+    pub ray_export: Option<studies::RayExport>,
+}
+
+/// The configuration, as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct ConfigInfo {
+    pub scenes: Vec<String>,
+    pub resolutions: Vec<[u32; 2]>,
+    pub accels: Vec<String>,
+    pub modes: Vec<String>,
+    pub backends: Vec<String>,
+    pub warmup: u32,
+    pub reps: u32,
+    pub paper_grids: bool,
+    pub grid: String,
+    pub data_dir: Option<String>,
+}
+
+impl ConfigInfo {
+    pub fn of(cfg: &BenchConfig, backends: &[BenchBackend]) -> Self {
+        ConfigInfo {
+            scenes: cfg.scenes.clone(),
+            resolutions: cfg.resolutions.iter().map(|&(w, h)| [w, h]).collect(),
+            accels: cfg.accels.iter().map(|a| a.name().to_string()).collect(),
+            modes: cfg.modes.iter().map(|m| m.name().to_string()).collect(),
+            backends: backends.iter().map(|b| b.name().to_string()).collect(),
+            warmup: cfg.warmup,
+            reps: cfg.reps,
+            paper_grids: cfg.paper_grids,
+            grid: resolution_name(cfg.grid),
+            data_dir: find_data_dir(cfg.data_dir.as_deref()).map(|p| p.display().to_string()),
+        }
+    }
+}
+
+impl BenchReport {
+    pub fn new(cfg: &BenchConfig, backends: &[BenchBackend], machine: Machine, matrix: MatrixResult) -> Self {
+        BenchReport {
+            gridtrace_version: env!("CARGO_PKG_VERSION").to_string(),
+            command_line: std::env::args().collect(),
+            unix_time: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs()),
+            machine,
+            config: ConfigInfo::of(cfg, backends),
+            matrix,
+            grid_sweep: Vec::new(),
+            scaling: None,
+            pc_study: Vec::new(),
+            ray_export: None,
+        }
+    }
+}
+
+/// An error for a bad benchmark request.
+pub fn invalid(msg: impl Into<String>) -> Error {
+    Error::InvalidInput(msg.into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_median_best() {
+        let s = Summary::of(&[3.0, 1.0, 2.0, 10.0]);
+        assert_eq!(s.best_ms, 1.0);
+        assert_eq!(s.median_ms, 2.5);
+        assert_eq!(Summary::of(&[5.0, 1.0, 2.0]).median_ms, 2.0);
+    }
+
+    #[test]
+    fn loglog_slope() {
+        let pts: Vec<(f64, f64)> = (1..6)
+            .map(|i| (i as f64 * 10.0, 3.0 * (i as f64 * 10.0).powf(0.5)))
+            .collect();
+        let (s, _) = loglog_fit(&pts).unwrap();
+        assert!((s - 0.5).abs() < 1e-9);
+        assert!(loglog_fit(&[(1.0, 1.0)]).is_none());
+    }
+}
