@@ -321,17 +321,12 @@ impl TraceMesh {
     }
 
     pub fn intersect_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
-        match self.renderer(backend)? {
-            Some(g) => g
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .intersect(rays, t_min, t_max, self.accel),
-            None => Ok(rays
-                .par_iter()
-                .with_min_len(1024)
-                .map(|r| self.scene.accel.intersect(r, t_min, t_max, self.accel, &mut NoCounters))
-                .collect()),
-        }
+        self.run(
+            backend,
+            rays,
+            |g| g.intersect(rays, t_min, t_max, self.accel),
+            |r| self.scene.accel.intersect(r, t_min, t_max, self.accel, &mut NoCounters),
+        )
     }
 
     pub fn occluded_rays(&self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
@@ -339,16 +334,25 @@ impl TraceMesh {
     }
 
     pub fn occluded_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
+        self.run(
+            backend,
+            rays,
+            |g| g.occluded(rays, t_min, t_max, self.accel),
+            |r| self.scene.accel.occluded(r, t_min, t_max, self.accel, &mut NoCounters),
+        )
+    }
+
+    /// One query over a batch: on the GPU renderer for `backend`, else in parallel on the CPU.
+    fn run<T: Send>(
+        &self,
+        backend: Backend,
+        rays: &[Ray],
+        on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<Vec<T>>,
+        on_cpu: impl Fn(&Ray) -> T + Sync,
+    ) -> Result<Vec<T>> {
         match self.renderer(backend)? {
-            Some(g) => g
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .occluded(rays, t_min, t_max, self.accel),
-            None => Ok(rays
-                .par_iter()
-                .with_min_len(1024)
-                .map(|r| self.scene.accel.occluded(r, t_min, t_max, self.accel, &mut NoCounters))
-                .collect()),
+            Some(g) => on_gpu(&mut g.lock().unwrap_or_else(|p| p.into_inner())),
+            None => Ok(rays.par_iter().with_min_len(1024).map(on_cpu).collect()),
         }
     }
 

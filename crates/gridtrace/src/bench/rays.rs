@@ -5,13 +5,12 @@
 use std::io::Write;
 use std::path::Path;
 
-use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::accel::{NoCounters, Ray};
-use crate::cpu::{Surface, surface_at};
+use crate::cpu::surface_at;
 use crate::render::{Mode, RayCounts, RenderOptions};
-use crate::scene::{PointLight, PreparedScene};
+use crate::scene::PreparedScene;
 use crate::{Error, Result};
 
 /// Which kind of ray a record is.
@@ -120,7 +119,7 @@ fn pixel_rays(scene: &PreparedScene, eye: Ray, opts: &RenderOptions, out: &mut V
         let origin = s.position + s.ng * scene.ray_epsilon;
         if opts.mode.shadows() {
             for light in &scene.lights {
-                let Some((to_light, dist)) = light_direction(&s, origin, light) else {
+                let Some((_, to_light, dist)) = crate::cpu::light_contribution(&s, origin, light) else {
                     continue;
                 };
                 let shadow = Ray::new(origin, to_light);
@@ -150,22 +149,6 @@ fn first_occluder(scene: &PreparedScene, ray: &Ray, dist: f32, opts: &RenderOpti
     }
     let h = scene.accel.intersect(ray, 0.0, dist, opts.accel, &mut NoCounters);
     if h.is_hit() { h.t } else { dist }
-}
-
-/// Unit direction and distance to a light the surface faces, as the renderer decides it (no
-/// shadow ray when the light is behind the surface).
-fn light_direction(s: &Surface, origin: Vec3, light: &PointLight) -> Option<(Vec3, f32)> {
-    let to = Vec3::from(light.position) - origin;
-    let d2 = to.length_squared();
-    if d2 == 0.0 {
-        return None;
-    }
-    let dist = d2.sqrt();
-    let l = to / dist;
-    if s.ns.dot(l) <= 0.0 || s.ng.dot(l) <= 0.0 {
-        return None;
-    }
-    Some((l, dist))
 }
 
 #[cfg(test)]

@@ -198,7 +198,7 @@ fn trace_pixel<C: Counters>(
 /// direction and distance for the shadow ray. `None` when the light is behind the surface
 /// (then no shadow ray is spent: the paper's masking of rays known not to contribute).
 #[inline]
-fn light_contribution(
+pub(crate) fn light_contribution(
     s: &crate::cpu::Surface,
     origin: Vec3,
     light: &crate::scene::PointLight,
