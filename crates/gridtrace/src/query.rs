@@ -348,7 +348,7 @@ impl TraceMesh {
         backend: Backend,
         rays: &[Ray],
         on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<Vec<T>>,
-        on_cpu: impl Fn(&Ray) -> T + Sync,
+        on_cpu: impl Fn(&Ray) -> T + Sync + Send,
     ) -> Result<Vec<T>> {
         match self.renderer(backend)? {
             Some(g) => on_gpu(&mut g.lock().unwrap_or_else(|p| p.into_inner())),
