@@ -100,3 +100,12 @@ pub fn open_gpu(backend: Backend) -> gridtrace::Result<Option<gridtrace::gpu::Gp
         },
     }
 }
+
+/// `Scene::prepare`, with a scene-level error (nothing to trace, NaN camera...) naming the scene
+/// or file it came from.
+pub fn prepare(scene: &Scene, name: &str, grid: Resolution) -> gridtrace::Result<gridtrace::PreparedScene> {
+    scene.prepare(grid).map_err(|e| match e {
+        gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
+        e => e,
+    })
+}

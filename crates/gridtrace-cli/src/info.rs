@@ -14,7 +14,7 @@ pub struct InfoArgs {
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     let (scene, name) = a.scene.load()?;
-    let prepared = scene.prepare(a.grid.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, a.grid.grid)?;
     let g = &prepared.accel.grid;
     let s = &g.stats;
     println!("scene            {name}");

@@ -74,7 +74,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             .collect();
     }
     let t_build = Instant::now();
-    let prepared = scene.prepare(a.grid.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, a.grid.grid)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
     let g = &prepared.accel.grid.stats;
     println!(

@@ -154,3 +154,331 @@ pub fn ray_set(accel: &GridAccel, n: usize, seed: u64) -> Vec<Ray> {
     }
     rays
 }
+
+/// A ray aimed exactly at a point of a mesh surface: a vertex, or a point on an edge shared by
+/// two triangles. Whatever the origin (off the surface), the ray must hit something at
+/// `t <= t_aim` (up to rounding): a miss, or a first hit beyond the aim point, is a ray that
+/// slipped through the surface.
+#[derive(Debug, Clone, Copy)]
+pub struct AimedRay {
+    pub ray: Ray,
+    /// Ray parameter of the aim point.
+    pub t_aim: f32,
+}
+
+/// Rays aimed at the shared edges and interior vertices of a mesh (`positions`, `triangles`:
+/// the triangles the accel was built from), for watertightness tests. Only edges shared by
+/// exactly two triangles are used, and only vertices all of whose edges are such (so open
+/// meshes such as the Stanford Bunny are aimed at away from their holes). Ray kinds, in turn:
+/// random origins around the grid; axis-parallel rays; rays lying in a cell-boundary plane
+/// through the point where an edge crosses that plane; rays that start at a grid corner; rays
+/// that pass through a grid corner. Only rays that cross the surface there are kept (the same
+/// side of every face at the aim point, by more than 1e-4 in cosine): a ray that merely touches
+/// a silhouette vertex or ridge edge is a graze, not a crossing.
+pub fn edge_aimed_rays(
+    accel: &GridAccel,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    n: usize,
+    seed: u64,
+) -> Vec<AimedRay> {
+    use std::collections::HashMap;
+    let mut edges: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+    for (t, tri) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            edges.entry((a.min(b), a.max(b))).or_default().push(t as u32);
+        }
+    }
+    let face_normal = |t: u32| {
+        let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
+        (b - a).cross(c - a).normalize_or_zero()
+    };
+    let mut vertex_ok = vec![true; positions.len()];
+    let mut vertex_faces: Vec<Vec<u32>> = vec![Vec::new(); positions.len()];
+    for (t, tri) in triangles.iter().enumerate() {
+        for &i in tri {
+            vertex_faces[i as usize].push(t as u32);
+        }
+    }
+    let mut shared: Vec<((u32, u32), [u32; 2])> = Vec::new();
+    for (&(a, b), faces) in &edges {
+        if faces.len() == 2 {
+            shared.push(((a, b), [faces[0], faces[1]]));
+        } else {
+            vertex_ok[a as usize] = false;
+            vertex_ok[b as usize] = false;
+        }
+    }
+    shared.sort_unstable();
+    let vertices: Vec<u32> = (0..positions.len() as u32)
+        .filter(|&i| vertex_ok[i as usize] && !vertex_faces[i as usize].is_empty())
+        .collect();
+    assert!(!shared.is_empty(), "mesh has no edge shared by two triangles");
+
+    let mut rng = Rng::new(seed);
+    let g = &accel.grid;
+    let b = g.bounds;
+    let far = b.diagonal();
+    let axes = [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z];
+    let corner = |rng: &mut Rng| {
+        b.min
+            + Vec3::new(
+                rng.below(g.dims.x + 1) as f32,
+                rng.below(g.dims.y + 1) as f32,
+                rng.below(g.dims.z + 1) as f32,
+            ) * g.cell_size
+    };
+    let mut out = Vec::with_capacity(n);
+    let mut i = 0usize;
+    while out.len() < n {
+        i += 1;
+        let kind = i % 6;
+        // The aim point and the faces that meet there.
+        let on_vertex = !vertices.is_empty() && rng.below(3) == 0 && kind != 3;
+        let (mut p, mut faces): (Vec3, Vec<u32>) = if on_vertex {
+            let v = vertices[rng.below(vertices.len() as u32) as usize];
+            (positions[v as usize], vertex_faces[v as usize].clone())
+        } else {
+            let ((a, c), f) = shared[rng.below(shared.len() as u32) as usize];
+            let (pa, pc) = (positions[a as usize], positions[c as usize]);
+            let t = [0.5, 0.25, rng.next_f32()][rng.below(3) as usize];
+            (pa + (pc - pa) * t, f.to_vec())
+        };
+        let dir = match kind {
+            // Random direction from a random origin around the scene.
+            0 | 1 => {
+                let o = b.center() + unit_dir(&mut rng) * far * rng.range(0.6, 1.5);
+                p - o
+            }
+            // Axis-parallel.
+            2 => axes[rng.below(6) as usize] * far,
+            // In a cell-boundary plane: aim at the point where a shared edge crosses a boundary
+            // plane, with a direction inside that plane (the origin is on the plane exactly).
+            3 => {
+                let ((a, c), f) = shared[rng.below(shared.len() as u32) as usize];
+                let (pa, pc) = (positions[a as usize], positions[c as usize]);
+                let axis = rng.below(3) as usize;
+                let (lo, hi) = (pa[axis].min(pc[axis]), pa[axis].max(pc[axis]));
+                let k0 = ((lo - b.min[axis]) / g.cell_size[axis]).ceil();
+                let plane = b.min[axis] + k0 * g.cell_size[axis];
+                if !(plane > lo && plane < hi) {
+                    continue;
+                }
+                let s = (plane - pa[axis]) / (pc[axis] - pa[axis]);
+                p = pa + (pc - pa) * s;
+                p[axis] = plane;
+                faces = f.to_vec();
+                let mut d = unit_dir(&mut rng);
+                d[axis] = 0.0;
+                if d.length_squared() < 1e-6 {
+                    continue;
+                }
+                d * far
+            }
+            // From a grid corner (kind 4) or through one (kind 5).
+            _ => p - corner(&mut rng),
+        };
+        if dir.length_squared() == 0.0 || !dir.is_finite() {
+            continue;
+        }
+        let dn = dir.normalize();
+        // Only rays that cross the surface at the aim point: the same side of every face there
+        // (consistently wound meshes). A ray that merely touches (a silhouette vertex or ridge
+        // edge seen from the side) is a graze that rounding may decide either way.
+        let crossing = |sign: f32| faces.iter().all(|&f| face_normal(f).dot(dn) * sign > 1e-4);
+        if !(crossing(1.0) || crossing(-1.0)) {
+            continue;
+        }
+        let (origin, t_aim) = match kind {
+            4 => (p - dir, 1.0),
+            5 => (p - dir * 2.0, 2.0),
+            _ => (p - dir, 1.0),
+        };
+        out.push(AimedRay {
+            ray: Ray::new(origin, dir),
+            t_aim,
+        });
+    }
+    out
+}
+
+/// One malformed input file for the bad-input tests: its file name (the extension picks the
+/// loader), its bytes, and what the error must say besides the file name: a location such as
+/// `"line 3"` or `"byte "`, or `""` for whole-file errors (empty file, nothing to trace).
+#[derive(Debug, Clone)]
+pub struct BadFile {
+    pub name: &'static str,
+    pub bytes: Vec<u8>,
+    pub location: &'static str,
+}
+
+/// A corpus of malformed mesh and scene files: truncated files, header counts that lie, indices
+/// out of range, NaN/Inf coordinates, faces with fewer than 3 vertices, wrong types, non-UTF-8
+/// bytes, empty files, meshes with only degenerate triangles, absurd header sizes.
+pub fn bad_input_corpus() -> Vec<BadFile> {
+    let ply_head = |format: &str, nv: &str, nf: &str| {
+        format!(
+            "ply\nformat {format} 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n\
+             element face {nf}\nproperty list uchar int vertex_indices\nend_header\n"
+        )
+        .into_bytes()
+    };
+    let cat = |a: Vec<u8>, b: &[u8]| [a, b.to_vec()].concat();
+    let tri_f32: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    let mut stl_bin = vec![0u8; 80];
+    stl_bin.extend(1_000_000_000u32.to_le_bytes());
+    stl_bin.extend([0u8; 12]);
+    stl_bin.extend(&tri_f32);
+    stl_bin.extend([0u8; 2]);
+    let mut stl_nan = vec![0u8; 80];
+    stl_nan.extend(1u32.to_le_bytes());
+    stl_nan.extend([0u8; 12]);
+    stl_nan.extend(f32::NAN.to_le_bytes());
+    stl_nan.extend(&tri_f32[4..]);
+    stl_nan.extend([0u8; 2]);
+    let glb = |json: &str, declared_len: u32| {
+        let mut j = json.as_bytes().to_vec();
+        while j.len() % 4 != 0 {
+            j.push(b' ');
+        }
+        let mut v = b"glTF".to_vec();
+        v.extend(2u32.to_le_bytes());
+        v.extend(declared_len.to_le_bytes());
+        v.extend((j.len() as u32).to_le_bytes());
+        v.extend(b"JSON");
+        v.extend(j);
+        v
+    };
+    let b = |name, bytes: &[u8], location| BadFile {
+        name,
+        bytes: bytes.to_vec(),
+        location,
+    };
+    vec![
+        // OBJ
+        b("empty.obj", b"", ""),
+        b("truncated.obj", b"v 0 0 0\nv 1 0 0\nv 0 1", "line 3"),
+        b("index-range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "line 4"),
+        b("index-zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "line 4"),
+        b(
+            "index-negative.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -7\n",
+            "line 4",
+        ),
+        b("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
+        b("inf.obj", b"v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
+        b("two-vertex-face.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "line 4"),
+        b("wrong-type.obj", b"v 0 0 0\nv one 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
+        b("non-utf8.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \xff\xfe\n", "line 4"),
+        b("degenerate.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n", ""),
+        b(
+            "huge-index.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n",
+            "line 4",
+        ),
+        // PLY
+        b("empty.ply", b"", ""),
+        b("no-end-header.ply", b"ply\nformat ascii 1.0\nelement vertex 3\n", ""),
+        b(
+            "count-lies.ply",
+            &cat(ply_head("ascii", "5", "1"), b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+            "line ",
+        ),
+        b(
+            "truncated-binary.ply",
+            &cat(ply_head("binary_little_endian", "3", "1"), &tri_f32[..20]),
+            "byte ",
+        ),
+        b(
+            "absurd-count.ply",
+            &cat(ply_head("binary_little_endian", "4000000000", "1"), &tri_f32),
+            "byte ",
+        ),
+        b(
+            "index-range.ply",
+            &cat(ply_head("ascii", "3", "1"), b"0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"),
+            "line 13",
+        ),
+        b(
+            "two-vertex-face.ply",
+            &cat(ply_head("ascii", "3", "1"), b"0 0 0\n1 0 0\n0 1 0\n2 0 1\n"),
+            "line 13",
+        ),
+        b(
+            "nan.ply",
+            &cat(ply_head("ascii", "3", "1"), b"0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n"),
+            "line 11",
+        ),
+        b(
+            "wrong-type.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty quaternion x\nend_header\n",
+            "line 4",
+        ),
+        // Whole-file errors from the PLY header check and the gltf crate (no offsets to give).
+        b(
+            "non-utf8-header.ply",
+            b"ply\nformat ascii 1.0\nelement vert\xffex 3\nend_header\n",
+            "",
+        ),
+        b("bad-format.ply", b"ply\nformat ebcdic 1.0\nend_header\n", "line 2"),
+        // OFF
+        b("empty.off", b"", ""),
+        b("count-lies.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n", "line "),
+        b("absurd-count.off", b"OFF\n4000000000 4000000000 0\n0 0 0\n", "line "),
+        b("nan.off", b"OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n", "line 4"),
+        b(
+            "two-vertex-face.off",
+            b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+            "line 6",
+        ),
+        // STL
+        b("empty.stl", b"", ""),
+        b("count-lies.stl", &stl_bin, "byte "),
+        b("nan.stl", &stl_nan, "byte "),
+        b(
+            "truncated-ascii.stl",
+            b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0",
+            "line 5",
+        ),
+        // glTF
+        b("empty.gltf", b"", ""),
+        b(
+            "bad-json.gltf",
+            b"{\n\"asset\": {\"version\": \"2.0\"},\n\"meshes\": [\n",
+            "line ",
+        ),
+        b("wrong-type.gltf", b"{\n\"asset\": {\"version\": 2}\n}\n", "line "),
+        b(
+            "truncated.glb",
+            &glb("{\"asset\":{\"version\":\"2.0\"}}", 1_000_000)[..30],
+            "",
+        ),
+        // Scene files
+        b("empty.toml", b"", ""),
+        b(
+            "wrong-type.toml",
+            b"[camera]\neye = [0, 1, 4]\ntarget = \"origin\"\n",
+            "line 3",
+        ),
+        b(
+            "unknown-key.toml",
+            b"[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\nzoom = 2\n",
+            "line 4",
+        ),
+        b("non-utf8.toml", b"[camera]\neye = [0, 1, 4]\xff\n", "byte 24"),
+        b(
+            "missing-mesh.toml",
+            b"[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n[[object]]\nmesh = \"nowhere.ply\"\n",
+            "line 4",
+        ),
+        b(
+            "nan-transform.toml",
+            b"[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n[[object]]\nshape = \"plane\"\nscale = nan\n",
+            "line ",
+        ),
+    ]
+}

@@ -11,6 +11,6 @@ pub use aabb::Aabb;
 pub use grid::{Cell, Grid, GridStats, Resolution};
 pub use traverse::{
     AccelKind, Counters, GridAccel, Hit, NoCounters, Ray, TraversalCounters, brute_force_intersect,
-    brute_force_occluded,
+    brute_force_intersect_with, brute_force_occluded,
 };
-pub use triangle::{TriAccel, TriHit};
+pub use triangle::{Intersector, TriAccel, TriHit, WatertightRay};

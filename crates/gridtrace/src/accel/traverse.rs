@@ -5,6 +5,7 @@ use std::ops::ControlFlow;
 
 use glam::{IVec3, Vec3};
 
+use super::triangle::{Intersector, WatertightRay};
 use super::{Cell, Grid, TriAccel};
 
 /// A ray `origin + t * dir`. `dir` need not be normalised: `t` is in units of its length.
@@ -130,11 +131,26 @@ pub struct GridAccel {
 impl GridAccel {
     /// Closest hit with `t_min < t < t_max`.
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
+        self.intersect_with(ray, t_min, t_max, kind, Intersector::MollerTrumbore, counters)
+    }
+
+    /// Closest hit with the given ray/triangle test.
+    pub fn intersect_with<C: Counters>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        which: Intersector,
+        counters: &mut C,
+    ) -> Hit {
+        let wt = WatertightRay::new(ray.origin, ray.dir);
         let mut best = Hit { t: t_max, ..Hit::MISS };
         self.walk(ray, t_min, t_max, kind, counters, |refs, t_cell_exit, counters| {
             for &tri in refs {
                 counters.tri_test();
-                if let Some(h) = self.tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
+                if let Some(h) = self.tris[tri as usize].intersect_with(which, ray.origin, ray.dir, &wt, t_min, best.t)
+                {
                     best = Hit {
                         t: h.t,
                         tri,
@@ -156,12 +172,26 @@ impl GridAccel {
 
     /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
     pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
+        self.occluded_with(ray, t_min, t_max, kind, Intersector::MollerTrumbore, counters)
+    }
+
+    /// Any hit with the given ray/triangle test.
+    pub fn occluded_with<C: Counters>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        which: Intersector,
+        counters: &mut C,
+    ) -> bool {
+        let wt = WatertightRay::new(ray.origin, ray.dir);
         let mut hit = false;
         self.walk(ray, t_min, t_max, kind, counters, |refs, _, counters| {
             for &tri in refs {
                 counters.tri_test();
                 if self.tris[tri as usize]
-                    .intersect(ray.origin, ray.dir, t_min, t_max)
+                    .intersect_with(which, ray.origin, ray.dir, &wt, t_min, t_max)
                     .is_some()
                 {
                     hit = true;
@@ -323,4 +353,21 @@ pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f3
 pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> bool {
     tris.iter()
         .any(|t| t.intersect(ray.origin, ray.dir, t_min, t_max).is_some())
+}
+
+/// Reference closest hit with the given ray/triangle test.
+pub fn brute_force_intersect_with(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, which: Intersector) -> Hit {
+    let wt = WatertightRay::new(ray.origin, ray.dir);
+    let mut best = Hit { t: t_max, ..Hit::MISS };
+    for (i, tri) in tris.iter().enumerate() {
+        if let Some(h) = tri.intersect_with(which, ray.origin, ray.dir, &wt, t_min, best.t) {
+            best = Hit {
+                t: h.t,
+                tri: i as u32,
+                u: h.u,
+                v: h.v,
+            };
+        }
+    }
+    if best.tri == u32::MAX { Hit::MISS } else { best }
 }

@@ -91,3 +91,139 @@ impl TriAccel {
         Some(TriHit { t, u, v })
     }
 }
+
+/// Which ray/triangle test the traversal uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Intersector {
+    /// The paper's two-sided Möller-Trumbore on `v0, e1, e2` (with `BARY_EPS` slack).
+    #[default]
+    MollerTrumbore,
+    /// Woop, Benthin and Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013): a ray through
+    /// a shared edge or vertex hits at least one of the triangles there.
+    Watertight,
+}
+
+impl std::str::FromStr for Intersector {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "mt" | "moller-trumbore" => Ok(Intersector::MollerTrumbore),
+            "watertight" | "wt" => Ok(Intersector::Watertight),
+            _ => Err(format!("intersector must be 'mt' or 'watertight', got '{s}'")),
+        }
+    }
+}
+
+impl Intersector {
+    pub fn name(self) -> &'static str {
+        match self {
+            Intersector::MollerTrumbore => "mt",
+            Intersector::Watertight => "watertight",
+        }
+    }
+}
+
+/// Per-ray constants of the watertight test: the axis permutation that makes `z` the largest
+/// direction component, and the shear that maps the ray onto the `+z` axis.
+#[derive(Debug, Clone, Copy)]
+pub struct WatertightRay {
+    pub origin: Vec3,
+    pub k: [usize; 3],
+    pub shear: [f32; 3],
+}
+
+impl WatertightRay {
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        let a = dir.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Keep the winding (not needed for a two-sided test, but it keeps u, v meaningful).
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / dir[kz];
+        WatertightRay {
+            origin,
+            k: [kx, ky, kz],
+            shear: [dir[kx] * sz, dir[ky] * sz, sz],
+        }
+    }
+}
+
+impl TriAccel {
+    /// Two-sided watertight test (Woop, Benthin, Wald 2013) on the vertices `v0, v0 + e1,
+    /// v0 + e2`. Edge functions of 0 are re-evaluated in f64, as the paper does, so a ray through
+    /// an edge or vertex hits the triangles there. Watertight for triangles that share vertices
+    /// bit-exactly; rebuilding `v1`, `v2` from the stored edges can move a vertex by an ulp (see
+    /// docs/robustness.md).
+    #[inline(always)]
+    pub fn intersect_watertight(&self, r: &WatertightRay, t_min: f32, t_max: f32) -> Option<TriHit> {
+        watertight(self.vertices(), r, t_min, t_max)
+    }
+    /// The test `which` names.
+    #[inline(always)]
+    pub fn intersect_with(
+        &self,
+        which: Intersector,
+        origin: Vec3,
+        dir: Vec3,
+        wt: &WatertightRay,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<TriHit> {
+        match which {
+            Intersector::MollerTrumbore => self.intersect(origin, dir, t_min, t_max),
+            Intersector::Watertight => self.intersect_watertight(wt, t_min, t_max),
+        }
+    }
+}
+
+/// The watertight test on explicit vertices: watertight across triangles whose shared vertices
+/// are bit-identical.
+#[inline(always)]
+pub fn watertight([v0, v1, v2]: [Vec3; 3], r: &WatertightRay, t_min: f32, t_max: f32) -> Option<TriHit> {
+    {
+        let [kx, ky, kz] = r.k;
+        let [sx, sy, sz] = r.shear;
+        let a = v0 - r.origin;
+        let b = v1 - r.origin;
+        let c = v2 - r.origin;
+        let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+        let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+        let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let f = |p: f32, q: f32, s: f32, t: f32| (p as f64 * q as f64 - s as f64 * t as f64) as f32;
+            u = f(cx, by, cy, bx);
+            v = f(ax, cy, ay, cx);
+            w = f(bx, ay, by, ax);
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let t_scaled = u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz]);
+        let inv = 1.0 / det;
+        let t = t_scaled * inv;
+        if !(t > t_min && t < t_max) {
+            return None;
+        }
+        Some(TriHit {
+            t,
+            u: v * inv,
+            v: w * inv,
+        })
+    }
+}

@@ -153,6 +153,22 @@ fn dispatch_size(n: u32) -> (u32, u32) {
     (x, if x == 0 { 0 } else { g.div_ceil(x) })
 }
 
+/// Checks every scene array (`(name, bytes)`) against the device's per-binding limits before
+/// anything is allocated: a scene too large for the device is an error that names the array and
+/// the limit, not a validation panic or a lost device.
+pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, adapter: &str) -> Result<()> {
+    let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+    for &(name, bytes) in arrays {
+        if bytes > max_binding {
+            return Err(Error::Gpu(format!(
+                "scene array '{name}' needs {bytes} bytes; the device allows {max_binding} per storage buffer \
+                 (limit max_storage_buffer_binding_size / max_buffer_size on '{adapter}')"
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl GpuRenderer {
     /// Uploads the scene (grid, references, triangles, shading data, materials) once.
     pub fn new(ctx: GpuContext, scene: &PreparedScene) -> Result<GpuRenderer> {
@@ -186,18 +202,8 @@ impl GpuRenderer {
             ("tri_shade", bytemuck::cast_slice(&tri_shade)),
             ("materials", bytemuck::cast_slice(&materials)),
         ];
-        let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
-        for (name, data) in &arrays {
-            if data.len() as u64 > max_binding {
-                return Err(Error::Gpu(format!(
-                    "scene array '{name}' needs {} bytes; the device allows {} per storage buffer \
-                     (limit max_storage_buffer_binding_size / max_buffer_size on '{}')",
-                    data.len(),
-                    max_binding,
-                    ctx.info.name
-                )));
-            }
-        }
+        let sizes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
+        check_scene_fits(&sizes, &limits, &ctx.info.name)?;
         let storage = |label: &str, data: &[u8]| {
             // Zero-length bindings are invalid; give empty arrays one element of padding.
             let contents: &[u8] = if data.is_empty() { &[0u8; 16] } else { data };
@@ -764,4 +770,36 @@ impl RenderStats {
 #[allow(dead_code)]
 fn _assert_zeroable() -> RayRec {
     RayRec::zeroed()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene larger than the device allows is an error naming the array and the limit (checked
+    /// with artificially small limits: no software adapter's limits can be exceeded in a test).
+    #[test]
+    fn scene_too_large_names_the_limit() {
+        let limits = wgpu::Limits {
+            max_storage_buffer_binding_size: 1 << 20,
+            max_buffer_size: 1 << 30,
+            ..wgpu::Limits::default()
+        };
+        assert!(check_scene_fits(&[("cells", 1 << 20), ("refs", 12)], &limits, "tiny").is_ok());
+        let e = check_scene_fits(&[("cells", 12), ("refs", (1 << 20) + 4)], &limits, "tiny")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("'refs'") && e.contains("max_storage_buffer_binding_size") && e.contains("tiny"),
+            "{e}"
+        );
+        let limits = wgpu::Limits {
+            max_buffer_size: 1000,
+            ..limits
+        };
+        let e = check_scene_fits(&[("triangles", 1001)], &limits, "tiny")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("'triangles'") && e.contains("max_buffer_size"), "{e}");
+    }
 }

@@ -47,7 +47,11 @@ pub(crate) fn parse_with_base(data: &[u8], path: &Path, base: Option<&Path>) -> 
     if data.is_empty() {
         return Err(Error::parse(path, Location::Whole, "empty file"));
     }
-    let ::gltf::Gltf { document, blob } = ::gltf::Gltf::from_slice(data).map_err(wrap)?;
+    // gltf-json's validation indexes arrays with file-provided indices (fuzzing found a panic on
+    // a POSITION accessor index out of range, gltf-json 1.4.1 mesh.rs:151): a panic is an error.
+    let ::gltf::Gltf { document, blob } = catch_unwind(AssertUnwindSafe(|| ::gltf::Gltf::from_slice(data)))
+        .map_err(|_| Error::parse(path, Location::Whole, "glTF: malformed document (index out of range)"))?
+        .map_err(wrap)?;
     let buffers = ::gltf::import_buffers(&document, base, blob).map_err(wrap)?;
     // The crate's accessor readers index and do arithmetic on file-provided offsets and counts;
     // a panic there must become an error, not take the program down.

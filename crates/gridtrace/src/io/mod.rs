@@ -67,6 +67,7 @@ pub(crate) fn check_finite(path: &Path, location: Location, what: &str, v: Vec3)
 /// * at least one triangle ("no triangles" otherwise),
 /// * every index `< positions.len()`,
 /// * every position finite,
+/// * at least one triangle of non-zero area,
 /// * `normals` empty or one per position (a mismatched or non-finite set is dropped, since
 ///   normals can always be recomputed),
 /// * `triangle_materials` empty or one per triangle, each indexing `materials`.
@@ -88,6 +89,22 @@ pub(crate) fn finish(mut mesh: Mesh, path: &Path) -> Result<Mesh> {
     }
     for (i, &p) in mesh.positions.iter().enumerate() {
         check_finite(path, Location::Whole, &format!("position of vertex {i}"), p)?;
+    }
+    // Degenerate triangles are kept (the scene layer drops and counts them), but a mesh made of
+    // nothing else has nothing to trace: say so here, where the file is known.
+    let area = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+        (b - a).cross(c - a).length_squared() > 0.0
+    };
+    if !mesh.triangles.iter().any(area) {
+        return Err(Error::parse(
+            path,
+            Location::Whole,
+            format!(
+                "no triangles left: all {} have zero area (degenerate)",
+                mesh.triangles.len()
+            ),
+        ));
     }
     if mesh.normals.len() != n || !mesh.normals.iter().all(|v| v.is_finite()) {
         mesh.normals.clear();

@@ -432,8 +432,14 @@ fn read_body(header: &Header, r: &mut dyn Reader, path: &Path) -> Result<Mesh> {
         let is_vertex = std::ptr::eq(element, vertex);
         let is_face = face.is_some_and(|f| std::ptr::eq(element, f));
         // Smallest valid record; a face holds at least 3 indices.
-        let face_item = match face_list.map(|k| &element.props[k].kind) {
-            Some(Kind::List { item, .. }) if is_face => Some(*item),
+        // `face_list` indexes the face element's properties: only look it up on that element
+        // (fuzzing found the out-of-bounds index on a vertex element with fewer properties).
+        let face_item = match face_list
+            .filter(|_| is_face)
+            .and_then(|k| element.props.get(k))
+            .map(|p| &p.kind)
+        {
+            Some(Kind::List { item, .. }) => Some(*item),
             _ => None,
         };
         let min_size = match header.format {

@@ -214,6 +214,9 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             ),
             Vec3::from(o.translate.unwrap_or([0.0; 3])),
         );
+        if !xf.is_finite() {
+            return Err(err("non-finite transform (translate, rotate or scale)".into()));
+        }
         let given = [o.mesh.is_some(), o.shape.is_some(), o.builtin.is_some()]
             .iter()
             .filter(|b| **b)
@@ -222,7 +225,8 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             return Err(err("an object needs exactly one of 'mesh', 'shape' or 'builtin'".into()));
         }
         let mesh = if let Some(file) = &o.mesh {
-            crate::io::load_mesh(&base.join(file))?
+            // The mesh's own error (file and place in it), and where the scene refers to it.
+            crate::io::load_mesh(&base.join(file)).map_err(|e| err(format!("mesh '{file}': {e}")))?
         } else if let Some(name) = &o.builtin {
             builtin::scene(name)
                 .ok_or_else(|| err(format!("unknown builtin scene '{name}'")))?
