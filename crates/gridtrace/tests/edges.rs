@@ -11,9 +11,13 @@ use gridtrace::scene::{PreparedScene, Scene, procedural};
 use gridtrace::testing::{AimedRay, edge_aimed_rays};
 use rayon::prelude::*;
 
+/// A ray leaks if it misses, or its first hit lies beyond the aim point by more than 1e-4 of the
+/// aim distance. (The hit's t itself carries rounding error that grows as the ray grazes the
+/// surface: rays crossing at a 1e-3 cosine hit the aimed edge at t within ~3e-5 of t_aim. A ray
+/// that really passed through would hit the far side of the mesh, much farther away.)
 fn leaks(rays: &[AimedRay], hits: &[Hit]) -> Vec<usize> {
     (0..rays.len())
-        .filter(|&i| !(hits[i].is_hit() && hits[i].t <= rays[i].t_aim * (1.0 + 1e-5)))
+        .filter(|&i| !(hits[i].is_hit() && hits[i].t <= rays[i].t_aim * (1.0 + 1e-4)))
         .collect()
 }
 
@@ -105,22 +109,19 @@ fn cpu_watertight_edges_and_vertices_do_not_leak() {
     assert!(report.is_empty(), "{}", report.join("\n"));
 }
 
-/// Möller-Trumbore with its 1e-6 barycentric slack leaks (about 1.8% of these rays on the
-/// level-5 icosphere): its barycentric error grows with the distance of the ray origin relative
-/// to the triangle size. Kept as the paper's default; see docs/robustness.md. Run with
-/// `--ignored` to see the counts.
+/// Möller-Trumbore with a fixed 1e-6 barycentric slack leaked about 1.8% of these rays: its
+/// barycentric error grows with the distance of the ray origin relative to the triangle size.
+/// With the slack taken from a rounding-error bound (`TriAccel::intersect`) none leaks.
 #[test]
-#[ignore = "Möller-Trumbore is not watertight: known leaks, see docs/robustness.md"]
 fn cpu_moller_trumbore_edges_and_vertices_do_not_leak() {
     let (total, report) = cpu_leaks(Intersector::MollerTrumbore);
     assert!(total >= 700_000);
     assert!(report.is_empty(), "{}", report.join("\n"));
 }
 
-/// The same rays through the GPU batch API (lavapipe in CI). The GPU has only Möller-Trumbore so
-/// far, which leaks like the CPU's: ignored until the WGSL watertight test exists.
+/// The same rays through the GPU batch API (lavapipe in CI), whose Möller-Trumbore uses the
+/// same error-bound slack.
 #[test]
-#[ignore = "GPU Möller-Trumbore is not watertight: known leaks, see docs/robustness.md"]
 fn gpu_edges_and_vertices_do_not_leak() {
     if std::env::var_os("GRIDTRACE_SKIP_GPU").is_some() {
         eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");

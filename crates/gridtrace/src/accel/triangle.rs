@@ -28,6 +28,20 @@ pub struct TriHit {
 /// through; the slack makes both accept it instead.
 pub const BARY_EPS: f32 = 1.0e-6;
 
+/// Ulps of the rounding-error bound used as barycentric slack in `TriAccel::intersect`
+/// (about 6 are derived; 8 leaves room for fused multiply-adds on GPUs).
+pub const SLACK_ULPS: f32 = 8.0;
+
+/// Upper limit of the error-bound slack. For a ray grazing the triangle's plane the bound (and the
+/// real error) is large and MT's u, v are meaningless; accepting them would report hits far
+/// outside the triangle, where the grid (rightly) does not look.
+pub const MAX_SLACK: f32 = 1.0e-3;
+
+#[inline(always)]
+fn l1(v: Vec3) -> f32 {
+    v.x.abs() + v.y.abs() + v.z.abs()
+}
+
 /// Squared cosine bound for "ray parallel to the triangle" (see `TriAccel::intersect`).
 pub const PARALLEL_COS2: f32 = 1.0 / (1u64 << 40) as f32;
 
@@ -71,13 +85,24 @@ impl TriAccel {
         }
         let inv_det = 1.0 / det;
         let s = origin - Vec3::from(self.v0);
+        // Barycentric slack from a rounding-error bound, so that a ray through a shared edge is
+        // accepted by at least one of the two triangles whatever the rounding (CPU or GPU,
+        // fused or not). u = (s.p)/det with p = dir x e2: the computed s, p and dot product are
+        // each off by a few ulps of |s|_1 |dir|_1 |e2|_1, and det by a few ulps of
+        // |e1|_1 |dir|_1 |e2|_1 (which scales u, at most 1 at an edge); likewise v with e1.
+        // The bound grows with the origin's distance relative to the triangle's size, which a
+        // fixed slack cannot follow (docs/robustness.md).
+        let (s1, d1, a1, b1) = (l1(s), l1(dir), l1(e1), l1(e2));
+        let scale = SLACK_ULPS * f32::EPSILON * d1 * inv_det.abs();
+        let tol_u = BARY_EPS + (scale * b1 * (s1 + a1)).min(MAX_SLACK);
+        let tol_v = BARY_EPS + (scale * a1 * (s1 + b1)).min(MAX_SLACK);
         let u = s.dot(p) * inv_det;
-        if !(-BARY_EPS..=1.0 + BARY_EPS).contains(&u) {
+        if !(u >= -tol_u && u <= 1.0 + tol_u) {
             return None;
         }
         let q = s.cross(e1);
         let v = dir.dot(q) * inv_det;
-        if v < -BARY_EPS || u + v > 1.0 + BARY_EPS {
+        if v < -tol_v || u + v > 1.0 + tol_u + tol_v {
             return None;
         }
         let t = e2.dot(q) * inv_det;

@@ -49,8 +49,11 @@ const ACCEL_PC: u32 = 1u;
 const MISS: u32 = 0xffffffffu;
 const WORKGROUP: u32 = 64u;
 // Squared cosine below which a ray counts as parallel to a triangle (TriAccel::intersect).
-// Barycentric slack at edges (TriAccel::intersect).
+// Barycentric slack at edges (TriAccel::intersect): fixed part and rounding-bound ulps.
 const BARY_EPS: f32 = 1.0e-6;
+const SLACK_ULPS: f32 = 8.0;
+const MAX_SLACK: f32 = 1.0e-3;
+const F32_EPSILON: f32 = 1.1920929e-7;
 const PARALLEL_COS2: f32 = 9.094947e-13; // 2^-40
 
 // Set per pipeline: the heat pipeline counts traversal work, the others compile it away.
@@ -75,6 +78,7 @@ override COUNT_WORK: bool = false;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }
+fn l1(v: vec3<f32>) -> f32 { return abs(v.x) + abs(v.y) + abs(v.z); }
 fn inf() -> f32 { return bitcast<f32>(0x7f800000u); }
 
 // Invocation index in a 2-D grid of 64-wide workgroups (dispatches may exceed 65535 groups in x).
@@ -92,11 +96,18 @@ fn intersect_tri(tri: TriAccel, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f
     if (det == 0.0) { return vec4<f32>(0.0); }
     let inv_det = 1.0 / det;
     let s = o - v3(tri.v0);
+    // Rounding-error-bound slack, as TriAccel::intersect (see there for the derivation).
+    let s1 = l1(s);
+    let a1 = l1(e1);
+    let b1 = l1(e2);
+    let scale = SLACK_ULPS * F32_EPSILON * l1(d) * abs(inv_det);
+    let tol_u = BARY_EPS + min(scale * b1 * (s1 + a1), MAX_SLACK);
+    let tol_v = BARY_EPS + min(scale * a1 * (s1 + b1), MAX_SLACK);
     let u = dot(s, p) * inv_det;
-    if (!(u >= -BARY_EPS && u <= 1.0 + BARY_EPS)) { return vec4<f32>(0.0); }
+    if (!(u >= -tol_u && u <= 1.0 + tol_u)) { return vec4<f32>(0.0); }
     let q = cross(s, e1);
     let v = dot(d, q) * inv_det;
-    if (v < -BARY_EPS || u + v > 1.0 + BARY_EPS) { return vec4<f32>(0.0); }
+    if (v < -tol_v || u + v > 1.0 + tol_u + tol_v) { return vec4<f32>(0.0); }
     let t = dot(e2, q) * inv_det;
     if (!(t > t_min && t < t_max)) { return vec4<f32>(0.0); }
     if (det * det <= PARALLEL_COS2 * dot(e1, e1) * dot(p, p)) { return vec4<f32>(0.0); }
