@@ -85,25 +85,32 @@ impl TriAccel {
         }
         let inv_det = 1.0 / det;
         let s = origin - Vec3::from(self.v0);
-        // Barycentric slack from a rounding-error bound, so that a ray through a shared edge is
-        // accepted by at least one of the two triangles whatever the rounding (CPU or GPU,
-        // fused or not). u = (s.p)/det with p = dir x e2: the computed s, p and dot product are
-        // each off by a few ulps of |s|_1 |dir|_1 |e2|_1, and det by a few ulps of
-        // |e1|_1 |dir|_1 |e2|_1 (which scales u, at most 1 at an edge); likewise v with e1.
-        // The bound grows with the origin's distance relative to the triangle's size, which a
-        // fixed slack cannot follow (docs/robustness.md).
-        let (s1, d1, a1, b1) = (l1(s), l1(dir), l1(e1), l1(e2));
-        let scale = SLACK_ULPS * f32::EPSILON * d1 * inv_det.abs();
-        let tol_u = BARY_EPS + (scale * b1 * (s1 + a1)).min(MAX_SLACK);
-        let tol_v = BARY_EPS + (scale * a1 * (s1 + b1)).min(MAX_SLACK);
+        // First against the widest slack there can be, which rejects most candidates cheaply.
+        const LOOSE: f32 = BARY_EPS + MAX_SLACK;
         let u = s.dot(p) * inv_det;
-        if !(u >= -tol_u && u <= 1.0 + tol_u) {
+        if !(u >= -LOOSE && u <= 1.0 + LOOSE) {
             return None;
         }
         let q = s.cross(e1);
         let v = dir.dot(q) * inv_det;
-        if v < -tol_v || u + v > 1.0 + tol_u + tol_v {
+        if v < -LOOSE || u + v > 1.0 + 2.0 * LOOSE {
             return None;
+        }
+        if u < -BARY_EPS || u > 1.0 + BARY_EPS || v < -BARY_EPS || u + v > 1.0 + BARY_EPS {
+            // Near an edge: the slack is a rounding-error bound, so that a ray through a shared
+            // edge is accepted by at least one of the two triangles whatever the rounding (CPU
+            // or GPU, fused or not). u = (s.p)/det with p = dir x e2: the computed s, p and dot
+            // product are each off by a few ulps of |s|_1 |dir|_1 |e2|_1, and det by a few ulps
+            // of |e1|_1 |dir|_1 |e2|_1 (which scales u, at most 1 at an edge); likewise v with
+            // e1. The bound grows with the origin's distance relative to the triangle's size,
+            // which a fixed slack cannot follow (docs/robustness.md).
+            let (s1, d1, a1, b1) = (l1(s), l1(dir), l1(e1), l1(e2));
+            let scale = SLACK_ULPS * f32::EPSILON * d1 * inv_det.abs();
+            let tol_u = BARY_EPS + (scale * b1 * (s1 + a1)).min(MAX_SLACK);
+            let tol_v = BARY_EPS + (scale * a1 * (s1 + b1)).min(MAX_SLACK);
+            if u < -tol_u || u > 1.0 + tol_u || v < -tol_v || u + v > 1.0 + tol_u + tol_v {
+                return None;
+            }
         }
         let t = e2.dot(q) * inv_det;
         if !(t > t_min && t < t_max) {

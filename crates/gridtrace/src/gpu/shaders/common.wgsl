@@ -96,18 +96,22 @@ fn intersect_tri(tri: TriAccel, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f
     if (det == 0.0) { return vec4<f32>(0.0); }
     let inv_det = 1.0 / det;
     let s = o - v3(tri.v0);
-    // Rounding-error-bound slack, as TriAccel::intersect (see there for the derivation).
-    let s1 = l1(s);
-    let a1 = l1(e1);
-    let b1 = l1(e2);
-    let scale = SLACK_ULPS * F32_EPSILON * l1(d) * abs(inv_det);
-    let tol_u = BARY_EPS + min(scale * b1 * (s1 + a1), MAX_SLACK);
-    let tol_v = BARY_EPS + min(scale * a1 * (s1 + b1), MAX_SLACK);
+    // Widest slack first, then the rounding-error bound near edges (TriAccel::intersect).
+    let loose = BARY_EPS + MAX_SLACK;
     let u = dot(s, p) * inv_det;
-    if (!(u >= -tol_u && u <= 1.0 + tol_u)) { return vec4<f32>(0.0); }
+    if (!(u >= -loose && u <= 1.0 + loose)) { return vec4<f32>(0.0); }
     let q = cross(s, e1);
     let v = dot(d, q) * inv_det;
-    if (v < -tol_v || u + v > 1.0 + tol_u + tol_v) { return vec4<f32>(0.0); }
+    if (v < -loose || u + v > 1.0 + 2.0 * loose) { return vec4<f32>(0.0); }
+    if (u < -BARY_EPS || u > 1.0 + BARY_EPS || v < -BARY_EPS || u + v > 1.0 + BARY_EPS) {
+        let s1 = l1(s);
+        let a1 = l1(e1);
+        let b1 = l1(e2);
+        let scale = SLACK_ULPS * F32_EPSILON * l1(d) * abs(inv_det);
+        let tol_u = BARY_EPS + min(scale * b1 * (s1 + a1), MAX_SLACK);
+        let tol_v = BARY_EPS + min(scale * a1 * (s1 + b1), MAX_SLACK);
+        if (u < -tol_u || u > 1.0 + tol_u || v < -tol_v || u + v > 1.0 + tol_u + tol_v) { return vec4<f32>(0.0); }
+    }
     let t = dot(e2, q) * inv_det;
     if (!(t > t_min && t < t_max)) { return vec4<f32>(0.0); }
     if (det * det <= PARALLEL_COS2 * dot(e1, e1) * dot(p, p)) { return vec4<f32>(0.0); }
