@@ -109,6 +109,22 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
                 s.tiles,
                 if s.tiles == 1 { "" } else { "s" }
             );
+            // Rays per second by kind, from the stage that traces them.
+            let rate = |rays: u64, stage: &str| {
+                s.timings
+                    .stages_ms
+                    .get(stage)
+                    .filter(|ms| **ms > 0.0)
+                    .map(|ms| rays as f64 / (ms * 1e3))
+            };
+            let r = s.render.rays;
+            if let Some(v) = rate(r.eye + r.reflection, "traverse") {
+                print!("rates   eye+reflection {v:.2} Mrays/s (traverse)");
+                if let Some(v) = rate(r.shadow, "occlusion") {
+                    print!(", shadow {v:.2} Mrays/s (occlusion)");
+                }
+                println!();
+            }
             (image, s.render)
         }
         None => {

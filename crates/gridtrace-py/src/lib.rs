@@ -52,6 +52,19 @@ fn bytemuck_points(flat: &[f32]) -> &[[f32; 3]] {
     body
 }
 
+/// The backend and the two point arrays of a ray batch.
+fn batch<'a>(
+    backend: &str,
+    origins: &'a PyReadonlyArray2<'_, f32>,
+    directions: &'a PyReadonlyArray2<'_, f32>,
+) -> PyResult<(Backend, &'a [[f32; 3]], &'a [[f32; 3]])> {
+    Ok((
+        parse("backend", backend)?,
+        points(origins, "origins")?,
+        points(directions, "directions")?,
+    ))
+}
+
 /// An accelerated triangle mesh (native part of `gridtrace.Mesh`).
 #[pyclass(module = "gridtrace._gridtrace", frozen)]
 struct NativeMesh {
@@ -122,9 +135,7 @@ impl NativeMesh {
         Bound<'py, PyArray1<f32>>,
         Bound<'py, PyArray2<f32>>,
     )> {
-        let b: Backend = parse("backend", backend)?;
-        let o = points(&origins, "origins")?;
-        let d = points(&directions, "directions")?;
+        let (b, o, d) = batch(backend, &origins, &directions)?;
         let hits = py
             .detach(|| self.inner.intersect_with(b, o, d, t_min, t_max))
             .map_err(to_py)?;
@@ -149,9 +160,7 @@ impl NativeMesh {
         t_max: f32,
         backend: &str,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let b: Backend = parse("backend", backend)?;
-        let o = points(&origins, "origins")?;
-        let d = points(&directions, "directions")?;
+        let (b, o, d) = batch(backend, &origins, &directions)?;
         let occ = py
             .detach(|| self.inner.occluded_with(b, o, d, t_min, t_max))
             .map_err(to_py)?;

@@ -264,13 +264,9 @@ impl TraceMesh {
         t_min: f32,
         t_max: f32,
     ) -> Result<Hits> {
-        let n = batch_len(origins, dirs)?;
-        check_interval(t_min, t_max)?;
         let mut out = Hits::default();
-        for start in (0..n).step_by(CHUNK) {
-            let rays = make_rays(origins, dirs, start, (start + CHUNK).min(n))?;
-            let hits = self.intersect_rays_with(backend, &rays, t_min, t_max)?;
-            for h in hits {
+        for_chunks(origins, dirs, t_min, t_max, |rays| {
+            for h in self.intersect_rays_with(backend, rays, t_min, t_max)? {
                 if h.is_hit() {
                     out.t.push(h.t);
                     out.tri.push(self.original[h.tri as usize]);
@@ -286,7 +282,8 @@ impl TraceMesh {
                     out.normal.push([0.0; 3]);
                 }
             }
-        }
+            Ok(())
+        })?;
         Ok(out)
     }
 
@@ -304,13 +301,11 @@ impl TraceMesh {
         t_min: f32,
         t_max: f32,
     ) -> Result<Vec<bool>> {
-        let n = batch_len(origins, dirs)?;
-        check_interval(t_min, t_max)?;
-        let mut out = Vec::with_capacity(n.min(CHUNK));
-        for start in (0..n).step_by(CHUNK) {
-            let rays = make_rays(origins, dirs, start, (start + CHUNK).min(n))?;
-            out.extend(self.occluded_rays_with(backend, &rays, t_min, t_max)?);
-        }
+        let mut out = Vec::new();
+        for_chunks(origins, dirs, t_min, t_max, |rays| {
+            out.extend(self.occluded_rays_with(backend, rays, t_min, t_max)?);
+            Ok(())
+        })?;
         Ok(out)
     }
 
@@ -360,6 +355,22 @@ impl TraceMesh {
     pub fn original_index(&self, kept: u32) -> u32 {
         self.original[kept as usize]
     }
+}
+
+/// Validates a (possibly broadcast) batch and hands it to `f` as rays, `CHUNK` at a time.
+fn for_chunks(
+    origins: &[[f32; 3]],
+    dirs: &[[f32; 3]],
+    t_min: f32,
+    t_max: f32,
+    mut f: impl FnMut(&[Ray]) -> Result<()>,
+) -> Result<()> {
+    let n = batch_len(origins, dirs)?;
+    check_interval(t_min, t_max)?;
+    for start in (0..n).step_by(CHUNK) {
+        f(&make_rays(origins, dirs, start, (start + CHUNK).min(n))?)?;
+    }
+    Ok(())
 }
 
 fn batch_len(origins: &[[f32; 3]], dirs: &[[f32; 3]]) -> Result<usize> {

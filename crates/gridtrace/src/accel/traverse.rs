@@ -335,18 +335,7 @@ fn sign(x: f32) -> i32 {
 
 /// Reference closest hit: every triangle tested. The ground truth for all traversal tests.
 pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> Hit {
-    let mut best = Hit { t: t_max, ..Hit::MISS };
-    for (i, tri) in tris.iter().enumerate() {
-        if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
-            best = Hit {
-                t: h.t,
-                tri: i as u32,
-                u: h.u,
-                v: h.v,
-            };
-        }
-    }
-    if best.tri == u32::MAX { Hit::MISS } else { best }
+    brute_force_intersect_with(tris, ray, t_min, t_max, Intersector::MollerTrumbore)
 }
 
 /// Reference any hit.

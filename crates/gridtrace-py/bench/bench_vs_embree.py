@@ -1,0 +1,115 @@
+"""1,000,000 rays against the Stanford Bunny from Python: gridtrace against embreex (Embree) and
+trimesh's ray module, same rays, results checked against each other.
+
+    pip install embreex trimesh
+    python crates/gridtrace-py/bench/bench_vs_embree.py [path/to/bun_zipper.ply] [--rays N]
+
+Times are the best of --reps runs of the whole call (array conversion included). embreex's `run`
+is single-threaded, so it is also run split over as many Python threads as there are cores (it
+releases the GIL while it traces), for a fair comparison with gridtrace's multithreaded CPU path.
+"""
+
+import argparse
+import os
+import pathlib
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+import gridtrace
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+
+
+def rays_at(vertices, n, seed=7):
+    """Origins on a sphere around the mesh, aimed at random points of its bounding box."""
+    rng = np.random.default_rng(seed)
+    lo, hi = vertices.min(0), vertices.max(0)
+    c, r = (lo + hi) / 2, np.linalg.norm(hi - lo)
+    d = rng.normal(size=(n, 3))
+    o = c + r * d / np.linalg.norm(d, axis=1, keepdims=True)
+    target = rng.uniform(lo, hi, (n, 3))
+    dirs = target - o
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    return o.astype(np.float32), dirs.astype(np.float32)
+
+
+def best(f, reps):
+    times = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        out = f()
+        times.append(time.perf_counter() - t0)
+    return min(times), float(np.median(times)), out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("mesh", nargs="?", default=str(ROOT.parent / "shared/data/meshes/bunny/bun_zipper.ply"))
+    ap.add_argument("--rays", type=int, default=1_000_000)
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--trimesh-rays", type=int, default=20_000)
+    a = ap.parse_args()
+    threads = os.cpu_count() or 1
+
+    import trimesh
+
+    tm = trimesh.load(a.mesh, process=False)
+    vertices = np.asarray(tm.vertices, dtype=np.float32)
+    faces = np.asarray(tm.faces, dtype=np.int64)
+    o, d = rays_at(vertices, a.rays)
+    print(f"mesh {a.mesh}: {len(faces)} triangles; {a.rays} rays; {threads} cores")
+
+    results = {}
+    for accel in ("grid", "pc"):
+        mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
+        tb, tm_, hits = best(lambda: mesh.intersect(o, d), a.reps)
+        results[f"gridtrace {accel}"] = (tb, tm_)
+        if accel == "grid":
+            g_hits = hits
+        print(f"gridtrace cpu {accel:<4}  best {tb*1e3:8.1f} ms  median {tm_*1e3:8.1f} ms  {a.rays/tb/1e6:6.2f} Mrays/s  ({mesh.device()})")
+    hit = np.isfinite(g_hits.t)
+    print(f"  hits: {hit.sum()} of {a.rays}")
+
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    scene = rtcs.EmbreeScene()
+    TriangleMesh(scene, vertices[faces].astype(np.float32))
+
+    def embree_run(oo, dd):
+        return scene.run(oo, dd, output=1)
+
+    tb, tm_, e_out = best(lambda: embree_run(o, d), a.reps)
+    results["embreex 1 thread"] = (tb, tm_)
+    print(f"embreex 1 thread   best {tb*1e3:8.1f} ms  median {tm_*1e3:8.1f} ms  {a.rays/tb/1e6:6.2f} Mrays/s")
+    chunks = np.array_split(np.arange(a.rays), threads)
+    with ThreadPoolExecutor(threads) as pool:
+        tb, tm_, _ = best(lambda: list(pool.map(lambda idx: embree_run(o[idx], d[idx]), chunks)), a.reps)
+    results[f"embreex {threads} threads"] = (tb, tm_)
+    print(f"embreex {threads} threads  best {tb*1e3:8.1f} ms  median {tm_*1e3:8.1f} ms  {a.rays/tb/1e6:6.2f} Mrays/s")
+
+    e_prim = np.asarray(e_out["primID"])
+    e_t = np.asarray(e_out["tfar"])
+    e_hit = e_prim >= 0
+    same_hit = (e_hit == hit).mean()
+    both = e_hit & hit
+    same_tri = (e_prim[both] == g_hits.tri[both].astype(np.int64)).mean()
+    t_close = (np.abs(e_t[both] - g_hits.t[both]) <= 1e-4 * np.abs(e_t[both])).mean()
+    print(f"  agreement with embree: hit/miss {same_hit*100:.4f}%, same triangle {same_tri*100:.4f}%, t within 1e-4 {t_close*100:.4f}%")
+
+    from trimesh.ray.ray_triangle import RayMeshIntersector
+
+    n = min(a.trimesh_rays, a.rays)
+    rmi = RayMeshIntersector(tm)
+    t0 = time.perf_counter()
+    tri_idx = rmi.intersects_first(o[:n].astype(np.float64), d[:n].astype(np.float64))
+    tt = time.perf_counter() - t0
+    print(f"trimesh (numpy)    {tt*1e3:8.1f} ms for {n} rays  {n/tt/1e6:6.3f} Mrays/s (one run)")
+    t_hit = tri_idx >= 0
+    print(f"  agreement with gridtrace on those rays: hit/miss {(t_hit == hit[:n]).mean()*100:.3f}%, same triangle {(tri_idx[t_hit & hit[:n]] == g_hits.tri[:n][t_hit & hit[:n]]).mean()*100:.3f}%")
+
+
+if __name__ == "__main__":
+    main()
