@@ -342,7 +342,7 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
     stl_nan.extend([0u8; 2]);
     let glb = |json: &str, declared_len: u32| {
         let mut j = json.as_bytes().to_vec();
-        while j.len() % 4 != 0 {
+        while !j.len().is_multiple_of(4) {
             j.push(b' ');
         }
         let mut v = b"glTF".to_vec();

@@ -88,7 +88,7 @@ impl TriAccel {
         // First against the widest slack there can be, which rejects most candidates cheaply.
         const LOOSE: f32 = BARY_EPS + MAX_SLACK;
         let u = s.dot(p) * inv_det;
-        if !(u >= -LOOSE && u <= 1.0 + LOOSE) {
+        if !(-LOOSE..=1.0 + LOOSE).contains(&u) {
             return None;
         }
         let q = s.cross(e1);
@@ -96,7 +96,7 @@ impl TriAccel {
         if v < -LOOSE || u + v > 1.0 + 2.0 * LOOSE {
             return None;
         }
-        if u < -BARY_EPS || u > 1.0 + BARY_EPS || v < -BARY_EPS || u + v > 1.0 + BARY_EPS {
+        if !(-BARY_EPS..=1.0 + BARY_EPS).contains(&u) || v < -BARY_EPS || u + v > 1.0 + BARY_EPS {
             // Near an edge: the slack is a rounding-error bound, so that a ray through a shared
             // edge is accepted by at least one of the two triangles whatever the rounding (CPU
             // or GPU, fused or not). u = (s.p)/det with p = dir x e2: the computed s, p and dot

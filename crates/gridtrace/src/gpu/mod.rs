@@ -157,7 +157,7 @@ fn dispatch_size(n: u32) -> (u32, u32) {
 /// anything is allocated: a scene too large for the device is an error that names the array and
 /// the limit, not a validation panic or a lost device.
 pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, adapter: &str) -> Result<()> {
-    let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+    let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
     for &(name, bytes) in arrays {
         if bytes > max_binding {
             return Err(Error::Gpu(format!(
@@ -385,7 +385,7 @@ impl GpuRenderer {
     /// Largest tile (pixels) whose buffers fit the device's binding limit with `lights` lights.
     fn tile_capacity(&self, lights: u32) -> u32 {
         let limits = self.ctx.limits();
-        let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let per_pixel_shadow = std::mem::size_of::<RayRec>() as u64 * lights.max(1) as u64;
         let by_shadow = max_binding / per_pixel_shadow;
         let by_rays = max_binding / std::mem::size_of::<RayRec>() as u64;
@@ -394,10 +394,11 @@ impl GpuRenderer {
 
     /// Makes sure the work buffers hold `tile_pixels` and `lights`; recreates them if not.
     fn ensure_work(&mut self, tile_pixels: u32, lights: u32) {
-        if let Some(w) = &self.work {
-            if w.tile_pixels >= tile_pixels && w.max_lights >= lights {
-                return;
-            }
+        if let Some(w) = &self.work
+            && w.tile_pixels >= tile_pixels
+            && w.max_lights >= lights
+        {
+            return;
         }
         let dev = &self.ctx.device;
         let buf = |label: &str, size: u64, extra: wgpu::BufferUsages| {
@@ -630,25 +631,25 @@ impl GpuRenderer {
             enc.clear_buffer(&self.counters, (d % 2) as u64 * 4, Some(4));
             enc.clear_buffer(&self.counters, SLOT_SHADOW as u64 * 4, Some(4));
         }
-        if let Some((qs, buf)) = query {
-            if !stages.is_empty() {
-                enc.resolve_query_set(qs, 0..stages.len() as u32 * 2, buf, 0);
-            }
+        if let Some((qs, buf)) = query
+            && !stages.is_empty()
+        {
+            enc.resolve_query_set(qs, 0..stages.len() as u32 * 2, buf, 0);
         }
         self.ctx.queue.submit([enc.finish()]);
         let accum: Vec<f32> = bytemuck::cast_slice(&self.ctx.read_buffer(&w.accum, tp as u64 * 16)?).to_vec();
         let counters: Vec<u32> =
             bytemuck::cast_slice(&self.ctx.read_buffer(&self.counters, (COUNTER_SLOTS * 4) as u64)?).to_vec();
         let mut times = Vec::new();
-        if let Some((_, buf)) = query {
-            if !stages.is_empty() {
-                let raw = self.ctx.read_buffer(buf, stages.len() as u64 * 16)?;
-                let ts: &[u64] = bytemuck::cast_slice(&raw);
-                let period_ns = self.ctx.queue.get_timestamp_period() as f64;
-                for (i, name) in stages.iter().enumerate() {
-                    let dt = ts[2 * i + 1].saturating_sub(ts[2 * i]) as f64 * period_ns * 1e-6;
-                    times.push((*name, dt));
-                }
+        if let Some((_, buf)) = query
+            && !stages.is_empty()
+        {
+            let raw = self.ctx.read_buffer(buf, stages.len() as u64 * 16)?;
+            let ts: &[u64] = bytemuck::cast_slice(&raw);
+            let period_ns = self.ctx.queue.get_timestamp_period() as f64;
+            for (i, name) in stages.iter().enumerate() {
+                let dt = ts[2 * i + 1].saturating_sub(ts[2 * i]) as f64 * period_ns * 1e-6;
+                times.push((*name, dt));
             }
         }
         Ok((accum, counters, times))
