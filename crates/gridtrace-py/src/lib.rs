@@ -31,8 +31,8 @@ fn options(accel: &str, grid: &str, backend: &str) -> PyResult<QueryOptions> {
     })
 }
 
-/// (N, 3) float32 C-contiguous array as a slice of points.
-fn points<'a>(a: &'a PyReadonlyArray2<'_, f32>, what: &str) -> PyResult<&'a [[f32; 3]]> {
+/// An (N, 3) C-contiguous array as a slice of rows, without copying.
+fn rows3<'a, T: numpy::Element + bytemuck::Pod>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<&'a [[T; 3]]> {
     let shape = a.shape();
     if shape.len() != 2 || shape[1] != 3 {
         return Err(PyValueError::new_err(format!(
@@ -42,14 +42,8 @@ fn points<'a>(a: &'a PyReadonlyArray2<'_, f32>, what: &str) -> PyResult<&'a [[f3
     let flat = a
         .as_slice()
         .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous")))?;
-    Ok(bytemuck_points(flat))
-}
-
-fn bytemuck_points(flat: &[f32]) -> &[[f32; 3]] {
-    // SAFETY-free reinterpretation: chunks_exact would copy; [f32; 3] has the layout of three f32.
-    let (head, body, _) = unsafe { flat.align_to::<[f32; 3]>() };
-    debug_assert!(head.is_empty());
-    body
+    // The length is a multiple of 3 (checked above), so the cast cannot fail.
+    Ok(bytemuck::cast_slice(flat))
 }
 
 /// The backend and the two point arrays of a ray batch.
@@ -60,8 +54,8 @@ fn batch<'a>(
 ) -> PyResult<(Backend, &'a [[f32; 3]], &'a [[f32; 3]])> {
     Ok((
         parse("backend", backend)?,
-        points(origins, "origins")?,
-        points(directions, "directions")?,
+        rows3(origins, "origins")?,
+        rows3(directions, "directions")?,
     ))
 }
 
@@ -83,18 +77,8 @@ impl NativeMesh {
         backend: &str,
     ) -> PyResult<Self> {
         let opts = options(accel, grid, backend)?;
-        let v = points(&vertices, "vertices")?;
-        let fshape = faces.shape();
-        if fshape.len() != 2 || fshape[1] != 3 {
-            return Err(PyValueError::new_err(format!(
-                "faces must have shape (M, 3), got {fshape:?}"
-            )));
-        }
-        let fflat = faces
-            .as_slice()
-            .map_err(|_| PyValueError::new_err("faces must be C-contiguous"))?;
-        let f: Vec<[u32; 3]> = fflat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        let v = v.to_vec();
+        let v = rows3(&vertices, "vertices")?.to_vec();
+        let f = rows3(&faces, "faces")?.to_vec();
         let inner = py
             .detach(move || TraceMesh::from_arrays(&v, &f, &opts))
             .map_err(to_py)?;
