@@ -63,7 +63,7 @@ fn run(b: &mut Bytes) -> Option<()> {
         return None;
     }
     let grid = Grid::build(&tris, res).ok()?;
-    let accel = GridAccel { grid, tris };
+    let accel = GridAccel::new(grid, tris);
     // Rays: origin and either a direction or a pool vertex to aim at (exactly through it).
     while let Some(sel) = b.u8() {
         let o = b.vec(raw)?;
@@ -77,7 +77,7 @@ fn run(b: &mut Bytes) -> Option<()> {
         }
         let r = Ray::new(o, d);
         let want = brute_force_intersect(&accel.tris, &r, 0.0, f32::INFINITY);
-        for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+        for kind in AccelKind::ALL {
             let got = accel.intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
             assert_eq!(got.is_hit(), want.is_hit(), "{kind:?} {r:?}: got {got:?} want {want:?}");
             if want.is_hit() {

@@ -36,7 +36,8 @@ pub struct BenchArgs {
     /// Resolutions, comma separated, each N or WxH (default: 256,512,768).
     #[arg(long, value_delimiter = ',', value_parser = parse_res)]
     res: Vec<(u32, u32)>,
-    /// Accelerations, comma separated: grid, pc (default: both).
+    /// Accelerations, comma separated: grid, pc, bvh (default: grid and pc, the paper's; the
+    /// BVH runs on the CPU only).
     #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<AccelKind>())]
     accel: Vec<AccelKind>,
     /// Modes, comma separated: cast, shadow, trace (default: all three).
@@ -76,6 +77,14 @@ pub struct BenchArgs {
     /// scenes (sparse-room, a mesh seen from far away) and the torus knot.
     #[arg(long)]
     pc_study: bool,
+    /// Also time ray queries (`TraceMesh::intersect`) with incoherent rays (the Python
+    /// benchmark's: from a sphere around the mesh at random points of its box), grid, pc and
+    /// bvh, on the Stanford Bunny and the Dragon when present and a torus knot always.
+    #[arg(long)]
+    query_study: bool,
+    /// Rays per mesh for --query-study.
+    #[arg(long, default_value_t = 1_000_000)]
+    query_rays: usize,
     /// Write the rays of a CPU run (first scene and resolution, the most complete mode asked
     /// for, first accel) as 6 little-endian f32 per ray: origin xyz, direction xyz.
     #[arg(long)]
@@ -290,6 +299,25 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             cfg.reps,
             &mut log,
         )?;
+    }
+    if a.query_study {
+        println!("ray-query study ({} incoherent rays per mesh):", a.query_rays);
+        let mut meshes = vec![(
+            "torus-knot-hi".to_string(),
+            gridtrace::scene::procedural::torus_knot(2, 3, 0.16, 1024, 32),
+        )];
+        if let Some(d) = &data_dir {
+            for (name, file) in [
+                ("stanford-bunny", "bunny/bun_zipper.ply"),
+                ("dragon", "dragon/dragon_vrip_binary.ply"),
+            ] {
+                match gridtrace::io::load_mesh(&d.join(file)) {
+                    Ok(m) => meshes.push((name.to_string(), m)),
+                    Err(e) => println!("  {name}: skipped ({e})"),
+                }
+            }
+        }
+        report.query_study = studies::query_study(&meshes, a.query_rays, cfg.warmup, cfg.reps, &mut log)?;
     }
     if a.export_rays.is_some() || a.export_hits.is_some() {
         let mode = [Mode::Trace, Mode::Shadow, Mode::Cast]

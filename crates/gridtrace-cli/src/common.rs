@@ -24,7 +24,7 @@ pub struct SceneArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct GridArgs {
-    /// Acceleration: plain uniform grid or grid with proximity clouds.
+    /// Acceleration: plain uniform grid, grid with proximity clouds, or a BVH (CPU only).
     #[arg(long, default_value = "grid", value_parser = |s: &str| s.parse::<AccelKind>())]
     pub accel: AccelKind,
     /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.
@@ -87,7 +87,19 @@ pub fn fmt_bytes(b: usize) -> String {
 pub use gridtrace::query::Backend;
 
 /// Opens the GPU for `backend`: `Ok(None)` means use the CPU. Prints the adapter, or why not.
-pub fn open_gpu(backend: Backend) -> gridtrace::Result<Option<gridtrace::gpu::GpuContext>> {
+/// The BVH has no GPU kernels: `auto` then means the CPU and `gpu` is an error.
+pub fn open_gpu(
+    backend: Backend,
+    accel: gridtrace::AccelKind,
+) -> gridtrace::Result<Option<gridtrace::gpu::GpuContext>> {
+    if backend != Backend::Cpu && accel == gridtrace::AccelKind::Bvh {
+        gridtrace::gpu::check_accel(accel).or_else(|e| match backend {
+            Backend::Gpu => Err(e),
+            _ => Ok(()),
+        })?;
+        eprintln!("note: the bvh acceleration runs on the CPU only; using the CPU");
+        return Ok(None);
+    }
     match backend {
         Backend::Cpu => Ok(None),
         Backend::Gpu => gridtrace::gpu::GpuContext::new().map(Some),

@@ -89,7 +89,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     println!("build   {build_ms:.1} ms (grid {:.1} ms)", g.build_ms);
 
     let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, a.grid.accel);
-    let (image, stats) = match open_gpu(a.backend)? {
+    let (image, stats) = match open_gpu(a.backend, a.grid.accel)? {
         Some(ctx) => {
             println!("backend gpu: {}", ctx.describe());
             if ctx.is_software() {

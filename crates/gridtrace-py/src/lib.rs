@@ -196,6 +196,8 @@ fn render<'py>(
             let gpu = match backend {
                 Backend::Cpu => None,
                 Backend::Gpu => Some(gridtrace::gpu::GpuContext::new()?),
+                // The BVH has no GPU kernels: auto means the CPU for it.
+                Backend::Auto if accel == AccelKind::Bvh => None,
                 Backend::Auto => gridtrace::gpu::GpuContext::new().ok(),
             };
             let image = match gpu {
@@ -214,7 +216,7 @@ fn render<'py>(
             Ok(image.to_rgb8())
         })
         .map_err(to_py)?;
-    Ok(rgb.into_pyarray(py).reshape([height as usize, width as usize, 3])?)
+    rgb.into_pyarray(py).reshape([height as usize, width as usize, 3])
 }
 
 #[pymodule]

@@ -33,7 +33,7 @@ use std::sync::{Mutex, OnceLock};
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
-use crate::accel::{AccelKind, Hit, NoCounters, Ray, Resolution};
+use crate::accel::{AccelKind, Hit, Ray, Resolution};
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::scene::{Mesh, PreparedScene, Scene};
 use crate::{Error, Result};
@@ -105,6 +105,10 @@ impl Hits {
 /// Rays are processed in chunks of this many, so temporary memory stays bounded however large
 /// the batch.
 pub const CHUNK: usize = 1 << 20;
+
+/// Rays per CPU work item: large enough to amortise scheduling, small enough to balance two
+/// to hundreds of threads over a chunk.
+const CPU_BATCH: usize = 1024;
 
 /// An accelerated triangle mesh for ray queries.
 pub struct TraceMesh {
@@ -182,6 +186,10 @@ impl TraceMesh {
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
         let prepared = scene.prepare(opts.grid)?;
+        if opts.accel == AccelKind::Bvh {
+            // Built now, so that the first query does not pay for it.
+            prepared.accel.bvh();
+        }
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let mesh = TraceMesh {
             scene: prepared,
@@ -207,6 +215,13 @@ impl TraceMesh {
     fn renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
         if backend == Backend::Cpu {
             return Ok(None);
+        }
+        if self.accel == AccelKind::Bvh {
+            // No GPU kernels for the BVH: `auto` runs on the CPU, `gpu` is an error.
+            return match backend {
+                Backend::Gpu => crate::gpu::check_accel(self.accel).map(|_| None),
+                _ => Ok(None),
+            };
         }
         let opened = self.gpu.get_or_init(|| {
             let ctx = GpuContext::new().map_err(|e| e.to_string())?;
@@ -264,24 +279,41 @@ impl TraceMesh {
         t_min: f32,
         t_max: f32,
     ) -> Result<Hits> {
-        let mut out = Hits::default();
+        let n = batch_len(origins, dirs)?;
+        let mut out = Hits {
+            t: vec![0.0; n],
+            tri: vec![0; n],
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            normal: vec![[0.0; 3]; n],
+        };
+        let mut done = 0;
         for_chunks(origins, dirs, t_min, t_max, |rays| {
-            for h in self.intersect_rays_with(backend, rays, t_min, t_max)? {
-                if h.is_hit() {
-                    out.t.push(h.t);
-                    out.tri.push(self.original[h.tri as usize]);
-                    out.u.push(h.u);
-                    out.v.push(h.v);
-                    out.normal
-                        .push(self.scene.accel.tris[h.tri as usize].normal().normalize().to_array());
-                } else {
-                    out.t.push(f32::INFINITY);
-                    out.tri.push(u32::MAX);
-                    out.u.push(0.0);
-                    out.v.push(0.0);
-                    out.normal.push([0.0; 3]);
-                }
-            }
+            let hits = self.intersect_rays_with(backend, rays, t_min, t_max)?;
+            let r = done..done + hits.len();
+            done = r.end;
+            (
+                &mut out.t[r.clone()],
+                &mut out.tri[r.clone()],
+                &mut out.u[r.clone()],
+                &mut out.v[r.clone()],
+                &mut out.normal[r],
+                &hits[..],
+            )
+                .into_par_iter()
+                .with_min_len(4096)
+                .for_each(|(t, tri, u, v, normal, h)| {
+                    if h.is_hit() {
+                        *t = h.t;
+                        *tri = self.original[h.tri as usize];
+                        *u = h.u;
+                        *v = h.v;
+                        *normal = self.scene.accel.tris[h.tri as usize].normal().normalize().to_array();
+                    } else {
+                        *t = f32::INFINITY;
+                        *tri = u32::MAX;
+                    }
+                });
             Ok(())
         })?;
         Ok(out)
@@ -320,7 +352,8 @@ impl TraceMesh {
             backend,
             rays,
             |g| g.intersect(rays, t_min, t_max, self.accel),
-            |r| self.scene.accel.intersect(r, t_min, t_max, self.accel, &mut NoCounters),
+            |r, out| self.scene.accel.intersect_batch(r, t_min, t_max, self.accel, out),
+            Hit::MISS,
         )
     }
 
@@ -333,21 +366,30 @@ impl TraceMesh {
             backend,
             rays,
             |g| g.occluded(rays, t_min, t_max, self.accel),
-            |r| self.scene.accel.occluded(r, t_min, t_max, self.accel, &mut NoCounters),
+            |r, out| self.scene.accel.occluded_batch(r, t_min, t_max, self.accel, out),
+            false,
         )
     }
 
-    /// One query over a batch: on the GPU renderer for `backend`, else in parallel on the CPU.
-    fn run<T: Send>(
+    /// One query over a batch: on the GPU renderer for `backend`, else on the CPU, in parallel
+    /// over sub-batches of `CPU_BATCH` rays.
+    fn run<T: Send + Sync + Copy>(
         &self,
         backend: Backend,
         rays: &[Ray],
         on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<Vec<T>>,
-        on_cpu: impl Fn(&Ray) -> T + Sync + Send,
+        on_cpu: impl Fn(&[Ray], &mut [T]) + Sync + Send,
+        fill: T,
     ) -> Result<Vec<T>> {
         match self.renderer(backend)? {
             Some(g) => on_gpu(&mut g.lock().unwrap_or_else(|p| p.into_inner())),
-            None => Ok(rays.par_iter().with_min_len(1024).map(on_cpu).collect()),
+            None => {
+                let mut out = vec![fill; rays.len()];
+                out.par_chunks_mut(CPU_BATCH)
+                    .zip(rays.par_chunks(CPU_BATCH))
+                    .for_each(|(o, r)| on_cpu(r, o));
+                Ok(out)
+            }
         }
     }
 
@@ -396,19 +438,29 @@ fn check_interval(t_min: f32, t_max: f32) -> Result<()> {
 /// Rays `start..end` of a (possibly broadcast) batch; non-finite values and zero directions are
 /// errors naming the ray.
 fn make_rays(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Result<Vec<Ray>> {
-    (start..end)
-        .map(|i| {
-            let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
-            let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
-            if !o.is_finite() || !d.is_finite() {
-                return Err(Error::InvalidInput(format!(
-                    "ray {i} has a non-finite origin {o} or direction {d}"
-                )));
-            }
-            if d == Vec3::ZERO {
-                return Err(Error::InvalidInput(format!("ray {i} has a zero direction")));
-            }
-            Ok(Ray::new(o, d))
-        })
-        .collect()
+    let ray = |i: usize| -> Result<Ray> {
+        let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
+        let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
+        if !o.is_finite() || !d.is_finite() {
+            return Err(Error::InvalidInput(format!(
+                "ray {i} has a non-finite origin {o} or direction {d}"
+            )));
+        }
+        if d == Vec3::ZERO {
+            return Err(Error::InvalidInput(format!("ray {i} has a zero direction")));
+        }
+        Ok(Ray::new(o, d))
+    };
+    let rays: Option<Vec<Ray>> = (start..end)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|i| ray(i).ok())
+        .collect();
+    match rays {
+        Some(rays) => Ok(rays),
+        // Name the first bad ray, whichever thread saw one.
+        None => Err((start..end)
+            .find_map(|i| ray(i).err())
+            .unwrap_or_else(|| Error::InvalidInput("a ray failed validation".into()))),
+    }
 }

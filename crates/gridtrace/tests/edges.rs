@@ -1,12 +1,12 @@
 //! Watertightness: rays aimed exactly at shared edges and vertices of closed meshes (and at the
 //! interior edges of the open Stanford Bunny) must not slip through, on the CPU and the GPU, for
-//! the plain grid and proximity clouds. A ray "leaks" if it misses, or if its first hit lies
+//! the plain grid, proximity clouds and the BVH. A ray "leaks" if it misses, or if its first hit lies
 //! beyond the aim point (relative 1e-5).
 
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
-use gridtrace::accel::{AccelKind, Hit, Intersector, NoCounters, Resolution};
+use gridtrace::accel::{AccelKind, Hit, NoCounters, Resolution};
 use gridtrace::scene::{PreparedScene, Scene, procedural};
 use gridtrace::testing::{AimedRay, edge_aimed_rays};
 use rayon::prelude::*;
@@ -54,8 +54,8 @@ pub fn aimed(scene: &PreparedScene, positions: &[Vec3], n: usize, seed: u64) -> 
     edge_aimed_rays(&scene.accel, positions, &scene.tri_vertices, n, seed)
 }
 
-/// Leaking rays per mesh and accel kind, on the CPU, with the given intersector.
-fn cpu_leaks(which: Intersector) -> (usize, Vec<String>) {
+/// Leaking rays per mesh and accel kind, on the CPU.
+fn cpu_leaks() -> (usize, Vec<String>) {
     let mut total = 0;
     let mut report = Vec::new();
     for (name, mesh, n) in meshes() {
@@ -67,23 +67,13 @@ fn cpu_leaks(which: Intersector) -> (usize, Vec<String>) {
         let scene = prepared(mesh);
         let rays = aimed(&scene, &positions, n, 0xED6E);
         total += rays.len();
-        for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+        for kind in [AccelKind::Grid, AccelKind::ProximityCloud, AccelKind::Bvh] {
             let hits: Vec<Hit> = rays
                 .par_iter()
-                .map(|r| {
-                    scene
-                        .accel
-                        .intersect_with(&r.ray, 0.0, f32::INFINITY, kind, which, &mut NoCounters)
-                })
+                .map(|r| scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, kind, &mut NoCounters))
                 .collect();
             let bad = leaks(&rays, &hits);
-            eprintln!(
-                "{} {name} {}: {} of {} rays leak",
-                which.name(),
-                kind.name(),
-                bad.len(),
-                rays.len()
-            );
+            eprintln!("{name} {}: {} of {} rays leak", kind.name(), bad.len(), rays.len());
             if !bad.is_empty() {
                 report.push(format!(
                     "{name} {}: {} of {} rays leak; first: {:?}",
@@ -98,23 +88,12 @@ fn cpu_leaks(which: Intersector) -> (usize, Vec<String>) {
     (total, report)
 }
 
-/// The watertight test (on vertices rebuilt from `v0, e1, e2`) leaks far less than MT (about
-/// 0.02% of these rays against 1.7%) but not zero yet, even on the mesh's own shared vertices
-/// (`cpu_watertight_on_shared_vertices_does_not_leak`): open, see docs/robustness.md.
-#[test]
-#[ignore = "watertight test still leaks 0.02% of edge rays: open, see docs/robustness.md"]
-fn cpu_watertight_edges_and_vertices_do_not_leak() {
-    let (total, report) = cpu_leaks(Intersector::Watertight);
-    assert!(total >= 700_000);
-    assert!(report.is_empty(), "{}", report.join("\n"));
-}
-
 /// Möller-Trumbore with a fixed 1e-6 barycentric slack leaked about 1.8% of these rays: its
 /// barycentric error grows with the distance of the ray origin relative to the triangle size.
 /// With the slack taken from a rounding-error bound (`TriAccel::intersect`) none leaks.
 #[test]
 fn cpu_moller_trumbore_edges_and_vertices_do_not_leak() {
-    let (total, report) = cpu_leaks(Intersector::MollerTrumbore);
+    let (total, report) = cpu_leaks();
     assert!(total >= 700_000);
     assert!(report.is_empty(), "{}", report.join("\n"));
 }
@@ -154,67 +133,6 @@ fn gpu_edges_and_vertices_do_not_leak() {
             );
         }
         eprintln!("GPU {name}: {} rays, no leaks", rays.len());
-    }
-    assert!(total >= 700_000);
-}
-
-/// The watertight test on the mesh's own (shared, bit-identical) vertices: no leaks at all. With
-/// vertices rebuilt as `v0 + e1`, `v0 + e2` (what `TriAccel` stores) the rebuilt copies of a
-/// shared vertex can differ by an ulp, which opens cracks (see docs/robustness.md). Brute force
-/// over every triangle for every ray is too slow for 1M rays, so this uses the grid's candidate cells via the
-/// rebuilt-vertex traversal and re-tests leaking rays against all triangles with exact vertices.
-#[test]
-#[ignore = "watertight test still leaks 0.02% of edge rays: open, see docs/robustness.md"]
-fn cpu_watertight_on_shared_vertices_does_not_leak() {
-    use gridtrace::accel::WatertightRay;
-    use gridtrace::accel::triangle::watertight;
-    let mut total = 0;
-    for (name, mesh, n) in meshes() {
-        let positions = {
-            let mut s = Scene::default();
-            s.add_mesh(mesh.clone(), Mat4::IDENTITY, None);
-            s.mesh.positions
-        };
-        let scene = prepared(mesh);
-        let rays = aimed(&scene, &positions, n, 0xED6E);
-        total += rays.len();
-        let verts: Vec<[Vec3; 3]> = scene
-            .tri_vertices
-            .iter()
-            .map(|t| t.map(|i| positions[i as usize]))
-            .collect();
-        let bad: Vec<usize> = (0..rays.len())
-            .into_par_iter()
-            .filter(|&i| {
-                let r = &rays[i];
-                let h = scene.accel.intersect_with(
-                    &r.ray,
-                    0.0,
-                    f32::INFINITY,
-                    AccelKind::Grid,
-                    Intersector::Watertight,
-                    &mut NoCounters,
-                );
-                if h.is_hit() && h.t <= r.t_aim * (1.0 + 1e-5) {
-                    return false;
-                }
-                let wt = WatertightRay::new(r.ray.origin, r.ray.dir);
-                !verts
-                    .iter()
-                    .any(|v| watertight(*v, &wt, 0.0, r.t_aim * (1.0 + 1e-5)).is_some())
-            })
-            .collect();
-        eprintln!(
-            "watertight on shared vertices, {name}: {} of {} rays leak",
-            bad.len(),
-            rays.len()
-        );
-        assert!(
-            bad.is_empty(),
-            "{name}: {} leak; first {:?}",
-            bad.len(),
-            bad.iter().take(3).map(|&i| rays[i]).collect::<Vec<_>>()
-        );
     }
     assert!(total >= 700_000);
 }

@@ -25,9 +25,9 @@ fn tris_of(m: &gridtrace::Mesh) -> Vec<TriAccel> {
 /// Grid and pc closest hits equal brute force (hit/miss, relative t) for 20,000 rays.
 fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
     let grid = Grid::build(&tris, res).unwrap();
-    let accel = GridAccel { grid, tris };
+    let accel = GridAccel::new(grid, tris);
     let rays = ray_set(&accel, 20_000, 0x5EED ^ name.len() as u64);
-    for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+    for kind in AccelKind::ALL {
         let bad: Vec<(Ray, Hit, Hit)> = rays
             .par_iter()
             .filter_map(|r| {
@@ -55,7 +55,7 @@ fn single_triangle() {
     check("single", vec![t], Resolution::default());
     check("single-fine", vec![t], Resolution::Fixed([9, 9, 1]));
     let grid = Grid::build(&[t], Resolution::default()).unwrap();
-    let accel = GridAccel { grid, tris: vec![t] };
+    let accel = GridAccel::new(grid, vec![t]);
     let h = accel.intersect(
         &Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z),
         0.0,
@@ -132,7 +132,7 @@ fn camera_inside_a_mesh() {
     s.background = Vec3::new(1.0, 0.0, 1.0);
     s.lights.push(PointLight::new(Vec3::new(0.0, 0.5, 0.0), Vec3::ONE));
     let p = s.prepare(Resolution::default()).unwrap();
-    for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+    for kind in AccelKind::ALL {
         let (img, _) = gridtrace::cpu::render(&p, &RenderOptions::new(96, 64, Mode::Shadow, kind), None).unwrap();
         let bg = img.pixels.iter().filter(|c| **c == s.background).count();
         assert_eq!(bg, 0, "{} background pixels seen from inside", bg);

@@ -52,7 +52,7 @@ proptest! {
             .collect();
         prop_assume!(!tris.is_empty());
         let grid = Grid::build(&tris, res).unwrap();
-        let accel = GridAccel { grid, tris };
+        let accel = GridAccel::new(grid, tris);
         for (o, d, aim) in rays {
             let d = match aim {
                 Some(i) => pool[i % pool.len()] - o,
@@ -63,7 +63,7 @@ proptest! {
             }
             let r = Ray::new(o, d);
             let want = brute_force_intersect(&accel.tris, &r, 0.0, f32::INFINITY);
-            for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+            for kind in AccelKind::ALL {
                 let got = accel.intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
                 prop_assert_eq!(got.is_hit(), want.is_hit(), "{:?} {:?}: got {:?} want {:?}", kind, r, got, want);
                 if want.is_hit() {

@@ -1,5 +1,6 @@
 //! Traversal equals brute force: closest t and triangle id for 100,000 adversarial rays per
-//! scene, for the plain grid and for proximity clouds; any-hit agrees with closest hit.
+//! scene, for the plain grid, proximity clouds and the BVH; any-hit agrees with closest hit, and
+//! the batch queries agree with the per-ray ones.
 
 use gridtrace::accel::{
     AccelKind, Grid, GridAccel, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
@@ -25,7 +26,7 @@ fn agree(a: &Hit, b: &Hit) -> bool {
 
 fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
     let grid = Grid::build(&tris, res).unwrap();
-    let accel = GridAccel { grid, tris };
+    let accel = GridAccel::new(grid, tris);
     let rays = ray_set(&accel, RAYS, 0xC0FFEE ^ name.len() as u64);
     let truth: Vec<Hit> = rays
         .par_iter()
@@ -36,7 +37,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         hits > RAYS / 10 && hits < RAYS * 95 / 100,
         "{name}: ray set is not varied enough ({hits} hits)"
     );
-    for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+    for kind in AccelKind::ALL {
         let bad: Vec<String> = rays
             .par_iter()
             .zip(&truth)
@@ -68,6 +69,25 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                 (!errs.is_empty()).then(|| format!("{r:?}: {}", errs.join("; ")))
             })
             .collect();
+        // The batch queries (interleaved rays for the BVH) give exactly the per-ray answers.
+        let mut batch = vec![Hit::MISS; rays.len()];
+        accel.intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
+        let mut occ_batch = vec![false; rays.len()];
+        accel.occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
+        for (i, r) in rays.iter().enumerate() {
+            assert_eq!(
+                batch[i],
+                accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters),
+                "{name} {} batch {r:?}",
+                kind.name()
+            );
+            assert_eq!(
+                occ_batch[i],
+                batch[i].is_hit(),
+                "{name} {} occluded batch {r:?}",
+                kind.name()
+            );
+        }
         assert!(
             bad.is_empty(),
             "{name} {}: {} of {RAYS} rays disagree, first: {:#?}",
@@ -129,7 +149,7 @@ fn proximity_cloud_visits_fewer_cells() {
     use gridtrace::accel::TraversalCounters;
     let tris = scene_tris("sparse-room");
     let grid = Grid::build(&tris, Resolution::Fixed([48, 48, 48])).unwrap();
-    let accel = GridAccel { grid, tris };
+    let accel = GridAccel::new(grid, tris);
     let rays = ray_set(&accel, 20_000, 9);
     let (mut g, mut p) = (TraversalCounters::default(), TraversalCounters::default());
     for r in &rays {

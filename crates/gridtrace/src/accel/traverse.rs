@@ -5,7 +5,9 @@ use std::ops::ControlFlow;
 
 use glam::{IVec3, Vec3};
 
-use super::triangle::{Intersector, WatertightRay};
+use std::sync::OnceLock;
+
+use super::bvh::BvhAccel;
 use super::{Cell, Grid, TriAccel};
 
 /// A ray `origin + t * dir`. `dir` need not be normalised: `t` is in units of its length.
@@ -52,6 +54,9 @@ pub enum AccelKind {
     Grid,
     /// Uniform grid with proximity clouds: empty space is crossed in jumps.
     ProximityCloud,
+    /// Bounding volume hierarchy (binned SAH), the comparison the paper left as future work.
+    /// CPU only.
+    Bvh,
 }
 
 impl std::str::FromStr for AccelKind {
@@ -60,16 +65,23 @@ impl std::str::FromStr for AccelKind {
         match s {
             "grid" | "g" => Ok(AccelKind::Grid),
             "pc" | "proximity" => Ok(AccelKind::ProximityCloud),
-            _ => Err(format!("accel must be 'grid' or 'pc', got '{s}'")),
+            "bvh" => Ok(AccelKind::Bvh),
+            _ => Err(format!("accel must be 'grid', 'pc' or 'bvh', got '{s}'")),
         }
     }
 }
 
 impl AccelKind {
+    /// Every kind (the CPU runs them all).
+    pub const ALL: [AccelKind; 3] = [AccelKind::Grid, AccelKind::ProximityCloud, AccelKind::Bvh];
+    /// The kinds the GPU kernels run.
+    pub const GPU: [AccelKind; 2] = [AccelKind::Grid, AccelKind::ProximityCloud];
+
     pub fn name(self) -> &'static str {
         match self {
             AccelKind::Grid => "grid",
             AccelKind::ProximityCloud => "pc",
+            AccelKind::Bvh => "bvh",
         }
     }
 }
@@ -121,36 +133,44 @@ impl std::ops::AddAssign for TraversalCounters {
     }
 }
 
-/// The grid together with the triangles it references: everything a ray query needs.
+/// The triangles and the structures over them: everything a ray query needs. The grid is
+/// always built; the BVH (`AccelKind::Bvh`) is built the first time it is asked for.
 #[derive(Debug, Clone)]
 pub struct GridAccel {
     pub grid: Grid,
     pub tris: Vec<TriAccel>,
+    bvh: OnceLock<BvhAccel>,
 }
 
 impl GridAccel {
-    /// Closest hit with `t_min < t < t_max`.
-    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
-        self.intersect_with(ray, t_min, t_max, kind, Intersector::MollerTrumbore, counters)
+    pub fn new(grid: Grid, tris: Vec<TriAccel>) -> GridAccel {
+        GridAccel {
+            grid,
+            tris,
+            bvh: OnceLock::new(),
+        }
     }
 
-    /// Closest hit with the given ray/triangle test.
-    pub fn intersect_with<C: Counters>(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        which: Intersector,
-        counters: &mut C,
-    ) -> Hit {
-        let wt = WatertightRay::new(ray.origin, ray.dir);
+    /// The BVH over `tris`, built on first use.
+    pub fn bvh(&self) -> &BvhAccel {
+        self.bvh.get_or_init(|| BvhAccel::build(&self.tris))
+    }
+
+    /// The BVH if it has been built.
+    pub fn bvh_if_built(&self) -> Option<&BvhAccel> {
+        self.bvh.get()
+    }
+
+    /// Closest hit with `t_min < t < t_max`.
+    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
+        if kind == AccelKind::Bvh {
+            return self.bvh().intersect(ray, t_min, t_max, counters);
+        }
         let mut best = Hit { t: t_max, ..Hit::MISS };
         self.walk(ray, t_min, t_max, kind, counters, |refs, t_cell_exit, counters| {
             for &tri in refs {
                 counters.tri_test();
-                if let Some(h) = self.tris[tri as usize].intersect_with(which, ray.origin, ray.dir, &wt, t_min, best.t)
-                {
+                if let Some(h) = self.tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
                     best = Hit {
                         t: h.t,
                         tri,
@@ -170,28 +190,41 @@ impl GridAccel {
         if best.tri == u32::MAX { Hit::MISS } else { best }
     }
 
-    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
-    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
-        self.occluded_with(ray, t_min, t_max, kind, Intersector::MollerTrumbore, counters)
+    /// Closest hits of a batch, `out[i]` for `rays[i]` (on this thread: callers split large
+    /// batches across threads). The same answers as `intersect`; the BVH interleaves the rays
+    /// to hide memory latency (`BvhAccel::intersect_batch`).
+    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [Hit]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        if kind == AccelKind::Bvh {
+            return self.bvh().intersect_batch(rays, t_min, t_max, out);
+        }
+        for (r, o) in rays.iter().zip(out) {
+            *o = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
+        }
     }
 
-    /// Any hit with the given ray/triangle test.
-    pub fn occluded_with<C: Counters>(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        which: Intersector,
-        counters: &mut C,
-    ) -> bool {
-        let wt = WatertightRay::new(ray.origin, ray.dir);
+    /// Any-hit results of a batch, like `intersect_batch`.
+    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        if kind == AccelKind::Bvh {
+            return self.bvh().occluded_batch(rays, t_min, t_max, out);
+        }
+        for (r, o) in rays.iter().zip(out) {
+            *o = self.occluded(r, t_min, t_max, kind, &mut NoCounters);
+        }
+    }
+
+    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
+    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
+        if kind == AccelKind::Bvh {
+            return self.bvh().occluded(ray, t_min, t_max, counters);
+        }
         let mut hit = false;
         self.walk(ray, t_min, t_max, kind, counters, |refs, _, counters| {
             for &tri in refs {
                 counters.tri_test();
                 if self.tris[tri as usize]
-                    .intersect_with(which, ray.origin, ray.dir, &wt, t_min, t_max)
+                    .intersect(ray.origin, ray.dir, t_min, t_max)
                     .is_some()
                 {
                     hit = true;
@@ -204,7 +237,8 @@ impl GridAccel {
     }
 
     /// Visits the non-empty cells pierced by the ray within `[t_min, t_max]`, front to back,
-    /// calling `visit(refs, t_cell_exit)` until it breaks.
+    /// calling `visit(refs, t_cell_exit)` until it breaks. Proximity jumps are taken for
+    /// `AccelKind::ProximityCloud` only.
     ///
     /// Boundary distances are recomputed from the integer cell coordinate at every step
     /// (`t = (grid_min + k * cell_size - origin) / dir`) instead of accumulating `t_delta`, so
@@ -335,21 +369,9 @@ fn sign(x: f32) -> i32 {
 
 /// Reference closest hit: every triangle tested. The ground truth for all traversal tests.
 pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> Hit {
-    brute_force_intersect_with(tris, ray, t_min, t_max, Intersector::MollerTrumbore)
-}
-
-/// Reference any hit.
-pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> bool {
-    tris.iter()
-        .any(|t| t.intersect(ray.origin, ray.dir, t_min, t_max).is_some())
-}
-
-/// Reference closest hit with the given ray/triangle test.
-pub fn brute_force_intersect_with(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, which: Intersector) -> Hit {
-    let wt = WatertightRay::new(ray.origin, ray.dir);
     let mut best = Hit { t: t_max, ..Hit::MISS };
     for (i, tri) in tris.iter().enumerate() {
-        if let Some(h) = tri.intersect_with(which, ray.origin, ray.dir, &wt, t_min, best.t) {
+        if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
             best = Hit {
                 t: h.t,
                 tri: i as u32,
@@ -359,4 +381,10 @@ pub fn brute_force_intersect_with(tris: &[TriAccel], ray: &Ray, t_min: f32, t_ma
         }
     }
     if best.tri == u32::MAX { Hit::MISS } else { best }
+}
+
+/// Reference any hit.
+pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    tris.iter()
+        .any(|t| t.intersect(ray.origin, ray.dir, t_min, t_max).is_some())
 }

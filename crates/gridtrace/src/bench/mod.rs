@@ -383,7 +383,8 @@ pub fn run_matrix(
             let mut largest = 0u64;
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
-                    for &accel in &cfg.accels {
+                    // The BVH has no GPU kernels: its rows are CPU rows only.
+                    for &accel in cfg.accels.iter().filter(|&&a| a != AccelKind::Bvh) {
                         let opts = RenderOptions::new(w, h, mode, accel);
                         let row = gpu_row(&bs.name, &prepared, &mut r, &opts, cfg)?;
                         log(&row_line(&row));
@@ -531,6 +532,7 @@ pub struct BenchReport {
     pub grid_sweep: Vec<studies::Sweep>,
     pub scaling: Option<studies::Scaling>,
     pub pc_study: Vec<studies::PcStudyRow>,
+    pub query_study: Vec<studies::QueryStudyRow>,
     pub ray_export: Option<studies::RayExport>,
 }
 
@@ -580,6 +582,7 @@ impl BenchReport {
             grid_sweep: Vec::new(),
             scaling: None,
             pc_study: Vec::new(),
+            query_study: Vec::new(),
             ray_export: None,
         }
     }

@@ -315,6 +315,25 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+    if !report.query_study.is_empty() {
+        md.push_str("\n## Ray-query study (incoherent rays, `TraceMesh::intersect`, CPU)\n\n| scene | triangles | accel | build ms | threads | hits | cells or nodes/ray | tri tests/ray | best ms | Mrays/s |\n|---|---:|---|---:|---:|---:|---:|---:|---:|---:|\n");
+        for r in &report.query_study {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.1} | {} | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} |",
+                r.scene,
+                r.triangles,
+                r.accel,
+                r.build_ms,
+                r.threads,
+                r.hit_fraction * 100.0,
+                r.cells_per_ray,
+                r.tri_tests_per_ray,
+                r.summary.best_ms,
+                r.mrays_per_s
+            );
+        }
+    }
     if let Some(e) = &report.ray_export {
         let _ = writeln!(
             md,

@@ -158,6 +158,8 @@ pub fn paper_ms(scene: &str, mode: crate::Mode, res: (u32, u32), accel: crate::A
     let a = match accel {
         crate::AccelKind::Grid => 0,
         crate::AccelKind::ProximityCloud => 1,
+        // The paper measured no BVH.
+        crate::AccelKind::Bvh => return None,
     };
     if s.column == 3 {
         return if a == 0 { PAPER_MS[m][r][6] } else { None };

@@ -1,5 +1,6 @@
 //! Studies beside the paper's matrix (CPU): grid-resolution sweeps, scaling with triangle and
-//! pixel count, and the proximity-cloud study with traversal counters.
+//! pixel count, the proximity-cloud study with traversal counters, and the ray-query study
+//! (incoherent rays through the library's batch API, grid against pc against BVH).
 
 use std::path::Path;
 
@@ -378,6 +379,122 @@ pub fn pc_study(
                 ));
                 rows.push(row);
             }
+        }
+    }
+    Ok(rows)
+}
+
+/// One mesh and acceleration of the ray-query study.
+#[derive(Debug, Clone, Serialize)]
+pub struct QueryStudyRow {
+    pub scene: String,
+    pub triangles: usize,
+    pub accel: String,
+    /// Building the acceleration (grid, plus the BVH for `bvh`), milliseconds.
+    pub build_ms: f64,
+    pub rays: usize,
+    pub threads: usize,
+    pub hit_fraction: f64,
+    /// Grid cells, or BVH nodes (four-wide), visited per ray.
+    pub cells_per_ray: f64,
+    pub tri_tests_per_ray: f64,
+    #[serde(flatten)]
+    pub summary: Summary,
+    pub mrays_per_s: f64,
+}
+
+/// The ray set of the Python benchmark (`crates/gridtrace-py/bench/bench_vs_embree.py`): origins
+/// uniform on a sphere of radius one bounding-box diagonal around the mesh, aimed at uniform
+/// random points of its bounding box. Incoherent: neighbouring rays share nothing.
+pub fn incoherent_rays(bounds: crate::accel::Aabb, n: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let mut rng = crate::util::Rng::new(seed);
+    let (c, r) = (bounds.center(), bounds.diagonal());
+    let (mut origins, mut dirs) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    while origins.len() < n {
+        let v = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        if !(1e-6..=1.0).contains(&v.length_squared()) {
+            continue;
+        }
+        let o = c + r * v.normalize();
+        let target = Vec3::new(
+            rng.range(bounds.min.x, bounds.max.x),
+            rng.range(bounds.min.y, bounds.max.y),
+            rng.range(bounds.min.z, bounds.max.z),
+        );
+        origins.push(o.to_array());
+        dirs.push((target - o).normalize().to_array());
+    }
+    (origins, dirs)
+}
+
+/// Times `TraceMesh::intersect` (the whole library call, as Python makes it: validation,
+/// parallel traversal, output arrays) on `rays` incoherent rays per mesh, for every
+/// acceleration, on the CPU with the current rayon thread count.
+pub fn query_study(
+    meshes: &[(String, crate::Mesh)],
+    rays: usize,
+    warmup: u32,
+    reps: u32,
+    log: &mut dyn FnMut(&str),
+) -> Result<Vec<QueryStudyRow>> {
+    use crate::accel::{Ray, TraversalCounters};
+    use crate::query::{Backend, QueryOptions, TraceMesh};
+    let mut rows = Vec::new();
+    for (name, mesh) in meshes {
+        for accel in AccelKind::ALL {
+            let opts = QueryOptions {
+                accel,
+                backend: Backend::Cpu,
+                ..Default::default()
+            };
+            let t0 = std::time::Instant::now();
+            let tm = TraceMesh::from_mesh(mesh.clone(), &opts)?;
+            let build_ms = t0.elapsed().as_secs_f64() * 1e3;
+            let (o, d) = incoherent_rays(tm.prepared().accel.grid.bounds, rays, 7);
+            let mut times = Vec::new();
+            let mut hits = 0;
+            for rep in 0..warmup + reps {
+                let t0 = std::time::Instant::now();
+                let h = tm.intersect(&o, &d, 0.0, f32::INFINITY)?;
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                if rep >= warmup {
+                    times.push(ms);
+                }
+                hits = h.t.iter().filter(|t| t.is_finite()).count();
+            }
+            // Work per ray, counted on a sample (single-ray traversal: the same work as the
+            // batch).
+            let sample = rays.min(100_000);
+            let mut c = TraversalCounters::default();
+            for i in 0..sample {
+                let r = Ray::new(o[i].into(), d[i].into());
+                tm.prepared().accel.intersect(&r, 0.0, f32::INFINITY, accel, &mut c);
+            }
+            let summary = Summary::of(&times);
+            let row = QueryStudyRow {
+                scene: name.clone(),
+                triangles: tm.triangle_count(),
+                accel: accel.name().into(),
+                build_ms,
+                rays,
+                threads: rayon::current_num_threads(),
+                hit_fraction: hits as f64 / rays.max(1) as f64,
+                cells_per_ray: c.cells as f64 / sample.max(1) as f64,
+                tri_tests_per_ray: c.tri_tests as f64 / sample.max(1) as f64,
+                summary,
+                mrays_per_s: rays as f64 / (summary.best_ms * 1e3).max(1e-9),
+            };
+            log(&format!(
+                "  query-study {:<16} {:<4} build {:>7.1} ms  {:>6.2} cells/nodes  {:>6.2} tri tests per ray  best {:>8.2} ms  {:>6.2} Mrays/s",
+                row.scene,
+                row.accel,
+                row.build_ms,
+                row.cells_per_ray,
+                row.tri_tests_per_ray,
+                summary.best_ms,
+                row.mrays_per_s
+            ));
+            rows.push(row);
         }
     }
     Ok(rows)

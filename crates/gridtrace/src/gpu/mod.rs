@@ -516,6 +516,7 @@ impl GpuRenderer {
         opts: &RenderOptions,
     ) -> Result<(Image, GpuRenderStats)> {
         opts.validate()?;
+        check_accel(opts.accel)?;
         camera.validate().map_err(Error::Scene)?;
         let n_lights = lights.len() as u32;
         let pixels = opts.width * opts.height;
@@ -673,6 +674,7 @@ impl GpuRenderer {
         kind: AccelKind,
         occlusion: bool,
     ) -> Result<(Vec<Hit>, Vec<bool>)> {
+        check_accel(kind)?;
         let chunk = self.tile_capacity(1) as usize;
         self.ensure_work(
             chunk.min(rays.len().max(1)) as u32,
@@ -771,6 +773,16 @@ impl RenderStats {
 #[allow(dead_code)]
 fn _assert_zeroable() -> RayRec {
     RayRec::zeroed()
+}
+
+/// The GPU kernels traverse the grid (with or without proximity clouds) only.
+pub fn check_accel(kind: AccelKind) -> Result<()> {
+    if kind == AccelKind::Bvh {
+        return Err(Error::InvalidInput(
+            "the bvh acceleration runs on the CPU only: use backend cpu (or auto), or accel grid or pc".into(),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

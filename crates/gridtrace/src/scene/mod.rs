@@ -165,7 +165,7 @@ impl Scene {
         // coordinates, because f32 hit points far from the origin carry larger absolute error.
         let ray_epsilon = (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE);
         Ok(PreparedScene {
-            accel: GridAccel { grid, tris },
+            accel: GridAccel::new(grid, tris),
             normals,
             tri_vertices,
             tri_material,

@@ -1,0 +1,702 @@
+//! A bounding volume hierarchy over the same triangles as the grid: the comparison with other
+//! acceleration structures that the paper left as future work, and the structure that serves
+//! incoherent ray queries best (a uniform grid cannot adapt to a mesh's uneven density, and a
+//! ray that misses crosses every cell on its way).
+//!
+//! Binary, built top-down with the binned surface area heuristic (Wald 2007), stored depth-first
+//! in 32-byte nodes whose two children sit side by side, traversed front to back with a fixed
+//! stack. The builder takes boxes and centres only, so it knows nothing of triangles.
+
+use bytemuck::{Pod, Zeroable};
+use std::mem::MaybeUninit;
+
+use glam::{Vec3, Vec4};
+
+use super::traverse::{Counters, Hit, Ray};
+use super::triangle::{BARY_EPS, MAX_SLACK};
+use super::{Aabb, TriAccel};
+
+/// One node: its box, and either its children (`count == 0`; the left child is `first`, the
+/// right one `first + 1`) or its primitives (`prims[first..first + count]`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct BvhNode {
+    pub min: [f32; 3],
+    pub first: u32,
+    pub max: [f32; 3],
+    pub count: u32,
+}
+
+impl BvhNode {
+    fn is_leaf(&self) -> bool {
+        self.count > 0
+    }
+}
+
+/// Centroid bins per axis of the binned SAH.
+const BINS: usize = 16;
+/// SAH cost of visiting a node, relative to one ray/triangle test (measured: a box pair costs
+/// about as much as one Möller-Trumbore test here).
+const COST_NODE: f32 = 1.0;
+/// Leaves never hold more than this many primitives unless they cannot be separated (identical
+/// centres).
+const MAX_LEAF: usize = 8;
+/// Below this depth the SAH decides the splits; past it every split is a median split by count,
+/// which halves the node. So the depth is at most `SAH_DEPTH + log2(n) < STACK` for any n < 2^32:
+/// the traversal stack cannot overflow, whatever the input (exponentially spaced triangles can
+/// make SAH trees arbitrarily deep).
+const SAH_DEPTH: usize = 64;
+/// Traversal stack entries: one far child per level at most.
+const STACK: usize = SAH_DEPTH + 33;
+
+/// The hierarchy over a set of primitives, given by their boxes and centres.
+#[derive(Debug, Clone, Default)]
+pub struct Bvh {
+    pub nodes: Vec<BvhNode>,
+    /// Primitive indices in leaf order.
+    pub prims: Vec<u32>,
+    /// Depth of the deepest leaf (the root has depth 0).
+    pub depth: usize,
+}
+
+impl Bvh {
+    /// Builds over primitives with the given boxes and centres (any point inside the box serves;
+    /// the centroid gives the best trees). An empty input gives a single empty leaf.
+    pub fn build(boxes: &[Aabb], centers: &[Vec3]) -> Bvh {
+        assert_eq!(boxes.len(), centers.len(), "one centre per box");
+        let n = boxes.len();
+        let mut prims: Vec<u32> = (0..n as u32).collect();
+        let mut nodes = Vec::with_capacity((2 * n).max(1));
+        nodes.push(BvhNode::zeroed());
+        let mut depth = 0;
+        // Explicit work list instead of recursion: the tree depth is bounded (SAH_DEPTH + 32),
+        // but a thread's stack should not have to be.
+        let mut work = vec![(0usize, 0..n, 0usize)];
+        while let Some((node, range, level)) = work.pop() {
+            depth = depth.max(level);
+            let bounds = range
+                .clone()
+                .fold(Aabb::EMPTY, |b, i| b.union(boxes[prims[i] as usize]));
+            nodes[node].min = bounds.min.to_array();
+            nodes[node].max = bounds.max.to_array();
+            let split = if range.len() <= 1 {
+                None
+            } else if level < SAH_DEPTH {
+                sah_split(&mut prims[range.clone()], boxes, centers, bounds)
+            } else {
+                median_split(&mut prims[range.clone()], centers)
+            };
+            match split {
+                Some(mid) => {
+                    let left = nodes.len();
+                    nodes.push(BvhNode::zeroed());
+                    nodes.push(BvhNode::zeroed());
+                    nodes[node].first = left as u32;
+                    nodes[node].count = 0;
+                    work.push((left + 1, range.start + mid..range.end, level + 1));
+                    work.push((left, range.start..range.start + mid, level + 1));
+                }
+                None => {
+                    nodes[node].first = range.start as u32;
+                    nodes[node].count = range.len() as u32;
+                }
+            }
+        }
+        Bvh { nodes, prims, depth }
+    }
+}
+
+fn half_area(b: &Aabb) -> f32 {
+    let e = b.extent();
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
+
+/// The binned-SAH split of `prims` (reordered in place): the number that go left, or `None` for
+/// a leaf.
+fn sah_split(prims: &mut [u32], boxes: &[Aabb], centers: &[Vec3], bounds: Aabb) -> Option<usize> {
+    let n = prims.len();
+    let cbounds = Aabb::from_points(prims.iter().map(|&i| &centers[i as usize]));
+    let cext = cbounds.extent();
+    // (cost, axis, first bin on the right)
+    let mut best: Option<(f32, usize, usize)> = None;
+    for axis in 0..3 {
+        // All centres level along this axis: nothing to bin.
+        if cext[axis] <= 0.0 {
+            continue;
+        }
+        let scale = BINS as f32 / cext[axis];
+        let bin_of = |c: Vec3| (((c[axis] - cbounds.min[axis]) * scale) as usize).min(BINS - 1);
+        let mut bin_box = [Aabb::EMPTY; BINS];
+        let mut bin_count = [0u32; BINS];
+        for &i in prims.iter() {
+            let b = bin_of(centers[i as usize]);
+            bin_box[b] = bin_box[b].union(boxes[i as usize]);
+            bin_count[b] += 1;
+        }
+        // Sweep from the right, then from the left: cost of a split before bin k.
+        let mut right_area = [0.0f32; BINS];
+        let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
+        for k in (1..BINS).rev() {
+            acc = acc.union(bin_box[k]);
+            cnt += bin_count[k];
+            right_area[k] = if cnt > 0 { half_area(&acc) * cnt as f32 } else { 0.0 };
+        }
+        let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
+        for k in 1..BINS {
+            acc = acc.union(bin_box[k - 1]);
+            cnt += bin_count[k - 1];
+            if cnt == 0 || cnt as usize == n {
+                continue;
+            }
+            let cost = half_area(&acc) * cnt as f32 + right_area[k];
+            if best.is_none_or(|(c, _, _)| cost < c) {
+                best = Some((cost, axis, k));
+            }
+        }
+    }
+    let parent_area = half_area(&bounds);
+    match best {
+        Some((cost, axis, k)) => {
+            let split_cost = COST_NODE + cost / parent_area.max(f32::MIN_POSITIVE);
+            if split_cost >= n as f32 && n <= MAX_LEAF {
+                return None;
+            }
+            let scale = BINS as f32 / cext[axis];
+            let goes_left =
+                |i: u32| ((((centers[i as usize][axis] - cbounds.min[axis]) * scale) as usize).min(BINS - 1)) < k;
+            Some(partition(prims, goes_left))
+        }
+        // All centres coincide: nothing separates them but a split by count.
+        None if n > MAX_LEAF => Some(n / 2),
+        None => None,
+    }
+}
+
+/// Splits by count at the median along the centres' widest axis.
+fn median_split(prims: &mut [u32], centers: &[Vec3]) -> Option<usize> {
+    let cbounds = Aabb::from_points(prims.iter().map(|&i| &centers[i as usize]));
+    let axis = cbounds.extent().max_position();
+    let mid = prims.len() / 2;
+    prims.select_nth_unstable_by(mid, |&a, &b| {
+        centers[a as usize][axis].total_cmp(&centers[b as usize][axis])
+    });
+    Some(mid)
+}
+
+/// Moves the elements for which `left` holds to the front; returns how many there are.
+fn partition(v: &mut [u32], left: impl Fn(u32) -> bool) -> usize {
+    let mut i = 0;
+    for j in 0..v.len() {
+        if left(v[j]) {
+            v.swap(i, j);
+            i += 1;
+        }
+    }
+    i
+}
+
+/// Children per node of the traversal tree. The binary SAH tree is collapsed to four-wide nodes
+/// (Dammertz et al. 2008; Embree's BVH4): half the levels, so half the dependent memory loads
+/// per ray, and the four box tests of a node run as one SIMD computation with no branches.
+pub const WIDTH: usize = 4;
+
+/// A four-wide node: its children's boxes in structure-of-arrays form (`lo[axis]`, `hi[axis]`,
+/// one lane per child) and what each child is. Exactly two cache lines.
+///
+/// A child with `count[k] == 0` is a node (`child[k]` indexes `BvhAccel::nodes`); with
+/// `count[k] > 0` it is a leaf of `count[k]` triangles from `child[k]`. An unused slot has the
+/// empty box `lo = +inf, hi = -inf`, which the near/far-plane box test below never enters.
+#[repr(C, align(64))]
+#[derive(Debug, Clone, Copy)]
+pub struct WideNode {
+    pub lo: [Vec4; 3],
+    pub hi: [Vec4; 3],
+    pub child: [u32; WIDTH],
+    pub count: [u32; WIDTH],
+}
+
+impl WideNode {
+    const EMPTY: WideNode = WideNode {
+        lo: [Vec4::INFINITY; 3],
+        hi: [Vec4::NEG_INFINITY; 3],
+        child: [0; WIDTH],
+        count: [0; WIDTH],
+    };
+}
+
+/// The per-ray constants of the box test.
+struct BoxRay {
+    origin: [Vec4; 3],
+    /// `1 / dir`, with zero components replaced by `±1e-30` first: a slab then never computes
+    /// `0 * inf = NaN`, and a box the ray runs beside (parallel, outside the slab) gets an entry
+    /// distance beyond 1e20, which the other axes' finite interval always excludes.
+    inv_dir: [Vec4; 3],
+    /// Per axis: whether the ray goes down it, so the box's `hi` plane is the near one.
+    down: [bool; 3],
+}
+
+/// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
+/// widening the exit distance by this factor makes the box test conservative (Ize, "Robust
+/// BVH Ray Traversal", JCGT 2013). A ray that touches a box is never reported as missing it.
+const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
+
+/// Boxes are searched up to this factor past the current `t_far`. Möller-Trumbore's t is exact
+/// only up to rounding that grows as the ray grazes the triangle's plane: the crossing point of
+/// a ray at a small angle to a plane is ill-conditioned along the ray. Seen in the traversal
+/// tests: a hit reported at t = 0.99892 on a triangle whose (padded) box the ray enters only at
+/// 0.99997. A box whose entry lies a little past the current hit may thus still hold a hit the
+/// triangle test reports as closer; the triangle test itself still enforces `t < t_far`
+/// exactly, so this costs only extra box visits.
+const T_SLOP: f32 = 1.0 + 1.0 / 256.0;
+
+impl BoxRay {
+    fn new(ray: &Ray) -> BoxRay {
+        let safe = |d: f32| if d.abs() < 1e-30 { 1e-30f32.copysign(d) } else { d };
+        let o = ray.origin.to_array();
+        let d = ray.dir.to_array().map(safe);
+        BoxRay {
+            origin: o.map(Vec4::splat),
+            inv_dir: d.map(|x| Vec4::splat(1.0 / x)),
+            down: d.map(|x| x < 0.0),
+        }
+    }
+
+    /// Entry distances of the ray into the node's four boxes within `[t_min, t_max]`, and the
+    /// mask of the boxes it enters. Per axis the near plane is chosen by the ray's direction,
+    /// so each slab costs a subtract and a multiply per plane and nothing else.
+    #[inline(always)]
+    fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Vec4, u32) {
+        let mut t_enter = Vec4::splat(t_min);
+        let mut t_exit = Vec4::splat(f32::INFINITY);
+        for a in 0..3 {
+            let (near, far) = if self.down[a] {
+                (n.hi[a], n.lo[a])
+            } else {
+                (n.lo[a], n.hi[a])
+            };
+            t_enter = t_enter.max((near - self.origin[a]) * self.inv_dir[a]);
+            t_exit = t_exit.min((far - self.origin[a]) * self.inv_dir[a]);
+        }
+        let t_exit = (t_exit * FAR_SCALE).min(Vec4::splat(t_max));
+        (t_enter, t_enter.cmple(t_exit).bitmask())
+    }
+}
+
+/// One pending child on the traversal stack: a node (`count == 0`) or a leaf's triangles.
+#[derive(Clone, Copy)]
+struct Pending {
+    index: u32,
+    count: u32,
+    t_enter: f32,
+}
+
+/// A BVH over triangles: the four-wide nodes, and the triangles copied into leaf order so that
+/// a leaf's triangles are adjacent in memory.
+#[derive(Debug, Clone)]
+pub struct BvhAccel {
+    /// The binary SAH tree the wide nodes were collapsed from (its `prims` map leaf order to
+    /// input order).
+    pub bvh: Bvh,
+    pub nodes: Vec<WideNode>,
+    /// `tris[prims[i]]` of the input, in leaf order.
+    pub tris: Vec<TriAccel>,
+}
+
+/// How far outside a triangle's box a hit it accepts can lie, relative to the box's largest
+/// extent: Möller-Trumbore's barycentric slack admits points up to `BARY_EPS + MAX_SLACK` (in
+/// barycentric units, along each of two edges) outside an edge. Triangle boxes are padded by
+/// this so that the BVH finds every hit the brute force finds (the grid's cell margin does the
+/// same).
+const BOX_PAD: f32 = 2.0 * (BARY_EPS + MAX_SLACK) * 1.1;
+
+impl BvhAccel {
+    pub fn build(tris: &[TriAccel]) -> BvhAccel {
+        let boxes: Vec<Aabb> = tris
+            .iter()
+            .map(|t| {
+                let b = Aabb::from_points(&t.vertices());
+                // Padding relative to the size, plus a few ulps of the coordinates (rebuilding
+                // v1, v2 from v0 + e rounds).
+                let pad = BOX_PAD * b.extent().max_element()
+                    + 4.0 * f32::EPSILON * b.min.abs().max(b.max.abs()).max_element();
+                Aabb {
+                    min: b.min - pad,
+                    max: b.max + pad,
+                }
+            })
+            .collect();
+        let centers: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
+        let bvh = Bvh::build(&boxes, &centers);
+        let nodes = collapse(&bvh);
+        let tris = bvh.prims.iter().map(|&i| tris[i as usize]).collect();
+        BvhAccel { bvh, nodes, tris }
+    }
+
+    /// Closest hit with `t_min < t < t_max`; `tri` indexes the triangles given to `build`.
+    /// `counters.cell()` counts nodes visited.
+    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
+        let mut w = Walk::new(ray, t_min, t_max);
+        while !w.step::<false, C>(self, counters) {}
+        self.result(&w)
+    }
+
+    /// Any hit with `t_min < t < t_max`.
+    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
+        let mut w = Walk::new(ray, t_min, t_max);
+        while !w.step::<true, C>(self, counters) {}
+        w.best.is_hit()
+    }
+
+    /// Closest hits of a batch of rays, `out[i]` for `rays[i]`: the same answers as `intersect`,
+    /// faster. Incoherent rays spend most of their time waiting for nodes and triangles to come
+    /// from memory, one dependent load after another. Here `LANES` rays are traced at once,
+    /// one step each in turn, and each step prefetches what its ray touches next: by the time
+    /// that ray's turn comes again its data has arrived.
+    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
+        self.interleaved::<false>(rays, t_min, t_max, |i, w| out[i] = self.result(w));
+    }
+
+    /// Any-hit results of a batch of rays (interleaved like `intersect_batch`).
+    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
+        self.interleaved::<true>(rays, t_min, t_max, |i, w| out[i] = w.best.is_hit());
+    }
+
+    fn interleaved<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, mut finish: impl FnMut(usize, &Walk)) {
+        // The walks are reset in place for each new ray: a walk holds a few KiB of stack, which
+        // is never copied.
+        let idle = Ray::new(Vec3::ZERO, Vec3::X);
+        let mut walks: [Walk; LANES] = std::array::from_fn(|_| Walk::new(&idle, t_min, t_max));
+        let mut ray_of = [usize::MAX; LANES];
+        let mut next = 0;
+        let mut active = 0;
+        for (w, i) in walks.iter_mut().zip(&mut ray_of) {
+            if next < rays.len() {
+                w.reset(&rays[next], t_min, t_max);
+                *i = next;
+                next += 1;
+                active += 1;
+            }
+        }
+        while active > 0 {
+            for (w, i) in walks.iter_mut().zip(&mut ray_of) {
+                if *i == usize::MAX {
+                    continue;
+                }
+                if w.step::<ANY, _>(self, &mut super::NoCounters) {
+                    finish(*i, w);
+                    if next < rays.len() {
+                        w.reset(&rays[next], t_min, t_max);
+                        *i = next;
+                        next += 1;
+                    } else {
+                        *i = usize::MAX;
+                        active -= 1;
+                        continue;
+                    }
+                }
+                self.prefetch(&w.current);
+            }
+        }
+    }
+
+    /// Asks for the memory of a pending node or leaf ahead of its use.
+    #[inline(always)]
+    fn prefetch(&self, p: &Pending) {
+        if p.count == 0 {
+            let n = &self.nodes[p.index as usize] as *const WideNode as *const i8;
+            prefetch(n);
+            prefetch(n.wrapping_add(64));
+        } else {
+            let t = self.tris[p.index as usize..].as_ptr() as *const i8;
+            prefetch(t);
+            // A leaf of up to 8 triangles of 36 bytes spans at most 5 cache lines; the first
+            // two cover most leaves (1-3 triangles).
+            prefetch(t.wrapping_add(64));
+        }
+    }
+
+    fn result(&self, w: &Walk) -> Hit {
+        if w.best.is_hit() {
+            Hit {
+                tri: self.bvh.prims[w.best.tri as usize],
+                ..w.best
+            }
+        } else {
+            Hit::MISS
+        }
+    }
+
+    /// Bytes of the nodes, the leaf-ordered triangles and the index map.
+    pub fn memory(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.tris.as_slice())
+            + std::mem::size_of_val(self.bvh.prims.as_slice())
+    }
+}
+
+/// Rays traced at once by the batch queries (enough in flight to cover memory latency; more
+/// only adds bookkeeping).
+const LANES: usize = 8;
+
+#[inline(always)]
+fn prefetch(p: *const i8) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is only a hint; it never faults, whatever the address.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p)
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+/// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
+/// interleave rays).
+struct Walk {
+    origin: Vec3,
+    dir: Vec3,
+    r: BoxRay,
+    t_min: f32,
+    /// Closest hit so far (or `t_max`): triangles are tested up to it.
+    t_far: f32,
+    /// Boxes are searched up to this (`t_far * T_SLOP`).
+    t_box: f32,
+    /// The closest hit so far; `tri` in leaf order.
+    best: Hit,
+    /// A node pushes at most WIDTH - 1 entries and the tree is less than STACK levels deep.
+    /// Left uninitialised: entries below `sp` are always written before they are read.
+    stack: [MaybeUninit<Pending>; (WIDTH - 1) * STACK],
+    sp: usize,
+    /// The node or leaf the next step visits.
+    current: Pending,
+}
+
+impl Walk {
+    /// Starts `ray` over, keeping the (uninitialised) stack where it is.
+    #[inline(always)]
+    fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
+        self.origin = ray.origin;
+        self.dir = ray.dir;
+        self.r = BoxRay::new(ray);
+        self.t_min = t_min;
+        self.t_far = t_max;
+        self.t_box = t_max * T_SLOP;
+        self.best = Hit { t: t_max, ..Hit::MISS };
+        self.sp = 0;
+        self.current = Pending {
+            index: 0,
+            count: 0,
+            t_enter: t_min,
+        };
+    }
+
+    fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
+        Walk {
+            origin: ray.origin,
+            dir: ray.dir,
+            r: BoxRay::new(ray),
+            t_min,
+            t_far: t_max,
+            t_box: t_max * T_SLOP,
+            best: Hit { t: t_max, ..Hit::MISS },
+            stack: [const { MaybeUninit::uninit() }; (WIDTH - 1) * STACK],
+            sp: 0,
+            current: Pending {
+                index: 0,
+                count: 0,
+                t_enter: t_min,
+            },
+        }
+    }
+
+    /// Visits `current` (a leaf's triangles, or a node's four boxes) and picks what comes next.
+    /// Returns true when the ray is done: nothing left that could hold a (closer) hit, or, for
+    /// `ANY`, a hit found.
+    #[inline(always)]
+    fn step<const ANY: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
+        let cur = self.current;
+        if cur.count > 0 {
+            let start = cur.index as usize;
+            for i in start..start + cur.count as usize {
+                counters.tri_test();
+                if let Some(h) = accel.tris[i].intersect(self.origin, self.dir, self.t_min, self.t_far) {
+                    self.best = Hit {
+                        t: h.t,
+                        tri: i as u32,
+                        u: h.u,
+                        v: h.v,
+                    };
+                    if ANY {
+                        return true;
+                    }
+                    self.t_far = h.t;
+                    // The hit's input index is looked up when the ray is done.
+                    prefetch(&accel.bvh.prims[i] as *const u32 as *const i8);
+                }
+            }
+            self.t_box = self.t_far * T_SLOP;
+        } else {
+            counters.cell();
+            let n = &accel.nodes[cur.index as usize];
+            let (t_enter, mut mask) = self.r.enter(n, self.t_min, self.t_box);
+            if mask != 0 {
+                let t = t_enter.to_array();
+                // Nearest child next; the others onto the stack, sorted, nearest on top.
+                let mut first = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let base = self.sp;
+                while mask != 0 {
+                    let mut k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if t[k] < t[first] {
+                        std::mem::swap(&mut k, &mut first);
+                    }
+                    let item = Pending {
+                        index: n.child[k],
+                        count: n.count[k],
+                        t_enter: t[k],
+                    };
+                    let mut j = self.sp;
+                    // SAFETY: entries base..sp were written by this loop.
+                    while j > base && unsafe { self.stack[j - 1].assume_init_ref() }.t_enter < item.t_enter {
+                        self.stack[j] = self.stack[j - 1];
+                        j -= 1;
+                    }
+                    self.stack[j] = MaybeUninit::new(item);
+                    self.sp += 1;
+                }
+                self.current = Pending {
+                    index: n.child[first],
+                    count: n.count[first],
+                    t_enter: t[first],
+                };
+                return false;
+            }
+        }
+        // Pop the nearest pending entry that can still hold a closer hit.
+        while self.sp > 0 {
+            self.sp -= 1;
+            // SAFETY: entries below `sp` were written by a push.
+            let p = unsafe { self.stack[self.sp].assume_init() };
+            if p.t_enter <= self.t_box {
+                self.current = p;
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// Collapses the binary tree into four-wide nodes: each wide node takes a binary node's
+/// children and keeps opening the child with the largest surface area (the one a ray is most
+/// likely to enter) until it has four.
+fn collapse(bvh: &Bvh) -> Vec<WideNode> {
+    let bin = &bvh.nodes;
+    let mut nodes = vec![WideNode::EMPTY];
+    if bvh.prims.is_empty() {
+        // No primitives: a root with four empty slots, which no ray enters.
+        return nodes;
+    }
+    let area = |i: usize| {
+        half_area(&Aabb {
+            min: bin[i].min.into(),
+            max: bin[i].max.into(),
+        })
+    };
+    // (wide node to fill, binary node it stands for)
+    let mut work = vec![(0usize, 0usize)];
+    while let Some((wide, b)) = work.pop() {
+        let mut kids: Vec<usize> = if bin[b].is_leaf() {
+            vec![b]
+        } else {
+            vec![bin[b].first as usize, bin[b].first as usize + 1]
+        };
+        while kids.len() < WIDTH {
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|&(_, &k)| !bin[k].is_leaf())
+                .max_by(|a, b| area(*a.1).total_cmp(&area(*b.1)));
+            let Some((pos, &k)) = open else { break };
+            kids.swap_remove(pos);
+            kids.push(bin[k].first as usize);
+            kids.push(bin[k].first as usize + 1);
+        }
+        for (slot, &k) in kids.iter().enumerate() {
+            let n = &bin[k];
+            for a in 0..3 {
+                nodes[wide].lo[a][slot] = n.min[a];
+                nodes[wide].hi[a][slot] = n.max[a];
+            }
+            if n.is_leaf() {
+                nodes[wide].child[slot] = n.first;
+                nodes[wide].count[slot] = n.count;
+            } else {
+                let w = nodes.len();
+                nodes.push(WideNode::EMPTY);
+                nodes[wide].child[slot] = w as u32;
+                nodes[wide].count[slot] = 0;
+                work.push((w, k));
+            }
+        }
+    }
+    nodes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_is_bounded_for_exponentially_spaced_boxes() {
+        // Centres at 2^-k: every SAH split peels off one box, the worst case for depth.
+        let centers: Vec<Vec3> = (0..2000)
+            .map(|k| Vec3::splat(0.5f32.powi(k % 120) * (1 + k / 120) as f32))
+            .collect();
+        let boxes: Vec<Aabb> = centers.iter().map(|&c| Aabb { min: c, max: c }).collect();
+        let bvh = Bvh::build(&boxes, &centers);
+        assert!(bvh.depth < STACK, "depth {} >= stack {STACK}", bvh.depth);
+        let mut seen = bvh.prims.clone();
+        seen.sort();
+        assert_eq!(
+            seen,
+            (0..2000).collect::<Vec<u32>>(),
+            "every primitive in exactly one leaf"
+        );
+    }
+
+    #[test]
+    fn leaves_cover_their_primitives() {
+        let centers: Vec<Vec3> = (0..500)
+            .map(|i| Vec3::new((i * 37 % 101) as f32, (i * 17 % 53) as f32, i as f32 * 0.1))
+            .collect();
+        let boxes: Vec<Aabb> = centers
+            .iter()
+            .map(|&c| Aabb {
+                min: c - 0.5,
+                max: c + 0.5,
+            })
+            .collect();
+        let bvh = Bvh::build(&boxes, &centers);
+        for n in &bvh.nodes {
+            let b = Aabb {
+                min: n.min.into(),
+                max: n.max.into(),
+            };
+            let contains = |o: &Aabb| b.min.cmple(o.min).all() && b.max.cmpge(o.max).all();
+            if n.is_leaf() {
+                assert!(n.count as usize <= MAX_LEAF);
+                for &p in &bvh.prims[n.first as usize..(n.first + n.count) as usize] {
+                    assert!(contains(&boxes[p as usize]));
+                }
+            } else {
+                for c in [n.first, n.first + 1] {
+                    let cn = &bvh.nodes[c as usize];
+                    assert!(contains(&Aabb {
+                        min: cn.min.into(),
+                        max: cn.max.into()
+                    }));
+                }
+            }
+        }
+    }
+}
