@@ -78,6 +78,34 @@ fn render_from_mesh_file_and_scene_file() {
     assert!(text.contains("grid 4x4x4"), "{text}");
 }
 
+/// The BVH renders on the CPU; `auto` picks the CPU for it and `gpu` is a clear error.
+#[test]
+fn bvh_renders_on_the_cpu_only() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-cli-bvh-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("bvh.png");
+    let args = |backend| {
+        [
+            "render",
+            "--scene",
+            "knot-box",
+            "--accel",
+            "bvh",
+            "--res",
+            "32",
+            "--backend",
+            backend,
+            "-o",
+            png.to_str().unwrap(),
+        ]
+    };
+    let (ok, text) = gridtrace(&args("auto"));
+    assert!(ok, "{text}");
+    assert!(text.contains("CPU only") && png.exists(), "{text}");
+    let (ok, text) = gridtrace(&args("gpu"));
+    assert!(!ok && text.contains("bvh acceleration runs on the CPU only"), "{text}");
+}
+
 #[test]
 fn info_prints_grid_and_memory() {
     let (ok, text) = gridtrace(&["info", "--scene", "knot-box", "--grid", "16"]);

@@ -75,7 +75,7 @@ def brute_force(vertices, faces, o, d):
     return best, tri, margin, gap
 
 
-@pytest.mark.parametrize("accel", ["grid", "pc"])
+@pytest.mark.parametrize("accel", ["grid", "pc", "bvh"])
 def test_closest_hits_equal_brute_force(accel):
     vertices, faces = sphere_soup()
     mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
@@ -101,9 +101,10 @@ def test_closest_hits_equal_brute_force(accel):
     assert (hits.tri[miss] == gridtrace.MISS).all() and (hits.normal[miss] == 0).all()
 
 
-def test_occlusion_agrees_with_closest_hit():
+@pytest.mark.parametrize("accel", ["grid", "bvh"])
+def test_occlusion_agrees_with_closest_hit(accel):
     vertices, faces = sphere_soup(seed=5)
-    mesh = gridtrace.Mesh(vertices, faces, backend="cpu")
+    mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
     o, d = random_rays(5000, seed=6)
     hits = mesh.intersect(o, d)
     hit = np.isfinite(hits.t)
@@ -235,3 +236,17 @@ def test_releases_the_gil():
     done.set()
     t.join()
     assert during > 1000, f"the other thread ran only {during} iterations while the query ran"
+
+
+def test_bvh_equals_grid_and_is_cpu_only():
+    vertices, faces = sphere_soup(seed=13)
+    o, d = random_rays(20000, seed=14)
+    g = gridtrace.Mesh(vertices, faces, accel="grid", backend="cpu").intersect(o, d)
+    b = gridtrace.Mesh(vertices, faces, accel="bvh", backend="auto")
+    assert "cpu" in b.device()  # auto means the CPU for the BVH, GPU or not
+    h = b.intersect(o, d)
+    np.testing.assert_array_equal(np.isfinite(h.t), np.isfinite(g.t))
+    # Same closest t; the triangle may differ only at an exact tie (a shared edge).
+    np.testing.assert_allclose(h.t[np.isfinite(g.t)], g.t[np.isfinite(g.t)], rtol=1e-6)
+    with pytest.raises(ValueError, match="bvh.*CPU only"):
+        gridtrace.Mesh(vertices, faces, accel="bvh", backend="gpu")

@@ -94,9 +94,9 @@ fn comparison_detects_differences() {
     assert!(compare_rgb8(&a, &c).is_err(), "mean difference 1 exceeds 0.5");
 }
 
-/// Proximity clouds change speed, never pictures.
+/// Proximity clouds and the BVH change speed, never pictures.
 #[test]
-fn pc_renders_the_same_image() {
+fn pc_and_bvh_render_the_same_image() {
     let prepared = builtin::scene("mirror-spheres")
         .unwrap()
         .prepare(Resolution::default())
@@ -107,7 +107,9 @@ fn pc_renders_the_same_image() {
         (img.to_rgb8(), stats.rays)
     };
     let (g, rg) = render(AccelKind::Grid);
-    let (p, rp) = render(AccelKind::ProximityCloud);
-    assert_eq!(rg, rp);
-    compare_rgb8(&p, &g).unwrap();
+    for accel in [AccelKind::ProximityCloud, AccelKind::Bvh] {
+        let (p, rp) = render(accel);
+        assert_eq!(rg, rp, "{}: ray counts", accel.name());
+        compare_rgb8(&p, &g).unwrap_or_else(|e| panic!("{}: {e}", accel.name()));
+    }
 }
