@@ -185,11 +185,15 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let prepared = scene.prepare(opts.grid)?;
-        if opts.accel == AccelKind::Bvh {
-            // Built now, so that the first query does not pay for it.
-            prepared.accel.bvh();
-        }
+        let prepared = if opts.accel == AccelKind::Bvh {
+            // The grid is not used: one cell is the cheapest to build. The BVH is built now, so
+            // that the first query does not pay for it.
+            let p = scene.prepare(Resolution::Fixed([1, 1, 1]))?;
+            p.accel.bvh();
+            p
+        } else {
+            scene.prepare(opts.grid)?
+        };
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let mesh = TraceMesh {
             scene: prepared,

@@ -8,7 +8,9 @@
 //! stack. The builder takes boxes and centres only, so it knows nothing of triangles.
 
 use bytemuck::{Pod, Zeroable};
+use rayon::prelude::*;
 use std::mem::MaybeUninit;
+use std::ops::Range;
 
 use glam::{Vec3, Vec4};
 
@@ -62,48 +64,110 @@ pub struct Bvh {
 impl Bvh {
     /// Builds over primitives with the given boxes and centres (any point inside the box serves;
     /// the centroid gives the best trees). An empty input gives a single empty leaf.
+    ///
+    /// The top of the tree is built on one thread until it has split the primitives into
+    /// subtrees of at most `n / 64` (and at least 4,096); those are then built in parallel and
+    /// stitched in. The tree is the same whatever the thread count.
     pub fn build(boxes: &[Aabb], centers: &[Vec3]) -> Bvh {
         assert_eq!(boxes.len(), centers.len(), "one centre per box");
         let n = boxes.len();
         let mut prims: Vec<u32> = (0..n as u32).collect();
-        let mut nodes = Vec::with_capacity((2 * n).max(1));
-        nodes.push(BvhNode::zeroed());
-        let mut depth = 0;
-        // Explicit work list instead of recursion: the tree depth is bounded (SAH_DEPTH + 32),
-        // but a thread's stack should not have to be.
-        let mut work = vec![(0usize, 0..n, 0usize)];
-        while let Some((node, range, level)) = work.pop() {
-            depth = depth.max(level);
-            let bounds = range
-                .clone()
-                .fold(Aabb::EMPTY, |b, i| b.union(boxes[prims[i] as usize]));
-            nodes[node].min = bounds.min.to_array();
-            nodes[node].max = bounds.max.to_array();
-            let split = if range.len() <= 1 {
-                None
-            } else if level < SAH_DEPTH {
-                sah_split(&mut prims[range.clone()], boxes, centers, bounds)
-            } else {
-                median_split(&mut prims[range.clone()], centers)
+        let defer = (n / 64).max(4096);
+        let (mut nodes, mut depth, mut deferred) = build_range(&mut prims, 0, boxes, centers, 0, defer);
+        // Hand each deferred subtree its own disjoint part of `prims`.
+        deferred.sort_by_key(|d| d.1.start);
+        let mut jobs = Vec::with_capacity(deferred.len());
+        let mut rest = prims.as_mut_slice();
+        let mut consumed = 0;
+        for (node, range, level) in deferred {
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(range.start - consumed);
+            let (mine, tail) = tail.split_at_mut(range.len());
+            rest = tail;
+            consumed = range.end;
+            jobs.push((node, range.start, level, mine));
+        }
+        let subtrees: Vec<(usize, Vec<BvhNode>, usize)> = jobs
+            .into_par_iter()
+            .map(|(node, start, level, part)| {
+                let (sub, d, _) = build_range(part, start, boxes, centers, level, 0);
+                (node, sub, d)
+            })
+            .collect();
+        for (node, sub, d) in subtrees {
+            depth = depth.max(d);
+            // The subtree's node i >= 1 goes to base + i - 1; its root replaces the placeholder.
+            let base = nodes.len();
+            let remap = |mut x: BvhNode| {
+                if !x.is_leaf() {
+                    x.first = (base + x.first as usize - 1) as u32;
+                }
+                x
             };
-            match split {
-                Some(mid) => {
-                    let left = nodes.len();
-                    nodes.push(BvhNode::zeroed());
-                    nodes.push(BvhNode::zeroed());
-                    nodes[node].first = left as u32;
-                    nodes[node].count = 0;
-                    work.push((left + 1, range.start + mid..range.end, level + 1));
-                    work.push((left, range.start..range.start + mid, level + 1));
-                }
-                None => {
-                    nodes[node].first = range.start as u32;
-                    nodes[node].count = range.len() as u32;
-                }
-            }
+            nodes[node] = remap(sub[0]);
+            nodes.extend(sub[1..].iter().map(|&x| remap(x)));
         }
         Bvh { nodes, prims, depth }
     }
+}
+
+/// A subtree still to build: (its placeholder node, its range of `prims`, its depth).
+type Deferred = (usize, Range<usize>, usize);
+
+/// Builds the tree over `prims` (which sit at `offset` in the whole primitive order) with its
+/// root at depth `level`; ranges of at most `defer` primitives (if `defer > 0`) are left as
+/// placeholder nodes and returned. Returns the nodes (root first), the depth reached and the
+/// deferred ranges (relative to the whole order).
+fn build_range(
+    prims: &mut [u32],
+    offset: usize,
+    boxes: &[Aabb],
+    centers: &[Vec3],
+    level: usize,
+    defer: usize,
+) -> (Vec<BvhNode>, usize, Vec<Deferred>) {
+    let n = prims.len();
+    let mut nodes = Vec::with_capacity((2 * n).max(1));
+    nodes.push(BvhNode::zeroed());
+    let mut depth = level;
+    let mut deferred = Vec::new();
+    // Explicit work list instead of recursion: the tree depth is bounded (SAH_DEPTH + 32), but
+    // a thread's stack should not have to be.
+    let mut work = vec![(0usize, 0..n, level)];
+    while let Some((node, range, level)) = work.pop() {
+        if defer > 0 && range.len() <= defer && node != 0 {
+            deferred.push((node, offset + range.start..offset + range.end, level));
+            continue;
+        }
+        depth = depth.max(level);
+        let bounds = range
+            .clone()
+            .fold(Aabb::EMPTY, |b, i| b.union(boxes[prims[i] as usize]));
+        nodes[node].min = bounds.min.to_array();
+        nodes[node].max = bounds.max.to_array();
+        let split = if range.len() <= 1 {
+            None
+        } else if level < SAH_DEPTH {
+            sah_split(&mut prims[range.clone()], boxes, centers, bounds)
+        } else {
+            median_split(&mut prims[range.clone()], centers)
+        };
+        match split {
+            Some(mid) => {
+                let left = nodes.len();
+                nodes.push(BvhNode::zeroed());
+                nodes.push(BvhNode::zeroed());
+                nodes[node].first = left as u32;
+                nodes[node].count = 0;
+                work.push((left + 1, range.start + mid..range.end, level + 1));
+                work.push((left, range.start..range.start + mid, level + 1));
+            }
+            None => {
+                nodes[node].first = (offset + range.start) as u32;
+                nodes[node].count = range.len() as u32;
+            }
+        }
+    }
+    (nodes, depth, deferred)
 }
 
 fn half_area(b: &Aabb) -> f32 {
@@ -312,7 +376,7 @@ const BOX_PAD: f32 = 2.0 * (BARY_EPS + MAX_SLACK) * 1.1;
 impl BvhAccel {
     pub fn build(tris: &[TriAccel]) -> BvhAccel {
         let boxes: Vec<Aabb> = tris
-            .iter()
+            .par_iter()
             .map(|t| {
                 let b = Aabb::from_points(&t.vertices());
                 // Padding relative to the size, plus a few ulps of the coordinates (rebuilding
@@ -325,10 +389,10 @@ impl BvhAccel {
                 }
             })
             .collect();
-        let centers: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
+        let centers: Vec<Vec3> = boxes.par_iter().map(Aabb::center).collect();
         let bvh = Bvh::build(&boxes, &centers);
         let nodes = collapse(&bvh);
-        let tris = bvh.prims.iter().map(|&i| tris[i as usize]).collect();
+        let tris = bvh.prims.par_iter().map(|&i| tris[i as usize]).collect();
         BvhAccel { bvh, nodes, tris }
     }
 
@@ -664,39 +728,50 @@ mod tests {
         );
     }
 
+    /// Every primitive in exactly one leaf, inside its leaf's box; every child box inside its
+    /// parent's. 20,000 boxes exercise the parallel subtrees (deferred below 4,096).
     #[test]
     fn leaves_cover_their_primitives() {
-        let centers: Vec<Vec3> = (0..500)
-            .map(|i| Vec3::new((i * 37 % 101) as f32, (i * 17 % 53) as f32, i as f32 * 0.1))
-            .collect();
-        let boxes: Vec<Aabb> = centers
-            .iter()
-            .map(|&c| Aabb {
-                min: c - 0.5,
-                max: c + 0.5,
-            })
-            .collect();
-        let bvh = Bvh::build(&boxes, &centers);
-        for n in &bvh.nodes {
-            let b = Aabb {
-                min: n.min.into(),
-                max: n.max.into(),
-            };
-            let contains = |o: &Aabb| b.min.cmple(o.min).all() && b.max.cmpge(o.max).all();
-            if n.is_leaf() {
-                assert!(n.count as usize <= MAX_LEAF);
-                for &p in &bvh.prims[n.first as usize..(n.first + n.count) as usize] {
-                    assert!(contains(&boxes[p as usize]));
-                }
-            } else {
-                for c in [n.first, n.first + 1] {
-                    let cn = &bvh.nodes[c as usize];
-                    assert!(contains(&Aabb {
-                        min: cn.min.into(),
-                        max: cn.max.into()
-                    }));
+        for n in [500u32, 20_000] {
+            let centers: Vec<Vec3> = (0..n)
+                .map(|i| Vec3::new((i * 37 % 101) as f32, (i * 17 % 53) as f32, i as f32 * 0.1))
+                .collect();
+            let boxes: Vec<Aabb> = centers
+                .iter()
+                .map(|&c| Aabb {
+                    min: c - 0.5,
+                    max: c + 0.5,
+                })
+                .collect();
+            let bvh = Bvh::build(&boxes, &centers);
+            let mut seen = vec![0u32; n as usize];
+            // Walk from the root so that every reachable node is checked.
+            let mut stack = vec![0usize];
+            while let Some(i) = stack.pop() {
+                let node = &bvh.nodes[i];
+                let b = Aabb {
+                    min: node.min.into(),
+                    max: node.max.into(),
+                };
+                let contains = |o: &Aabb| b.min.cmple(o.min).all() && b.max.cmpge(o.max).all();
+                if node.is_leaf() {
+                    assert!(node.count as usize <= MAX_LEAF);
+                    for &p in &bvh.prims[node.first as usize..(node.first + node.count) as usize] {
+                        assert!(contains(&boxes[p as usize]));
+                        seen[p as usize] += 1;
+                    }
+                } else {
+                    for c in [node.first as usize, node.first as usize + 1] {
+                        let cn = &bvh.nodes[c];
+                        assert!(contains(&Aabb {
+                            min: cn.min.into(),
+                            max: cn.max.into()
+                        }));
+                        stack.push(c);
+                    }
                 }
             }
+            assert!(seen.iter().all(|&k| k == 1), "n = {n}: every primitive exactly once");
         }
     }
 }
