@@ -4,6 +4,7 @@
 //! are either on a coarse lattice (exact ties with cell boundaries) or arbitrary finite floats.
 #![no_main]
 use glam::Vec3;
+use gridtrace::accel::triangle::MAX_SLACK;
 use gridtrace::accel::{AccelKind, Grid, GridAccel, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect};
 use libfuzzer_sys::fuzz_target;
 
@@ -77,6 +78,10 @@ fn run(b: &mut Bytes) -> Option<()> {
         }
         let r = Ray::new(o, d);
         let want = brute_force_intersect(&accel.tris, &r, 0.0, f32::INFINITY);
+        if want.is_hit() && accel.tris[want.tri as usize].barycentric_error_bound(r.origin, r.dir) > MAX_SLACK {
+            // Möller-Trumbore's answer is rounding noise here (see docs/robustness.md).
+            continue;
+        }
         for kind in AccelKind::ALL {
             let got = accel.intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
             assert_eq!(got.is_hit(), want.is_hit(), "{kind:?} {r:?}: got {got:?} want {want:?}");

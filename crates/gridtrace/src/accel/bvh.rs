@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
-use glam::{Vec3, Vec4};
+use glam::{BVec4A, Vec3, Vec4};
 
 use super::traverse::{Counters, Hit, Ray};
 use super::triangle::{BARY_EPS, MAX_SLACK};
@@ -295,8 +295,9 @@ struct BoxRay {
     /// `0 * inf = NaN`, and a box the ray runs beside (parallel, outside the slab) gets an entry
     /// distance beyond 1e20, which the other axes' finite interval always excludes.
     inv_dir: [Vec4; 3],
-    /// Per axis: whether the ray goes down it, so the box's `hi` plane is the near one.
-    down: [bool; 3],
+    /// Per axis: whether the ray goes down it, so the box's `hi` plane is the near one (all
+    /// lanes alike: a select, not a branch, which rays interleaved in a batch would mispredict).
+    down: [BVec4A; 3],
 }
 
 /// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
@@ -321,7 +322,7 @@ impl BoxRay {
         BoxRay {
             origin: o.map(Vec4::splat),
             inv_dir: d.map(|x| Vec4::splat(1.0 / x)),
-            down: d.map(|x| x < 0.0),
+            down: d.map(|x| BVec4A::splat(x < 0.0)),
         }
     }
 
@@ -333,11 +334,8 @@ impl BoxRay {
         let mut t_enter = Vec4::splat(t_min);
         let mut t_exit = Vec4::splat(f32::INFINITY);
         for a in 0..3 {
-            let (near, far) = if self.down[a] {
-                (n.hi[a], n.lo[a])
-            } else {
-                (n.lo[a], n.hi[a])
-            };
+            let near = Vec4::select(self.down[a], n.hi[a], n.lo[a]);
+            let far = Vec4::select(self.down[a], n.lo[a], n.hi[a]);
             t_enter = t_enter.max((near - self.origin[a]) * self.inv_dir[a]);
             t_exit = t_exit.min((far - self.origin[a]) * self.inv_dir[a]);
         }

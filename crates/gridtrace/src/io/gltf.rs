@@ -52,12 +52,50 @@ pub(crate) fn parse_with_base(data: &[u8], path: &Path, base: Option<&Path>) -> 
     let ::gltf::Gltf { document, blob } = catch_unwind(AssertUnwindSafe(|| ::gltf::Gltf::from_slice(data)))
         .map_err(|_| Error::parse(path, Location::Whole, "glTF: malformed document (index out of range)"))?
         .map_err(wrap)?;
-    let buffers = ::gltf::import_buffers(&document, base, blob).map_err(wrap)?;
+    // gltf 1.4.1 unwraps the percent-decoding of a relative buffer URI (import.rs:50): a URI
+    // whose escapes decode to invalid UTF-8 panics (found by fuzzing). Checked here first, for a
+    // precise error; the catch_unwind is the backstop for anything else in the import.
+    for b in document.buffers() {
+        if let ::gltf::buffer::Source::Uri(uri) = b.source()
+            && !uri.starts_with("data:")
+            && !percent_decodes_to_utf8(uri)
+        {
+            return Err(Error::parse(
+                path,
+                Location::Whole,
+                format!("glTF: buffer {}: URI is not valid percent-encoded UTF-8", b.index()),
+            ));
+        }
+    }
+    let buffers = catch_unwind(AssertUnwindSafe(|| ::gltf::import_buffers(&document, base, blob)))
+        .map_err(|_| Error::parse(path, Location::Whole, "glTF: malformed buffer"))?
+        .map_err(wrap)?;
     // The crate's accessor readers index and do arithmetic on file-provided offsets and counts;
     // a panic there must become an error, not take the program down.
     let mesh = catch_unwind(AssertUnwindSafe(|| build(&document, &buffers, path)))
         .unwrap_or_else(|_| Err(Error::parse(path, Location::Whole, "glTF: malformed accessor data")))?;
     finish(mesh, path)
+}
+
+/// Whether the `%XX` escapes of `uri` decode to valid UTF-8 (a `%` not followed by two hex
+/// digits stays as it is, as the `urlencoding` crate does).
+fn percent_decodes_to_utf8(uri: &str) -> bool {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        if b[i] == b'%'
+            && let (Some(h), Some(l)) = (b.get(i + 1).and_then(|&c| hex(c)), b.get(i + 2).and_then(|&c| hex(c)))
+        {
+            out.push((h * 16 + l) as u8);
+            i += 3;
+            continue;
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    std::str::from_utf8(&out).is_ok()
 }
 
 fn build(doc: &::gltf::Document, buffers: &[::gltf::buffer::Data], path: &Path) -> Result<Mesh> {
