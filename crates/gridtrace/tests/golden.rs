@@ -70,7 +70,15 @@ fn golden_images() {
             let want =
                 image::open(&path).unwrap_or_else(|e| panic!("{}: {e} (bless with GRIDTRACE_BLESS=1)", path.display()));
             if let Err(e) = compare_rgb8(&rgb, want.to_rgb8().as_raw()) {
-                image::save_buffer(path.with_extension("png.new"), &rgb, SIZE, SIZE, image::ColorType::Rgb8).unwrap();
+                image::save_buffer_with_format(
+                    path.with_extension("png.new"),
+                    &rgb,
+                    SIZE,
+                    SIZE,
+                    image::ColorType::Rgb8,
+                    image::ImageFormat::Png,
+                )
+                .unwrap();
                 failures.push(format!("{name}: {e}"));
             }
         }

@@ -15,7 +15,7 @@ use std::ops::Range;
 use glam::{BVec4A, Vec3, Vec4};
 
 use super::traverse::{Counters, Hit, Ray};
-use super::triangle::{BARY_EPS, MAX_SLACK};
+use super::triangle::slack_pad;
 use super::{Aabb, TriAccel};
 
 /// One node: its box, and either its children (`count == 0`; the left child is `first`, the
@@ -364,23 +364,14 @@ pub struct BvhAccel {
     pub tris: Vec<TriAccel>,
 }
 
-/// How far outside a triangle's box a hit it accepts can lie, relative to the box's largest
-/// extent: Möller-Trumbore's barycentric slack admits points up to `BARY_EPS + MAX_SLACK` (in
-/// barycentric units, along each of two edges) outside an edge. Triangle boxes are padded by
-/// this so that the BVH finds every hit the brute force finds (the grid's cell margin does the
-/// same).
-const BOX_PAD: f32 = 2.0 * (BARY_EPS + MAX_SLACK) * 1.1;
-
 impl BvhAccel {
     pub fn build(tris: &[TriAccel]) -> BvhAccel {
         let boxes: Vec<Aabb> = tris
             .par_iter()
             .map(|t| {
+                // Padded so that every hit the triangle test accepts lies inside (`SLACK_PAD`).
                 let b = Aabb::from_points(&t.vertices());
-                // Padding relative to the size, plus a few ulps of the coordinates (rebuilding
-                // v1, v2 from v0 + e rounds).
-                let pad = BOX_PAD * b.extent().max_element()
-                    + 4.0 * f32::EPSILON * b.min.abs().max(b.max.abs()).max_element();
+                let pad = slack_pad(b.min, b.max);
                 Aabb {
                     min: b.min - pad,
                     max: b.max + pad,

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use super::proximity::chebyshev_distance_transform;
 use super::tri_box::triangle_overlaps_box;
+use super::triangle::slack_pad;
 use super::{Aabb, TriAccel};
 use crate::{Error, Result};
 
@@ -116,9 +117,13 @@ impl Grid {
     /// Builds the grid over the given triangles. An empty triangle list gives a 1x1x1 empty grid.
     pub fn build(tris: &[TriAccel], resolution: Resolution) -> Result<Grid> {
         let t0 = Instant::now();
+        // The bounds hold every triangle's slack-padded box: a hit the triangle test accepts a
+        // hair outside a large triangle can lie outside the vertices' bounds (`SLACK_PAD`).
         let scene_bounds = tris.iter().fold(Aabb::EMPTY, |b, t| {
             let [a, bb, c] = t.vertices();
-            b.grow(a).grow(bb).grow(c)
+            let (lo, hi) = (a.min(bb).min(c), a.max(bb).max(c));
+            let pad = slack_pad(lo, hi);
+            b.grow(lo - pad).grow(hi + pad)
         });
         let scene_bounds = if scene_bounds.is_empty() {
             Aabb {
@@ -159,8 +164,11 @@ impl Grid {
             .enumerate()
             .fold(Vec::new, |mut out, (i, tri)| {
                 let [a, b, c] = tri.vertices();
-                let lo = a.min(b).min(c) - margin;
-                let hi = a.max(b).max(c) + margin;
+                // At least the triangle test's own slack (large triangles), else the cell margin.
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
+                let lo = lo - margin;
+                let hi = hi + margin;
                 let clamp = |p: Vec3| {
                     ((p - bounds.min) * inv_cell_size)
                         .floor()

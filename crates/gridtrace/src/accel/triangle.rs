@@ -37,6 +37,19 @@ pub const SLACK_ULPS: f32 = 8.0;
 /// outside the triangle, where the grid (rightly) does not look.
 pub const MAX_SLACK: f32 = 1.0e-3;
 
+/// How far outside a triangle a hit `TriAccel::intersect` accepts can lie, per axis, relative
+/// to the triangle's largest box extent: the barycentric slack admits points up to
+/// `BARY_EPS + MAX_SLACK` outside an edge along each of the two edges, whose components along an
+/// axis are at most the box's extent there (10% spare). The grid's cell assignment and the BVH's
+/// boxes are padded by this much, so that they find every hit a brute-force test finds.
+pub const SLACK_PAD: f32 = 2.0 * (BARY_EPS + MAX_SLACK) * 1.1;
+
+/// Padding for a triangle's box (see `SLACK_PAD`): relative to its size, plus a few ulps of its
+/// coordinates (rebuilding `v1`, `v2` from `v0 + e` rounds).
+pub fn slack_pad(lo: Vec3, hi: Vec3) -> f32 {
+    SLACK_PAD * (hi - lo).max_element() + 4.0 * f32::EPSILON * lo.abs().max(hi.abs()).max_element()
+}
+
 #[inline(always)]
 fn l1(v: Vec3) -> f32 {
     v.x.abs() + v.y.abs() + v.z.abs()
