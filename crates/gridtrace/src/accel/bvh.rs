@@ -106,6 +106,9 @@ impl Bvh {
             nodes[node] = remap(sub[0]);
             nodes.extend(sub[1..].iter().map(|&x| remap(x)));
         }
+        // Room was reserved for the worst case (2n nodes); a tree with leaves of a few
+        // primitives has far fewer.
+        nodes.shrink_to_fit();
         Bvh { nodes, prims, depth }
     }
 }
@@ -608,6 +611,9 @@ impl Walk {
                         count: n.count[k],
                         t_enter: t[k],
                     };
+                    // Most pushed entries are visited later; asking for them now gives their
+                    // loads the most time.
+                    accel.prefetch(&item);
                     let mut j = self.sp;
                     // SAFETY: entries base..sp were written by this loop.
                     while j > base && unsafe { self.stack[j - 1].assume_init_ref() }.t_enter < item.t_enter {
