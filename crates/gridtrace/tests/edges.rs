@@ -43,15 +43,16 @@ pub fn meshes() -> Vec<(&'static str, gridtrace::Mesh, usize)> {
     v
 }
 
-pub fn prepared(mesh: gridtrace::Mesh) -> PreparedScene {
+/// The mesh alone, prepared, and `n` rays aimed at its shared edges and vertices (seeded, so the
+/// CPU and GPU tests see the same rays).
+fn scene_and_rays(mesh: gridtrace::Mesh, n: usize) -> (PreparedScene, Vec<AimedRay>) {
     let mut s = Scene::default();
     s.add_mesh(mesh, Mat4::IDENTITY, None);
     s.camera.eye = Vec3::new(0.0, 0.0, 10.0);
-    s.prepare(Resolution::default()).unwrap()
-}
-
-pub fn aimed(scene: &PreparedScene, positions: &[Vec3], n: usize, seed: u64) -> Vec<AimedRay> {
-    edge_aimed_rays(&scene.accel, positions, &scene.tri_vertices, n, seed)
+    let scene = s.prepare(Resolution::default()).unwrap();
+    // The scene's world-space positions, which `tri_vertices` index.
+    let rays = edge_aimed_rays(&scene.accel, &s.mesh.positions, &scene.tri_vertices, n, 0xED6E);
+    (scene, rays)
 }
 
 /// Leaking rays per mesh and accel kind, on the CPU.
@@ -59,15 +60,9 @@ fn cpu_leaks() -> (usize, Vec<String>) {
     let mut total = 0;
     let mut report = Vec::new();
     for (name, mesh, n) in meshes() {
-        let positions = {
-            let mut s = Scene::default();
-            s.add_mesh(mesh.clone(), Mat4::IDENTITY, None);
-            s.mesh.positions
-        };
-        let scene = prepared(mesh);
-        let rays = aimed(&scene, &positions, n, 0xED6E);
+        let (scene, rays) = scene_and_rays(mesh, n);
         total += rays.len();
-        for kind in [AccelKind::Grid, AccelKind::ProximityCloud, AccelKind::Bvh] {
+        for kind in AccelKind::ALL {
             let hits: Vec<Hit> = rays
                 .par_iter()
                 .map(|r| scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, kind, &mut NoCounters))
@@ -108,19 +103,13 @@ fn gpu_edges_and_vertices_do_not_leak() {
     }
     let mut total = 0;
     for (name, mesh, n) in meshes() {
-        let positions = {
-            let mut s = Scene::default();
-            s.add_mesh(mesh.clone(), Mat4::IDENTITY, None);
-            s.mesh.positions
-        };
-        let scene = prepared(mesh);
-        let rays = aimed(&scene, &positions, n, 0xED6E);
+        let (scene, rays) = scene_and_rays(mesh, n);
         total += rays.len();
         let ctx = gridtrace::gpu::GpuContext::new()
             .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
         let mut gpu = gridtrace::gpu::GpuRenderer::new(ctx, &scene).unwrap();
         let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
-        for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+        for kind in AccelKind::GPU {
             let hits = gpu.intersect(&plain, 0.0, f32::INFINITY, kind).unwrap();
             let bad = leaks(&rays, &hits);
             assert!(

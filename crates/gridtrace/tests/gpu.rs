@@ -55,7 +55,7 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
     let Some(mut gpu) = renderer(&scene) else { return };
     let accel = &scene.accel;
     let rays = ray_set(accel, 100_000, 77);
-    for kind in [AccelKind::Grid, AccelKind::ProximityCloud] {
+    for kind in AccelKind::GPU {
         let cpu_hits: Vec<Hit> = rays
             .iter()
             .map(|r| accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
@@ -133,7 +133,7 @@ fn images_match_cpu() {
         let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
         let Some(mut gpu) = renderer(&scene) else { return };
         for mode in Mode::ALL {
-            for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
+            for accel in AccelKind::GPU {
                 let opts = RenderOptions::new(160, 120, mode, accel);
                 let (ci, cs) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
                 let (gi, gs) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
