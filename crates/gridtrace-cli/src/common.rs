@@ -92,15 +92,11 @@ pub fn open_gpu(
     backend: Backend,
     accel: gridtrace::AccelKind,
 ) -> gridtrace::Result<Option<gridtrace::gpu::GpuContext>> {
-    if backend != Backend::Cpu && accel == gridtrace::AccelKind::Bvh {
-        gridtrace::gpu::check_accel(accel).or_else(|e| match backend {
-            Backend::Gpu => Err(e),
-            _ => Ok(()),
-        })?;
+    let resolved = backend.for_accel(accel)?;
+    if resolved != backend {
         eprintln!("note: the bvh acceleration runs on the CPU only; using the CPU");
-        return Ok(None);
     }
-    match backend {
+    match resolved {
         Backend::Cpu => Ok(None),
         Backend::Gpu => gridtrace::gpu::GpuContext::new().map(Some),
         Backend::Auto => match gridtrace::gpu::GpuContext::new() {

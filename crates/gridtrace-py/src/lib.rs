@@ -170,7 +170,7 @@ fn render<'py>(
     let mode: Mode = parse("mode", mode)?;
     let accel: AccelKind = parse("accel", accel)?;
     let grid: Resolution = parse("grid", grid)?;
-    let backend: Backend = parse("backend", backend)?;
+    let backend = parse::<Backend>("backend", backend)?.for_accel(accel).map_err(to_py)?;
     let scene_name = scene.to_string();
     let rgb = py
         .detach(move || -> gridtrace::Result<Vec<u8>> {
@@ -196,8 +196,6 @@ fn render<'py>(
             let gpu = match backend {
                 Backend::Cpu => None,
                 Backend::Gpu => Some(gridtrace::gpu::GpuContext::new()?),
-                // The BVH has no GPU kernels: auto means the CPU for it.
-                Backend::Auto if accel == AccelKind::Bvh => None,
                 Backend::Auto => gridtrace::gpu::GpuContext::new().ok(),
             };
             let image = match gpu {

@@ -60,6 +60,19 @@ impl std::str::FromStr for Backend {
     }
 }
 
+impl Backend {
+    /// The backend that runs `accel`. The BVH has no GPU kernels: `auto` means the CPU for it
+    /// and `gpu` is an error (`gpu::check_accel`). The one place that decides it, for queries,
+    /// the CLI and Python.
+    pub fn for_accel(self, accel: AccelKind) -> Result<Backend> {
+        match (self, accel) {
+            (Backend::Gpu, _) => crate::gpu::check_accel(accel).map(|_| Backend::Gpu),
+            (Backend::Auto, AccelKind::Bvh) => Ok(Backend::Cpu),
+            (b, _) => Ok(b),
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QueryOptions {
     pub accel: AccelKind,
@@ -217,15 +230,9 @@ impl TraceMesh {
     /// The GPU renderer for `backend`: `None` means the CPU. `Gpu` without an adapter is an
     /// error; `Auto` falls back to the CPU.
     fn renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
+        let backend = backend.for_accel(self.accel)?;
         if backend == Backend::Cpu {
             return Ok(None);
-        }
-        if self.accel == AccelKind::Bvh {
-            // No GPU kernels for the BVH: `auto` runs on the CPU, `gpu` is an error.
-            return match backend {
-                Backend::Gpu => crate::gpu::check_accel(self.accel).map(|_| None),
-                _ => Ok(None),
-            };
         }
         let opened = self.gpu.get_or_init(|| {
             let ctx = GpuContext::new().map_err(|e| e.to_string())?;
