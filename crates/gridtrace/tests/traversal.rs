@@ -2,6 +2,7 @@
 //! scene, for the plain grid, proximity clouds and the BVH; any-hit agrees with closest hit, and
 //! the batch queries agree with the per-ray ones.
 
+use glam::Vec3;
 use gridtrace::accel::{
     AccelKind, Grid, GridAccel, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
 };
@@ -74,6 +75,20 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         accel.intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
         let mut occ_batch = vec![false; rays.len()];
         accel.occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
+        // With normals (the BVH takes them from the triangle it hits): the same hits, and each
+        // normal the hit triangle's.
+        let mut with_normals = vec![Hit::MISS; rays.len()];
+        let mut normals = vec![Vec3::NAN; rays.len()];
+        accel.intersect_batch_normals(&rays, 0.0, f32::INFINITY, kind, &mut with_normals, &mut normals);
+        assert_eq!(with_normals, batch, "{name} {}: batch with normals", kind.name());
+        for (h, n) in batch.iter().zip(&normals) {
+            let want = if h.is_hit() {
+                accel.tris[h.tri as usize].normal()
+            } else {
+                Vec3::ZERO
+            };
+            assert_eq!(*n, want, "{name} {}: normal of {h:?}", kind.name());
+        }
         for (i, r) in rays.iter().enumerate() {
             assert_eq!(
                 batch[i],

@@ -6,7 +6,9 @@
 //! Built top-down as a binary tree with the binned surface area heuristic (Wald 2007; the
 //! builder takes boxes and centres only, so it knows nothing of triangles), then collapsed into
 //! four-wide nodes whose four box tests are one SIMD computation, traversed front to back with a
-//! fixed stack. Batches of rays are traced interleaved, with prefetching, to hide memory latency
+//! fixed stack. Leaves hold up to eight triangles, stored four to a block (`TriAccel4`) and
+//! tested a block at a time, as Embree's `Triangle4`; the SAH counts their cost in blocks.
+//! Batches of rays are traced interleaved, with prefetching, to hide memory latency
 //! (docs/design.md).
 
 use bytemuck::{Pod, Zeroable};
@@ -17,7 +19,7 @@ use std::ops::Range;
 use glam::{BVec4A, Vec3, Vec4};
 
 use super::traverse::{Counters, Hit, Ray};
-use super::triangle::slack_pad;
+use super::triangle::{TriAccel4, slack_pad};
 use super::{Aabb, TriAccel};
 
 /// One node: its box, and either its children (`count == 0`; the left child is `first`, the
@@ -39,11 +41,19 @@ impl BvhNode {
 
 /// Centroid bins per axis of the binned SAH.
 const BINS: usize = 16;
-/// SAH cost of visiting a node, relative to one ray/triangle test. 1 is the usual choice; 2 and
-/// 3 (larger leaves, fewer nodes) measured no faster on the Stanford Bunny.
+/// SAH cost of visiting a node, relative to testing one block of `LEAF_BLOCK` triangles (one
+/// SIMD test, `TriAccel4`), as in Embree.
 const COST_NODE: f32 = 1.0;
 /// Leaves never hold more than this many primitives (coincident centres are split by count).
 const MAX_LEAF: usize = 8;
+/// Triangles tested at once: the SAH counts a leaf's cost in blocks of this many.
+const LEAF_BLOCK: usize = 4;
+
+/// SAH cost of intersecting `n` primitives: whole blocks, since a block of four costs what one
+/// primitive does.
+fn blocks(n: u32) -> f32 {
+    n.div_ceil(LEAF_BLOCK as u32) as f32
+}
 /// Below this depth the SAH decides the splits; past it every split is a median split by count,
 /// which halves the node. So the depth is at most `SAH_DEPTH + log2(n) < STACK` for any n < 2^32:
 /// the traversal stack cannot overflow, whatever the input (exponentially spaced triangles can
@@ -207,7 +217,7 @@ fn sah_split(prims: &mut [u32], boxes: &[Aabb], centers: &[Vec3], bounds: Aabb) 
         for k in (1..BINS).rev() {
             acc = acc.union(bin_box[k]);
             cnt += bin_count[k];
-            right_area[k] = if cnt > 0 { half_area(&acc) * cnt as f32 } else { 0.0 };
+            right_area[k] = if cnt > 0 { half_area(&acc) * blocks(cnt) } else { 0.0 };
         }
         let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
         for k in 1..BINS {
@@ -216,7 +226,7 @@ fn sah_split(prims: &mut [u32], boxes: &[Aabb], centers: &[Vec3], bounds: Aabb) 
             if cnt == 0 || cnt as usize == n {
                 continue;
             }
-            let cost = half_area(&acc) * cnt as f32 + right_area[k];
+            let cost = half_area(&acc) * blocks(cnt) + right_area[k];
             if best.is_none_or(|(c, _, _)| cost < c) {
                 best = Some((cost, axis, k));
             }
@@ -226,7 +236,7 @@ fn sah_split(prims: &mut [u32], boxes: &[Aabb], centers: &[Vec3], bounds: Aabb) 
     match best {
         Some((cost, axis, k)) => {
             let split_cost = COST_NODE + cost / parent_area.max(f32::MIN_POSITIVE);
-            if split_cost >= n as f32 && n <= MAX_LEAF {
+            if split_cost >= blocks(n as u32) && n <= MAX_LEAF {
                 return None;
             }
             let scale = BINS as f32 / cext[axis];
@@ -272,8 +282,9 @@ pub const WIDTH: usize = 4;
 /// one lane per child) and what each child is. Exactly two cache lines.
 ///
 /// A child with `count[k] == 0` is a node (`child[k]` indexes `BvhAccel::nodes`); with
-/// `count[k] > 0` it is a leaf of `count[k]` triangles from `child[k]`. An unused slot has the
-/// empty box `lo = +inf, hi = -inf`, which the near/far-plane box test below never enters.
+/// `count[k] > 0` it is a leaf of `count[k]` triangles, in `count[k].div_ceil(4)` blocks from
+/// `BvhAccel::blocks[child[k]]`. An unused slot has the empty box `lo = +inf, hi = -inf`,
+/// which the near/far-plane box test below never enters.
 #[repr(C, align(64))]
 #[derive(Debug, Clone, Copy)]
 pub struct WideNode {
@@ -356,16 +367,18 @@ struct Pending {
     t_enter: f32,
 }
 
-/// A BVH over triangles: the four-wide nodes, and the triangles copied into leaf order so that
-/// a leaf's triangles are adjacent in memory.
+/// A BVH over triangles: the four-wide nodes, and the triangles copied into leaf order, four
+/// to a block, so that a leaf's triangles are adjacent in memory and tested together.
 #[derive(Debug, Clone)]
 pub struct BvhAccel {
-    /// The binary SAH tree the wide nodes were collapsed from (its `prims` map leaf order to
-    /// input order).
+    /// The binary SAH tree the wide nodes were collapsed from.
     pub bvh: Bvh,
     pub nodes: Vec<WideNode>,
-    /// `tris[prims[i]]` of the input, in leaf order.
-    pub tris: Vec<TriAccel>,
+    /// The leaves' triangles, each leaf in whole blocks (its last one padded with unused lanes).
+    pub blocks: Vec<TriAccel4>,
+    /// Index (in the triangles given to `build`) of lane `k` of block `b`, at `4 * b + k`;
+    /// `u32::MAX` for an unused lane.
+    pub lane_prims: Vec<u32>,
 }
 
 impl BvhAccel {
@@ -384,9 +397,13 @@ impl BvhAccel {
             .collect();
         let centers: Vec<Vec3> = boxes.par_iter().map(Aabb::center).collect();
         let bvh = Bvh::build(&boxes, &centers);
-        let nodes = collapse(&bvh);
-        let tris = bvh.prims.par_iter().map(|&i| tris[i as usize]).collect();
-        BvhAccel { bvh, nodes, tris }
+        let (nodes, blocks, lane_prims) = collapse(&bvh, tris);
+        BvhAccel {
+            bvh,
+            nodes,
+            blocks,
+            lane_prims,
+        }
     }
 
     /// Closest hit with `t_min < t < t_max`; `tri` indexes the triangles given to `build`.
@@ -411,6 +428,15 @@ impl BvhAccel {
     /// that ray's turn comes again its data has arrived.
     pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
         self.interleaved::<false>(rays, t_min, t_max, |i, w| out[i] = self.result(w));
+    }
+
+    /// `intersect_batch`, also giving each hit's geometric normal (`TriAccel::normal`; zero for
+    /// a miss), taken from the triangle when it is hit, while it is in cache.
+    pub fn intersect_batch_normals(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit], normals: &mut [Vec3]) {
+        self.interleaved::<false>(rays, t_min, t_max, |i, w| {
+            out[i] = self.result(w);
+            normals[i] = if w.best.is_hit() { w.normal } else { Vec3::ZERO };
+        });
     }
 
     /// Any-hit results of a batch of rays (interleaved like `intersect_batch`).
@@ -457,25 +483,27 @@ impl BvhAccel {
     }
 
     /// Asks for the memory of a pending node or leaf ahead of its use.
+    ///
+    /// Branch-free: whether an entry is a node or a leaf is a coin toss to the branch predictor.
+    /// A node is two cache lines; a block of four triangles, 144 bytes at a multiple of 16,
+    /// always lies within three (a second block, in leaves of five to eight triangles, is left
+    /// to the hardware). Three lines are asked for either way. The address is only computed,
+    /// never dereferenced, so an index out of range would only be a useless hint.
     #[inline(always)]
     fn prefetch(&self, p: &Pending) {
-        if p.count == 0 {
-            let n = &self.nodes[p.index as usize] as *const WideNode as *const i8;
-            prefetch(n);
-            prefetch(n.wrapping_add(64));
-        } else {
-            let t = self.tris[p.index as usize..].as_ptr() as *const i8;
-            prefetch(t);
-            // A leaf of up to 8 triangles of 36 bytes spans at most 5 cache lines; the first
-            // two cover most leaves (1-3 triangles).
-            prefetch(t.wrapping_add(64));
-        }
+        let node = self.nodes.as_ptr().wrapping_add(p.index as usize) as usize;
+        let leaf = self.blocks.as_ptr().wrapping_add(p.index as usize) as usize;
+        let is_leaf = 0usize.wrapping_sub((p.count != 0) as usize);
+        let at = (node ^ ((node ^ leaf) & is_leaf)) as *const i8;
+        prefetch(at);
+        prefetch(at.wrapping_add(64));
+        prefetch(at.wrapping_add(128));
     }
 
     fn result(&self, w: &Walk) -> Hit {
         if w.best.is_hit() {
             Hit {
-                tri: self.bvh.prims[w.best.tri as usize],
+                tri: self.lane_prims[w.best.tri as usize],
                 ..w.best
             }
         } else {
@@ -483,11 +511,11 @@ impl BvhAccel {
         }
     }
 
-    /// Bytes of the nodes, the leaf-ordered triangles and the index map.
+    /// Bytes of the nodes, the triangle blocks and the index map.
     pub fn memory(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.tris.as_slice())
-            + std::mem::size_of_val(self.bvh.prims.as_slice())
+            + std::mem::size_of_val(self.blocks.as_slice())
+            + std::mem::size_of_val(self.lane_prims.as_slice())
     }
 }
 
@@ -509,16 +537,18 @@ fn prefetch(p: *const i8) {
 /// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
 /// interleave rays).
 struct Walk {
-    origin: Vec3,
-    dir: Vec3,
+    /// The direction in every lane, for the four-triangle test (the origin is in `r`).
+    dir: [Vec4; 3],
     r: BoxRay,
     t_min: f32,
     /// Closest hit so far (or `t_max`): triangles are tested up to it.
     t_far: f32,
     /// Boxes are searched up to this (`t_far * T_SLOP`).
     t_box: f32,
-    /// The closest hit so far; `tri` in leaf order.
+    /// The closest hit so far; `tri` is `4 * block + lane`.
     best: Hit,
+    /// Its geometric normal.
+    normal: Vec3,
     /// A node pushes at most WIDTH - 1 entries and the tree is less than STACK levels deep.
     /// Left uninitialised: entries below `sp` are always written before they are read.
     stack: [MaybeUninit<Pending>; (WIDTH - 1) * STACK],
@@ -531,8 +561,7 @@ impl Walk {
     /// Starts `ray` over, keeping the (uninitialised) stack where it is.
     #[inline(always)]
     fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
-        self.origin = ray.origin;
-        self.dir = ray.dir;
+        self.dir = ray.dir.to_array().map(Vec4::splat);
         self.r = BoxRay::new(ray);
         self.t_min = t_min;
         self.t_far = t_max;
@@ -548,13 +577,13 @@ impl Walk {
 
     fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
         Walk {
-            origin: ray.origin,
-            dir: ray.dir,
+            dir: ray.dir.to_array().map(Vec4::splat),
             r: BoxRay::new(ray),
             t_min,
             t_far: t_max,
             t_box: t_max * T_SLOP,
             best: Hit { t: t_max, ..Hit::MISS },
+            normal: Vec3::ZERO,
             stack: [const { MaybeUninit::uninit() }; (WIDTH - 1) * STACK],
             sp: 0,
             current: Pending {
@@ -572,23 +601,38 @@ impl Walk {
     fn step<const ANY: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
         let cur = self.current;
         if cur.count > 0 {
-            let start = cur.index as usize;
-            for i in start..start + cur.count as usize {
+            for _ in 0..cur.count {
                 counters.tri_test();
-                if let Some(h) = accel.tris[i].intersect(self.origin, self.dir, self.t_min, self.t_far) {
-                    self.best = Hit {
-                        t: h.t,
-                        tri: i as u32,
-                        u: h.u,
-                        v: h.v,
-                    };
-                    if ANY {
-                        return true;
-                    }
-                    self.t_far = h.t;
-                    // The hit's input index is looked up when the ray is done.
-                    prefetch(&accel.bvh.prims[i] as *const u32 as *const i8);
+            }
+            let start = cur.index as usize;
+            for b in start..start + cur.count.div_ceil(4) as usize {
+                let h = accel.blocks[b].intersect(&self.r.origin, &self.dir, self.t_min, self.t_far);
+                if h.mask == 0 {
+                    continue;
                 }
+                // Lanes in order, each only if strictly closer: the same hit as testing the
+                // triangles one by one.
+                let block = &accel.blocks[b];
+                let mut mask = h.mask;
+                while mask != 0 {
+                    let k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if h.t[k] < self.t_far {
+                        self.t_far = h.t[k];
+                        self.best = Hit {
+                            t: h.t[k],
+                            tri: (4 * b + k) as u32,
+                            u: h.u[k],
+                            v: h.v[k],
+                        };
+                        self.normal = block.lane(k).normal();
+                    }
+                }
+                if ANY {
+                    return true;
+                }
+                // The hit's input index is looked up when the ray is done.
+                prefetch(&accel.lane_prims[self.best.tri as usize] as *const u32 as *const i8);
             }
             self.t_box = self.t_far * T_SLOP;
         } else {
@@ -648,13 +692,17 @@ impl Walk {
 
 /// Collapses the binary tree into four-wide nodes: each wide node takes a binary node's
 /// children and keeps opening the child with the largest surface area (the one a ray is most
-/// likely to enter) until it has four.
-fn collapse(bvh: &Bvh) -> Vec<WideNode> {
+/// likely to enter) until it has four. Packs each leaf's triangles into blocks of four as it
+/// meets them (depth first, so that nearby leaves are near in memory); returns the nodes, the
+/// blocks and the input index of every block lane.
+fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec<u32>) {
     let bin = &bvh.nodes;
     let mut nodes = vec![WideNode::EMPTY];
+    let mut blocks = Vec::with_capacity(bvh.prims.len().div_ceil(2));
+    let mut lane_prims = Vec::with_capacity(4 * blocks.capacity());
     if bvh.prims.is_empty() {
         // No primitives: a root with four empty slots, which no ray enters.
-        return nodes;
+        return (nodes, blocks, lane_prims);
     }
     let area = |i: usize| {
         half_area(&Aabb {
@@ -688,8 +736,13 @@ fn collapse(bvh: &Bvh) -> Vec<WideNode> {
                 nodes[wide].hi[a][slot] = n.max[a];
             }
             if n.is_leaf() {
-                nodes[wide].child[slot] = n.first;
+                nodes[wide].child[slot] = blocks.len() as u32;
                 nodes[wide].count[slot] = n.count;
+                for ids in bvh.prims[n.first as usize..(n.first + n.count) as usize].chunks(4) {
+                    let block: Vec<TriAccel> = ids.iter().map(|&i| tris[i as usize]).collect();
+                    blocks.push(TriAccel4::pack(&block));
+                    lane_prims.extend(ids.iter().copied().chain(std::iter::repeat(u32::MAX)).take(4));
+                }
             } else {
                 let w = nodes.len();
                 nodes.push(WideNode::EMPTY);
@@ -699,7 +752,7 @@ fn collapse(bvh: &Bvh) -> Vec<WideNode> {
             }
         }
     }
-    nodes
+    (nodes, blocks, lane_prims)
 }
 
 #[cfg(test)]

@@ -16,4 +16,4 @@ pub use traverse::{
     AccelKind, Counters, GridAccel, Hit, NoCounters, Ray, TraversalCounters, brute_force_intersect,
     brute_force_occluded,
 };
-pub use triangle::{TriAccel, TriHit};
+pub use triangle::{TriAccel, TriAccel4, TriHit, TriHit4};

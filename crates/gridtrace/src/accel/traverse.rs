@@ -203,6 +203,33 @@ impl GridAccel {
         }
     }
 
+    /// `intersect_batch`, also giving each hit's geometric normal (`TriAccel::normal`,
+    /// unnormalised; zero for a miss). The BVH takes it from the triangle as it hits it: looked
+    /// up afterwards, it is a cache miss per hit.
+    pub fn intersect_batch_normals(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        out: &mut [Hit],
+        normals: &mut [Vec3],
+    ) {
+        assert_eq!(rays.len(), normals.len(), "one normal per ray");
+        if kind == AccelKind::Bvh {
+            assert_eq!(rays.len(), out.len(), "one output per ray");
+            return self.bvh().intersect_batch_normals(rays, t_min, t_max, out, normals);
+        }
+        self.intersect_batch(rays, t_min, t_max, kind, out);
+        for (h, n) in out.iter().zip(normals) {
+            *n = if h.is_hit() {
+                self.tris[h.tri as usize].normal()
+            } else {
+                Vec3::ZERO
+            };
+        }
+    }
+
     /// Any-hit results of a batch, like `intersect_batch`.
     pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
