@@ -27,6 +27,7 @@
 //! # Ok::<(), gridtrace::Error>(())
 //! ```
 
+use std::ops::Range;
 use std::path::Path;
 use std::sync::{Mutex, OnceLock};
 
@@ -106,7 +107,39 @@ pub struct Hits {
     pub normal: Vec<[f32; 3]>,
 }
 
+/// A piece of a `Hits` being filled.
+struct HitsMut<'a> {
+    t: &'a mut [f32],
+    tri: &'a mut [u32],
+    u: &'a mut [f32],
+    v: &'a mut [f32],
+    normal: &'a mut [[f32; 3]],
+}
+
 impl Hits {
+    fn zeroed(n: usize) -> Hits {
+        Hits {
+            t: vec![0.0; n],
+            tri: vec![0; n],
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            normal: vec![[0.0; 3]; n],
+        }
+    }
+
+    /// Entries `range`, in pieces of `size`, to fill in parallel.
+    fn pieces(&mut self, range: Range<usize>, size: usize) -> impl IndexedParallelIterator<Item = HitsMut<'_>> {
+        (
+            self.t[range.clone()].par_chunks_mut(size),
+            self.tri[range.clone()].par_chunks_mut(size),
+            self.u[range.clone()].par_chunks_mut(size),
+            self.v[range.clone()].par_chunks_mut(size),
+            self.normal[range].par_chunks_mut(size),
+        )
+            .into_par_iter()
+            .map(|(t, tri, u, v, normal)| HitsMut { t, tri, u, v, normal })
+    }
+
     pub fn len(&self) -> usize {
         self.t.len()
     }
@@ -120,7 +153,9 @@ impl Hits {
 pub const CHUNK: usize = 1 << 20;
 
 /// Rays per CPU work item: large enough to amortise scheduling, small enough to balance two
-/// to hundreds of threads over a chunk.
+/// to hundreds of threads over a chunk. The CPU validates and traces each work item's rays on
+/// its own and writes the results straight into the output: besides the output, a query
+/// allocates nothing of the batch's size (no array of rays, no array of hits).
 const CPU_BATCH: usize = 1024;
 
 /// An accelerated triangle mesh for ray queries.
@@ -291,43 +326,52 @@ impl TraceMesh {
         t_max: f32,
     ) -> Result<Hits> {
         let n = batch_len(origins, dirs)?;
-        let mut out = Hits {
-            t: vec![0.0; n],
-            tri: vec![0; n],
-            u: vec![0.0; n],
-            v: vec![0.0; n],
-            normal: vec![[0.0; 3]; n],
-        };
-        let mut done = 0;
-        for_chunks(origins, dirs, t_min, t_max, |rays| {
-            let hits = self.intersect_rays_with(backend, rays, t_min, t_max)?;
-            let r = done..done + hits.len();
-            done = r.end;
-            (
-                &mut out.t[r.clone()],
-                &mut out.tri[r.clone()],
-                &mut out.u[r.clone()],
-                &mut out.v[r.clone()],
-                &mut out.normal[r],
-                &hits[..],
-            )
-                .into_par_iter()
-                .with_min_len(4096)
-                .for_each(|(t, tri, u, v, normal, h)| {
-                    if h.is_hit() {
-                        *t = h.t;
-                        *tri = self.original[h.tri as usize];
-                        *u = h.u;
-                        *v = h.v;
-                        *normal = self.scene.accel.tris[h.tri as usize].normal().normalize().to_array();
-                    } else {
-                        *t = f32::INFINITY;
-                        *tri = u32::MAX;
-                    }
-                });
-            Ok(())
-        })?;
+        check_interval(t_min, t_max)?;
+        let mut out = Hits::zeroed(n);
+        match self.renderer(backend)? {
+            Some(gpu) => {
+                let mut done = 0;
+                for_chunks(origins, dirs, |rays| {
+                    let hits = gpu
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .intersect(rays, t_min, t_max, self.accel)?;
+                    let r = done..done + hits.len();
+                    done = r.end;
+                    out.pieces(r, CPU_BATCH)
+                        .zip(hits.par_chunks(CPU_BATCH))
+                        .for_each(|(piece, h)| self.write_hits(h, None, piece));
+                    Ok(())
+                })?;
+            }
+            None => on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, piece| {
+                let mut hits = [Hit::MISS; CPU_BATCH];
+                let mut normals = [Vec3::ZERO; CPU_BATCH];
+                let (hits, normals) = (&mut hits[..rays.len()], &mut normals[..rays.len()]);
+                let accel = &self.scene.accel;
+                accel.intersect_batch_normals(rays, t_min, t_max, self.accel, hits, normals);
+                self.write_hits(hits, Some(normals), piece);
+            })?,
+        }
         Ok(out)
+    }
+
+    /// Writes hits of kept triangles as the input's: face index and unit normal (from `normals`,
+    /// the unnormalised geometric normals, where given).
+    fn write_hits(&self, hits: &[Hit], normals: Option<&[Vec3]>, out: HitsMut) {
+        for (i, h) in hits.iter().enumerate() {
+            if h.is_hit() {
+                out.t[i] = h.t;
+                out.tri[i] = self.original[h.tri as usize];
+                out.u[i] = h.u;
+                out.v[i] = h.v;
+                let n = normals.map_or_else(|| self.scene.accel.tris[h.tri as usize].normal(), |n| n[i]);
+                out.normal[i] = n.normalize().to_array();
+            } else {
+                out.t[i] = f32::INFINITY;
+                out.tri[i] = u32::MAX;
+            }
+        }
     }
 
     /// Whether anything is hit with `t_min < t < t_max`, per ray (broadcasting as `intersect`).
@@ -344,12 +388,26 @@ impl TraceMesh {
         t_min: f32,
         t_max: f32,
     ) -> Result<Vec<bool>> {
-        let mut out = Vec::new();
-        for_chunks(origins, dirs, t_min, t_max, |rays| {
-            out.extend(self.occluded_rays_with(backend, rays, t_min, t_max)?);
-            Ok(())
-        })?;
-        Ok(out)
+        let n = batch_len(origins, dirs)?;
+        check_interval(t_min, t_max)?;
+        match self.renderer(backend)? {
+            Some(gpu) => {
+                let mut out = Vec::with_capacity(n);
+                for_chunks(origins, dirs, |rays| {
+                    let mut gpu = gpu.lock().unwrap_or_else(|p| p.into_inner());
+                    out.extend(gpu.occluded(rays, t_min, t_max, self.accel)?);
+                    Ok(())
+                })?;
+                Ok(out)
+            }
+            None => {
+                let mut out = vec![false; n];
+                on_cpu_batches(origins, dirs, n, out.par_chunks_mut(CPU_BATCH), |rays, piece| {
+                    self.scene.accel.occluded_batch(rays, t_min, t_max, self.accel, piece)
+                })?;
+                Ok(out)
+            }
+        }
     }
 
     /// Closest hits for prepared rays; triangle indices are the kept triangles' (see
@@ -410,20 +468,37 @@ impl TraceMesh {
     }
 }
 
-/// Validates a (possibly broadcast) batch and hands it to `f` as rays, `CHUNK` at a time.
-fn for_chunks(
-    origins: &[[f32; 3]],
-    dirs: &[[f32; 3]],
-    t_min: f32,
-    t_max: f32,
-    mut f: impl FnMut(&[Ray]) -> Result<()>,
-) -> Result<()> {
-    let n = batch_len(origins, dirs)?;
-    check_interval(t_min, t_max)?;
+/// Hands a (possibly broadcast, checked) batch to `f` as rays, `CHUNK` at a time.
+fn for_chunks(origins: &[[f32; 3]], dirs: &[[f32; 3]], mut f: impl FnMut(&[Ray]) -> Result<()>) -> Result<()> {
+    let n = origins.len().max(dirs.len());
     for start in (0..n).step_by(CHUNK) {
         f(&make_rays(origins, dirs, start, (start + CHUNK).min(n))?)?;
     }
     Ok(())
+}
+
+/// Runs `f` on the CPU for every `CPU_BATCH` rays of a (possibly broadcast, checked) batch of
+/// `n`, in parallel, each with its piece of the output (`pieces` yields one per `CPU_BATCH`
+/// rays).
+fn on_cpu_batches<P: Send>(
+    origins: &[[f32; 3]],
+    dirs: &[[f32; 3]],
+    n: usize,
+    pieces: impl IndexedParallelIterator<Item = P>,
+    f: impl Fn(&[Ray], P) + Sync + Send,
+) -> Result<()> {
+    let done = pieces.enumerate().try_for_each_init(
+        || Vec::with_capacity(CPU_BATCH),
+        |rays, (b, piece)| {
+            rays.clear();
+            for i in b * CPU_BATCH..((b + 1) * CPU_BATCH).min(n) {
+                rays.push(ray_at(origins, dirs, i).ok()?);
+            }
+            f(rays, piece);
+            Some(())
+        },
+    );
+    done.ok_or_else(|| first_bad_ray(origins, dirs, 0, n))
 }
 
 fn batch_len(origins: &[[f32; 3]], dirs: &[[f32; 3]]) -> Result<usize> {
@@ -446,32 +521,139 @@ fn check_interval(t_min: f32, t_max: f32) -> Result<()> {
     Ok(())
 }
 
-/// Rays `start..end` of a (possibly broadcast) batch; non-finite values and zero directions are
-/// errors naming the ray.
+/// Ray `i` of a (possibly broadcast) batch; non-finite values and zero directions are errors
+/// naming the ray.
+fn ray_at(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> Result<Ray> {
+    let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
+    let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
+    if !o.is_finite() || !d.is_finite() {
+        return Err(Error::InvalidInput(format!(
+            "ray {i} has a non-finite origin {o} or direction {d}"
+        )));
+    }
+    if d == Vec3::ZERO {
+        return Err(Error::InvalidInput(format!("ray {i} has a zero direction")));
+    }
+    Ok(Ray::new(o, d))
+}
+
+/// The error of the first bad ray among `start..end` (whichever thread saw one).
+fn first_bad_ray(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Error {
+    (start..end)
+        .find_map(|i| ray_at(origins, dirs, i).err())
+        .unwrap_or_else(|| Error::InvalidInput("a ray failed validation".into()))
+}
+
+/// Rays `start..end` of a (possibly broadcast) batch, validated (`ray_at`).
 fn make_rays(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Result<Vec<Ray>> {
-    let ray = |i: usize| -> Result<Ray> {
-        let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
-        let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
-        if !o.is_finite() || !d.is_finite() {
-            return Err(Error::InvalidInput(format!(
-                "ray {i} has a non-finite origin {o} or direction {d}"
-            )));
-        }
-        if d == Vec3::ZERO {
-            return Err(Error::InvalidInput(format!("ray {i} has a zero direction")));
-        }
-        Ok(Ray::new(o, d))
-    };
     let rays: Option<Vec<Ray>> = (start..end)
         .into_par_iter()
         .with_min_len(4096)
-        .map(|i| ray(i).ok())
+        .map(|i| ray_at(origins, dirs, i).ok())
         .collect();
-    match rays {
-        Some(rays) => Ok(rays),
-        // Name the first bad ray, whichever thread saw one.
-        None => Err((start..end)
-            .find_map(|i| ray(i).err())
-            .unwrap_or_else(|| Error::InvalidInput("a ray failed validation".into()))),
+    rays.ok_or_else(|| first_bad_ray(origins, dirs, start, end))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::{NoCounters, brute_force_intersect};
+    use crate::testing::triangle_soup;
+
+    /// A soup of triangles as arrays, with a degenerate face every 7th (dropped, so kept and input
+    /// indices differ), and 5,000 rays at it: several CPU work items.
+    fn soup() -> (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let tris = triangle_soup(600, 11);
+        let mut vertices = Vec::new();
+        let mut faces = Vec::new();
+        for (i, t) in tris.iter().enumerate() {
+            let base = vertices.len() as u32;
+            vertices.extend(t.vertices().map(|v| v.to_array()));
+            faces.push([base, base + 1, base + 2]);
+            if i % 7 == 0 {
+                faces.push([base, base, base + 1]);
+            }
+        }
+        let mut rng = crate::util::Rng::new(5);
+        let origins = (0..5000)
+            .map(|_| [rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0)])
+            .collect::<Vec<_>>();
+        let dirs = (0..5000)
+            .map(|_| [rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)])
+            .collect();
+        (vertices, faces, origins, dirs)
+    }
+
+    /// The batched CPU query (rays built, traced and written per work item) gives, for every ray,
+    /// the brute-force closest hit, reported with the input face index and that face's unit
+    /// normal; and occlusion agrees with it.
+    #[test]
+    fn cpu_queries_equal_brute_force_in_input_terms() {
+        let (vertices, faces, origins, dirs) = soup();
+        for accel in AccelKind::ALL {
+            let opts = QueryOptions {
+                accel,
+                backend: Backend::Cpu,
+                ..Default::default()
+            };
+            let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts).unwrap();
+            let hits = mesh.intersect(&origins, &dirs, 0.0, f32::INFINITY).unwrap();
+            let occluded = mesh.occluded(&origins, &dirs, 0.0, f32::INFINITY).unwrap();
+            let tris = &mesh.prepared().accel.tris;
+            let mut hit_count = 0;
+            for i in 0..origins.len() {
+                let ray = Ray::new(origins[i].into(), dirs[i].into());
+                let want = brute_force_intersect(tris, &ray, 0.0, f32::INFINITY);
+                let got = mesh
+                    .prepared()
+                    .accel
+                    .intersect(&ray, 0.0, f32::INFINITY, accel, &mut NoCounters);
+                assert_eq!(hits.t[i], got.t, "{} ray {i}", accel.name());
+                assert!(
+                    (got.t - want.t).abs() <= 1e-6 * want.t.abs() || got.t == want.t,
+                    "ray {i}"
+                );
+                assert_eq!(occluded[i], got.is_hit(), "{} ray {i}", accel.name());
+                if got.is_hit() {
+                    hit_count += 1;
+                    let face = faces[hits.tri[i] as usize].map(|k| Vec3::from(vertices[k as usize]));
+                    let normal = (face[1] - face[0]).cross(face[2] - face[0]).normalize();
+                    assert_eq!(hits.tri[i], mesh.original_index(got.tri), "ray {i}");
+                    assert!(Vec3::from(hits.normal[i]).abs_diff_eq(normal, 1e-5), "ray {i}: normal");
+                    assert_eq!((hits.u[i], hits.v[i]), (got.u, got.v), "ray {i}");
+                } else {
+                    assert_eq!(hits.tri[i], u32::MAX, "ray {i}");
+                }
+            }
+            assert!(hit_count > 500, "{} hits only", hit_count);
+        }
+    }
+
+    /// A bad ray in a later work item is reported by its index, the first bad one whichever thread
+    /// saw which.
+    #[test]
+    fn the_first_bad_ray_is_named() {
+        let (vertices, faces, mut origins, mut dirs) = soup();
+        origins[4321][1] = f32::NAN;
+        dirs[3210] = [0.0; 3];
+        let opts = QueryOptions {
+            accel: AccelKind::Bvh,
+            backend: Backend::Cpu,
+            ..Default::default()
+        };
+        let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts).unwrap();
+        let err = mesh
+            .intersect(&origins, &dirs, 0.0, f32::INFINITY)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("ray 3210 has a zero direction"), "{err}");
+        let err = mesh.occluded(&origins, &dirs, 0.0, 1.0).unwrap_err().to_string();
+        assert!(err.contains("ray 3210 has a zero direction"), "{err}");
+        dirs[3210] = [0.0, 0.0, 1.0];
+        let err = mesh
+            .intersect(&origins, &dirs, 0.0, f32::INFINITY)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("ray 4321 has a non-finite origin"), "{err}");
     }
 }
