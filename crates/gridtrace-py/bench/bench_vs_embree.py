@@ -49,6 +49,7 @@ def main():
     ap.add_argument("mesh", nargs="?", default=str(ROOT.parent / "shared/data/meshes/bunny/bun_zipper.ply"))
     ap.add_argument("--rays", type=int, default=1_000_000)
     ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--pairs", type=int, default=11, help="alternating gridtrace bvh / embreex runs for the paired ratio")
     ap.add_argument("--trimesh-rays", type=int, default=2_000, help="trimesh traces about 40 rays/s here: a subset")
     a = ap.parse_args()
     threads = os.cpu_count() or 1
@@ -87,11 +88,27 @@ def main():
     tb, tm_, e_out = best(lambda: embree_run(o, d), a.reps)
     results["embreex 1 thread"] = (tb, tm_)
     print(f"embreex 1 thread   best {tb*1e3:8.1f} ms  median {tm_*1e3:8.1f} ms  {a.rays/tb/1e6:6.2f} Mrays/s")
-    chunks = np.array_split(np.arange(a.rays), threads)
+    # Contiguous views, split before timing: no copies inside the timed call.
+    parts = list(zip(np.array_split(o, threads), np.array_split(d, threads)))
     with ThreadPoolExecutor(threads) as pool:
-        tb, tm_, _ = best(lambda: list(pool.map(lambda idx: embree_run(o[idx], d[idx]), chunks)), a.reps)
-    results[f"embreex {threads} threads"] = (tb, tm_)
-    print(f"embreex {threads} threads  best {tb*1e3:8.1f} ms  median {tm_*1e3:8.1f} ms  {a.rays/tb/1e6:6.2f} Mrays/s")
+        embree_threads = lambda: list(pool.map(lambda od: embree_run(*od), parts))  # noqa: E731
+        tb, tm_, _ = best(embree_threads, a.reps)
+        results[f"embreex {threads} threads"] = (tb, tm_)
+        print(f"embreex {threads} threads  best {tb*1e3:8.1f} ms  median {tm_*1e3:8.1f} ms  {a.rays/tb/1e6:6.2f} Mrays/s")
+
+        # The machine's speed drifts between the runs above: time the two contenders in turn,
+        # pair by pair, and quote the median of the per-pair ratios.
+        bvh = gridtrace.Mesh(vertices, faces, accel="bvh", backend="cpu")
+        ratios = []
+        for _ in range(a.pairs):
+            tg, _, _ = best(lambda: bvh.intersect(o, d), 1)
+            te, _, _ = best(embree_threads, 1)
+            ratios.append(te / tg)
+        r = np.array(ratios)
+        print(
+            f"paired, {a.pairs} pairs: embreex {threads} threads time / gridtrace bvh time: "
+            f"median {np.median(r):.3f} (min {r.min():.3f}, max {r.max():.3f}; above 1: gridtrace is faster)"
+        )
 
     e_prim = np.asarray(e_out["primID"])
     e_t = np.asarray(e_out["tfar"])
