@@ -562,7 +562,10 @@ mod tests {
 
     /// A soup of triangles as arrays, with a degenerate face every 7th (dropped, so kept and input
     /// indices differ), and 5,000 rays at it: several CPU work items.
-    fn soup() -> (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    /// Vertices, faces, ray origins, ray directions.
+    type Soup = (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<[f32; 3]>, Vec<[f32; 3]>);
+
+    fn soup() -> Soup {
         let tris = triangle_soup(600, 11);
         let mut vertices = Vec::new();
         let mut faces = Vec::new();
