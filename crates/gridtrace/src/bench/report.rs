@@ -99,7 +99,7 @@ fn paper_tables(md: &mut String, report: &BenchReport) {
             md.push_str("| rendering resolution |");
             for s in scenes {
                 for a in accels {
-                    let _ = write!(md, " {} {} |", scene_header(s), if a == "grid" { "g" } else { "pc" });
+                    let _ = write!(md, " {} {} |", scene_header(s), if a == "grid" { "g" } else { a });
                 }
             }
             md.push_str("\n|---|");
