@@ -29,7 +29,7 @@
 
 use std::ops::Range;
 use std::path::Path;
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
@@ -336,10 +336,7 @@ impl TraceMesh {
             Some(gpu) => {
                 let mut done = 0;
                 for_chunks(origins, dirs, |rays| {
-                    let hits = gpu
-                        .lock()
-                        .unwrap_or_else(|p| p.into_inner())
-                        .intersect(rays, t_min, t_max, self.accel)?;
+                    let hits = locked(gpu).intersect(rays, t_min, t_max, self.accel)?;
                     let r = done..done + hits.len();
                     done = r.end;
                     out.pieces(r, CPU_BATCH)
@@ -398,8 +395,7 @@ impl TraceMesh {
             Some(gpu) => {
                 let mut out = Vec::with_capacity(n);
                 for_chunks(origins, dirs, |rays| {
-                    let mut gpu = gpu.lock().unwrap_or_else(|p| p.into_inner());
-                    out.extend(gpu.occluded(rays, t_min, t_max, self.accel)?);
+                    out.extend(locked(gpu).occluded(rays, t_min, t_max, self.accel)?);
                     Ok(())
                 })?;
                 Ok(out)
@@ -455,7 +451,7 @@ impl TraceMesh {
         fill: T,
     ) -> Result<Vec<T>> {
         match self.renderer(backend)? {
-            Some(g) => on_gpu(&mut g.lock().unwrap_or_else(|p| p.into_inner())),
+            Some(g) => on_gpu(&mut locked(g)),
             None => {
                 let mut out = vec![fill; rays.len()];
                 out.par_chunks_mut(CPU_BATCH)
@@ -471,6 +467,13 @@ impl TraceMesh {
     pub fn original_index(&self, kept: u32) -> u32 {
         self.original.as_ref().map_or(kept, |o| o[kept as usize])
     }
+}
+
+/// The GPU renderer, for one query at a time. A query that panicked while holding it left
+/// nothing half-written that the next one reads (each uploads its own rays), so a poisoned lock
+/// is taken as it is.
+fn locked(gpu: &Mutex<GpuRenderer>) -> MutexGuard<'_, GpuRenderer> {
+    gpu.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// Hands a (possibly broadcast, checked) batch to `f` as rays, `CHUNK` at a time.
