@@ -47,7 +47,7 @@ const COST_NODE: f32 = 1.0;
 /// Leaves never hold more than this many primitives (coincident centres are split by count).
 const MAX_LEAF: usize = 8;
 /// Triangles tested at once: the SAH counts a leaf's cost in blocks of this many.
-const LEAF_BLOCK: usize = 4;
+const LEAF_BLOCK: usize = TriAccel4::LANES;
 
 /// SAH cost of intersecting `n` primitives: whole blocks, since a block of four costs what one
 /// primitive does.
@@ -605,14 +605,14 @@ impl Walk {
                 counters.tri_test();
             }
             let start = cur.index as usize;
-            for b in start..start + cur.count.div_ceil(4) as usize {
-                let h = accel.blocks[b].intersect(&self.r.origin, &self.dir, self.t_min, self.t_far);
+            for b in start..start + cur.count.div_ceil(LEAF_BLOCK as u32) as usize {
+                let block = &accel.blocks[b];
+                let h = block.intersect(&self.r.origin, &self.dir, self.t_min, self.t_far);
                 if h.mask == 0 {
                     continue;
                 }
                 // Lanes in order, each only if strictly closer: the same hit as testing the
                 // triangles one by one.
-                let block = &accel.blocks[b];
                 let mut mask = h.mask;
                 while mask != 0 {
                     let k = mask.trailing_zeros() as usize;
@@ -621,7 +621,7 @@ impl Walk {
                         self.t_far = h.t[k];
                         self.best = Hit {
                             t: h.t[k],
-                            tri: (4 * b + k) as u32,
+                            tri: (LEAF_BLOCK * b + k) as u32,
                             u: h.u[k],
                             v: h.v[k],
                         };
@@ -699,7 +699,7 @@ fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec
     let bin = &bvh.nodes;
     let mut nodes = vec![WideNode::EMPTY];
     let mut blocks = Vec::with_capacity(bvh.prims.len().div_ceil(2));
-    let mut lane_prims = Vec::with_capacity(4 * blocks.capacity());
+    let mut lane_prims = Vec::with_capacity(LEAF_BLOCK * blocks.capacity());
     if bvh.prims.is_empty() {
         // No primitives: a root with four empty slots, which no ray enters.
         return (nodes, blocks, lane_prims);
@@ -738,10 +738,10 @@ fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec
             if n.is_leaf() {
                 nodes[wide].child[slot] = blocks.len() as u32;
                 nodes[wide].count[slot] = n.count;
-                for ids in bvh.prims[n.first as usize..(n.first + n.count) as usize].chunks(4) {
+                for ids in bvh.prims[n.first as usize..(n.first + n.count) as usize].chunks(LEAF_BLOCK) {
                     let block: Vec<TriAccel> = ids.iter().map(|&i| tris[i as usize]).collect();
                     blocks.push(TriAccel4::pack(&block));
-                    lane_prims.extend(ids.iter().copied().chain(std::iter::repeat(u32::MAX)).take(4));
+                    lane_prims.extend(ids.iter().copied().chain(std::iter::repeat(u32::MAX)).take(LEAF_BLOCK));
                 }
             } else {
                 let w = nodes.len();

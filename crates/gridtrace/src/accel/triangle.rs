@@ -220,9 +220,12 @@ fn l1_4(a: &Lanes3) -> Vec4 {
 }
 
 impl TriAccel4 {
+    /// Triangles per block.
+    pub const LANES: usize = 4;
+
     /// Packs up to four triangles; the lanes past `tris.len()` are left unused.
     pub fn pack(tris: &[TriAccel]) -> TriAccel4 {
-        assert!(tris.len() <= 4, "four triangles at most");
+        assert!(tris.len() <= Self::LANES, "four triangles at most");
         let mut p = TriAccel4 {
             v0: [Vec4::ZERO; 3],
             e1: [Vec4::ZERO; 3],
