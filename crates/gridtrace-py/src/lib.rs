@@ -124,7 +124,8 @@ impl NativeMesh {
             .detach(|| self.inner.intersect_with(b, o, d, t_min, t_max))
             .map_err(to_py)?;
         let n = hits.len();
-        let normal: Vec<f32> = hits.normal.iter().flatten().copied().collect();
+        // The same allocation, seen as 3n floats: no copy (12 bytes a ray, in fresh pages).
+        let normal: Vec<f32> = bytemuck::allocation::cast_vec(hits.normal);
         let normal = normal.into_pyarray(py).reshape([n, 3])?;
         Ok((
             hits.t.into_pyarray(py),

@@ -181,8 +181,10 @@ def test_bad_input_raises_clear_errors():
     mesh = gridtrace.Mesh(v, [[0, 1, 2]], backend="cpu")
     with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
         mesh.intersect(np.zeros((4, 2)), np.zeros((4, 3)))
-    with pytest.raises(ValueError, match="not finite"):
-        mesh.intersect([[0, 0, np.nan]], [0, 0, 1])
+    with pytest.raises(ValueError, match="ray 1 has a non-finite origin"):
+        mesh.intersect([[0, 0, 1], [0, 0, np.nan]], [0, 0, -1])
+    with pytest.raises(ValueError, match="ray 0 has a non-finite origin .* or direction"):
+        mesh.occluded([0, 0, 1], [[np.inf, 0, -1]])
     with pytest.raises(ValueError, match="lengths must match"):
         mesh.intersect(np.zeros((3, 3)), np.ones((2, 3)))
     with pytest.raises(TypeError, match="numeric"):

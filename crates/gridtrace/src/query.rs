@@ -499,8 +499,16 @@ fn on_cpu_batches<P: Send>(
         || Vec::with_capacity(CPU_BATCH),
         |rays, (b, piece)| {
             rays.clear();
+            // The same rule as `ray_at`, without a branch per ray: a bad ray is rare, and then
+            // `first_bad_ray` finds and names it.
+            let mut all_good = true;
             for i in b * CPU_BATCH..((b + 1) * CPU_BATCH).min(n) {
-                rays.push(ray_at(origins, dirs, i).ok()?);
+                let (o, d) = ray_parts(origins, dirs, i);
+                all_good &= o.is_finite() & d.is_finite() & (d != Vec3::ZERO);
+                rays.push(Ray::new(o, d));
+            }
+            if !all_good {
+                return None;
             }
             f(rays, piece);
             Some(())
@@ -529,11 +537,18 @@ fn check_interval(t_min: f32, t_max: f32) -> Result<()> {
     Ok(())
 }
 
+/// Origin and direction of ray `i` of a (possibly broadcast) batch, unchecked.
+#[inline(always)]
+fn ray_parts(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> (Vec3, Vec3) {
+    let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
+    let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
+    (o, d)
+}
+
 /// Ray `i` of a (possibly broadcast) batch; non-finite values and zero directions are errors
 /// naming the ray.
 fn ray_at(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> Result<Ray> {
-    let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
-    let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
+    let (o, d) = ray_parts(origins, dirs, i);
     if !o.is_finite() || !d.is_finite() {
         return Err(Error::InvalidInput(format!(
             "ray {i} has a non-finite origin {o} or direction {d}"

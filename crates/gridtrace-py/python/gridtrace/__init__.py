@@ -45,7 +45,7 @@ class Hits(NamedTuple):
     """(N, 3) float32 unit geometric normal of the hit face (input winding); zeros for a miss."""
 
 
-def _points(a: ArrayLike, name: str) -> np.ndarray:
+def _points(a: ArrayLike, name: str, check_finite: bool = True) -> np.ndarray:
     arr = np.asarray(a)
     if arr.dtype.kind not in "fiu":
         raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
@@ -54,15 +54,18 @@ def _points(a: ArrayLike, name: str) -> np.ndarray:
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must have shape (N, 3) or (3,), got {np.shape(a)}")
     arr = np.ascontiguousarray(arr, dtype=np.float32)
-    if not np.isfinite(arr).all():
+    if check_finite and not np.isfinite(arr).all():
         bad = int(np.argwhere(~np.isfinite(arr).all(axis=1))[0][0])
         raise ValueError(f"{name}[{bad}] is not finite: {arr[bad]}")
     return arr
 
 
 def _rays(origins: ArrayLike, directions: ArrayLike):
-    o = _points(origins, "origins")
-    d = _points(directions, "directions")
+    # Rays are checked for NaN, infinity and zero directions by the native code, while it
+    # builds them, in parallel (and the error names the ray); a numpy pass here would be a
+    # second, single-threaded scan of the whole batch.
+    o = _points(origins, "origins", check_finite=False)
+    d = _points(directions, "directions", check_finite=False)
     if len(o) != len(d) and len(o) != 1 and len(d) != 1:
         raise ValueError(f"{len(o)} origins and {len(d)} directions: lengths must match or one be 1")
     return o, d
