@@ -504,7 +504,7 @@ fn on_cpu_batches<P: Send>(
             let mut all_good = true;
             for i in b * CPU_BATCH..((b + 1) * CPU_BATCH).min(n) {
                 let (o, d) = ray_parts(origins, dirs, i);
-                all_good &= o.is_finite() & d.is_finite() & (d != Vec3::ZERO);
+                all_good &= is_valid_ray(o, d);
                 rays.push(Ray::new(o, d));
             }
             if !all_good {
@@ -545,19 +545,25 @@ fn ray_parts(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> (Vec3, Vec3) 
     (o, d)
 }
 
-/// Ray `i` of a (possibly broadcast) batch; non-finite values and zero directions are errors
-/// naming the ray.
+/// The rule for a ray: finite origin and direction, and a direction that is not zero.
+#[inline(always)]
+fn is_valid_ray(o: Vec3, d: Vec3) -> bool {
+    o.is_finite() & d.is_finite() & (d != Vec3::ZERO)
+}
+
+/// Ray `i` of a (possibly broadcast) batch; a ray that breaks `is_valid_ray` is an error naming
+/// the ray and what is wrong with it.
 fn ray_at(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> Result<Ray> {
     let (o, d) = ray_parts(origins, dirs, i);
+    if is_valid_ray(o, d) {
+        return Ok(Ray::new(o, d));
+    }
     if !o.is_finite() || !d.is_finite() {
         return Err(Error::InvalidInput(format!(
             "ray {i} has a non-finite origin {o} or direction {d}"
         )));
     }
-    if d == Vec3::ZERO {
-        return Err(Error::InvalidInput(format!("ray {i} has a zero direction")));
-    }
-    Ok(Ray::new(o, d))
+    Err(Error::InvalidInput(format!("ray {i} has a zero direction")))
 }
 
 /// The error of the first bad ray among `start..end` (whichever thread saw one).
