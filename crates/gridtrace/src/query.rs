@@ -207,7 +207,7 @@ impl TraceMesh {
         // one came from, so hits report input indices.
         let mesh_faces = mesh.triangles.len();
         let mut original = Vec::with_capacity(mesh_faces);
-        let mut kept = Vec::with_capacity(mesh.triangles.len());
+        let mut kept = Vec::with_capacity(mesh_faces);
         for (i, t) in mesh.triangles.iter().enumerate() {
             let [a, b, c] = t.map(|k| mesh.positions[k as usize]);
             if (b - a).cross(c - a).length_squared() > 0.0 {
