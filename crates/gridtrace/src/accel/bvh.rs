@@ -5,9 +5,10 @@
 //!
 //! Built top-down as a binary tree with the binned surface area heuristic (Wald 2007; the
 //! builder takes boxes and centres only, so it knows nothing of triangles), then collapsed into
-//! four-wide nodes whose four box tests are one SIMD computation, traversed front to back with a
-//! fixed stack. Leaves hold up to eight triangles, stored four to a block (`TriAccel4`) and
-//! tested a block at a time, as Embree's `Triangle4`; the SAH counts their cost in blocks.
+//! eight-wide nodes whose eight box tests are one SIMD computation (AVX where the CPU has AVX2,
+//! chosen at run time), traversed front to back with a fixed stack. Leaves hold up to eight
+//! triangles, stored four to a block (`TriAccel4`) and tested a block at a time, as Embree's
+//! `Triangle4`; the SAH counts their cost in blocks.
 //! Batches of rays are traced interleaved, with prefetching, to hide memory latency
 //! (docs/design.md).
 
@@ -16,7 +17,7 @@ use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
-use glam::{BVec4A, Vec3, Vec4};
+use glam::{Vec3, Vec4};
 
 use super::traverse::{Counters, Hit, Ray};
 use super::triangle::{TriAccel4, slack_pad};
@@ -42,10 +43,10 @@ impl BvhNode {
 /// Centroid bins per axis of the binned SAH.
 const BINS: usize = 16;
 /// SAH cost of visiting a node, relative to testing one block of `LEAF_BLOCK` triangles (one
-/// SIMD test, `TriAccel4`). Embree uses 1; a four-box test is about half the work of a block
+/// SIMD test, `TriAccel4`). Embree uses 1; a node's box test is about half the work of a block
 /// test, and 0.5 gives smaller leaves (Stanford Bunny, incoherent rays: 5.4 instead of 7.7
-/// triangles tested per ray, 8.4 instead of 8.1 nodes) and was 2-4% faster in every paired
-/// measurement, for 10% more memory (docs/design.md).
+/// triangles tested per ray, with four-wide nodes 8.4 instead of 8.1 nodes) and was 2-4% faster
+/// in every paired measurement, for 10% more memory (docs/design.md).
 const COST_NODE: f32 = 0.5;
 /// Leaves never hold more than this many primitives (coincident centres are split by count).
 const MAX_LEAF: usize = 8;
@@ -276,31 +277,35 @@ fn partition(v: &mut [u32], left: impl Fn(u32) -> bool) -> usize {
     i
 }
 
-/// Children per node of the traversal tree. The binary SAH tree is collapsed to four-wide nodes
-/// (Dammertz et al. 2008; Embree's BVH4): half the levels, so half the dependent memory loads
-/// per ray, and the four box tests of a node run as one SIMD computation with no branches.
-pub const WIDTH: usize = 4;
+/// Children per node of the traversal tree. The binary SAH tree is collapsed to eight-wide
+/// nodes (Dammertz et al. 2008; Embree's BVH8): a third of the levels, so a third of the
+/// dependent memory loads per ray, and the eight box tests of a node run as one SIMD
+/// computation with no branches (one AVX instruction per operation where the CPU has AVX2).
+pub const WIDTH: usize = 8;
 
-/// A four-wide node: its children's boxes in structure-of-arrays form (`lo[axis]`, `hi[axis]`,
-/// one lane per child) and what each child is. Exactly two cache lines.
+/// A value per child slot of a node.
+type Lanes = [f32; WIDTH];
+
+/// An eight-wide node: its children's boxes in structure-of-arrays form (`planes[0][axis]` the
+/// low planes, `planes[1][axis]` the high ones, one lane per child) and what each child is.
+/// Exactly four cache lines. The two sides are one array so that a ray picks its near plane per
+/// axis by an index computed once per ray (Embree's `nearX`), not by a select per node.
 ///
 /// A child with `count[k] == 0` is a node (`child[k]` indexes `BvhAccel::nodes`); with
 /// `count[k] > 0` it is a leaf of `count[k]` triangles, in `count[k].div_ceil(4)` blocks from
-/// `BvhAccel::blocks[child[k]]`. An unused slot has the empty box `lo = +inf, hi = -inf`,
+/// `BvhAccel::blocks[child[k]]`. An unused slot has the empty box `low = +inf, high = -inf`,
 /// which the near/far-plane box test below never enters.
 #[repr(C, align(64))]
 #[derive(Debug, Clone, Copy)]
 pub struct WideNode {
-    pub lo: [Vec4; 3],
-    pub hi: [Vec4; 3],
+    pub planes: [[Lanes; 3]; 2],
     pub child: [u32; WIDTH],
     pub count: [u32; WIDTH],
 }
 
 impl WideNode {
     const EMPTY: WideNode = WideNode {
-        lo: [Vec4::INFINITY; 3],
-        hi: [Vec4::NEG_INFINITY; 3],
+        planes: [[[f32::INFINITY; WIDTH]; 3], [[f32::NEG_INFINITY; WIDTH]; 3]],
         child: [0; WIDTH],
         count: [0; WIDTH],
     };
@@ -308,14 +313,15 @@ impl WideNode {
 
 /// The per-ray constants of the box test.
 struct BoxRay {
-    origin: [Vec4; 3],
+    origin: [f32; 3],
     /// `1 / dir`, with zero components replaced by `±1e-30` first: a slab then never computes
     /// `0 * inf = NaN`, and a box the ray runs beside (parallel, outside the slab) gets an entry
     /// distance beyond 1e20, which the other axes' finite interval always excludes.
-    inv_dir: [Vec4; 3],
-    /// Per axis: whether the ray goes down it, so the box's `hi` plane is the near one (all
-    /// lanes alike: a select, not a branch, which rays interleaved in a batch would mispredict).
-    down: [BVec4A; 3],
+    inv_dir: [f32; 3],
+    /// Per axis, whether the ray goes down it, so that the near plane is the high one: the
+    /// `WideNode::planes` index of the near side. An index, not a branch, which rays
+    /// interleaved in a batch would mispredict (and a bool, so the index needs no bounds check).
+    down: [bool; 3],
 }
 
 /// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
@@ -335,30 +341,74 @@ const T_SLOP: f32 = 1.0 + 1.0 / 256.0;
 impl BoxRay {
     fn new(ray: &Ray) -> BoxRay {
         let safe = |d: f32| if d.abs() < 1e-30 { 1e-30f32.copysign(d) } else { d };
-        let o = ray.origin.to_array();
         let d = ray.dir.to_array().map(safe);
         BoxRay {
-            origin: o.map(Vec4::splat),
-            inv_dir: d.map(|x| Vec4::splat(1.0 / x)),
-            down: d.map(|x| BVec4A::splat(x < 0.0)),
+            origin: ray.origin.to_array(),
+            inv_dir: d.map(|x| 1.0 / x),
+            down: d.map(|x| x < 0.0),
         }
     }
 
-    /// Entry distances of the ray into the node's four boxes within `[t_min, t_max]`, and the
-    /// mask of the boxes it enters. Per axis the near plane is chosen by the ray's direction,
-    /// so each slab costs a subtract and a multiply per plane and nothing else.
+    /// Entry distances of the ray into the node's boxes within `[t_min, t_max]`, and the mask
+    /// of the boxes it enters. Per axis the near plane is chosen by the ray's direction, so
+    /// each slab costs a subtract and a multiply per plane and nothing else.
+    ///
+    /// The portable form, lane by lane over plain arrays (`if a > b { a } else { b }` is exactly
+    /// `maxps`, so the compiler vectorises it partly); `enter_avx2` is its AVX form.
     #[inline(always)]
-    fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Vec4, u32) {
-        let mut t_enter = Vec4::splat(t_min);
-        let mut t_exit = Vec4::splat(f32::INFINITY);
+    fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
+        let mut t_enter = [t_min; WIDTH];
+        let mut t_exit = [f32::INFINITY; WIDTH];
         for a in 0..3 {
-            let near = Vec4::select(self.down[a], n.hi[a], n.lo[a]);
-            let far = Vec4::select(self.down[a], n.lo[a], n.hi[a]);
-            t_enter = t_enter.max((near - self.origin[a]) * self.inv_dir[a]);
-            t_exit = t_exit.min((far - self.origin[a]) * self.inv_dir[a]);
+            let near = &n.planes[self.down[a] as usize][a];
+            let far = &n.planes[!self.down[a] as usize][a];
+            let (o, inv) = (self.origin[a], self.inv_dir[a]);
+            for k in 0..WIDTH {
+                let t_near = (near[k] - o) * inv;
+                let t_far = (far[k] - o) * inv;
+                t_enter[k] = if t_enter[k] > t_near { t_enter[k] } else { t_near };
+                t_exit[k] = if t_exit[k] < t_far { t_exit[k] } else { t_far };
+            }
         }
-        let t_exit = (t_exit * FAR_SCALE).min(Vec4::splat(t_max));
-        (t_enter, t_enter.cmple(t_exit).bitmask())
+        let mut mask = 0;
+        for k in 0..WIDTH {
+            let t_exit = t_exit[k] * FAR_SCALE;
+            let t_exit = if t_exit < t_max { t_exit } else { t_max };
+            mask |= ((t_enter[k] <= t_exit) as u32) << k;
+        }
+        (t_enter, mask)
+    }
+
+    /// `enter` in AVX instructions, with the same results bit for bit: each operation is the
+    /// packed form of the portable one (`_mm256_max_ps(a, b)` is `if a > b { a } else { b }`
+    /// per lane, NaNs included). The compiler vectorises the portable loops only partly.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn enter_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
+        use std::arch::x86_64::*;
+        let mut t_enter = _mm256_set1_ps(t_min);
+        let mut t_exit = _mm256_set1_ps(f32::INFINITY);
+        for a in 0..3 {
+            // SAFETY: each plane array is eight f32s in bounds (the node is 64-byte aligned,
+            // the unaligned load needs nothing more).
+            let (near, far) = unsafe {
+                (
+                    _mm256_loadu_ps(n.planes[self.down[a] as usize][a].as_ptr()),
+                    _mm256_loadu_ps(n.planes[!self.down[a] as usize][a].as_ptr()),
+                )
+            };
+            let o = _mm256_set1_ps(self.origin[a]);
+            let inv = _mm256_set1_ps(self.inv_dir[a]);
+            t_enter = _mm256_max_ps(t_enter, _mm256_mul_ps(_mm256_sub_ps(near, o), inv));
+            t_exit = _mm256_min_ps(t_exit, _mm256_mul_ps(_mm256_sub_ps(far, o), inv));
+        }
+        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit)) as u32;
+        let mut out = [0.0; WIDTH];
+        // SAFETY: `out` holds eight f32s.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t_enter) };
+        (out, mask)
     }
 }
 
@@ -370,7 +420,7 @@ struct Pending {
     t_enter: f32,
 }
 
-/// A BVH over triangles: the four-wide nodes, and the triangles copied into leaf order, four
+/// A BVH over triangles: the eight-wide nodes, and the triangles copied into leaf order, four
 /// to a block, so that a leaf's triangles are adjacent in memory and tested together.
 #[derive(Debug, Clone)]
 pub struct BvhAccel {
@@ -413,15 +463,31 @@ impl BvhAccel {
     /// `counters.cell()` counts nodes visited.
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         let mut w = Walk::new(ray, t_min, t_max);
-        while !w.step::<false, C>(self, counters) {}
+        self.walk::<false, C>(&mut w, counters);
         self.result(&w)
     }
 
     /// Any hit with `t_min < t < t_max`.
     pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         let mut w = Walk::new(ray, t_min, t_max);
-        while !w.step::<true, C>(self, counters) {}
+        self.walk::<true, C>(&mut w, counters);
         w.best.is_hit()
+    }
+
+    /// Runs one ray's walk to its end, compiled for AVX2 where the CPU has it (as `interleaved`).
+    fn walk<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            return unsafe { self.walk_avx2::<ANY, C>(w, counters) };
+        }
+        while !w.step::<ANY, false, C>(self, counters) {}
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn walk_avx2<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
+        while !w.step::<ANY, true, C>(self, counters) {}
     }
 
     /// Closest hits of a batch of rays, `out[i]` for `rays[i]`: the same answers as `intersect`,
@@ -447,7 +513,39 @@ impl BvhAccel {
         self.interleaved::<true>(rays, t_min, t_max, |i, w| out[i] = w.best.is_hit());
     }
 
-    fn interleaved<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, mut finish: impl FnMut(usize, &Walk)) {
+    /// Runs the batch traversal compiled for AVX2 where the CPU has it (with the box test in
+    /// AVX instructions, `BoxRay::enter_avx2`), else the baseline build. Both give the same
+    /// bits: IEEE arithmetic rounds the same at any vector width, and Rust never fuses
+    /// multiply-adds on its own.
+    fn interleaved<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, finish: impl FnMut(usize, &Walk)) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            return unsafe { self.interleaved_avx2::<ANY>(rays, t_min, t_max, finish) };
+        }
+        self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn interleaved_avx2<const ANY: bool>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        finish: impl FnMut(usize, &Walk),
+    ) {
+        self.interleaved_body::<ANY, true>(rays, t_min, t_max, finish)
+    }
+
+    #[inline(always)]
+    fn interleaved_body<const ANY: bool, const AVX: bool>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        mut finish: impl FnMut(usize, &Walk),
+    ) {
         // The walks are reset in place for each new ray: a walk holds a few KiB of stack, which
         // is never copied.
         let idle = Ray::new(Vec3::ZERO, Vec3::X);
@@ -468,7 +566,7 @@ impl BvhAccel {
                 if *i == usize::MAX {
                     continue;
                 }
-                if w.step::<ANY, _>(self, &mut super::NoCounters) {
+                if w.step::<ANY, AVX, _>(self, &mut super::NoCounters) {
                     finish(*i, w);
                     if next < rays.len() {
                         w.reset(&rays[next], t_min, t_max);
@@ -488,9 +586,9 @@ impl BvhAccel {
     /// Asks for the memory of a pending node or leaf ahead of its use.
     ///
     /// Branch-free: whether an entry is a node or a leaf is a coin toss to the branch predictor.
-    /// A node is two cache lines; a block of four triangles, 144 bytes at a multiple of 16,
+    /// A node is four cache lines; a block of four triangles, 144 bytes at a multiple of 16,
     /// always lies within three (a second block, in leaves of five to eight triangles, is left
-    /// to the hardware). Three lines are asked for either way. The address is only computed,
+    /// to the hardware). Four lines are asked for either way. The address is only computed,
     /// never dereferenced, so an index out of range would only be a useless hint.
     #[inline(always)]
     fn prefetch(&self, p: &Pending) {
@@ -501,6 +599,7 @@ impl BvhAccel {
         prefetch(at);
         prefetch(at.wrapping_add(64));
         prefetch(at.wrapping_add(128));
+        prefetch(at.wrapping_add(192));
     }
 
     fn result(&self, w: &Walk) -> Hit {
@@ -540,7 +639,8 @@ fn prefetch(p: *const i8) {
 /// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
 /// interleave rays).
 struct Walk {
-    /// The direction in every lane, for the four-triangle test (the origin is in `r`).
+    /// The origin and direction in every lane, for the four-triangle test.
+    origin: [Vec4; 3],
     dir: [Vec4; 3],
     r: BoxRay,
     t_min: f32,
@@ -564,6 +664,7 @@ impl Walk {
     /// Starts `ray` over, keeping the (uninitialised) stack where it is.
     #[inline(always)]
     fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
+        self.origin = ray.origin.to_array().map(Vec4::splat);
         self.dir = ray.dir.to_array().map(Vec4::splat);
         self.r = BoxRay::new(ray);
         self.t_min = t_min;
@@ -580,6 +681,7 @@ impl Walk {
 
     fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
         Walk {
+            origin: ray.origin.to_array().map(Vec4::splat),
             dir: ray.dir.to_array().map(Vec4::splat),
             r: BoxRay::new(ray),
             t_min,
@@ -597,11 +699,12 @@ impl Walk {
         }
     }
 
-    /// Visits `current` (a leaf's triangles, or a node's four boxes) and picks what comes next.
+    /// Visits `current` (a leaf's triangles, or a node's boxes) and picks what comes next.
+    /// `AVX`: the box test in AVX instructions (only in code compiled for AVX2).
     /// Returns true when the ray is done: nothing left that could hold a (closer) hit, or, for
     /// `ANY`, a hit found.
     #[inline(always)]
-    fn step<const ANY: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
+    fn step<const ANY: bool, const AVX: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
         let cur = self.current;
         if cur.count > 0 {
             for _ in 0..cur.count {
@@ -610,7 +713,7 @@ impl Walk {
             let start = cur.index as usize;
             for b in start..start + cur.count.div_ceil(LEAF_BLOCK as u32) as usize {
                 let block = &accel.blocks[b];
-                let h = block.intersect(&self.r.origin, &self.dir, self.t_min, self.t_far);
+                let h = block.intersect(&self.origin, &self.dir, self.t_min, self.t_far);
                 if h.mask == 0 {
                     continue;
                 }
@@ -641,9 +744,17 @@ impl Walk {
         } else {
             counters.cell();
             let n = &accel.nodes[cur.index as usize];
+            #[cfg(target_arch = "x86_64")]
+            let (t_enter, mut mask) = if AVX {
+                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
+                unsafe { self.r.enter_avx2(n, self.t_min, self.t_box) }
+            } else {
+                self.r.enter(n, self.t_min, self.t_box)
+            };
+            #[cfg(not(target_arch = "x86_64"))]
             let (t_enter, mut mask) = self.r.enter(n, self.t_min, self.t_box);
             if mask != 0 {
-                let t = t_enter.to_array();
+                let t = t_enter;
                 // Nearest child next; the others onto the stack, sorted, nearest on top.
                 let mut first = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
@@ -659,9 +770,6 @@ impl Walk {
                         count: n.count[k],
                         t_enter: t[k],
                     };
-                    // Most pushed entries are visited later; asking for them now gives their
-                    // loads the most time.
-                    accel.prefetch(&item);
                     let mut j = self.sp;
                     // SAFETY: entries base..sp were written by this loop.
                     while j > base && unsafe { self.stack[j - 1].assume_init_ref() }.t_enter < item.t_enter {
@@ -693,9 +801,9 @@ impl Walk {
     }
 }
 
-/// Collapses the binary tree into four-wide nodes: each wide node takes a binary node's
+/// Collapses the binary tree into eight-wide nodes: each wide node takes a binary node's
 /// children and keeps opening the child with the largest surface area (the one a ray is most
-/// likely to enter) until it has four. Packs each leaf's triangles into blocks of four as it
+/// likely to enter) until it has eight. Packs each leaf's triangles into blocks of four as it
 /// meets them (depth first, so that nearby leaves are near in memory); returns the nodes, the
 /// blocks and the input index of every block lane.
 fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec<u32>) {
@@ -704,7 +812,7 @@ fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec
     let mut blocks = Vec::with_capacity(bvh.prims.len().div_ceil(2));
     let mut lane_prims = Vec::with_capacity(LEAF_BLOCK * blocks.capacity());
     if bvh.prims.is_empty() {
-        // No primitives: a root with four empty slots, which no ray enters.
+        // No primitives: a root with only empty slots, which no ray enters.
         return (nodes, blocks, lane_prims);
     }
     let area = |i: usize| {
@@ -735,8 +843,8 @@ fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec
         for (slot, &k) in kids.iter().enumerate() {
             let n = &bin[k];
             for a in 0..3 {
-                nodes[wide].lo[a][slot] = n.min[a];
-                nodes[wide].hi[a][slot] = n.max[a];
+                nodes[wide].planes[0][a][slot] = n.min[a];
+                nodes[wide].planes[1][a][slot] = n.max[a];
             }
             if n.is_leaf() {
                 nodes[wide].child[slot] = blocks.len() as u32;
@@ -825,5 +933,120 @@ mod tests {
             }
             assert!(seen.iter().all(|&k| k == 1), "n = {n}: every primitive exactly once");
         }
+    }
+
+    fn random_ray(rng: &mut crate::util::Rng) -> Ray {
+        let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        // Some directions with zero components: rays parallel to slabs.
+        for a in 0..3 {
+            if rng.below(5) == 0 {
+                d[a] = 0.0;
+            }
+        }
+        if d == Vec3::ZERO {
+            d = Vec3::Y;
+        }
+        let o = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+        Ray::new(o, d * rng.range(0.1, 10.0))
+    }
+
+    /// The AVX box test gives the portable one's entry distances and mask bit for bit: random
+    /// boxes (some flat, some points, some slots empty) against random rays, some parallel to
+    /// an axis, with and without limits on t.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx_box_test_equals_portable() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: only the portable box test runs here");
+            return;
+        }
+        let mut rng = crate::util::Rng::new(0xB0C5);
+        let mut entered = 0;
+        for round in 0..20_000 {
+            let mut node = WideNode::EMPTY;
+            for slot in 0..WIDTH - round % 3 {
+                for a in 0..3 {
+                    let lo = rng.range(-1.0, 1.0);
+                    let size = [0.0, 1e-6, rng.range(0.0, 1.0)][rng.below(3) as usize];
+                    node.planes[0][a][slot] = lo;
+                    node.planes[1][a][slot] = lo + size;
+                }
+            }
+            // Aimed at the first box, most of the time through it.
+            let aim = Vec3::from_array(std::array::from_fn(|a| {
+                node.planes[0][a][0] + 0.5 * (node.planes[1][a][0] - node.planes[0][a][0])
+            }));
+            let mut ray = random_ray(&mut rng);
+            if round % 8 != 0 {
+                ray = Ray::new(ray.origin, (aim - ray.origin) * rng.range(0.5, 2.0));
+            }
+            let (t_min, t_max) = if round % 4 == 0 {
+                (0.5, rng.range(0.5, 3.0))
+            } else {
+                (0.0, f32::INFINITY)
+            };
+            let r = BoxRay::new(&ray);
+            let (t, mask) = r.enter(&node, t_min, t_max);
+            // SAFETY: the CPU has AVX2, checked above.
+            let (t_avx, mask_avx) = unsafe { r.enter_avx2(&node, t_min, t_max) };
+            assert_eq!(mask, mask_avx, "round {round}: masks");
+            assert_eq!(
+                t.map(f32::to_bits),
+                t_avx.map(f32::to_bits),
+                "round {round}: entry distances"
+            );
+            entered += mask.count_ones();
+        }
+        assert!(entered > 10_000, "the rays really enter boxes: {entered}");
+    }
+
+    /// The batch traversal's AVX2 build and its baseline build give the same hits, bit for bit,
+    /// closest and any, on random triangles and rays.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx_and_baseline_traversals_agree() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: only the baseline traversal runs here");
+            return;
+        }
+        let mut rng = crate::util::Rng::new(0x7A5E);
+        let tris: Vec<TriAccel> = (0..3000)
+            .map(|_| {
+                let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                let mut p = || c + Vec3::new(rng.range(-0.1, 0.1), rng.range(-0.1, 0.1), rng.range(-0.1, 0.1));
+                TriAccel::new(p(), p(), p())
+            })
+            .collect();
+        let accel = BvhAccel::build(&tris);
+        let rays: Vec<Ray> = (0..20_000).map(|_| random_ray(&mut rng)).collect();
+        let closest = |avx: bool| {
+            let mut out = vec![Hit::MISS; rays.len()];
+            let finish = |i: usize, w: &Walk| out[i] = accel.result(w);
+            if avx {
+                // SAFETY: the CPU has AVX2, checked above.
+                unsafe { accel.interleaved_avx2::<false>(&rays, 0.0, f32::INFINITY, finish) }
+            } else {
+                accel.interleaved_body::<false, false>(&rays, 0.0, f32::INFINITY, finish)
+            }
+            out
+        };
+        let any = |avx: bool| {
+            let mut out = vec![false; rays.len()];
+            let finish = |i: usize, w: &Walk| out[i] = w.best.is_hit();
+            if avx {
+                // SAFETY: the CPU has AVX2, checked above.
+                unsafe { accel.interleaved_avx2::<true>(&rays, 0.0, 1.0, finish) }
+            } else {
+                accel.interleaved_body::<true, false>(&rays, 0.0, 1.0, finish)
+            }
+            out
+        };
+        let bits = |h: &Hit| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits());
+        let (a, b) = (closest(false), closest(true));
+        assert!(a.iter().filter(|h| h.is_hit()).count() > 2000, "the rays really hit");
+        for (i, (a, b)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(bits(a), bits(b), "ray {i}: {a:?} against {b:?}");
+        }
+        assert_eq!(any(false), any(true));
     }
 }
