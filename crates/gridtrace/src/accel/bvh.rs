@@ -500,11 +500,17 @@ impl BvhAccel {
     }
 
     /// `intersect_batch`, also giving each hit's geometric normal (`TriAccel::normal`; zero for
-    /// a miss), taken from the triangle when it is hit, while it is in cache.
+    /// a miss), computed when the ray is done, from the block of the hit triangle: it was
+    /// tested last or nearly so, and is still in cache.
     pub fn intersect_batch_normals(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit], normals: &mut [Vec3]) {
         self.interleaved::<false>(rays, t_min, t_max, |i, w| {
             out[i] = self.result(w);
-            normals[i] = if w.best.is_hit() { w.normal } else { Vec3::ZERO };
+            normals[i] = if w.best.is_hit() {
+                let tri = w.best.tri as usize;
+                self.blocks[tri / LEAF_BLOCK].lane(tri % LEAF_BLOCK).normal()
+            } else {
+                Vec3::ZERO
+            };
         });
     }
 
@@ -650,8 +656,6 @@ struct Walk {
     t_box: f32,
     /// The closest hit so far; `tri` is `4 * block + lane`.
     best: Hit,
-    /// Its geometric normal.
-    normal: Vec3,
     /// A node pushes at most WIDTH - 1 entries and the tree is less than STACK levels deep.
     /// Left uninitialised: entries below `sp` are always written before they are read.
     stack: [MaybeUninit<Pending>; (WIDTH - 1) * STACK],
@@ -688,7 +692,6 @@ impl Walk {
             t_far: t_max,
             t_box: t_max * T_SLOP,
             best: Hit { t: t_max, ..Hit::MISS },
-            normal: Vec3::ZERO,
             stack: [const { MaybeUninit::uninit() }; (WIDTH - 1) * STACK],
             sp: 0,
             current: Pending {
@@ -731,7 +734,6 @@ impl Walk {
                             u: h.u[k],
                             v: h.v[k],
                         };
-                        self.normal = block.lane(k).normal();
                     }
                 }
                 if ANY {
