@@ -937,6 +937,7 @@ mod tests {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
     fn random_ray(rng: &mut crate::util::Rng) -> Ray {
         let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
         // Some directions with zero components: rays parallel to slabs.
