@@ -318,10 +318,12 @@ struct BoxRay {
     /// `0 * inf = NaN`, and a box the ray runs beside (parallel, outside the slab) gets an entry
     /// distance beyond 1e20, which the other axes' finite interval always excludes.
     inv_dir: [f32; 3],
-    /// Per axis, whether the ray goes down it, so that the near plane is the high one: the
-    /// `WideNode::planes` index of the near side. An index, not a branch, which rays
-    /// interleaved in a batch would mispredict (and a bool, so the index needs no bounds check).
-    down: [bool; 3],
+    /// Per axis, where in `WideNode::planes` (flattened: `side * 3 + axis`) the near and the
+    /// far planes are: the high side is the near one where the ray goes down the axis. Indices
+    /// computed once per ray, not a select per node, nor a branch, which rays interleaved in a
+    /// batch would mispredict.
+    near: [usize; 3],
+    far: [usize; 3],
 }
 
 /// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
@@ -345,7 +347,8 @@ impl BoxRay {
         BoxRay {
             origin: ray.origin.to_array(),
             inv_dir: d.map(|x| 1.0 / x),
-            down: d.map(|x| x < 0.0),
+            near: std::array::from_fn(|a| (d[a] < 0.0) as usize * 3 + a),
+            far: std::array::from_fn(|a| (d[a] >= 0.0) as usize * 3 + a),
         }
     }
 
@@ -360,8 +363,8 @@ impl BoxRay {
         let mut t_enter = [t_min; WIDTH];
         let mut t_exit = [f32::INFINITY; WIDTH];
         for a in 0..3 {
-            let near = &n.planes[self.down[a] as usize][a];
-            let far = &n.planes[!self.down[a] as usize][a];
+            let planes = n.planes.as_flattened();
+            let (near, far) = (&planes[self.near[a]], &planes[self.far[a]]);
             let (o, inv) = (self.origin[a], self.inv_dir[a]);
             for k in 0..WIDTH {
                 let t_near = (near[k] - o) * inv;
@@ -390,12 +393,13 @@ impl BoxRay {
         let mut t_enter = _mm256_set1_ps(t_min);
         let mut t_exit = _mm256_set1_ps(f32::INFINITY);
         for a in 0..3 {
-            // SAFETY: each plane array is eight f32s in bounds (the node is 64-byte aligned,
-            // the unaligned load needs nothing more).
+            // SAFETY: `near` and `far` index the six plane arrays (`BoxRay::new`), each eight
+            // f32s (an unaligned load needs nothing more).
             let (near, far) = unsafe {
+                let planes = n.planes.as_ptr() as *const Lanes;
                 (
-                    _mm256_loadu_ps(n.planes[self.down[a] as usize][a].as_ptr()),
-                    _mm256_loadu_ps(n.planes[!self.down[a] as usize][a].as_ptr()),
+                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
+                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
                 )
             };
             let o = _mm256_set1_ps(self.origin[a]);
