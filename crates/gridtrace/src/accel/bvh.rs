@@ -362,8 +362,8 @@ impl BoxRay {
     fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
         let mut t_enter = [t_min; WIDTH];
         let mut t_exit = [f32::INFINITY; WIDTH];
+        let planes = n.planes.as_flattened();
         for a in 0..3 {
-            let planes = n.planes.as_flattened();
             let (near, far) = (&planes[self.near[a]], &planes[self.far[a]]);
             let (o, inv) = (self.origin[a], self.inv_dir[a]);
             for k in 0..WIDTH {
@@ -481,7 +481,7 @@ impl BvhAccel {
     /// Runs one ray's walk to its end, compiled for AVX2 where the CPU has it (as `interleaved`).
     fn walk<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
             return unsafe { self.walk_avx2::<ANY, C>(w, counters) };
         }
@@ -529,7 +529,7 @@ impl BvhAccel {
     /// multiply-adds on its own.
     fn interleaved<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, finish: impl FnMut(usize, &Walk)) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
             return unsafe { self.interleaved_avx2::<ANY>(rays, t_min, t_max, finish) };
         }
@@ -629,6 +629,14 @@ impl BvhAccel {
             + std::mem::size_of_val(self.blocks.as_slice())
             + std::mem::size_of_val(self.lane_prims.as_slice())
     }
+}
+
+/// Whether this CPU runs the AVX2 build of the traversal (`walk_avx2`, `interleaved_avx2`,
+/// `BoxRay::enter_avx2`: the features those enable). The standard library caches the answer.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
 }
 
 /// Rays traced at once by the batch queries (enough in flight to cover memory latency; more
@@ -963,7 +971,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx_box_test_equals_portable() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !has_avx2() {
             eprintln!("no AVX2 on this CPU: only the portable box test runs here");
             return;
         }
@@ -1012,7 +1020,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx_and_baseline_traversals_agree() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !has_avx2() {
             eprintln!("no AVX2 on this CPU: only the baseline traversal runs here");
             return;
         }
