@@ -291,24 +291,75 @@ type Lanes = [f32; WIDTH];
 /// Exactly four cache lines. The two sides are one array so that a ray picks its near plane per
 /// axis by an index computed once per ray (Embree's `nearX`), not by a select per node.
 ///
-/// A child with `count[k] == 0` is a node (`child[k]` indexes `BvhAccel::nodes`); with
-/// `count[k] > 0` it is a leaf of `count[k]` triangles, in `count[k].div_ceil(4)` blocks from
-/// `BvhAccel::blocks[child[k]]`. An unused slot has the empty box `low = +inf, high = -inf`,
-/// which the near/far-plane box test below never enters.
+/// `child[k]` is a `ChildRef`: a node or a leaf. An unused slot has the empty box
+/// `low = +inf, high = -inf`, which the near/far-plane box test below never enters.
 #[repr(C, align(64))]
 #[derive(Debug, Clone, Copy)]
 pub struct WideNode {
     pub planes: [[Lanes; 3]; 2],
-    pub child: [u32; WIDTH],
-    pub count: [u32; WIDTH],
+    pub child: [ChildRef; WIDTH],
 }
 
 impl WideNode {
     const EMPTY: WideNode = WideNode {
         planes: [[[f32::INFINITY; WIDTH]; 3], [[f32::NEG_INFINITY; WIDTH]; 3]],
-        child: [0; WIDTH],
-        count: [0; WIDTH],
+        child: [ChildRef(0); WIDTH],
     };
+}
+
+/// A child of a wide node in one word, `index << 4 | count`: with `count == 0` a node
+/// (`BvhAccel::nodes[index]`), else a leaf of `count` triangles in `count.div_ceil(4)` blocks
+/// from `BvhAccel::blocks[index]`. One word, so that a stack entry (`Pending`) is eight bytes
+/// and a node's entries are sorted and stored as two AVX registers.
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChildRef(pub u32);
+
+impl ChildRef {
+    /// Largest node or block index a reference holds (2^28 - 1: about a billion triangles,
+    /// well past what fits in memory as blocks of 144 bytes).
+    pub const MAX_INDEX: usize = (1 << 28) - 1;
+
+    fn node(index: usize) -> ChildRef {
+        assert!(
+            index <= Self::MAX_INDEX,
+            "BVH node {index} past the largest child index"
+        );
+        ChildRef((index as u32) << 4)
+    }
+    fn leaf(first_block: usize, count: u32) -> ChildRef {
+        assert!(
+            first_block <= Self::MAX_INDEX,
+            "BVH block {first_block} past the largest child index"
+        );
+        debug_assert!((1..=MAX_LEAF as u32).contains(&count));
+        ChildRef((first_block as u32) << 4 | count)
+    }
+    #[inline(always)]
+    pub fn index(self) -> u32 {
+        self.0 >> 4
+    }
+    /// Triangles in the leaf; 0 for a node.
+    #[inline(always)]
+    pub fn count(self) -> u32 {
+        self.0 & 15
+    }
+}
+
+/// Where a child the ray enters goes in a node's sorted entries: children sort by this key,
+/// ascending, which puts the entered ones first, farthest first (so that the nearest ends on
+/// top of the stack), and the others after them. The key is unique per node: distance from
+/// the high bits of `t_enter` (a non-negative float orders as its bits; `max(0)` maps -0.0,
+/// possible when `t_min` is -0.0, to +0.0), the slot in the low three. Entry distances within
+/// eight ulps of each other thus order by slot: a visiting order, never a result, depends on
+/// it. `BoxRay::push_entered_avx2` computes the same keys.
+#[inline(always)]
+fn order_key(t_enter: f32, entered: bool, slot: usize) -> u32 {
+    if entered {
+        ((0x7FFF_FFFF - (t_enter.to_bits() as i32).max(0) as u32) & !7) | slot as u32
+    } else {
+        0x8000_0000 | slot as u32
+    }
 }
 
 /// The per-ray constants of the box test.
@@ -382,13 +433,92 @@ impl BoxRay {
         (t_enter, mask)
     }
 
-    /// `enter` in AVX instructions, with the same results bit for bit: each operation is the
-    /// packed form of the portable one (`_mm256_max_ps(a, b)` is `if a > b { a } else { b }`
-    /// per lane, NaNs included). The compiler vectorises the portable loops only partly.
+    /// Writes the node's children the ray enters (within `[t_min, t_max]`) to `out` as stack
+    /// entries, farthest first, and returns how many; the rest of `out` is left meaningless.
+    /// Writing all of `out` and sorting every slot spares the branches of pushing only the
+    /// entered children, whose number a branch predictor cannot guess.
+    #[inline(always)]
+    fn push_entered(&self, n: &WideNode, t_min: f32, t_max: f32, out: &mut [MaybeUninit<Pending>; WIDTH]) -> usize {
+        let (t, mask) = self.enter(n, t_min, t_max);
+        let mut keys: [u32; WIDTH] = std::array::from_fn(|k| order_key(t[k], mask >> k & 1 != 0, k));
+        keys.sort_unstable();
+        for (o, key) in out.iter_mut().zip(keys) {
+            let k = (key & 7) as usize;
+            *o = MaybeUninit::new(Pending {
+                child: n.child[k],
+                t_enter: t[k],
+            });
+        }
+        mask.count_ones() as usize
+    }
+
+    /// `push_entered` in AVX2 instructions, with the same entries bit for bit: the keys are
+    /// `order_key`'s, sorted by a bitonic network (unique keys have one sorted order).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline]
+    fn push_entered_avx2(
+        &self,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+        out: &mut [MaybeUninit<Pending>; WIDTH],
+    ) -> usize {
+        use std::arch::x86_64::*;
+        let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
+        let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let bits = _mm256_max_epi32(_mm256_castps_si256(t_enter), _mm256_setzero_si256());
+        let hit_key = _mm256_or_si256(
+            _mm256_and_si256(
+                _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), bits),
+                _mm256_set1_epi32(!7),
+            ),
+            slot,
+        );
+        let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
+        let key = _mm256_blendv_epi8(miss_key, hit_key, _mm256_castps_si256(entered));
+        let order = _mm256_and_si256(sort8_avx2(key), _mm256_set1_epi32(7));
+        let t = _mm256_castps_si256(_mm256_permutevar8x32_ps(t_enter, order));
+        // SAFETY: `child` is eight u32s (an unaligned load needs nothing more).
+        let child = unsafe { _mm256_loadu_si256(n.child.as_ptr() as *const __m256i) };
+        let child = _mm256_permutevar8x32_epi32(child, order);
+        // (child, t) pairs: `Pending`'s layout.
+        let lo = _mm256_unpacklo_epi32(child, t);
+        let hi = _mm256_unpackhi_epi32(child, t);
+        // SAFETY: `out` is eight eight-byte entries: 64 bytes, stored as two 32-byte halves.
+        unsafe {
+            let at = out.as_mut_ptr() as *mut __m256i;
+            _mm256_storeu_si256(at, _mm256_permute2x128_si256::<0x20>(lo, hi));
+            _mm256_storeu_si256(at.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
+        }
+        _mm256_movemask_ps(entered).count_ones() as usize
+    }
+
+    /// `enter` in AVX instructions, for the tests.
+    #[cfg(all(test, target_arch = "x86_64"))]
+    #[target_feature(enable = "avx2")]
     fn enter_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
+        use std::arch::x86_64::*;
+        let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
+        let mut out = [0.0; WIDTH];
+        // SAFETY: `out` holds eight f32s.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t_enter) };
+        (out, _mm256_movemask_ps(entered) as u32)
+    }
+
+    /// `enter` in AVX instructions, with the same results bit for bit: each operation is the
+    /// packed form of the portable one (`_mm256_max_ps(a, b)` is `if a > b { a } else { b }`
+    /// per lane, NaNs included). The compiler vectorises the portable loops only partly.
+    /// Returns the entry distances and the entered lanes (all bits set) as registers.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn enter_avx2_packed(
+        &self,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+    ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
         let mut t_enter = _mm256_set1_ps(t_min);
         let mut t_exit = _mm256_set1_ps(f32::INFINITY);
@@ -408,19 +538,52 @@ impl BoxRay {
             t_exit = _mm256_min_ps(t_exit, _mm256_mul_ps(_mm256_sub_ps(far, o), inv));
         }
         let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
-        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit)) as u32;
-        let mut out = [0.0; WIDTH];
-        // SAFETY: `out` holds eight f32s.
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t_enter) };
-        (out, mask)
+        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
     }
 }
 
-/// One pending child on the traversal stack: a node (`count == 0`) or a leaf's triangles.
+/// The mask of `_mm256_blend_epi32` for one layer of a bitonic sorting network on eight lanes
+/// (Batcher 1968): lanes `i` and `i ^ j` compare, in blocks of `k` that sort up where `i & k`
+/// is 0 and down elsewhere; bit `i` set where lane `i` keeps the larger value.
+const fn bitonic_mask(k: usize, j: usize) -> i32 {
+    let mut mask = 0;
+    let mut i = 0;
+    while i < 8 {
+        if ((i & j) == 0) != ((i & k) == 0) {
+            mask |= 1 << i;
+        }
+        i += 1;
+    }
+    mask
+}
+
+/// Sorts eight u32s, ascending, without a branch: the six layers of the bitonic network, each
+/// a lane shuffle, a min, a max and a blend.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn sort8_avx2(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    macro_rules! layer {
+        ($v:expr, $partner:expr, $k:literal, $j:literal) => {{
+            let (v, p) = ($v, $partner);
+            _mm256_blend_epi32::<{ bitonic_mask($k, $j) }>(_mm256_min_epu32(v, p), _mm256_max_epu32(v, p))
+        }};
+    }
+    // Partners: lane i ^ 1 and i ^ 2 within each 128-bit half; i ^ 4 across the halves.
+    let v = layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 2, 1);
+    let v = layer!(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v), 4, 2);
+    let v = layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 4, 1);
+    let v = layer!(v, _mm256_permute4x64_epi64::<0b01_00_11_10>(v), 8, 4);
+    let v = layer!(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v), 8, 2);
+    layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 8, 1)
+}
+
+/// One pending child on the traversal stack, with the distance at which the ray enters its box.
+#[repr(C)]
 #[derive(Clone, Copy)]
 struct Pending {
-    index: u32,
-    count: u32,
+    child: ChildRef,
     t_enter: f32,
 }
 
@@ -602,9 +765,10 @@ impl BvhAccel {
     /// never dereferenced, so an index out of range would only be a useless hint.
     #[inline(always)]
     fn prefetch(&self, p: &Pending) {
-        let node = self.nodes.as_ptr().wrapping_add(p.index as usize) as usize;
-        let leaf = self.blocks.as_ptr().wrapping_add(p.index as usize) as usize;
-        let is_leaf = 0usize.wrapping_sub((p.count != 0) as usize);
+        let index = p.child.index() as usize;
+        let node = self.nodes.as_ptr().wrapping_add(index) as usize;
+        let leaf = self.blocks.as_ptr().wrapping_add(index) as usize;
+        let is_leaf = 0usize.wrapping_sub((p.child.count() != 0) as usize);
         let at = (node ^ ((node ^ leaf) & is_leaf)) as *const i8;
         prefetch(at);
         prefetch(at.wrapping_add(64));
@@ -654,6 +818,8 @@ fn prefetch(p: *const i8) {
     let _ = p;
 }
 
+const STACK_LEN: usize = (WIDTH - 1) * STACK + WIDTH;
+
 /// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
 /// interleave rays).
 struct Walk {
@@ -668,9 +834,11 @@ struct Walk {
     t_box: f32,
     /// The closest hit so far; `tri` is `4 * block + lane`.
     best: Hit,
-    /// A node pushes at most WIDTH - 1 entries and the tree is less than STACK levels deep.
-    /// Left uninitialised: entries below `sp` are always written before they are read.
-    stack: [MaybeUninit<Pending>; (WIDTH - 1) * STACK],
+    /// A node step leaves at most WIDTH - 1 more entries and the tree is less than STACK
+    /// levels deep; a node step writes WIDTH entries from `sp` (`push_entered`), hence the
+    /// WIDTH more. Left uninitialised: entries below `sp` are always written before they are
+    /// read.
+    stack: [MaybeUninit<Pending>; STACK_LEN],
     sp: usize,
     /// The node or leaf the next step visits.
     current: Pending,
@@ -689,8 +857,7 @@ impl Walk {
         self.best = Hit { t: t_max, ..Hit::MISS };
         self.sp = 0;
         self.current = Pending {
-            index: 0,
-            count: 0,
+            child: ChildRef::node(0),
             t_enter: t_min,
         };
     }
@@ -704,11 +871,10 @@ impl Walk {
             t_far: t_max,
             t_box: t_max * T_SLOP,
             best: Hit { t: t_max, ..Hit::MISS },
-            stack: [const { MaybeUninit::uninit() }; (WIDTH - 1) * STACK],
+            stack: [const { MaybeUninit::uninit() }; STACK_LEN],
             sp: 0,
             current: Pending {
-                index: 0,
-                count: 0,
+                child: ChildRef::node(0),
                 t_enter: t_min,
             },
         }
@@ -721,12 +887,13 @@ impl Walk {
     #[inline(always)]
     fn step<const ANY: bool, const AVX: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
         let cur = self.current;
-        if cur.count > 0 {
-            for _ in 0..cur.count {
+        let count = cur.child.count();
+        if count > 0 {
+            for _ in 0..count {
                 counters.tri_test();
             }
-            let start = cur.index as usize;
-            for b in start..start + cur.count.div_ceil(LEAF_BLOCK as u32) as usize {
+            let start = cur.child.index() as usize;
+            for b in start..start + count.div_ceil(LEAF_BLOCK as u32) as usize {
                 let block = &accel.blocks[b];
                 let h = block.intersect(&self.origin, &self.dir, self.t_min, self.t_far);
                 if h.mask == 0 {
@@ -757,49 +924,21 @@ impl Walk {
             self.t_box = self.t_far * T_SLOP;
         } else {
             counters.cell();
-            let n = &accel.nodes[cur.index as usize];
+            let n = &accel.nodes[cur.child.index() as usize];
+            // The entered children, nearest on top: popped first, just below.
+            let out = (&mut self.stack[self.sp..self.sp + WIDTH])
+                .try_into()
+                .expect("WIDTH entries");
             #[cfg(target_arch = "x86_64")]
-            let (t_enter, mut mask) = if AVX {
+            let pushed = if AVX {
                 // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                unsafe { self.r.enter_avx2(n, self.t_min, self.t_box) }
+                unsafe { self.r.push_entered_avx2(n, self.t_min, self.t_box, out) }
             } else {
-                self.r.enter(n, self.t_min, self.t_box)
+                self.r.push_entered(n, self.t_min, self.t_box, out)
             };
             #[cfg(not(target_arch = "x86_64"))]
-            let (t_enter, mut mask) = self.r.enter(n, self.t_min, self.t_box);
-            if mask != 0 {
-                let t = t_enter;
-                // Nearest child next; the others onto the stack, sorted, nearest on top.
-                let mut first = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let base = self.sp;
-                while mask != 0 {
-                    let mut k = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    if t[k] < t[first] {
-                        std::mem::swap(&mut k, &mut first);
-                    }
-                    let item = Pending {
-                        index: n.child[k],
-                        count: n.count[k],
-                        t_enter: t[k],
-                    };
-                    let mut j = self.sp;
-                    // SAFETY: entries base..sp were written by this loop.
-                    while j > base && unsafe { self.stack[j - 1].assume_init_ref() }.t_enter < item.t_enter {
-                        self.stack[j] = self.stack[j - 1];
-                        j -= 1;
-                    }
-                    self.stack[j] = MaybeUninit::new(item);
-                    self.sp += 1;
-                }
-                self.current = Pending {
-                    index: n.child[first],
-                    count: n.count[first],
-                    t_enter: t[first],
-                };
-                return false;
-            }
+            let pushed = self.r.push_entered(n, self.t_min, self.t_box, out);
+            self.sp += pushed;
         }
         // Pop the nearest pending entry that can still hold a closer hit.
         while self.sp > 0 {
@@ -861,8 +1000,7 @@ fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec
                 nodes[wide].planes[1][a][slot] = n.max[a];
             }
             if n.is_leaf() {
-                nodes[wide].child[slot] = blocks.len() as u32;
-                nodes[wide].count[slot] = n.count;
+                nodes[wide].child[slot] = ChildRef::leaf(blocks.len(), n.count);
                 for ids in bvh.prims[n.first as usize..(n.first + n.count) as usize].chunks(LEAF_BLOCK) {
                     let block: Vec<TriAccel> = ids.iter().map(|&i| tris[i as usize]).collect();
                     blocks.push(TriAccel4::pack(&block));
@@ -871,8 +1009,7 @@ fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriAccel4>, Vec
             } else {
                 let w = nodes.len();
                 nodes.push(WideNode::EMPTY);
-                nodes[wide].child[slot] = w as u32;
-                nodes[wide].count[slot] = 0;
+                nodes[wide].child[slot] = ChildRef::node(w);
                 work.push((w, k));
             }
         }
@@ -965,9 +1102,120 @@ mod tests {
         Ray::new(o, d * rng.range(0.1, 10.0))
     }
 
+    /// A node of random boxes (some flat, some points, some slots empty) and a random ray, most
+    /// of the time aimed through the first box, with `t_min` and `t_max`.
+    #[cfg(target_arch = "x86_64")]
+    fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
+        let mut node = WideNode::EMPTY;
+        for slot in 0..WIDTH - round % 3 {
+            for a in 0..3 {
+                let (lo, hi) = if round % 5 == 4 {
+                    // Nested-ish boxes around the origin: rays enter several.
+                    (rng.range(-1.0, -0.1), rng.range(0.1, 1.0))
+                } else {
+                    let lo = rng.range(-1.0, 1.0);
+                    (lo, lo + [0.0, 1e-6, rng.range(0.0, 1.0)][rng.below(3) as usize])
+                };
+                node.planes[0][a][slot] = lo;
+                node.planes[1][a][slot] = hi;
+            }
+            node.child[slot] = ChildRef::leaf(round * WIDTH + slot, 1 + (slot % MAX_LEAF) as u32);
+        }
+        let aim = Vec3::from_array(std::array::from_fn(|a| {
+            node.planes[0][a][0] + 0.5 * (node.planes[1][a][0] - node.planes[0][a][0])
+        }));
+        let mut ray = random_ray(rng);
+        if round % 8 != 0 {
+            ray = Ray::new(ray.origin, (aim - ray.origin) * rng.range(0.5, 2.0));
+        }
+        // Some with t_min = -0.0, which `order_key` maps to +0.0.
+        let (t_min, t_max) = match round % 4 {
+            0 => (0.5, rng.range(0.5, 3.0)),
+            1 => (-0.0, f32::INFINITY),
+            _ => (0.0, f32::INFINITY),
+        };
+        (node, ray, t_min, t_max)
+    }
+
+    /// The bitonic network sorts: random keys, many repeated, against the standard sort.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn sort8_avx2_sorts() {
+        use std::arch::x86_64::*;
+        if !has_avx2() {
+            eprintln!("no AVX2 on this CPU: the network is not used here");
+            return;
+        }
+        let mut rng = crate::util::Rng::new(0x5027);
+        for round in 0..20_000 {
+            let range = [4, 1000, u32::MAX][round % 3];
+            let keys: [u32; 8] = std::array::from_fn(|_| (rng.next_u64() as u32) % range);
+            let mut want = keys;
+            want.sort_unstable();
+            let mut got = [0u32; 8];
+            // SAFETY: the CPU has AVX2, checked above; both arrays are eight u32s.
+            unsafe {
+                let v = sort8_avx2(_mm256_loadu_si256(keys.as_ptr() as *const __m256i));
+                _mm256_storeu_si256(got.as_mut_ptr() as *mut __m256i, v);
+            }
+            assert_eq!(got, want, "keys {keys:?}");
+        }
+    }
+
+    /// A node step's pushed entries, portable and AVX2, are the same bits; they are exactly the
+    /// children the box test enters, farthest first (up to `order_key`'s eight ulps).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx_push_equals_portable_and_sorts_far_to_near() {
+        if !has_avx2() {
+            eprintln!("no AVX2 on this CPU: only the portable push runs here");
+            return;
+        }
+        let mut rng = crate::util::Rng::new(0x9E57);
+        let mut several = 0;
+        for round in 0..20_000 {
+            let (node, ray, t_min, t_max) = random_node_and_ray(&mut rng, round);
+            let r = BoxRay::new(&ray);
+            let (t, mask) = r.enter(&node, t_min, t_max);
+            let mut a = [MaybeUninit::new(Pending {
+                child: ChildRef(0),
+                t_enter: 0.0,
+            }); WIDTH];
+            let mut b = a;
+            let n = r.push_entered(&node, t_min, t_max, &mut a);
+            // SAFETY: the CPU has AVX2, checked above.
+            let n_avx = unsafe { r.push_entered_avx2(&node, t_min, t_max, &mut b) };
+            assert_eq!((n, n_avx), (mask.count_ones() as usize, n), "round {round}: counts");
+            // SAFETY: all WIDTH entries were written by both pushes.
+            let (a, b) = unsafe { (a.map(|p| p.assume_init()), b.map(|p| p.assume_init())) };
+            let entries = |p: &[Pending]| p.iter().map(|p| (p.child.0, p.t_enter.to_bits())).collect::<Vec<_>>();
+            assert_eq!(entries(&a[..n]), entries(&b[..n]), "round {round}: entries");
+            let mut slots: Vec<usize> = a[..n].iter().map(|p| p.child.index() as usize % WIDTH).collect();
+            for (p, &k) in a[..n].iter().zip(&slots) {
+                assert_eq!(p.child, node.child[k], "round {round}: the child of its slot");
+                assert_eq!(p.t_enter.to_bits(), t[k].to_bits(), "round {round}: its entry distance");
+            }
+            for w in a[..n].windows(2) {
+                // Bits of a non-negative float, -0.0 as +0.0.
+                let bits = |t: f32| (t.to_bits() as i32).max(0) as u32 & !7;
+                assert!(
+                    bits(w[0].t_enter) >= bits(w[1].t_enter),
+                    "round {round}: {} before {}",
+                    w[0].t_enter,
+                    w[1].t_enter
+                );
+            }
+            slots.sort();
+            let want: Vec<usize> = (0..WIDTH).filter(|k| mask >> k & 1 != 0).collect();
+            assert_eq!(slots, want, "round {round}: the entered slots");
+            several += (n >= 3) as usize;
+        }
+        assert!(several > 1000, "nodes with several entered children: {several}");
+    }
+
     /// The AVX box test gives the portable one's entry distances and mask bit for bit: random
-    /// boxes (some flat, some points, some slots empty) against random rays, some parallel to
-    /// an axis, with and without limits on t.
+    /// boxes (some flat, some points, some slots empty, some around a common point) against
+    /// random rays, some parallel to an axis, with and without limits on t.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx_box_test_equals_portable() {
@@ -978,28 +1226,7 @@ mod tests {
         let mut rng = crate::util::Rng::new(0xB0C5);
         let mut entered = 0;
         for round in 0..20_000 {
-            let mut node = WideNode::EMPTY;
-            for slot in 0..WIDTH - round % 3 {
-                for a in 0..3 {
-                    let lo = rng.range(-1.0, 1.0);
-                    let size = [0.0, 1e-6, rng.range(0.0, 1.0)][rng.below(3) as usize];
-                    node.planes[0][a][slot] = lo;
-                    node.planes[1][a][slot] = lo + size;
-                }
-            }
-            // Aimed at the first box, most of the time through it.
-            let aim = Vec3::from_array(std::array::from_fn(|a| {
-                node.planes[0][a][0] + 0.5 * (node.planes[1][a][0] - node.planes[0][a][0])
-            }));
-            let mut ray = random_ray(&mut rng);
-            if round % 8 != 0 {
-                ray = Ray::new(ray.origin, (aim - ray.origin) * rng.range(0.5, 2.0));
-            }
-            let (t_min, t_max) = if round % 4 == 0 {
-                (0.5, rng.range(0.5, 3.0))
-            } else {
-                (0.0, f32::INFINITY)
-            };
+            let (node, ray, t_min, t_max) = random_node_and_ray(&mut rng, round);
             let r = BoxRay::new(&ray);
             let (t, mask) = r.enter(&node, t_min, t_max);
             // SAFETY: the CPU has AVX2, checked above.
