@@ -19,6 +19,7 @@ use std::ops::Range;
 
 use glam::{Vec3, Vec4};
 
+use super::huge::HugePageArray;
 use super::traverse::{Counters, Hit, Ray};
 use super::triangle::{TriAccel4, slack_pad};
 use super::{Aabb, TriAccel};
@@ -593,12 +594,13 @@ struct Pending {
 pub struct BvhAccel {
     /// The binary SAH tree the wide nodes were collapsed from.
     pub bvh: Bvh,
-    pub nodes: Vec<WideNode>,
+    /// The arrays a ray reads are in huge pages where the system allows (`HugePageArray`).
+    pub nodes: HugePageArray<WideNode>,
     /// The leaves' triangles, each leaf in whole blocks (its last one padded with unused lanes).
-    pub blocks: Vec<TriAccel4>,
+    pub blocks: HugePageArray<TriAccel4>,
     /// Index (in the triangles given to `build`) of lane `k` of block `b`, at `4 * b + k`;
     /// `u32::MAX` for an unused lane.
-    pub lane_prims: Vec<u32>,
+    pub lane_prims: HugePageArray<u32>,
 }
 
 impl BvhAccel {
@@ -620,9 +622,9 @@ impl BvhAccel {
         let (nodes, blocks, lane_prims) = collapse(&bvh, tris);
         BvhAccel {
             bvh,
-            nodes,
-            blocks,
-            lane_prims,
+            nodes: HugePageArray::from_slice(&nodes),
+            blocks: HugePageArray::from_slice(&blocks),
+            lane_prims: HugePageArray::from_slice(&lane_prims),
         }
     }
 
@@ -789,9 +791,9 @@ impl BvhAccel {
 
     /// Bytes of the nodes, the triangle blocks and the index map.
     pub fn memory(&self) -> usize {
-        std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.blocks.as_slice())
-            + std::mem::size_of_val(self.lane_prims.as_slice())
+        std::mem::size_of_val(&self.nodes[..])
+            + std::mem::size_of_val(&self.blocks[..])
+            + std::mem::size_of_val(&self.lane_prims[..])
     }
 }
 
@@ -1125,7 +1127,7 @@ mod tests {
             node.planes[0][a][0] + 0.5 * (node.planes[1][a][0] - node.planes[0][a][0])
         }));
         let mut ray = random_ray(rng);
-        if round % 8 != 0 {
+        if !round.is_multiple_of(8) {
             ray = Ray::new(ray.origin, (aim - ray.origin) * rng.range(0.5, 2.0));
         }
         // Some with t_min = -0.0, which `order_key` maps to +0.0.

@@ -4,6 +4,7 @@
 pub mod aabb;
 pub mod bvh;
 pub mod grid;
+pub mod huge;
 pub mod proximity;
 pub mod traverse;
 pub mod tri_box;
