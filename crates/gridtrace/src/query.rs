@@ -339,39 +339,46 @@ impl TraceMesh {
                     let hits = locked(gpu).intersect(rays, t_min, t_max, self.accel)?;
                     let r = done..done + hits.len();
                     done = r.end;
+                    let tris = &self.scene.accel.tris;
                     out.pieces(r, CPU_BATCH)
                         .zip(hits.par_chunks(CPU_BATCH))
-                        .for_each(|(piece, h)| self.write_hits(h, None, piece));
+                        .for_each(|(mut piece, hits)| {
+                            for (i, &h) in hits.iter().enumerate() {
+                                let normal = if h.is_hit() {
+                                    tris[h.tri as usize].normal()
+                                } else {
+                                    Vec3::ZERO
+                                };
+                                self.write_hit(&mut piece, i, h, normal);
+                            }
+                        });
                     Ok(())
                 })?;
             }
-            None => on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, piece| {
-                let mut hits = [Hit::MISS; CPU_BATCH];
-                let mut normals = [Vec3::ZERO; CPU_BATCH];
-                let (hits, normals) = (&mut hits[..rays.len()], &mut normals[..rays.len()]);
+            None => on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, mut piece| {
+                // Each hit goes straight into the output as its ray is done.
                 let accel = &self.scene.accel;
-                accel.intersect_batch_normals(rays, t_min, t_max, self.accel, hits, normals);
-                self.write_hits(hits, Some(normals), piece);
+                accel.intersect_batch_each(rays, t_min, t_max, self.accel, |i, hit, normal| {
+                    self.write_hit(&mut piece, i, hit, normal)
+                });
             })?,
         }
         Ok(out)
     }
 
-    /// Writes hits of kept triangles as the input's: face index and unit normal (from `normals`,
-    /// the unnormalised geometric normals, where given).
-    fn write_hits(&self, hits: &[Hit], normals: Option<&[Vec3]>, out: HitsMut) {
-        for (i, h) in hits.iter().enumerate() {
-            if h.is_hit() {
-                out.t[i] = h.t;
-                out.tri[i] = self.original_index(h.tri);
-                out.u[i] = h.u;
-                out.v[i] = h.v;
-                let n = normals.map_or_else(|| self.scene.accel.tris[h.tri as usize].normal(), |n| n[i]);
-                out.normal[i] = n.normalize().to_array();
-            } else {
-                out.t[i] = f32::INFINITY;
-                out.tri[i] = u32::MAX;
-            }
+    /// Writes entry `i` of `out`: a hit of a kept triangle as the input's, with its face index
+    /// and unit normal (`normal` is the triangle's unnormalised geometric normal), or a miss.
+    #[inline(always)]
+    fn write_hit(&self, out: &mut HitsMut, i: usize, h: Hit, normal: Vec3) {
+        if h.is_hit() {
+            out.t[i] = h.t;
+            out.tri[i] = self.original_index(h.tri);
+            out.u[i] = h.u;
+            out.v[i] = h.v;
+            out.normal[i] = normal.normalize().to_array();
+        } else {
+            out.t[i] = f32::INFINITY;
+            out.tri[i] = u32::MAX;
         }
     }
 

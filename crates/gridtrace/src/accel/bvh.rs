@@ -669,17 +669,29 @@ impl BvhAccel {
     }
 
     /// `intersect_batch`, also giving each hit's geometric normal (`TriAccel::normal`; zero for
-    /// a miss), computed when the ray is done, from the block of the hit triangle: it was
-    /// tested last or nearly so, and is still in cache.
+    /// a miss).
     pub fn intersect_batch_normals(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit], normals: &mut [Vec3]) {
+        self.intersect_batch_each(rays, t_min, t_max, |i, hit, normal| {
+            out[i] = hit;
+            normals[i] = normal;
+        });
+    }
+
+    /// Closest hits of a batch handed to `f(i, hit, normal)` as each ray `rays[i]` is done, in
+    /// no particular order, with the hit's geometric normal (`TriAccel::normal`; zero for a
+    /// miss). The normal comes from the block of the hit triangle, tested last or nearly so
+    /// and still in cache. A caller can write its own output format here, without a pass over
+    /// an intermediate array.
+    #[inline]
+    pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: f32, mut f: impl FnMut(usize, Hit, Vec3)) {
         self.interleaved::<false>(rays, t_min, t_max, |i, w| {
-            out[i] = self.result(w);
-            normals[i] = if w.best.is_hit() {
+            let normal = if w.best.is_hit() {
                 let tri = w.best.tri as usize;
-                self.blocks[tri / LEAF_BLOCK].lane(tri % LEAF_BLOCK).normal()
+                self.blocks[tri / LEAF_BLOCK].normal(tri % LEAF_BLOCK)
             } else {
                 Vec3::ZERO
             };
+            f(i, self.result(w), normal)
         });
     }
 

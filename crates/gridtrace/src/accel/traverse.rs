@@ -204,8 +204,7 @@ impl GridAccel {
     }
 
     /// `intersect_batch`, also giving each hit's geometric normal (`TriAccel::normal`,
-    /// unnormalised; zero for a miss). The BVH takes it from the triangle as it hits it: looked
-    /// up afterwards, it is a cache miss per hit.
+    /// unnormalised; zero for a miss).
     pub fn intersect_batch_normals(
         &self,
         rays: &[Ray],
@@ -215,18 +214,39 @@ impl GridAccel {
         out: &mut [Hit],
         normals: &mut [Vec3],
     ) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
         assert_eq!(rays.len(), normals.len(), "one normal per ray");
+        self.intersect_batch_each(rays, t_min, t_max, kind, |i, hit, normal| {
+            out[i] = hit;
+            normals[i] = normal;
+        });
+    }
+
+    /// Closest hits of a batch handed to `f(i, hit, normal)` for each ray `rays[i]`, in no
+    /// particular order, with the hit's geometric normal (`TriAccel::normal`, unnormalised;
+    /// zero for a miss). The BVH takes the normal from the triangle's block while it is still
+    /// in cache (`BvhAccel::intersect_batch_each`): looked up afterwards, it is a cache miss
+    /// per hit.
+    #[inline]
+    pub fn intersect_batch_each(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        mut f: impl FnMut(usize, Hit, Vec3),
+    ) {
         if kind == AccelKind::Bvh {
-            assert_eq!(rays.len(), out.len(), "one output per ray");
-            return self.bvh().intersect_batch_normals(rays, t_min, t_max, out, normals);
+            return self.bvh().intersect_batch_each(rays, t_min, t_max, f);
         }
-        self.intersect_batch(rays, t_min, t_max, kind, out);
-        for (h, n) in out.iter().zip(normals) {
-            *n = if h.is_hit() {
-                self.tris[h.tri as usize].normal()
+        for (i, r) in rays.iter().enumerate() {
+            let hit = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
+            let normal = if hit.is_hit() {
+                self.tris[hit.tri as usize].normal()
             } else {
                 Vec3::ZERO
             };
+            f(i, hit, normal);
         }
     }
 

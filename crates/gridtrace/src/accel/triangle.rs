@@ -242,6 +242,16 @@ impl TriAccel4 {
     }
 
     /// The triangle in lane `k`.
+    /// `TriAccel::normal` of lane `k`, bit for bit.
+    #[inline(always)]
+    pub fn normal(&self, k: usize) -> Vec3 {
+        Vec3::new(self.e1[0][k], self.e1[1][k], self.e1[2][k]).cross(Vec3::new(
+            self.e2[0][k],
+            self.e2[1][k],
+            self.e2[2][k],
+        ))
+    }
+
     pub fn lane(&self, k: usize) -> TriAccel {
         TriAccel {
             v0: self.v0.map(|c| c[k]),
