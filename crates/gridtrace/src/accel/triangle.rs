@@ -2,7 +2,7 @@
 //! which saves two vector subtractions in every Möller-Trumbore test.
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Vec3, Vec4};
+use glam::{BVec4A, Vec3, Vec4};
 
 /// One triangle as the traversal sees it. Plain `f32` fields (no `Vec3`, whose alignment
 /// differs between Rust and WGSL) so this exact struct is also the GPU storage layout: 36 bytes.
@@ -177,6 +177,8 @@ pub struct TriAccel4 {
 #[derive(Debug, Clone, Copy)]
 pub struct TriHit4 {
     pub mask: u32,
+    /// `mask` as lanes, for selects.
+    pub hit: BVec4A,
     pub t: Vec4,
     pub u: Vec4,
     pub v: Vec4,
@@ -304,6 +306,7 @@ impl TriAccel4 {
         ok &= !(det * det).cmple(Vec4::splat(PARALLEL_COS2) * e1_len2 * p_len2);
         TriHit4 {
             mask: ok.bitmask(),
+            hit: ok,
             t,
             u,
             v,
