@@ -546,6 +546,7 @@ impl BoxRay {
 /// The mask of `_mm256_blend_epi32` for one layer of a bitonic sorting network on eight lanes
 /// (Batcher 1968): lanes `i` and `i ^ j` compare, in blocks of `k` that sort up where `i & k`
 /// is 0 and down elsewhere; bit `i` set where lane `i` keeps the larger value.
+#[cfg(target_arch = "x86_64")]
 const fn bitonic_mask(k: usize, j: usize) -> i32 {
     let mut mask = 0;
     let mut i = 0;
