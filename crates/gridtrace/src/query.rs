@@ -347,17 +347,11 @@ impl TraceMesh {
                     let hits = locked(gpu).intersect(rays, t_min, t_max, self.accel)?;
                     let r = done..done + hits.len();
                     done = r.end;
-                    let tris = &self.scene.accel.tris;
                     out.pieces(r, CPU_BATCH)
                         .zip(hits.par_chunks(CPU_BATCH))
                         .for_each(|(mut piece, hits)| {
                             for (i, &h) in hits.iter().enumerate() {
-                                let normal = if h.is_hit() {
-                                    tris[h.tri as usize].normal()
-                                } else {
-                                    Vec3::ZERO
-                                };
-                                self.write_hit(&mut piece, i, h, normal);
+                                self.write_hit(&mut piece, i, h, self.scene.accel.hit_normal(&h));
                             }
                         });
                     Ok(())

@@ -915,10 +915,11 @@ impl Walk {
                 // one by one, each kept only if strictly closer. Without a branch on whether
                 // any lane hit, which is a coin toss: selects instead (every hit lane has
                 // `t < t_far`, and with none `t_min_lane` is +inf, so `t_far` stays).
+                let mask = h.mask();
                 let t = Vec4::select(h.hit, h.t, Vec4::INFINITY);
                 let t_min_lane = t.min_element();
-                let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & h.mask).trailing_zeros() as usize & 3;
-                let closer = h.mask != 0;
+                let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & mask).trailing_zeros() as usize & 3;
+                let closer = mask != 0;
                 self.t_far = self.t_far.min(t_min_lane);
                 let lane = Hit {
                     t: t_min_lane,

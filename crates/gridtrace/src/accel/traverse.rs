@@ -241,12 +241,17 @@ impl GridAccel {
         }
         for (i, r) in rays.iter().enumerate() {
             let hit = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
-            let normal = if hit.is_hit() {
-                self.tris[hit.tri as usize].normal()
-            } else {
-                Vec3::ZERO
-            };
-            f(i, hit, normal);
+            f(i, hit, self.hit_normal(&hit));
+        }
+    }
+
+    /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a
+    /// miss.
+    pub fn hit_normal(&self, hit: &Hit) -> Vec3 {
+        if hit.is_hit() {
+            self.tris[hit.tri as usize].normal()
+        } else {
+            Vec3::ZERO
         }
     }
 

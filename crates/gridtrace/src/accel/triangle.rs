@@ -173,11 +173,9 @@ pub struct TriAccel4 {
     pub e2: [Vec4; 3],
 }
 
-/// The lanes of a `TriAccel4` test that hit (bit k for lane k), and where.
+/// The lanes of a `TriAccel4` test that hit, and where.
 #[derive(Debug, Clone, Copy)]
 pub struct TriHit4 {
-    pub mask: u32,
-    /// `mask` as lanes, for selects.
     pub hit: BVec4A,
     pub t: Vec4,
     pub u: Vec4,
@@ -185,6 +183,12 @@ pub struct TriHit4 {
 }
 
 impl TriHit4 {
+    /// The lanes that hit, bit `k` for lane `k`.
+    #[inline(always)]
+    pub fn mask(&self) -> u32 {
+        self.hit.bitmask()
+    }
+
     /// The hit of lane `k` (meaningful where `mask` has bit `k`).
     pub fn lane(&self, k: usize) -> TriHit {
         TriHit {
@@ -243,7 +247,6 @@ impl TriAccel4 {
         p
     }
 
-    /// The triangle in lane `k`.
     /// `TriAccel::normal` of lane `k`, bit for bit.
     #[inline(always)]
     pub fn normal(&self, k: usize) -> Vec3 {
@@ -254,6 +257,7 @@ impl TriAccel4 {
         ))
     }
 
+    /// The triangle in lane `k`.
     pub fn lane(&self, k: usize) -> TriAccel {
         TriAccel {
             v0: self.v0.map(|c| c[k]),
@@ -304,13 +308,7 @@ impl TriAccel4 {
         let e1_len2 = dot4(&self.e1, &self.e1);
         let p_len2 = dot4(&p, &p);
         ok &= !(det * det).cmple(Vec4::splat(PARALLEL_COS2) * e1_len2 * p_len2);
-        TriHit4 {
-            mask: ok.bitmask(),
-            hit: ok,
-            t,
-            u,
-            v,
-        }
+        TriHit4 { hit: ok, t, u, v }
     }
 }
 
@@ -369,7 +367,7 @@ mod tests {
             let got = block.intersect(&o4, &d4, t_min, t_max);
             for k in 0..4 {
                 let want = tris.get(k).and_then(|t| t.intersect(origin, dir, t_min, t_max));
-                let lane = (got.mask >> k & 1 == 1).then(|| got.lane(k));
+                let lane = (got.mask() >> k & 1 == 1).then(|| got.lane(k));
                 let same = match (want, lane) {
                     (Some(w), Some(l)) => {
                         w.t.to_bits() == l.t.to_bits()
