@@ -5,7 +5,8 @@
 #![no_main]
 use glam::Vec3;
 use gridtrace::accel::triangle::MAX_SLACK;
-use gridtrace::accel::{AccelKind, Grid, GridAccel, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect};
+use gridtrace::accel::{AccelKind, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect};
+use gridtrace::testing::AllAccels;
 use libfuzzer_sys::fuzz_target;
 
 struct Bytes<'a>(&'a [u8]);
@@ -63,8 +64,7 @@ fn run(b: &mut Bytes) -> Option<()> {
     if tris.is_empty() {
         return None;
     }
-    let grid = Grid::build(&tris, res).ok()?;
-    let accel = GridAccel::new(grid, tris);
+    let all = AllAccels::build(tris, res).ok()?;
     // Rays: origin and either a direction or a pool vertex to aim at (exactly through it).
     while let Some(sel) = b.u8() {
         let o = b.vec(raw)?;
@@ -77,13 +77,13 @@ fn run(b: &mut Bytes) -> Option<()> {
             continue;
         }
         let r = Ray::new(o, d);
-        let want = brute_force_intersect(&accel.tris, &r, 0.0, f32::INFINITY);
-        if want.is_hit() && accel.tris[want.tri as usize].barycentric_error_bound(r.origin, r.dir) > MAX_SLACK {
+        let want = brute_force_intersect(&all.grid.tris, &r, 0.0, f32::INFINITY);
+        if want.is_hit() && all.grid.tris[want.tri as usize].barycentric_error_bound(r.origin, r.dir) > MAX_SLACK {
             // Möller-Trumbore's answer is rounding noise here (see docs/robustness.md).
             continue;
         }
         for kind in AccelKind::ALL {
-            let got = accel.intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+            let got = all.get(kind).intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
             assert_eq!(got.is_hit(), want.is_hit(), "{kind:?} {r:?}: got {got:?} want {want:?}");
             if want.is_hit() {
                 assert!(
@@ -91,7 +91,7 @@ fn run(b: &mut Bytes) -> Option<()> {
                     "{kind:?} {r:?}: got {got:?} want {want:?}"
                 );
             }
-            let occ = accel.occluded(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+            let occ = all.get(kind).occluded(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
             assert_eq!(occ, want.is_hit(), "{kind:?} {r:?}: occluded {occ}, closest {want:?}");
         }
     }

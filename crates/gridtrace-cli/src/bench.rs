@@ -326,7 +326,9 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             .unwrap_or(Mode::Cast);
         let name = &cfg.scenes[0];
         let bs = scenes::build_paper_scene(name, data_dir.as_deref())?;
-        let prepared = bs.scene.prepare(bs.resolution(cfg.paper_grids, cfg.grid))?;
+        let prepared = bs
+            .scene
+            .prepare_for(cfg.accels[0], bs.resolution(cfg.paper_grids, cfg.grid))?;
         let opts = RenderOptions::new(first_res.0, first_res.1, mode, cfg.accels[0]);
         let set = bench::rays::collect_rays(&prepared, &opts)?;
         let c = set.counts();

@@ -86,34 +86,41 @@ pub fn fmt_bytes(b: usize) -> String {
 
 pub use gridtrace::query::Backend;
 
-/// Opens the GPU for `backend`: `Ok(None)` means use the CPU. Prints the adapter, or why not.
-/// The BVH has no GPU kernels: `auto` then means the CPU and `gpu` is an error.
-pub fn open_gpu(
-    backend: Backend,
-    accel: gridtrace::AccelKind,
-) -> gridtrace::Result<Option<gridtrace::gpu::GpuContext>> {
-    let resolved = backend.for_accel(accel)?;
-    if resolved != backend {
-        eprintln!("note: the bvh acceleration runs on the CPU only; using the CPU");
-    }
-    match resolved {
-        Backend::Cpu => Ok(None),
-        Backend::Gpu => gridtrace::gpu::GpuContext::new().map(Some),
-        Backend::Auto => match gridtrace::gpu::GpuContext::new() {
-            Ok(c) => Ok(Some(c)),
-            Err(e) => {
-                eprintln!("note: no usable GPU ({e}); using the CPU");
-                Ok(None)
-            }
-        },
-    }
-}
-
-/// `Scene::prepare`, with a scene-level error (nothing to trace, NaN camera...) naming the scene
-/// or file it came from.
-pub fn prepare(scene: &Scene, name: &str, grid: Resolution) -> gridtrace::Result<gridtrace::PreparedScene> {
-    scene.prepare(grid).map_err(|e| match e {
+/// `Scene::prepare_for`, with a scene-level error (nothing to trace, NaN camera...) naming the
+/// scene or file it came from.
+pub fn prepare(
+    scene: &Scene,
+    name: &str,
+    accel: AccelKind,
+    grid: Resolution,
+) -> gridtrace::Result<gridtrace::PreparedScene> {
+    scene.prepare_for(accel, grid).map_err(|e| match e {
         gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
         e => e,
     })
+}
+
+/// The structure in a few words: a grid's dimensions and references per triangle, a BVH's
+/// nodes and memory. The one place the CLI formats it.
+pub fn describe_structure(accel: &gridtrace::Accel) -> String {
+    use gridtrace::accel::Structure;
+    match &accel.structure {
+        Structure::Grid(g) => {
+            let s = &g.stats;
+            format!(
+                "grid {}x{}x{}, {:.2} refs/tri (built in {:.1} ms)",
+                s.dims[0],
+                s.dims[1],
+                s.dims[2],
+                s.refs_per_triangle(),
+                s.build_ms
+            )
+        }
+        Structure::Bvh(b) => format!(
+            "bvh {} wide nodes, depth {}, {}",
+            b.nodes.len(),
+            b.bvh.depth,
+            fmt_bytes(b.memory())
+        ),
+    }
 }

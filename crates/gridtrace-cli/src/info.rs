@@ -2,7 +2,9 @@
 
 use clap::Args;
 
-use crate::common::{GridArgs, SceneArgs, fmt_bytes};
+use gridtrace::accel::Structure;
+
+use crate::common::{GridArgs, SceneArgs, describe_structure, fmt_bytes};
 
 #[derive(Args)]
 pub struct InfoArgs {
@@ -14,9 +16,7 @@ pub struct InfoArgs {
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     let (scene, name) = a.scene.load()?;
-    let prepared = crate::common::prepare(&scene, &name, a.grid.grid)?;
-    let g = &prepared.accel.grid;
-    let s = &g.stats;
+    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, a.grid.grid)?;
     println!("scene            {name}");
     println!("vertices         {}", scene.mesh.positions.len());
     println!(
@@ -26,19 +26,26 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     );
     println!("materials        {}", prepared.materials.len());
     println!("lights           {}", prepared.lights.len());
-    println!("bounds           {} .. {}", g.bounds.min, g.bounds.max);
-    println!(
-        "grid             {}x{}x{} = {} cells",
-        s.dims[0], s.dims[1], s.dims[2], s.cells
-    );
-    println!("empty cells      {:.1}%", s.empty_fraction() * 100.0);
-    println!(
-        "references       {} ({:.2} per triangle, max {} in a cell)",
-        s.references,
-        s.refs_per_triangle(),
-        s.max_refs_in_cell
-    );
-    println!("build            {:.2} ms", s.build_ms);
+    let b = prepared.accel.bounds();
+    println!("bounds           {} .. {}", b.min, b.max);
+    match &prepared.accel.structure {
+        Structure::Grid(g) => {
+            let s = &g.stats;
+            println!(
+                "grid             {}x{}x{} = {} cells",
+                s.dims[0], s.dims[1], s.dims[2], s.cells
+            );
+            println!("empty cells      {:.1}%", s.empty_fraction() * 100.0);
+            println!(
+                "references       {} ({:.2} per triangle, max {} in a cell)",
+                s.references,
+                s.refs_per_triangle(),
+                s.max_refs_in_cell
+            );
+            println!("build            {:.2} ms", s.build_ms);
+        }
+        Structure::Bvh(_) => println!("structure        {}", describe_structure(&prepared.accel)),
+    }
     println!("memory:");
     let mut total = 0;
     for (k, b) in prepared.memory() {
@@ -46,10 +53,12 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
         total += b;
     }
     println!("  {:<14} {:>12}", "total", fmt_bytes(total));
-    println!(
-        "  {:<14} {:>12}   (paper's model M = n*96 + cells*16)",
-        "paper model",
-        fmt_bytes(prepared.paper_memory_model())
-    );
+    if let Some(model) = prepared.paper_memory_model() {
+        println!(
+            "  {:<14} {:>12}   (paper's model M = n*96 + cells*16)",
+            "paper model",
+            fmt_bytes(model)
+        );
+    }
     Ok(())
 }

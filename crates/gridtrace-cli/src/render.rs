@@ -10,7 +10,7 @@ use gridtrace::scene::PointLight;
 use gridtrace::{Mode, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::common::{Backend, GridArgs, SceneArgs, open_gpu, parse_res, parse_vec3};
+use crate::common::{Backend, GridArgs, SceneArgs, parse_res, parse_vec3};
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -46,6 +46,14 @@ pub struct RenderArgs {
     /// Count traversal work (cells, jumps, triangle tests) and print it.
     #[arg(long)]
     stats: bool,
+    /// Frames to render (the first is written): the first frame's time and the median and best
+    /// of the rest are reported, so the figure compares with `bench` (warm, not one cold frame).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    frames: u32,
+    /// Move the camera along a circle around its target over the frames (about the up axis,
+    /// one turn in all): the paper's dynamic camera.
+    #[arg(long)]
+    orbit: bool,
     /// Output PNG.
     #[arg(short, long, default_value = "gridtrace.png")]
     output: PathBuf,
@@ -74,85 +82,104 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             .collect();
     }
     let t_build = Instant::now();
-    let prepared = crate::common::prepare(&scene, &name, a.grid.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, a.grid.grid)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
-    let g = &prepared.accel.grid.stats;
     println!(
-        "scene {name}: {} triangles ({} degenerate dropped), grid {}x{}x{}, {:.2} refs/tri",
+        "scene {name}: {} triangles ({} degenerate dropped), {}",
         prepared.accel.tris.len(),
         prepared.degenerate_dropped,
-        g.dims[0],
-        g.dims[1],
-        g.dims[2],
-        g.refs_per_triangle()
+        crate::common::describe_structure(&prepared.accel)
     );
-    println!("build   {build_ms:.1} ms (grid {:.1} ms)", g.build_ms);
+    println!("build   {build_ms:.1} ms");
 
     let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, a.grid.accel);
-    let (image, stats) = match open_gpu(a.backend, a.grid.accel)? {
-        Some(ctx) => {
-            println!("backend gpu: {}", ctx.describe());
-            if ctx.is_software() {
+    let (mut renderer, notes) = gridtrace::Renderer::open(a.backend, &prepared, a.grid.accel)?;
+    for n in notes {
+        eprintln!("note: {n}");
+    }
+    match renderer.gpu() {
+        Some(gpu) => {
+            println!("backend gpu: {}", gpu.context().describe());
+            if gpu.context().is_software() {
                 println!("        (a software adapter: CPU speed, not GPU speed)");
             }
-            let mut gpu = gridtrace::gpu::GpuRenderer::new(ctx, &prepared)?;
-            let (image, s) = gpu.render(&prepared.camera, &prepared.lights, &opts)?;
-            let source = if s.timings.from_timestamps {
-                "GPU timestamps"
-            } else {
-                "wall clock, no timestamp queries"
-            };
-            let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
-            println!(
-                "stages  {} ms ({source}; {} tile{})",
-                stages.join(", "),
-                s.tiles,
-                if s.tiles == 1 { "" } else { "s" }
-            );
-            // Rays per second by kind, from the stage that traces them.
-            let rate = |rays: u64, stage: &str| {
-                s.timings
-                    .stages_ms
-                    .get(stage)
-                    .filter(|ms| **ms > 0.0)
-                    .map(|ms| rays as f64 / (ms * 1e3))
-            };
-            let r = s.render.rays;
-            if let Some(v) = rate(r.eye + r.reflection, "traverse") {
-                print!("rates   eye+reflection {v:.2} Mrays/s (traverse)");
-                if let Some(v) = rate(r.shadow, "occlusion") {
-                    print!(", shadow {v:.2} Mrays/s (occlusion)");
-                }
-                println!();
-            }
-            (image, s.render)
         }
-        None => {
-            println!("backend cpu ({} threads)", rayon::current_num_threads());
-            let bar = (std::io::stderr().is_terminal() && (a.res.0 as u64 * a.res.1 as u64) >= 512 * 512).then(|| {
-                let b = ProgressBar::new(a.res.1 as u64);
-                b.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap());
-                b
-            });
-            let tick = |rows: u32| {
-                if let Some(b) = &bar {
-                    b.inc(rows as u64);
-                }
-            };
-            let result = if a.stats {
-                gridtrace::cpu::render_with_counters(&prepared, &opts)?
-            } else {
-                gridtrace::cpu::render(&prepared, &opts, Some(&tick))?
-            };
-            if let Some(b) = bar {
-                b.finish_and_clear();
-            }
-            result
+        None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
+    }
+    let bar = (renderer.gpu().is_none()
+        && std::io::stderr().is_terminal()
+        && (a.res.0 as u64 * a.res.1 as u64 * a.frames as u64) >= 512 * 512)
+        .then(|| {
+            let b = ProgressBar::new(a.res.1 as u64 * a.frames as u64);
+            b.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap());
+            b
+        });
+    let tick = |rows: u32| {
+        if let Some(b) = &bar {
+            b.inc(rows as u64);
         }
     };
+    let mut frames = Vec::with_capacity(a.frames as usize);
+    let mut first = None;
+    for i in 0..a.frames {
+        let camera = if a.orbit {
+            orbit(&prepared.camera, i as f32 / a.frames as f32)
+        } else {
+            prepared.camera
+        };
+        let frame = if a.stats && renderer.gpu().is_none() {
+            let (image, stats) = gridtrace::cpu::render_with_counters(&prepared, &opts)?;
+            gridtrace::Frame {
+                image,
+                stats,
+                gpu: None,
+            }
+        } else {
+            renderer.render(&camera, &prepared.lights, &opts, Some(&tick))?
+        };
+        frames.push(frame.stats);
+        if first.is_none() {
+            first = Some(frame);
+        }
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let gridtrace::Frame { image, stats, gpu } = first.expect("at least one frame (--frames is at least 1)");
+    if let Some(s) = &gpu {
+        let source = if s.timings.from_timestamps {
+            "GPU timestamps"
+        } else {
+            "wall clock, no timestamp queries"
+        };
+        let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
+        println!(
+            "stages  {} ms ({source}; {} tile{})",
+            stages.join(", "),
+            s.tiles,
+            if s.tiles == 1 { "" } else { "s" }
+        );
+        // Rays per second by kind, from the stage that traces them.
+        let rate = |rays: u64, stage: &str| {
+            s.timings
+                .stages_ms
+                .get(stage)
+                .filter(|ms| **ms > 0.0)
+                .map(|ms| rays as f64 / (ms * 1e3))
+        };
+        let r = s.render.rays;
+        if let Some(v) = rate(r.eye + r.reflection, "traverse") {
+            print!("rates   eye+reflection {v:.2} Mrays/s (traverse)");
+            if let Some(v) = rate(r.shadow, "occlusion") {
+                print!(", shadow {v:.2} Mrays/s (occlusion)");
+            }
+            println!();
+        }
+    }
     let r = stats.rays;
     println!(
-        "render  {:.1} ms, {} rays (eye {}, shadow {}, reflection {}), {:.2} Mrays/s  [{} {} {}x{}]",
+        "{}  {:.1} ms, {} rays (eye {}, shadow {}, reflection {}), {:.2} Mrays/s  [{} {} {}x{}]",
+        if a.frames > 1 { "first " } else { "render" },
         stats.render_ms,
         r.total(),
         r.eye,
@@ -164,6 +191,9 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         a.res.0,
         a.res.1
     );
+    if frames.len() > 1 {
+        println!("{}", describe_frames(&frames[1..], a.orbit));
+    }
     if a.stats && stats.counters.cells > 0 {
         let c = stats.counters;
         let n = r.total().max(1) as f64;
@@ -182,4 +212,33 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     out.save_png(&a.output)?;
     println!("wrote   {}", a.output.display());
     Ok(())
+}
+
+/// The camera `turn` of the way (0..1) round its orbit: rotated about the up axis through the
+/// target, at the same distance and height.
+fn orbit(camera: &gridtrace::scene::Camera, turn: f32) -> gridtrace::scene::Camera {
+    let up = camera.up.normalize_or_zero();
+    let rot = glam::Quat::from_axis_angle(up, turn * std::f32::consts::TAU);
+    gridtrace::scene::Camera {
+        eye: camera.target + rot * (camera.eye - camera.target),
+        ..*camera
+    }
+}
+
+/// The frames after the first: median and best, in ms and Mrays/s.
+fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool) -> String {
+    let mut ms: Vec<f64> = rest.iter().map(|s| s.render_ms).collect();
+    ms.sort_by(f64::total_cmp);
+    let median = ms[ms.len() / 2];
+    let best = ms[0];
+    // Rays per frame vary along an orbit: rates are each frame's own, summarised the same way.
+    let mut rates: Vec<f64> = rest.iter().map(|s| s.mrays_per_s()).collect();
+    rates.sort_by(f64::total_cmp);
+    format!(
+        "frames  {} more{}: median {median:.1} ms ({:.2} Mrays/s), best {best:.1} ms ({:.2} Mrays/s)",
+        rest.len(),
+        if orbit { " along the orbit" } else { "" },
+        rates[rates.len() / 2],
+        rates[rates.len() - 1]
+    )
 }

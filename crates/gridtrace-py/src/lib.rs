@@ -171,7 +171,7 @@ fn render<'py>(
     let mode: Mode = parse("mode", mode)?;
     let accel: AccelKind = parse("accel", accel)?;
     let grid: Resolution = parse("grid", grid)?;
-    let backend = parse::<Backend>("backend", backend)?.for_accel(accel).map_err(to_py)?;
+    let backend = parse::<Backend>("backend", backend)?;
     let scene_name = scene.to_string();
     let rgb = py
         .detach(move || -> gridtrace::Result<Vec<u8>> {
@@ -192,21 +192,10 @@ fn render<'py>(
             if let Some(t) = target {
                 s.camera.target = t.into();
             }
-            let prepared = s.prepare(grid)?;
+            let prepared = s.prepare_for(accel, grid)?;
             let opts = RenderOptions::new(width, height, mode, accel);
-            let gpu = match backend {
-                Backend::Cpu => None,
-                Backend::Gpu => Some(gridtrace::gpu::GpuContext::new()?),
-                Backend::Auto => gridtrace::gpu::GpuContext::new().ok(),
-            };
-            let image = match gpu {
-                Some(ctx) => {
-                    gridtrace::gpu::GpuRenderer::new(ctx, &prepared)?
-                        .render(&prepared.camera, &prepared.lights, &opts)?
-                        .0
-                }
-                None => gridtrace::cpu::render(&prepared, &opts, None)?.0,
-            };
+            let (mut renderer, _notes) = gridtrace::Renderer::open(backend, &prepared, accel)?;
+            let image = renderer.render(&prepared.camera, &prepared.lights, &opts, None)?.image;
             let image = if mode == Mode::Heat {
                 image.heat_to_color()
             } else {

@@ -2,6 +2,7 @@
 //! clouds (K. Ralovich, "Implementing and Analyzing a GPU Ray Tracer"), on the CPU and on any GPU.
 
 pub mod accel;
+pub mod backend;
 pub mod bench;
 pub mod cpu;
 pub mod error;
@@ -13,7 +14,8 @@ pub mod scene;
 pub mod testing;
 pub mod util;
 
-pub use accel::{AccelKind, GridAccel, Hit, Ray, Resolution};
+pub use accel::{Accel, AccelKind, Hit, Ray, Resolution};
+pub use backend::{Backend, Frame, Renderer};
 pub use error::{Error, Location, Result};
 pub use render::{Image, Mode, RenderOptions, RenderStats};
 pub use scene::{Material, Mesh, PreparedScene, Scene};

@@ -40,40 +40,8 @@ use crate::gpu::{GpuContext, GpuRenderer};
 use crate::scene::{Mesh, PreparedScene, Scene};
 use crate::{Error, Result};
 
-/// Where ray queries run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Backend {
-    /// The GPU when an adapter can be opened, else the CPU.
-    #[default]
-    Auto,
-    Gpu,
-    Cpu,
-}
-
-impl std::str::FromStr for Backend {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "auto" => Ok(Backend::Auto),
-            "gpu" => Ok(Backend::Gpu),
-            "cpu" => Ok(Backend::Cpu),
-            _ => Err(format!("backend must be auto, gpu or cpu; got '{s}'")),
-        }
-    }
-}
-
-impl Backend {
-    /// The backend that runs `accel`. The BVH has no GPU kernels: `auto` means the CPU for it
-    /// and `gpu` is an error (`gpu::check_accel`). The one place that decides it, for queries,
-    /// the CLI and Python.
-    pub fn for_accel(self, accel: AccelKind) -> Result<Backend> {
-        match (self, accel) {
-            (Backend::Gpu, _) => crate::gpu::check_accel(accel).map(|_| Backend::Gpu),
-            (Backend::Auto, AccelKind::Bvh) => Ok(Backend::Cpu),
-            (b, _) => Ok(b),
-        }
-    }
-}
+/// Where ray queries run (the same choice as rendering's).
+pub use crate::backend::Backend;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QueryOptions {
@@ -244,15 +212,7 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let prepared = if opts.accel == AccelKind::Bvh {
-            // The grid is not used: one cell is the cheapest to build. The BVH is built now, so
-            // that the first query does not pay for it.
-            let p = scene.prepare(Resolution::Fixed([1, 1, 1]))?;
-            p.accel.bvh();
-            p
-        } else {
-            scene.prepare(opts.grid)?
-        };
+        let prepared = scene.prepare_for(opts.accel, opts.grid)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
         let mesh = TraceMesh {

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use crate::accel::{Aabb, GridAccel, Ray, TriAccel};
+use crate::accel::{Aabb, Accel, AccelKind, Grid, Ray, Resolution, TriAccel};
 use crate::scene::procedural;
 use crate::util::Rng;
 
@@ -63,9 +63,9 @@ fn unit_dir(rng: &mut Rng) -> Vec3 {
 /// exactly at vertices and at points on edges, axis-parallel rays (also through vertices), rays
 /// in cell-boundary planes and through grid corners, and rays that miss the grid. Directions are
 /// not all normalised.
-pub fn ray_set(accel: &GridAccel, n: usize, seed: u64) -> Vec<Ray> {
+pub fn ray_set(accel: &Accel, n: usize, seed: u64) -> Vec<Ray> {
     let mut rng = Rng::new(seed);
-    let g = &accel.grid;
+    let g = accel.grid().expect("ray sets are drawn from a grid's cells (use AllAccels)");
     let b = g.bounds;
     let ext = b.extent();
     let big = Aabb {
@@ -176,7 +176,7 @@ pub struct AimedRay {
 /// side of every face at the aim point, by more than 1e-4 in cosine): a ray that merely touches
 /// a silhouette vertex or ridge edge is a graze, not a crossing.
 pub fn edge_aimed_rays(
-    accel: &GridAccel,
+    accel: &Accel,
     positions: &[Vec3],
     triangles: &[[u32; 3]],
     n: usize,
@@ -217,7 +217,7 @@ pub fn edge_aimed_rays(
     assert!(!shared.is_empty(), "mesh has no edge shared by two triangles");
 
     let mut rng = Rng::new(seed);
-    let g = &accel.grid;
+    let g = accel.grid().expect("ray sets are drawn from a grid's cells (use AllAccels)");
     let b = g.bounds;
     let far = b.diagonal();
     let axes = [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z];
@@ -481,4 +481,24 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
             "line ",
         ),
     ]
+}
+
+/// One structure per traversal kind over the same triangles, for tests that compare them all:
+/// the grid (serving `grid` and `pc`) and the BVH.
+pub struct AllAccels {
+    pub grid: Accel,
+    pub bvh: Accel,
+}
+
+impl AllAccels {
+    pub fn build(tris: Vec<TriAccel>, resolution: Resolution) -> crate::Result<AllAccels> {
+        let grid = Accel::from_grid(Grid::build(&tris, resolution)?, tris.clone());
+        let bvh = Accel::build(tris, AccelKind::Bvh, resolution)?;
+        Ok(AllAccels { grid, bvh })
+    }
+
+    /// The structure that serves `kind`.
+    pub fn get(&self, kind: AccelKind) -> &Accel {
+        if self.grid.serves(kind) { &self.grid } else { &self.bvh }
+    }
 }

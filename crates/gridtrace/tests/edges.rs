@@ -62,7 +62,9 @@ fn cpu_leaks() -> (usize, Vec<String>) {
     for (name, mesh, n) in meshes() {
         let (scene, rays) = scene_and_rays(mesh, n);
         total += rays.len();
+        let bvh = scene.with_accel(AccelKind::Bvh, Resolution::default()).unwrap();
         for kind in AccelKind::ALL {
+            let scene = if kind == AccelKind::Bvh { &bvh } else { &scene };
             let hits: Vec<Hit> = rays
                 .par_iter()
                 .map(|r| scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, kind, &mut NoCounters))

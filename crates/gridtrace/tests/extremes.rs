@@ -4,10 +4,10 @@
 
 use glam::{Mat4, Vec3};
 use gridtrace::accel::{
-    AccelKind, Grid, GridAccel, Hit, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
+    Accel, AccelKind, Hit, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
 };
 use gridtrace::scene::{Camera, Material, PointLight, Scene, procedural};
-use gridtrace::testing::ray_set;
+use gridtrace::testing::{AllAccels, ray_set};
 use gridtrace::{Mode, RenderOptions};
 use rayon::prelude::*;
 
@@ -24,18 +24,17 @@ fn tris_of(m: &gridtrace::Mesh) -> Vec<TriAccel> {
 
 /// Grid and pc closest hits equal brute force (hit/miss, relative t) for 20,000 rays.
 fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
-    let grid = Grid::build(&tris, res).unwrap();
-    let accel = GridAccel::new(grid, tris);
-    let rays = ray_set(&accel, 20_000, 0x5EED ^ name.len() as u64);
+    let all = AllAccels::build(tris, res).unwrap();
+    let rays = ray_set(&all.grid, 20_000, 0x5EED ^ name.len() as u64);
     for kind in AccelKind::ALL {
         let bad: Vec<(Ray, Hit, Hit)> = rays
             .par_iter()
             .filter_map(|r| {
-                let want = brute_force_intersect(&accel.tris, r, 0.0, f32::INFINITY);
-                let got = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let want = brute_force_intersect(&all.grid.tris, r, 0.0, f32::INFINITY);
+                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
                 let ok = got.is_hit() == want.is_hit()
                     && (!want.is_hit() || (got.t - want.t).abs() <= 1e-6 * want.t.abs())
-                    && accel.occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters) == want.is_hit();
+                    && all.get(kind).occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters) == want.is_hit();
                 (!ok).then_some((*r, got, want))
             })
             .collect();
@@ -54,8 +53,7 @@ fn single_triangle() {
     let t = TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y);
     check("single", vec![t], Resolution::default());
     check("single-fine", vec![t], Resolution::Fixed([9, 9, 1]));
-    let grid = Grid::build(&[t], Resolution::default()).unwrap();
-    let accel = GridAccel::new(grid, vec![t]);
+    let accel = Accel::build(vec![t], AccelKind::ProximityCloud, Resolution::default()).unwrap();
     let h = accel.intersect(
         &Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z),
         0.0,
@@ -131,8 +129,8 @@ fn camera_inside_a_mesh() {
     };
     s.background = Vec3::new(1.0, 0.0, 1.0);
     s.lights.push(PointLight::new(Vec3::new(0.0, 0.5, 0.0), Vec3::ONE));
-    let p = s.prepare(Resolution::default()).unwrap();
     for kind in AccelKind::ALL {
+        let p = s.prepare_for(kind, Resolution::default()).unwrap();
         let (img, _) = gridtrace::cpu::render(&p, &RenderOptions::new(96, 64, Mode::Shadow, kind), None).unwrap();
         let bg = img.pixels.iter().filter(|c| **c == s.background).count();
         assert_eq!(bg, 0, "{} background pixels seen from inside", bg);

@@ -105,11 +105,9 @@ fn comparison_detects_differences() {
 /// Proximity clouds and the BVH change speed, never pictures.
 #[test]
 fn pc_and_bvh_render_the_same_image() {
-    let prepared = builtin::scene("mirror-spheres")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
+    let scene = builtin::scene("mirror-spheres").unwrap();
     let render = |accel| {
+        let prepared = scene.prepare_for(accel, Resolution::default()).unwrap();
         let (img, stats) =
             gridtrace::cpu::render(&prepared, &RenderOptions::new(64, 64, Mode::Trace, accel), None).unwrap();
         (img.to_rgb8(), stats.rays)

@@ -6,7 +6,7 @@
 use std::sync::Mutex;
 
 use glam::Vec3;
-use gridtrace::accel::{AccelKind, GridAccel, Hit, NoCounters, Resolution};
+use gridtrace::accel::{Accel, AccelKind, Hit, NoCounters, Resolution};
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::scene::{PointLight, PreparedScene, builtin};
 use gridtrace::testing::ray_set;
@@ -28,7 +28,7 @@ fn renderer(scene: &PreparedScene) -> Option<GpuRenderer> {
 
 /// Same hit or miss; t within a relative 1e-4 (the GPU compiler may fuse multiply-adds);
 /// same triangle except at ties, where the CPU's triangle is hit at the GPU's t.
-fn agree(accel: &GridAccel, r: &gridtrace::Ray, cpu: &Hit, gpu: &Hit) -> bool {
+fn agree(accel: &Accel, r: &gridtrace::Ray, cpu: &Hit, gpu: &Hit) -> bool {
     if cpu.is_hit() != gpu.is_hit() {
         return false;
     }

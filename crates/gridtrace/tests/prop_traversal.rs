@@ -2,7 +2,8 @@
 //! the brute-force closest hit (same hit/miss, same t), and any-hit agrees with it.
 
 use glam::Vec3;
-use gridtrace::accel::{AccelKind, Grid, GridAccel, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect};
+use gridtrace::accel::{AccelKind, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect};
+use gridtrace::testing::AllAccels;
 use proptest::prelude::*;
 
 /// Coordinates either on a 1/8 lattice (exact ties with cell boundaries and shared edges) or
@@ -51,8 +52,7 @@ proptest! {
             .filter(|t| t.normal().length_squared() > 0.0)
             .collect();
         prop_assume!(!tris.is_empty());
-        let grid = Grid::build(&tris, res).unwrap();
-        let accel = GridAccel::new(grid, tris);
+        let all = AllAccels::build(tris, res).unwrap();
         for (o, d, aim) in rays {
             let d = match aim {
                 Some(i) => pool[i % pool.len()] - o,
@@ -62,15 +62,15 @@ proptest! {
                 continue;
             }
             let r = Ray::new(o, d);
-            let want = brute_force_intersect(&accel.tris, &r, 0.0, f32::INFINITY);
+            let want = brute_force_intersect(&all.grid.tris, &r, 0.0, f32::INFINITY);
             for kind in AccelKind::ALL {
-                let got = accel.intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let got = all.get(kind).intersect(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
                 prop_assert_eq!(got.is_hit(), want.is_hit(), "{:?} {:?}: got {:?} want {:?}", kind, r, got, want);
                 if want.is_hit() {
                     prop_assert!((got.t - want.t).abs() <= 1e-6 * want.t.abs().max(1e-30),
                         "{:?} {:?}: got {:?} want {:?}", kind, r, got, want);
                 }
-                let occ = accel.occluded(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let occ = all.get(kind).occluded(&r, 0.0, f32::INFINITY, kind, &mut NoCounters);
                 prop_assert_eq!(occ, want.is_hit(), "{:?} {:?}", kind, r);
             }
         }

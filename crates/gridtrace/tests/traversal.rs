@@ -4,10 +4,10 @@
 
 use glam::Vec3;
 use gridtrace::accel::{
-    AccelKind, Grid, GridAccel, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
+    Accel, AccelKind, Grid, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
 };
 use gridtrace::scene::builtin;
-use gridtrace::testing::{flat_scene, ray_set, triangle_soup};
+use gridtrace::testing::{AllAccels, flat_scene, ray_set, triangle_soup};
 use rayon::prelude::*;
 
 const RAYS: usize = 100_000;
@@ -26,12 +26,11 @@ fn agree(a: &Hit, b: &Hit) -> bool {
 }
 
 fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
-    let grid = Grid::build(&tris, res).unwrap();
-    let accel = GridAccel::new(grid, tris);
-    let rays = ray_set(&accel, RAYS, 0xC0FFEE ^ name.len() as u64);
+    let all = AllAccels::build(tris, res).unwrap();
+    let rays = ray_set(&all.grid, RAYS, 0xC0FFEE ^ name.len() as u64);
     let truth: Vec<Hit> = rays
         .par_iter()
-        .map(|r| brute_force_intersect(&accel.tris, r, 0.0, f32::INFINITY))
+        .map(|r| brute_force_intersect(&all.grid.tris, r, 0.0, f32::INFINITY))
         .collect();
     let hits = truth.iter().filter(|h| h.is_hit()).count();
     assert!(
@@ -43,27 +42,27 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .par_iter()
             .zip(&truth)
             .filter_map(|(r, want)| {
-                let got = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
                 let mut errs = Vec::new();
                 if !agree(&got, want) {
                     errs.push(format!("closest {got:?} want {want:?}"));
                 }
                 if got.is_hit() && got.tri != want.tri {
                     // A tie must really be a tie: the other triangle is hit at the same t.
-                    let alt = accel.tris[want.tri as usize].intersect(r.origin, r.dir, 0.0, f32::INFINITY);
+                    let alt = all.grid.tris[want.tri as usize].intersect(r.origin, r.dir, 0.0, f32::INFINITY);
                     if alt.is_none() {
                         errs.push("tie partner not hit".into());
                     }
                 }
-                let occ = accel.occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let occ = all.get(kind).occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
                 if occ != want.is_hit() {
                     errs.push(format!("occluded {occ} but closest {want:?}"));
                 }
                 if want.is_hit() {
                     // Nothing strictly before the closest hit; something just past it.
-                    let before = accel.occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
-                    let past = accel.occluded(r, 0.0, want.t * (1.0 + 1e-5), kind, &mut NoCounters);
-                    if before != brute_force_occluded(&accel.tris, r, 0.0, want.t * (1.0 - 1e-5)) || !past {
+                    let before = all.get(kind).occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
+                    let past = all.get(kind).occluded(r, 0.0, want.t * (1.0 + 1e-5), kind, &mut NoCounters);
+                    if before != brute_force_occluded(&all.grid.tris, r, 0.0, want.t * (1.0 - 1e-5)) || !past {
                         errs.push(format!("occluded window wrong: before {before} past {past}"));
                     }
                 }
@@ -72,18 +71,21 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .collect();
         // The batch queries (interleaved rays for the BVH) give exactly the per-ray answers.
         let mut batch = vec![Hit::MISS; rays.len()];
-        accel.intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
+        all.get(kind).intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
         let mut occ_batch = vec![false; rays.len()];
-        accel.occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
+        all.get(kind).occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
         // With normals (the BVH takes them from the triangle it hits): the same hits, and each
         // normal the hit triangle's.
         let mut with_normals = vec![Hit::MISS; rays.len()];
         let mut normals = vec![Vec3::NAN; rays.len()];
-        accel.intersect_batch_normals(&rays, 0.0, f32::INFINITY, kind, &mut with_normals, &mut normals);
+        all.get(kind).intersect_batch_each(&rays, 0.0, f32::INFINITY, kind, |i, hit, normal| {
+            with_normals[i] = hit;
+            normals[i] = normal;
+        });
         assert_eq!(with_normals, batch, "{name} {}: batch with normals", kind.name());
         for (h, n) in batch.iter().zip(&normals) {
             let want = if h.is_hit() {
-                accel.tris[h.tri as usize].normal()
+                all.grid.tris[h.tri as usize].normal()
             } else {
                 Vec3::ZERO
             };
@@ -92,7 +94,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         for (i, r) in rays.iter().enumerate() {
             assert_eq!(
                 batch[i],
-                accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters),
+                all.get(kind).intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters),
                 "{name} {} batch {r:?}",
                 kind.name()
             );
@@ -164,7 +166,7 @@ fn proximity_cloud_visits_fewer_cells() {
     use gridtrace::accel::TraversalCounters;
     let tris = scene_tris("sparse-room");
     let grid = Grid::build(&tris, Resolution::Fixed([48, 48, 48])).unwrap();
-    let accel = GridAccel::new(grid, tris);
+    let accel = Accel::from_grid(grid, tris);
     let rays = ray_set(&accel, 20_000, 9);
     let (mut g, mut p) = (TraversalCounters::default(), TraversalCounters::default());
     for r in &rays {

@@ -1,20 +1,220 @@
-//! The acceleration structures: the paper's uniform grid with proximity clouds and its traversal,
-//! and a BVH to compare it with.
+//! The acceleration structures, one folder each, behind one front door (`Accel`): the paper's
+//! uniform grid with proximity clouds (`grid/`) and a wide BVH to compare it with (`bvh/`).
+//!
+//! A structure is built over `TriAccel`s (`triangle.rs`, the one edge-safe triangle test every
+//! structure shares) and answers closest-hit and any-hit queries for single rays and batches.
+//! Adding a structure means a new folder and one arm of `Structure`; everything above this
+//! module (renderers, queries, benchmarks) goes through `Accel`.
 
 pub mod aabb;
+pub mod brute_force;
 pub mod bvh;
 pub mod grid;
 pub mod huge;
-pub mod proximity;
-pub mod traverse;
-pub mod tri_box;
+pub mod ray;
 pub mod triangle;
 
+use glam::Vec3;
+
 pub use aabb::Aabb;
+pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
-pub use grid::{Cell, Grid, GridStats, Resolution};
-pub use traverse::{
-    AccelKind, Counters, GridAccel, Hit, NoCounters, Ray, TraversalCounters, brute_force_intersect,
-    brute_force_occluded,
-};
+pub use grid::{Cell, Grid, GridStats, Resolution, Stepping};
+pub use ray::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
 pub use triangle::{TriAccel, TriAccel4, TriHit, TriHit4};
+
+use crate::{Error, Result};
+
+/// The structure built over the triangles: only the one that was asked for.
+#[derive(Debug, Clone)]
+pub enum Structure {
+    /// The uniform grid with its proximity cloud; serves `AccelKind::Grid` (cell by cell) and
+    /// `AccelKind::ProximityCloud` (jumps), which share it.
+    Grid(Grid),
+    /// The eight-wide BVH (`AccelKind::Bvh`); it keeps its own copy of the triangles in leaf
+    /// order.
+    Bvh(BvhAccel),
+}
+
+/// The triangles and the structure over them: everything a ray query needs.
+#[derive(Debug, Clone)]
+pub struct Accel {
+    /// The triangles, in the order hits name them (`Hit::tri`).
+    pub tris: Vec<TriAccel>,
+    pub structure: Structure,
+}
+
+impl Accel {
+    /// Builds the structure that serves `kind` over `tris` (`resolution` sizes a grid; the BVH
+    /// ignores it).
+    pub fn build(tris: Vec<TriAccel>, kind: AccelKind, resolution: Resolution) -> Result<Accel> {
+        let structure = match kind {
+            AccelKind::Grid | AccelKind::ProximityCloud => Structure::Grid(Grid::build(&tris, resolution)?),
+            AccelKind::Bvh => Structure::Bvh(BvhAccel::build(&tris)),
+        };
+        Ok(Accel { tris, structure })
+    }
+
+    /// A grid built elsewhere (over these triangles).
+    pub fn from_grid(grid: Grid, tris: Vec<TriAccel>) -> Accel {
+        Accel {
+            tris,
+            structure: Structure::Grid(grid),
+        }
+    }
+
+    /// The grid, if that is the structure.
+    pub fn grid(&self) -> Option<&Grid> {
+        match &self.structure {
+            Structure::Grid(g) => Some(g),
+            _ => None,
+        }
+    }
+
+    /// The BVH, if that is the structure.
+    pub fn bvh(&self) -> Option<&BvhAccel> {
+        match &self.structure {
+            Structure::Bvh(b) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// The box every ray set over these triangles is drawn from: the grid's bounds, which any
+    /// structure over the same triangles shares (`grid::grid_bounds`).
+    pub fn bounds(&self) -> Aabb {
+        match &self.structure {
+            Structure::Grid(g) => g.bounds,
+            // The triangles were checked finite when the structure was built.
+            _ => grid::grid_bounds(&self.tris).unwrap_or(Aabb::EMPTY),
+        }
+    }
+
+    /// The structure's name, as `--accel` spells the kinds it serves.
+    pub fn structure_name(&self) -> &'static str {
+        match self.structure {
+            Structure::Grid(_) => "grid",
+            Structure::Bvh(_) => "bvh",
+        }
+    }
+
+    /// Whether this structure can run traversal `kind`.
+    pub fn serves(&self, kind: AccelKind) -> bool {
+        matches!(
+            (&self.structure, kind),
+            (Structure::Grid(_), AccelKind::Grid | AccelKind::ProximityCloud) | (Structure::Bvh(_), AccelKind::Bvh)
+        )
+    }
+
+    /// `serves`, as an error that says what to do.
+    pub fn check_serves(&self, kind: AccelKind) -> Result<()> {
+        if self.serves(kind) {
+            Ok(())
+        } else {
+            Err(Error::InvalidInput(format!(
+                "accel '{}' asked of a scene prepared with a {}: prepare it for '{}'",
+                kind.name(),
+                self.structure_name(),
+                kind.name()
+            )))
+        }
+    }
+
+    /// Closest hit with `t_min < t < t_max`. `kind` must be one this structure serves
+    /// (`serves`); the grid's `Grid` and `ProximityCloud` differ only in how they cross empty
+    /// space.
+    #[inline]
+    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
+        match &self.structure {
+            Structure::Grid(g) => g.intersect(&self.tris, ray, t_min, t_max, stepping(kind), counters),
+            Structure::Bvh(b) => b.intersect(ray, t_min, t_max, counters),
+        }
+    }
+
+    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
+    #[inline]
+    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
+        match &self.structure {
+            Structure::Grid(g) => g.occluded(&self.tris, ray, t_min, t_max, stepping(kind), counters),
+            Structure::Bvh(b) => b.occluded(ray, t_min, t_max, counters),
+        }
+    }
+
+    /// The batch query: closest hits of `rays` handed to `f(i, hit, normal)` for each ray
+    /// `rays[i]`, in no particular order, with the hit's geometric normal (`TriAccel::normal`,
+    /// unnormalised; zero for a miss). On this thread: callers split large batches across
+    /// threads. The BVH interleaves the rays to hide memory latency and takes the normal from
+    /// the hit's block while it is still in cache (`BvhAccel::intersect_batch_each`); looked up
+    /// afterwards, it is a cache miss per hit.
+    #[inline]
+    pub fn intersect_batch_each(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        mut f: impl FnMut(usize, Hit, Vec3),
+    ) {
+        match &self.structure {
+            Structure::Bvh(b) => b.intersect_batch_each(rays, t_min, t_max, f),
+            Structure::Grid(_) => {
+                for (i, r) in rays.iter().enumerate() {
+                    let hit = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
+                    f(i, hit, self.hit_normal(&hit));
+                }
+            }
+        }
+    }
+
+    /// Closest hits of a batch into `out` (`out[i]` for `rays[i]`), like `intersect_batch_each`.
+    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [Hit]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        self.intersect_batch_each(rays, t_min, t_max, kind, |i, hit, _| out[i] = hit);
+    }
+
+    /// Any-hit results of a batch into `out` (`out[i]` for `rays[i]`).
+    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        match &self.structure {
+            Structure::Bvh(b) => b.occluded_batch(rays, t_min, t_max, out),
+            Structure::Grid(_) => {
+                for (r, o) in rays.iter().zip(out) {
+                    *o = self.occluded(r, t_min, t_max, kind, &mut NoCounters);
+                }
+            }
+        }
+    }
+
+    /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a
+    /// miss.
+    pub fn hit_normal(&self, hit: &Hit) -> Vec3 {
+        if hit.is_hit() {
+            self.tris[hit.tri as usize].normal()
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// Bytes of each array the structure traverses (the triangles included).
+    pub fn memory(&self) -> Vec<(&'static str, usize)> {
+        let mut v = match &self.structure {
+            Structure::Grid(g) => vec![
+                ("cells", std::mem::size_of_val(g.cells.as_slice())),
+                ("refs", std::mem::size_of_val(g.refs.as_slice())),
+            ],
+            Structure::Bvh(b) => vec![("bvh", b.memory())],
+        };
+        v.push(("triangles", std::mem::size_of_val(self.tris.as_slice())));
+        v
+    }
+}
+
+/// How the grid crosses empty space for a traversal kind.
+fn stepping(kind: AccelKind) -> Stepping {
+    if kind == AccelKind::ProximityCloud {
+        Stepping::ProximityJumps
+    } else {
+        Stepping::EveryCell
+    }
+}

@@ -196,7 +196,7 @@ pub struct GridInfo {
 
 impl GridInfo {
     pub fn of(prepared: &PreparedScene, choice: String) -> Self {
-        let s = &prepared.accel.grid.stats;
+        let s = &prepared.grid().stats;
         GridInfo {
             choice,
             dims: s.dims,
@@ -267,7 +267,7 @@ fn make_row(
         accel: opts.accel.name().into(),
         width: opts.width,
         height: opts.height,
-        grid_dims: prepared.accel.grid.stats.dims,
+        grid_dims: prepared.accel.grid().map_or([0; 3], |g| g.stats.dims),
         times_ms: times,
         summary,
         rays: rays.into(),
@@ -363,11 +363,17 @@ pub fn run_matrix(
             bs.description
         ));
         if cpu {
+            // The grid serves grid and pc; the BVH rows get their own structure, built once.
+            let bvh = match cfg.accels.contains(&AccelKind::Bvh) {
+                true => Some(prepared.with_accel(AccelKind::Bvh, res)?),
+                false => None,
+            };
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
                     for &accel in &cfg.accels {
                         let opts = RenderOptions::new(w, h, mode, accel);
-                        let row = cpu_row(&bs.name, &prepared, &opts, cfg)?;
+                        let p = bvh.as_ref().filter(|_| accel == AccelKind::Bvh).unwrap_or(&prepared);
+                        let row = cpu_row(&bs.name, p, &opts, cfg)?;
                         log(&row_line(&row));
                         out.rows.push(row);
                     }
@@ -425,7 +431,7 @@ pub fn scene_info(bs: &BenchScene, prepared: &PreparedScene, choice: String) -> 
         memory_cpu,
         memory_gpu: None,
         memory_gpu_total: None,
-        memory_paper_model: prepared.paper_memory_model() as u64,
+        memory_paper_model: prepared.paper_memory_model().unwrap_or(0) as u64,
     }
 }
 

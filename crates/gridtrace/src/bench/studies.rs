@@ -191,8 +191,8 @@ pub fn scaling(
         let p = ScalingPoint {
             family: family(&m.name),
             triangles: prepared.accel.tris.len(),
-            grid_dims: prepared.accel.grid.stats.dims,
-            build_ms: prepared.accel.grid.stats.build_ms,
+            grid_dims: prepared.grid().stats.dims,
+            build_ms: prepared.grid().stats.build_ms,
             width: res.0,
             height: res.1,
             rays: rays.total(),
@@ -232,8 +232,8 @@ pub fn scaling(
                 family: fam.clone(),
                 source: source.clone(),
                 triangles: prepared.accel.tris.len(),
-                grid_dims: prepared.accel.grid.stats.dims,
-                build_ms: prepared.accel.grid.stats.build_ms,
+                grid_dims: prepared.grid().stats.dims,
+                build_ms: prepared.grid().stats.build_ms,
                 width: side,
                 height: side,
                 rays: rays.total(),
@@ -359,8 +359,8 @@ pub fn pc_study(
                     accel: accel.name().into(),
                     width: res.0,
                     height: res.1,
-                    grid_dims: prepared.accel.grid.stats.dims,
-                    empty_fraction: prepared.accel.grid.stats.empty_fraction(),
+                    grid_dims: prepared.grid().stats.dims,
+                    empty_fraction: prepared.grid().stats.empty_fraction(),
                     rays: stats.rays.total(),
                     cells_per_ray: c.cells as f64 / n,
                     jumps_per_ray: c.jumps as f64 / n,
@@ -450,7 +450,7 @@ pub fn query_study(
             let t0 = std::time::Instant::now();
             let tm = TraceMesh::from_mesh(mesh.clone(), &opts)?;
             let build_ms = t0.elapsed().as_secs_f64() * 1e3;
-            let (o, d) = incoherent_rays(tm.prepared().accel.grid.bounds, rays, 7);
+            let (o, d) = incoherent_rays(tm.prepared().accel.bounds(), rays, 7);
             let mut times = Vec::new();
             let mut hits = 0;
             for rep in 0..warmup + reps {

@@ -3,4 +3,4 @@
 mod render;
 
 pub(crate) use render::light_contribution;
-pub use render::{Surface, intersect_batch, occluded_batch, render, render_with_counters, surface_at};
+pub use render::{Surface, render, render_view, render_with_counters, surface_at};

@@ -7,9 +7,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::Result;
-use crate::accel::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
+use crate::accel::{Counters, Hit, NoCounters, Ray, TraversalCounters};
 use crate::render::{Image, Mode, RayCounts, RenderOptions, RenderStats};
-use crate::scene::{CameraFrame, PreparedScene};
+use crate::scene::{Camera, CameraFrame, PointLight, PreparedScene};
 
 /// Shading geometry at a hit, both normals facing the incoming ray.
 #[derive(Debug, Clone, Copy)]
@@ -48,22 +48,46 @@ pub fn surface_at(scene: &PreparedScene, ray: &Ray, hit: &Hit) -> Surface {
     }
 }
 
-/// Renders the scene with its own camera and lights.
+/// Renders the scene with its own camera and lights. `progress` is called with the number of
+/// image rows finished, as bands of rows finish (from any thread).
 pub fn render(
     scene: &PreparedScene,
     opts: &RenderOptions,
     progress: Option<&(dyn Fn(u32) + Sync)>,
 ) -> Result<(Image, RenderStats)> {
+    render_view(scene, &scene.camera, &scene.lights, opts, progress)
+}
+
+/// Renders the scene from `camera` with `lights` (the scene's own need not be used): the CPU
+/// form of a frame of the interactive tracer, where both change every frame.
+pub fn render_view(
+    scene: &PreparedScene,
+    camera: &Camera,
+    lights: &[PointLight],
+    opts: &RenderOptions,
+    progress: Option<&(dyn Fn(u32) + Sync)>,
+) -> Result<(Image, RenderStats)> {
+    let view = View { camera, lights };
     if opts.mode == Mode::Heat {
-        render_generic::<TraversalCounters>(scene, opts, progress)
+        render_generic::<TraversalCounters>(scene, &view, opts, progress)
     } else {
-        render_generic::<NoCounters>(scene, opts, progress)
+        render_generic::<NoCounters>(scene, &view, opts, progress)
     }
 }
 
 /// Renders and also counts traversal work (cells, jumps, triangle tests).
 pub fn render_with_counters(scene: &PreparedScene, opts: &RenderOptions) -> Result<(Image, RenderStats)> {
-    render_generic::<TraversalCounters>(scene, opts, None)
+    let view = View {
+        camera: &scene.camera,
+        lights: &scene.lights,
+    };
+    render_generic::<TraversalCounters>(scene, &view, opts, None)
+}
+
+/// What changes per frame: where the camera is and where the lights are.
+struct View<'a> {
+    camera: &'a Camera,
+    lights: &'a [PointLight],
 }
 
 trait Collect: Counters + Default + Send {
@@ -86,12 +110,15 @@ impl Collect for TraversalCounters {
 
 fn render_generic<C: Collect>(
     scene: &PreparedScene,
+    view: &View,
     opts: &RenderOptions,
     progress: Option<&(dyn Fn(u32) + Sync)>,
 ) -> Result<(Image, RenderStats)> {
     opts.validate()?;
+    scene.accel.check_serves(opts.accel)?;
+    view.camera.validate().map_err(crate::Error::Scene)?;
     let t0 = Instant::now();
-    let cam = scene.camera.frame(opts.width, opts.height);
+    let cam = view.camera.frame(opts.width, opts.height);
     let mut img = Image::new(opts.width, opts.height);
     const BAND: usize = 4;
     let width = opts.width as usize;
@@ -106,7 +133,7 @@ fn render_generic<C: Collect>(
                 let x = (i % width) as u32;
                 let y = (band * BAND + i / width) as u32;
                 let mut c = C::default();
-                *px = trace_pixel(scene, &cam, x, y, opts, &mut rays, &mut c);
+                *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, &mut rays, &mut c);
                 if opts.mode == Mode::Heat {
                     *px = Vec3::splat(c.cost() as f32);
                 }
@@ -139,8 +166,8 @@ fn render_generic<C: Collect>(
 fn trace_pixel<C: Counters>(
     scene: &PreparedScene,
     cam: &CameraFrame,
-    x: u32,
-    y: u32,
+    lights: &[PointLight],
+    (x, y): (u32, u32),
     opts: &RenderOptions,
     rays: &mut RayCounts,
     counters: &mut C,
@@ -169,7 +196,7 @@ fn trace_pixel<C: Counters>(
         let local = weight * (1.0 - reflect) * mat.diffuse;
         color += local * scene.ambient;
         let origin = s.position + s.ng * scene.ray_epsilon;
-        for light in &scene.lights {
+        for light in lights {
             let (contrib, to_light, dist) = match light_contribution(&s, origin, light) {
                 Some(v) => v,
                 None => continue,
@@ -215,20 +242,4 @@ pub(crate) fn light_contribution(
         return None;
     }
     Some((Vec3::from(light.intensity) * (ndl / d2), l, dist))
-}
-
-/// Closest hits for a batch of rays, in parallel.
-pub fn intersect_batch(accel: &crate::GridAccel, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Vec<Hit> {
-    rays.par_iter()
-        .with_min_len(256)
-        .map(|r| accel.intersect(r, t_min, t_max, kind, &mut NoCounters))
-        .collect()
-}
-
-/// Occlusion for a batch of rays, in parallel.
-pub fn occluded_batch(accel: &crate::GridAccel, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Vec<bool> {
-    rays.par_iter()
-        .with_min_len(256)
-        .map(|r| accel.occluded(r, t_min, t_max, kind, &mut NoCounters))
-        .collect()
 }

@@ -174,7 +174,9 @@ impl GpuRenderer {
     pub fn new(ctx: GpuContext, scene: &PreparedScene) -> Result<GpuRenderer> {
         let dev = &ctx.device;
         let limits = ctx.limits();
-        let g = &scene.accel.grid;
+        let Some(g) = scene.accel.grid() else {
+            return check_accel(AccelKind::Bvh).map(|_| unreachable!());
+        };
         let tri_shade: Vec<TriShade> = scene
             .tri_vertices
             .iter()

@@ -12,7 +12,7 @@ use glam::{Mat4, Vec3};
 pub use camera::{Camera, CameraFrame};
 pub use mesh::{Material, Mesh};
 
-use crate::accel::{Aabb, Grid, GridAccel, Resolution, TriAccel};
+use crate::accel::{Aabb, Accel, AccelKind, Resolution, TriAccel};
 use crate::{Error, Result};
 
 /// A point light. Irradiance falls off with the squared distance: `intensity / d^2`.
@@ -99,8 +99,14 @@ impl Scene {
         Aabb::from_points(&self.mesh.positions)
     }
 
-    /// Validates the scene and builds everything the tracers need.
+    /// Validates the scene and builds everything the tracers need, with a grid (which serves
+    /// `AccelKind::Grid` and `AccelKind::ProximityCloud`).
     pub fn prepare(&self, resolution: Resolution) -> Result<PreparedScene> {
+        self.prepare_for(AccelKind::Grid, resolution)
+    }
+
+    /// `prepare`, building the structure that serves `accel` (`resolution` sizes a grid).
+    pub fn prepare_for(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
         self.camera.validate().map_err(Error::Scene)?;
         for (i, l) in self.lights.iter().enumerate() {
             if !(Vec3::from(l.position).is_finite() && Vec3::from(l.intensity).is_finite()) {
@@ -157,7 +163,6 @@ impl Scene {
                 materials.len()
             )));
         }
-        let grid = Grid::build(&tris, resolution)?;
         let bounds = Aabb::from_points(&m.positions);
         let max_coord = bounds.min.abs().max(bounds.max.abs()).max_element();
         // Secondary rays start this far off the surface (along the geometric normal, towards
@@ -165,7 +170,7 @@ impl Scene {
         // coordinates, because f32 hit points far from the origin carry larger absolute error.
         let ray_epsilon = (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE);
         Ok(PreparedScene {
-            accel: GridAccel::new(grid, tris),
+            accel: Accel::build(tris, accel, resolution)?,
             normals,
             tri_vertices,
             tri_material,
@@ -183,7 +188,8 @@ impl Scene {
 /// Everything the renderers need, built once; camera and lights may change per frame.
 #[derive(Debug, Clone)]
 pub struct PreparedScene {
-    pub accel: GridAccel,
+    /// The triangles and the structure built over them.
+    pub accel: Accel,
     /// Per-vertex unit normals (indexed by `tri_vertices`).
     pub normals: Vec<Vec3>,
     /// Vertex indices of each kept triangle (same order as `accel.tris`).
@@ -203,19 +209,39 @@ pub struct PreparedScene {
 impl PreparedScene {
     /// Bytes of every CPU-side array that tracing uses.
     pub fn memory(&self) -> Vec<(&'static str, usize)> {
-        vec![
-            ("cells", std::mem::size_of_val(self.accel.grid.cells.as_slice())),
-            ("refs", std::mem::size_of_val(self.accel.grid.refs.as_slice())),
-            ("triangles", std::mem::size_of_val(self.accel.tris.as_slice())),
+        let mut v = self.accel.memory();
+        v.extend([
             ("tri_vertices", std::mem::size_of_val(self.tri_vertices.as_slice())),
             ("normals", std::mem::size_of_val(self.normals.as_slice())),
             ("tri_material", std::mem::size_of_val(self.tri_material.as_slice())),
-        ]
+        ]);
+        v
     }
 
-    /// The paper's memory model `M = n*96 + cells*16` (bytes).
-    pub fn paper_memory_model(&self) -> usize {
-        self.accel.tris.len() * 96 + self.accel.grid.cells.len() * 16
+    /// The paper's memory model `M = n*96 + cells*16` (bytes), for a grid.
+    pub fn paper_memory_model(&self) -> Option<usize> {
+        let cells = self.accel.grid()?.cells.len();
+        Some(self.accel.tris.len() * 96 + cells * 16)
+    }
+
+    /// The grid this scene was prepared with. Panics for a scene prepared for another
+    /// structure: for the code paths (the GPU kernels, the grid studies) that only exist for
+    /// grids and have checked `accel.serves` first.
+    pub fn grid(&self) -> &crate::accel::Grid {
+        self.accel
+            .grid()
+            .expect("a grid-only code path reached a scene prepared without a grid")
+    }
+
+    /// The same scene with the structure for `accel` (rebuilt unless it already serves it).
+    pub fn with_accel(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
+        if self.accel.serves(accel) {
+            return Ok(self.clone());
+        }
+        Ok(PreparedScene {
+            accel: Accel::build(self.accel.tris.clone(), accel, resolution)?,
+            ..self.clone()
+        })
     }
 }
 

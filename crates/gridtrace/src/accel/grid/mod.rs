@@ -8,10 +8,16 @@ use bytemuck::{Pod, Zeroable};
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
-use super::proximity::chebyshev_distance_transform;
-use super::tri_box::triangle_overlaps_box;
-use super::triangle::slack_pad;
-use super::{Aabb, TriAccel};
+pub mod dda;
+pub mod proximity;
+pub mod tri_box;
+
+pub use dda::Stepping;
+use proximity::chebyshev_distance_transform;
+use tri_box::triangle_overlaps_box;
+
+use crate::accel::triangle::slack_pad;
+use crate::accel::{Aabb, TriAccel};
 use crate::{Error, Result};
 
 /// One grid cell: 12 bytes, as the paper's RGB float texel, but integers.
@@ -117,25 +123,7 @@ impl Grid {
     /// Builds the grid over the given triangles. An empty triangle list gives a 1x1x1 empty grid.
     pub fn build(tris: &[TriAccel], resolution: Resolution) -> Result<Grid> {
         let t0 = Instant::now();
-        // The bounds hold every triangle's slack-padded box: a hit the triangle test accepts a
-        // hair outside a large triangle can lie outside the vertices' bounds (`SLACK_PAD`).
-        let scene_bounds = tris.iter().fold(Aabb::EMPTY, |b, t| {
-            let [a, bb, c] = t.vertices();
-            let (lo, hi) = (a.min(bb).min(c), a.max(bb).max(c));
-            let pad = slack_pad(lo, hi);
-            b.grow(lo - pad).grow(hi + pad)
-        });
-        let scene_bounds = if scene_bounds.is_empty() {
-            Aabb {
-                min: Vec3::ZERO,
-                max: Vec3::ONE,
-            }
-        } else {
-            scene_bounds
-        };
-        if !scene_bounds.min.is_finite() || !scene_bounds.max.is_finite() {
-            return Err(Error::InvalidInput("triangle coordinates are not finite".into()));
-        }
+        let scene_bounds = tri_bounds(tris)?;
         let bounds = pad_bounds(scene_bounds);
         let dims = match resolution {
             Resolution::Auto { lambda } => auto_dims(scene_bounds.extent(), tris.len(), lambda),
@@ -256,6 +244,36 @@ impl Grid {
     pub fn bytes(&self) -> usize {
         std::mem::size_of_val(self.cells.as_slice()) + std::mem::size_of_val(self.refs.as_slice())
     }
+}
+
+/// Bounds of every triangle's slack-padded box (a unit box for no triangles).
+fn tri_bounds(tris: &[TriAccel]) -> Result<Aabb> {
+    // The bounds hold every triangle's slack-padded box: a hit the triangle test accepts a
+    // hair outside a large triangle can lie outside the vertices' bounds (`SLACK_PAD`).
+    let scene_bounds = tris.iter().fold(Aabb::EMPTY, |b, t| {
+        let [a, bb, c] = t.vertices();
+        let (lo, hi) = (a.min(bb).min(c), a.max(bb).max(c));
+        let pad = slack_pad(lo, hi);
+        b.grow(lo - pad).grow(hi + pad)
+    });
+    let scene_bounds = if scene_bounds.is_empty() {
+        Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        }
+    } else {
+        scene_bounds
+    };
+    if !scene_bounds.min.is_finite() || !scene_bounds.max.is_finite() {
+        return Err(Error::InvalidInput("triangle coordinates are not finite".into()));
+    }
+    Ok(scene_bounds)
+}
+
+/// The box a grid over `tris` covers (`Grid::bounds`), whatever its resolution: ray sets that
+/// must be the same for every structure are drawn from it.
+pub fn grid_bounds(tris: &[TriAccel]) -> Result<Aabb> {
+    tri_bounds(tris).map(pad_bounds)
 }
 
 /// Pads the scene bounds a little on every axis: a flat scene gets a non-zero thickness (cell

@@ -1,0 +1,25 @@
+//! The ground truth: every triangle tested against every ray.
+
+use super::{Hit, Ray, TriAccel};
+
+/// Reference closest hit: every triangle tested. The ground truth for all traversal tests.
+pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> Hit {
+    let mut best = Hit { t: t_max, ..Hit::MISS };
+    for (i, tri) in tris.iter().enumerate() {
+        if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
+            best = Hit {
+                t: h.t,
+                tri: i as u32,
+                u: h.u,
+                v: h.v,
+            };
+        }
+    }
+    if best.tri == u32::MAX { Hit::MISS } else { best }
+}
+
+/// Reference any hit.
+pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    tris.iter()
+        .any(|t| t.intersect(ray.origin, ray.dir, t_min, t_max).is_some())
+}

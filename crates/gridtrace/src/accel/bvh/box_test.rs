@@ -1,0 +1,250 @@
+//! The ray/node box test: eight slabs at once (portable and AVX2, bit-identical), and the
+//! branch-free ordering of the entered children into stack entries.
+
+use std::mem::MaybeUninit;
+
+use crate::accel::Ray;
+
+use super::wide::{ChildRef, Lanes, WIDTH, WideNode};
+
+/// Where a child the ray enters goes in a node's sorted entries: children sort by this key,
+/// ascending, which puts the entered ones first, farthest first (so that the nearest ends on
+/// top of the stack), and the others after them. The key is unique per node: distance from
+/// the high bits of `t_enter` (a non-negative float orders as its bits; `max(0)` maps -0.0,
+/// possible when `t_min` is -0.0, to +0.0), the slot in the low three. Entry distances within
+/// eight ulps of each other thus order by slot: a visiting order, never a result, depends on
+/// it. `BoxRay::push_entered_avx2` computes the same keys.
+#[inline(always)]
+pub(super) fn order_key(t_enter: f32, entered: bool, slot: usize) -> u32 {
+    if entered {
+        ((0x7FFF_FFFF - (t_enter.to_bits() as i32).max(0) as u32) & !7) | slot as u32
+    } else {
+        0x8000_0000 | slot as u32
+    }
+}
+
+/// The per-ray constants of the box test.
+pub(super) struct BoxRay {
+    pub(super) origin: [f32; 3],
+    /// `1 / dir`, with zero components replaced by `±1e-30` first: a slab then never computes
+    /// `0 * inf = NaN`, and a box the ray runs beside (parallel, outside the slab) gets an entry
+    /// distance beyond 1e20, which the other axes' finite interval always excludes.
+    pub(super) inv_dir: [f32; 3],
+    /// Per axis, where in `WideNode::planes` (flattened: `side * 3 + axis`) the near and the
+    /// far planes are: the high side is the near one where the ray goes down the axis. Indices
+    /// computed once per ray, not a select per node, nor a branch, which rays interleaved in a
+    /// batch would mispredict.
+    pub(super) near: [usize; 3],
+    pub(super) far: [usize; 3],
+}
+
+/// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
+/// widening the exit distance by this factor makes the box test conservative (Ize, "Robust
+/// BVH Ray Traversal", JCGT 2013). A ray that touches a box is never reported as missing it.
+pub(super) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
+
+/// Boxes are searched up to this factor past the current `t_far`. Möller-Trumbore's t is exact
+/// only up to rounding that grows as the ray grazes the triangle's plane: the crossing point of
+/// a ray at a small angle to a plane is ill-conditioned along the ray. Seen in the traversal
+/// tests: a hit reported at t = 0.99892 on a triangle whose (padded) box the ray enters only at
+/// 0.99997. A box whose entry lies a little past the current hit may thus still hold a hit the
+/// triangle test reports as closer; the triangle test itself still enforces `t < t_far`
+/// exactly, so this costs only extra box visits.
+pub(super) const T_SLOP: f32 = 1.0 + 1.0 / 256.0;
+
+impl BoxRay {
+    pub(super) fn new(ray: &Ray) -> BoxRay {
+        let safe = |d: f32| if d.abs() < 1e-30 { 1e-30f32.copysign(d) } else { d };
+        let d = ray.dir.to_array().map(safe);
+        BoxRay {
+            origin: ray.origin.to_array(),
+            inv_dir: d.map(|x| 1.0 / x),
+            near: std::array::from_fn(|a| (d[a] < 0.0) as usize * 3 + a),
+            far: std::array::from_fn(|a| (d[a] >= 0.0) as usize * 3 + a),
+        }
+    }
+
+    /// Entry distances of the ray into the node's boxes within `[t_min, t_max]`, and the mask
+    /// of the boxes it enters. Per axis the near plane is chosen by the ray's direction, so
+    /// each slab costs a subtract and a multiply per plane and nothing else.
+    ///
+    /// The portable form, lane by lane over plain arrays (`if a > b { a } else { b }` is exactly
+    /// `maxps`, so the compiler vectorises it partly); `enter_avx2` is its AVX form.
+    #[inline(always)]
+    pub(super) fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
+        let mut t_enter = [t_min; WIDTH];
+        let mut t_exit = [f32::INFINITY; WIDTH];
+        let planes = n.planes.as_flattened();
+        for a in 0..3 {
+            let (near, far) = (&planes[self.near[a]], &planes[self.far[a]]);
+            let (o, inv) = (self.origin[a], self.inv_dir[a]);
+            for k in 0..WIDTH {
+                let t_near = (near[k] - o) * inv;
+                let t_far = (far[k] - o) * inv;
+                t_enter[k] = if t_enter[k] > t_near { t_enter[k] } else { t_near };
+                t_exit[k] = if t_exit[k] < t_far { t_exit[k] } else { t_far };
+            }
+        }
+        let mut mask = 0;
+        for k in 0..WIDTH {
+            let t_exit = t_exit[k] * FAR_SCALE;
+            let t_exit = if t_exit < t_max { t_exit } else { t_max };
+            mask |= ((t_enter[k] <= t_exit) as u32) << k;
+        }
+        (t_enter, mask)
+    }
+
+    /// Writes the node's children the ray enters (within `[t_min, t_max]`) to `out` as stack
+    /// entries, farthest first, and returns how many; the rest of `out` is left meaningless.
+    /// Writing all of `out` and sorting every slot spares the branches of pushing only the
+    /// entered children, whose number a branch predictor cannot guess.
+    #[inline(always)]
+    pub(super) fn push_entered(&self, n: &WideNode, t_min: f32, t_max: f32, out: &mut [MaybeUninit<Pending>; WIDTH]) -> usize {
+        let (t, mask) = self.enter(n, t_min, t_max);
+        let mut keys: [u32; WIDTH] = std::array::from_fn(|k| order_key(t[k], mask >> k & 1 != 0, k));
+        keys.sort_unstable();
+        for (o, key) in out.iter_mut().zip(keys) {
+            let k = (key & 7) as usize;
+            *o = MaybeUninit::new(Pending {
+                child: n.child[k],
+                t_enter: t[k],
+            });
+        }
+        mask.count_ones() as usize
+    }
+
+    /// `push_entered` in AVX2 instructions, with the same entries bit for bit: the keys are
+    /// `order_key`'s, sorted by a bitonic network (unique keys have one sorted order).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn push_entered_avx2(
+        &self,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+        out: &mut [MaybeUninit<Pending>; WIDTH],
+    ) -> usize {
+        use std::arch::x86_64::*;
+        let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
+        let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let bits = _mm256_max_epi32(_mm256_castps_si256(t_enter), _mm256_setzero_si256());
+        let hit_key = _mm256_or_si256(
+            _mm256_and_si256(
+                _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), bits),
+                _mm256_set1_epi32(!7),
+            ),
+            slot,
+        );
+        let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
+        let key = _mm256_blendv_epi8(miss_key, hit_key, _mm256_castps_si256(entered));
+        let order = _mm256_and_si256(sort8_avx2(key), _mm256_set1_epi32(7));
+        let t = _mm256_castps_si256(_mm256_permutevar8x32_ps(t_enter, order));
+        // SAFETY: `child` is eight u32s (an unaligned load needs nothing more).
+        let child = unsafe { _mm256_loadu_si256(n.child.as_ptr() as *const __m256i) };
+        let child = _mm256_permutevar8x32_epi32(child, order);
+        // (child, t) pairs: `Pending`'s layout.
+        let lo = _mm256_unpacklo_epi32(child, t);
+        let hi = _mm256_unpackhi_epi32(child, t);
+        // SAFETY: `out` is eight eight-byte entries: 64 bytes, stored as two 32-byte halves.
+        unsafe {
+            let at = out.as_mut_ptr() as *mut __m256i;
+            _mm256_storeu_si256(at, _mm256_permute2x128_si256::<0x20>(lo, hi));
+            _mm256_storeu_si256(at.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
+        }
+        _mm256_movemask_ps(entered).count_ones() as usize
+    }
+
+    /// `enter` in AVX instructions, for the tests.
+    #[cfg(all(test, target_arch = "x86_64"))]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn enter_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
+        use std::arch::x86_64::*;
+        let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
+        let mut out = [0.0; WIDTH];
+        // SAFETY: `out` holds eight f32s.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t_enter) };
+        (out, _mm256_movemask_ps(entered) as u32)
+    }
+
+    /// `enter` in AVX instructions, with the same results bit for bit: each operation is the
+    /// packed form of the portable one (`_mm256_max_ps(a, b)` is `if a > b { a } else { b }`
+    /// per lane, NaNs included). The compiler vectorises the portable loops only partly.
+    /// Returns the entry distances and the entered lanes (all bits set) as registers.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn enter_avx2_packed(
+        &self,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+    ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let mut t_enter = _mm256_set1_ps(t_min);
+        let mut t_exit = _mm256_set1_ps(f32::INFINITY);
+        for a in 0..3 {
+            // SAFETY: `near` and `far` index the six plane arrays (`BoxRay::new`), each eight
+            // f32s (an unaligned load needs nothing more).
+            let (near, far) = unsafe {
+                let planes = n.planes.as_ptr() as *const Lanes;
+                (
+                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
+                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
+                )
+            };
+            let o = _mm256_set1_ps(self.origin[a]);
+            let inv = _mm256_set1_ps(self.inv_dir[a]);
+            t_enter = _mm256_max_ps(t_enter, _mm256_mul_ps(_mm256_sub_ps(near, o), inv));
+            t_exit = _mm256_min_ps(t_exit, _mm256_mul_ps(_mm256_sub_ps(far, o), inv));
+        }
+        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
+        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
+    }
+}
+
+/// The mask of `_mm256_blend_epi32` for one layer of a bitonic sorting network on eight lanes
+/// (Batcher 1968): lanes `i` and `i ^ j` compare, in blocks of `k` that sort up where `i & k`
+/// is 0 and down elsewhere; bit `i` set where lane `i` keeps the larger value.
+#[cfg(target_arch = "x86_64")]
+pub(super) const fn bitonic_mask(k: usize, j: usize) -> i32 {
+    let mut mask = 0;
+    let mut i = 0;
+    while i < 8 {
+        if ((i & j) == 0) != ((i & k) == 0) {
+            mask |= 1 << i;
+        }
+        i += 1;
+    }
+    mask
+}
+
+/// Sorts eight u32s, ascending, without a branch: the six layers of the bitonic network, each
+/// a lane shuffle, a min, a max and a blend.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn sort8_avx2(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    macro_rules! layer {
+        ($v:expr, $partner:expr, $k:literal, $j:literal) => {{
+            let (v, p) = ($v, $partner);
+            _mm256_blend_epi32::<{ bitonic_mask($k, $j) }>(_mm256_min_epu32(v, p), _mm256_max_epu32(v, p))
+        }};
+    }
+    // Partners: lane i ^ 1 and i ^ 2 within each 128-bit half; i ^ 4 across the halves.
+    let v = layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 2, 1);
+    let v = layer!(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v), 4, 2);
+    let v = layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 4, 1);
+    let v = layer!(v, _mm256_permute4x64_epi64::<0b01_00_11_10>(v), 8, 4);
+    let v = layer!(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v), 8, 2);
+    layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 8, 1)
+}
+
+/// One pending child on the traversal stack, with the distance at which the ray enters its box.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub(super) struct Pending {
+    pub(super) child: ChildRef,
+    pub(super) t_enter: f32,
+}

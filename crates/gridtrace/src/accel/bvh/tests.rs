@@ -1,0 +1,282 @@
+//! Tests of the builder, the box test, the sorting network and the traversal.
+
+use std::mem::MaybeUninit;
+
+use super::box_test::{BoxRay, Pending};
+#[cfg(target_arch = "x86_64")]
+use super::box_test::sort8_avx2;
+use super::build::{MAX_LEAF, STACK};
+#[cfg(target_arch = "x86_64")]
+use super::walk::has_avx2;
+use super::*;
+
+#[test]
+fn depth_is_bounded_for_exponentially_spaced_boxes() {
+    // Centres at 2^-k: every SAH split peels off one box, the worst case for depth.
+    let centers: Vec<Vec3> = (0..2000)
+        .map(|k| Vec3::splat(0.5f32.powi(k % 120) * (1 + k / 120) as f32))
+        .collect();
+    let boxes: Vec<Aabb> = centers.iter().map(|&c| Aabb { min: c, max: c }).collect();
+    let bvh = Bvh::build(&boxes, &centers);
+    assert!(bvh.depth < STACK, "depth {} >= stack {STACK}", bvh.depth);
+    let mut seen = bvh.prims.clone();
+    seen.sort();
+    assert_eq!(
+        seen,
+        (0..2000).collect::<Vec<u32>>(),
+        "every primitive in exactly one leaf"
+    );
+}
+
+/// Every primitive in exactly one leaf, inside its leaf's box; every child box inside its
+/// parent's. 20,000 boxes exercise the parallel subtrees (deferred below 4,096).
+#[test]
+fn leaves_cover_their_primitives() {
+    for n in [500u32, 20_000] {
+        let centers: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new((i * 37 % 101) as f32, (i * 17 % 53) as f32, i as f32 * 0.1))
+            .collect();
+        let boxes: Vec<Aabb> = centers
+            .iter()
+            .map(|&c| Aabb {
+                min: c - 0.5,
+                max: c + 0.5,
+            })
+            .collect();
+        let bvh = Bvh::build(&boxes, &centers);
+        let mut seen = vec![0u32; n as usize];
+        // Walk from the root so that every reachable node is checked.
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let node = &bvh.nodes[i];
+            let b = Aabb {
+                min: node.min.into(),
+                max: node.max.into(),
+            };
+            let contains = |o: &Aabb| b.min.cmple(o.min).all() && b.max.cmpge(o.max).all();
+            if node.is_leaf() {
+                assert!(node.count as usize <= MAX_LEAF);
+                for &p in &bvh.prims[node.first as usize..(node.first + node.count) as usize] {
+                    assert!(contains(&boxes[p as usize]));
+                    seen[p as usize] += 1;
+                }
+            } else {
+                for c in [node.first as usize, node.first as usize + 1] {
+                    let cn = &bvh.nodes[c];
+                    assert!(contains(&Aabb {
+                        min: cn.min.into(),
+                        max: cn.max.into()
+                    }));
+                    stack.push(c);
+                }
+            }
+        }
+        assert!(seen.iter().all(|&k| k == 1), "n = {n}: every primitive exactly once");
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+fn random_ray(rng: &mut crate::util::Rng) -> Ray {
+    let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+    // Some directions with zero components: rays parallel to slabs.
+    for a in 0..3 {
+        if rng.below(5) == 0 {
+            d[a] = 0.0;
+        }
+    }
+    if d == Vec3::ZERO {
+        d = Vec3::Y;
+    }
+    let o = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+    Ray::new(o, d * rng.range(0.1, 10.0))
+}
+
+/// A node of random boxes (some flat, some points, some slots empty) and a random ray, most
+/// of the time aimed through the first box, with `t_min` and `t_max`.
+#[cfg(target_arch = "x86_64")]
+fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
+    let mut node = WideNode::EMPTY;
+    for slot in 0..WIDTH - round % 3 {
+        for a in 0..3 {
+            let (lo, hi) = if round % 5 == 4 {
+                // Nested-ish boxes around the origin: rays enter several.
+                (rng.range(-1.0, -0.1), rng.range(0.1, 1.0))
+            } else {
+                let lo = rng.range(-1.0, 1.0);
+                (lo, lo + [0.0, 1e-6, rng.range(0.0, 1.0)][rng.below(3) as usize])
+            };
+            node.planes[0][a][slot] = lo;
+            node.planes[1][a][slot] = hi;
+        }
+        node.child[slot] = ChildRef::leaf(round * WIDTH + slot, 1 + (slot % MAX_LEAF) as u32);
+    }
+    let aim = Vec3::from_array(std::array::from_fn(|a| {
+        node.planes[0][a][0] + 0.5 * (node.planes[1][a][0] - node.planes[0][a][0])
+    }));
+    let mut ray = random_ray(rng);
+    if !round.is_multiple_of(8) {
+        ray = Ray::new(ray.origin, (aim - ray.origin) * rng.range(0.5, 2.0));
+    }
+    // Some with t_min = -0.0, which `order_key` maps to +0.0.
+    let (t_min, t_max) = match round % 4 {
+        0 => (0.5, rng.range(0.5, 3.0)),
+        1 => (-0.0, f32::INFINITY),
+        _ => (0.0, f32::INFINITY),
+    };
+    (node, ray, t_min, t_max)
+}
+
+/// The bitonic network sorts: random keys, many repeated, against the standard sort.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn sort8_avx2_sorts() {
+    use std::arch::x86_64::*;
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: the network is not used here");
+        return;
+    }
+    let mut rng = crate::util::Rng::new(0x5027);
+    for round in 0..20_000 {
+        let range = [4, 1000, u32::MAX][round % 3];
+        let keys: [u32; 8] = std::array::from_fn(|_| (rng.next_u64() as u32) % range);
+        let mut want = keys;
+        want.sort_unstable();
+        let mut got = [0u32; 8];
+        // SAFETY: the CPU has AVX2, checked above; both arrays are eight u32s.
+        unsafe {
+            let v = sort8_avx2(_mm256_loadu_si256(keys.as_ptr() as *const __m256i));
+            _mm256_storeu_si256(got.as_mut_ptr() as *mut __m256i, v);
+        }
+        assert_eq!(got, want, "keys {keys:?}");
+    }
+}
+
+/// A node step's pushed entries, portable and AVX2, are the same bits; they are exactly the
+/// children the box test enters, farthest first (up to `order_key`'s eight ulps).
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn avx_push_equals_portable_and_sorts_far_to_near() {
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: only the portable push runs here");
+        return;
+    }
+    let mut rng = crate::util::Rng::new(0x9E57);
+    let mut several = 0;
+    for round in 0..20_000 {
+        let (node, ray, t_min, t_max) = random_node_and_ray(&mut rng, round);
+        let r = BoxRay::new(&ray);
+        let (t, mask) = r.enter(&node, t_min, t_max);
+        let mut a = [MaybeUninit::new(Pending {
+            child: ChildRef(0),
+            t_enter: 0.0,
+        }); WIDTH];
+        let mut b = a;
+        let n = r.push_entered(&node, t_min, t_max, &mut a);
+        // SAFETY: the CPU has AVX2, checked above.
+        let n_avx = unsafe { r.push_entered_avx2(&node, t_min, t_max, &mut b) };
+        assert_eq!((n, n_avx), (mask.count_ones() as usize, n), "round {round}: counts");
+        // SAFETY: all WIDTH entries were written by both pushes.
+        let (a, b) = unsafe { (a.map(|p| p.assume_init()), b.map(|p| p.assume_init())) };
+        let entries = |p: &[Pending]| p.iter().map(|p| (p.child.0, p.t_enter.to_bits())).collect::<Vec<_>>();
+        assert_eq!(entries(&a[..n]), entries(&b[..n]), "round {round}: entries");
+        let mut slots: Vec<usize> = a[..n].iter().map(|p| p.child.index() as usize % WIDTH).collect();
+        for (p, &k) in a[..n].iter().zip(&slots) {
+            assert_eq!(p.child, node.child[k], "round {round}: the child of its slot");
+            assert_eq!(p.t_enter.to_bits(), t[k].to_bits(), "round {round}: its entry distance");
+        }
+        for w in a[..n].windows(2) {
+            // Bits of a non-negative float, -0.0 as +0.0.
+            let bits = |t: f32| (t.to_bits() as i32).max(0) as u32 & !7;
+            assert!(
+                bits(w[0].t_enter) >= bits(w[1].t_enter),
+                "round {round}: {} before {}",
+                w[0].t_enter,
+                w[1].t_enter
+            );
+        }
+        slots.sort();
+        let want: Vec<usize> = (0..WIDTH).filter(|k| mask >> k & 1 != 0).collect();
+        assert_eq!(slots, want, "round {round}: the entered slots");
+        several += (n >= 3) as usize;
+    }
+    assert!(several > 1000, "nodes with several entered children: {several}");
+}
+
+/// The AVX box test gives the portable one's entry distances and mask bit for bit: random
+/// boxes (some flat, some points, some slots empty, some around a common point) against
+/// random rays, some parallel to an axis, with and without limits on t.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn avx_box_test_equals_portable() {
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: only the portable box test runs here");
+        return;
+    }
+    let mut rng = crate::util::Rng::new(0xB0C5);
+    let mut entered = 0;
+    for round in 0..20_000 {
+        let (node, ray, t_min, t_max) = random_node_and_ray(&mut rng, round);
+        let r = BoxRay::new(&ray);
+        let (t, mask) = r.enter(&node, t_min, t_max);
+        // SAFETY: the CPU has AVX2, checked above.
+        let (t_avx, mask_avx) = unsafe { r.enter_avx2(&node, t_min, t_max) };
+        assert_eq!(mask, mask_avx, "round {round}: masks");
+        assert_eq!(
+            t.map(f32::to_bits),
+            t_avx.map(f32::to_bits),
+            "round {round}: entry distances"
+        );
+        entered += mask.count_ones();
+    }
+    assert!(entered > 10_000, "the rays really enter boxes: {entered}");
+}
+
+/// The batch traversal's AVX2 build and its baseline build give the same hits, bit for bit,
+/// closest and any, on random triangles and rays.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn avx_and_baseline_traversals_agree() {
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: only the baseline traversal runs here");
+        return;
+    }
+    let mut rng = crate::util::Rng::new(0x7A5E);
+    let tris: Vec<TriAccel> = (0..3000)
+        .map(|_| {
+            let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            let mut p = || c + Vec3::new(rng.range(-0.1, 0.1), rng.range(-0.1, 0.1), rng.range(-0.1, 0.1));
+            TriAccel::new(p(), p(), p())
+        })
+        .collect();
+    let accel = BvhAccel::build(&tris);
+    let rays: Vec<Ray> = (0..20_000).map(|_| random_ray(&mut rng)).collect();
+    let closest = |avx: bool| {
+        let mut out = vec![Hit::MISS; rays.len()];
+        let finish = |i: usize, w: &Walk| out[i] = accel.result(w);
+        if avx {
+            // SAFETY: the CPU has AVX2, checked above.
+            unsafe { accel.interleaved_avx2::<false>(&rays, 0.0, f32::INFINITY, finish) }
+        } else {
+            accel.interleaved_body::<false, false>(&rays, 0.0, f32::INFINITY, finish)
+        }
+        out
+    };
+    let any = |avx: bool| {
+        let mut out = vec![false; rays.len()];
+        let finish = |i: usize, w: &Walk| out[i] = w.best.is_hit();
+        if avx {
+            // SAFETY: the CPU has AVX2, checked above.
+            unsafe { accel.interleaved_avx2::<true>(&rays, 0.0, 1.0, finish) }
+        } else {
+            accel.interleaved_body::<true, false>(&rays, 0.0, 1.0, finish)
+        }
+        out
+    };
+    let bits = |h: &Hit| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits());
+    let (a, b) = (closest(false), closest(true));
+    assert!(a.iter().filter(|h| h.is_hit()).count() > 2000, "the rays really hit");
+    for (i, (a, b)) in a.iter().zip(&b).enumerate() {
+        assert_eq!(bits(a), bits(b), "ray {i}: {a:?} against {b:?}");
+    }
+    assert_eq!(any(false), any(true));
+}

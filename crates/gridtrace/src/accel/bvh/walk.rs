@@ -1,0 +1,290 @@
+//! One ray's resumable walk down the wide BVH, and the traversal loops that run it: a ray to
+//! its end, or a batch of rays interleaved (with prefetching) to hide memory latency.
+
+use std::mem::MaybeUninit;
+
+use glam::{Vec3, Vec4};
+
+use crate::accel::{Counters, Hit, NoCounters, Ray};
+
+use super::BvhAccel;
+use super::box_test::{BoxRay, Pending, T_SLOP};
+use super::build::{LEAF_BLOCK, STACK};
+use super::wide::{ChildRef, WIDTH};
+
+impl BvhAccel {
+    /// Runs one ray's walk to its end, compiled for AVX2 where the CPU has it (as `interleaved`).
+    pub(super) fn walk<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2() {
+            // SAFETY: the CPU has AVX2, checked just above.
+            return unsafe { self.walk_avx2::<ANY, C>(w, counters) };
+        }
+        while !w.step::<ANY, false, C>(self, counters) {}
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn walk_avx2<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
+        while !w.step::<ANY, true, C>(self, counters) {}
+    }
+
+    /// Runs the batch traversal compiled for AVX2 where the CPU has it (with the box test in
+    /// AVX instructions, `BoxRay::enter_avx2`), else the baseline build. Both give the same
+    /// bits: IEEE arithmetic rounds the same at any vector width, and Rust never fuses
+    /// multiply-adds on its own.
+    pub(super) fn interleaved<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, finish: impl FnMut(usize, &Walk)) {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2() {
+            // SAFETY: the CPU has AVX2, checked just above.
+            return unsafe { self.interleaved_avx2::<ANY>(rays, t_min, t_max, finish) };
+        }
+        self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn interleaved_avx2<const ANY: bool>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        finish: impl FnMut(usize, &Walk),
+    ) {
+        self.interleaved_body::<ANY, true>(rays, t_min, t_max, finish)
+    }
+
+    #[inline(always)]
+    pub(super) fn interleaved_body<const ANY: bool, const AVX: bool>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        mut finish: impl FnMut(usize, &Walk),
+    ) {
+        // The walks are reset in place for each new ray: a walk holds a few KiB of stack, which
+        // is never copied.
+        let idle = Ray::new(Vec3::ZERO, Vec3::X);
+        let mut walks: [Walk; LANES] = std::array::from_fn(|_| Walk::new(&idle, t_min, t_max));
+        let mut ray_of = [usize::MAX; LANES];
+        let mut next = 0;
+        let mut active = 0;
+        for (w, i) in walks.iter_mut().zip(&mut ray_of) {
+            if next < rays.len() {
+                w.reset(&rays[next], t_min, t_max);
+                *i = next;
+                next += 1;
+                active += 1;
+            }
+        }
+        while active > 0 {
+            for (w, i) in walks.iter_mut().zip(&mut ray_of) {
+                if *i == usize::MAX {
+                    continue;
+                }
+                if w.step::<ANY, AVX, _>(self, &mut NoCounters) {
+                    finish(*i, w);
+                    if next < rays.len() {
+                        w.reset(&rays[next], t_min, t_max);
+                        *i = next;
+                        next += 1;
+                    } else {
+                        *i = usize::MAX;
+                        active -= 1;
+                        continue;
+                    }
+                }
+                self.prefetch(&w.current);
+            }
+        }
+    }
+
+    /// Asks for the memory of a pending node or leaf ahead of its use.
+    ///
+    /// Branch-free: whether an entry is a node or a leaf is a coin toss to the branch predictor.
+    /// A node is four cache lines; a block of four triangles, 144 bytes at a multiple of 16,
+    /// always lies within three (a second block, in leaves of five to eight triangles, is left
+    /// to the hardware). Four lines are asked for either way. The address is only computed,
+    /// never dereferenced, so an index out of range would only be a useless hint.
+    #[inline(always)]
+    pub(super) fn prefetch(&self, p: &Pending) {
+        let index = p.child.index() as usize;
+        let node = self.nodes.as_ptr().wrapping_add(index) as usize;
+        let leaf = self.blocks.as_ptr().wrapping_add(index) as usize;
+        let is_leaf = 0usize.wrapping_sub((p.child.count() != 0) as usize);
+        let at = (node ^ ((node ^ leaf) & is_leaf)) as *const i8;
+        prefetch(at);
+        prefetch(at.wrapping_add(64));
+        prefetch(at.wrapping_add(128));
+        prefetch(at.wrapping_add(192));
+    }
+
+    pub(super) fn result(&self, w: &Walk) -> Hit {
+        if w.best.is_hit() {
+            Hit {
+                tri: self.lane_prims[w.best.tri as usize],
+                ..w.best
+            }
+        } else {
+            Hit::MISS
+        }
+    }
+}
+
+/// Whether this CPU runs the AVX2 build of the traversal (`walk_avx2`, `interleaved_avx2`,
+/// `BoxRay::enter_avx2`: the features those enable). The standard library caches the answer.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) fn has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+}
+
+/// Rays traced at once by the batch queries (enough in flight to cover memory latency; more
+/// only adds bookkeeping).
+pub(super) const LANES: usize = 8;
+
+#[inline(always)]
+pub(super) fn prefetch(p: *const i8) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is only a hint; it never faults, whatever the address.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p)
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+pub(super) const STACK_LEN: usize = (WIDTH - 1) * STACK + WIDTH;
+
+/// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
+/// interleave rays).
+pub(super) struct Walk {
+    /// The origin and direction in every lane, for the four-triangle test.
+    pub(super) origin: [Vec4; 3],
+    pub(super) dir: [Vec4; 3],
+    pub(super) r: BoxRay,
+    pub(super) t_min: f32,
+    /// Closest hit so far (or `t_max`): triangles are tested up to it.
+    pub(super) t_far: f32,
+    /// Boxes are searched up to this (`t_far * T_SLOP`).
+    pub(super) t_box: f32,
+    /// The closest hit so far; `tri` is `4 * block + lane`.
+    pub(super) best: Hit,
+    /// A node step leaves at most WIDTH - 1 more entries and the tree is less than STACK
+    /// levels deep; a node step writes WIDTH entries from `sp` (`push_entered`), hence the
+    /// WIDTH more. Left uninitialised: entries below `sp` are always written before they are
+    /// read.
+    pub(super) stack: [MaybeUninit<Pending>; STACK_LEN],
+    pub(super) sp: usize,
+    /// The node or leaf the next step visits.
+    pub(super) current: Pending,
+}
+
+impl Walk {
+    /// Starts `ray` over, keeping the (uninitialised) stack where it is.
+    #[inline(always)]
+    pub(super) fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
+        self.origin = ray.origin.to_array().map(Vec4::splat);
+        self.dir = ray.dir.to_array().map(Vec4::splat);
+        self.r = BoxRay::new(ray);
+        self.t_min = t_min;
+        self.t_far = t_max;
+        self.t_box = t_max * T_SLOP;
+        self.best = Hit { t: t_max, ..Hit::MISS };
+        self.sp = 0;
+        self.current = Pending {
+            child: ChildRef::node(0),
+            t_enter: t_min,
+        };
+    }
+
+    pub(super) fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
+        Walk {
+            origin: ray.origin.to_array().map(Vec4::splat),
+            dir: ray.dir.to_array().map(Vec4::splat),
+            r: BoxRay::new(ray),
+            t_min,
+            t_far: t_max,
+            t_box: t_max * T_SLOP,
+            best: Hit { t: t_max, ..Hit::MISS },
+            stack: [const { MaybeUninit::uninit() }; STACK_LEN],
+            sp: 0,
+            current: Pending {
+                child: ChildRef::node(0),
+                t_enter: t_min,
+            },
+        }
+    }
+
+    /// Visits `current` (a leaf's triangles, or a node's boxes) and picks what comes next.
+    /// `AVX`: the box test in AVX instructions (only in code compiled for AVX2).
+    /// Returns true when the ray is done: nothing left that could hold a (closer) hit, or, for
+    /// `ANY`, a hit found.
+    #[inline(always)]
+    pub(super) fn step<const ANY: bool, const AVX: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
+        let cur = self.current;
+        let count = cur.child.count();
+        if count > 0 {
+            for _ in 0..count {
+                counters.tri_test();
+            }
+            let start = cur.child.index() as usize;
+            for b in start..start + count.div_ceil(LEAF_BLOCK as u32) as usize {
+                let block = &accel.blocks[b];
+                let h = block.intersect(&self.origin, &self.dir, self.t_min, self.t_far);
+                // The closest lane, the first of equals: the same hit as testing the triangles
+                // one by one, each kept only if strictly closer. Without a branch on whether
+                // any lane hit, which is a coin toss: selects instead (every hit lane has
+                // `t < t_far`, and with none `t_min_lane` is +inf, so `t_far` stays).
+                let mask = h.mask();
+                let t = Vec4::select(h.hit, h.t, Vec4::INFINITY);
+                let t_min_lane = t.min_element();
+                let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & mask).trailing_zeros() as usize & 3;
+                let closer = mask != 0;
+                self.t_far = self.t_far.min(t_min_lane);
+                let lane = Hit {
+                    t: t_min_lane,
+                    tri: (LEAF_BLOCK * b + k) as u32,
+                    u: h.u[k],
+                    v: h.v[k],
+                };
+                self.best = if closer { lane } else { self.best };
+                if ANY && closer {
+                    return true;
+                }
+                // The hit's input index is looked up when the ray is done. (Only an address:
+                // with no hit yet, `tri` is u32::MAX and the hint useless but harmless.)
+                prefetch(accel.lane_prims.as_ptr().wrapping_add(self.best.tri as usize) as *const i8);
+            }
+            self.t_box = self.t_far * T_SLOP;
+        } else {
+            counters.cell();
+            let n = &accel.nodes[cur.child.index() as usize];
+            // The entered children, nearest on top: popped first, just below.
+            let out = (&mut self.stack[self.sp..self.sp + WIDTH])
+                .try_into()
+                .expect("WIDTH entries");
+            #[cfg(target_arch = "x86_64")]
+            let pushed = if AVX {
+                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
+                unsafe { self.r.push_entered_avx2(n, self.t_min, self.t_box, out) }
+            } else {
+                self.r.push_entered(n, self.t_min, self.t_box, out)
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let pushed = self.r.push_entered(n, self.t_min, self.t_box, out);
+            self.sp += pushed;
+        }
+        // Pop the nearest pending entry that can still hold a closer hit.
+        while self.sp > 0 {
+            self.sp -= 1;
+            // SAFETY: entries below `sp` were written by a push.
+            let p = unsafe { self.stack[self.sp].assume_init() };
+            if p.t_enter <= self.t_box {
+                self.current = p;
+                return false;
+            }
+        }
+        true
+    }
+}

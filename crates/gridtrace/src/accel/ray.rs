@@ -1,0 +1,127 @@
+//! What every structure's traversal shares: rays, hits, which structure to use, and the
+//! counters of traversal work.
+
+use glam::Vec3;
+
+/// A ray `origin + t * dir`. `dir` need not be normalised: `t` is in units of its length.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3) -> Ray {
+        Ray { origin, dir }
+    }
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// Closest hit. A miss is explicit: `t = INFINITY`, `tri = u32::MAX`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub tri: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Hit {
+    pub const MISS: Hit = Hit {
+        t: f32::INFINITY,
+        tri: u32::MAX,
+        u: 0.0,
+        v: 0.0,
+    };
+    pub fn is_hit(&self) -> bool {
+        self.tri != u32::MAX
+    }
+}
+
+/// Which acceleration the traversal uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AccelKind {
+    /// Plain uniform grid: one DDA step per cell.
+    Grid,
+    /// Uniform grid with proximity clouds: empty space is crossed in jumps.
+    ProximityCloud,
+    /// Bounding volume hierarchy (binned SAH), the comparison the paper left as future work.
+    /// CPU only.
+    Bvh,
+}
+
+impl std::str::FromStr for AccelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "grid" | "g" => Ok(AccelKind::Grid),
+            "pc" | "proximity" => Ok(AccelKind::ProximityCloud),
+            "bvh" => Ok(AccelKind::Bvh),
+            _ => Err(format!("accel must be 'grid', 'pc' or 'bvh', got '{s}'")),
+        }
+    }
+}
+
+impl AccelKind {
+    /// Every kind (the CPU runs them all).
+    pub const ALL: [AccelKind; 3] = [AccelKind::Grid, AccelKind::ProximityCloud, AccelKind::Bvh];
+    /// The kinds the GPU kernels run.
+    pub const GPU: [AccelKind; 2] = [AccelKind::Grid, AccelKind::ProximityCloud];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            AccelKind::Grid => "grid",
+            AccelKind::ProximityCloud => "pc",
+            AccelKind::Bvh => "bvh",
+        }
+    }
+}
+
+/// Traversal counters. The no-op implementation compiles to nothing, so the hot loop pays for
+/// statistics only when they are asked for.
+pub trait Counters {
+    fn cell(&mut self) {}
+    fn jump(&mut self) {}
+    fn tri_test(&mut self) {}
+}
+
+/// Counters that cost nothing.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoCounters;
+impl Counters for NoCounters {}
+
+/// Counters that count.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct TraversalCounters {
+    /// Cells visited (DDA steps plus landing cells of jumps).
+    pub cells: u64,
+    /// Proximity-cloud jumps taken.
+    pub jumps: u64,
+    /// Ray/triangle tests.
+    pub tri_tests: u64,
+}
+
+impl Counters for TraversalCounters {
+    #[inline(always)]
+    fn cell(&mut self) {
+        self.cells += 1;
+    }
+    #[inline(always)]
+    fn jump(&mut self) {
+        self.jumps += 1;
+    }
+    #[inline(always)]
+    fn tri_test(&mut self) {
+        self.tri_tests += 1;
+    }
+}
+
+impl std::ops::AddAssign for TraversalCounters {
+    fn add_assign(&mut self, o: Self) {
+        self.cells += o.cells;
+        self.jumps += o.jumps;
+        self.tri_tests += o.tri_tests;
+    }
+}

@@ -1,0 +1,169 @@
+//! Where tracing runs: the one place that turns `--backend auto|gpu|cpu`, the structure's rule
+//! (which structures have GPU kernels) and what the machine has into a CPU or a GPU renderer.
+//! The CLI, the benchmarks, Python and the ray queries all come through here.
+
+use crate::accel::AccelKind;
+use crate::gpu::{GpuContext, GpuRenderStats, GpuRenderer};
+use crate::render::{Image, RenderOptions, RenderStats};
+use crate::scene::{Camera, PointLight, PreparedScene};
+use crate::{Error, Result};
+
+/// Where rays are traced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Backend {
+    /// The GPU when an adapter can be opened and the scene fits it, else the CPU.
+    #[default]
+    Auto,
+    Gpu,
+    Cpu,
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(Backend::Auto),
+            "gpu" => Ok(Backend::Gpu),
+            "cpu" => Ok(Backend::Cpu),
+            _ => Err(format!("backend must be auto, gpu or cpu; got '{s}'")),
+        }
+    }
+}
+
+impl Backend {
+    pub const NAMES: [&'static str; 3] = ["auto", "gpu", "cpu"];
+
+    /// The backend that runs `accel`. The BVH has no GPU kernels: `auto` means the CPU for it
+    /// and `gpu` is an error (`gpu::check_accel`).
+    pub fn for_accel(self, accel: AccelKind) -> Result<Backend> {
+        match (self, accel) {
+            (Backend::Gpu, _) => crate::gpu::check_accel(accel).map(|_| Backend::Gpu),
+            (Backend::Auto, AccelKind::Bvh) => Ok(Backend::Cpu),
+            (b, _) => Ok(b),
+        }
+    }
+
+    /// Opens the GPU device this backend asks for (`None`: trace on the CPU), with notes for
+    /// the user on every choice that was not the one asked for. `gpu` without an adapter is an
+    /// error; `auto` falls back to the CPU.
+    pub fn open_device(self, accel: AccelKind) -> Result<(Option<GpuContext>, Vec<String>)> {
+        let mut notes = Vec::new();
+        let resolved = self.for_accel(accel)?;
+        if resolved != self {
+            notes.push(format!(
+                "the {} acceleration runs on the CPU only; using the CPU",
+                accel.name()
+            ));
+        }
+        let ctx = match resolved {
+            Backend::Cpu => None,
+            Backend::Gpu => Some(GpuContext::new()?),
+            Backend::Auto => match GpuContext::new() {
+                Ok(c) => Some(c),
+                Err(e) => {
+                    notes.push(format!("no usable GPU ({e}); using the CPU"));
+                    None
+                }
+            },
+        };
+        Ok((ctx, notes))
+    }
+}
+
+/// A scene ready to render frames on the CPU or a GPU. The scene stays where it is (on the GPU:
+/// uploaded once); each frame takes its own camera and lights.
+pub enum Renderer<'s> {
+    Cpu(&'s PreparedScene),
+    Gpu {
+        gpu: Box<GpuRenderer>,
+        scene: &'s PreparedScene,
+    },
+}
+
+/// One rendered frame.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub image: Image,
+    pub stats: RenderStats,
+    /// GPU stage times and tiles, for frames traced on a GPU.
+    pub gpu: Option<GpuRenderStats>,
+}
+
+impl<'s> Renderer<'s> {
+    /// Opens the renderer for `backend` and `accel` over `scene`, with notes for the user on
+    /// what was chosen instead of what was asked for. With `auto`, a scene the GPU cannot hold
+    /// (over its buffer limits) is traced on the CPU; with `gpu` that is an error that says so.
+    pub fn open(backend: Backend, scene: &'s PreparedScene, accel: AccelKind) -> Result<(Renderer<'s>, Vec<String>)> {
+        scene.accel.check_serves(accel)?;
+        let (ctx, mut notes) = backend.open_device(accel)?;
+        let Some(ctx) = ctx else {
+            return Ok((Renderer::Cpu(scene), notes));
+        };
+        match GpuRenderer::new(ctx, scene) {
+            Ok(gpu) => Ok((
+                Renderer::Gpu {
+                    gpu: Box::new(gpu),
+                    scene,
+                },
+                notes,
+            )),
+            Err(e) if backend == Backend::Auto => {
+                notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
+                Ok((Renderer::Cpu(scene), notes))
+            }
+            Err(Error::Gpu(m)) => Err(Error::Gpu(format!("{m}; use --backend cpu (or auto) to trace it on the CPU"))),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// "cpu (N threads)" or the GPU adapter's description.
+    pub fn describe(&self) -> String {
+        match self {
+            Renderer::Cpu(_) => format!("cpu ({} threads)", rayon::current_num_threads()),
+            Renderer::Gpu { gpu, .. } => format!("gpu: {}", gpu.context().describe()),
+        }
+    }
+
+    pub fn gpu(&self) -> Option<&GpuRenderer> {
+        match self {
+            Renderer::Gpu { gpu, .. } => Some(gpu),
+            Renderer::Cpu(_) => None,
+        }
+    }
+
+    /// The scene being rendered.
+    pub fn scene(&self) -> &'s PreparedScene {
+        match self {
+            Renderer::Cpu(s) | Renderer::Gpu { scene: s, .. } => s,
+        }
+    }
+
+    /// One frame from `camera` with `lights`. `progress` (CPU only) is called with the number of
+    /// image rows finished.
+    pub fn render(
+        &mut self,
+        camera: &Camera,
+        lights: &[PointLight],
+        opts: &RenderOptions,
+        progress: Option<&(dyn Fn(u32) + Sync)>,
+    ) -> Result<Frame> {
+        match self {
+            Renderer::Cpu(scene) => {
+                let (image, stats) = crate::cpu::render_view(scene, camera, lights, opts, progress)?;
+                Ok(Frame {
+                    image,
+                    stats,
+                    gpu: None,
+                })
+            }
+            Renderer::Gpu { gpu, .. } => {
+                let (image, s) = gpu.render(camera, lights, opts)?;
+                Ok(Frame {
+                    image,
+                    stats: s.render,
+                    gpu: Some(s),
+                })
+            }
+        }
+    }
+}
