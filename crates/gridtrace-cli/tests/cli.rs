@@ -131,3 +131,44 @@ fn bad_input_gives_located_errors() {
     let (ok, text) = gridtrace(&["info", dir.join("missing.ply").to_str().unwrap()]);
     assert!(!ok && text.contains("missing.ply"), "{text}");
 }
+
+/// Like [`gridtrace`], with stderr apart and the environment adjusted by `env`.
+fn gridtrace_env(args: &[&str], env: impl FnOnce(&mut Command)) -> (bool, String, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gridtrace"));
+    cmd.args(args);
+    env(&mut cmd);
+    let out = cmd.output().expect("run gridtrace");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).to_string(),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
+}
+
+/// A fresh scratch folder for one test.
+fn scratch(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("gridtrace-cli-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+
+/// Without XDG_RUNTIME_DIR (or with a missing one) no "XDG_RUNTIME_DIR is invalid" line from
+/// the graphics drivers: `main` points it at a private folder before anything opens the GPU.
+/// `--backend auto` opens the GPU adapter where there is one (lavapipe counts), which is where
+/// the line came from.
+#[test]
+fn no_xdg_runtime_dir_complaint() {
+    let dir = scratch("xdg");
+    let png = dir.join("x.png");
+    let args = ["render", "--scene", "knot-box", "--backend", "auto", "--mode", "cast", "--res", "8", "-o", png.to_str().unwrap()];
+    let (ok, _, stderr) = gridtrace_env(&args, |c| {
+        c.env_remove("XDG_RUNTIME_DIR");
+    });
+    assert!(ok && !stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    let (ok, _, stderr) = gridtrace_env(&args, |c| {
+        c.env("XDG_RUNTIME_DIR", dir.join("missing"));
+    });
+    assert!(ok && !stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+}
