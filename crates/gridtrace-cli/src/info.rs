@@ -8,12 +8,16 @@ use crate::common::{GridArgs, SceneArgs, fmt_bytes};
 pub struct InfoArgs {
     #[command(flatten)]
     scene: SceneArgs,
+    /// With a mesh file: count the floor that `render` adds under it too. By default `info`
+    /// describes the file itself, so its triangle count is the file's.
+    #[arg(long)]
+    with_floor: bool,
     #[command(flatten)]
     grid: GridArgs,
 }
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
-    let (scene, name) = a.scene.load()?;
+    let (scene, name) = a.scene.load(a.with_floor)?;
     let prepared = crate::common::prepare(&scene, &name, a.grid.grid)?;
     let g = &prepared.accel.grid;
     let s = &g.stats;
