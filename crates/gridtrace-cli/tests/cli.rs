@@ -309,3 +309,19 @@ fn scene_without_lights_warns() {
     let (ok, _, stderr) = gridtrace_env(&lit, |_| {});
     assert!(ok && !stderr.contains("no lights"), "{stderr}");
 }
+
+/// The shipped example scene renders, so the example and docs/scene-format.md cannot rot.
+#[test]
+fn example_scene_renders() {
+    let example = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/scene.toml");
+    let dir = scratch("example");
+    let png = dir.join("e.png");
+    let (ok, stdout, stderr) = gridtrace_env(
+        &["render", example, "--backend", "cpu", "--res", "24x16", "-o", png.to_str().unwrap()],
+        |_| {},
+    );
+    assert!(ok, "{stdout}{stderr}");
+    assert!(!stderr.contains("warning"), "the example has lights: {stderr}");
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (24, 16));
+}
