@@ -126,6 +126,9 @@ fn bad_input_gives_located_errors() {
     assert!(text.contains("bad.obj") && text.contains("line 3"), "{text}");
     let (ok, text) = gridtrace(&["render", "--scene", "nope"]);
     assert!(!ok && text.contains("knot-box"), "{text}");
+    // A scene name where a file goes: no such file, and the way to name a built-in scene.
+    let (ok, text) = gridtrace(&["render", "mirror-spheres"]);
+    assert!(!ok && text.contains("mirror-spheres: no such file; for a built-in scene use --scene NAME (knot-box"), "{text}");
     let (ok, text) = gridtrace(&["render", "--scene", "knot-box", "--grid", "0x1x1"]);
     assert!(!ok && text.contains("grid"), "{text}");
     let (ok, text) = gridtrace(&["info", dir.join("missing.ply").to_str().unwrap()]);
