@@ -9,7 +9,7 @@ use gridtrace::bench::{self, BenchBackend, BenchConfig, BenchReport, Machine, sc
 use gridtrace::gpu::GpuContext;
 use gridtrace::{AccelKind, Mode, RenderOptions, Resolution};
 
-use crate::common::parse_res;
+use crate::common::{accel_parser, mode_parser, parse_res};
 
 /// Where the benchmark runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -33,24 +33,26 @@ pub struct BenchArgs {
     /// Scenes, comma separated: knight, torus-knot, bunny, stanford-bunny (default: all four).
     #[arg(long, value_delimiter = ',')]
     scenes: Vec<String>,
-    /// Resolutions, comma separated, each N or WxH (default: 256,512,768).
-    #[arg(long, value_delimiter = ',', value_parser = parse_res)]
+    /// Image sizes in pixels, comma separated, each WxH or N for N x N (default: 256,512,768).
+    #[arg(long, value_name = "WxH|N", value_delimiter = ',', value_parser = parse_res, allow_hyphen_values = true)]
     res: Vec<(u32, u32)>,
     /// Accelerations, comma separated: grid, pc, bvh (default: grid and pc, the paper's; the
     /// BVH runs on the CPU only).
-    #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<AccelKind>())]
+    #[arg(long, value_delimiter = ',', value_parser = accel_parser())]
     accel: Vec<AccelKind>,
     /// Modes, comma separated: cast, shadow, trace (default: all three).
-    #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<Mode>())]
+    #[arg(long, value_delimiter = ',', value_parser = mode_parser())]
     mode: Vec<Mode>,
     /// auto (CPU, plus the GPU if found), cpu, gpu or both. Default: auto (cpu with --quick).
     #[arg(long, value_enum)]
     backend: Option<BenchBackendArg>,
     /// Untimed runs before the timed ones.
-    #[arg(long)]
+    // Hyphen values on numbers: a negative one then gets "invalid value", not clap's advice to
+    // write "-- -1".
+    #[arg(long, allow_hyphen_values = true)]
     warmup: Option<u32>,
     /// Timed repetitions per cell (median and best are reported).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     reps: Option<u32>,
     /// Use the paper's hand-tuned grid dims (14x16x14, 16^3, 20^3, 128^3) instead of --grid.
     #[arg(long)]
@@ -83,7 +85,7 @@ pub struct BenchArgs {
     #[arg(long)]
     query_study: bool,
     /// Rays per mesh for --query-study.
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = 1_000_000, allow_hyphen_values = true)]
     query_rays: usize,
     /// Write the rays of a CPU run (first scene and resolution, the most complete mode asked
     /// for, first accel) as 6 little-endian f32 per ray: origin xyz, direction xyz.

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use glam::Vec3;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
 use gridtrace::{AccelKind, Resolution};
@@ -17,15 +18,13 @@ pub struct SceneArgs {
     /// Any mesh, in an auto-framed scene with a floor, a light and a camera.
     #[arg(long, conflicts_with = "file")]
     pub mesh: Option<PathBuf>,
-    /// With a mesh file: leave out the floor of the auto-framed scene (the mesh alone).
-    #[arg(long)]
-    pub no_floor: bool,
 }
 
 #[derive(Args, Debug, Clone)]
 pub struct GridArgs {
-    /// Acceleration: plain uniform grid, grid with proximity clouds, or a BVH (CPU only).
-    #[arg(long, default_value = "grid", value_parser = |s: &str| s.parse::<AccelKind>())]
+    /// Acceleration: grid (plain uniform grid), pc (grid with proximity clouds) or bvh (a
+    /// bounding volume hierarchy, CPU only).
+    #[arg(long, default_value = "grid", value_parser = accel_parser())]
     pub accel: AccelKind,
     /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.
     #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Resolution>())]
@@ -33,12 +32,12 @@ pub struct GridArgs {
 }
 
 impl SceneArgs {
-    /// Loads the scene the arguments name; a plain mesh file gets the auto-framed scene.
-    pub fn load(&self) -> gridtrace::Result<(Scene, String)> {
+    /// Loads the scene the arguments name; a plain mesh file gets the auto-framed scene, with a
+    /// floor under it when `floor` is set.
+    pub fn load(&self, floor: bool) -> gridtrace::Result<(Scene, String)> {
         if let Some(name) = &self.scene {
             let s = builtin::scene(name).ok_or_else(|| {
-                let names: Vec<_> = builtin::SCENES.iter().map(|(n, _)| *n).collect();
-                gridtrace::Error::InvalidInput(format!("unknown scene '{name}'; built-in scenes: {}", names.join(", ")))
+                gridtrace::Error::InvalidInput(format!("unknown scene '{name}'; built-in scenes: {}", builtin_names()))
             })?;
             return Ok((s, name.clone()));
         }
@@ -46,14 +45,49 @@ impl SceneArgs {
             (Some(p), _) | (None, Some(p)) => p,
             (None, None) => return Ok((builtin::knot_box(), "knot-box".into())),
         };
+        // `gridtrace render mirror-spheres`: a scene name given where a file goes.
+        if self.file.is_some() && path.extension().is_none() && !path.exists() {
+            return Err(gridtrace::Error::InvalidInput(format!(
+                "{}: no such file; for a built-in scene use --scene NAME ({})",
+                path.display(),
+                builtin_names()
+            )));
+        }
         let is_scene = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
         let scene = if is_scene && self.mesh.is_none() {
             load_scene(path)?
         } else {
-            builtin::mesh_scene(gridtrace::io::load_mesh(path)?, !self.no_floor)
+            builtin::mesh_scene(gridtrace::io::load_mesh(path)?, floor)
         };
         Ok((scene, path.display().to_string()))
     }
+}
+
+/// The built-in scenes' names, comma separated.
+fn builtin_names() -> String {
+    builtin::SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+}
+
+/// `--accel`: the values are listed in `--help` and in the error for a wrong one.
+pub fn accel_parser() -> impl TypedValueParser<Value = AccelKind> {
+    PossibleValuesParser::new([
+        PossibleValue::new("grid").alias("g"),
+        PossibleValue::new("pc").alias("proximity"),
+        PossibleValue::new("bvh"),
+    ])
+    .map(|s| s.parse::<AccelKind>().expect("every listed accel parses"))
+}
+
+/// `--mode`: the values are listed in `--help` and in the error for a wrong one.
+pub fn mode_parser() -> impl TypedValueParser<Value = gridtrace::Mode> {
+    PossibleValuesParser::new(["cast", "shadow", "trace", "heat"])
+        .map(|s| s.parse::<gridtrace::Mode>().expect("every listed mode parses"))
+}
+
+/// `--backend`: the values are listed in `--help` and in the error for a wrong one.
+pub fn backend_parser() -> impl TypedValueParser<Value = Backend> {
+    PossibleValuesParser::new(["auto", "gpu", "cpu"])
+        .map(|s| s.parse::<Backend>().expect("every listed backend parses"))
 }
 
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
@@ -70,7 +104,8 @@ pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
     match nums.as_deref() {
         Ok([n]) if *n > 0 => Ok((*n, *n)),
         Ok([w, h]) if *w > 0 && *h > 0 => Ok((*w, *h)),
-        _ => Err(format!("expected WxH (or N), got '{s}'")),
+        Ok([_] | [_, _]) => Err(format!("image size must be positive in both directions, got '{s}'")),
+        _ => Err(format!("expected WxH or N (N x N) in pixels, got '{s}'")),
     }
 }
 

@@ -10,12 +10,16 @@ use crate::common::{GridArgs, SceneArgs, describe_structure, fmt_bytes};
 pub struct InfoArgs {
     #[command(flatten)]
     scene: SceneArgs,
+    /// With a mesh file: count the floor that `render` adds under it too. By default `info`
+    /// describes the file itself, so its triangle count is the file's.
+    #[arg(long)]
+    with_floor: bool,
     #[command(flatten)]
     grid: GridArgs,
 }
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
-    let (scene, name) = a.scene.load()?;
+    let (scene, name) = a.scene.load(a.with_floor)?;
     let prepared = crate::common::prepare(&scene, &name, a.grid.accel, a.grid.grid)?;
     println!("scene            {name}");
     println!("vertices         {}", scene.mesh.positions.len());

@@ -32,7 +32,44 @@ enum Command {
     Bench(bench::BenchArgs),
 }
 
+/// Points `XDG_RUNTIME_DIR` at a private folder when it is unset or not a directory.
+///
+/// Opening a GPU adapter loads the Vulkan loader and drivers (Mesa's lavapipe included), whose
+/// window-system code prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment"
+/// when the variable is missing (in containers, under `su`, in CI). Nothing fails, but the line
+/// looks like a failure on a first run. A folder of our own, mode 0700 like a real runtime dir,
+/// keeps it quiet. A valid setting is left alone.
+#[cfg(unix)]
+fn ensure_runtime_dir() {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| std::path::Path::new(&d).is_dir()) {
+        return;
+    }
+    // /proc/self belongs to the process's user; without /proc, the pid keeps the name ours.
+    let uid = std::fs::metadata("/proc/self").map(|m| m.uid());
+    let tag = match uid {
+        Ok(uid) => format!("uid{uid}"),
+        Err(_) => format!("pid{}", std::process::id()),
+    };
+    let dir = std::env::temp_dir().join(format!("gridtrace-runtime-{tag}"));
+    let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+    // Use the folder only if it is a real directory (not a link someone planted in /tmp), ours,
+    // and private; otherwise leave the environment as it was (the message is cosmetic).
+    let ok = std::fs::symlink_metadata(&dir).is_ok_and(|m| {
+        m.is_dir() && uid.as_ref().is_ok_and(|u| m.uid() == *u) && m.permissions().mode() & 0o077 == 0
+    }) || (uid.is_err() && dir.is_dir());
+    if ok {
+        // SAFETY: called first thing in `main`, before clap, rayon, indicatif or any GPU code
+        // has started a thread, so no other thread can be reading the environment.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+    }
+}
+
+#[cfg(not(unix))]
+fn ensure_runtime_dir() {}
+
 fn main() {
+    ensure_runtime_dir();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(a) => render::run(a),

@@ -14,7 +14,7 @@ use clap::Args;
 use gridtrace::query::{CHUNK, QueryOptions, TraceMesh};
 use gridtrace::{Error, Ray};
 
-use crate::common::{Backend, GridArgs};
+use crate::common::{Backend, GridArgs, backend_parser};
 
 #[derive(Args)]
 pub struct RaysArgs {
@@ -23,14 +23,18 @@ pub struct RaysArgs {
     /// Ray file: float32 records ox oy oz dx dy dz.
     #[arg(long)]
     rays: PathBuf,
-    #[arg(long, default_value_t = 0.0)]
+    /// Hits count only for t > TMIN (t in units of each ray's direction length).
+    // Hyphen values: clap would otherwise take `--tmin -1` for a flag `-1`.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     tmin: f32,
-    #[arg(long, default_value_t = f32::INFINITY)]
+    /// Hits count only for t < TMAX.
+    #[arg(long, default_value_t = f32::INFINITY, allow_hyphen_values = true)]
     tmax: f32,
     /// Any-hit occlusion instead of closest hits (one byte per ray).
     #[arg(long)]
     occluded: bool,
-    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Backend>())]
+    /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
+    #[arg(long, default_value = "auto", value_parser = backend_parser())]
     backend: Backend,
     #[command(flatten)]
     grid: GridArgs,
@@ -40,6 +44,14 @@ pub struct RaysArgs {
 }
 
 pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
+    // Checked here, before any work: the CPU query path does not check the interval itself, and
+    // a negative --tmin would silently report hits behind the origins.
+    if a.tmin.is_nan() || a.tmax.is_nan() || a.tmin < 0.0 || a.tmin > a.tmax {
+        return Err(Error::InvalidInput(format!(
+            "need 0 <= --tmin <= --tmax, got --tmin {} --tmax {}",
+            a.tmin, a.tmax
+        )));
+    }
     let size = std::fs::metadata(&a.rays).map_err(|e| Error::io(&a.rays, e))?.len();
     if size % 24 != 0 {
         return Err(Error::parse(

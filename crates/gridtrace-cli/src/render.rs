@@ -10,38 +10,43 @@ use gridtrace::scene::PointLight;
 use gridtrace::{Mode, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::common::{Backend, GridArgs, SceneArgs, parse_res, parse_vec3};
+use crate::common::{Backend, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3};
 
+// Every number and x,y,z option takes `allow_hyphen_values`: without it clap reads
+// `--target -0.0169,0.11,-0.0016` as a new flag "-0" and suggests "-- -1", which is wrong here.
 #[derive(Args)]
 pub struct RenderArgs {
     #[command(flatten)]
     scene: SceneArgs,
+    /// With a mesh file: leave out the floor of the auto-framed scene (the mesh alone).
+    #[arg(long)]
+    no_floor: bool,
     #[command(flatten)]
     grid: GridArgs,
     /// cast (eye rays), shadow (+ shadow rays), trace (+ two levels of reflection), heat (cost).
-    #[arg(long, default_value = "trace", value_parser = |s: &str| s.parse::<Mode>())]
+    #[arg(long, default_value = "trace", value_parser = mode_parser())]
     mode: Mode,
-    /// Image size WxH.
-    #[arg(long, default_value = "512x512", value_parser = parse_res)]
+    /// Image size in pixels: WxH, or N for a square N x N image.
+    #[arg(long, value_name = "WxH|N", default_value = "512x512", value_parser = parse_res, allow_hyphen_values = true)]
     res: (u32, u32),
-    /// Camera position (overrides the scene's).
-    #[arg(long, value_parser = parse_vec3)]
+    /// Camera position x,y,z (overrides the scene's), e.g. --eye -1,2,3.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     eye: Option<Vec3>,
-    /// Camera target.
-    #[arg(long, value_parser = parse_vec3)]
+    /// Camera target x,y,z (the point at the image centre).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     target: Option<Vec3>,
-    /// Camera up vector.
-    #[arg(long, value_parser = parse_vec3)]
+    /// Camera up vector x,y,z.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     up: Option<Vec3>,
     /// Vertical field of view in degrees.
-    #[arg(long)]
+    #[arg(long, value_name = "DEGREES", allow_hyphen_values = true)]
     vfov: Option<f32>,
     /// A point light at x,y,z (repeatable; replaces the scene's lights). Its intensity is set
     /// so that it lights the scene centre with unit irradiance.
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     light: Vec<Vec3>,
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
-    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Backend>())]
+    #[arg(long, default_value = "auto", value_parser = backend_parser())]
     backend: Backend,
     /// Count traversal work (cells, jumps, triangle tests) and print it.
     #[arg(long)]
@@ -60,7 +65,7 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
-    let (mut scene, name) = a.scene.load()?;
+    let (mut scene, name) = a.scene.load(!a.no_floor)?;
     if let Some(e) = a.eye {
         scene.camera.eye = e;
     }
@@ -80,6 +85,14 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             .iter()
             .map(|&p| PointLight::new(p, Vec3::splat((p - c).length_squared())))
             .collect();
+    }
+    // Without lights only the ambient term shows (and shadow rays have nothing to test): a
+    // nearly black image that looks like a bug unless we say why. Heat images do not shade.
+    if scene.lights.is_empty() && a.mode != Mode::Heat {
+        eprintln!(
+            "warning: scene {name} has no lights: only the ambient term lights it (add [[light]] \
+             tables to the scene file, or --light X,Y,Z)"
+        );
     }
     let t_build = Instant::now();
     let prepared = crate::common::prepare(&scene, &name, a.grid.accel, a.grid.grid)?;
@@ -106,14 +119,21 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         }
         None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
     }
-    let bar = (renderer.gpu().is_none()
-        && std::io::stderr().is_terminal()
-        && (a.res.0 as u64 * a.res.1 as u64 * a.frames as u64) >= 512 * 512)
-        .then(|| {
+    // `cpu::render` calls back with the number of image rows each finished band holds, from
+    // the worker threads: a bar of rows fits that. The GPU and the counting renderer report no
+    // progress: a spinner at least shows they are working.
+    let bar = if renderer.gpu().is_none() && !a.stats {
+        show_progress(a.res).then(|| {
             let b = ProgressBar::new(a.res.1 as u64 * a.frames as u64);
-            b.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed}").unwrap());
+            b.set_style(
+                ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed} (eta {eta})")
+                    .expect("valid template"),
+            );
             b
-        });
+        })
+    } else {
+        spinner(a.res, &format!("rendering on {}", renderer.describe()))
+    };
     let tick = |rows: u32| {
         if let Some(b) = &bar {
             b.inc(rows as u64);
@@ -241,4 +261,21 @@ fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool) -> String {
         rates[rates.len() / 2],
         rates[rates.len() - 1]
     )
+}
+
+/// Whether to draw progress: only on a terminal (piped or captured stderr stays exactly as it
+/// was) and only for images of at least 512x512 pixels (smaller ones finish before a bar helps).
+fn show_progress(res: (u32, u32)) -> bool {
+    std::io::stderr().is_terminal() && res.0 as u64 * res.1 as u64 >= 512 * 512
+}
+
+/// A ticking spinner for renders that report no progress, under the same rule as the bar.
+fn spinner(res: (u32, u32), what: &str) -> Option<ProgressBar> {
+    show_progress(res).then(|| {
+        let b = ProgressBar::new_spinner();
+        b.set_style(ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template"));
+        b.set_message(format!("{what}, {}x{} pixels", res.0, res.1));
+        b.enable_steady_tick(std::time::Duration::from_millis(120));
+        b
+    })
 }

@@ -57,7 +57,7 @@ fn render_from_mesh_file_and_scene_file() {
         dir.join("a.png").to_str().unwrap(),
     ]);
     assert!(ok, "{text}");
-    assert!(text.contains("6 triangles"), "4 + the 2-triangle floor: {text}");
+    assert!(text.contains("6 triangles"), "render adds a 2-triangle floor to the 4: {text}");
     let toml = dir.join("s.toml");
     std::fs::write(&toml, "[camera]\neye=[0,1,4]\ntarget=[0,0,0]\n[[light]]\nposition=[1,3,2]\nintensity=9\n[[object]]\nmesh=\"tet.obj\"\n").unwrap();
     let (ok, text) = gridtrace(&[
@@ -126,8 +126,205 @@ fn bad_input_gives_located_errors() {
     assert!(text.contains("bad.obj") && text.contains("line 3"), "{text}");
     let (ok, text) = gridtrace(&["render", "--scene", "nope"]);
     assert!(!ok && text.contains("knot-box"), "{text}");
+    // A scene name where a file goes: no such file, and the way to name a built-in scene.
+    let (ok, text) = gridtrace(&["render", "mirror-spheres"]);
+    assert!(!ok && text.contains("mirror-spheres: no such file; for a built-in scene use --scene NAME (knot-box"), "{text}");
     let (ok, text) = gridtrace(&["render", "--scene", "knot-box", "--grid", "0x1x1"]);
     assert!(!ok && text.contains("grid"), "{text}");
     let (ok, text) = gridtrace(&["info", dir.join("missing.ply").to_str().unwrap()]);
     assert!(!ok && text.contains("missing.ply"), "{text}");
+}
+
+/// Like [`gridtrace`], with stderr apart and the environment adjusted by `env`.
+fn gridtrace_env(args: &[&str], env: impl FnOnce(&mut Command)) -> (bool, String, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gridtrace"));
+    cmd.args(args);
+    env(&mut cmd);
+    let out = cmd.output().expect("run gridtrace");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).to_string(),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
+}
+
+/// A fresh scratch folder for one test.
+fn scratch(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("gridtrace-cli-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+const TET_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+
+/// Every number and x,y,z option takes a value that starts with '-'. Without
+/// `allow_hyphen_values`, clap reads `-0.0169,...` as an unknown flag ("unexpected argument
+/// '-0' found") and advises "-- -1"; each case checks that the value reached its parser or
+/// the command instead: a success, or an error about the value itself.
+#[test]
+fn negative_values_reach_every_number_and_vector_option() {
+    let dir = scratch("negative");
+    let png = dir.join("n.png");
+    let png = png.to_str().unwrap();
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, TET_OBJ).unwrap();
+    let obj = obj.to_str().unwrap();
+    // One ray from (0.2, 0.2, 2) down -z: it hits the tetrahedron.
+    let rays = dir.join("one.rays");
+    let ray: Vec<u8> = [0.2f32, 0.2, 2.0, 0.0, 0.0, -1.0].iter().flat_map(|f| f.to_le_bytes()).collect();
+    std::fs::write(&rays, ray).unwrap();
+    let rays = rays.to_str().unwrap();
+    let hits = dir.join("hits.bin");
+    let hits = hits.to_str().unwrap();
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--scene", "knot-box", "--backend", "cpu", "--mode", "cast", "--res", "8"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", png]);
+        args.iter().map(|s| s.to_string()).collect::<Vec<_>>()
+    };
+    let owned = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    // (option under test, arguments, None for success or Some(text the error must contain))
+    let cases: Vec<(&str, Vec<String>, Option<&str>)> = vec![
+        // The user report: a target with negative coordinates.
+        ("render --target", render(&["--eye", "0.04,0.19,0.2", "--target", "-0.0169,0.1101,-0.0016"]), None),
+        ("render --eye", render(&["--eye", "-1,2,3", "--target", "0,0,0"]), None),
+        ("render --up", render(&["--up", "0,-1,0"]), None),
+        ("render --light", render(&["--light", "-1,2,-3", "--light", "1,-2,3"]), None),
+        ("render --vfov", render(&["--vfov", "-30"]), Some("vfov must be in (0, 180) degrees, got -30")),
+        ("render --res", owned(&["render", "--scene", "knot-box", "--res", "-8"]), Some("invalid value '-8' for '--res")),
+        (
+            "rays --tmin",
+            owned(&["rays", obj, "--rays", rays, "--backend", "cpu", "--hits-out", hits, "--tmin", "-1"]),
+            Some("need 0 <= --tmin <= --tmax, got --tmin -1"),
+        ),
+        (
+            "rays --tmax",
+            owned(&["rays", obj, "--rays", rays, "--backend", "cpu", "--hits-out", hits, "--tmax", "-1"]),
+            Some("need 0 <= --tmin <= --tmax, got --tmin 0 --tmax -1"),
+        ),
+        ("bench --warmup", owned(&["bench", "--quick", "--warmup", "-1"]), Some("invalid value '-1' for '--warmup")),
+        ("bench --reps", owned(&["bench", "--quick", "--reps", "-2"]), Some("invalid value '-2' for '--reps")),
+        ("bench --query-rays", owned(&["bench", "--quick", "--query-rays", "-5"]), Some("invalid value '-5' for '--query-rays")),
+        ("bench --res", owned(&["bench", "--quick", "--res", "-64"]), Some("invalid value '-64' for '--res")),
+    ];
+    let mut failures = Vec::new();
+    for (what, args, want_err) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, text) = gridtrace(&args);
+        let clap_misread = text.contains("unexpected argument") || text.contains("-- -");
+        let right = match want_err {
+            None => ok,
+            Some(want) => !ok && text.contains(want),
+        };
+        if clap_misread || !right {
+            failures.push(format!("{what}: want {}:\n{text}", want_err.unwrap_or("success")));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+/// `--help` shows the x,y,z format, the values of --accel, --mode and --backend, and that
+/// --res takes N; a zero size says it must be positive.
+#[test]
+fn help_shows_formats_and_values() {
+    let (ok, help) = gridtrace(&["render", "--help"]);
+    assert!(ok, "{help}");
+    for want in [
+        "--eye <X,Y,Z>",
+        "--target <X,Y,Z>",
+        "--up <X,Y,Z>",
+        "--light <X,Y,Z>",
+        "--res <WxH|N>",
+        "N for a square N x N image",
+        "[possible values: grid, pc, bvh]",
+        "[possible values: cast, shadow, trace, heat]",
+        "[possible values: auto, gpu, cpu]",
+    ] {
+        assert!(help.contains(want), "render --help lacks '{want}':\n{help}");
+    }
+    let (ok, help) = gridtrace(&["bench", "--help"]);
+    assert!(ok && help.contains("[possible values: grid, pc, bvh]") && help.contains("--res <WxH|N>"), "{help}");
+    let (ok, help) = gridtrace(&["info", "--help"]);
+    assert!(ok && help.contains("--with-floor"), "{help}");
+
+    let (ok, text) = gridtrace(&["render", "--res", "0x0"]);
+    assert!(!ok && text.contains("image size must be positive"), "{text}");
+    let (ok, text) = gridtrace(&["render", "--res", "64x0"]);
+    assert!(!ok && text.contains("image size must be positive"), "{text}");
+    let (ok, text) = gridtrace(&["render", "--accel", "kd-tree"]);
+    assert!(!ok && text.contains("[possible values: grid, pc, bvh]"), "{text}");
+    // The short aliases the library accepts still work.
+    let (ok, text) = gridtrace(&["info", "--scene", "knot-box", "--accel", "proximity", "--grid", "4"]);
+    assert!(ok, "{text}");
+}
+
+/// `info` on a mesh file describes the file: its own triangle count, no floor unless asked.
+#[test]
+fn info_counts_the_file_without_the_floor() {
+    let dir = scratch("info-floor");
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, TET_OBJ).unwrap();
+    let (ok, text) = gridtrace(&["info", obj.to_str().unwrap()]);
+    assert!(ok && text.contains("triangles        4 (0 degenerate"), "the file has 4: {text}");
+    let (ok, text) = gridtrace(&["info", "--mesh", obj.to_str().unwrap()]);
+    assert!(ok && text.contains("triangles        4 ("), "{text}");
+    let (ok, text) = gridtrace(&["info", obj.to_str().unwrap(), "--with-floor"]);
+    assert!(ok && text.contains("triangles        6 ("), "4 + the 2-triangle floor: {text}");
+}
+
+/// Without XDG_RUNTIME_DIR (or with a missing one) no "XDG_RUNTIME_DIR is invalid" line from
+/// the graphics drivers: `main` points it at a private folder before anything opens the GPU.
+/// `--backend auto` opens the GPU adapter where there is one (lavapipe counts), which is where
+/// the line came from.
+#[test]
+fn no_xdg_runtime_dir_complaint() {
+    let dir = scratch("xdg");
+    let png = dir.join("x.png");
+    let args = ["render", "--scene", "knot-box", "--backend", "auto", "--mode", "cast", "--res", "8", "-o", png.to_str().unwrap()];
+    let (ok, _, stderr) = gridtrace_env(&args, |c| {
+        c.env_remove("XDG_RUNTIME_DIR");
+    });
+    assert!(ok && !stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    let (ok, _, stderr) = gridtrace_env(&args, |c| {
+        c.env("XDG_RUNTIME_DIR", dir.join("missing"));
+    });
+    assert!(ok && !stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+}
+
+/// A scene without lights renders (ambient only) with a warning that names it.
+#[test]
+fn scene_without_lights_warns() {
+    let dir = scratch("nolights");
+    let toml = dir.join("dark.toml");
+    std::fs::write(&toml, "[camera]\neye=[0,1,4]\ntarget=[0,0,0]\n[[object]]\nshape=\"icosphere\"\nlevel=1\n").unwrap();
+    let png = dir.join("d.png");
+    let base = ["render", toml.to_str().unwrap(), "--backend", "cpu", "--res", "8", "-o", png.to_str().unwrap()];
+    let (ok, _, stderr) = gridtrace_env(&base, |_| {});
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("warning: scene") && stderr.contains("dark.toml") && stderr.contains("no lights"),
+        "{stderr}"
+    );
+    // A light from the command line silences it; so do the built-in scenes' own lights.
+    let mut lit = base.to_vec();
+    lit.extend_from_slice(&["--light", "1,3,2"]);
+    let (ok, _, stderr) = gridtrace_env(&lit, |_| {});
+    assert!(ok && !stderr.contains("no lights"), "{stderr}");
+}
+
+/// The shipped example scene renders, so the example and docs/scene-format.md cannot rot.
+#[test]
+fn example_scene_renders() {
+    let example = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/scene.toml");
+    let dir = scratch("example");
+    let png = dir.join("e.png");
+    let (ok, stdout, stderr) = gridtrace_env(
+        &["render", example, "--backend", "cpu", "--res", "24x16", "-o", png.to_str().unwrap()],
+        |_| {},
+    );
+    assert!(ok, "{stdout}{stderr}");
+    assert!(!stderr.contains("warning"), "the example has lights: {stderr}");
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (24, 16));
 }

@@ -179,6 +179,15 @@ fn render<'py>(
                 Some(s) => s,
                 None => {
                     let path = std::path::Path::new(&scene_name);
+                    // A bare word that is no file is a mistyped scene name, not a mesh file
+                    // "with no extension": say so and list the names, as the CLI does.
+                    if path.extension().is_none() && !path.exists() {
+                        let names: Vec<_> = gridtrace::scene::builtin::SCENES.iter().map(|(n, _)| *n).collect();
+                        return Err(gridtrace::Error::InvalidInput(format!(
+                            "unknown scene '{scene_name}'; built-in scenes: {} (or a path to a .toml scene file or a mesh file)",
+                            names.join(", ")
+                        )));
+                    }
                     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
                         gridtrace::scene::file::load_scene(path)?
                     } else {

@@ -6,6 +6,7 @@ import os
 import pathlib
 import struct
 import subprocess
+import sys
 import tempfile
 import threading
 
@@ -216,6 +217,31 @@ def test_render_returns_image():
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50
     with pytest.raises(ValueError, match="mode"):
         gridtrace.render("knot-box", 8, 8, mode="nope")
+
+
+def test_render_unknown_scene_lists_the_builtins():
+    """A mistyped scene name says so and lists the built-in scenes, as the CLI does (it used to
+    be read as a mesh file and fail with "unsupported mesh format '.'")."""
+    with pytest.raises(ValueError, match=r"unknown scene 'nope'.*knot-box, mirror-spheres, sparse-room"):
+        gridtrace.render("nope", 8, 8, backend="cpu")
+    # A path with a mesh extension that does not exist is a missing file, named as such.
+    with tempfile.TemporaryDirectory() as d:
+        with pytest.raises(OSError, match="missing.ply"):
+            gridtrace.render(str(pathlib.Path(d) / "missing.ply"), 8, 8, backend="cpu")
+
+
+def test_import_sets_a_private_runtime_dir():
+    """Without XDG_RUNTIME_DIR, importing gridtrace points it at a private folder (mode 0700)
+    before the native module loads, so GPU drivers do not print "XDG_RUNTIME_DIR is invalid"."""
+    if not hasattr(os, "getuid"):
+        pytest.skip("POSIX only")
+    env = {k: v for k, v in os.environ.items() if k != "XDG_RUNTIME_DIR"}
+    code = "import os, gridtrace; print(os.environ.get('XDG_RUNTIME_DIR', ''))"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    path = out.stdout.strip()
+    assert path and os.path.isdir(path), out
+    assert os.stat(path).st_mode & 0o777 == 0o700
+    assert "XDG_RUNTIME_DIR" not in out.stderr
 
 
 def test_releases_the_gil():

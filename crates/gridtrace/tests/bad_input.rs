@@ -42,3 +42,25 @@ fn corpus_gives_located_errors() {
         failures.join("\n")
     );
 }
+
+/// A path whose format cannot be told from its name says what is wrong with it (a directory, no
+/// extension, an unknown one), names it and lists the formats, instead of "unsupported mesh
+/// format '.'".
+#[test]
+fn unusable_mesh_paths_say_why() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-bad-path-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let formats = "OBJ (.obj), PLY (.ply), glTF/GLB (.gltf, .glb), STL (.stl), OFF (.off)";
+    let e = gridtrace::io::load_mesh(&dir).unwrap_err().to_string();
+    assert!(e.contains(dir.to_str().unwrap()) && e.contains("is a directory") && e.contains(formats), "{e}");
+    let bare = dir.join("mesh");
+    std::fs::write(&bare, "v 0 0 0\n").unwrap();
+    let e = gridtrace::io::load_mesh(&bare).unwrap_err().to_string();
+    assert!(e.contains("mesh: has no extension") && e.contains(formats), "{e}");
+    // Missing and extensionless: missing is the problem to report.
+    let e = gridtrace::io::load_mesh(&dir.join("nope")).unwrap_err();
+    assert!(matches!(e, gridtrace::Error::Io { .. }), "{e}");
+    let e = gridtrace::io::load_mesh(&dir.join("m.fbx")).unwrap_err().to_string();
+    assert!(e.contains("m.fbx: unsupported mesh format '.fbx'") && e.contains(formats), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

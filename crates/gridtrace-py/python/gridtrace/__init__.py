@@ -4,7 +4,7 @@ Built around the uniform grid with proximity clouds (Ralovich, "Implementing and
 Ray Tracer"). Example::
 
     import numpy as np, gridtrace
-    mesh = gridtrace.Mesh.load("bunny.ply")
+    mesh = gridtrace.Mesh.load("../shared/data/meshes/bunny/bun_zipper.ply")
     origins = np.random.rand(1_000_000, 3).astype(np.float32) - 0.5
     hits = mesh.intersect(origins, [0.0, 0.0, -1.0])      # one direction for all rays
     print((hits.tri != gridtrace.MISS).sum(), "hits")
@@ -18,9 +18,41 @@ from typing import NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 
-from ._gridtrace import NativeMesh as _NativeMesh
-from ._gridtrace import __version__
-from ._gridtrace import render as _render
+
+def _ensure_runtime_dir() -> None:
+    """Points XDG_RUNTIME_DIR at a private folder when it is unset or missing.
+
+    Opening a GPU adapter loads the Vulkan drivers (Mesa's lavapipe too), whose window-system
+    code prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment" without it:
+    harmless, but it looks like a failure. This runs before the native module is imported, so
+    before any GPU code reads the environment. A valid setting is left alone."""
+    import os
+    import tempfile
+
+    current = os.environ.get("XDG_RUNTIME_DIR")
+    if current and os.path.isdir(current):
+        return
+    getuid = getattr(os, "getuid", None)
+    if getuid is None:  # not a POSIX system: no such variable to worry about
+        return
+    path = os.path.join(tempfile.gettempdir(), f"gridtrace-runtime-uid{getuid()}")
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+        st = os.lstat(path)
+    except OSError:
+        return
+    import stat
+
+    # Only a real directory of ours that nobody else can enter (not one planted in /tmp).
+    if stat.S_ISDIR(st.st_mode) and st.st_uid == getuid() and st.st_mode & 0o077 == 0:
+        os.environ["XDG_RUNTIME_DIR"] = path
+
+
+_ensure_runtime_dir()
+
+from ._gridtrace import NativeMesh as _NativeMesh  # noqa: E402
+from ._gridtrace import __version__  # noqa: E402
+from ._gridtrace import render as _render  # noqa: E402
 
 __all__ = ["Mesh", "Hits", "render", "MISS", "__version__"]
 
@@ -137,7 +169,8 @@ class Mesh:
 def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "grid", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None) -> np.ndarray:
     """Renders a built-in scene (``"knot-box"``, ``"mirror-spheres"``, ``"sparse-room"``), a TOML
     scene file or a mesh file; returns an (height, width, 3) uint8 sRGB image.
-    ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``."""
+    ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``. An unknown scene name raises
+    ``ValueError`` listing the built-in scenes."""
     if width <= 0 or height <= 0:
         raise ValueError(f"image size must be positive, got {width}x{height}")
     e = None if eye is None else [float(x) for x in eye]

@@ -17,21 +17,47 @@ pub mod off;
 pub mod ply;
 pub mod stl;
 
+/// The formats [`load_mesh`] reads, as its errors list them.
+pub const SUPPORTED_FORMATS: &str =
+    "supported mesh formats: OBJ (.obj), PLY (.ply), glTF/GLB (.gltf, .glb), STL (.stl), OFF (.off)";
+
+/// `"1 vertex"`, `"3 vertices"`: a count and its noun, with the noun's real plural (messages
+/// used to build plurals with a bare `s`, giving "3 vertexs").
+pub(crate) fn count_of(n: usize, noun: &str) -> String {
+    if n == 1 {
+        return format!("1 {noun}");
+    }
+    let plural = match noun {
+        "vertex" => "vertices".to_string(),
+        "index" => "indices".to_string(),
+        "matrix" => "matrices".to_string(),
+        n if n.ends_with('s') || n.ends_with('x') || n.ends_with("ch") || n.ends_with("sh") => format!("{n}es"),
+        n => format!("{n}s"),
+    };
+    format!("{n} {plural}")
+}
+
 /// Loads a mesh, choosing the format from the file extension (case-insensitive): `obj`, `ply`,
 /// `gltf`, `glb`, `stl`, `off`. OBJ material libraries and glTF external buffers are resolved
 /// relative to the file's folder.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    // The format comes from the extension, so say exactly what is wrong with the name (or the
+    // path) before reading anything: "unsupported mesh format '.'" helped nobody.
+    let unusable = |what: String| Error::parse(path, Location::Whole, format!("{what}; {SUPPORTED_FORMATS}"));
+    let meta = std::fs::metadata(path);
+    if meta.as_ref().is_ok_and(|m| m.is_dir()) {
+        return Err(unusable("is a directory, not a mesh file".into()));
+    }
+    let ext = match path.extension() {
+        None => {
+            // A missing file is reported as missing, not as badly named.
+            meta.map_err(|e| Error::io(path, e))?;
+            return Err(unusable("has no extension, so its mesh format is unknown".into()));
+        }
+        Some(e) => e.to_string_lossy().to_ascii_lowercase(),
+    };
     if !matches!(ext.as_str(), "obj" | "ply" | "gltf" | "glb" | "stl" | "off") {
-        return Err(Error::parse(
-            path,
-            Location::Whole,
-            format!("unsupported mesh format '.{ext}'"),
-        ));
+        return Err(unusable(format!("unsupported mesh format '.{ext}'")));
     }
     let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let dir = path.parent().unwrap_or(Path::new(""));
@@ -82,7 +108,7 @@ pub(crate) fn finish(mut mesh: Mesh, path: &Path) -> Result<Mesh> {
                 return Err(Error::parse(
                     path,
                     Location::Whole,
-                    format!("triangle {t}: vertex index {i} out of range ({n} vertices)"),
+                    format!("triangle {t}: vertex index {i} out of range ({})", count_of(n, "vertex")),
                 ));
             }
         }
@@ -131,7 +157,7 @@ pub(crate) fn finish(mut mesh: Mesh, path: &Path) -> Result<Mesh> {
             return Err(Error::parse(
                 path,
                 Location::Whole,
-                format!("triangle {t}: material {id} out of range ({m} materials)"),
+                format!("triangle {t}: material {id} out of range ({})", count_of(m, "material")),
             ));
         }
     }
@@ -215,6 +241,14 @@ mod tests {
     }
 
     #[test]
+    fn counts_use_real_plurals() {
+        assert_eq!(count_of(1, "vertex"), "1 vertex");
+        assert_eq!(count_of(3, "vertex"), "3 vertices");
+        assert_eq!(count_of(0, "normal"), "0 normals");
+        assert_eq!(count_of(2, "index"), "2 indices");
+    }
+
+    #[test]
     fn capacity_is_capped_by_remaining_bytes() {
         assert_eq!(capped_capacity(4_000_000_000, 36, 12), 3);
         assert_eq!(capped_capacity(2, 1000, 12), 2);
@@ -261,6 +295,19 @@ mod tests {
 
         let err = load_mesh(&dir.0.join("x.fbx")).unwrap_err().to_string();
         assert!(err.contains("x.fbx") && err.contains("unsupported"), "{err}");
+
+        // A name the format cannot be read from: say what is wrong, name the path, list the
+        // formats.
+        let err = load_mesh(&dir.0).unwrap_err().to_string();
+        assert!(err.contains(dir.0.to_str().unwrap()) && err.contains("is a directory"), "{err}");
+        assert!(err.contains(SUPPORTED_FORMATS), "{err}");
+        let bare = dir.0.join("bunny");
+        std::fs::write(&bare, b"v 0 0 0\n").unwrap();
+        let err = load_mesh(&bare).unwrap_err().to_string();
+        assert!(err.contains("bunny: has no extension") && err.contains("PLY (.ply)"), "{err}");
+        assert!(!err.contains("'.'"), "{err}");
+        let err = load_mesh(&dir.0.join("x.fbx")).unwrap_err().to_string();
+        assert!(err.contains("'.fbx'") && err.contains("OBJ (.obj)"), "{err}");
 
         let missing = dir.0.join("missing.obj");
         let err = load_mesh(&missing).unwrap_err();

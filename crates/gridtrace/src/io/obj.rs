@@ -16,7 +16,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use super::{check_finite, finish};
+use super::{check_finite, count_of, finish};
 use crate::{Error, Location, Material, Mesh, Result};
 
 const NONE: u32 = u32::MAX;
@@ -171,7 +171,7 @@ impl Parser<'_> {
         if resolved < 0 || resolved >= count as i64 {
             return Err(self.err(
                 n,
-                format!("{what} index {i} out of range ({count} {what}s defined so far)"),
+                format!("{what} index {i} out of range ({} defined so far)", count_of(count, what)),
             ));
         }
         Ok(resolved as u32)
@@ -343,6 +343,15 @@ mod tests {
 
     fn err(src: &[u8]) -> String {
         parse(src, Path::new("bad.obj"), &no_mtl).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn out_of_range_index_counts_with_real_plural() {
+        let e = err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
+        assert!(e.contains("bad.obj:line 4") && e.contains("(3 vertices defined so far)"), "{e}");
+        let e = err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n");
+        assert!(e.contains("(1 normal defined so far)"), "{e}");
+        assert!(!e.contains("vertexs") && !e.contains("normals"), "{e}");
     }
 
     #[test]
