@@ -13,7 +13,6 @@ pub mod layout;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use bytemuck::Zeroable;
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
@@ -21,7 +20,7 @@ pub use context::GpuContext;
 use layout::*;
 
 use crate::accel::{AccelKind, Hit, Ray};
-use crate::render::{Image, Mode, RayCounts, RenderOptions, RenderStats};
+use crate::render::{Image, Mode, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene};
 use crate::{Error, Result};
 
@@ -758,21 +757,6 @@ impl GpuRenderer {
         }
         Ok((hits, occ))
     }
-}
-
-impl RenderStats {
-    /// Rays per kind and GPU milliseconds as one line (used by the CLI and benchmarks).
-    pub fn describe_rays(rays: &RayCounts) -> String {
-        format!(
-            "eye {}, shadow {}, reflection {}",
-            rays.eye, rays.shadow, rays.reflection
-        )
-    }
-}
-
-#[allow(dead_code)]
-fn _assert_zeroable() -> RayRec {
-    RayRec::zeroed()
 }
 
 /// The GPU kernels traverse the grid (with or without proximity clouds) only.
