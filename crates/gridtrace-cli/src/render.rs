@@ -95,7 +95,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             if ctx.is_software() {
                 println!("        (a software adapter: CPU speed, not GPU speed)");
             }
-            let mut gpu = gridtrace::gpu::GpuRenderer::new(ctx, &prepared)?;
+            let mut gpu = gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &prepared)?;
             let (image, s) = gpu.render(&prepared.camera, &prepared.lights, &opts)?;
             let source = if s.timings.from_timestamps {
                 "GPU timestamps"

@@ -201,7 +201,7 @@ fn render<'py>(
             };
             let image = match gpu {
                 Some(ctx) => {
-                    gridtrace::gpu::GpuRenderer::new(ctx, &prepared)?
+                    gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &prepared)?
                         .render(&prepared.camera, &prepared.lights, &opts)?
                         .0
                 }

@@ -5,13 +5,14 @@
 use std::mem::{offset_of, size_of};
 
 use gridtrace::accel::{Cell, TriAccel};
-use gridtrace::gpu::layout::{GpuHit, GpuMaterial, PassUniform, RayRec, SceneUniform, TriShade};
+use gridtrace::gpu::bindings::{self, Access};
+use gridtrace::gpu::layout::{GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade};
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
 
 fn module() -> naga::Module {
-    naga::front::wgsl::parse_str(shaders::COMMON).expect("common.wgsl parses")
+    naga::front::wgsl::parse_str(&shaders::common_source()).expect("common.wgsl parses")
 }
 
 /// (size, [(field, offset)]) of a WGSL struct.
@@ -78,6 +79,7 @@ fn wgsl_structs_match_rust() {
         "CameraFrame",
         [eye, width, forward, height, right_scaled, _pad0, up_scaled, _pad1]
     );
+    check!(m, IndirectArgs, "IndirectArgs", [rays, shadow]);
     check!(
         m,
         PassUniform,
@@ -98,11 +100,11 @@ fn wgsl_structs_match_rust() {
 /// The check itself must catch a mismatch.
 #[test]
 fn mismatch_is_detected() {
-    let src = shaders::COMMON.replace(
+    let src = shaders::common_source().replace(
         "struct Cell { start: u32, count: u32, dist: u32 }",
         "struct Cell { count: u32, start: u32, dist: u32 }",
     );
-    assert_ne!(src, shaders::COMMON);
+    assert_ne!(src, shaders::common_source());
     let m = naga::front::wgsl::parse_str(&src).unwrap();
     let r = std::panic::catch_unwind(|| check!(m, Cell, "Cell", [start, count, dist]));
     assert!(r.is_err());
@@ -112,10 +114,41 @@ fn mismatch_is_detected() {
 #[test]
 fn kernels_validate() {
     for (name, src) in shaders::KERNELS {
-        let m = naga::front::wgsl::parse_str(&format!("{}\n{}", shaders::COMMON, src))
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
             .validate(&m)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
     }
+}
+
+/// The bind group tables are what the WGSL declares: same (group, binding, name, access), no
+/// binding missing from either side.
+#[test]
+fn bindings_match_wgsl() {
+    let mut declared = std::collections::BTreeSet::new();
+    for (name, src) in shaders::KERNELS {
+        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        for (_, g) in m.global_variables.iter() {
+            let Some(b) = &g.binding else { continue };
+            let access = match g.space {
+                naga::AddressSpace::Uniform => "uniform",
+                naga::AddressSpace::Storage { access } if access.contains(naga::StorageAccess::STORE) => "read_write",
+                naga::AddressSpace::Storage { .. } => "read",
+                _ => "other",
+            };
+            declared.insert((b.group, b.binding, g.name.clone().unwrap_or_default(), access));
+        }
+    }
+    let table: std::collections::BTreeSet<_> = bindings::all()
+        .into_iter()
+        .map(|(group, index, name, access)| {
+            let access = match access {
+                Access::Uniform => "uniform",
+                Access::StorageRead => "read",
+                Access::StorageReadWrite => "read_write",
+            };
+            (group, index, name.to_string(), access)
+        })
+        .collect();
+    assert_eq!(declared, table);
 }

@@ -35,6 +35,9 @@ struct PassUniform {
     depth: u32, in_slot: u32, out_slot: u32, tile_offset: u32,
     tile_pixels: u32, mode: u32, accel: u32, max_depth: u32,
 }
+// Arguments of the two indirect dispatches (x, y, z workgroups): the input ray queue's kernels
+// and the shadow queue's. Written by the indirect kernel, read as INDIRECT arguments.
+struct IndirectArgs { rays: array<u32, 3>, shadow: array<u32, 3> }
 
 // Counter slots (array<atomic<u32>> `counters`).
 const SLOT_QUEUE_A: u32 = 0u;   // ray queue A length (slots 0 and 1 alternate as in/out)
