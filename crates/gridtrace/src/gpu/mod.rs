@@ -12,7 +12,7 @@
 //! - `kernels`: shader modules, layouts and pipelines, built once per device, and the one helper
 //!   that records a kernel's pass;
 //! - `bindings`: the bind group tables; `layout`: the structs the kernels share with the host;
-//!   `constants`: the numbers they share;
+//!   `constants`: the numbers they share, printed into every module as a WGSL prelude;
 //! - `scene`: the scene's upload; `renderer`: `GpuRenderer` and its work buffers;
 //! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded;
 //! - `timing`: timestamp queries and per-stage milliseconds.

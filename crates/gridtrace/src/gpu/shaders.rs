@@ -1,5 +1,7 @@
 //! WGSL sources: the shared file and one per kernel. WGSL has no includes, so a kernel's module
-//! is `common.wgsl` followed by the kernel's own file.
+//! is the generated constant prelude, then `common.wgsl`, then the kernel's own file.
+
+use super::constants::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
 pub const RAYGEN: &str = include_str!("shaders/raygen.wgsl");
@@ -18,9 +20,9 @@ pub const KERNELS: [(&str, &str); 6] = [
     ("indirect", INDIRECT),
 ];
 
-/// Every declaration the kernels share (layout tests parse this).
+/// The prelude and `common.wgsl`: every declaration the kernels share (layout tests parse this).
 pub fn common_source() -> String {
-    COMMON.to_string()
+    format!("{}\n{}", wgsl_prelude(), COMMON)
 }
 
 /// The whole module of one kernel, as the device compiles it.

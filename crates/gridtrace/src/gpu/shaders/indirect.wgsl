@@ -7,7 +7,7 @@
 
 fn groups(n: u32) -> array<u32, 3> {
     let g = (n + WORKGROUP - 1u) / WORKGROUP;
-    let x = min(g, 32768u);
+    let x = min(g, MAX_GROUPS_X);
     return array<u32, 3>(x, select(0u, (g + x - 1u) / x, x > 0u), 1u);
 }
 
