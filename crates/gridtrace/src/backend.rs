@@ -2,6 +2,8 @@
 //! (which structures have GPU kernels) and what the machine has into a CPU or a GPU renderer.
 //! The CLI, the benchmarks, Python and the ray queries all come through here.
 
+use std::sync::Arc;
+
 use crate::accel::AccelKind;
 use crate::gpu::{GpuContext, GpuRenderStats, GpuRenderer};
 use crate::render::{Image, RenderOptions, RenderStats};
@@ -46,7 +48,7 @@ impl Backend {
     /// Opens the GPU device this backend asks for (`None`: trace on the CPU), with notes for
     /// the user on every choice that was not the one asked for. `gpu` without an adapter is an
     /// error; `auto` falls back to the CPU.
-    pub fn open_device(self, accel: AccelKind) -> Result<(Option<GpuContext>, Vec<String>)> {
+    pub fn open_device(self, accel: AccelKind) -> Result<(Option<Arc<GpuContext>>, Vec<String>)> {
         let mut notes = Vec::new();
         let resolved = self.for_accel(accel)?;
         if resolved != self {
@@ -57,9 +59,9 @@ impl Backend {
         }
         let ctx = match resolved {
             Backend::Cpu => None,
-            Backend::Gpu => Some(GpuContext::new()?),
+            Backend::Gpu => Some(Arc::new(GpuContext::new()?)),
             Backend::Auto => match GpuContext::new() {
-                Ok(c) => Some(c),
+                Ok(c) => Some(Arc::new(c)),
                 Err(e) => {
                     notes.push(format!("no usable GPU ({e}); using the CPU"));
                     None

@@ -29,7 +29,7 @@
 
 use std::ops::Range;
 use std::path::Path;
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
@@ -244,7 +244,7 @@ impl TraceMesh {
         let opened = self.gpu.get_or_init(|| {
             let ctx = GpuContext::new().map_err(|e| e.to_string())?;
             let d = format!("gpu: {}", ctx.describe());
-            GpuRenderer::new(ctx, &self.scene)
+            GpuRenderer::new(Arc::new(ctx), &self.scene)
                 .map(|r| (Mutex::new(r), d))
                 .map_err(|e| e.to_string())
         });

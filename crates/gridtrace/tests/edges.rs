@@ -109,7 +109,7 @@ fn gpu_edges_and_vertices_do_not_leak() {
         total += rays.len();
         let ctx = gridtrace::gpu::GpuContext::new()
             .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
-        let mut gpu = gridtrace::gpu::GpuRenderer::new(ctx, &scene).unwrap();
+        let mut gpu = gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &scene).unwrap();
         let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
         for kind in AccelKind::GPU {
             let hits = gpu.intersect(&plain, 0.0, f32::INFINITY, kind).unwrap();

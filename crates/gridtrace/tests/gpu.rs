@@ -23,7 +23,7 @@ fn renderer(scene: &PreparedScene) -> Option<GpuRenderer> {
     let ctx =
         GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
     eprintln!("adapter: {}", ctx.describe());
-    Some(GpuRenderer::new(ctx, scene).expect("upload scene"))
+    Some(GpuRenderer::new(std::sync::Arc::new(ctx), scene).expect("upload scene"))
 }
 
 /// Same hit or miss; t within a relative 1e-4 (the GPU compiler may fuse multiply-adds);

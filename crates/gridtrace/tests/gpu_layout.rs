@@ -5,13 +5,15 @@
 use std::mem::{offset_of, size_of};
 
 use gridtrace::accel::{Cell, TriAccel};
-use gridtrace::gpu::layout::{GpuHit, GpuMaterial, PassUniform, RayRec, SceneUniform, TriShade};
+use gridtrace::gpu::bindings::{self, Access};
+use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
+use gridtrace::gpu::layout::{GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade};
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
 
 fn module() -> naga::Module {
-    naga::front::wgsl::parse_str(shaders::COMMON).expect("common.wgsl parses")
+    naga::front::wgsl::parse_str(&shaders::common_source()).expect("common.wgsl parses")
 }
 
 /// (size, [(field, offset)]) of a WGSL struct.
@@ -78,6 +80,7 @@ fn wgsl_structs_match_rust() {
         "CameraFrame",
         [eye, width, forward, height, right_scaled, _pad0, up_scaled, _pad1]
     );
+    check!(m, IndirectArgs, "IndirectArgs", [rays, shadow]);
     check!(
         m,
         PassUniform,
@@ -98,11 +101,11 @@ fn wgsl_structs_match_rust() {
 /// The check itself must catch a mismatch.
 #[test]
 fn mismatch_is_detected() {
-    let src = shaders::COMMON.replace(
+    let src = shaders::common_source().replace(
         "struct Cell { start: u32, count: u32, dist: u32 }",
         "struct Cell { count: u32, start: u32, dist: u32 }",
     );
-    assert_ne!(src, shaders::COMMON);
+    assert_ne!(src, shaders::common_source());
     let m = naga::front::wgsl::parse_str(&src).unwrap();
     let r = std::panic::catch_unwind(|| check!(m, Cell, "Cell", [start, count, dist]));
     assert!(r.is_err());
@@ -112,10 +115,133 @@ fn mismatch_is_detected() {
 #[test]
 fn kernels_validate() {
     for (name, src) in shaders::KERNELS {
-        let m = naga::front::wgsl::parse_str(&format!("{}\n{}", shaders::COMMON, src))
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
             .validate(&m)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
     }
+}
+
+/// Every named constant of `m` that is in the Rust table, checked against it bit for bit:
+/// one line per constant whose WGSL value differs (or is not a plain literal), and one per Rust
+/// constant the module lacks.
+fn constant_mismatches(m: &naga::Module) -> Vec<String> {
+    let mut problems = Vec::new();
+    for (name, want) in WGSL_CONSTANTS {
+        let Some((_, c)) = m.constants.iter().find(|(_, c)| c.name.as_deref() == Some(name)) else {
+            problems.push(format!("{name}: not declared in WGSL"));
+            continue;
+        };
+        let got = match m.global_expressions[c.init] {
+            naga::Expression::Literal(naga::Literal::U32(v)) => Some(WgslConst::U32(v)),
+            naga::Expression::Literal(naga::Literal::F32(v)) => Some(WgslConst::F32(v)),
+            _ => None,
+        };
+        let same = match (got, want) {
+            (Some(WgslConst::U32(a)), WgslConst::U32(b)) => a == b,
+            (Some(WgslConst::F32(a)), WgslConst::F32(b)) => a.to_bits() == b.to_bits(),
+            _ => false,
+        };
+        if !same {
+            problems.push(format!("{name}: WGSL {got:?}, Rust {want:?}"));
+        }
+    }
+    problems
+}
+
+/// Single source for the shared numbers: in every kernel's module, naga's value of each prelude
+/// constant is the Rust constant's, exactly.
+#[test]
+fn wgsl_constants_match_rust() {
+    let problems = constant_mismatches(&module());
+    assert!(problems.is_empty(), "{problems:#?}");
+    for (name, src) in shaders::KERNELS {
+        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let problems = constant_mismatches(&m);
+        assert!(problems.is_empty(), "{name}: {problems:#?}");
+    }
+}
+
+/// The comparison catches a prelude with one value altered: an integer, and a float by one ulp.
+#[test]
+fn altered_constant_is_reported() {
+    let prelude = wgsl_prelude();
+    let bary = WGSL_CONSTANTS
+        .iter()
+        .find_map(|(n, v)| match (n, v) {
+            (&"BARY_EPS", WgslConst::F32(v)) => Some(*v),
+            _ => None,
+        })
+        .unwrap();
+    let next_up = f32::from_bits(bary.to_bits() + 1);
+    for (line, altered) in [
+        (
+            "const WORKGROUP: u32 = 64u;".to_string(),
+            "const WORKGROUP: u32 = 65u;".to_string(),
+        ),
+        (
+            format!("const BARY_EPS: f32 = {bary:?}f;"),
+            format!("const BARY_EPS: f32 = {next_up:?}f;"),
+        ),
+    ] {
+        assert!(prelude.contains(&line), "prelude lacks {line}:\n{prelude}");
+        let src = format!("{}\n{}", prelude.replace(&line, &altered), shaders::COMMON);
+        let m = naga::front::wgsl::parse_str(&src).unwrap();
+        let problems = constant_mismatches(&m);
+        let name = line.split(':').next().unwrap().trim_start_matches("const ");
+        assert!(
+            problems.len() == 1 && problems[0].starts_with(name),
+            "{altered}: {problems:?}"
+        );
+    }
+}
+
+/// A WGSL file cannot declare a prelude name again: the module fails to compile, so a second
+/// definition of a shared number cannot creep back into the shaders.
+#[test]
+fn redeclared_constant_fails() {
+    for (name, _) in WGSL_CONSTANTS {
+        let src = format!(
+            "{}\nconst {name}: u32 = 1u;\n",
+            shaders::module_source(shaders::TRAVERSE)
+        );
+        let e = naga::front::wgsl::parse_str(&src).expect_err(name);
+        assert!(
+            e.emit_to_string(&src).contains("redefinition"),
+            "{name}: {}",
+            e.emit_to_string(&src)
+        );
+    }
+}
+
+/// The bind group tables are what the WGSL declares: same (group, binding, name, access), no
+/// binding missing from either side.
+#[test]
+fn bindings_match_wgsl() {
+    let mut declared = std::collections::BTreeSet::new();
+    for (name, src) in shaders::KERNELS {
+        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        for (_, g) in m.global_variables.iter() {
+            let Some(b) = &g.binding else { continue };
+            let access = match g.space {
+                naga::AddressSpace::Uniform => "uniform",
+                naga::AddressSpace::Storage { access } if access.contains(naga::StorageAccess::STORE) => "read_write",
+                naga::AddressSpace::Storage { .. } => "read",
+                _ => "other",
+            };
+            declared.insert((b.group, b.binding, g.name.clone().unwrap_or_default(), access));
+        }
+    }
+    let table: std::collections::BTreeSet<_> = bindings::all()
+        .into_iter()
+        .map(|(group, index, name, access)| {
+            let access = match access {
+                Access::Uniform => "uniform",
+                Access::StorageRead => "read",
+                Access::StorageReadWrite => "read_write",
+            };
+            (group, index, name.to_string(), access)
+        })
+        .collect();
+    assert_eq!(declared, table);
 }

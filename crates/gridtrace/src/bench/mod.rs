@@ -320,17 +320,17 @@ pub struct MatrixResult {
     pub skipped: Vec<String>,
 }
 
-/// Runs the matrix on the CPU and, when `gpu` is given, on the GPU too. The GPU context is used
-/// for the first scene; later scenes open their own (the renderer owns its context). `log`
-/// receives one line per scene and per row.
+/// Runs the matrix on the CPU and, when `gpu` is given, on the GPU too. Every scene's renderer
+/// shares the one GPU context (device and compiled kernels). `log` receives one line per scene
+/// and per row.
 pub fn run_matrix(
     cfg: &BenchConfig,
-    mut gpu: Option<GpuContext>,
+    gpu: Option<GpuContext>,
     cpu: bool,
     log: &mut dyn FnMut(&str),
 ) -> Result<MatrixResult> {
     let data_dir = find_data_dir(cfg.data_dir.as_deref());
-    let use_gpu = gpu.is_some();
+    let gpu = gpu.map(std::sync::Arc::new);
     let mut out = MatrixResult::default();
     for name in &cfg.scenes {
         let bs = match build_paper_scene(name, data_dir.as_deref()) {
@@ -380,12 +380,8 @@ pub fn run_matrix(
                 }
             }
         }
-        if use_gpu {
-            let ctx = match gpu.take() {
-                Some(c) => c,
-                None => GpuContext::new()?,
-            };
-            let mut r = GpuRenderer::new(ctx, &prepared)?;
+        if let Some(ctx) = &gpu {
+            let mut r = GpuRenderer::new(ctx.clone(), &prepared)?;
             let mut largest = 0u64;
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {

@@ -1,9 +1,11 @@
 //! Adapter and device: chosen once, described on every run (so a software adapter can never
 //! pass for a GPU), with errors captured instead of panicking and waits that cannot hang.
 
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
+use super::bindings::storage_buffers_needed;
+use super::kernels::Kernels;
 use crate::{Error, Result};
 
 /// How long a submission may run before it is reported as a hang.
@@ -18,6 +20,8 @@ pub struct GpuContext {
     pub timestamps: bool,
     /// First uncaptured device error, if any (validation, out of memory, lost device).
     errors: Arc<Mutex<Option<String>>>,
+    /// The compiled kernels, built by the first renderer and shared by the later ones.
+    kernels: OnceLock<Arc<Kernels>>,
 }
 
 /// Adapter kinds in order of preference.
@@ -75,9 +79,10 @@ impl GpuContext {
         // Ask for what the adapter really has, not the conservative defaults (8 storage buffers,
         // 128 MiB bindings): large scenes need the real limits.
         let limits = adapter.limits();
-        if limits.max_storage_buffers_per_shader_stage < 14 {
+        let needed = storage_buffers_needed();
+        if limits.max_storage_buffers_per_shader_stage < needed {
             return Err(Error::Gpu(format!(
-                "adapter '{}' allows {} storage buffers per shader stage; gridtrace needs 14 \
+                "adapter '{}' allows {} storage buffers per shader stage; gridtrace needs {needed} \
                  (limit max_storage_buffers_per_shader_stage)",
                 info.name, limits.max_storage_buffers_per_shader_stage
             )));
@@ -111,6 +116,7 @@ impl GpuContext {
             info,
             timestamps,
             errors,
+            kernels: OnceLock::new(),
         })
     }
 
@@ -132,6 +138,16 @@ impl GpuContext {
 
     pub fn limits(&self) -> wgpu::Limits {
         self.device.limits()
+    }
+
+    /// The kernels of this device, compiled on first use.
+    pub(crate) fn kernels(&self) -> Result<Arc<Kernels>> {
+        if let Some(k) = self.kernels.get() {
+            return Ok(k.clone());
+        }
+        // Two threads may both compile; the first to finish is kept, the other's dropped.
+        let built = Arc::new(Kernels::new(&self.device)?);
+        Ok(self.kernels.get_or_init(|| built).clone())
     }
 
     /// Returns the first device error since the last call, as an `Error`.

@@ -81,9 +81,21 @@ pub struct PassUniform {
     pub max_depth: u32,
 }
 
-/// Counter slots, as in common.wgsl.
-pub const SLOT_QUEUE_A: usize = 0;
-pub const SLOT_SHADOW: usize = 2;
-pub const SLOT_SHADOW_TOTAL: usize = 3;
-pub const SLOT_REFLECT_TOTAL: usize = 4;
-pub const COUNTER_SLOTS: usize = 16;
+/// Arguments of the two indirect dispatches the `indirect` kernel writes: workgroups (x, y, z)
+/// for the kernels over the input ray queue, then for the occlusion kernel over the shadow queue.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+pub struct IndirectArgs {
+    pub rays: [u32; 3],
+    pub shadow: [u32; 3],
+}
+
+impl IndirectArgs {
+    /// Byte offset of the ray queue's dispatch arguments (for `dispatch_workgroups_indirect`).
+    pub const RAYS_OFFSET: u64 = std::mem::offset_of!(IndirectArgs, rays) as u64;
+    /// Byte offset of the shadow queue's dispatch arguments.
+    pub const SHADOW_OFFSET: u64 = std::mem::offset_of!(IndirectArgs, shadow) as u64;
+}
+
+/// Counter slots (defined with the other constants WGSL shares).
+pub use super::constants::{COUNTER_SLOTS, SLOT_QUEUE_A, SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};

@@ -1,5 +1,5 @@
-// Shared declarations and functions of all gridtrace kernels. Every kernel's module is this file
-// followed by the kernel's own file (WGSL has no includes).
+// Shared declarations and functions of all gridtrace kernels. Every kernel's module is the
+// generated constant prelude, this file, then the kernel's own file (WGSL has no includes).
 //
 // The structs below mirror #[repr(C)] Rust structs in src/gpu/layout.rs (and accel/scene); a
 // test (tests/gpu_layout.rs) parses this file with naga and checks every size and offset.
@@ -35,26 +35,12 @@ struct PassUniform {
     depth: u32, in_slot: u32, out_slot: u32, tile_offset: u32,
     tile_pixels: u32, mode: u32, accel: u32, max_depth: u32,
 }
+// Arguments of the two indirect dispatches (x, y, z workgroups): the input ray queue's kernels
+// and the shadow queue's. Written by the indirect kernel, read as INDIRECT arguments.
+struct IndirectArgs { rays: array<u32, 3>, shadow: array<u32, 3> }
 
-// Counter slots (array<atomic<u32>> `counters`).
-const SLOT_QUEUE_A: u32 = 0u;   // ray queue A length (slots 0 and 1 alternate as in/out)
-const SLOT_SHADOW: u32 = 2u;    // shadow queue length, this bounce
-const SLOT_SHADOW_TOTAL: u32 = 3u;
-const SLOT_REFLECT_TOTAL: u32 = 4u;
-const MODE_CAST: u32 = 0u;
-const MODE_SHADOW: u32 = 1u;
-const MODE_TRACE: u32 = 2u;
-const MODE_HEAT: u32 = 3u;
-const ACCEL_PC: u32 = 1u;
-const MISS: u32 = 0xffffffffu;
-const WORKGROUP: u32 = 64u;
-// Squared cosine below which a ray counts as parallel to a triangle (TriAccel::intersect).
-// Barycentric slack at edges (TriAccel::intersect): fixed part and rounding-bound ulps.
-const BARY_EPS: f32 = 1.0e-6;
-const SLACK_ULPS: f32 = 8.0;
-const MAX_SLACK: f32 = 1.0e-3;
-const F32_EPSILON: f32 = 1.1920929e-7;
-const PARALLEL_COS2: f32 = 9.094947e-13; // 2^-40
+// Named constants (counter slots, modes, WORKGROUP, MISS, the triangle test's slack) are not
+// declared here: the host prepends them, printed from src/gpu/constants.rs, to every module.
 
 // Set per pipeline: the heat pipeline counts traversal work, the others compile it away.
 override COUNT_WORK: bool = false;
@@ -74,7 +60,7 @@ override COUNT_WORK: bool = false;
 @group(0) @binding(12) var<storage, read_write> shadow_rays: array<RayRec>;
 @group(0) @binding(13) var<storage, read_write> resolve: array<vec2<u32>>;
 @group(0) @binding(14) var<storage, read_write> accum: array<vec4<f32>>;
-@group(0) @binding(15) var<storage, read_write> counters: array<atomic<u32>, 16>;
+@group(0) @binding(15) var<storage, read_write> counters: array<atomic<u32>, COUNTER_SLOTS>;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }

@@ -1,6 +1,6 @@
 // Occlusion (any hit) for the shadow queue: an occluded shadow ray loses its contribution.
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
     if (i >= atomicLoad(&counters[SLOT_SHADOW])) { return; }

@@ -1,7 +1,7 @@
 // Ray generation: one eye ray per pixel of the tile into queue A. Rays that miss the grid are
 // finished here (background written, never queued): the paper's early ray masking.
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
     if (i >= pass_.tile_pixels) { return; }

@@ -31,7 +31,7 @@ fn light_term(s: Surface, origin: vec3<f32>, l: PointLight, dir_out: ptr<functio
     return vec4<f32>(v3(l.intensity) * (ndl / d2), dist);
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
     if (i >= atomicLoad(&counters[pass_.in_slot])) { return; }

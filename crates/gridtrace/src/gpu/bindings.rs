@@ -1,0 +1,162 @@
+//! The buffers the kernels bind, as one table per bind group. Each row gives the binding index,
+//! the WGSL variable's name and its access; the same rows produce the bind group layout and, given
+//! a buffer for each row, the bind group, so the two cannot disagree. `tests/gpu_layout.rs` checks
+//! the rows against the `@group @binding` declarations of the WGSL.
+
+/// How a kernel may use a bound buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    Uniform,
+    StorageRead,
+    StorageReadWrite,
+}
+
+/// One row of a bind group table; `slot` is what the host binds there.
+#[derive(Debug, Clone, Copy)]
+pub struct Binding<S> {
+    pub index: u32,
+    /// The WGSL variable's name.
+    pub name: &'static str,
+    pub access: Access,
+    pub slot: S,
+}
+
+/// What group 0 binds: everything a kernel of the tile loop reads or writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameSlot {
+    SceneUniform,
+    CameraUniform,
+    /// One bounce's `PassUniform` (a range of the pass uniform buffer).
+    PassUniform,
+    Cells,
+    Refs,
+    Tris,
+    TriShade,
+    Materials,
+    Lights,
+    /// The bounce's input ray queue (queues A and B swap roles every bounce).
+    RaysIn,
+    RaysOut,
+    Hits,
+    ShadowRays,
+    Resolve,
+    Accum,
+    Counters,
+}
+
+pub const FRAME_GROUP: u32 = 0;
+
+const fn row<S>(index: u32, name: &'static str, access: Access, slot: S) -> Binding<S> {
+    Binding {
+        index,
+        name,
+        access,
+        slot,
+    }
+}
+
+use Access::{StorageRead, StorageReadWrite, Uniform};
+
+/// Group 0, as declared in common.wgsl.
+pub const FRAME_BINDINGS: [Binding<FrameSlot>; 16] = [
+    row(0, "scene", Uniform, FrameSlot::SceneUniform),
+    row(1, "camera", Uniform, FrameSlot::CameraUniform),
+    row(2, "pass_", Uniform, FrameSlot::PassUniform),
+    row(3, "cells", StorageRead, FrameSlot::Cells),
+    row(4, "refs", StorageRead, FrameSlot::Refs),
+    row(5, "tris", StorageRead, FrameSlot::Tris),
+    row(6, "tri_shade", StorageRead, FrameSlot::TriShade),
+    row(7, "materials", StorageRead, FrameSlot::Materials),
+    row(8, "lights", StorageRead, FrameSlot::Lights),
+    row(9, "rays_in", StorageReadWrite, FrameSlot::RaysIn),
+    row(10, "rays_out", StorageReadWrite, FrameSlot::RaysOut),
+    row(11, "hits", StorageReadWrite, FrameSlot::Hits),
+    row(12, "shadow_rays", StorageReadWrite, FrameSlot::ShadowRays),
+    row(13, "resolve", StorageReadWrite, FrameSlot::Resolve),
+    row(14, "accum", StorageReadWrite, FrameSlot::Accum),
+    row(15, "counters", StorageReadWrite, FrameSlot::Counters),
+];
+
+/// What group 1 binds: the indirect arguments, written as storage by the one kernel that
+/// computes them. Apart from group 0 because a buffer bound as storage in the dispatch that
+/// reads it as indirect arguments would be a usage conflict.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IndirectSlot {
+    Args,
+}
+
+pub const INDIRECT_GROUP: u32 = 1;
+
+/// Group 1, as declared in indirect.wgsl.
+pub const INDIRECT_BINDINGS: [Binding<IndirectSlot>; 1] = [row(0, "indirect", StorageReadWrite, IndirectSlot::Args)];
+
+/// Every binding of every group as (group, index, WGSL name, access), for checks against WGSL.
+pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
+    let frame = FRAME_BINDINGS.iter().map(|b| (FRAME_GROUP, b.index, b.name, b.access));
+    let indirect = INDIRECT_BINDINGS
+        .iter()
+        .map(|b| (INDIRECT_GROUP, b.index, b.name, b.access));
+    frame.chain(indirect).collect()
+}
+
+/// Storage buffers a kernel may bind at once: every storage row of every group (the device
+/// must allow this many per shader stage).
+pub fn storage_buffers_needed() -> u32 {
+    all().iter().filter(|b| b.3 != Access::Uniform).count() as u32
+}
+
+/// The layout entries of a table (every kernel is a compute kernel).
+pub fn layout_entries<S>(table: &[Binding<S>]) -> Vec<wgpu::BindGroupLayoutEntry> {
+    table
+        .iter()
+        .map(|b| wgpu::BindGroupLayoutEntry {
+            binding: b.index,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: match b.access {
+                    Access::Uniform => wgpu::BufferBindingType::Uniform,
+                    Access::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
+                    Access::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
+                },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        })
+        .collect()
+}
+
+/// The bind group entries of a table: `resource` names the buffer for each slot (a `match` over
+/// the slot enum, so a slot without a buffer does not compile).
+pub fn group_entries<'a, S: Copy>(
+    table: &[Binding<S>],
+    resource: impl Fn(S) -> wgpu::BindingResource<'a>,
+) -> Vec<wgpu::BindGroupEntry<'a>> {
+    table
+        .iter()
+        .map(|b| wgpu::BindGroupEntry {
+            binding: b.index,
+            resource: resource(b.slot),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Indices and names are unique within a group (a duplicate would make wgpu reject the
+    /// layout, but only on a device).
+    #[test]
+    fn tables_are_unique() {
+        let rows = all();
+        // 13 in group 0 and the indirect args: what gridtrace has always asked the device for.
+        assert_eq!(storage_buffers_needed(), 14);
+        for (i, a) in rows.iter().enumerate() {
+            for b in &rows[i + 1..] {
+                assert!(!(a.0 == b.0 && a.1 == b.1), "binding {}/{} twice", a.0, a.1);
+                assert_ne!(a.2, b.2, "name {} twice", a.2);
+            }
+        }
+    }
+}

@@ -1,0 +1,127 @@
+//! Numbers the kernels and the host must agree on, defined once here. The WGSL side never types
+//! them: [`wgsl_prelude`] prints them as `const` declarations that are prepended to every kernel
+//! module (see `shaders::module_source`), so a kernel that re-declares one fails to compile, and
+//! `tests/gpu_layout.rs` checks naga's values against [`WGSL_CONSTANTS`] bit for bit.
+
+use std::fmt::Write as _;
+
+use crate::accel::AccelKind;
+use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_ULPS};
+use crate::render::Mode;
+
+/// Counter slots of the `counters` array (atomic u32s). Slots 0 and 1 are the two ray queues'
+/// lengths, alternating as input and output per bounce (the pass uniform says which).
+pub const SLOT_QUEUE_A: usize = 0;
+/// Shadow queue length, this bounce.
+pub const SLOT_SHADOW: usize = 2;
+/// Shadow rays emitted over the whole tile (statistics).
+pub const SLOT_SHADOW_TOTAL: usize = 3;
+/// Reflection rays emitted over the whole tile (statistics).
+pub const SLOT_REFLECT_TOTAL: usize = 4;
+/// Length of the `counters` array.
+pub const COUNTER_SLOTS: usize = 16;
+
+/// Invocations per workgroup of every per-ray kernel (`@workgroup_size(WORKGROUP)`).
+pub const WORKGROUP: u32 = 64;
+/// Most workgroups in x of one dispatch; larger dispatches go 2-D (`flat_index` in common.wgsl),
+/// which keeps them under WebGPU's 65535 per dimension.
+pub const MAX_GROUPS_X: u32 = 32768;
+/// `GpuHit::tri` of a miss.
+pub const MISS: u32 = u32::MAX;
+
+/// The number `PassUniform::mode` carries for each render mode; the prelude's `MODE_*` names
+/// are printed from this same function.
+pub const fn mode_code(mode: Mode) -> u32 {
+    match mode {
+        Mode::Cast => 0,
+        Mode::Shadow => 1,
+        Mode::Trace => 2,
+        Mode::Heat => 3,
+    }
+}
+
+/// `PassUniform::accel`: 1 walks the proximity clouds (`ACCEL_PC`), 0 the plain grid. The BVH
+/// never reaches the GPU (`check_accel`).
+pub const fn accel_code(accel: AccelKind) -> u32 {
+    match accel {
+        AccelKind::ProximityCloud => 1,
+        AccelKind::Grid | AccelKind::Bvh => 0,
+    }
+}
+
+/// A constant's value as WGSL will see it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WgslConst {
+    U32(u32),
+    F32(f32),
+}
+
+/// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
+/// `TriAccel::intersect`'s own, so both backends accept the same hits.
+pub const WGSL_CONSTANTS: [(&str, WgslConst); 18] = [
+    ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
+    ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
+    ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
+    ("SLOT_REFLECT_TOTAL", WgslConst::U32(SLOT_REFLECT_TOTAL as u32)),
+    ("COUNTER_SLOTS", WgslConst::U32(COUNTER_SLOTS as u32)),
+    ("MODE_CAST", WgslConst::U32(mode_code(Mode::Cast))),
+    ("MODE_SHADOW", WgslConst::U32(mode_code(Mode::Shadow))),
+    ("MODE_TRACE", WgslConst::U32(mode_code(Mode::Trace))),
+    ("MODE_HEAT", WgslConst::U32(mode_code(Mode::Heat))),
+    ("ACCEL_PC", WgslConst::U32(accel_code(AccelKind::ProximityCloud))),
+    ("MISS", WgslConst::U32(MISS)),
+    ("WORKGROUP", WgslConst::U32(WORKGROUP)),
+    ("MAX_GROUPS_X", WgslConst::U32(MAX_GROUPS_X)),
+    ("BARY_EPS", WgslConst::F32(BARY_EPS)),
+    ("SLACK_ULPS", WgslConst::F32(SLACK_ULPS)),
+    ("MAX_SLACK", WgslConst::F32(MAX_SLACK)),
+    ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),
+    ("PARALLEL_COS2", WgslConst::F32(PARALLEL_COS2)),
+];
+
+/// One WGSL literal that denotes exactly `v`: Rust's `{:?}` prints the shortest decimal that
+/// parses back to the same f32, and the `f` suffix makes WGSL parse it as an f32 directly (no
+/// detour through an abstract float that could round twice).
+fn f32_literal(v: f32) -> String {
+    assert!(v.is_finite(), "WGSL has no literal for {v}");
+    format!("{v:?}f")
+}
+
+/// The WGSL declarations of [`WGSL_CONSTANTS`], one `const NAME: type = value;` a line.
+pub fn wgsl_prelude() -> String {
+    let mut s = String::from("// Generated from src/gpu/constants.rs: do not declare these names in WGSL.\n");
+    for (name, value) in WGSL_CONSTANTS {
+        // Writing to a String cannot fail.
+        let _ = match value {
+            WgslConst::U32(v) => writeln!(s, "const {name}: u32 = {v}u;"),
+            WgslConst::F32(v) => writeln!(s, "const {name}: f32 = {};", f32_literal(v)),
+        };
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The printed f32s read back as the same bits (naga's own reading is checked in
+    /// tests/gpu_layout.rs).
+    #[test]
+    fn f32_literals_round_trip() {
+        for (name, value) in WGSL_CONSTANTS {
+            if let WgslConst::F32(v) = value {
+                let text = f32_literal(v);
+                let back: f32 = text.trim_end_matches('f').parse().unwrap();
+                assert_eq!(back.to_bits(), v.to_bits(), "{name}: {text}");
+            }
+        }
+    }
+
+    #[test]
+    fn names_are_unique() {
+        let mut names: Vec<&str> = WGSL_CONSTANTS.iter().map(|(n, _)| *n).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), WGSL_CONSTANTS.len());
+    }
+}

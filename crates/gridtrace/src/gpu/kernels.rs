@@ -1,0 +1,234 @@
+//! The compute kernels: shader modules, bind group layouts, pipeline layouts and pipelines. They
+//! depend on the device only, not on the scene, so they are built once per `GpuContext`
+//! (`GpuContext::kernels`) and shared by every renderer on it. Also the one helper that records
+//! a kernel's compute pass, for the tile loop and the ray queries alike.
+
+use super::bindings::{self, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP};
+use super::constants::{MAX_GROUPS_X, WORKGROUP};
+use super::layout::IndirectArgs;
+use super::shaders;
+use super::timing::StageTimer;
+use crate::{Error, Result};
+
+/// A pipeline: a kernel, or a kernel compiled with other override constants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Kernel {
+    Raygen,
+    Traverse,
+    /// `traverse` that also writes each ray's traversal work to its pixel (heat mode).
+    TraverseHeat,
+    Occlusion,
+    Shade,
+    Resolve,
+    Indirect,
+}
+
+/// How many invocations a kernel's dispatch has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Launch {
+    /// One per pixel of the tile, sized on the host.
+    PerPixel,
+    /// A single invocation.
+    Once,
+    /// Sized on the GPU by the indirect kernel: the dispatch arguments at this byte offset of
+    /// the indirect-args buffer.
+    Indirect { offset_bytes: u64 },
+}
+
+struct KernelSpec {
+    kernel: Kernel,
+    /// Pipeline label.
+    label: &'static str,
+    /// Stage name in `GpuTimings` (the heat pipeline counts as `traverse`).
+    stage: &'static str,
+    source: &'static str,
+    /// Pipeline-overridable constants (`override` in WGSL).
+    overrides: &'static [(&'static str, f64)],
+    launch: Launch,
+    /// Writes the indirect arguments, so binds them as group 1 (its pipeline layout has it).
+    writes_indirect_args: bool,
+}
+
+const RAY_QUEUE: Launch = Launch::Indirect {
+    offset_bytes: IndirectArgs::RAYS_OFFSET,
+};
+const SHADOW_QUEUE: Launch = Launch::Indirect {
+    offset_bytes: IndirectArgs::SHADOW_OFFSET,
+};
+
+const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: &'static str) -> KernelSpec {
+    KernelSpec {
+        kernel,
+        label,
+        stage,
+        source,
+        overrides: &[],
+        launch: RAY_QUEUE,
+        writes_indirect_args: false,
+    }
+}
+
+/// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
+const SPECS: [KernelSpec; 7] = [
+    KernelSpec {
+        launch: Launch::PerPixel,
+        ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
+    },
+    spec(Kernel::Traverse, "traverse", "traverse", shaders::TRAVERSE),
+    KernelSpec {
+        overrides: &[("COUNT_WORK", 1.0)],
+        ..spec(Kernel::TraverseHeat, "traverse (heat)", "traverse", shaders::TRAVERSE)
+    },
+    KernelSpec {
+        launch: SHADOW_QUEUE,
+        ..spec(Kernel::Occlusion, "occlusion", "occlusion", shaders::OCCLUSION)
+    },
+    spec(Kernel::Shade, "shade", "shade", shaders::SHADE),
+    spec(Kernel::Resolve, "resolve", "resolve", shaders::RESOLVE),
+    KernelSpec {
+        launch: Launch::Once,
+        writes_indirect_args: true,
+        ..spec(Kernel::Indirect, "indirect", "indirect", shaders::INDIRECT)
+    },
+];
+
+fn spec_of(kernel: Kernel) -> &'static KernelSpec {
+    let spec = &SPECS[kernel as usize];
+    debug_assert_eq!(spec.kernel, kernel);
+    spec
+}
+
+/// Workgroups for `n` items as a 2-D dispatch (the kernels use `flat_index`); mirrors `groups`
+/// in indirect.wgsl.
+fn dispatch_size(n: u32) -> (u32, u32) {
+    let g = n.div_ceil(WORKGROUP);
+    let x = g.min(MAX_GROUPS_X);
+    (x, if x == 0 { 0 } else { g.div_ceil(x) })
+}
+
+/// The compiled kernels of one device.
+pub(crate) struct Kernels {
+    /// Layout of group 0 (`FRAME_BINDINGS`).
+    pub frame_layout: wgpu::BindGroupLayout,
+    /// Layout of group 1 (`INDIRECT_BINDINGS`).
+    pub indirect_layout: wgpu::BindGroupLayout,
+    /// In `SPECS` order.
+    pipelines: Vec<wgpu::ComputePipeline>,
+}
+
+impl Kernels {
+    /// Compiles every kernel; a validation error is returned, not raised on the device.
+    pub fn new(dev: &wgpu::Device) -> Result<Kernels> {
+        let frame_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gridtrace"),
+            entries: &bindings::layout_entries(&FRAME_BINDINGS),
+        });
+        let indirect_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("indirect args"),
+            entries: &bindings::layout_entries(&INDIRECT_BINDINGS),
+        });
+        let frame_only = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("gridtrace"),
+            bind_group_layouts: &[Some(&frame_layout)],
+            immediate_size: 0,
+        });
+        let with_indirect = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("indirect"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&indirect_layout)],
+            immediate_size: 0,
+        });
+        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipelines = SPECS
+            .iter()
+            .map(|s| {
+                let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(s.label),
+                    source: wgpu::ShaderSource::Wgsl(shaders::module_source(s.source).into()),
+                });
+                dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(s.label),
+                    layout: Some(if s.writes_indirect_args {
+                        &with_indirect
+                    } else {
+                        &frame_only
+                    }),
+                    module: &module,
+                    entry_point: Some("main"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: s.overrides,
+                        ..Default::default()
+                    },
+                    cache: None,
+                })
+            })
+            .collect();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Gpu(format!("creating the kernels failed: {e}")));
+        }
+        Ok(Kernels {
+            frame_layout,
+            indirect_layout,
+            pipelines,
+        })
+    }
+}
+
+/// Records compute passes into one submission: binds each kernel's groups and sizes its
+/// dispatch as its spec says, and takes its timestamps.
+pub(crate) struct PassRecorder<'a> {
+    pub kernels: &'a Kernels,
+    /// The indirect-args buffer and its group-1 bind group.
+    pub indirect_args: &'a wgpu::Buffer,
+    pub indirect_group: &'a wgpu::BindGroup,
+    /// Pixels of the tile (sizes `Launch::PerPixel` kernels).
+    pub tile_pixels: u32,
+    pub timer: StageTimer<'a>,
+}
+
+impl PassRecorder<'_> {
+    /// One compute pass running `kernel` with `frame` as group 0.
+    pub fn pass(&mut self, enc: &mut wgpu::CommandEncoder, kernel: Kernel, frame: &wgpu::BindGroup) {
+        let spec = spec_of(kernel);
+        let timestamp_writes = self.timer.pass_writes(spec.stage);
+        let mut cp = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(spec.stage),
+            timestamp_writes,
+        });
+        cp.set_pipeline(&self.kernels.pipelines[kernel as usize]);
+        cp.set_bind_group(FRAME_GROUP, frame, &[]);
+        if spec.writes_indirect_args {
+            cp.set_bind_group(INDIRECT_GROUP, self.indirect_group, &[]);
+        }
+        match spec.launch {
+            Launch::PerPixel => {
+                let (x, y) = dispatch_size(self.tile_pixels);
+                cp.dispatch_workgroups(x, y, 1);
+            }
+            Launch::Once => cp.dispatch_workgroups(1, 1, 1),
+            Launch::Indirect { offset_bytes } => cp.dispatch_workgroups_indirect(self.indirect_args, offset_bytes),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_are_in_kernel_order() {
+        for (i, s) in SPECS.iter().enumerate() {
+            assert_eq!(s.kernel as usize, i, "{}", s.label);
+        }
+    }
+
+    /// The host's dispatch sizes agree with indirect.wgsl's rule and stay under WebGPU's 65535.
+    #[test]
+    fn dispatch_sizes() {
+        assert_eq!(dispatch_size(0), (0, 0));
+        assert_eq!(dispatch_size(1), (1, 1));
+        assert_eq!(dispatch_size(WORKGROUP), (1, 1));
+        assert_eq!(dispatch_size(WORKGROUP + 1), (2, 1));
+        let (x, y) = dispatch_size(u32::MAX);
+        assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * WORKGROUP as u64 >= u32::MAX as u64);
+    }
+}

@@ -1,0 +1,282 @@
+//! `GpuRenderer`: a scene resident on a device, with the per-frame uniforms and the work
+//! buffers (ray queues, hits, accumulation) that the tile loop (`wavefront.rs`) and the ray
+//! queries (`queries.rs`) share.
+
+use std::mem::size_of;
+use std::sync::Arc;
+
+use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot};
+use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
+use super::context::GpuContext;
+use super::kernels::{Kernels, PassRecorder};
+use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
+use super::scene::SceneBuffers;
+use super::timing::{StageTimer, Timestamps};
+use crate::Result;
+use crate::accel::AccelKind;
+use crate::render::Mode;
+use crate::scene::{CameraFrame, PointLight, PreparedScene};
+
+/// Largest tile in pixels: bounds queue memory and keeps each submission short for watchdogs.
+pub const MAX_TILE_PIXELS: u32 = 1 << 20;
+/// Bytes between the bounces' pass uniforms: uniform binding offsets must be multiples of
+/// this (WebGPU's largest allowed `min_uniform_buffer_offset_alignment`).
+const PASS_UNIFORM_STRIDE_BYTES: u64 = 256;
+/// Bounces per frame at most: eye + two reflection levels.
+const MAX_PASSES: usize = 3;
+/// Bytes per pixel of the accumulation buffer (`vec4<f32>`).
+pub(super) const ACCUM_TEXEL_BYTES: u64 = size_of::<[f32; 4]>() as u64;
+/// Bytes per ray of the resolve buffer (`vec2<u32>`: first shadow ray, count).
+const RESOLVE_SPAN_BYTES: u64 = size_of::<[u32; 2]>() as u64;
+pub(super) const COUNTERS_BYTES: u64 = (COUNTER_SLOTS * size_of::<u32>()) as u64;
+
+/// Queues and per-tile buffers, sized for a tile of `tile_pixels` and `max_lights` lights.
+pub(super) struct WorkBuffers {
+    pub tile_pixels: u32,
+    pub max_lights: u32,
+    pub queue_a: wgpu::Buffer,
+    pub queue_b: wgpu::Buffer,
+    pub hits: wgpu::Buffer,
+    pub shadow: wgpu::Buffer,
+    pub resolve: wgpu::Buffer,
+    pub accum: wgpu::Buffer,
+    pub lights: wgpu::Buffer,
+    /// One bind group per bounce (queues A/B swap roles every bounce).
+    pub bind_groups: Vec<wgpu::BindGroup>,
+}
+
+/// A scene resident on the GPU. Camera and lights change per frame; nothing else is uploaded
+/// again. Renderers on one context share its device and compiled kernels.
+pub struct GpuRenderer {
+    pub(super) ctx: Arc<GpuContext>,
+    pub(super) kernels: Arc<Kernels>,
+    pub(super) scene: SceneBuffers,
+    pub(super) camera_uniform: wgpu::Buffer,
+    /// `MAX_PASSES` pass uniforms, `PASS_UNIFORM_STRIDE_BYTES` apart.
+    pass_uniform: wgpu::Buffer,
+    pub(super) counters: wgpu::Buffer,
+    indirect_args: wgpu::Buffer,
+    indirect_group: wgpu::BindGroup,
+    timestamps: Option<Timestamps>,
+    pub(super) work: Option<WorkBuffers>,
+}
+
+impl GpuRenderer {
+    /// Uploads the scene (grid, references, triangles, shading data, materials) once; compiles
+    /// the kernels unless an earlier renderer on `ctx` did.
+    pub fn new(ctx: Arc<GpuContext>, scene: &PreparedScene) -> Result<GpuRenderer> {
+        let dev = &ctx.device;
+        let scene = SceneBuffers::upload(&ctx, scene)?;
+        let uniform = |label: &str, size: u64| {
+            dev.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let camera_uniform = uniform("camera uniform", size_of::<CameraFrame>() as u64);
+        let pass_uniform = uniform("pass uniform", PASS_UNIFORM_STRIDE_BYTES * MAX_PASSES as u64);
+        let counters = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("counters"),
+            size: COUNTERS_BYTES,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let indirect_args = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("indirect args"),
+            size: size_of::<IndirectArgs>() as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT,
+            mapped_at_creation: false,
+        });
+        let kernels = ctx.kernels()?;
+        let indirect_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("indirect args"),
+            layout: &kernels.indirect_layout,
+            entries: &bindings::group_entries(&INDIRECT_BINDINGS, |slot| match slot {
+                IndirectSlot::Args => indirect_args.as_entire_binding(),
+            }),
+        });
+        let timestamps = Timestamps::new(&ctx);
+        ctx.check_errors()?;
+        Ok(GpuRenderer {
+            ctx,
+            kernels,
+            scene,
+            camera_uniform,
+            pass_uniform,
+            counters,
+            indirect_args,
+            indirect_group,
+            timestamps,
+            work: None,
+        })
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// Bytes of each GPU array: the scene's and the current work buffers'.
+    pub fn memory(&self) -> Vec<(&'static str, u64)> {
+        let mut v = self.scene.bytes.clone();
+        if let Some(w) = &self.work {
+            v.push(("ray queues", w.queue_a.size() + w.queue_b.size()));
+            v.push(("hits", w.hits.size()));
+            v.push(("shadow queue", w.shadow.size()));
+            v.push(("resolve", w.resolve.size()));
+            v.push(("accum", w.accum.size()));
+        }
+        v
+    }
+
+    /// Whether the stage times come from timestamp queries.
+    pub(super) fn timed(&self) -> bool {
+        self.timestamps.is_some()
+    }
+
+    /// A recorder for one submission over a tile (or batch) of `tile_pixels`; `timed` takes
+    /// timestamps when the device has them.
+    pub(super) fn recorder(&self, tile_pixels: u32, timed: bool) -> PassRecorder<'_> {
+        PassRecorder {
+            kernels: &self.kernels,
+            indirect_args: &self.indirect_args,
+            indirect_group: &self.indirect_group,
+            tile_pixels,
+            timer: StageTimer::new(self.timestamps.as_ref().filter(|_| timed)),
+        }
+    }
+
+    /// Largest tile (pixels) whose buffers fit the device's binding limit with `lights` lights.
+    pub(super) fn tile_capacity(&self, lights: u32) -> u32 {
+        let limits = self.ctx.limits();
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let per_pixel_shadow = size_of::<RayRec>() as u64 * lights.max(1) as u64;
+        let by_shadow = max_binding / per_pixel_shadow;
+        let by_rays = max_binding / size_of::<RayRec>() as u64;
+        (MAX_TILE_PIXELS as u64).min(by_shadow).min(by_rays).max(1) as u32
+    }
+
+    /// Makes sure the work buffers hold `tile_pixels` and `lights`; recreates them if not.
+    pub(super) fn ensure_work(&mut self, tile_pixels: u32, lights: u32) {
+        if let Some(w) = &self.work
+            && w.tile_pixels >= tile_pixels
+            && w.max_lights >= lights
+        {
+            return;
+        }
+        let dev = &self.ctx.device;
+        let buf = |label: &str, size: u64| {
+            dev.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                // Zero-length bindings are invalid.
+                size: size.max(16),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let n = tile_pixels as u64;
+        let rec = size_of::<RayRec>() as u64;
+        let max_lights = lights.max(1);
+        let queue_a = buf("ray queue A", n * rec);
+        let queue_b = buf("ray queue B", n * rec);
+        let hits = buf("hits", n * size_of::<GpuHit>() as u64);
+        let shadow = buf("shadow queue", n * rec * max_lights as u64);
+        let resolve = buf("resolve", n * RESOLVE_SPAN_BYTES);
+        let accum = buf("accum", n * ACCUM_TEXEL_BYTES);
+        let lights_buf = buf("lights", size_of::<PointLight>() as u64 * max_lights as u64);
+        let bind_groups = (0..MAX_PASSES)
+            .map(|d| {
+                let (rays_in, rays_out) = if d % 2 == 0 {
+                    (&queue_a, &queue_b)
+                } else {
+                    (&queue_b, &queue_a)
+                };
+                let entries = bindings::group_entries(&FRAME_BINDINGS, |slot| match slot {
+                    FrameSlot::SceneUniform => self.scene.uniform.as_entire_binding(),
+                    FrameSlot::CameraUniform => self.camera_uniform.as_entire_binding(),
+                    FrameSlot::PassUniform => wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &self.pass_uniform,
+                        offset: d as u64 * PASS_UNIFORM_STRIDE_BYTES,
+                        size: wgpu::BufferSize::new(size_of::<PassUniform>() as u64),
+                    }),
+                    FrameSlot::Cells => self.scene.cells.as_entire_binding(),
+                    FrameSlot::Refs => self.scene.refs.as_entire_binding(),
+                    FrameSlot::Tris => self.scene.tris.as_entire_binding(),
+                    FrameSlot::TriShade => self.scene.tri_shade.as_entire_binding(),
+                    FrameSlot::Materials => self.scene.materials.as_entire_binding(),
+                    FrameSlot::Lights => lights_buf.as_entire_binding(),
+                    FrameSlot::RaysIn => rays_in.as_entire_binding(),
+                    FrameSlot::RaysOut => rays_out.as_entire_binding(),
+                    FrameSlot::Hits => hits.as_entire_binding(),
+                    FrameSlot::ShadowRays => shadow.as_entire_binding(),
+                    FrameSlot::Resolve => resolve.as_entire_binding(),
+                    FrameSlot::Accum => accum.as_entire_binding(),
+                    FrameSlot::Counters => self.counters.as_entire_binding(),
+                });
+                dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("gridtrace"),
+                    layout: &self.kernels.frame_layout,
+                    entries: &entries,
+                })
+            })
+            .collect();
+        self.work = Some(WorkBuffers {
+            tile_pixels,
+            max_lights,
+            queue_a,
+            queue_b,
+            hits,
+            shadow,
+            resolve,
+            accum,
+            lights: lights_buf,
+            bind_groups,
+        });
+    }
+
+    /// Writes every bounce's pass uniform for a tile of `tile_pixels` starting at pixel
+    /// `tile_offset`.
+    pub(super) fn write_pass_uniforms(&self, tile_offset: u32, tile_pixels: u32, mode: Mode, accel: AccelKind) {
+        for d in 0..MAX_PASSES as u32 {
+            let p = PassUniform {
+                depth: d,
+                in_slot: d % 2,
+                out_slot: 1 - d % 2,
+                tile_offset,
+                tile_pixels,
+                mode: mode_code(mode),
+                accel: accel_code(accel),
+                max_depth: mode.reflection_depth(),
+            };
+            self.ctx.queue.write_buffer(
+                &self.pass_uniform,
+                d as u64 * PASS_UNIFORM_STRIDE_BYTES,
+                bytemuck::bytes_of(&p),
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::builtin;
+
+    /// A second renderer on the same context reuses the first one's kernels (skipped without an
+    /// adapter: the integration tests in tests/gpu.rs are the ones that insist on one).
+    #[test]
+    fn renderers_share_kernels() {
+        let Ok(ctx) = GpuContext::new() else {
+            eprintln!("no GPU adapter: skipping");
+            return;
+        };
+        let ctx = Arc::new(ctx);
+        let scene = builtin::knot_box().prepare(crate::Resolution::default()).unwrap();
+        let a = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let b = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        assert!(Arc::ptr_eq(&a.kernels, &b.kernels));
+        let other = GpuRenderer::new(Arc::new(GpuContext::new().unwrap()), &scene).unwrap();
+        assert!(!Arc::ptr_eq(&a.kernels, &other.kernels));
+    }
+}

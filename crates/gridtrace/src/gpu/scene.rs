@@ -1,0 +1,190 @@
+//! The scene on the GPU: grid cells, references, triangles, per-triangle shading data,
+//! materials and the scene constants, uploaded once per renderer. Camera and lights are not
+//! here; they change per frame.
+
+use glam::{UVec3, Vec3};
+use wgpu::util::DeviceExt;
+
+use super::context::GpuContext;
+use super::layout::{GpuMaterial, SceneUniform, TriShade};
+use crate::accel::{Aabb, Cell, TriAccel};
+use crate::scene::PreparedScene;
+use crate::{Error, Result};
+
+/// What the kernels read of the prepared scene's acceleration structure.
+struct AccelArrays<'a> {
+    cells: &'a [Cell],
+    refs: &'a [u32],
+    tris: &'a [TriAccel],
+    bounds: Aabb,
+    dims: UVec3,
+    /// World-space size of one cell per axis, and its reciprocal.
+    cell_size: Vec3,
+    inv_cell_size: Vec3,
+}
+
+/// The one place the GPU backend reads `scene.accel`: when its types change, only this function
+/// changes.
+fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
+    // The kernels traverse grids only: a scene prepared with another structure is an error
+    // that says what does run.
+    let Some(g) = scene.accel.grid() else {
+        return Err(Error::InvalidInput(format!(
+            "the GPU kernels traverse grids; this scene was prepared with a {}: use backend cpu \
+             (or auto), or accel grid or pc",
+            scene.accel.structure_name()
+        )));
+    };
+    Ok(AccelArrays {
+        cells: &g.cells,
+        refs: &g.refs,
+        tris: &scene.accel.tris,
+        bounds: g.bounds,
+        dims: g.dims,
+        cell_size: g.cell_size,
+        inv_cell_size: g.inv_cell_size,
+    })
+}
+
+/// Checks every scene array (`(name, bytes)`) against the device's per-binding limits before
+/// anything is allocated: a scene too large for the device is an error that names the array and
+/// the limit, not a validation panic or a lost device.
+pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, adapter: &str) -> Result<()> {
+    let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    for &(name, bytes) in arrays {
+        if bytes > max_binding {
+            return Err(Error::Gpu(format!(
+                "scene array '{name}' needs {bytes} bytes; the device allows {max_binding} per storage buffer \
+                 (limit max_storage_buffer_binding_size / max_buffer_size on '{adapter}')"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The scene's buffers on the device.
+pub(crate) struct SceneBuffers {
+    pub cells: wgpu::Buffer,
+    pub refs: wgpu::Buffer,
+    pub tris: wgpu::Buffer,
+    pub tri_shade: wgpu::Buffer,
+    pub materials: wgpu::Buffer,
+    /// `SceneUniform`, rewritten per frame with the frame's light count.
+    pub uniform: wgpu::Buffer,
+    /// The scene constants without lights (`n_lights` = 0).
+    pub consts: SceneUniform,
+    /// Bytes of each scene array, for `GpuRenderer::memory`.
+    pub bytes: Vec<(&'static str, u64)>,
+}
+
+impl SceneBuffers {
+    /// Checks the scene against the device's limits and uploads it.
+    pub fn upload(ctx: &GpuContext, scene: &PreparedScene) -> Result<SceneBuffers> {
+        let dev = &ctx.device;
+        let accel = accel_arrays(scene)?;
+        let tri_shade: Vec<TriShade> = scene
+            .tri_vertices
+            .iter()
+            .zip(&scene.tri_material)
+            .map(|(v, &m)| TriShade {
+                n0: scene.normals[v[0] as usize].to_array(),
+                n1: scene.normals[v[1] as usize].to_array(),
+                n2: scene.normals[v[2] as usize].to_array(),
+                material: m,
+            })
+            .collect();
+        let materials: Vec<GpuMaterial> = scene
+            .materials
+            .iter()
+            .map(|m| GpuMaterial {
+                diffuse: m.diffuse.to_array(),
+                reflectivity: m.reflectivity,
+            })
+            .collect();
+        let arrays: [(&'static str, &[u8]); 5] = [
+            ("cells", bytemuck::cast_slice(accel.cells)),
+            ("refs", bytemuck::cast_slice(accel.refs)),
+            ("triangles", bytemuck::cast_slice(accel.tris)),
+            ("tri_shade", bytemuck::cast_slice(&tri_shade)),
+            ("materials", bytemuck::cast_slice(&materials)),
+        ];
+        let bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
+        check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
+        let storage = |label: &str, data: &[u8]| {
+            // Zero-length bindings are invalid; give empty arrays one element of padding.
+            let contents: &[u8] = if data.is_empty() { &[0u8; 16] } else { data };
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            })
+        };
+        let [cells, refs, tris, tri_shade, materials] = arrays.map(|(n, d)| storage(n, d));
+
+        let consts = SceneUniform {
+            bounds_min: accel.bounds.min.to_array(),
+            ray_epsilon: scene.ray_epsilon,
+            bounds_max: accel.bounds.max.to_array(),
+            n_lights: 0,
+            cell_size: accel.cell_size.to_array(),
+            n_tris: accel.tris.len() as u32,
+            inv_cell_size: accel.inv_cell_size.to_array(),
+            _pad0: 0,
+            dims: accel.dims.to_array(),
+            _pad1: 0,
+            background: scene.background.to_array(),
+            _pad2: 0,
+            ambient: scene.ambient.to_array(),
+            _pad3: 0,
+        };
+        let uniform = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("scene uniform"),
+            size: std::mem::size_of::<SceneUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        ctx.queue.write_buffer(&uniform, 0, bytemuck::bytes_of(&consts));
+        Ok(SceneBuffers {
+            cells,
+            refs,
+            tris,
+            tri_shade,
+            materials,
+            uniform,
+            consts,
+            bytes,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene larger than the device allows is an error naming the array and the limit (checked
+    /// with artificially small limits: no software adapter's limits can be exceeded in a test).
+    #[test]
+    fn scene_too_large_names_the_limit() {
+        let limits = wgpu::Limits {
+            max_storage_buffer_binding_size: 1 << 20,
+            max_buffer_size: 1 << 30,
+            ..wgpu::Limits::default()
+        };
+        assert!(check_scene_fits(&[("cells", 1 << 20), ("refs", 12)], &limits, "tiny").is_ok());
+        let e = check_scene_fits(&[("cells", 12), ("refs", (1 << 20) + 4)], &limits, "tiny")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("'refs'") && e.contains("max_storage_buffer_binding_size") && e.contains("tiny"),
+            "{e}"
+        );
+        let limits = wgpu::Limits {
+            max_buffer_size: 1000,
+            ..limits
+        };
+        let e = check_scene_fits(&[("triangles", 1001)], &limits, "tiny")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("'triangles'") && e.contains("max_buffer_size"), "{e}");
+    }
+}

@@ -1,0 +1,31 @@
+//! WGSL sources: the shared file and one per kernel. WGSL has no includes, so a kernel's module
+//! is the generated constant prelude, then `common.wgsl`, then the kernel's own file.
+
+use super::constants::wgsl_prelude;
+
+pub const COMMON: &str = include_str!("shaders/common.wgsl");
+pub const RAYGEN: &str = include_str!("shaders/raygen.wgsl");
+pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
+pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
+pub const SHADE: &str = include_str!("shaders/shade.wgsl");
+pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
+pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
+/// Every kernel with its name.
+pub const KERNELS: [(&str, &str); 6] = [
+    ("raygen", RAYGEN),
+    ("traverse", TRAVERSE),
+    ("occlusion", OCCLUSION),
+    ("shade", SHADE),
+    ("resolve", RESOLVE),
+    ("indirect", INDIRECT),
+];
+
+/// The prelude and `common.wgsl`: every declaration the kernels share (layout tests parse this).
+pub fn common_source() -> String {
+    format!("{}\n{}", wgsl_prelude(), COMMON)
+}
+
+/// The whole module of one kernel, as the device compiles it.
+pub fn module_source(kernel: &str) -> String {
+    format!("{}\n{}", common_source(), kernel)
+}
