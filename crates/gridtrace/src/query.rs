@@ -303,7 +303,7 @@ impl TraceMesh {
         match self.renderer(backend)? {
             Some(gpu) => {
                 let mut done = 0;
-                for_chunks(origins, dirs, |rays| {
+                for_chunks(origins, dirs, n, |rays| {
                     let hits = locked(gpu).intersect(rays, t_min, t_max, self.accel)?;
                     let r = done..done + hits.len();
                     done = r.end;
@@ -363,7 +363,7 @@ impl TraceMesh {
         match self.renderer(backend)? {
             Some(gpu) => {
                 let mut out = Vec::with_capacity(n);
-                for_chunks(origins, dirs, |rays| {
+                for_chunks(origins, dirs, n, |rays| {
                     out.extend(locked(gpu).occluded(rays, t_min, t_max, self.accel)?);
                     Ok(())
                 })?;
@@ -446,8 +446,15 @@ fn locked(gpu: &Mutex<GpuRenderer>) -> MutexGuard<'_, GpuRenderer> {
 }
 
 /// Hands a (possibly broadcast, checked) batch to `f` as rays, `CHUNK` at a time.
-fn for_chunks(origins: &[[f32; 3]], dirs: &[[f32; 3]], mut f: impl FnMut(&[Ray]) -> Result<()>) -> Result<()> {
-    let n = origins.len().max(dirs.len());
+/// Runs `f` on the rays of a batch of `n` (its broadcast length, `batch_len`), `CHUNK` at a
+/// time. `n` is not `max(origins, dirs)`: with one side empty and the other of length 1 the batch
+/// is empty, and there is no ray to make.
+fn for_chunks(
+    origins: &[[f32; 3]],
+    dirs: &[[f32; 3]],
+    n: usize,
+    mut f: impl FnMut(&[Ray]) -> Result<()>,
+) -> Result<()> {
     for start in (0..n).step_by(CHUNK) {
         f(&make_rays(origins, dirs, start, (start + CHUNK).min(n))?)?;
     }
@@ -557,6 +564,59 @@ mod tests {
     use super::*;
     use crate::accel::{NoCounters, brute_force_intersect};
     use crate::testing::triangle_soup;
+
+    /// Empty, single and broadcast batches, on every backend and structure: every pair of
+    /// lengths 0..=3 (origins, directions). Lengths that match, or where one side is 1, give
+    /// `batch_len` results equal to the one-ray queries; others are errors. Never a panic (an
+    /// empty batch against one broadcast ray used to index past the end on the GPU path).
+    #[test]
+    fn empty_single_and_broadcast_batches() {
+        let vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let faces = [[0u32, 1, 2]];
+        let origins: Vec<[f32; 3]> = (0..3).map(|i| [0.1 + 0.1 * i as f32, 0.2, 1.0]).collect();
+        let dirs: Vec<[f32; 3]> = (0..3).map(|i| [0.0, 0.05 * i as f32, -1.0]).collect();
+        for accel in AccelKind::ALL {
+            for backend in [Backend::Cpu, Backend::Gpu] {
+                if backend.for_accel(accel).is_err() {
+                    continue;
+                }
+                let opts = QueryOptions {
+                    accel,
+                    backend,
+                    ..Default::default()
+                };
+                let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts).unwrap();
+                for no in 0..=3 {
+                    for nd in 0..=3 {
+                        let (o, d) = (&origins[..no], &dirs[..nd]);
+                        let want_len = match (no, nd) {
+                            (a, b) if a == b => Some(a),
+                            (1, b) => Some(b),
+                            (a, 1) => Some(a),
+                            _ => None,
+                        };
+                        let what = format!("{} {backend:?}: {no} origins, {nd} directions", accel.name());
+                        let hits = mesh.intersect(o, d, 0.0, f32::INFINITY);
+                        let occ = mesh.occluded(o, d, 0.0, f32::INFINITY);
+                        let Some(n) = want_len else {
+                            assert!(hits.is_err() && occ.is_err(), "{what}: must be an error");
+                            continue;
+                        };
+                        let (hits, occ) = (hits.expect(&what), occ.expect(&what));
+                        assert_eq!((hits.len(), occ.len()), (n, n), "{what}");
+                        for i in 0..n {
+                            let one = mesh
+                                .intersect(&[o[if no == 1 { 0 } else { i }]], &[d[if nd == 1 { 0 } else { i }]], 0.0, f32::INFINITY)
+                                .unwrap();
+                            assert_eq!((hits.t[i], hits.tri[i]), (one.t[0], one.tri[0]), "{what}: ray {i}");
+                            assert_eq!(hits.tri[i], 0, "{what}: ray {i} hits the triangle");
+                            assert!(occ[i], "{what}: ray {i} occluded");
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     /// Vertices, faces, ray origins, ray directions.
     type Soup = (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<[f32; 3]>, Vec<[f32; 3]>);

@@ -3,14 +3,13 @@
 pub mod builtin;
 pub mod camera;
 pub mod file;
-pub mod mesh;
 pub mod procedural;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
 
 pub use camera::{Camera, CameraFrame};
-pub use mesh::{Material, Mesh};
+pub use crate::mesh::{Material, Mesh};
 
 use crate::accel::{Aabb, Accel, AccelKind, Resolution, TriAccel};
 use crate::{Error, Result};

@@ -1,4 +1,5 @@
-//! Triangle meshes as loaded from files or generated: plain arrays, no acceleration data.
+//! Triangle meshes as loaded from files or generated: plain arrays, no acceleration data. Below
+//! both `io` (which fills them) and `scene` (which composes and prepares them).
 
 use glam::Vec3;
 
