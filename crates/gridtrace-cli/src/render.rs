@@ -279,3 +279,29 @@ fn spinner(res: (u32, u32), what: &str) -> Option<ProgressBar> {
         b
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gridtrace::scene::Camera;
+
+    /// The orbit turns the eye about the up axis through the target: the start is the camera
+    /// itself, half a turn mirrors the eye through the axis, and distance and height stay.
+    #[test]
+    fn orbit_turns_about_the_up_axis() {
+        let cam = Camera {
+            eye: Vec3::new(3.0, 2.0, 1.0),
+            target: Vec3::new(1.0, 0.5, 1.0),
+            up: Vec3::Y,
+            vfov_deg: 40.0,
+        };
+        assert!(orbit(&cam, 0.0).eye.abs_diff_eq(cam.eye, 1e-6));
+        let half = orbit(&cam, 0.5);
+        assert!(half.eye.abs_diff_eq(Vec3::new(-1.0, 2.0, 1.0), 1e-5), "{}", half.eye);
+        let quarter = orbit(&cam, 0.25);
+        assert!(((quarter.eye - cam.target).length() - (cam.eye - cam.target).length()).abs() < 1e-5);
+        assert!((quarter.eye.y - cam.eye.y).abs() < 1e-5, "height kept: {}", quarter.eye);
+        assert_ne!(quarter.eye, cam.eye);
+        assert_eq!((half.target, half.up, half.vfov_deg), (cam.target, cam.up, cam.vfov_deg));
+    }
+}

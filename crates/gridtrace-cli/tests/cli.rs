@@ -328,3 +328,35 @@ fn example_scene_renders() {
     let img = image::open(&png).unwrap();
     assert_eq!((img.width(), img.height()), (24, 16));
 }
+
+/// `--frames N` renders N frames and reports the first and the median and best of the rest;
+/// the PNG is the first frame, which `--orbit` leaves at the scene's own view. On the CPU and
+/// on the GPU (lavapipe in CI).
+#[test]
+fn frames_and_orbit() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-cli-frames-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for backend in ["cpu", "gpu"] {
+        let one = dir.join(format!("one-{backend}.png"));
+        let many = dir.join(format!("many-{backend}.png"));
+        let common = ["render", "--scene", "knot-box", "--mode", "shadow", "--res", "48x32", "--backend", backend];
+        let (ok, text) = gridtrace(&[&common[..], &["-o", one.to_str().unwrap()]].concat());
+        assert!(ok, "{text}");
+        assert!(!text.contains("more"), "one frame reports no others: {text}");
+        let (ok, text) = gridtrace(&[&common[..], &["--frames", "4", "--orbit", "-o", many.to_str().unwrap()]].concat());
+        assert!(ok, "{text}");
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("frames"))
+            .unwrap_or_else(|| panic!("no frames line: {text}"));
+        assert!(
+            line.contains("3 more along the orbit: median") && line.contains("best") && line.contains("Mrays/s"),
+            "{line}"
+        );
+        assert!(text.contains("first "), "the first frame is reported as such: {text}");
+        let (a, b) = (image::open(&one).unwrap().to_rgb8(), image::open(&many).unwrap().to_rgb8());
+        assert_eq!(a.as_raw(), b.as_raw(), "{backend}: the written image is the first frame");
+    }
+    let (ok, text) = gridtrace(&["render", "--scene", "knot-box", "--frames", "0", "-o", "x.png"]);
+    assert!(!ok && text.contains("--frames"), "{text}");
+}
