@@ -360,3 +360,36 @@ fn frames_and_orbit() {
     let (ok, text) = gridtrace(&["render", "--scene", "knot-box", "--frames", "0", "-o", "x.png"]);
     assert!(!ok && text.contains("--frames"), "{text}");
 }
+
+/// A scene over the GPU's buffer limits (a 300x300x160 grid: 173 MB of cells, over lavapipe's
+/// 128 MiB per binding): `auto` traces it on the CPU with a note naming the limit, `gpu` fails
+/// and suggests the CPU. On a GPU with larger bindings both render on the GPU.
+#[test]
+fn auto_falls_back_to_the_cpu_when_the_scene_does_not_fit() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-cli-fit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("fit.png");
+    let args = |backend| {
+        [
+            "render", "--scene", "knot-box", "--grid", "300x300x160", "--mode", "cast", "--res", "16", "--backend",
+            backend, "-o", png.to_str().unwrap(),
+        ]
+        .map(String::from)
+    };
+    let run = |backend| {
+        let a = args(backend);
+        gridtrace(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let (ok, text) = run("auto");
+    assert!(ok, "{text}");
+    let on_gpu = text.contains("backend gpu");
+    assert!(
+        on_gpu || (text.contains("note: the GPU cannot trace this scene") && text.contains("'cells'")),
+        "{text}"
+    );
+    let (ok, text) = run("gpu");
+    assert_eq!(ok, on_gpu, "{text}");
+    if !ok {
+        assert!(text.contains("use --backend cpu"), "{text}");
+    }
+}
