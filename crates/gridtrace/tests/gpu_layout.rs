@@ -19,16 +19,16 @@ fn module() -> naga::Module {
 /// (size, [(field, offset)]) of a WGSL struct.
 fn wgsl_struct(m: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
     for (_, ty) in m.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                return (
-                    *span,
-                    members
-                        .iter()
-                        .map(|mb| (mb.name.clone().unwrap_or_default(), mb.offset))
-                        .collect(),
-                );
-            }
+        if ty.name.as_deref() == Some(name)
+            && let naga::TypeInner::Struct { members, span } = &ty.inner
+        {
+            return (
+                *span,
+                members
+                    .iter()
+                    .map(|mb| (mb.name.clone().unwrap_or_default(), mb.offset))
+                    .collect(),
+            );
         }
     }
     panic!("struct {name} not found in common.wgsl");

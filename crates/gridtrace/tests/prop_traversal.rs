@@ -25,7 +25,10 @@ fn resolution() -> impl Strategy<Value = Resolution> {
 
 /// A soup over a shared vertex pool, so edges and vertices are shared exactly; rays either
 /// random or aimed exactly at a pool vertex.
-fn case() -> impl Strategy<Value = (Vec<Vec3>, Vec<[usize; 3]>, Resolution, Vec<(Vec3, Vec3, Option<usize>)>)> {
+/// Vertex pool, triangles (pool indices), grid resolution, rays (origin, direction, aim).
+type Case = (Vec<Vec3>, Vec<[usize; 3]>, Resolution, Vec<(Vec3, Vec3, Option<usize>)>);
+
+fn case() -> impl Strategy<Value = Case> {
     (
         prop::collection::vec(vec3(), 3..12),
         prop::collection::vec((0usize..64, 0usize..64, 0usize..64), 1..24),
