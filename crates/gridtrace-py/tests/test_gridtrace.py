@@ -176,6 +176,22 @@ def test_broadcasting_and_dtypes():
     assert hits.t.dtype == np.float32 and hits.tri.dtype == np.uint32 and hits.normal.shape == (2, 3)
 
 
+@pytest.mark.parametrize("accel", ["grid", "pc", "bvh"])
+def test_empty_batches(accel):
+    """An empty batch, alone or against one broadcast ray, gives empty results on every
+    backend (the GPU path used to index past the end of the empty side)."""
+    vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
+    backends = ["cpu"] if accel == "bvh" else ["cpu", "gpu"]
+    for backend in backends:
+        mesh = gridtrace.Mesh(vertices, [[0, 1, 2]], accel=accel, backend=backend)
+        for o, d in [(np.zeros((0, 3)), [0, 0, -1]), ([0.2, 0.2, 1], np.zeros((0, 3))), (np.zeros((0, 3)), np.zeros((0, 3)))]:
+            hits = mesh.intersect(o, d)
+            assert hits.t.shape == (0,) and hits.tri.shape == (0,) and hits.normal.shape == (0, 3), (backend, hits)
+            assert mesh.occluded(o, d).shape == (0,)
+        # and one ray still hits
+        assert mesh.intersect([0.2, 0.2, 1], [0, 0, -1]).tri[0] == 0
+
+
 def test_bad_input_raises_clear_errors():
     v = np.zeros((3, 3), np.float32)
     v[1, 0] = v[2, 1] = 1
