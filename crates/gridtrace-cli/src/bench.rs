@@ -1,11 +1,11 @@
 //! `gridtrace bench`: the paper's benchmark matrix and studies; the work is in
-//! `gridtrace::bench`, this file parses, prints and writes.
+//! `gridtrace_bench`, this file parses, prints and writes.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
-use gridtrace::bench::{self, BenchBackend, BenchConfig, BenchReport, Machine, scenes, studies};
+use gridtrace_bench::{self as bench, BenchBackend, BenchConfig, BenchReport, Machine, scenes, studies};
 use gridtrace::gpu::GpuContext;
 use gridtrace::{AccelKind, Mode, RenderOptions, Resolution};
 

@@ -3,7 +3,6 @@
 
 pub mod accel;
 pub mod backend;
-pub mod bench;
 pub mod cpu;
 pub mod error;
 pub mod gpu;
@@ -12,6 +11,7 @@ pub mod mesh;
 pub mod query;
 pub mod render;
 pub mod scene;
+#[cfg(any(test, feature = "testing"))]
 pub mod testing;
 pub mod util;
 

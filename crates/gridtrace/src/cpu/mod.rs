@@ -2,5 +2,6 @@
 
 mod render;
 
-pub(crate) use render::light_contribution;
-pub use render::{Surface, render, render_view, render_with_counters, surface_at};
+pub use render::{
+    RayKind, RayObserver, Surface, render, render_view, render_with_counters, surface_at, trace_pixel_observed,
+};

@@ -133,7 +133,7 @@ fn render_generic<C: Collect>(
                 let x = (i % width) as u32;
                 let y = (band * BAND + i / width) as u32;
                 let mut c = C::default();
-                *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, &mut rays, &mut c);
+                *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
                 if opts.mode == Mode::Heat {
                     *px = Vec3::splat(c.cost() as f32);
                 }
@@ -160,25 +160,61 @@ fn render_generic<C: Collect>(
     Ok((img, stats))
 }
 
+/// Which kind of ray the renderer traced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RayKind {
+    Eye,
+    Shadow,
+    Reflection,
+}
+
+/// Sees every ray a pixel's walk traces, in order, with its result: how the ray export of the
+/// benchmarks records exactly what the renderer traces, without a second copy of the walk. The
+/// no-op observer `()` compiles away.
+pub trait RayObserver {
+    /// An eye or reflection ray and its closest hit.
+    fn closest(&mut self, _kind: RayKind, _ray: &Ray, _hit: &Hit) {}
+    /// A shadow ray towards a light `dist` away, and whether something occludes it.
+    fn shadow(&mut self, _ray: &Ray, _dist: f32, _occluded: bool) {}
+}
+
+impl RayObserver for () {}
+
+/// Traces pixel `(x, y)` as `render` does, from the scene's camera and lights, showing every ray
+/// to `observer`; returns the pixel's colour.
+pub fn trace_pixel_observed(
+    scene: &PreparedScene,
+    cam: &CameraFrame,
+    (x, y): (u32, u32),
+    opts: &RenderOptions,
+    observer: &mut impl RayObserver,
+) -> Vec3 {
+    let mut rays = RayCounts::default();
+    trace_pixel(scene, cam, &scene.lights, (x, y), opts, (&mut rays, &mut NoCounters), observer)
+}
+
 /// One pixel: eye ray, then shading and reflections, accumulating `weight * colour` as the GPU
-/// wavefront does (a reflection ray carries the weight `reflectivity` of its parent).
+/// wavefront does (a reflection ray carries the weight `reflectivity` of its parent). Rays are
+/// counted into `tally` and shown to `observer`.
 #[inline]
-fn trace_pixel<C: Counters>(
+fn trace_pixel<C: Counters, O: RayObserver>(
     scene: &PreparedScene,
     cam: &CameraFrame,
     lights: &[PointLight],
     (x, y): (u32, u32),
     opts: &RenderOptions,
-    rays: &mut RayCounts,
-    counters: &mut C,
+    (rays, counters): (&mut RayCounts, &mut C),
+    observer: &mut O,
 ) -> Vec3 {
     let accel = &scene.accel;
     let mut ray = cam.ray(x, y);
     let mut weight = Vec3::ONE;
     let mut color = Vec3::ZERO;
+    let mut kind = RayKind::Eye;
     rays.eye += 1;
     for depth in 0..=opts.mode.reflection_depth() {
         let hit = accel.intersect(&ray, 0.0, f32::INFINITY, opts.accel, counters);
+        observer.closest(kind, &ray, &hit);
         if !hit.is_hit() {
             color += weight * scene.background;
             break;
@@ -203,7 +239,10 @@ fn trace_pixel<C: Counters>(
             };
             if opts.mode.shadows() {
                 rays.shadow += 1;
-                if accel.occluded(&Ray::new(origin, to_light), 0.0, dist, opts.accel, counters) {
+                let shadow = Ray::new(origin, to_light);
+                let occluded = accel.occluded(&shadow, 0.0, dist, opts.accel, counters);
+                observer.shadow(&shadow, dist, occluded);
+                if occluded {
                     continue;
                 }
             }
@@ -213,6 +252,7 @@ fn trace_pixel<C: Counters>(
             weight *= reflect;
             let d = ray.dir - 2.0 * ray.dir.dot(s.ns) * s.ns;
             ray = Ray::new(origin, d.normalize());
+            kind = RayKind::Reflection;
             rays.reflection += 1;
         } else {
             break;
@@ -225,7 +265,7 @@ fn trace_pixel<C: Counters>(
 /// direction and distance for the shadow ray. `None` when the light is behind the surface
 /// (then no shadow ray is spent: the paper's masking of rays known not to contribute).
 #[inline]
-pub(crate) fn light_contribution(
+fn light_contribution(
     s: &crate::cpu::Surface,
     origin: Vec3,
     light: &crate::scene::PointLight,

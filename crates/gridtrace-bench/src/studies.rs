@@ -9,12 +9,12 @@ use serde::Serialize;
 
 use super::scenes::{self, BenchScene, ScalingMesh};
 use super::{GridInfo, Summary, loglog_fit, time_cpu};
-use crate::Result;
-use crate::accel::grid::DEFAULT_LAMBDA;
-use crate::accel::{AccelKind, Resolution};
-use crate::render::{Mode, RenderOptions};
-use crate::scene::procedural::box_mesh;
-use crate::scene::{Camera, Material, PointLight, Scene, builtin};
+use gridtrace::Result;
+use gridtrace::accel::grid::DEFAULT_LAMBDA;
+use gridtrace::accel::{AccelKind, Resolution};
+use gridtrace::render::{Mode, RenderOptions};
+use gridtrace::scene::procedural::box_mesh;
+use gridtrace::scene::{Camera, Material, PointLight, Scene, builtin};
 
 /// The cells-per-triangle values of a sweep.
 pub const SWEEP_LAMBDAS: [f32; 7] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0];
@@ -154,7 +154,7 @@ pub fn scaling_meshes(data_dir: Option<&Path>, max_tris: usize, log: &mut dyn Fn
             continue;
         };
         let p = dir.join(f);
-        match crate::io::load_mesh(&p) {
+        match gridtrace::io::load_mesh(&p) {
             Ok(m) if m.triangles.len() <= max_tris => v.push(ScalingMesh {
                 name: Path::new(f).file_stem().unwrap().to_string_lossy().into(),
                 source: f.into(),
@@ -306,7 +306,7 @@ pub struct PcStudyRow {
 
 /// A mesh seen from far away: the mesh (a low-poly one if `mesh` is given, else a torus knot)
 /// about one unit across at one end of a closed 40-unit room, the camera at the other end.
-pub fn far_mesh_scene(mesh: Option<crate::Mesh>) -> Scene {
+pub fn far_mesh_scene(mesh: Option<gridtrace::Mesh>) -> Scene {
     let mut s = Scene::default();
     s.add_mesh(
         box_mesh(Vec3::splat(-20.0), Vec3::splat(20.0), 1, true),
@@ -317,8 +317,8 @@ pub fn far_mesh_scene(mesh: Option<crate::Mesh>) -> Scene {
             reflectivity: 0.0,
         }),
     );
-    let mesh = mesh.unwrap_or_else(|| crate::scene::procedural::torus_knot(2, 3, 0.16, 84, 6));
-    let b = crate::accel::Aabb::from_points(&mesh.positions);
+    let mesh = mesh.unwrap_or_else(|| gridtrace::scene::procedural::torus_knot(2, 3, 0.16, 84, 6));
+    let b = gridtrace::accel::Aabb::from_points(&mesh.positions);
     let scale = 1.5 / b.diagonal().max(1e-12);
     let target = Vec3::new(0.0, -10.0, -15.0);
     let xf =
@@ -349,7 +349,7 @@ pub fn pc_study(
         for &mode in modes {
             for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
                 let opts = RenderOptions::new(res.0, res.1, mode, accel);
-                let (_, stats) = crate::cpu::render_with_counters(&prepared, &opts)?;
+                let (_, stats) = gridtrace::cpu::render_with_counters(&prepared, &opts)?;
                 let (_, summary, _) = time_cpu(&prepared, &opts, warmup, reps)?;
                 let n = stats.rays.total().max(1) as f64;
                 let c = stats.counters;
@@ -406,8 +406,8 @@ pub struct QueryStudyRow {
 /// The ray set of the Python benchmark (`crates/gridtrace-py/bench/bench_vs_embree.py`): origins
 /// uniform on a sphere of radius one bounding-box diagonal around the mesh, aimed at uniform
 /// random points of its bounding box. Incoherent: neighbouring rays share nothing.
-pub fn incoherent_rays(bounds: crate::accel::Aabb, n: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-    let mut rng = crate::util::Rng::new(seed);
+pub fn incoherent_rays(bounds: gridtrace::accel::Aabb, n: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let mut rng = gridtrace::util::Rng::new(seed);
     let (c, r) = (bounds.center(), bounds.diagonal());
     let (mut origins, mut dirs) = (Vec::with_capacity(n), Vec::with_capacity(n));
     while origins.len() < n {
@@ -431,14 +431,14 @@ pub fn incoherent_rays(bounds: crate::accel::Aabb, n: usize, seed: u64) -> (Vec<
 /// parallel traversal, output arrays) on `rays` incoherent rays per mesh, for every
 /// acceleration, on the CPU with the current rayon thread count.
 pub fn query_study(
-    meshes: &[(String, crate::Mesh)],
+    meshes: &[(String, gridtrace::Mesh)],
     rays: usize,
     warmup: u32,
     reps: u32,
     log: &mut dyn FnMut(&str),
 ) -> Result<Vec<QueryStudyRow>> {
-    use crate::accel::{Ray, TraversalCounters};
-    use crate::query::{Backend, QueryOptions, TraceMesh};
+    use gridtrace::accel::{Ray, TraversalCounters};
+    use gridtrace::query::{Backend, QueryOptions, TraceMesh};
     let mut rows = Vec::new();
     for (name, mesh) in meshes {
         for accel in AccelKind::ALL {

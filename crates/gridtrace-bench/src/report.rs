@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::{BenchBackend, BenchReport, Row, SceneInfo};
-use crate::{Error, Result};
+use gridtrace::{Error, Result};
 
 const MODES: [(&str, &str); 3] = [
     ("cast", "Table 1: ray casting (eye rays only)"),

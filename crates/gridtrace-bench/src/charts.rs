@@ -7,7 +7,7 @@ use std::sync::Once;
 use plotters::prelude::*;
 
 use super::BenchReport;
-use crate::{Error, Result};
+use gridtrace::{Error, Result};
 
 const SIZE: (u32, u32) = (960, 640);
 

@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Vec3};
 
-use crate::accel::{Aabb, Resolution};
-use crate::scene::procedural::{box_mesh, icosphere, torus_knot};
-use crate::scene::{Camera, Material, Mesh, PointLight, Scene, builtin};
-use crate::{Error, Result};
+use gridtrace::accel::{Aabb, Resolution};
+use gridtrace::scene::procedural::{box_mesh, icosphere, torus_knot};
+use gridtrace::scene::{Camera, Material, Mesh, PointLight, Scene, builtin};
+use gridtrace::{Error, Result};
 
 /// Relative paths tried, in order, below each candidate root for the mesh folder.
 const DATA_SUBDIRS: [&str; 2] = ["../shared/data/meshes", "shared/data/meshes"];
@@ -141,13 +141,13 @@ pub const PAPER_MS: [[[Option<f64>; 8]; 3]; 3] = {
 };
 
 /// The paper's time (ms) for a scene, mode, square resolution and acceleration, if it has one.
-pub fn paper_ms(scene: &str, mode: crate::Mode, res: (u32, u32), accel: crate::AccelKind) -> Option<f64> {
+pub fn paper_ms(scene: &str, mode: gridtrace::Mode, res: (u32, u32), accel: gridtrace::AccelKind) -> Option<f64> {
     let s = paper_scene(scene)?;
     let m = match mode {
-        crate::Mode::Cast => 0,
-        crate::Mode::Shadow => 1,
-        crate::Mode::Trace => 2,
-        crate::Mode::Heat => return None,
+        gridtrace::Mode::Cast => 0,
+        gridtrace::Mode::Shadow => 1,
+        gridtrace::Mode::Trace => 2,
+        gridtrace::Mode::Heat => return None,
     };
     let r = match res {
         (256, 256) => 0,
@@ -156,10 +156,10 @@ pub fn paper_ms(scene: &str, mode: crate::Mode, res: (u32, u32), accel: crate::A
         _ => return None,
     };
     let a = match accel {
-        crate::AccelKind::Grid => 0,
-        crate::AccelKind::ProximityCloud => 1,
+        gridtrace::AccelKind::Grid => 0,
+        gridtrace::AccelKind::ProximityCloud => 1,
         // The paper measured no BVH.
-        crate::AccelKind::Bvh => return None,
+        gridtrace::AccelKind::Bvh => return None,
     };
     if s.column == 3 {
         return if a == 0 { PAPER_MS[m][r][6] } else { None };
@@ -216,7 +216,7 @@ fn load(data_dir: &Path, rel: &str) -> Result<Mesh> {
     if !p.is_file() {
         return Err(Error::InvalidInput(format!("mesh file {} not found", p.display())));
     }
-    crate::io::load_mesh(&p)
+    gridtrace::io::load_mesh(&p)
 }
 
 /// The Knight scene: `knight/knight_422.obj` (422 triangles, 2 of them degenerate) standing on
@@ -382,7 +382,7 @@ mod tests {
 
     #[test]
     fn paper_table_lookup() {
-        use crate::{AccelKind, Mode};
+        use gridtrace::{AccelKind, Mode};
         assert_eq!(paper_ms("knight", Mode::Cast, (256, 256), AccelKind::Grid), Some(45.0));
         assert_eq!(
             paper_ms("torus-knot", Mode::Trace, (768, 768), AccelKind::ProximityCloud),

@@ -1,4 +1,4 @@
-//! Benchmarks: the paper's matrix (scenes x resolutions x accel x mode x backend), grid-resolution
+//! gridtrace-bench: the paper's matrix (scenes x resolutions x accel x mode x backend), grid-resolution
 //! sweeps, scaling with triangle and pixel count, the proximity-cloud study, and the reports
 //! (JSON, CSV, a Markdown table laid out like the paper's Tables 1-3, PNG charts).
 //!
@@ -16,11 +16,11 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
-use crate::accel::{AccelKind, Resolution};
-use crate::gpu::{GpuContext, GpuRenderer};
-use crate::render::{Mode, RayCounts, RenderOptions};
-use crate::scene::PreparedScene;
-use crate::{Error, Result};
+use gridtrace::accel::{AccelKind, Resolution};
+use gridtrace::gpu::{GpuContext, GpuRenderer};
+use gridtrace::render::{Mode, RayCounts, RenderOptions};
+use gridtrace::scene::PreparedScene;
+use gridtrace::{Error, Result};
 
 pub use scenes::{BenchScene, PAPER_SCENES, build_paper_scene, find_data_dir, paper_ms};
 
@@ -239,7 +239,7 @@ pub fn time_cpu(
     reps: u32,
 ) -> Result<(Vec<f64>, Summary, RayCounts)> {
     let (times, outs) = repeat(warmup, reps, || {
-        let (_, s) = crate::cpu::render(prepared, opts, None)?;
+        let (_, s) = gridtrace::cpu::render(prepared, opts, None)?;
         Ok((s.render_ms, s.rays))
     })?;
     Ok((times.clone(), Summary::of(&times), outs[0]))

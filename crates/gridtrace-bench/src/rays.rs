@@ -1,25 +1,21 @@
-//! The rays of a CPU render, recorded instead of shaded: the same eye, shadow and reflection
-//! rays that `cpu::render` traces (it follows `trace_pixel` step by step), each with the `t` of
-//! its hit (closest hit for eye and reflection rays, any hit for shadow rays; infinity on a miss).
+//! The rays of a CPU render, recorded: the eye, shadow and reflection rays that `cpu::render`
+//! traces, seen through the renderer's own walk (`cpu::RayObserver`), each with the `t` of its
+//! hit (closest hit for eye and reflection rays, the closest occluder for shadow rays;
+//! infinity on a miss).
 
 use std::io::Write;
 use std::path::Path;
 
 use rayon::prelude::*;
 
-use crate::accel::{NoCounters, Ray};
-use crate::cpu::surface_at;
-use crate::render::{Mode, RayCounts, RenderOptions};
-use crate::scene::PreparedScene;
-use crate::{Error, Result};
+use gridtrace::accel::{Hit, NoCounters, Ray};
+use gridtrace::cpu::RayObserver;
+use gridtrace::render::{RayCounts, RenderOptions};
+use gridtrace::scene::PreparedScene;
+use gridtrace::{Error, Result};
 
-/// Which kind of ray a record is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RayKind {
-    Eye,
-    Shadow,
-    Reflection,
-}
+/// Which kind of ray a record is (the renderer's own).
+pub use gridtrace::cpu::RayKind;
 
 /// One traced ray and the `t` of its hit (`f32::INFINITY` on a miss). Shadow rays stop at the
 /// light: `t` is that of any occluder found before it, else infinity.
@@ -81,16 +77,20 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 /// Records the rays a CPU render of `scene` with `opts` traces. Heat mode records eye rays only.
 pub fn collect_rays(scene: &PreparedScene, opts: &RenderOptions) -> Result<RaySet> {
     opts.validate()?;
+    scene.accel.check_serves(opts.accel)?;
     let cam = scene.camera.frame(opts.width, opts.height);
-    let width = opts.width;
     let rows: Vec<Vec<RayRecord>> = (0..opts.height)
         .into_par_iter()
         .map(|y| {
-            let mut out = Vec::with_capacity(width as usize);
-            for x in 0..width {
-                pixel_rays(scene, cam.ray(x, y), opts, &mut out);
+            let mut recorder = Recorder {
+                scene,
+                opts,
+                out: Vec::with_capacity(opts.width as usize),
+            };
+            for x in 0..opts.width {
+                gridtrace::cpu::trace_pixel_observed(scene, &cam, (x, y), opts, &mut recorder);
             }
-            out
+            recorder.out
         })
         .collect();
     Ok(RaySet {
@@ -98,63 +98,40 @@ pub fn collect_rays(scene: &PreparedScene, opts: &RenderOptions) -> Result<RaySe
     })
 }
 
-/// The rays of one pixel, as `cpu::render`'s `trace_pixel` traces them.
-fn pixel_rays(scene: &PreparedScene, eye: Ray, opts: &RenderOptions, out: &mut Vec<RayRecord>) {
-    let accel = &scene.accel;
-    let mut ray = eye;
-    let mut kind = RayKind::Eye;
-    for depth in 0..=opts.mode.reflection_depth() {
-        let hit = accel.intersect(&ray, 0.0, f32::INFINITY, opts.accel, &mut NoCounters);
-        out.push(RayRecord { kind, ray, t: hit.t });
-        if !hit.is_hit() || opts.mode == Mode::Heat {
-            break;
-        }
-        let s = surface_at(scene, &ray, &hit);
-        let mat = &scene.materials[scene.tri_material[hit.tri as usize] as usize];
-        let reflect = if opts.mode == Mode::Trace {
-            mat.reflectivity
-        } else {
-            0.0
-        };
-        let origin = s.position + s.ng * scene.ray_epsilon;
-        if opts.mode.shadows() {
-            for light in &scene.lights {
-                let Some((_, to_light, dist)) = crate::cpu::light_contribution(&s, origin, light) else {
-                    continue;
-                };
-                let shadow = Ray::new(origin, to_light);
-                let t = first_occluder(scene, &shadow, dist, opts);
-                out.push(RayRecord {
-                    kind: RayKind::Shadow,
-                    ray: shadow,
-                    t,
-                });
-            }
-        }
-        if reflect > 0.0 && depth < opts.mode.reflection_depth() {
-            let d = ray.dir - 2.0 * ray.dir.dot(s.ns) * s.ns;
-            ray = Ray::new(origin, d.normalize());
-            kind = RayKind::Reflection;
-        } else {
-            break;
-        }
-    }
+/// Records the rays of the renderer's own walk (`cpu::trace_pixel_observed`), in the order it
+/// traces them.
+struct Recorder<'a> {
+    scene: &'a PreparedScene,
+    opts: &'a RenderOptions,
+    out: Vec<RayRecord>,
 }
 
-/// `t` of an occluder of a shadow ray before the light (the renderer's any-hit query decides
-/// whether there is one; the closest one's `t` is reported), infinity if the light is visible.
-fn first_occluder(scene: &PreparedScene, ray: &Ray, dist: f32, opts: &RenderOptions) -> f32 {
-    if !scene.accel.occluded(ray, 0.0, dist, opts.accel, &mut NoCounters) {
-        return f32::INFINITY;
+impl RayObserver for Recorder<'_> {
+    fn closest(&mut self, kind: RayKind, ray: &Ray, hit: &Hit) {
+        self.out.push(RayRecord { kind, ray: *ray, t: hit.t });
     }
-    let h = scene.accel.intersect(ray, 0.0, dist, opts.accel, &mut NoCounters);
-    if h.is_hit() { h.t } else { dist }
+
+    /// The renderer's any-hit query decided whether the light is occluded; the record carries
+    /// the closest occluder's `t` (infinity when the light is visible).
+    fn shadow(&mut self, ray: &Ray, dist: f32, occluded: bool) {
+        let t = if occluded {
+            let h = self.scene.accel.intersect(ray, 0.0, dist, self.opts.accel, &mut NoCounters);
+            if h.is_hit() { h.t } else { dist }
+        } else {
+            f32::INFINITY
+        };
+        self.out.push(RayRecord {
+            kind: RayKind::Shadow,
+            ray: *ray,
+            t,
+        });
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{AccelKind, Resolution, scene::builtin};
+    use gridtrace::{AccelKind, Mode, Resolution, scene::builtin};
 
     #[test]
     fn same_ray_counts_as_the_renderer() {
@@ -163,7 +140,7 @@ mod tests {
             for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
                 let opts = RenderOptions::new(40, 30, mode, accel);
                 let set = collect_rays(&prepared, &opts).unwrap();
-                let (_, stats) = crate::cpu::render(&prepared, &opts, None).unwrap();
+                let (_, stats) = gridtrace::cpu::render(&prepared, &opts, None).unwrap();
                 assert_eq!(set.counts(), stats.rays, "{mode:?} {accel:?}");
             }
         }
