@@ -108,14 +108,21 @@ struct Recorder<'a> {
 
 impl RayObserver for Recorder<'_> {
     fn closest(&mut self, kind: RayKind, ray: &Ray, hit: &Hit) {
-        self.out.push(RayRecord { kind, ray: *ray, t: hit.t });
+        self.out.push(RayRecord {
+            kind,
+            ray: *ray,
+            t: hit.t,
+        });
     }
 
     /// The renderer's any-hit query decided whether the light is occluded; the record carries
     /// the closest occluder's `t` (infinity when the light is visible).
     fn shadow(&mut self, ray: &Ray, dist: f32, occluded: bool) {
         let t = if occluded {
-            let h = self.scene.accel.intersect(ray, 0.0, dist, self.opts.accel, &mut NoCounters);
+            let h = self
+                .scene
+                .accel
+                .intersect(ray, 0.0, dist, self.opts.accel, &mut NoCounters);
             if h.is_hit() { h.t } else { dist }
         } else {
             f32::INFINITY

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
-use gridtrace_bench::{self as bench, BenchBackend, BenchConfig, BenchReport, Machine, scenes, studies};
 use gridtrace::gpu::GpuContext;
 use gridtrace::{AccelKind, Mode, RenderOptions, Resolution};
+use gridtrace_bench::{self as bench, BenchBackend, BenchConfig, BenchReport, Machine, scenes, studies};
 
 use crate::common::{accel_parser, mode_parser, parse_res};
 

@@ -55,9 +55,9 @@ fn ensure_runtime_dir() {
     let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
     // Use the folder only if it is a real directory (not a link someone planted in /tmp), ours,
     // and private; otherwise leave the environment as it was (the message is cosmetic).
-    let ok = std::fs::symlink_metadata(&dir).is_ok_and(|m| {
-        m.is_dir() && uid.as_ref().is_ok_and(|u| m.uid() == *u) && m.permissions().mode() & 0o077 == 0
-    }) || (uid.is_err() && dir.is_dir());
+    let ok = std::fs::symlink_metadata(&dir)
+        .is_ok_and(|m| m.is_dir() && uid.as_ref().is_ok_and(|u| m.uid() == *u) && m.permissions().mode() & 0o077 == 0)
+        || (uid.is_err() && dir.is_dir());
     if ok {
         // SAFETY: called first thing in `main`, before clap, rayon, indicatif or any GPU code
         // has started a thread, so no other thread can be reading the environment.

@@ -302,6 +302,9 @@ mod tests {
         assert!(((quarter.eye - cam.target).length() - (cam.eye - cam.target).length()).abs() < 1e-5);
         assert!((quarter.eye.y - cam.eye.y).abs() < 1e-5, "height kept: {}", quarter.eye);
         assert_ne!(quarter.eye, cam.eye);
-        assert_eq!((half.target, half.up, half.vfov_deg), (cam.target, cam.up, cam.vfov_deg));
+        assert_eq!(
+            (half.target, half.up, half.vfov_deg),
+            (cam.target, cam.up, cam.vfov_deg)
+        );
     }
 }

@@ -57,7 +57,10 @@ fn render_from_mesh_file_and_scene_file() {
         dir.join("a.png").to_str().unwrap(),
     ]);
     assert!(ok, "{text}");
-    assert!(text.contains("6 triangles"), "render adds a 2-triangle floor to the 4: {text}");
+    assert!(
+        text.contains("6 triangles"),
+        "render adds a 2-triangle floor to the 4: {text}"
+    );
     let toml = dir.join("s.toml");
     std::fs::write(&toml, "[camera]\neye=[0,1,4]\ntarget=[0,0,0]\n[[light]]\nposition=[1,3,2]\nintensity=9\n[[object]]\nmesh=\"tet.obj\"\n").unwrap();
     let (ok, text) = gridtrace(&[
@@ -128,7 +131,10 @@ fn bad_input_gives_located_errors() {
     assert!(!ok && text.contains("knot-box"), "{text}");
     // A scene name where a file goes: no such file, and the way to name a built-in scene.
     let (ok, text) = gridtrace(&["render", "mirror-spheres"]);
-    assert!(!ok && text.contains("mirror-spheres: no such file; for a built-in scene use --scene NAME (knot-box"), "{text}");
+    assert!(
+        !ok && text.contains("mirror-spheres: no such file; for a built-in scene use --scene NAME (knot-box"),
+        "{text}"
+    );
     let (ok, text) = gridtrace(&["render", "--scene", "knot-box", "--grid", "0x1x1"]);
     assert!(!ok && text.contains("grid"), "{text}");
     let (ok, text) = gridtrace(&["info", dir.join("missing.ply").to_str().unwrap()]);
@@ -172,13 +178,26 @@ fn negative_values_reach_every_number_and_vector_option() {
     let obj = obj.to_str().unwrap();
     // One ray from (0.2, 0.2, 2) down -z: it hits the tetrahedron.
     let rays = dir.join("one.rays");
-    let ray: Vec<u8> = [0.2f32, 0.2, 2.0, 0.0, 0.0, -1.0].iter().flat_map(|f| f.to_le_bytes()).collect();
+    let ray: Vec<u8> = [0.2f32, 0.2, 2.0, 0.0, 0.0, -1.0]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
     std::fs::write(&rays, ray).unwrap();
     let rays = rays.to_str().unwrap();
     let hits = dir.join("hits.bin");
     let hits = hits.to_str().unwrap();
     let render = |extra: &[&str]| {
-        let mut args = vec!["render", "--scene", "knot-box", "--backend", "cpu", "--mode", "cast", "--res", "8"];
+        let mut args = vec![
+            "render",
+            "--scene",
+            "knot-box",
+            "--backend",
+            "cpu",
+            "--mode",
+            "cast",
+            "--res",
+            "8",
+        ];
         args.extend_from_slice(extra);
         args.extend_from_slice(&["-o", png]);
         args.iter().map(|s| s.to_string()).collect::<Vec<_>>()
@@ -187,26 +206,80 @@ fn negative_values_reach_every_number_and_vector_option() {
     // (option under test, arguments, None for success or Some(text the error must contain))
     let cases: Vec<(&str, Vec<String>, Option<&str>)> = vec![
         // The user report: a target with negative coordinates.
-        ("render --target", render(&["--eye", "0.04,0.19,0.2", "--target", "-0.0169,0.1101,-0.0016"]), None),
+        (
+            "render --target",
+            render(&["--eye", "0.04,0.19,0.2", "--target", "-0.0169,0.1101,-0.0016"]),
+            None,
+        ),
         ("render --eye", render(&["--eye", "-1,2,3", "--target", "0,0,0"]), None),
         ("render --up", render(&["--up", "0,-1,0"]), None),
-        ("render --light", render(&["--light", "-1,2,-3", "--light", "1,-2,3"]), None),
-        ("render --vfov", render(&["--vfov", "-30"]), Some("vfov must be in (0, 180) degrees, got -30")),
-        ("render --res", owned(&["render", "--scene", "knot-box", "--res", "-8"]), Some("invalid value '-8' for '--res")),
+        (
+            "render --light",
+            render(&["--light", "-1,2,-3", "--light", "1,-2,3"]),
+            None,
+        ),
+        (
+            "render --vfov",
+            render(&["--vfov", "-30"]),
+            Some("vfov must be in (0, 180) degrees, got -30"),
+        ),
+        (
+            "render --res",
+            owned(&["render", "--scene", "knot-box", "--res", "-8"]),
+            Some("invalid value '-8' for '--res"),
+        ),
         (
             "rays --tmin",
-            owned(&["rays", obj, "--rays", rays, "--backend", "cpu", "--hits-out", hits, "--tmin", "-1"]),
+            owned(&[
+                "rays",
+                obj,
+                "--rays",
+                rays,
+                "--backend",
+                "cpu",
+                "--hits-out",
+                hits,
+                "--tmin",
+                "-1",
+            ]),
             Some("need 0 <= --tmin <= --tmax, got --tmin -1"),
         ),
         (
             "rays --tmax",
-            owned(&["rays", obj, "--rays", rays, "--backend", "cpu", "--hits-out", hits, "--tmax", "-1"]),
+            owned(&[
+                "rays",
+                obj,
+                "--rays",
+                rays,
+                "--backend",
+                "cpu",
+                "--hits-out",
+                hits,
+                "--tmax",
+                "-1",
+            ]),
             Some("need 0 <= --tmin <= --tmax, got --tmin 0 --tmax -1"),
         ),
-        ("bench --warmup", owned(&["bench", "--quick", "--warmup", "-1"]), Some("invalid value '-1' for '--warmup")),
-        ("bench --reps", owned(&["bench", "--quick", "--reps", "-2"]), Some("invalid value '-2' for '--reps")),
-        ("bench --query-rays", owned(&["bench", "--quick", "--query-rays", "-5"]), Some("invalid value '-5' for '--query-rays")),
-        ("bench --res", owned(&["bench", "--quick", "--res", "-64"]), Some("invalid value '-64' for '--res")),
+        (
+            "bench --warmup",
+            owned(&["bench", "--quick", "--warmup", "-1"]),
+            Some("invalid value '-1' for '--warmup"),
+        ),
+        (
+            "bench --reps",
+            owned(&["bench", "--quick", "--reps", "-2"]),
+            Some("invalid value '-2' for '--reps"),
+        ),
+        (
+            "bench --query-rays",
+            owned(&["bench", "--quick", "--query-rays", "-5"]),
+            Some("invalid value '-5' for '--query-rays"),
+        ),
+        (
+            "bench --res",
+            owned(&["bench", "--quick", "--res", "-64"]),
+            Some("invalid value '-64' for '--res"),
+        ),
     ];
     let mut failures = Vec::new();
     for (what, args, want_err) in cases {
@@ -244,7 +317,10 @@ fn help_shows_formats_and_values() {
         assert!(help.contains(want), "render --help lacks '{want}':\n{help}");
     }
     let (ok, help) = gridtrace(&["bench", "--help"]);
-    assert!(ok && help.contains("[possible values: grid, pc, bvh]") && help.contains("--res <WxH|N>"), "{help}");
+    assert!(
+        ok && help.contains("[possible values: grid, pc, bvh]") && help.contains("--res <WxH|N>"),
+        "{help}"
+    );
     let (ok, help) = gridtrace(&["info", "--help"]);
     assert!(ok && help.contains("--with-floor"), "{help}");
 
@@ -266,11 +342,17 @@ fn info_counts_the_file_without_the_floor() {
     let obj = dir.join("tet.obj");
     std::fs::write(&obj, TET_OBJ).unwrap();
     let (ok, text) = gridtrace(&["info", obj.to_str().unwrap()]);
-    assert!(ok && text.contains("triangles        4 (0 degenerate"), "the file has 4: {text}");
+    assert!(
+        ok && text.contains("triangles        4 (0 degenerate"),
+        "the file has 4: {text}"
+    );
     let (ok, text) = gridtrace(&["info", "--mesh", obj.to_str().unwrap()]);
     assert!(ok && text.contains("triangles        4 ("), "{text}");
     let (ok, text) = gridtrace(&["info", obj.to_str().unwrap(), "--with-floor"]);
-    assert!(ok && text.contains("triangles        6 ("), "4 + the 2-triangle floor: {text}");
+    assert!(
+        ok && text.contains("triangles        6 ("),
+        "4 + the 2-triangle floor: {text}"
+    );
 }
 
 /// Without XDG_RUNTIME_DIR (or with a missing one) no "XDG_RUNTIME_DIR is invalid" line from
@@ -281,7 +363,19 @@ fn info_counts_the_file_without_the_floor() {
 fn no_xdg_runtime_dir_complaint() {
     let dir = scratch("xdg");
     let png = dir.join("x.png");
-    let args = ["render", "--scene", "knot-box", "--backend", "auto", "--mode", "cast", "--res", "8", "-o", png.to_str().unwrap()];
+    let args = [
+        "render",
+        "--scene",
+        "knot-box",
+        "--backend",
+        "auto",
+        "--mode",
+        "cast",
+        "--res",
+        "8",
+        "-o",
+        png.to_str().unwrap(),
+    ];
     let (ok, _, stderr) = gridtrace_env(&args, |c| {
         c.env_remove("XDG_RUNTIME_DIR");
     });
@@ -297,9 +391,22 @@ fn no_xdg_runtime_dir_complaint() {
 fn scene_without_lights_warns() {
     let dir = scratch("nolights");
     let toml = dir.join("dark.toml");
-    std::fs::write(&toml, "[camera]\neye=[0,1,4]\ntarget=[0,0,0]\n[[object]]\nshape=\"icosphere\"\nlevel=1\n").unwrap();
+    std::fs::write(
+        &toml,
+        "[camera]\neye=[0,1,4]\ntarget=[0,0,0]\n[[object]]\nshape=\"icosphere\"\nlevel=1\n",
+    )
+    .unwrap();
     let png = dir.join("d.png");
-    let base = ["render", toml.to_str().unwrap(), "--backend", "cpu", "--res", "8", "-o", png.to_str().unwrap()];
+    let base = [
+        "render",
+        toml.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--res",
+        "8",
+        "-o",
+        png.to_str().unwrap(),
+    ];
     let (ok, _, stderr) = gridtrace_env(&base, |_| {});
     assert!(ok, "{stderr}");
     assert!(
@@ -320,7 +427,16 @@ fn example_scene_renders() {
     let dir = scratch("example");
     let png = dir.join("e.png");
     let (ok, stdout, stderr) = gridtrace_env(
-        &["render", example, "--backend", "cpu", "--res", "24x16", "-o", png.to_str().unwrap()],
+        &[
+            "render",
+            example,
+            "--backend",
+            "cpu",
+            "--res",
+            "24x16",
+            "-o",
+            png.to_str().unwrap(),
+        ],
         |_| {},
     );
     assert!(ok, "{stdout}{stderr}");
@@ -339,11 +455,22 @@ fn frames_and_orbit() {
     for backend in ["cpu", "gpu"] {
         let one = dir.join(format!("one-{backend}.png"));
         let many = dir.join(format!("many-{backend}.png"));
-        let common = ["render", "--scene", "knot-box", "--mode", "shadow", "--res", "48x32", "--backend", backend];
+        let common = [
+            "render",
+            "--scene",
+            "knot-box",
+            "--mode",
+            "shadow",
+            "--res",
+            "48x32",
+            "--backend",
+            backend,
+        ];
         let (ok, text) = gridtrace(&[&common[..], &["-o", one.to_str().unwrap()]].concat());
         assert!(ok, "{text}");
         assert!(!text.contains("more"), "one frame reports no others: {text}");
-        let (ok, text) = gridtrace(&[&common[..], &["--frames", "4", "--orbit", "-o", many.to_str().unwrap()]].concat());
+        let (ok, text) =
+            gridtrace(&[&common[..], &["--frames", "4", "--orbit", "-o", many.to_str().unwrap()]].concat());
         assert!(ok, "{text}");
         let line = text
             .lines()
@@ -354,8 +481,15 @@ fn frames_and_orbit() {
             "{line}"
         );
         assert!(text.contains("first "), "the first frame is reported as such: {text}");
-        let (a, b) = (image::open(&one).unwrap().to_rgb8(), image::open(&many).unwrap().to_rgb8());
-        assert_eq!(a.as_raw(), b.as_raw(), "{backend}: the written image is the first frame");
+        let (a, b) = (
+            image::open(&one).unwrap().to_rgb8(),
+            image::open(&many).unwrap().to_rgb8(),
+        );
+        assert_eq!(
+            a.as_raw(),
+            b.as_raw(),
+            "{backend}: the written image is the first frame"
+        );
     }
     let (ok, text) = gridtrace(&["render", "--scene", "knot-box", "--frames", "0", "-o", "x.png"]);
     assert!(!ok && text.contains("--frames"), "{text}");
@@ -371,8 +505,19 @@ fn auto_falls_back_to_the_cpu_when_the_scene_does_not_fit() {
     let png = dir.join("fit.png");
     let args = |backend| {
         [
-            "render", "--scene", "knot-box", "--grid", "300x300x160", "--mode", "cast", "--res", "16", "--backend",
-            backend, "-o", png.to_str().unwrap(),
+            "render",
+            "--scene",
+            "knot-box",
+            "--grid",
+            "300x300x160",
+            "--mode",
+            "cast",
+            "--res",
+            "16",
+            "--backend",
+            backend,
+            "-o",
+            png.to_str().unwrap(),
         ]
         .map(String::from)
     };

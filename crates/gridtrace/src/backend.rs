@@ -113,7 +113,9 @@ impl<'s> Renderer<'s> {
                 notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
                 Ok((Renderer::Cpu(scene), notes))
             }
-            Err(Error::Gpu(m)) => Err(Error::Gpu(format!("{m}; use --backend cpu (or auto) to trace it on the CPU"))),
+            Err(Error::Gpu(m)) => Err(Error::Gpu(format!(
+                "{m}; use --backend cpu (or auto) to trace it on the CPU"
+            ))),
             Err(e) => Err(e),
         }
     }

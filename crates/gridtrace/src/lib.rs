@@ -18,6 +18,6 @@ pub mod util;
 pub use accel::{Accel, AccelKind, Hit, Ray, Resolution};
 pub use backend::{Backend, Frame, Renderer};
 pub use error::{Error, Location, Result};
-pub use render::{Image, Mode, RenderOptions, RenderStats};
 pub use mesh::{Material, Mesh};
+pub use render::{Image, Mode, RenderOptions, RenderStats};
 pub use scene::{PreparedScene, Scene};

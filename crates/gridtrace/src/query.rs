@@ -606,7 +606,12 @@ mod tests {
                         assert_eq!((hits.len(), occ.len()), (n, n), "{what}");
                         for i in 0..n {
                             let one = mesh
-                                .intersect(&[o[if no == 1 { 0 } else { i }]], &[d[if nd == 1 { 0 } else { i }]], 0.0, f32::INFINITY)
+                                .intersect(
+                                    &[o[if no == 1 { 0 } else { i }]],
+                                    &[d[if nd == 1 { 0 } else { i }]],
+                                    0.0,
+                                    f32::INFINITY,
+                                )
                                 .unwrap();
                             assert_eq!((hits.t[i], hits.tri[i]), (one.t[0], one.tri[0]), "{what}: ray {i}");
                             assert_eq!(hits.tri[i], 0, "{what}: ray {i} hits the triangle");

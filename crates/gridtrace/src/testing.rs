@@ -65,7 +65,9 @@ fn unit_dir(rng: &mut Rng) -> Vec3 {
 /// not all normalised.
 pub fn ray_set(accel: &Accel, n: usize, seed: u64) -> Vec<Ray> {
     let mut rng = Rng::new(seed);
-    let g = accel.grid().expect("ray sets are drawn from a grid's cells (use AllAccels)");
+    let g = accel
+        .grid()
+        .expect("ray sets are drawn from a grid's cells (use AllAccels)");
     let b = g.bounds;
     let ext = b.extent();
     let big = Aabb {
@@ -217,7 +219,9 @@ pub fn edge_aimed_rays(
     assert!(!shared.is_empty(), "mesh has no edge shared by two triangles");
 
     let mut rng = Rng::new(seed);
-    let g = accel.grid().expect("ray sets are drawn from a grid's cells (use AllAccels)");
+    let g = accel
+        .grid()
+        .expect("ray sets are drawn from a grid's cells (use AllAccels)");
     let b = g.bounds;
     let far = b.diagonal();
     let axes = [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z];

@@ -52,7 +52,10 @@ fn unusable_mesh_paths_say_why() {
     std::fs::create_dir_all(&dir).unwrap();
     let formats = "OBJ (.obj), PLY (.ply), glTF/GLB (.gltf, .glb), STL (.stl), OFF (.off)";
     let e = gridtrace::io::load_mesh(&dir).unwrap_err().to_string();
-    assert!(e.contains(dir.to_str().unwrap()) && e.contains("is a directory") && e.contains(formats), "{e}");
+    assert!(
+        e.contains(dir.to_str().unwrap()) && e.contains("is a directory") && e.contains(formats),
+        "{e}"
+    );
     let bare = dir.join("mesh");
     std::fs::write(&bare, "v 0 0 0\n").unwrap();
     let e = gridtrace::io::load_mesh(&bare).unwrap_err().to_string();
@@ -61,6 +64,9 @@ fn unusable_mesh_paths_say_why() {
     let e = gridtrace::io::load_mesh(&dir.join("nope")).unwrap_err();
     assert!(matches!(e, gridtrace::Error::Io { .. }), "{e}");
     let e = gridtrace::io::load_mesh(&dir.join("m.fbx")).unwrap_err().to_string();
-    assert!(e.contains("m.fbx: unsupported mesh format '.fbx'") && e.contains(formats), "{e}");
+    assert!(
+        e.contains("m.fbx: unsupported mesh format '.fbx'") && e.contains(formats),
+        "{e}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -91,9 +91,7 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
             "{scene_name} {}: {bad_occ} occlusion results disagree",
             kind.name()
         );
-        assert!(
-            gpu_occ.iter().filter(|o| **o).count().abs_diff(hits) <= rays.len() / 10_000
-        );
+        assert!(gpu_occ.iter().filter(|o| **o).count().abs_diff(hits) <= rays.len() / 10_000);
     }
 }
 

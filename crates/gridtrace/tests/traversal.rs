@@ -60,8 +60,12 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                 }
                 if want.is_hit() {
                     // Nothing strictly before the closest hit; something just past it.
-                    let before = all.get(kind).occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
-                    let past = all.get(kind).occluded(r, 0.0, want.t * (1.0 + 1e-5), kind, &mut NoCounters);
+                    let before = all
+                        .get(kind)
+                        .occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
+                    let past = all
+                        .get(kind)
+                        .occluded(r, 0.0, want.t * (1.0 + 1e-5), kind, &mut NoCounters);
                     if before != brute_force_occluded(&all.grid.tris, r, 0.0, want.t * (1.0 - 1e-5)) || !past {
                         errs.push(format!("occluded window wrong: before {before} past {past}"));
                     }
@@ -71,17 +75,20 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .collect();
         // The batch queries (interleaved rays for the BVH) give exactly the per-ray answers.
         let mut batch = vec![Hit::MISS; rays.len()];
-        all.get(kind).intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
+        all.get(kind)
+            .intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
         let mut occ_batch = vec![false; rays.len()];
-        all.get(kind).occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
+        all.get(kind)
+            .occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
         // With normals (the BVH takes them from the triangle it hits): the same hits, and each
         // normal the hit triangle's.
         let mut with_normals = vec![Hit::MISS; rays.len()];
         let mut normals = vec![Vec3::NAN; rays.len()];
-        all.get(kind).intersect_batch_each(&rays, 0.0, f32::INFINITY, kind, |i, hit, normal| {
-            with_normals[i] = hit;
-            normals[i] = normal;
-        });
+        all.get(kind)
+            .intersect_batch_each(&rays, 0.0, f32::INFINITY, kind, |i, hit, normal| {
+                with_normals[i] = hit;
+                normals[i] = normal;
+            });
         assert_eq!(with_normals, batch, "{name} {}: batch with normals", kind.name());
         for (h, n) in batch.iter().zip(&normals) {
             let want = if h.is_hit() {

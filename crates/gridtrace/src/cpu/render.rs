@@ -190,7 +190,15 @@ pub fn trace_pixel_observed(
     observer: &mut impl RayObserver,
 ) -> Vec3 {
     let mut rays = RayCounts::default();
-    trace_pixel(scene, cam, &scene.lights, (x, y), opts, (&mut rays, &mut NoCounters), observer)
+    trace_pixel(
+        scene,
+        cam,
+        &scene.lights,
+        (x, y),
+        opts,
+        (&mut rays, &mut NoCounters),
+        observer,
+    )
 }
 
 /// One pixel: eye ray, then shading and reflections, accumulating `weight * colour` as the GPU

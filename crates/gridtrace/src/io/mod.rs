@@ -108,7 +108,10 @@ pub(crate) fn finish(mut mesh: Mesh, path: &Path) -> Result<Mesh> {
                 return Err(Error::parse(
                     path,
                     Location::Whole,
-                    format!("triangle {t}: vertex index {i} out of range ({})", count_of(n, "vertex")),
+                    format!(
+                        "triangle {t}: vertex index {i} out of range ({})",
+                        count_of(n, "vertex")
+                    ),
                 ));
             }
         }
@@ -299,12 +302,18 @@ mod tests {
         // A name the format cannot be read from: say what is wrong, name the path, list the
         // formats.
         let err = load_mesh(&dir.0).unwrap_err().to_string();
-        assert!(err.contains(dir.0.to_str().unwrap()) && err.contains("is a directory"), "{err}");
+        assert!(
+            err.contains(dir.0.to_str().unwrap()) && err.contains("is a directory"),
+            "{err}"
+        );
         assert!(err.contains(SUPPORTED_FORMATS), "{err}");
         let bare = dir.0.join("bunny");
         std::fs::write(&bare, b"v 0 0 0\n").unwrap();
         let err = load_mesh(&bare).unwrap_err().to_string();
-        assert!(err.contains("bunny: has no extension") && err.contains("PLY (.ply)"), "{err}");
+        assert!(
+            err.contains("bunny: has no extension") && err.contains("PLY (.ply)"),
+            "{err}"
+        );
         assert!(!err.contains("'.'"), "{err}");
         let err = load_mesh(&dir.0.join("x.fbx")).unwrap_err().to_string();
         assert!(err.contains("'.fbx'") && err.contains("OBJ (.obj)"), "{err}");

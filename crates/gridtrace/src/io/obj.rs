@@ -171,7 +171,10 @@ impl Parser<'_> {
         if resolved < 0 || resolved >= count as i64 {
             return Err(self.err(
                 n,
-                format!("{what} index {i} out of range ({} defined so far)", count_of(count, what)),
+                format!(
+                    "{what} index {i} out of range ({} defined so far)",
+                    count_of(count, what)
+                ),
             ));
         }
         Ok(resolved as u32)
@@ -348,7 +351,10 @@ mod tests {
     #[test]
     fn out_of_range_index_counts_with_real_plural() {
         let e = err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
-        assert!(e.contains("bad.obj:line 4") && e.contains("(3 vertices defined so far)"), "{e}");
+        assert!(
+            e.contains("bad.obj:line 4") && e.contains("(3 vertices defined so far)"),
+            "{e}"
+        );
         let e = err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n");
         assert!(e.contains("(1 normal defined so far)"), "{e}");
         assert!(!e.contains("vertexs") && !e.contains("normals"), "{e}");

@@ -8,8 +8,8 @@ pub mod procedural;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
 
-pub use camera::{Camera, CameraFrame};
 pub use crate::mesh::{Material, Mesh};
+pub use camera::{Camera, CameraFrame};
 
 use crate::accel::{Aabb, Accel, AccelKind, Resolution, TriAccel};
 use crate::{Error, Result};

@@ -99,7 +99,13 @@ impl BoxRay {
     /// Writing all of `out` and sorting every slot spares the branches of pushing only the
     /// entered children, whose number a branch predictor cannot guess.
     #[inline(always)]
-    pub(super) fn push_entered(&self, n: &WideNode, t_min: f32, t_max: f32, out: &mut [MaybeUninit<Pending>; WIDTH]) -> usize {
+    pub(super) fn push_entered(
+        &self,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+        out: &mut [MaybeUninit<Pending>; WIDTH],
+    ) -> usize {
         let (t, mask) = self.enter(n, t_min, t_max);
         let mut keys: [u32; WIDTH] = std::array::from_fn(|k| order_key(t[k], mask >> k & 1 != 0, k));
         keys.sort_unstable();

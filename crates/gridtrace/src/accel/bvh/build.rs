@@ -11,7 +11,6 @@ use bytemuck::{Pod, Zeroable};
 use crate::accel::Aabb;
 use crate::accel::triangle::TriAccel4;
 
-
 /// One node: its box, and either its children (`count == 0`; the left child is `first`, the
 /// right one `first + 1`) or its primitives (`prims[first..first + count]`).
 #[repr(C)]

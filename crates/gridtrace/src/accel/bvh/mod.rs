@@ -21,16 +21,16 @@ use super::{Aabb, Counters, Hit, Ray, TriAccel, TriAccel4};
 
 mod box_test;
 mod build;
-mod walk;
-mod wide;
 #[cfg(test)]
 mod tests;
+mod walk;
+mod wide;
 
-pub use build::{Bvh, BvhNode};
-pub use wide::{ChildRef, WIDTH, WideNode};
 use build::LEAF_BLOCK;
+pub use build::{Bvh, BvhNode};
 use walk::Walk;
 use wide::collapse;
+pub use wide::{ChildRef, WIDTH, WideNode};
 
 /// A BVH over triangles: the eight-wide nodes, and the triangles copied into leaf order, four
 /// to a block, so that a leaf's triangles are adjacent in memory and tested together.
@@ -118,7 +118,6 @@ impl BvhAccel {
     pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
         self.interleaved::<true>(rays, t_min, t_max, |i, w| out[i] = w.best.is_hit());
     }
-
 
     /// Bytes of the nodes, the triangle blocks and the index map.
     pub fn memory(&self) -> usize {

@@ -2,9 +2,9 @@
 
 use std::mem::MaybeUninit;
 
-use super::box_test::{BoxRay, Pending};
 #[cfg(target_arch = "x86_64")]
 use super::box_test::sort8_avx2;
+use super::box_test::{BoxRay, Pending};
 use super::build::{MAX_LEAF, STACK};
 #[cfg(target_arch = "x86_64")]
 use super::walk::has_avx2;

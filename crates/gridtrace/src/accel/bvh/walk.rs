@@ -33,7 +33,13 @@ impl BvhAccel {
     /// AVX instructions, `BoxRay::enter_avx2`), else the baseline build. Both give the same
     /// bits: IEEE arithmetic rounds the same at any vector width, and Rust never fuses
     /// multiply-adds on its own.
-    pub(super) fn interleaved<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, finish: impl FnMut(usize, &Walk)) {
+    pub(super) fn interleaved<const ANY: bool>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        finish: impl FnMut(usize, &Walk),
+    ) {
         #[cfg(target_arch = "x86_64")]
         if has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
@@ -221,7 +227,11 @@ impl Walk {
     /// Returns true when the ray is done: nothing left that could hold a (closer) hit, or, for
     /// `ANY`, a hit found.
     #[inline(always)]
-    pub(super) fn step<const ANY: bool, const AVX: bool, C: Counters>(&mut self, accel: &BvhAccel, counters: &mut C) -> bool {
+    pub(super) fn step<const ANY: bool, const AVX: bool, C: Counters>(
+        &mut self,
+        accel: &BvhAccel,
+        counters: &mut C,
+    ) -> bool {
         let cur = self.current;
         let count = cur.child.count();
         if count > 0 {
