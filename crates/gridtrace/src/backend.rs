@@ -1,6 +1,20 @@
 //! Where tracing runs: the one place that turns `--backend auto|gpu|cpu`, the structure's rule
 //! (which structures have GPU kernels) and what the machine has into a CPU or a GPU renderer.
-//! The CLI, the benchmarks, Python and the ray queries all come through here.
+//! The CLI, Python and the ray queries come through here (the benchmarks time each backend on
+//! its own, so they open both explicitly).
+//!
+//! ```
+//! use gridtrace::{scene::builtin, AccelKind, Backend, Mode, RenderOptions, Renderer, Resolution};
+//!
+//! let accel = AccelKind::ProximityCloud;
+//! let scene = builtin::knot_box().prepare_for(accel, Resolution::default())?;
+//! let (mut renderer, notes) = Renderer::open(Backend::Cpu, &scene, accel)?;
+//! assert!(notes.is_empty() && renderer.gpu().is_none());
+//! let opts = RenderOptions::new(32, 24, Mode::Shadow, accel);
+//! let frame = renderer.render(&scene.camera, &scene.lights, &opts, None)?;
+//! assert_eq!((frame.image.width, frame.stats.rays.eye), (32, 32 * 24));
+//! # Ok::<(), gridtrace::Error>(())
+//! ```
 
 use std::sync::Arc;
 
