@@ -19,4 +19,4 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.7,<2" numpy pytest
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" maturin develop --release --locked -q -m crates/gridtrace-py/Cargo.toml
-GRIDTRACE_BIN="$PWD/target/release/gridtrace" .venv/bin/python -m pytest -q crates/gridtrace-py/tests
+GRIDTRACE_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/gridtrace" .venv/bin/python -m pytest -q crates/gridtrace-py/tests
