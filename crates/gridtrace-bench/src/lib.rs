@@ -11,6 +11,7 @@ pub mod report;
 pub mod scenes;
 pub mod studies;
 
+use gridtrace::accel::grid::dims_str;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -212,7 +213,7 @@ impl GridInfo {
 pub fn resolution_name(r: Resolution) -> String {
     match r {
         Resolution::Auto { lambda } => format!("auto:{lambda}"),
-        Resolution::Fixed(d) => format!("{}x{}x{}", d[0], d[1], d[2]),
+        Resolution::Fixed(d) => dims_str(d),
     }
 }
 
@@ -351,14 +352,12 @@ pub fn run_matrix(
         };
         let mut info = scene_info(&bs, &prepared, choice);
         log(&format!(
-            "scene {}: {} triangles ({} traced; paper {}), grid {}x{}x{} ({}), {}",
+            "scene {}: {} triangles ({} traced; paper {}), grid {} ({}), {}",
             bs.name,
             bs.triangles,
             prepared.accel.tris.len(),
             bs.paper_tris.map_or("-".into(), |n| n.to_string()),
-            info.grid.dims[0],
-            info.grid.dims[1],
-            info.grid.dims[2],
+            dims_str(info.grid.dims),
             info.grid.choice,
             bs.description
         ));

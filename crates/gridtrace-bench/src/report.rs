@@ -1,6 +1,7 @@
 //! Writing a benchmark report: `bench.json` (everything), `bench.csv` (one line per matrix row)
 //! and `bench.md` (tables laid out like the paper's Tables 1-3, then the studies).
 
+use gridtrace::accel::grid::dims_str;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -37,16 +38,14 @@ pub fn csv(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{}x{}x{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{}",
             r.scene,
             r.backend.name(),
             r.mode,
             r.accel,
             r.width,
             r.height,
-            r.grid_dims[0],
-            r.grid_dims[1],
-            r.grid_dims[2],
+            dims_str(r.grid_dims),
             r.times_ms.len(),
             r.summary.best_ms,
             r.summary.median_ms,
@@ -183,14 +182,12 @@ pub fn markdown(report: &BenchReport) -> String {
         let g = &s.grid;
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {}x{}x{} ({}) | {} | {:.1}% | {:.2} | {:.1} | {} |",
+            "| {} | {} | {} | {} | {} ({}) | {} | {:.1}% | {:.2} | {:.1} | {} |",
             s.title,
             s.triangles,
             s.triangles_traced,
             s.paper_triangles.map_or("-".into(), |n| n.to_string()),
-            g.dims[0],
-            g.dims[1],
-            g.dims[2],
+            dims_str(g.dims),
             g.choice,
             g.cells,
             100.0 * g.empty_cells as f64 / g.cells.max(1) as f64,
@@ -234,14 +231,12 @@ pub fn markdown(report: &BenchReport) -> String {
                 let mark = if p.choice == sw.best { " **best**" } else { "" };
                 let _ = writeln!(
                     md,
-                    "| {} | {} | {} | {}{mark} | {}x{}x{} | {:.2} | {:.2} | {:.2} |",
+                    "| {} | {} | {} | {}{mark} | {} | {:.2} | {:.2} | {:.2} |",
                     sw.scene,
                     sw.mode,
                     sw.accel,
                     p.choice,
-                    p.grid.dims[0],
-                    p.grid.dims[1],
-                    p.grid.dims[2],
+                    dims_str(p.grid.dims),
                     p.cells_per_triangle,
                     p.summary.best_ms,
                     p.summary.median_ms
@@ -252,16 +247,12 @@ pub fn markdown(report: &BenchReport) -> String {
         for sw in &report.grid_sweep {
             let _ = writeln!(
                 md,
-                "| {} | {} {}x{}x{} | {:.2} | {}x{}x{} | {:.2} |",
+                "| {} | {} {} | {:.2} | {} | {:.2} |",
                 sw.scene,
                 sw.best,
-                sw.best_dims[0],
-                sw.best_dims[1],
-                sw.best_dims[2],
+                dims_str(sw.best_dims),
                 sw.best_ms,
-                sw.auto_dims[0],
-                sw.auto_dims[1],
-                sw.auto_dims[2],
+                dims_str(sw.auto_dims),
                 sw.auto_ms
             );
         }
@@ -276,12 +267,10 @@ pub fn markdown(report: &BenchReport) -> String {
         for p in sc.by_triangles.iter().chain(&sc.by_pixels) {
             let _ = writeln!(
                 md,
-                "| {} | {} | {}x{}x{} | {:.1} | {}x{} | {:.2} | {:.1} |",
+                "| {} | {} | {} | {:.1} | {}x{} | {:.2} | {:.1} |",
                 p.mesh,
                 p.triangles,
-                p.grid_dims[0],
-                p.grid_dims[1],
-                p.grid_dims[2],
+                dims_str(p.grid_dims),
                 p.build_ms,
                 p.width,
                 p.height,
@@ -300,13 +289,11 @@ pub fn markdown(report: &BenchReport) -> String {
         for r in &report.pc_study {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {}x{}x{} | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} |",
+                "| {} | {} | {} | {} | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} |",
                 r.scene,
                 r.mode,
                 r.accel,
-                r.grid_dims[0],
-                r.grid_dims[1],
-                r.grid_dims[2],
+                dims_str(r.grid_dims),
                 r.empty_fraction * 100.0,
                 r.cells_per_ray,
                 r.jumps_per_ray,

@@ -1,6 +1,7 @@
 //! `gridtrace bench`: the paper's benchmark matrix and studies; the work is in
 //! `gridtrace_bench`, this file parses, prints and writes.
 
+use gridtrace::accel::grid::dims_str;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -236,16 +237,12 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
                 Ok(bs) => {
                     let sw = studies::grid_sweep(&bs, &opts, cfg.warmup, cfg.reps, &mut log)?;
                     println!(
-                        "  {}: best {} {}x{}x{} {:.2} ms; automatic {}x{}x{} {:.2} ms",
+                        "  {}: best {} {} {:.2} ms; automatic {} {:.2} ms",
                         sw.scene,
                         sw.best,
-                        sw.best_dims[0],
-                        sw.best_dims[1],
-                        sw.best_dims[2],
+                        dims_str(sw.best_dims),
                         sw.best_ms,
-                        sw.auto_dims[0],
-                        sw.auto_dims[1],
-                        sw.auto_dims[2],
+                        dims_str(sw.auto_dims),
                         sw.auto_ms
                     );
                     report.grid_sweep.push(sw);

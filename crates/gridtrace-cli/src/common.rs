@@ -1,5 +1,6 @@
 //! Options shared by several commands: choosing the scene and the grid.
 
+use gridtrace::accel::grid::dims_str;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -143,10 +144,8 @@ pub fn describe_structure(accel: &gridtrace::Accel) -> String {
         Structure::Grid(g) => {
             let s = &g.stats;
             format!(
-                "grid {}x{}x{}, {:.2} refs/tri (built in {:.1} ms)",
-                s.dims[0],
-                s.dims[1],
-                s.dims[2],
+                "grid {}, {:.2} refs/tri (built in {:.1} ms)",
+                dims_str(s.dims),
                 s.refs_per_triangle(),
                 s.build_ms
             )

@@ -1,6 +1,7 @@
 //! `gridtrace info`: mesh, grid and memory statistics.
 
 use clap::Args;
+use gridtrace::accel::grid::dims_str;
 
 use gridtrace::accel::Structure;
 
@@ -35,10 +36,7 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     match &prepared.accel.structure {
         Structure::Grid(g) => {
             let s = &g.stats;
-            println!(
-                "grid             {}x{}x{} = {} cells",
-                s.dims[0], s.dims[1], s.dims[2], s.cells
-            );
+            println!("grid             {} = {} cells", dims_str(s.dims), s.cells);
             println!("empty cells      {:.1}%", s.empty_fraction() * 100.0);
             println!(
                 "references       {} ({:.2} per triangle, max {} in a cell)",

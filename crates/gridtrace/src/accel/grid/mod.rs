@@ -246,6 +246,11 @@ impl Grid {
     }
 }
 
+/// Grid dimensions as everyone prints them: `AxBxC`.
+pub fn dims_str(d: [u32; 3]) -> String {
+    format!("{}x{}x{}", d[0], d[1], d[2])
+}
+
 /// Bounds of every triangle's slack-padded box (a unit box for no triangles).
 fn tri_bounds(tris: &[TriAccel]) -> Result<Aabb> {
     // The bounds hold every triangle's slack-padded box: a hit the triangle test accepts a
