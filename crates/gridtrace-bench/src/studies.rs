@@ -349,7 +349,8 @@ pub fn pc_study(
         for &mode in modes {
             for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
                 let opts = RenderOptions::new(res.0, res.1, mode, accel);
-                let (_, stats) = gridtrace::cpu::render_with_counters(&prepared, &opts)?;
+                let (_, stats) =
+                    gridtrace::cpu::render_with_counters(&prepared, &prepared.camera, &prepared.lights, &opts)?;
                 let (_, summary, _) = time_cpu(&prepared, &opts, warmup, reps)?;
                 let n = stats.rays.total().max(1) as f64;
                 let c = stats.counters;

@@ -148,7 +148,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             prepared.camera
         };
         let frame = if a.stats && renderer.gpu().is_none() {
-            let (image, stats) = gridtrace::cpu::render_with_counters(&prepared, &opts)?;
+            let (image, stats) = gridtrace::cpu::render_with_counters(&prepared, &camera, &prepared.lights, &opts)?;
             gridtrace::Frame {
                 image,
                 stats,
@@ -251,15 +251,17 @@ fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool) -> String {
     ms.sort_by(f64::total_cmp);
     let median = ms[ms.len() / 2];
     let best = ms[0];
-    // Rays per frame vary along an orbit: rates are each frame's own, summarised the same way.
+    // Rays per frame vary along an orbit: rates are each frame's own, summarised the same way,
+    // fastest first, so that the median takes the same rank as the time's (the slower of two
+    // middle frames) and the best is the fastest.
     let mut rates: Vec<f64> = rest.iter().map(|s| s.mrays_per_s()).collect();
-    rates.sort_by(f64::total_cmp);
+    rates.sort_by(|a, b| b.total_cmp(a));
     format!(
         "frames  {} more{}: median {median:.1} ms ({:.2} Mrays/s), best {best:.1} ms ({:.2} Mrays/s)",
         rest.len(),
         if orbit { " along the orbit" } else { "" },
         rates[rates.len() / 2],
-        rates[rates.len() - 1]
+        rates[0]
     )
 }
 

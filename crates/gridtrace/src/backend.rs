@@ -47,8 +47,6 @@ impl std::str::FromStr for Backend {
 }
 
 impl Backend {
-    pub const NAMES: [&'static str; 3] = ["auto", "gpu", "cpu"];
-
     /// The backend that runs `accel`. The BVH has no GPU kernels: `auto` means the CPU for it
     /// and `gpu` is an error (`gpu::check_accel`).
     pub fn for_accel(self, accel: AccelKind) -> Result<Backend> {
@@ -146,13 +144,6 @@ impl<'s> Renderer<'s> {
         match self {
             Renderer::Gpu { gpu, .. } => Some(gpu),
             Renderer::Cpu(_) => None,
-        }
-    }
-
-    /// The scene being rendered.
-    pub fn scene(&self) -> &'s PreparedScene {
-        match self {
-            Renderer::Cpu(s) | Renderer::Gpu { scene: s, .. } => s,
         }
     }
 

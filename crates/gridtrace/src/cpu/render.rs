@@ -75,13 +75,14 @@ pub fn render_view(
     }
 }
 
-/// Renders and also counts traversal work (cells, jumps, triangle tests).
-pub fn render_with_counters(scene: &PreparedScene, opts: &RenderOptions) -> Result<(Image, RenderStats)> {
-    let view = View {
-        camera: &scene.camera,
-        lights: &scene.lights,
-    };
-    render_generic::<TraversalCounters>(scene, &view, opts, None)
+/// `render_view`, also counting traversal work (cells, jumps, triangle tests).
+pub fn render_with_counters(
+    scene: &PreparedScene,
+    camera: &Camera,
+    lights: &[PointLight],
+    opts: &RenderOptions,
+) -> Result<(Image, RenderStats)> {
+    render_generic::<TraversalCounters>(scene, &View { camera, lights }, opts, None)
 }
 
 /// What changes per frame: where the camera is and where the lights are.

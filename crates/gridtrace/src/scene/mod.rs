@@ -224,8 +224,8 @@ impl PreparedScene {
     }
 
     /// The grid this scene was prepared with. Panics for a scene prepared for another
-    /// structure: for the code paths (the GPU kernels, the grid studies) that only exist for
-    /// grids and have checked `accel.serves` first.
+    /// structure: for the benchmark's grid statistics and studies, which prepare their scenes
+    /// with a grid themselves (everything else asks `accel.grid()` and handles `None`).
     pub fn grid(&self) -> &crate::accel::Grid {
         self.accel
             .grid()
