@@ -1,5 +1,6 @@
-//! Where tracing runs: the one place that turns `--backend auto|gpu|cpu`, the structure's rule
-//! (which structures have GPU kernels) and what the machine has into a CPU or a GPU renderer.
+//! Where tracing runs: the one place that turns `--backend auto|gpu|cpu` and what the machine
+//! has (an adapter; room for the scene) into a CPU or a GPU renderer. Every structure runs on
+//! both.
 //! The CLI, Python and the ray queries come through here (the benchmarks time each backend on
 //! its own, so they open both explicitly).
 //!
@@ -47,29 +48,12 @@ impl std::str::FromStr for Backend {
 }
 
 impl Backend {
-    /// The backend that runs `accel`. The BVH has no GPU kernels: `auto` means the CPU for it
-    /// and `gpu` is an error (`gpu::check_accel`).
-    pub fn for_accel(self, accel: AccelKind) -> Result<Backend> {
-        match (self, accel) {
-            (Backend::Gpu, _) => crate::gpu::check_accel(accel).map(|_| Backend::Gpu),
-            (Backend::Auto, AccelKind::Bvh) => Ok(Backend::Cpu),
-            (b, _) => Ok(b),
-        }
-    }
-
     /// Opens the GPU device this backend asks for (`None`: trace on the CPU), with notes for
     /// the user on every choice that was not the one asked for. `gpu` without an adapter is an
     /// error; `auto` falls back to the CPU.
-    pub fn open_device(self, accel: AccelKind) -> Result<(Option<Arc<GpuContext>>, Vec<String>)> {
+    pub fn open_device(self) -> Result<(Option<Arc<GpuContext>>, Vec<String>)> {
         let mut notes = Vec::new();
-        let resolved = self.for_accel(accel)?;
-        if resolved != self {
-            notes.push(format!(
-                "the {} acceleration runs on the CPU only; using the CPU",
-                accel.name()
-            ));
-        }
-        let ctx = match resolved {
+        let ctx = match self {
             Backend::Cpu => None,
             Backend::Gpu => Some(Arc::new(GpuContext::new()?)),
             Backend::Auto => match GpuContext::new() {
@@ -109,7 +93,7 @@ impl<'s> Renderer<'s> {
     /// (over its buffer limits) is traced on the CPU; with `gpu` that is an error that says so.
     pub fn open(backend: Backend, scene: &'s PreparedScene, accel: AccelKind) -> Result<(Renderer<'s>, Vec<String>)> {
         scene.accel.check_serves(accel)?;
-        let (ctx, mut notes) = backend.open_device(accel)?;
+        let (ctx, mut notes) = backend.open_device()?;
         let Some(ctx) = ctx else {
             return Ok((Renderer::Cpu(scene), notes));
         };

@@ -107,11 +107,20 @@ fn gpu_edges_and_vertices_do_not_leak() {
     for (name, mesh, n) in meshes() {
         let (scene, rays) = scene_and_rays(mesh, n);
         total += rays.len();
-        let ctx = gridtrace::gpu::GpuContext::new()
-            .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
-        let mut gpu = gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &scene).unwrap();
+        let ctx = std::sync::Arc::new(
+            gridtrace::gpu::GpuContext::new()
+                .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")),
+        );
+        let bvh = scene.with_accel(AccelKind::Bvh, Resolution::default()).unwrap();
+        let mut grid_gpu = gridtrace::gpu::GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let mut bvh_gpu = gridtrace::gpu::GpuRenderer::new(ctx, &bvh).unwrap();
         let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
-        for kind in AccelKind::GPU {
+        for kind in AccelKind::ALL {
+            let gpu = if kind == AccelKind::Bvh {
+                &mut bvh_gpu
+            } else {
+                &mut grid_gpu
+            };
             let hits = gpu.intersect(&plain, 0.0, f32::INFINITY, kind).unwrap();
             let bad = leaks(&rays, &hits);
             assert!(

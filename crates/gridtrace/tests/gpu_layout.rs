@@ -7,7 +7,9 @@ use std::mem::{offset_of, size_of};
 use gridtrace::accel::{Cell, TriAccel};
 use gridtrace::gpu::bindings::{self, Access};
 use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
-use gridtrace::gpu::layout::{GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade};
+use gridtrace::gpu::layout::{
+    GpuBvhNode, GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
+};
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
@@ -53,6 +55,7 @@ fn wgsl_structs_match_rust() {
     check!(m, PointLight, "PointLight", [position, _pad0, intensity, _pad1]);
     check!(m, RayRec, "RayRec", [origin, pixel, dir, t_max, weight, t_min]);
     check!(m, GpuHit, "GpuHit", [t, tri, u, v]);
+    check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
     check!(
         m,
         SceneUniform,

@@ -48,7 +48,6 @@ pub enum AccelKind {
     /// Uniform grid with proximity clouds: empty space is crossed in jumps.
     ProximityCloud,
     /// Bounding volume hierarchy (binned SAH), the comparison the paper left as future work.
-    /// CPU only.
     Bvh,
 }
 
@@ -65,10 +64,8 @@ impl std::str::FromStr for AccelKind {
 }
 
 impl AccelKind {
-    /// Every kind (the CPU runs them all).
+    /// Every kind (the CPU and the GPU run them all).
     pub const ALL: [AccelKind; 3] = [AccelKind::Grid, AccelKind::ProximityCloud, AccelKind::Bvh];
-    /// The kinds the GPU kernels run.
-    pub const GPU: [AccelKind; 2] = [AccelKind::Grid, AccelKind::ProximityCloud];
 
     pub fn name(self) -> &'static str {
         match self {

@@ -42,6 +42,8 @@ pub enum FrameSlot {
     Resolve,
     Accum,
     Counters,
+    /// The BVH's nodes (a grid scene binds one unused node).
+    BvhNodes,
 }
 
 pub const FRAME_GROUP: u32 = 0;
@@ -58,7 +60,7 @@ const fn row<S>(index: u32, name: &'static str, access: Access, slot: S) -> Bind
 use Access::{StorageRead, StorageReadWrite, Uniform};
 
 /// Group 0, as declared in common.wgsl.
-pub const FRAME_BINDINGS: [Binding<FrameSlot>; 16] = [
+pub const FRAME_BINDINGS: [Binding<FrameSlot>; 17] = [
     row(0, "scene", Uniform, FrameSlot::SceneUniform),
     row(1, "camera", Uniform, FrameSlot::CameraUniform),
     row(2, "pass_", Uniform, FrameSlot::PassUniform),
@@ -75,6 +77,7 @@ pub const FRAME_BINDINGS: [Binding<FrameSlot>; 16] = [
     row(13, "resolve", StorageReadWrite, FrameSlot::Resolve),
     row(14, "accum", StorageReadWrite, FrameSlot::Accum),
     row(15, "counters", StorageReadWrite, FrameSlot::Counters),
+    row(16, "bvh_nodes", StorageRead, FrameSlot::BvhNodes),
 ];
 
 /// What group 1 binds: the indirect arguments, written as storage by the one kernel that
@@ -150,8 +153,8 @@ mod tests {
     #[test]
     fn tables_are_unique() {
         let rows = all();
-        // 13 in group 0 and the indirect args: what gridtrace has always asked the device for.
-        assert_eq!(storage_buffers_needed(), 14);
+        // 14 in group 0 (13 before the GPU BVH) and the indirect args.
+        assert_eq!(storage_buffers_needed(), 15);
         for (i, a) in rows.iter().enumerate() {
             for b in &rows[i + 1..] {
                 assert!(!(a.0 == b.0 && a.1 == b.1), "binding {}/{} twice", a.0, a.1);

@@ -5,7 +5,9 @@
 
 use std::fmt::Write as _;
 
+use super::bvh::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
+use crate::accel::bvh;
 use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_ULPS};
 use crate::render::Mode;
 
@@ -40,14 +42,19 @@ pub const fn mode_code(mode: Mode) -> u32 {
     }
 }
 
-/// `PassUniform::accel`: 1 walks the proximity clouds (`ACCEL_PC`), 0 the plain grid. The BVH
-/// never reaches the GPU (`check_accel`).
+/// `PassUniform::accel`: 1 walks the proximity clouds (`ACCEL_PC`), 0 the plain grid, 2 the BVH
+/// (whose kernels are their own pipelines, `Kernel::for_accel`, and do not read it).
 pub const fn accel_code(accel: AccelKind) -> u32 {
     match accel {
+        AccelKind::Grid => 0,
         AccelKind::ProximityCloud => 1,
-        AccelKind::Grid | AccelKind::Bvh => 0,
+        AccelKind::Bvh => 2,
     }
 }
+
+/// Entries of the GPU BVH walk's stack: the CPU builder's bound on the tree's depth (`STACK`),
+/// so that no tree can overflow it.
+pub const BVH_STACK: u32 = bvh::STACK as u32;
 
 /// A constant's value as WGSL will see it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,7 +65,7 @@ pub enum WgslConst {
 
 /// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
 /// `TriAccel::intersect`'s own, so both backends accept the same hits.
-pub const WGSL_CONSTANTS: [(&str, WgslConst); 18] = [
+pub const WGSL_CONSTANTS: [(&str, WgslConst); 26] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -77,6 +84,14 @@ pub const WGSL_CONSTANTS: [(&str, WgslConst); 18] = [
     ("MAX_SLACK", WgslConst::F32(MAX_SLACK)),
     ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),
     ("PARALLEL_COS2", WgslConst::F32(PARALLEL_COS2)),
+    ("BVH_STACK", WgslConst::U32(BVH_STACK)),
+    ("LEAF_BIT", WgslConst::U32(LEAF_BIT)),
+    ("LEAF_COUNT_SHIFT", WgslConst::U32(LEAF_COUNT_SHIFT)),
+    ("LEAF_FIRST_MAX", WgslConst::U32(LEAF_FIRST_MAX)),
+    ("STACK_DONE", WgslConst::U32(STACK_DONE)),
+    ("DIR_TINY", WgslConst::F32(bvh::DIR_TINY)),
+    ("FAR_SCALE", WgslConst::F32(bvh::FAR_SCALE)),
+    ("T_SLOP", WgslConst::F32(bvh::T_SLOP)),
 ];
 
 /// One WGSL literal that denotes exactly `v`: Rust's `{:?}` prints the shortest decimal that

@@ -6,6 +6,7 @@
 use super::bindings::{self, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP};
 use super::constants::{MAX_GROUPS_X, WORKGROUP};
 use super::layout::IndirectArgs;
+use super::scene::GpuStructure;
 use super::shaders;
 use super::timing::StageTimer;
 use crate::{Error, Result};
@@ -21,6 +22,24 @@ pub(crate) enum Kernel {
     Shade,
     Resolve,
     Indirect,
+    /// `traverse` compiled to walk the BVH (and the same three for heat and occlusion).
+    TraverseBvh,
+    TraverseBvhHeat,
+    OcclusionBvh,
+}
+
+impl Kernel {
+    /// The pipeline that runs this kernel on a scene walked as `structure`: the traversal
+    /// kernels have one per walk, specialised by the `BVH` override so that neither carries the
+    /// other's code and registers.
+    pub fn walking(self, structure: GpuStructure) -> Kernel {
+        match (self, structure) {
+            (Kernel::Traverse, GpuStructure::Bvh) => Kernel::TraverseBvh,
+            (Kernel::TraverseHeat, GpuStructure::Bvh) => Kernel::TraverseBvhHeat,
+            (Kernel::Occlusion, GpuStructure::Bvh) => Kernel::OcclusionBvh,
+            (k, _) => k,
+        }
+    }
 }
 
 /// How many invocations a kernel's dispatch has.
@@ -69,7 +88,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 7] = [
+const SPECS: [KernelSpec; 10] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -89,6 +108,24 @@ const SPECS: [KernelSpec; 7] = [
         launch: Launch::Once,
         writes_indirect_args: true,
         ..spec(Kernel::Indirect, "indirect", "indirect", shaders::INDIRECT)
+    },
+    KernelSpec {
+        overrides: &[("BVH", 1.0)],
+        ..spec(Kernel::TraverseBvh, "traverse (bvh)", "traverse", shaders::TRAVERSE)
+    },
+    KernelSpec {
+        overrides: &[("BVH", 1.0), ("COUNT_WORK", 1.0)],
+        ..spec(
+            Kernel::TraverseBvhHeat,
+            "traverse (bvh, heat)",
+            "traverse",
+            shaders::TRAVERSE,
+        )
+    },
+    KernelSpec {
+        launch: SHADOW_QUEUE,
+        overrides: &[("BVH", 1.0)],
+        ..spec(Kernel::OcclusionBvh, "occlusion (bvh)", "occlusion", shaders::OCCLUSION)
     },
 ];
 
@@ -180,6 +217,8 @@ pub(crate) struct PassRecorder<'a> {
     /// The indirect-args buffer and its group-1 bind group.
     pub indirect_args: &'a wgpu::Buffer,
     pub indirect_group: &'a wgpu::BindGroup,
+    /// The scene's walk: picks the traversal kernels' pipelines (`Kernel::walking`).
+    pub structure: GpuStructure,
     /// Pixels of the tile (sizes `Launch::PerPixel` kernels).
     pub tile_pixels: u32,
     pub timer: StageTimer<'a>,
@@ -188,6 +227,7 @@ pub(crate) struct PassRecorder<'a> {
 impl PassRecorder<'_> {
     /// One compute pass running `kernel` with `frame` as group 0.
     pub fn pass(&mut self, enc: &mut wgpu::CommandEncoder, kernel: Kernel, frame: &wgpu::BindGroup) {
+        let kernel = kernel.walking(self.structure);
         let spec = spec_of(kernel);
         let timestamp_writes = self.timer.pass_writes(spec.stage);
         let mut cp = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {

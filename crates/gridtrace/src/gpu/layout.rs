@@ -99,3 +99,21 @@ impl IndirectArgs {
 
 /// Counter slots (defined with the other constants WGSL shares).
 pub use super::constants::{COUNTER_SLOTS, SLOT_QUEUE_A, SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
+
+/// A node of the BVH the GPU walks (64 bytes): a binary node holding both children's boxes, so
+/// that one node fetch tests both and the ray descends into the nearer (Aila and Laine 2009).
+/// The boxes are interleaved as their layout has it, `xy01` = child 0's x and y slabs,
+/// `xy11` = child 1's, `z01` = both z slabs, so every field is one 16-byte load.
+/// `child[k]` is a `BvhEntry` (gpu/bvh.rs): an inner node's index, or a leaf's triangle range.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GpuBvhNode {
+    /// Child 0: lo.x, hi.x, lo.y, hi.y.
+    pub xy0: [f32; 4],
+    /// Child 1: lo.x, hi.x, lo.y, hi.y.
+    pub xy1: [f32; 4],
+    /// lo.z, hi.z of child 0, then of child 1.
+    pub z01: [f32; 4],
+    /// The children as stack entries; the last two words are unused.
+    pub child: [u32; 4],
+}

@@ -1,6 +1,9 @@
 //! The GPU backend: the paper's streaming ray tracer (its Figure 1) as wgpu compute kernels.
 //!
-//! Per image tile: `raygen` fills ray queue A with eye rays (rays that miss the grid are finished
+//! Every structure runs here: the grid and the proximity cloud (one DDA, `pass_.accel` says
+//! whether it jumps) and the BVH (its own pipelines of `traverse` and `occlusion`).
+//!
+//! Per image tile: `raygen` fills ray queue A with eye rays (rays that miss the scene are finished
 //! at once); then per bounce `traverse` finds closest hits, `shade` writes colour and emits
 //! shadow rays and reflection rays into compacted queues (atomic counters), `occlusion` runs the
 //! shadow queue (any hit), and `resolve` adds the unoccluded contributions. Every dispatch after
@@ -13,11 +16,13 @@
 //!   that records a kernel's pass;
 //! - `bindings`: the bind group tables; `layout`: the structs the kernels share with the host;
 //!   `constants`: the numbers they share, printed into every module as a WGSL prelude;
-//! - `scene`: the scene's upload; `renderer`: `GpuRenderer` and its work buffers;
+//! - `scene`: the scene's upload; `bvh`: the BVH's GPU layout (its walk is `shaders/bvh.wgsl`);
+//!   `renderer`: `GpuRenderer` and its work buffers;
 //! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded;
 //! - `timing`: timestamp queries and per-stage milliseconds.
 
 pub mod bindings;
+pub mod bvh;
 pub mod constants;
 mod context;
 mod kernels;
@@ -34,16 +39,3 @@ pub use renderer::{GpuRenderer, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
 pub use timing::GpuTimings;
 pub use wavefront::GpuRenderStats;
-
-use crate::accel::AccelKind;
-use crate::{Error, Result};
-
-/// The GPU kernels traverse the grid (with or without proximity clouds) only.
-pub fn check_accel(kind: AccelKind) -> Result<()> {
-    if kind == AccelKind::Bvh {
-        return Err(Error::InvalidInput(
-            "the bvh acceleration runs on the CPU only: use backend cpu (or auto), or accel grid or pc".into(),
-        ));
-    }
-    Ok(())
-}

@@ -4,7 +4,6 @@
 
 use std::mem::size_of;
 
-use super::check_accel;
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
 use super::kernels::Kernel;
 use super::layout::{GpuHit, RayRec};
@@ -39,7 +38,7 @@ impl GpuRenderer {
         kind: AccelKind,
         query: Query,
     ) -> Result<(Vec<Hit>, Vec<bool>)> {
-        check_accel(kind)?;
+        self.check_serves(kind)?;
         let chunk = self.tile_capacity(1) as usize;
         self.ensure_work(
             chunk.min(rays.len().max(1)) as u32,

@@ -10,12 +10,12 @@ use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
 use super::context::GpuContext;
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
-use super::scene::SceneBuffers;
+use super::scene::{GpuStructure, SceneBuffers};
 use super::timing::{StageTimer, Timestamps};
-use crate::Result;
 use crate::accel::AccelKind;
 use crate::render::Mode;
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
+use crate::{Error, Result};
 
 /// Largest tile in pixels: bounds queue memory and keeps each submission short for watchdogs.
 pub const MAX_TILE_PIXELS: u32 = 1 << 20;
@@ -117,6 +117,27 @@ impl GpuRenderer {
         &self.ctx
     }
 
+    /// Whether this scene's upload serves `accel`: a grid scene walks `grid` and `pc`, a BVH
+    /// scene `bvh`. An error that says what to do otherwise.
+    pub(super) fn check_serves(&self, accel: AccelKind) -> Result<()> {
+        let ok = match self.scene.structure {
+            GpuStructure::Grid => accel != AccelKind::Bvh,
+            GpuStructure::Bvh => accel == AccelKind::Bvh,
+        };
+        if ok {
+            return Ok(());
+        }
+        let uploaded = match self.scene.structure {
+            GpuStructure::Grid => "a grid",
+            GpuStructure::Bvh => "a bvh",
+        };
+        Err(Error::InvalidInput(format!(
+            "accel '{}' asked of a GPU scene uploaded with {uploaded}: prepare the scene for '{}'",
+            accel.name(),
+            accel.name()
+        )))
+    }
+
     /// Bytes of each GPU array: the scene's and the current work buffers'.
     pub fn memory(&self) -> Vec<(&'static str, u64)> {
         let mut v = self.scene.bytes.clone();
@@ -142,6 +163,7 @@ impl GpuRenderer {
             kernels: &self.kernels,
             indirect_args: &self.indirect_args,
             indirect_group: &self.indirect_group,
+            structure: self.scene.structure,
             tile_pixels,
             timer: StageTimer::new(self.timestamps.as_ref().filter(|_| timed)),
         }
@@ -213,6 +235,7 @@ impl GpuRenderer {
                     FrameSlot::Resolve => resolve.as_entire_binding(),
                     FrameSlot::Accum => accum.as_entire_binding(),
                     FrameSlot::Counters => self.counters.as_entire_binding(),
+                    FrameSlot::BvhNodes => self.scene.bvh_nodes.as_entire_binding(),
                 });
                 dev.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("gridtrace"),

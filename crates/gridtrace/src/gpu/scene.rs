@@ -1,24 +1,41 @@
-//! The scene on the GPU: grid cells, references, triangles, per-triangle shading data,
+//! The scene on the GPU: grid cells or BVH nodes, references, triangles, per-triangle shading data,
 //! materials and the scene constants, uploaded once per renderer. Camera and lights are not
 //! here; they change per frame.
+
+use std::borrow::Cow;
 
 use glam::{UVec3, Vec3};
 use wgpu::util::DeviceExt;
 
+use super::bvh::gpu_nodes;
+use super::constants::BVH_STACK;
 use super::context::GpuContext;
-use super::layout::{GpuMaterial, SceneUniform, TriShade};
-use crate::accel::{Aabb, Cell, TriAccel};
+use super::layout::{GpuBvhNode, GpuMaterial, SceneUniform, TriShade};
+use crate::accel::{Aabb, Cell, Structure, TriAccel};
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
 
-/// What the kernels read of the prepared scene's acceleration structure.
+/// Which walk the scene's kernels take.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum GpuStructure {
+    /// The 3D-DDA over `cells`, with or without proximity-cloud jumps.
+    Grid,
+    /// The BVH walk over `bvh_nodes`.
+    Bvh,
+}
+
+/// What the kernels read of the prepared scene's acceleration structure. The structure a scene
+/// was not prepared with gets one unused element (bindings cannot be empty).
 struct AccelArrays<'a> {
-    cells: &'a [Cell],
+    structure: GpuStructure,
+    cells: Cow<'a, [Cell]>,
+    /// Grid: the cells' triangle lists. BVH: triangle indices in leaf order.
     refs: &'a [u32],
+    bvh_nodes: Vec<GpuBvhNode>,
     tris: &'a [TriAccel],
     bounds: Aabb,
     dims: UVec3,
-    /// World-space size of one cell per axis, and its reciprocal.
+    /// World-space size of one cell per axis, and its reciprocal (zero for a BVH).
     cell_size: Vec3,
     inv_cell_size: Vec3,
 }
@@ -26,24 +43,41 @@ struct AccelArrays<'a> {
 /// The one place the GPU backend reads `scene.accel`: when its types change, only this function
 /// changes.
 fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
-    // The kernels traverse grids only: a scene prepared with another structure is an error
-    // that says what does run.
-    let Some(g) = scene.accel.grid() else {
-        return Err(Error::InvalidInput(format!(
-            "the GPU kernels traverse grids; this scene was prepared with a {}: use backend cpu \
-             (or auto), or accel grid or pc",
-            scene.accel.structure_name()
-        )));
-    };
-    Ok(AccelArrays {
-        cells: &g.cells,
-        refs: &g.refs,
-        tris: &scene.accel.tris,
-        bounds: g.bounds,
-        dims: g.dims,
-        cell_size: g.cell_size,
-        inv_cell_size: g.inv_cell_size,
-    })
+    let tris = &scene.accel.tris[..];
+    match &scene.accel.structure {
+        Structure::Grid(g) => Ok(AccelArrays {
+            structure: GpuStructure::Grid,
+            cells: Cow::Borrowed(&g.cells),
+            refs: &g.refs,
+            bvh_nodes: vec![bytemuck::Zeroable::zeroed()],
+            tris,
+            bounds: g.bounds,
+            dims: g.dims,
+            cell_size: g.cell_size,
+            inv_cell_size: g.inv_cell_size,
+        }),
+        Structure::Bvh(b) => {
+            if b.bvh.depth >= BVH_STACK as usize {
+                // The builder bounds the depth below the stack (`STACK`); checked all the same,
+                // since an overflow would lose hits silently.
+                return Err(Error::InvalidInput(format!(
+                    "the BVH is {} levels deep; the GPU walk's stack holds {BVH_STACK}",
+                    b.bvh.depth
+                )));
+            }
+            Ok(AccelArrays {
+                structure: GpuStructure::Bvh,
+                cells: Cow::Owned(vec![bytemuck::Zeroable::zeroed()]),
+                refs: &b.bvh.prims,
+                bvh_nodes: gpu_nodes(&b.bvh)?,
+                tris,
+                bounds: scene.accel.bounds(),
+                dims: UVec3::ZERO,
+                cell_size: Vec3::ZERO,
+                inv_cell_size: Vec3::ZERO,
+            })
+        }
+    }
 }
 
 /// Checks every scene array (`(name, bytes)`) against the device's per-binding limits before
@@ -64,7 +98,10 @@ pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, a
 
 /// The scene's buffers on the device.
 pub(crate) struct SceneBuffers {
+    /// The walk the kernels take.
+    pub structure: GpuStructure,
     pub cells: wgpu::Buffer,
+    pub bvh_nodes: wgpu::Buffer,
     pub refs: wgpu::Buffer,
     pub tris: wgpu::Buffer,
     pub tri_shade: wgpu::Buffer,
@@ -101,15 +138,22 @@ impl SceneBuffers {
                 reflectivity: m.reflectivity,
             })
             .collect();
-        let arrays: [(&'static str, &[u8]); 5] = [
-            ("cells", bytemuck::cast_slice(accel.cells)),
+        let arrays: [(&'static str, &[u8]); 6] = [
+            ("cells", bytemuck::cast_slice(&accel.cells)),
+            ("bvh_nodes", bytemuck::cast_slice(&accel.bvh_nodes)),
             ("refs", bytemuck::cast_slice(accel.refs)),
             ("triangles", bytemuck::cast_slice(accel.tris)),
             ("tri_shade", bytemuck::cast_slice(&tri_shade)),
             ("materials", bytemuck::cast_slice(&materials)),
         ];
-        let bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
+        let mut bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
         check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
+        // The other structure's placeholder is not the scene's memory.
+        let unused = match accel.structure {
+            GpuStructure::Grid => "bvh_nodes",
+            GpuStructure::Bvh => "cells",
+        };
+        bytes.retain(|(n, _)| *n != unused);
         let storage = |label: &str, data: &[u8]| {
             // Zero-length bindings are invalid; give empty arrays one element of padding.
             let contents: &[u8] = if data.is_empty() { &[0u8; 16] } else { data };
@@ -119,7 +163,7 @@ impl SceneBuffers {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             })
         };
-        let [cells, refs, tris, tri_shade, materials] = arrays.map(|(n, d)| storage(n, d));
+        let [cells, bvh_nodes, refs, tris, tri_shade, materials] = arrays.map(|(n, d)| storage(n, d));
 
         let consts = SceneUniform {
             bounds_min: accel.bounds.min.to_array(),
@@ -145,7 +189,9 @@ impl SceneBuffers {
         });
         ctx.queue.write_buffer(&uniform, 0, bytemuck::bytes_of(&consts));
         Ok(SceneBuffers {
+            structure: accel.structure,
             cells,
+            bvh_nodes,
             refs,
             tris,
             tri_shade,

@@ -1,9 +1,12 @@
 //! WGSL sources: the shared file and one per kernel. WGSL has no includes, so a kernel's module
-//! is the generated constant prelude, then `common.wgsl`, then the kernel's own file.
+//! is the generated constant prelude, then `common.wgsl` and `bvh.wgsl`, then the kernel's own
+//! file.
 
 use super::constants::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
+/// BVH traversal, shared like `COMMON` (the grid's DDA is in `COMMON`).
+pub const BVH: &str = include_str!("shaders/bvh.wgsl");
 pub const RAYGEN: &str = include_str!("shaders/raygen.wgsl");
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
@@ -20,9 +23,10 @@ pub const KERNELS: [(&str, &str); 6] = [
     ("indirect", INDIRECT),
 ];
 
-/// The prelude and `common.wgsl`: every declaration the kernels share (layout tests parse this).
+/// The prelude, `common.wgsl` and `bvh.wgsl`: every declaration the kernels share (layout
+/// tests parse this).
 pub fn common_source() -> String {
-    format!("{}\n{}", wgsl_prelude(), COMMON)
+    format!("{}\n{}\n{}", wgsl_prelude(), COMMON, BVH)
 }
 
 /// The whole module of one kernel, as the device compiles it.

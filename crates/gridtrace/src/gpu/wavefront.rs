@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::check_accel;
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
 use super::kernels::Kernel;
 use super::layout::SceneUniform;
@@ -45,7 +44,7 @@ impl GpuRenderer {
         opts: &RenderOptions,
     ) -> Result<(Image, GpuRenderStats)> {
         opts.validate()?;
-        check_accel(opts.accel)?;
+        self.check_serves(opts.accel)?;
         camera.validate().map_err(Error::Scene)?;
         let n_lights = lights.len() as u32;
         let pixels = opts.width * opts.height;

@@ -38,10 +38,14 @@ pub(super) struct BoxRay {
     pub(super) far: [usize; 3],
 }
 
+/// Direction components smaller than this are replaced by it (with their sign) before the
+/// reciprocal (`inv_dir`); the GPU walk does the same.
+pub(crate) const DIR_TINY: f32 = 1e-30;
+
 /// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
 /// widening the exit distance by this factor makes the box test conservative (Ize, "Robust
 /// BVH Ray Traversal", JCGT 2013). A ray that touches a box is never reported as missing it.
-pub(super) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
+pub(crate) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
 
 /// Boxes are searched up to this factor past the current `t_far`. Möller-Trumbore's t is exact
 /// only up to rounding that grows as the ray grazes the triangle's plane: the crossing point of
@@ -50,11 +54,11 @@ pub(super) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 
 /// 0.99997. A box whose entry lies a little past the current hit may thus still hold a hit the
 /// triangle test reports as closer; the triangle test itself still enforces `t < t_far`
 /// exactly, so this costs only extra box visits.
-pub(super) const T_SLOP: f32 = 1.0 + 1.0 / 256.0;
+pub(crate) const T_SLOP: f32 = 1.0 + 1.0 / 256.0;
 
 impl BoxRay {
     pub(super) fn new(ray: &Ray) -> BoxRay {
-        let safe = |d: f32| if d.abs() < 1e-30 { 1e-30f32.copysign(d) } else { d };
+        let safe = |d: f32| if d.abs() < DIR_TINY { DIR_TINY.copysign(d) } else { d };
         let d = ray.dir.to_array().map(safe);
         BoxRay {
             origin: ray.origin.to_array(),

@@ -23,7 +23,7 @@ pub struct BvhNode {
 }
 
 impl BvhNode {
-    pub(super) fn is_leaf(&self) -> bool {
+    pub fn is_leaf(&self) -> bool {
         self.count > 0
     }
 }
@@ -37,7 +37,7 @@ pub(super) const BINS: usize = 16;
 /// in every paired measurement, for 10% more memory (docs/design.md).
 pub(super) const COST_NODE: f32 = 0.5;
 /// Leaves never hold more than this many primitives (coincident centres are split by count).
-pub(super) const MAX_LEAF: usize = 8;
+pub const MAX_LEAF: usize = 8;
 /// Triangles tested at once: the SAH counts a leaf's cost in blocks of this many.
 pub(super) const LEAF_BLOCK: usize = TriAccel4::LANES;
 
@@ -52,7 +52,7 @@ pub(super) fn blocks(n: u32) -> f32 {
 /// make SAH trees arbitrarily deep).
 pub(super) const SAH_DEPTH: usize = 64;
 /// More than the deepest possible tree, in levels.
-pub(super) const STACK: usize = SAH_DEPTH + 33;
+pub(crate) const STACK: usize = SAH_DEPTH + 33;
 
 /// The hierarchy over a set of primitives, given by their boxes and centres.
 #[derive(Debug, Clone, Default)]

@@ -26,8 +26,10 @@ mod tests;
 mod walk;
 mod wide;
 
+pub(crate) use box_test::{DIR_TINY, FAR_SCALE, T_SLOP};
 use build::LEAF_BLOCK;
-pub use build::{Bvh, BvhNode};
+pub(crate) use build::STACK;
+pub use build::{Bvh, BvhNode, MAX_LEAF};
 use walk::Walk;
 use wide::collapse;
 pub use wide::{ChildRef, WIDTH, WideNode};

@@ -15,6 +15,8 @@ struct PointLight { position: array<f32, 3>, _pad0: f32, intensity: array<f32, 3
 // `weight` is the path throughput (shadow rays: the contribution if unoccluded).
 struct RayRec { origin: array<f32, 3>, pixel: u32, dir: array<f32, 3>, t_max: f32, weight: array<f32, 3>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
+// A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
+struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,
@@ -44,6 +46,8 @@ struct IndirectArgs { rays: array<u32, 3>, shadow: array<u32, 3> }
 
 // Set per pipeline: the heat pipeline counts traversal work, the others compile it away.
 override COUNT_WORK: bool = false;
+// Set per pipeline: the BVH pipelines walk `bvh_nodes`, the others the grid.
+override BVH: bool = false;
 
 @group(0) @binding(0) var<uniform> scene: SceneUniform;
 @group(0) @binding(1) var<uniform> camera: CameraFrame;
@@ -61,6 +65,9 @@ override COUNT_WORK: bool = false;
 @group(0) @binding(13) var<storage, read_write> resolve: array<vec2<u32>>;
 @group(0) @binding(14) var<storage, read_write> accum: array<vec4<f32>>;
 @group(0) @binding(15) var<storage, read_write> counters: array<atomic<u32>, COUNTER_SLOTS>;
+// The BVH's nodes (a BVH scene's `refs` are its triangle indices in leaf order; a grid scene
+// binds one unused node here, a BVH scene one unused cell in `cells`).
+@group(0) @binding(16) var<storage, read> bvh_nodes: array<BvhNode>;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }

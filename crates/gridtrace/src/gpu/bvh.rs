@@ -1,0 +1,212 @@
+//! The BVH as the GPU walks it: the CPU's binary SAH tree (`accel::bvh::Bvh`, the tree the
+//! eight-wide CPU nodes are collapsed from) re-laid as two-child nodes (`GpuBvhNode`), and its
+//! stack entries. The traversal is `shaders/bvh.wgsl`.
+//!
+//! Why a binary node and not the CPU's eight-wide one: a GPU thread tests its node's boxes one
+//! after another, so a wide node buys fewer fetches but not fewer box tests, and eight slots
+//! of mostly empty children in a 64-thread group cost bandwidth; the binary node with both
+//! child boxes (Aila and Laine 2009) is the classic GPU layout and the smallest step from what
+//! the builder makes. The other candidates (4/8-wide, compressed wide nodes) are for
+//! when a real GPU can measure them (docs/benchmarks.md says what was measured where).
+
+use super::layout::GpuBvhNode;
+use crate::accel::Aabb;
+use crate::accel::bvh::{Bvh, BvhNode};
+use crate::{Error, Result};
+
+/// A stack entry (and a node's child): an inner node's index, or, with `LEAF_BIT` set, a
+/// leaf: `count - 1` in bits 27..30 and the first of its triangles (an index into the leaf-order
+/// triangle indices, the `refs` buffer) in bits 0..26.
+pub const LEAF_BIT: u32 = 1 << 31;
+/// Where a leaf entry's `count - 1` starts.
+pub const LEAF_COUNT_SHIFT: u32 = 27;
+/// Leaves hold at most this many triangles (the builder's `MAX_LEAF`; three bits of count).
+pub const LEAF_MAX: u32 = 8;
+const _: () = assert!(crate::accel::bvh::MAX_LEAF as u32 <= LEAF_MAX);
+/// Largest first-triangle index a leaf entry can hold.
+pub const LEAF_FIRST_MAX: u32 = (1 << LEAF_COUNT_SHIFT) - 1;
+/// The entry under the bottom of the stack: the walk is over when it pops this. Never a valid
+/// leaf (`encode_leaf` refuses a first index this high).
+pub const STACK_DONE: u32 = u32::MAX;
+
+/// A leaf's entry; `None` if it cannot be encoded (more than `LEAF_MAX` triangles, or a first
+/// index past `LEAF_FIRST_MAX - LEAF_MAX`, which keeps every leaf entry below `STACK_DONE`).
+pub fn encode_leaf(first: u32, count: u32) -> Option<u32> {
+    if count == 0 || count > LEAF_MAX || first > LEAF_FIRST_MAX - LEAF_MAX {
+        return None;
+    }
+    Some(LEAF_BIT | ((count - 1) << LEAF_COUNT_SHIFT) | first)
+}
+
+/// The inverse of `encode_leaf`: `(first, count)`, or `None` for an inner node's entry.
+pub fn decode_leaf(entry: u32) -> Option<(u32, u32)> {
+    (entry & LEAF_BIT != 0).then(|| (entry & LEAF_FIRST_MAX, ((entry >> LEAF_COUNT_SHIFT) & 7) + 1))
+}
+
+/// A box no ray enters (finite, so the slab arithmetic stays free of inf - inf): an unused child.
+const NO_BOX: Aabb = Aabb {
+    min: glam::Vec3::splat(f32::MAX),
+    max: glam::Vec3::splat(-f32::MAX),
+};
+
+/// The GPU nodes of a tree; node 0 is the root. A tree whose root is a leaf (at most a few
+/// triangles, or none) becomes one node with that leaf as child 0 and an unused child 1, so
+/// the walk always starts at an inner node. Siblings' subtrees are laid out depth first, the
+/// first child's right after its parent.
+pub fn gpu_nodes(bvh: &Bvh) -> Result<Vec<GpuBvhNode>> {
+    let too_big = || {
+        Error::InvalidInput(format!(
+            "the GPU BVH addresses at most {} triangles and {} nodes; this mesh has {} triangles",
+            LEAF_FIRST_MAX - LEAF_MAX,
+            LEAF_BIT,
+            bvh.prims.len()
+        ))
+    };
+    let root = &bvh.nodes[0];
+    let mut out = Vec::with_capacity(bvh.nodes.len() / 2 + 1);
+    if root.is_leaf() || bvh.nodes.len() == 1 {
+        // A leaf with no triangles (an empty mesh) gets no box: nothing to enter.
+        let child0 = if root.count == 0 {
+            (NO_BOX, STACK_DONE)
+        } else {
+            (node_box(root), encode_leaf(root.first, root.count).ok_or_else(too_big)?)
+        };
+        out.push(pack(child0, (NO_BOX, STACK_DONE)));
+        return Ok(out);
+    }
+    // (binary node, its GPU slot), depth first. Slots are taken when the parent is written, so
+    // the two children of a node get adjacent slots.
+    out.push(GpuBvhNode::zeroed_node());
+    let mut todo = vec![(0usize, 0usize)];
+    while let Some((b, slot)) = todo.pop() {
+        let n = &bvh.nodes[b];
+        let mut children = [(NO_BOX, STACK_DONE); 2];
+        let mut inner = Vec::with_capacity(2);
+        for (k, c) in [n.first as usize, n.first as usize + 1].into_iter().enumerate() {
+            let cn = &bvh.nodes[c];
+            let entry = if cn.is_leaf() {
+                encode_leaf(cn.first, cn.count).ok_or_else(too_big)?
+            } else {
+                let s = out.len();
+                if s as u64 >= LEAF_BIT as u64 {
+                    return Err(too_big());
+                }
+                out.push(GpuBvhNode::zeroed_node());
+                inner.push((c, s));
+                s as u32
+            };
+            children[k] = (node_box(cn), entry);
+        }
+        out[slot] = pack(children[0], children[1]);
+        // The first child is taken next, so its subtree follows its parent.
+        todo.extend(inner.into_iter().rev());
+    }
+    Ok(out)
+}
+
+fn node_box(n: &BvhNode) -> Aabb {
+    Aabb {
+        min: n.min.into(),
+        max: n.max.into(),
+    }
+}
+
+fn pack((b0, c0): (Aabb, u32), (b1, c1): (Aabb, u32)) -> GpuBvhNode {
+    GpuBvhNode {
+        xy0: [b0.min.x, b0.max.x, b0.min.y, b0.max.y],
+        xy1: [b1.min.x, b1.max.x, b1.min.y, b1.max.y],
+        z01: [b0.min.z, b0.max.z, b1.min.z, b1.max.z],
+        child: [c0, c1, 0, 0],
+    }
+}
+
+impl GpuBvhNode {
+    fn zeroed_node() -> GpuBvhNode {
+        bytemuck::Zeroable::zeroed()
+    }
+
+    /// Child `k`'s box.
+    pub fn child_box(&self, k: usize) -> Aabb {
+        let xy = if k == 0 { self.xy0 } else { self.xy1 };
+        Aabb {
+            min: glam::Vec3::new(xy[0], xy[2], self.z01[2 * k]),
+            max: glam::Vec3::new(xy[1], xy[3], self.z01[2 * k + 1]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::TriAccel;
+    use crate::accel::bvh::BvhAccel;
+    use glam::Vec3;
+
+    fn random_tris(n: usize, seed: u64) -> Vec<TriAccel> {
+        let mut s = seed;
+        let mut r = move || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 40) as f32) / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let c = Vec3::new(r(), r(), r()) * 10.0;
+                let e = |r: &mut dyn FnMut() -> f32| Vec3::new(r() - 0.5, r() - 0.5, r() - 0.5);
+                TriAccel::new(c, c + e(&mut r), c + e(&mut r))
+            })
+            .collect()
+    }
+
+    /// Walks the GPU nodes from the root: every triangle is in exactly one leaf, every leaf's
+    /// triangles lie in every box on its path, and every inner node is reached once.
+    fn check(tris: &[TriAccel]) {
+        let accel = BvhAccel::build(tris);
+        let nodes = gpu_nodes(&accel.bvh).unwrap();
+        let mut seen = vec![0u32; tris.len()];
+        let mut reached = vec![0u32; nodes.len()];
+        let mut todo = vec![(0u32, Aabb::EMPTY, true)];
+        while let Some((entry, parent_box, root)) = todo.pop() {
+            if entry == STACK_DONE {
+                continue;
+            }
+            if let Some((first, count)) = decode_leaf(entry) {
+                for &p in &accel.bvh.prims[first as usize..(first + count) as usize] {
+                    seen[p as usize] += 1;
+                    for v in tris[p as usize].vertices() {
+                        assert!(parent_box.min.cmple(v).all() && v.cmple(parent_box.max).all());
+                    }
+                }
+                continue;
+            }
+            reached[entry as usize] += 1;
+            let n = nodes[entry as usize];
+            for k in 0..2 {
+                let b = n.child_box(k);
+                if !root {
+                    assert!(parent_box.min.cmple(b.min).all() || b.min.x > b.max.x);
+                }
+                todo.push((n.child[k], b, false));
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1), "every triangle in one leaf");
+        assert!(reached.iter().all(|&c| c == 1), "every node reached once");
+    }
+
+    #[test]
+    fn every_triangle_in_one_leaf() {
+        for n in [0, 1, 3, 8, 9, 100, 5000] {
+            check(&random_tris(n, n as u64 + 7));
+        }
+    }
+
+    #[test]
+    fn leaf_entries_round_trip() {
+        assert_eq!(decode_leaf(encode_leaf(0, 1).unwrap()), Some((0, 1)));
+        assert_eq!(decode_leaf(encode_leaf(12345, 8).unwrap()), Some((12345, 8)));
+        assert_eq!(decode_leaf(77), None);
+        assert!(encode_leaf(0, 0).is_none() && encode_leaf(0, 9).is_none());
+        assert!(encode_leaf(LEAF_FIRST_MAX, 1).is_none());
+        let last = encode_leaf(LEAF_FIRST_MAX - LEAF_MAX, LEAF_MAX).unwrap();
+        assert!(last < STACK_DONE);
+    }
+}

@@ -1,0 +1,126 @@
+// BVH traversal: closest and any hit over the two-child nodes of gpu/bvh.rs, mirroring the CPU
+// BVH's walk (accel/bvh/walk.rs) in its box test and its limits, and using the same triangle
+// test as the grid (`intersect_tri`).
+//
+// The loop is Aila and Laine's "while-while" (2009): an inner loop descends inner nodes until
+// it holds a leaf, then the leaf's triangles are tested, so the threads of a group tend to be
+// in the same phase. Both child boxes come with the node; where the ray enters both, the
+// farther goes on the stack and the walk goes on in the nearer.
+//
+// The stack is a private array of BVH_STACK entries: the builder bounds the tree's depth below
+// it for any input (SAH splits to depth 64, median splits after), and the upload checks the
+// depth, so a push can never overflow; the guard below only keeps the index in bounds. A
+// private array indexed at run time lives in the thread's local memory on GPUs (cached in L1);
+// a walk touches only its top few entries. Workgroup memory (64 threads x 97 entries = 25 KiB)
+// would cap occupancy, and a short stack with restarts needs no guarantee this tree lacks.
+
+struct BoxPair { t0: f32, t1: f32, hit0: bool, hit1: bool }
+
+// 1 / d with zero components replaced by +-DIR_TINY first (BoxRay::new): the slabs never
+// compute 0 * inf, and a box beside a parallel ray gets an entry beyond 1e20.
+fn bvh_inv_dir(d: vec3<f32>) -> vec3<f32> {
+    let sign_bits = bitcast<vec3<u32>>(d) & vec3<u32>(0x80000000u);
+    let tiny = bitcast<vec3<f32>>(sign_bits | vec3<u32>(bitcast<u32>(DIR_TINY)));
+    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(DIR_TINY));
+}
+
+// Entry distances into both child boxes within [t_min, t_max] (BoxRay::enter): per axis the
+// near plane is the low one where the ray goes up the axis; the exit is widened by FAR_SCALE so
+// that a ray touching a box is never reported as missing it.
+fn bvh_enter(n: BvhNode, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -> BoxPair {
+    let up = inv >= vec3<f32>(0.0);
+    let a0 = (vec3<f32>(n.xy0.x, n.xy0.z, n.z01.x) - o) * inv;
+    let b0 = (vec3<f32>(n.xy0.y, n.xy0.w, n.z01.y) - o) * inv;
+    let a1 = (vec3<f32>(n.xy1.x, n.xy1.z, n.z01.z) - o) * inv;
+    let b1 = (vec3<f32>(n.xy1.y, n.xy1.w, n.z01.w) - o) * inv;
+    let e0 = max(t_min, max3(select(b0, a0, up)));
+    let x0 = min(t_max, min3(select(a0, b0, up)) * FAR_SCALE);
+    let e1 = max(t_min, max3(select(b1, a1, up)));
+    let x1 = min(t_max, min3(select(a1, b1, up)) * FAR_SCALE);
+    return BoxPair(e0, e1, e0 <= x0, e1 <= x1);
+}
+
+fn max3(v: vec3<f32>) -> f32 { return max(v.x, max(v.y, v.z)); }
+
+// The entry the walk goes on with after a node the ray left: the top of the stack, or
+// STACK_DONE when it is empty.
+fn bvh_pop(stack: ptr<function, array<u32, BVH_STACK>>, sp: ptr<function, u32>) -> u32 {
+    if (*sp == 0u) { return STACK_DONE; }
+    *sp -= 1u;
+    return (*stack)[*sp];
+}
+
+// Descends from `entry` through inner nodes (pushing the farther of two entered children)
+// until it holds a leaf or the walk is over; returns that entry. `t_box` bounds the boxes.
+fn bvh_descend(entry_in: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_box: f32,
+               stack: ptr<function, array<u32, BVH_STACK>>, sp: ptr<function, u32>, work: ptr<function, u32>) -> u32 {
+    var entry = entry_in;
+    // Leaf entries and STACK_DONE have LEAF_BIT set.
+    while (entry < LEAF_BIT) {
+        if (COUNT_WORK) { *work += 1u; }
+        let n = bvh_nodes[entry];
+        let h = bvh_enter(n, o, inv, t_min, t_box);
+        if (h.hit0 && h.hit1) {
+            let first0 = h.t0 <= h.t1;
+            if (*sp < BVH_STACK) {
+                (*stack)[*sp] = select(n.child.x, n.child.y, first0);
+                *sp += 1u;
+            }
+            entry = select(n.child.y, n.child.x, first0);
+        } else if (h.hit0) {
+            entry = n.child.x;
+        } else if (h.hit1) {
+            entry = n.child.y;
+        } else {
+            entry = bvh_pop(stack, sp);
+        }
+    }
+    return entry;
+}
+
+// Closest hit with t_min < t < t_max; mirrors BvhAccel::intersect. `work` gets the cost (nodes
+// visited + triangle tests) when COUNT_WORK is set.
+fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(t_max, MISS, 0.0, 0.0);
+    let inv = bvh_inv_dir(d);
+    var stack: array<u32, BVH_STACK>;
+    var sp = 0u;
+    var entry = 0u;
+    loop {
+        // The box bound follows the closest hit so far, T_SLOP past it (see walk.rs: the
+        // triangle test's t may be a little short of where the ray enters the triangle's box).
+        entry = bvh_descend(entry, o, inv, t_min, best.t * T_SLOP, &stack, &sp, work);
+        if (entry == STACK_DONE) { break; }
+        let first = entry & LEAF_FIRST_MAX;
+        let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
+        for (var k = first; k < first + count; k++) {
+            if (COUNT_WORK) { *work += 1u; }
+            let tri = refs[k];
+            let h = intersect_tri(tris[tri], o, d, t_min, best.t);
+            if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
+        }
+        entry = bvh_pop(&stack, &sp);
+    }
+    if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    return best;
+}
+
+// Any hit with t_min < t < t_max; mirrors BvhAccel::occluded.
+fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    let inv = bvh_inv_dir(d);
+    var stack: array<u32, BVH_STACK>;
+    var sp = 0u;
+    var entry = 0u;
+    var work = 0u;
+    loop {
+        entry = bvh_descend(entry, o, inv, t_min, t_max * T_SLOP, &stack, &sp, &work);
+        if (entry == STACK_DONE) { break; }
+        let first = entry & LEAF_FIRST_MAX;
+        let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
+        for (var k = first; k < first + count; k++) {
+            if (intersect_tri(tris[refs[k]], o, d, t_min, t_max).w != 0.0) { return true; }
+        }
+        entry = bvh_pop(&stack, &sp);
+    }
+    return false;
+}

@@ -1,0 +1,213 @@
+//! The GPU BVH against brute force on the CPU, closest and any hit, on a random soup and on
+//! degenerate inputs: one triangle, one plane, a million copies of one triangle, a mesh a
+//! million times longer than wide. (The built-in scenes' GPU BVH is checked against the CPU
+//! BVH and its images against the CPU's in tests/gpu.rs; its edge leaks in tests/edges.rs.)
+//!
+//! Fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1 skips knowingly.
+
+use std::sync::Mutex;
+
+use glam::Vec3;
+use gridtrace::Backend;
+use gridtrace::accel::{Accel, AccelKind, Hit, Ray, Resolution, TriAccel, brute_force_intersect, brute_force_occluded};
+use gridtrace::query::{QueryOptions, TraceMesh};
+use gridtrace::testing::{flat_scene, ray_set, triangle_soup};
+use rayon::prelude::*;
+
+static GPU_LOCK: Mutex<()> = Mutex::new(());
+
+fn skip() -> bool {
+    let s = std::env::var_os("GRIDTRACE_SKIP_GPU").is_some();
+    if s {
+        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
+    }
+    s
+}
+
+/// The triangles as a mesh traced by the BVH on the GPU.
+fn gpu_bvh_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> TraceMesh {
+    let opts = QueryOptions {
+        accel: AccelKind::Bvh,
+        backend: Backend::Gpu,
+        ..Default::default()
+    };
+    TraceMesh::from_arrays(vertices, faces, &opts)
+        .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"))
+}
+
+/// `testing::ray_set`'s adversarial rays (drawn from a grid over the mesh's triangles).
+fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
+    let grid = Accel::build(
+        mesh.prepared().accel.tris.clone(),
+        AccelKind::Grid,
+        Resolution::default(),
+    )
+    .unwrap();
+    ray_set(&grid, n, seed)
+}
+
+fn soup_arrays(tris: &[TriAccel]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let vertices = tris.iter().flat_map(|t| t.vertices().map(|v| v.to_array())).collect();
+    let faces = (0..tris.len() as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    (vertices, faces)
+}
+
+/// GPU closest and any hits equal brute force over the mesh's own (kept) triangles: same hit
+/// or miss, t within a relative 1e-4 (the GPU compiler may fuse multiply-adds). Any hit is
+/// asked twice: unbounded, and with t_max halfway to the closest hit (must be false). At most
+/// `rays / 10,000` rays through exact edges may round either way (as in tests/gpu.rs).
+fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
+    let tris = &mesh.prepared().accel.tris;
+    let want: Vec<Hit> = rays
+        .par_iter()
+        .map(|r| brute_force_intersect(tris, r, 0.0, f32::INFINITY))
+        .collect();
+    let got = mesh
+        .intersect_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY)
+        .unwrap();
+    let occ = mesh.occluded_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY).unwrap();
+    let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
+    let bad: Vec<usize> = (0..rays.len())
+        .filter(|&i| {
+            let (w, g) = (&want[i], &got[i]);
+            w.is_hit() != g.is_hit() || (w.is_hit() && !close(w.t, g.t)) || occ[i] != w.is_hit()
+        })
+        .collect();
+    let allowed = rays.len() / 10_000;
+    assert!(
+        bad.len() <= allowed,
+        "{name}: {} of {} rays disagree with brute force; first: {:?}",
+        bad.len(),
+        rays.len(),
+        bad.iter()
+            .take(3)
+            .map(|&i| (rays[i], want[i], got[i]))
+            .collect::<Vec<_>>()
+    );
+    // Bounded any hit: nothing lies before half the closest hit (brute force agrees).
+    let hit_rays: Vec<(Ray, f32)> = rays
+        .iter()
+        .zip(&want)
+        .filter(|(_, h)| h.is_hit() && h.t > 1e-3)
+        .map(|(r, h)| (*r, h.t * 0.5))
+        .collect();
+    for chunk in hit_rays.chunk_by(|a, b| a.1 == b.1) {
+        let rs: Vec<Ray> = chunk.iter().map(|c| c.0).collect();
+        let t_max = chunk[0].1;
+        let o = mesh.occluded_rays_with(Backend::Gpu, &rs, 0.0, t_max).unwrap();
+        let wrong = rs
+            .iter()
+            .zip(&o)
+            .filter(|(r, o)| **o != brute_force_occluded(tris, r, 0.0, t_max))
+            .count();
+        assert!(
+            wrong <= allowed.max(0),
+            "{name}: {wrong} bounded any-hit results disagree"
+        );
+    }
+    let hits = want.iter().filter(|h| h.is_hit()).count();
+    eprintln!("{name}: {} rays, {hits} hits, {} disagree", rays.len(), bad.len());
+    assert!(hits > 0, "{name}: the ray set must hit something");
+}
+
+#[test]
+fn soup_100k_rays() {
+    if skip() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let (v, f) = soup_arrays(&triangle_soup(3000, 0xB7));
+    let mesh = gpu_bvh_mesh(&v, &f);
+    let rays = rays_for(&mesh, 100_000, 0xB8);
+    check("soup", &mesh, &rays);
+}
+
+#[test]
+fn one_triangle_and_one_plane() {
+    if skip() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let mesh = gpu_bvh_mesh(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[[0, 1, 2]]);
+    let rays = rays_for(&mesh, 20_000, 1);
+    check("one triangle", &mesh, &rays);
+    let (v, f) = soup_arrays(&flat_scene(5));
+    let mesh = gpu_bvh_mesh(&v, &f);
+    let rays = rays_for(&mesh, 20_000, 2);
+    check("one plane", &mesh, &rays);
+}
+
+/// A strip a million units long and one wide: boxes of every aspect, rays at every angle.
+#[test]
+fn aspect_ratio_one_million() {
+    if skip() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let n = 1000u32;
+    let mut v = Vec::new();
+    let mut f = Vec::new();
+    for i in 0..=n {
+        let x = 1e6 * i as f32 / n as f32;
+        // A gentle wave, so the strip is not planar.
+        let z = (i as f32 * 0.37).sin() * 0.3;
+        v.push([x, 0.0, z]);
+        v.push([x, 1.0, -z]);
+    }
+    for i in 0..n {
+        let a = 2 * i;
+        f.push([a, a + 2, a + 1]);
+        f.push([a + 1, a + 2, a + 3]);
+    }
+    let mesh = gpu_bvh_mesh(&v, &f);
+    let rays = rays_for(&mesh, 20_000, 3);
+    check("1e6:1 strip", &mesh, &rays);
+}
+
+/// A million copies of one triangle: the SAH cannot split them (one centre), the builder splits
+/// by count, and a ray through the triangle must visit every leaf. No hang, no stack overflow,
+/// and the hit is the triangle's.
+#[test]
+fn a_million_copies_of_one_triangle() {
+    if skip() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let v = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let f = vec![[0u32, 1, 2]; 1_000_000];
+    let mesh = gpu_bvh_mesh(&v, &f);
+    assert_eq!(mesh.triangle_count(), 1_000_000);
+    // 16 rays through the triangle (every one visits every leaf), 16 beside it, 16 along it.
+    let mut rays = Vec::new();
+    for i in 0..16 {
+        let s = i as f32 / 16.0;
+        rays.push(Ray::new(
+            Vec3::new(0.1 + 0.4 * s, 0.3 - 0.2 * s, 2.0),
+            Vec3::new(0.01, 0.02, -1.0),
+        ));
+        rays.push(Ray::new(Vec3::new(1.0 + s, 1.0, 2.0), Vec3::new(0.0, 0.0, -1.0)));
+        rays.push(Ray::new(Vec3::new(-1.0, 0.2 + s * 0.01, 0.0), Vec3::new(1.0, 0.0, 0.0)));
+    }
+    let got = mesh
+        .intersect_rays_with(Backend::Gpu, &rays, 0.0, f32::INFINITY)
+        .unwrap();
+    let occ = mesh
+        .occluded_rays_with(Backend::Gpu, &rays, 0.0, f32::INFINITY)
+        .unwrap();
+    let tri = TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y);
+    for (i, r) in rays.iter().enumerate() {
+        let want = tri.intersect(r.origin, r.dir, 0.0, f32::INFINITY);
+        assert_eq!(got[i].is_hit(), want.is_some(), "ray {i}: {r:?} -> {:?}", got[i]);
+        assert_eq!(occ[i], want.is_some(), "ray {i}");
+        if let Some(w) = want {
+            assert!(
+                (got[i].t - w.t).abs() <= 1e-4 * w.t,
+                "ray {i}: t {} vs {}",
+                got[i].t,
+                w.t
+            );
+            assert!((got[i].tri as usize) < 1_000_000);
+        }
+    }
+    assert_eq!(got.iter().filter(|h| h.is_hit()).count(), 16);
+}
