@@ -326,12 +326,11 @@ pub struct MatrixResult {
 /// and per row.
 pub fn run_matrix(
     cfg: &BenchConfig,
-    gpu: Option<GpuContext>,
+    gpu: Option<std::sync::Arc<GpuContext>>,
     cpu: bool,
     log: &mut dyn FnMut(&str),
 ) -> Result<MatrixResult> {
     let data_dir = find_data_dir(cfg.data_dir.as_deref());
-    let gpu = gpu.map(std::sync::Arc::new);
     let mut out = MatrixResult::default();
     for name in &cfg.scenes {
         let bs = match build_paper_scene(name, data_dir.as_deref()) {
@@ -361,18 +360,18 @@ pub fn run_matrix(
             info.grid.choice,
             bs.description
         ));
+        // The grid serves grid and pc; the BVH rows get their own structure, built once.
+        let bvh = match cfg.accels.contains(&AccelKind::Bvh) {
+            true => Some(prepared.with_accel(AccelKind::Bvh, res)?),
+            false => None,
+        };
+        let for_accel = |accel: AccelKind| bvh.as_ref().filter(|_| accel == AccelKind::Bvh).unwrap_or(&prepared);
         if cpu {
-            // The grid serves grid and pc; the BVH rows get their own structure, built once.
-            let bvh = match cfg.accels.contains(&AccelKind::Bvh) {
-                true => Some(prepared.with_accel(AccelKind::Bvh, res)?),
-                false => None,
-            };
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
                     for &accel in &cfg.accels {
                         let opts = RenderOptions::new(w, h, mode, accel);
-                        let p = bvh.as_ref().filter(|_| accel == AccelKind::Bvh).unwrap_or(&prepared);
-                        let row = cpu_row(&bs.name, p, &opts, cfg)?;
+                        let row = cpu_row(&bs.name, for_accel(accel), &opts, cfg)?;
                         log(&row_line(&row));
                         out.rows.push(row);
                     }
@@ -380,16 +379,28 @@ pub fn run_matrix(
             }
         }
         if let Some(ctx) = &gpu {
-            let mut r = GpuRenderer::new(ctx.clone(), &prepared)?;
+            // One renderer per structure uploaded: the grid's (grid, pc) and the BVH's.
+            let mut grid_gpu = GpuRenderer::new(ctx.clone(), &prepared)?;
+            let mut bvh_gpu = match &bvh {
+                Some(b) => Some(GpuRenderer::new(ctx.clone(), b)?),
+                None => None,
+            };
             let mut largest = 0u64;
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
-                    // The BVH has no GPU kernels: its rows are CPU rows only.
-                    for &accel in cfg.accels.iter().filter(|&&a| a != AccelKind::Bvh) {
+                    for &accel in &cfg.accels {
                         let opts = RenderOptions::new(w, h, mode, accel);
-                        let row = gpu_row(&bs.name, &prepared, &mut r, &opts, cfg)?;
+                        let r = match bvh_gpu.as_mut() {
+                            Some(b) if accel == AccelKind::Bvh => b,
+                            _ => &mut grid_gpu,
+                        };
+                        let row = gpu_row(&bs.name, for_accel(accel), r, &opts, cfg)?;
                         log(&row_line(&row));
                         out.rows.push(row);
+                        if accel == AccelKind::Bvh {
+                            // The scene's memory is the paper's structure's (the grid's).
+                            continue;
+                        }
                         let mem: BTreeMap<String, u64> =
                             r.memory().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
                         let total = mem.values().sum();

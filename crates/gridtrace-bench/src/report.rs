@@ -303,14 +303,15 @@ pub fn markdown(report: &BenchReport) -> String {
         }
     }
     if !report.query_study.is_empty() {
-        md.push_str("\n## Ray-query study (incoherent rays, `TraceMesh::intersect`, CPU)\n\n| scene | triangles | accel | build ms | threads | hits | cells or nodes/ray | tri tests/ray | best ms | Mrays/s |\n|---|---:|---|---:|---:|---:|---:|---:|---:|---:|\n");
+        md.push_str("\n## Ray-query study (incoherent rays; CPU: `TraceMesh::intersect`, GPU: `GpuRenderer::intersect`)\n\n| scene | triangles | accel | backend | build ms | threads | hits | cells or nodes/ray | tri tests/ray | best ms | Mrays/s |\n|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
         for r in &report.query_study {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.1} | {} | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} |",
+                "| {} | {} | {} | {} | {:.1} | {} | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} |",
                 r.scene,
                 r.triangles,
                 r.accel,
+                r.backend,
                 r.build_ms,
                 r.threads,
                 r.hit_fraction * 100.0,

@@ -391,12 +391,15 @@ pub struct QueryStudyRow {
     pub scene: String,
     pub triangles: usize,
     pub accel: String,
+    /// cpu or gpu.
+    pub backend: String,
     /// Building the acceleration (grid, plus the BVH for `bvh`), milliseconds.
     pub build_ms: f64,
     pub rays: usize,
     pub threads: usize,
     pub hit_fraction: f64,
-    /// Grid cells, or BVH nodes (four-wide), visited per ray.
+    /// Grid cells, or BVH nodes visited per ray (the CPU walks eight-wide nodes, the GPU
+    /// two-wide ones).
     pub cells_per_ray: f64,
     pub tri_tests_per_ray: f64,
     #[serde(flatten)]
@@ -428,17 +431,54 @@ pub fn incoherent_rays(bounds: gridtrace::accel::Aabb, n: usize, seed: u64) -> (
     (origins, dirs)
 }
 
-/// Times `TraceMesh::intersect` (the whole library call, as Python makes it: validation,
-/// parallel traversal, output arrays) on `rays` incoherent rays per mesh, for every
-/// acceleration, on the CPU with the current rayon thread count.
+/// Work per ray of one structure's walk, counted on a sample of the rays: cells (grid, pc) or
+/// nodes (BVH) visited, and triangle tests. On the GPU the BVH is walked as two-wide nodes
+/// (`gpu::bvh::walk` counts that walk on the CPU, step for step); the grids walk alike on both.
+fn work_per_ray(
+    tm: &gridtrace::query::TraceMesh,
+    accel: AccelKind,
+    on_gpu: bool,
+    o: &[[f32; 3]],
+    d: &[[f32; 3]],
+) -> (f64, f64) {
+    use gridtrace::accel::{Ray, TraversalCounters};
+    let sample = o.len().min(100_000);
+    let scene = tm.prepared();
+    let mut c = TraversalCounters::default();
+    let gpu_bvh = match (on_gpu, scene.accel.bvh()) {
+        (true, Some(b)) => gridtrace::gpu::bvh::gpu_nodes(&b.bvh).ok().map(|n| (n, &b.bvh.prims)),
+        _ => None,
+    };
+    for i in 0..sample {
+        let r = Ray::new(o[i].into(), d[i].into());
+        match &gpu_bvh {
+            Some((nodes, prims)) => {
+                gridtrace::gpu::bvh::walk::<false, _>(nodes, prims, &scene.accel.tris, &r, 0.0, f32::INFINITY, &mut c);
+            }
+            None => {
+                scene.accel.intersect(&r, 0.0, f32::INFINITY, accel, &mut c);
+            }
+        }
+    }
+    let n = sample.max(1) as f64;
+    (c.cells as f64 / n, c.tri_tests as f64 / n)
+}
+
+/// Times ray queries with `rays` incoherent rays per mesh, for every acceleration: on the CPU
+/// (`cpu`) the whole library call as Python makes it (`TraceMesh::intersect`: validation,
+/// parallel traversal, output arrays) with the current rayon thread count, and on the GPU
+/// (`gpu`) the batch query (`GpuRenderer::intersect`: upload, dispatches, read-back), on the
+/// same rays.
 pub fn query_study(
     meshes: &[(String, gridtrace::Mesh)],
     rays: usize,
+    cpu: bool,
+    gpu: Option<&std::sync::Arc<gridtrace::gpu::GpuContext>>,
     warmup: u32,
     reps: u32,
     log: &mut dyn FnMut(&str),
 ) -> Result<Vec<QueryStudyRow>> {
-    use gridtrace::accel::{Ray, TraversalCounters};
+    use gridtrace::accel::Ray;
     use gridtrace::query::{Backend, QueryOptions, TraceMesh};
     let mut rows = Vec::new();
     for (name, mesh) in meshes {
@@ -452,53 +492,74 @@ pub fn query_study(
             let tm = TraceMesh::from_mesh(mesh.clone(), &opts)?;
             let build_ms = t0.elapsed().as_secs_f64() * 1e3;
             let (o, d) = incoherent_rays(tm.prepared().accel.bounds(), rays, 7);
-            let mut times = Vec::new();
-            let mut hits = 0;
-            for rep in 0..warmup + reps {
-                let t0 = std::time::Instant::now();
-                let h = tm.intersect(&o, &d, 0.0, f32::INFINITY)?;
-                let ms = t0.elapsed().as_secs_f64() * 1e3;
-                if rep >= warmup {
-                    times.push(ms);
-                }
-                hits = h.t.iter().filter(|t| t.is_finite()).count();
+            let mut runs: Vec<(&str, Vec<f64>, usize)> = Vec::new();
+            if cpu {
+                let (times, hits) = time_reps(warmup, reps, || {
+                    let h = tm.intersect(&o, &d, 0.0, f32::INFINITY)?;
+                    Ok(h.t.iter().filter(|t| t.is_finite()).count())
+                })?;
+                runs.push(("cpu", times, hits));
             }
-            // Work per ray, counted on a sample (single-ray traversal: the same work as the
-            // batch).
-            let sample = rays.min(100_000);
-            let mut c = TraversalCounters::default();
-            for i in 0..sample {
-                let r = Ray::new(o[i].into(), d[i].into());
-                tm.prepared().accel.intersect(&r, 0.0, f32::INFINITY, accel, &mut c);
+            if let Some(ctx) = gpu {
+                let mut r = gridtrace::gpu::GpuRenderer::new(ctx.clone(), tm.prepared())?;
+                let ray_vec: Vec<Ray> = o
+                    .iter()
+                    .zip(&d)
+                    .map(|(a, b)| Ray::new((*a).into(), (*b).into()))
+                    .collect();
+                let (times, hits) = time_reps(warmup, reps, || {
+                    let h = r.intersect(&ray_vec, 0.0, f32::INFINITY, accel)?;
+                    Ok(h.iter().filter(|h| h.is_hit()).count())
+                })?;
+                runs.push(("gpu", times, hits));
             }
-            let summary = Summary::of(&times);
-            let row = QueryStudyRow {
-                scene: name.clone(),
-                triangles: tm.triangle_count(),
-                accel: accel.name().into(),
-                build_ms,
-                rays,
-                threads: rayon::current_num_threads(),
-                hit_fraction: hits as f64 / rays.max(1) as f64,
-                cells_per_ray: c.cells as f64 / sample.max(1) as f64,
-                tri_tests_per_ray: c.tri_tests as f64 / sample.max(1) as f64,
-                summary,
-                mrays_per_s: rays as f64 / (summary.best_ms * 1e3).max(1e-9),
-            };
-            log(&format!(
-                "  query-study {:<16} {:<4} build {:>7.1} ms  {:>6.2} cells/nodes  {:>6.2} tri tests per ray  best {:>8.2} ms  {:>6.2} Mrays/s",
-                row.scene,
-                row.accel,
-                row.build_ms,
-                row.cells_per_ray,
-                row.tri_tests_per_ray,
-                summary.best_ms,
-                row.mrays_per_s
-            ));
-            rows.push(row);
+            for (backend, times, hits) in runs {
+                let (cells_per_ray, tri_tests_per_ray) = work_per_ray(&tm, accel, backend == "gpu", &o, &d);
+                let summary = Summary::of(&times);
+                let row = QueryStudyRow {
+                    scene: name.clone(),
+                    triangles: tm.triangle_count(),
+                    accel: accel.name().into(),
+                    backend: backend.into(),
+                    build_ms,
+                    rays,
+                    threads: rayon::current_num_threads(),
+                    hit_fraction: hits as f64 / rays.max(1) as f64,
+                    cells_per_ray,
+                    tri_tests_per_ray,
+                    summary,
+                    mrays_per_s: rays as f64 / (summary.best_ms * 1e3).max(1e-9),
+                };
+                log(&format!(
+                    "  query-study {:<16} {:<4} {} build {:>7.1} ms  {:>6.2} cells/nodes  {:>6.2} tri tests per ray  best {:>8.2} ms  {:>7.2} Mrays/s",
+                    row.scene,
+                    row.accel,
+                    row.backend,
+                    row.build_ms,
+                    row.cells_per_ray,
+                    row.tri_tests_per_ray,
+                    summary.best_ms,
+                    row.mrays_per_s
+                ));
+                rows.push(row);
+            }
         }
     }
     Ok(rows)
+}
+
+/// Runs `f` `warmup + reps` times; the timed runs' milliseconds and the last run's result.
+fn time_reps(warmup: u32, reps: u32, mut f: impl FnMut() -> Result<usize>) -> Result<(Vec<f64>, usize)> {
+    let mut times = Vec::new();
+    let mut out = 0;
+    for rep in 0..warmup + reps {
+        let t0 = std::time::Instant::now();
+        out = f()?;
+        if rep >= warmup {
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    Ok((times, out))
 }
 
 /// What `--export-rays` / `--export-hits` wrote.

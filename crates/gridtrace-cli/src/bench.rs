@@ -37,8 +37,7 @@ pub struct BenchArgs {
     /// Image sizes in pixels, comma separated, each WxH or N for N x N (default: 256,512,768).
     #[arg(long, value_name = "WxH|N", value_delimiter = ',', value_parser = parse_res, allow_hyphen_values = true)]
     res: Vec<(u32, u32)>,
-    /// Accelerations, comma separated: grid, pc, bvh (default: grid and pc, the paper's; the
-    /// BVH runs on the CPU only).
+    /// Accelerations, comma separated: grid, pc, bvh (default: grid and pc, the paper's).
     #[arg(long, value_delimiter = ',', value_parser = accel_parser())]
     accel: Vec<AccelKind>,
     /// Modes, comma separated: cast, shadow, trace (default: all three).
@@ -185,7 +184,7 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
     } else {
         BenchBackendArg::Auto
     });
-    let gpu = open_gpu(backend)?;
+    let gpu = open_gpu(backend)?.map(std::sync::Arc::new);
     let run_cpu = backend != BenchBackendArg::Gpu;
     let mut backends = Vec::new();
     if run_cpu {
@@ -194,7 +193,7 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
     if gpu.is_some() {
         backends.push(BenchBackend::Gpu);
     }
-    let machine = Machine::detect(gpu.as_ref());
+    let machine = Machine::detect(gpu.as_deref());
     println!(
         "CPU: {} ({} logical cores, {} threads); OS: {}",
         machine.cpu_model, machine.logical_cores, machine.threads, machine.os
@@ -219,7 +218,7 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
         cfg.reps
     );
     let mut log = |s: &str| println!("{s}");
-    let matrix = bench::run_matrix(&cfg, gpu, run_cpu, &mut log)?;
+    let matrix = bench::run_matrix(&cfg, gpu.clone(), run_cpu, &mut log)?;
     let mut report = BenchReport::new(&cfg, &backends, machine, matrix);
 
     let first_res = cfg.resolutions[0];
@@ -316,7 +315,15 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
                 }
             }
         }
-        report.query_study = studies::query_study(&meshes, a.query_rays, cfg.warmup, cfg.reps, &mut log)?;
+        report.query_study = studies::query_study(
+            &meshes,
+            a.query_rays,
+            run_cpu,
+            gpu.as_ref(),
+            cfg.warmup,
+            cfg.reps,
+            &mut log,
+        )?;
     }
     if a.export_rays.is_some() || a.export_hits.is_some() {
         let mode = [Mode::Trace, Mode::Shadow, Mode::Cast]

@@ -24,7 +24,7 @@ pub struct SceneArgs {
 #[derive(Args, Debug, Clone)]
 pub struct GridArgs {
     /// Acceleration: grid (plain uniform grid), pc (grid with proximity clouds) or bvh (a
-    /// bounding volume hierarchy, CPU only).
+    /// bounding volume hierarchy); each runs on the CPU and the GPU.
     #[arg(long, default_value = "grid", value_parser = accel_parser())]
     pub accel: AccelKind,
     /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.

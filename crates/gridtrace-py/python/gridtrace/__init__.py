@@ -115,7 +115,7 @@ class Mesh:
 
     ``vertices`` is an (N, 3) float array, ``faces`` an (M, 3) integer array of vertex indices.
     ``accel`` is ``"grid"``, ``"pc"`` (proximity clouds) or ``"bvh"`` (a bounding volume hierarchy,
-    CPU only: fastest for incoherent rays), ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
+    the fastest for incoherent rays; on the GPU too), ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (GPU if present, else CPU), ``"gpu"`` or ``"cpu"``.
     Degenerate faces are kept in the numbering but can never be hit.
     """

@@ -9,9 +9,11 @@
 //! the builder makes. The other candidates (4/8-wide, compressed wide nodes) are for
 //! when a real GPU can measure them (docs/benchmarks.md says what was measured where).
 
+use glam::Vec3;
+
 use super::layout::GpuBvhNode;
-use crate::accel::Aabb;
-use crate::accel::bvh::{Bvh, BvhNode};
+use crate::accel::bvh::{Bvh, BvhNode, DIR_TINY, FAR_SCALE, STACK, T_SLOP};
+use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
 
 /// A stack entry (and a node's child): an inner node's index, or, with `LEAF_BIT` set, a
@@ -135,6 +137,85 @@ impl GpuBvhNode {
     }
 }
 
+/// The walk of `shaders/bvh.wgsl` on the CPU, step for step: the same box test, visiting order
+/// and stack. It is the layout's oracle where no GPU is (unit tests), and it counts the work of
+/// the GPU's walk (`counters.cell()` per node, `tri_test()` per triangle) for the benchmarks,
+/// which the CPU's eight-wide BVH cannot tell. `ANY`: stop at the first hit.
+pub fn walk<const ANY: bool, C: Counters>(
+    nodes: &[GpuBvhNode],
+    prims: &[u32],
+    tris: &[TriAccel],
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    counters: &mut C,
+) -> Hit {
+    let o = ray.origin;
+    let safe = |d: f32| if d.abs() < DIR_TINY { DIR_TINY.copysign(d) } else { d };
+    let inv = Vec3::ONE / Vec3::from(ray.dir.to_array().map(safe));
+    let up = inv.cmpge(Vec3::ZERO);
+    let mut best = Hit { t: t_max, ..Hit::MISS };
+    let mut stack = [0u32; STACK];
+    let mut sp = 0usize;
+    let pop = |stack: &[u32; STACK], sp: &mut usize| {
+        if *sp == 0 {
+            STACK_DONE
+        } else {
+            *sp -= 1;
+            stack[*sp]
+        }
+    };
+    let mut entry = 0u32;
+    loop {
+        let t_box = if ANY { t_max } else { best.t } * T_SLOP;
+        while entry & LEAF_BIT == 0 {
+            counters.cell();
+            let n = &nodes[entry as usize];
+            let enter = |k: usize| {
+                let b = n.child_box(k);
+                let (a, c) = ((b.min - o) * inv, (b.max - o) * inv);
+                let near = Vec3::select(up, a, c);
+                let far = Vec3::select(up, c, a);
+                let e = t_min.max(near.max_element());
+                let x = t_box.min(far.min_element() * FAR_SCALE);
+                (e, e <= x)
+            };
+            let ((t0, h0), (t1, h1)) = (enter(0), enter(1));
+            entry = match (h0, h1) {
+                (true, true) => {
+                    let first0 = t0 <= t1;
+                    stack[sp] = n.child[first0 as usize];
+                    sp += 1;
+                    n.child[!first0 as usize]
+                }
+                (true, false) => n.child[0],
+                (false, true) => n.child[1],
+                (false, false) => pop(&stack, &mut sp),
+            };
+        }
+        let Some((first, count)) = decode_leaf(entry).filter(|_| entry != STACK_DONE) else {
+            break;
+        };
+        for k in first..first + count {
+            counters.tri_test();
+            let tri = prims[k as usize];
+            if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
+                best = Hit {
+                    t: h.t,
+                    tri,
+                    u: h.u,
+                    v: h.v,
+                };
+                if ANY {
+                    return best;
+                }
+            }
+        }
+        entry = pop(&stack, &mut sp);
+    }
+    if best.tri == u32::MAX { Hit::MISS } else { best }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -196,6 +277,30 @@ mod tests {
     fn every_triangle_in_one_leaf() {
         for n in [0, 1, 3, 8, 9, 100, 5000] {
             check(&random_tris(n, n as u64 + 7));
+        }
+    }
+
+    /// The CPU mirror of the GPU walk equals brute force on adversarial rays (closest and any
+    /// hit): the layout and the walk's logic, checked without a GPU.
+    #[test]
+    fn mirror_walk_equals_brute_force() {
+        use crate::accel::{AccelKind, NoCounters, Resolution, brute_force_intersect};
+        use crate::testing::{ray_set, triangle_soup};
+        for (n, seed) in [(1, 1), (40, 2), (2000, 3)] {
+            let tris = triangle_soup(n, seed);
+            let grid = crate::accel::Accel::build(tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
+            let accel = BvhAccel::build(&tris);
+            let nodes = gpu_nodes(&accel.bvh).unwrap();
+            for r in ray_set(&grid, 5000, seed) {
+                let want = brute_force_intersect(&tris, &r, 0.0, f32::INFINITY);
+                let got = walk::<false, _>(&nodes, &accel.bvh.prims, &tris, &r, 0.0, f32::INFINITY, &mut NoCounters);
+                assert_eq!(got.is_hit(), want.is_hit(), "{r:?}");
+                if want.is_hit() {
+                    assert_eq!(got.t, want.t, "{r:?}");
+                }
+                let any = walk::<true, _>(&nodes, &accel.bvh.prims, &tris, &r, 0.0, f32::INFINITY, &mut NoCounters);
+                assert_eq!(any.is_hit(), want.is_hit());
+            }
         }
     }
 
