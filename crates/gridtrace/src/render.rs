@@ -59,6 +59,40 @@ pub struct RenderOptions {
     pub height: u32,
     pub mode: Mode,
     pub accel: AccelKind,
+    /// Optimisations turned off, to measure what they buy (`bench --ablate`); none by default.
+    pub ablation: Ablation,
+}
+
+/// Switches that each turn off one optimisation the paper credits (its any-hit shadow rays, its
+/// early removal of finished rays), for `bench --ablate`. Images do not change; time does.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Ablation {
+    /// Shadow rays find the closest hit before the light instead of stopping at the first hit.
+    pub shadow_closest_hit: bool,
+    /// GPU: no compacted queues. Every ray keeps its slot through the bounces, a finished one
+    /// idles there, and every kernel runs over the whole tile. The CPU has nothing to compact:
+    /// it walks each pixel's rays to their end.
+    pub no_compaction: bool,
+}
+
+impl Ablation {
+    /// The ablations by name, as `bench --ablate` takes them.
+    pub const NAMES: [&'static str; 2] = ["shadow-any-hit", "compaction"];
+
+    /// The ablation that turns off the optimisation `name` (one of `NAMES`).
+    pub fn named(name: &str) -> Option<Ablation> {
+        match name {
+            "shadow-any-hit" => Some(Ablation {
+                shadow_closest_hit: true,
+                ..Ablation::default()
+            }),
+            "compaction" => Some(Ablation {
+                no_compaction: true,
+                ..Ablation::default()
+            }),
+            _ => None,
+        }
+    }
 }
 
 impl RenderOptions {
@@ -68,6 +102,7 @@ impl RenderOptions {
             height,
             mode,
             accel,
+            ablation: Ablation::default(),
         }
     }
     pub fn validate(&self) -> crate::Result<()> {

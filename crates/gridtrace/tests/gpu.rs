@@ -242,3 +242,44 @@ fn dynamic_camera_and_lights() {
     let (cpu, _) = gridtrace::cpu::render(&moved, &opts, None).unwrap();
     assert!(differing(&cpu.to_rgb8(), &second.to_rgb8(), 2) <= 0.005);
 }
+
+/// The ablations (`bench --ablate`) change what runs, not what is seen: with shadow rays
+/// finding closest hits, or without compacted queues, every structure's GPU image equals its
+/// normal image bit for bit, and so does the CPU's with closest-hit shadow rays; ray counts
+/// are the same.
+#[test]
+fn ablations_keep_images() {
+    use gridtrace::render::Ablation;
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("mirror-spheres")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let mut p = prepared(&scene, Resolution::default());
+    if p[0].1.is_none() {
+        return;
+    }
+    for accel in AccelKind::ALL {
+        let (scene, gpu) = for_kind(&mut p, accel);
+        for mode in [Mode::Shadow, Mode::Trace, Mode::Heat] {
+            let base = RenderOptions::new(96, 72, mode, accel);
+            let (want, ws) = gpu.render(&scene.camera, &scene.lights, &base).unwrap();
+            let (cpu_want, _) = gridtrace::cpu::render(scene, &base, None).unwrap();
+            for name in Ablation::NAMES {
+                let opts = RenderOptions {
+                    ablation: Ablation::named(name).unwrap(),
+                    ..base
+                };
+                let (got, gs) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
+                assert!(got == want, "gpu {} {} without {name}: the image changed", accel.name(), mode.name());
+                assert_eq!(
+                    (gs.render.rays.shadow, gs.render.rays.reflection),
+                    (ws.render.rays.shadow, ws.render.rays.reflection)
+                );
+                let (cpu_got, _) = gridtrace::cpu::render(scene, &opts, None).unwrap();
+                assert!(cpu_got == cpu_want, "cpu {} {} without {name}", accel.name(), mode.name());
+            }
+        }
+    }
+    assert!(Ablation::named("nonsense").is_none());
+}

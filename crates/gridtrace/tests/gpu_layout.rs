@@ -96,7 +96,11 @@ fn wgsl_structs_match_rust() {
             tile_pixels,
             mode,
             accel,
-            max_depth
+            max_depth,
+            compact,
+            _pad0,
+            _pad1,
+            _pad2
         ]
     );
 }

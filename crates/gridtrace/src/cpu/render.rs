@@ -249,7 +249,11 @@ fn trace_pixel<C: Counters, O: RayObserver>(
             if opts.mode.shadows() {
                 rays.shadow += 1;
                 let shadow = Ray::new(origin, to_light);
-                let occluded = accel.occluded(&shadow, 0.0, dist, opts.accel, counters);
+                let occluded = if opts.ablation.shadow_closest_hit {
+                    accel.intersect(&shadow, 0.0, dist, opts.accel, counters).is_hit()
+                } else {
+                    accel.occluded(&shadow, 0.0, dist, opts.accel, counters)
+                };
                 observer.shadow(&shadow, dist, occluded);
                 if occluded {
                     continue;

@@ -26,6 +26,9 @@ pub(crate) enum Kernel {
     TraverseBvh,
     TraverseBvhHeat,
     OcclusionBvh,
+    /// `occlusion` finding closest hits: the `shadow_closest_hit` ablation, for each walk.
+    OcclusionClosest,
+    OcclusionBvhClosest,
 }
 
 impl Kernel {
@@ -37,6 +40,7 @@ impl Kernel {
             (Kernel::Traverse, GpuStructure::Bvh) => Kernel::TraverseBvh,
             (Kernel::TraverseHeat, GpuStructure::Bvh) => Kernel::TraverseBvhHeat,
             (Kernel::Occlusion, GpuStructure::Bvh) => Kernel::OcclusionBvh,
+            (Kernel::OcclusionClosest, GpuStructure::Bvh) => Kernel::OcclusionBvhClosest,
             (k, _) => k,
         }
     }
@@ -88,7 +92,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 10] = [
+const SPECS: [KernelSpec; 12] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -126,6 +130,26 @@ const SPECS: [KernelSpec; 10] = [
         launch: SHADOW_QUEUE,
         overrides: &[("BVH", 1.0)],
         ..spec(Kernel::OcclusionBvh, "occlusion (bvh)", "occlusion", shaders::OCCLUSION)
+    },
+    KernelSpec {
+        launch: SHADOW_QUEUE,
+        overrides: &[("SHADOW_CLOSEST", 1.0)],
+        ..spec(
+            Kernel::OcclusionClosest,
+            "occlusion (closest hit)",
+            "occlusion",
+            shaders::OCCLUSION,
+        )
+    },
+    KernelSpec {
+        launch: SHADOW_QUEUE,
+        overrides: &[("BVH", 1.0), ("SHADOW_CLOSEST", 1.0)],
+        ..spec(
+            Kernel::OcclusionBvhClosest,
+            "occlusion (bvh, closest hit)",
+            "occlusion",
+            shaders::OCCLUSION,
+        )
     },
 ];
 
@@ -219,6 +243,8 @@ pub(crate) struct PassRecorder<'a> {
     pub indirect_group: &'a wgpu::BindGroup,
     /// The scene's walk: picks the traversal kernels' pipelines (`Kernel::walking`).
     pub structure: GpuStructure,
+    /// The `shadow_closest_hit` ablation: occlusion runs its closest-hit pipeline.
+    pub shadow_closest_hit: bool,
     /// Pixels of the tile (sizes `Launch::PerPixel` kernels).
     pub tile_pixels: u32,
     pub timer: StageTimer<'a>,
@@ -227,7 +253,11 @@ pub(crate) struct PassRecorder<'a> {
 impl PassRecorder<'_> {
     /// One compute pass running `kernel` with `frame` as group 0.
     pub fn pass(&mut self, enc: &mut wgpu::CommandEncoder, kernel: Kernel, frame: &wgpu::BindGroup) {
-        let kernel = kernel.walking(self.structure);
+        let kernel = match (kernel, self.shadow_closest_hit) {
+            (Kernel::Occlusion, true) => Kernel::OcclusionClosest,
+            (k, _) => k,
+        }
+        .walking(self.structure);
         let spec = spec_of(kernel);
         let timestamp_writes = self.timer.pass_writes(spec.stage);
         let mut cp = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {

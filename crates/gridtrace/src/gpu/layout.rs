@@ -79,6 +79,11 @@ pub struct PassUniform {
     pub mode: u32,
     pub accel: u32,
     pub max_depth: u32,
+    /// 1: compacted queues (the tracer); 0: the `no_compaction` ablation (common.wgsl).
+    pub compact: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// Arguments of the two indirect dispatches the `indirect` kernel writes: workgroups (x, y, z)

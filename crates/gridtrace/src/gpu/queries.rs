@@ -10,7 +10,7 @@ use super::layout::{GpuHit, RayRec};
 use super::renderer::GpuRenderer;
 use crate::Result;
 use crate::accel::{AccelKind, Hit, Ray};
-use crate::render::Mode;
+use crate::render::{Ablation, Mode};
 
 /// What a batch asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,7 +61,7 @@ impl GpuRenderer {
                 })
                 .collect();
             let n = recs.len() as u32;
-            self.write_pass_uniforms(0, n, Mode::Cast, kind);
+            self.write_pass_uniforms(0, n, Mode::Cast, kind, Ablation::default());
             let w = self.work.as_ref().unwrap();
             let q = &self.ctx.queue;
             // The queue the kernel reads holds the rays; its counter says how many.
@@ -75,7 +75,7 @@ impl GpuRenderer {
             q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counts));
             let mut enc = self.ctx.device.create_command_encoder(&Default::default());
             // Untimed: queries report no stage times.
-            let mut rec = self.recorder(n, false);
+            let mut rec = self.recorder(n, false, Ablation::default());
             rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
             rec.pass(&mut enc, kernel, &w.bind_groups[0]);
             q.submit([enc.finish()]);

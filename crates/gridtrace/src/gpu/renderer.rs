@@ -13,7 +13,7 @@ use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
 use super::scene::{GpuStructure, SceneBuffers};
 use super::timing::{StageTimer, Timestamps};
 use crate::accel::AccelKind;
-use crate::render::Mode;
+use crate::render::{Ablation, Mode};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
 use crate::{Error, Result};
 
@@ -158,12 +158,13 @@ impl GpuRenderer {
 
     /// A recorder for one submission over a tile (or batch) of `tile_pixels`; `timed` takes
     /// timestamps when the device has them.
-    pub(super) fn recorder(&self, tile_pixels: u32, timed: bool) -> PassRecorder<'_> {
+    pub(super) fn recorder(&self, tile_pixels: u32, timed: bool, ablation: Ablation) -> PassRecorder<'_> {
         PassRecorder {
             kernels: &self.kernels,
             indirect_args: &self.indirect_args,
             indirect_group: &self.indirect_group,
             structure: self.scene.structure,
+            shadow_closest_hit: ablation.shadow_closest_hit,
             tile_pixels,
             timer: StageTimer::new(self.timestamps.as_ref().filter(|_| timed)),
         }
@@ -260,7 +261,14 @@ impl GpuRenderer {
 
     /// Writes every bounce's pass uniform for a tile of `tile_pixels` starting at pixel
     /// `tile_offset`.
-    pub(super) fn write_pass_uniforms(&self, tile_offset: u32, tile_pixels: u32, mode: Mode, accel: AccelKind) {
+    pub(super) fn write_pass_uniforms(
+        &self,
+        tile_offset: u32,
+        tile_pixels: u32,
+        mode: Mode,
+        accel: AccelKind,
+        ablation: Ablation,
+    ) {
         for d in 0..MAX_PASSES as u32 {
             let p = PassUniform {
                 depth: d,
@@ -271,6 +279,10 @@ impl GpuRenderer {
                 mode: mode_code(mode),
                 accel: accel_code(accel),
                 max_depth: mode.reflection_depth(),
+                compact: !ablation.no_compaction as u32,
+                _pad0: 0,
+                _pad1: 0,
+                _pad2: 0,
             };
             self.ctx.queue.write_buffer(
                 &self.pass_uniform,

@@ -11,7 +11,7 @@ use super::kernels::Kernel;
 use super::layout::SceneUniform;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer};
 use super::timing::GpuTimings;
-use crate::render::{Image, Mode, RenderOptions, RenderStats};
+use crate::render::{Ablation, Image, Mode, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
 
@@ -70,8 +70,8 @@ impl GpuRenderer {
         let mut offset = 0u32;
         while offset < pixels {
             let tp = tile.min(pixels - offset);
-            self.write_pass_uniforms(offset, tp, opts.mode, opts.accel);
-            let out = self.run_tile(tp, opts.mode)?;
+            self.write_pass_uniforms(offset, tp, opts.mode, opts.accel, opts.ablation);
+            let out = self.run_tile(tp, opts.mode, opts.ablation)?;
             for (i, px) in out.accum.chunks_exact(4).enumerate() {
                 img.pixels[offset as usize + i] = Vec3::new(px[0], px[1], px[2]);
             }
@@ -100,14 +100,14 @@ impl GpuRenderer {
     }
 
     /// Records and runs one tile's kernels (`tp` pixels; the pass uniforms are written).
-    fn run_tile(&self, tp: u32, mode: Mode) -> Result<TileOutput> {
+    fn run_tile(&self, tp: u32, mode: Mode, ablation: Ablation) -> Result<TileOutput> {
         let w = self.work.as_ref().unwrap();
         let mut enc = self
             .ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         enc.clear_buffer(&self.counters, 0, None);
-        let mut rec = self.recorder(tp, true);
+        let mut rec = self.recorder(tp, true, ablation);
         rec.pass(&mut enc, Kernel::Raygen, &w.bind_groups[0]);
         for d in 0..=mode.reflection_depth() as usize {
             let bg = &w.bind_groups[d];

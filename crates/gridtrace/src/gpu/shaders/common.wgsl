@@ -36,6 +36,7 @@ struct CameraFrame {
 struct PassUniform {
     depth: u32, in_slot: u32, out_slot: u32, tile_offset: u32,
     tile_pixels: u32, mode: u32, accel: u32, max_depth: u32,
+    compact: u32, _pad0: u32, _pad1: u32, _pad2: u32,
 }
 // Arguments of the two indirect dispatches (x, y, z workgroups): the input ray queue's kernels
 // and the shadow queue's. Written by the indirect kernel, read as INDIRECT arguments.
@@ -48,6 +49,9 @@ struct IndirectArgs { rays: array<u32, 3>, shadow: array<u32, 3> }
 override COUNT_WORK: bool = false;
 // Set per pipeline: the BVH pipelines walk `bvh_nodes`, the others the grid.
 override BVH: bool = false;
+// Set per pipeline: the occlusion kernel of the `shadow closest hit` ablation finds the closest
+// hit of each shadow ray instead of stopping at the first (RenderOptions::ablation).
+override SHADOW_CLOSEST: bool = false;
 
 @group(0) @binding(0) var<uniform> scene: SceneUniform;
 @group(0) @binding(1) var<uniform> camera: CameraFrame;
@@ -68,6 +72,21 @@ override BVH: bool = false;
 // The BVH's nodes (a BVH scene's `refs` are its triangle indices in leaf order; a grid scene
 // binds one unused node here, a BVH scene one unused cell in `cells`).
 @group(0) @binding(16) var<storage, read> bvh_nodes: array<BvhNode>;
+
+// Queues. Compacted (the tracer's way): each kernel appends the rays it emits with an atomic
+// counter, finished rays are never queued, and the next kernel runs over the queue's length.
+// Without compaction (the `no_compaction` ablation, `pass_.compact` = 0): ray i of a bounce
+// stays in slot i of every queue (its shadow rays in slots i * n_lights + l), a finished ray
+// idles there marked `pixel = MISS`, and every kernel runs over the whole tile.
+fn compacted() -> bool { return pass_.compact != 0u; }
+fn queue_len(slot: u32) -> u32 {
+    if (compacted()) { return atomicLoad(&counters[slot]); }
+    return pass_.tile_pixels;
+}
+fn shadow_len() -> u32 {
+    if (compacted()) { return atomicLoad(&counters[SLOT_SHADOW]); }
+    return pass_.tile_pixels * scene.n_lights;
+}
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }

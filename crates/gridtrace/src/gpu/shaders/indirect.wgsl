@@ -13,6 +13,6 @@ fn groups(n: u32) -> array<u32, 3> {
 
 @compute @workgroup_size(1)
 fn main() {
-    indirect.rays = groups(atomicLoad(&counters[pass_.in_slot]));
-    indirect.shadow = groups(atomicLoad(&counters[SLOT_SHADOW]));
+    indirect.rays = groups(queue_len(pass_.in_slot));
+    indirect.shadow = groups(shadow_len());
 }

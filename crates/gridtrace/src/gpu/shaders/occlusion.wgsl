@@ -1,16 +1,28 @@
 // Occlusion (any hit) for the shadow queue: an occluded shadow ray loses its contribution.
-// Compiled with BVH = true for BVH scenes (as traverse.wgsl).
+// Compiled with BVH = true for BVH scenes (as traverse.wgsl), and with SHADOW_CLOSEST = true for
+// the ablation that finds closest hits instead.
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
-    if (i >= atomicLoad(&counters[SLOT_SHADOW])) { return; }
+    if (i >= shadow_len()) { return; }
     let r = shadow_rays[i];
+    if (r.pixel == MISS) { return; }
+    let o = v3(r.origin);
+    let d = v3(r.dir);
     var occluded: bool;
-    if (BVH) {
-        occluded = bvh_any(v3(r.origin), v3(r.dir), r.t_min, r.t_max);
+    var work = 0u;
+    if (SHADOW_CLOSEST) {
+        // The ablation: the closest hit before the light, as a closest-hit-only tracer would.
+        if (BVH) {
+            occluded = bvh_closest(o, d, r.t_min, r.t_max, &work).tri != MISS;
+        } else {
+            occluded = closest_hit(o, d, r.t_min, r.t_max, pass_.accel == ACCEL_PC, &work).tri != MISS;
+        }
+    } else if (BVH) {
+        occluded = bvh_any(o, d, r.t_min, r.t_max);
     } else {
-        occluded = any_hit(v3(r.origin), v3(r.dir), r.t_min, r.t_max, pass_.accel == ACCEL_PC);
+        occluded = any_hit(o, d, r.t_min, r.t_max, pass_.accel == ACCEL_PC);
     }
     if (occluded) {
         shadow_rays[i].weight = array<f32, 3>(0.0, 0.0, 0.0);

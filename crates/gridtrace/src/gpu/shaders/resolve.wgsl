@@ -3,7 +3,7 @@
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
-    if (i >= atomicLoad(&counters[pass_.in_slot])) { return; }
+    if (i >= queue_len(pass_.in_slot)) { return; }
     let span = resolve[i];
     if (span.y == 0u) { return; }
     let p = rays_in[i].pixel;

@@ -34,11 +34,19 @@ fn light_term(s: Surface, origin: vec3<f32>, l: PointLight, dir_out: ptr<functio
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
-    if (i >= atomicLoad(&counters[pass_.in_slot])) { return; }
+    if (i >= queue_len(pass_.in_slot)) { return; }
     let r = rays_in[i];
+    resolve[i] = vec2<u32>(0u, 0u);
+    if (!compacted()) {
+        // Every slot this ray owns downstream starts finished; what it emits overwrites that.
+        rays_out[i].pixel = MISS;
+        if (pass_.mode != MODE_CAST) {
+            for (var l = 0u; l < scene.n_lights; l++) { shadow_rays[i * scene.n_lights + l].pixel = MISS; }
+        }
+    }
+    if (r.pixel == MISS) { return; }
     let h = hits[i];
     let weight = v3(r.weight);
-    resolve[i] = vec2<u32>(0u, 0u);
     if (h.tri == MISS) {
         accum[r.pixel] += vec4<f32>(weight * scene.background, 0.0);
         return;
@@ -67,7 +75,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (light_term(s, origin, lights[l], &dir).w >= 0.0) { n += 1u; }
         }
         if (n > 0u) {
-            let base = atomicAdd(&counters[SLOT_SHADOW], n);
+            var base = i * scene.n_lights;
+            if (compacted()) { base = atomicAdd(&counters[SLOT_SHADOW], n); }
             atomicAdd(&counters[SLOT_SHADOW_TOTAL], n);
             var k = 0u;
             for (var l = 0u; l < scene.n_lights; l++) {
@@ -84,7 +93,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     accum[r.pixel] = vec4<f32>(color, 0.0);
     if (reflect > 0.0 && pass_.depth < pass_.max_depth) {
         let rd = d - 2.0 * dot(d, s.ns) * s.ns;
-        let slot = atomicAdd(&counters[pass_.out_slot], 1u);
+        var slot = i;
+        if (compacted()) { slot = atomicAdd(&counters[pass_.out_slot], 1u); }
         atomicAdd(&counters[SLOT_REFLECT_TOTAL], 1u);
         rays_out[slot] = RayRec(a3(origin), r.pixel, a3(normalize(rd)), inf(), a3(weight * reflect), 0.0);
     }

@@ -5,8 +5,9 @@
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
-    if (i >= atomicLoad(&counters[pass_.in_slot])) { return; }
+    if (i >= queue_len(pass_.in_slot)) { return; }
     let r = rays_in[i];
+    if (r.pixel == MISS) { return; }
     var work = 0u;
     if (BVH) {
         hits[i] = bvh_closest(v3(r.origin), v3(r.dir), r.t_min, r.t_max, &work);
