@@ -222,7 +222,13 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .save(&path)?;
         out.push(path);
     }
-    if let Some(sc) = &report.scaling {
+    for sc in &report.scaling {
+        // The CPU's charts keep their old names; the GPU's get a suffix.
+        let suffix = if sc.backend == "cpu" {
+            String::new()
+        } else {
+            format!("_{}", sc.backend)
+        };
         let mut families: Vec<String> = sc.by_triangles.iter().map(|p| p.family.clone()).collect();
         families.dedup();
         let mut series: Vec<Series> = families
@@ -251,9 +257,12 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
                 reference: true,
             });
         }
-        let path = dir.join("scaling_triangles.png");
+        let path = dir.join(format!("scaling_triangles{suffix}.png"));
         LineChart {
-            title: &format!("Time per ray vs triangle count ({} {})", sc.mode, sc.accel),
+            title: &format!(
+                "Time per ray vs triangle count ({} {} {})",
+                sc.backend, sc.mode, sc.accel
+            ),
             x_label: "triangles (log)",
             y_label: "ns per ray (log)",
             log_x: true,
@@ -264,7 +273,7 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         out.push(path);
         if !sc.by_pixels.is_empty() {
             let exp = sc.fits.iter().find(|f| f.series == "ms vs pixels").map(|f| f.exponent);
-            let path = dir.join("scaling_pixels.png");
+            let path = dir.join(format!("scaling_pixels{suffix}.png"));
             LineChart {
                 title: &format!(
                     "Time vs pixel count ({}){}",

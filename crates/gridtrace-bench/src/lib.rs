@@ -5,6 +5,7 @@
 //! Every timing is repeated after warm-up runs; rows keep all repetitions, their median and the
 //! best (the paper reports best values of several runs).
 
+pub mod ablation;
 pub mod charts;
 pub mod rays;
 pub mod report;
@@ -281,14 +282,16 @@ fn make_row(
     }
 }
 
-fn gpu_row(
-    scene: &str,
-    prepared: &PreparedScene,
+/// One GPU measurement: all times (the timestamps' sum where the adapter has them, else wall
+/// time), their summary, and the statistics of the fastest frame.
+pub fn time_gpu(
     gpu: &mut GpuRenderer,
+    prepared: &PreparedScene,
     opts: &RenderOptions,
-    cfg: &BenchConfig,
-) -> Result<Row> {
-    let (times, outs) = repeat(cfg.warmup, cfg.reps, || {
+    warmup: u32,
+    reps: u32,
+) -> Result<(Vec<f64>, Summary, gridtrace::gpu::GpuRenderStats)> {
+    let (times, mut outs) = repeat(warmup, reps, || {
         let (_, s) = gpu.render(&prepared.camera, &prepared.lights, opts)?;
         let t = if s.timings.from_timestamps {
             s.timings.total_ms
@@ -304,7 +307,18 @@ fn gpu_row(
         .min_by(|a, b| a.1.total_cmp(b.1))
         .map(|(i, _)| i)
         .unwrap_or(0);
-    let s = &outs[best];
+    Ok((times, summary, outs.swap_remove(best)))
+}
+
+fn gpu_row(
+    scene: &str,
+    prepared: &PreparedScene,
+    gpu: &mut GpuRenderer,
+    opts: &RenderOptions,
+    cfg: &BenchConfig,
+) -> Result<Row> {
+    let (times, summary, s) = time_gpu(gpu, prepared, opts, cfg.warmup, cfg.reps)?;
+    let s = &s;
     let mut row = make_row(scene, BenchBackend::Gpu, prepared, opts, times, summary, s.render.rays);
     row.gpu_wall_ms = Some(s.render.render_ms);
     row.gpu_stages_ms = Some(s.timings.stages_ms.iter().map(|(k, v)| (k.to_string(), *v)).collect());
@@ -542,9 +556,11 @@ pub struct BenchReport {
     #[serde(flatten)]
     pub matrix: MatrixResult,
     pub grid_sweep: Vec<studies::Sweep>,
-    pub scaling: Option<studies::Scaling>,
+    /// The CPU's series, then the GPU's when one ran.
+    pub scaling: Vec<studies::Scaling>,
     pub pc_study: Vec<studies::PcStudyRow>,
     pub query_study: Vec<studies::QueryStudyRow>,
+    pub ablation: Vec<ablation::AblationRow>,
     pub ray_export: Option<studies::RayExport>,
 }
 
@@ -592,9 +608,10 @@ impl BenchReport {
             config: ConfigInfo::of(cfg, backends),
             matrix,
             grid_sweep: Vec::new(),
-            scaling: None,
+            scaling: Vec::new(),
             pc_study: Vec::new(),
             query_study: Vec::new(),
+            ablation: Vec::new(),
             ray_export: None,
         }
     }

@@ -258,11 +258,11 @@ pub fn markdown(report: &BenchReport) -> String {
         }
     }
 
-    if let Some(sc) = &report.scaling {
+    for sc in &report.scaling {
         let _ = writeln!(
             md,
-            "\n## Scaling ({} mode, {})\n\n| mesh | triangles | grid | build ms | resolution | best ms | ns/ray |\n|---|---:|---|---:|---|---:|---:|",
-            sc.mode, sc.accel
+            "\n## Scaling ({}, {} mode, {})\n\n| mesh | triangles | grid | build ms | resolution | best ms | ns/ray |\n|---|---:|---|---:|---|---:|---:|",
+            sc.backend, sc.mode, sc.accel
         );
         for p in sc.by_triangles.iter().chain(&sc.by_pixels) {
             let _ = writeln!(
@@ -319,6 +319,26 @@ pub fn markdown(report: &BenchReport) -> String {
                 r.tri_tests_per_ray,
                 r.summary.best_ms,
                 r.mrays_per_s
+            );
+        }
+    }
+    if !report.ablation.is_empty() {
+        md.push_str("\n## Ablations (median ms per frame with the optimisation and without it; the two alternate run by run)\n\n| scene | backend | accel | mode | without | size | with ms | without ms | slowdown | shadow rays |\n|---|---|---|---|---|---|---:|---:|---:|---:|\n");
+        for r in &report.ablation {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {} | {}x{} | {:.2} | {:.2} | {:.3} | {} |",
+                r.scene,
+                r.backend,
+                r.accel,
+                r.mode,
+                r.ablation,
+                r.width,
+                r.height,
+                r.with_ms,
+                r.without_ms,
+                r.slowdown,
+                r.shadow_rays
             );
         }
     }

@@ -8,7 +8,7 @@ use glam::{Mat4, Vec3};
 use serde::Serialize;
 
 use super::scenes::{self, BenchScene, ScalingMesh};
-use super::{GridInfo, Summary, loglog_fit, time_cpu};
+use super::{GridInfo, Summary, loglog_fit, time_cpu, time_gpu};
 use gridtrace::Result;
 use gridtrace::accel::grid::DEFAULT_LAMBDA;
 use gridtrace::accel::{AccelKind, Resolution};
@@ -130,6 +130,8 @@ pub struct Fit {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Scaling {
+    /// cpu or gpu.
+    pub backend: String,
     pub mode: String,
     pub accel: String,
     pub by_triangles: Vec<ScalingPoint>,
@@ -169,10 +171,12 @@ pub fn scaling_meshes(data_dir: Option<&Path>, max_tris: usize, log: &mut dyn Fn
     v
 }
 
-/// Time per ray against triangle count (each mesh alone, auto-framed) and against pixel count.
+/// Time per ray against triangle count (each mesh alone, auto-framed) and against pixel count,
+/// on the CPU, or on the GPU when `gpu` is given (each mesh uploaded once, then timed).
 #[allow(clippy::too_many_arguments)]
 pub fn scaling(
     meshes: Vec<ScalingMesh>,
+    gpu: Option<&std::sync::Arc<gridtrace::gpu::GpuContext>>,
     res: (u32, u32),
     pixel_sides: &[u32],
     mode: Mode,
@@ -183,16 +187,23 @@ pub fn scaling(
 ) -> Result<Scaling> {
     let mut by_triangles = Vec::new();
     let mut pixel_mesh = None;
+    let time = |prepared: &gridtrace::scene::PreparedScene, opts: &RenderOptions| match gpu {
+        None => time_cpu(prepared, opts, warmup, reps).map(|(_, s, r)| (s, r)),
+        Some(ctx) => {
+            let mut r = gridtrace::gpu::GpuRenderer::new(ctx.clone(), prepared)?;
+            time_gpu(&mut r, prepared, opts, warmup, reps).map(|(_, s, out)| (s, out.render.rays))
+        }
+    };
     for m in meshes {
         let scene = builtin::mesh_scene(m.mesh, false);
-        let prepared = scene.prepare(Resolution::default())?;
+        let prepared = scene.prepare_for(accel, Resolution::default())?;
         let opts = RenderOptions::new(res.0, res.1, mode, accel);
-        let (_, summary, rays) = time_cpu(&prepared, &opts, warmup, reps)?;
+        let (summary, rays) = time(&prepared, &opts)?;
         let p = ScalingPoint {
             family: family(&m.name),
             triangles: prepared.accel.tris.len(),
-            grid_dims: prepared.grid().stats.dims,
-            build_ms: prepared.grid().stats.build_ms,
+            grid_dims: grid_dims_of(&prepared),
+            build_ms: grid_build_ms_of(&prepared),
             width: res.0,
             height: res.1,
             rays: rays.total(),
@@ -222,7 +233,7 @@ pub fn scaling(
     if let Some((name, fam, source, prepared)) = pixel_mesh {
         for &side in pixel_sides {
             let opts = RenderOptions::new(side, side, mode, accel);
-            let (_, summary, rays) = time_cpu(&prepared, &opts, warmup, reps)?;
+            let (summary, rays) = time(&prepared, &opts)?;
             log(&format!(
                 "  pixels  {:<22} {:>5}x{:<5} best {:>8.2} ms",
                 name, side, side, summary.best_ms
@@ -232,8 +243,8 @@ pub fn scaling(
                 family: fam.clone(),
                 source: source.clone(),
                 triangles: prepared.accel.tris.len(),
-                grid_dims: prepared.grid().stats.dims,
-                build_ms: prepared.grid().stats.build_ms,
+                grid_dims: grid_dims_of(&prepared),
+                build_ms: grid_build_ms_of(&prepared),
                 width: side,
                 height: side,
                 rays: rays.total(),
@@ -278,12 +289,22 @@ pub fn scaling(
             .collect(),
     );
     Ok(Scaling {
+        backend: if gpu.is_some() { "gpu" } else { "cpu" }.into(),
         mode: mode.name().into(),
         accel: accel.name().into(),
         by_triangles,
         by_pixels,
         fits,
     })
+}
+
+/// The grid's dims and build time, zero for a scene prepared with a BVH.
+fn grid_dims_of(p: &gridtrace::scene::PreparedScene) -> [u32; 3] {
+    p.accel.grid().map_or([0; 3], |g| g.stats.dims)
+}
+
+fn grid_build_ms_of(p: &gridtrace::scene::PreparedScene) -> f64 {
+    p.accel.grid().map_or(0.0, |g| g.stats.build_ms)
 }
 
 /// Traversal work per ray and time, grid against proximity clouds, for one scene and mode.

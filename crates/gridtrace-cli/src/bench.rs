@@ -84,6 +84,13 @@ pub struct BenchArgs {
     /// bvh, on the Stanford Bunny and the Dragon when present and a torus knot always.
     #[arg(long)]
     query_study: bool,
+    /// Also measure what the paper's optimisations buy by turning each off, comma separated:
+    /// shadow-any-hit (shadow rays find closest hits instead), compaction (GPU: no compacted
+    /// queues; finished rays idle in their slots). At the first resolution, every scene,
+    /// accel and mode with shadow rays, on each backend it applies to.
+    #[arg(long, value_delimiter = ',', value_name = "NAMES",
+          value_parser = clap::builder::PossibleValuesParser::new(gridtrace::render::Ablation::NAMES))]
+    ablate: Vec<String>,
     /// Rays per mesh for --query-study.
     #[arg(long, default_value_t = 1_000_000, allow_hyphen_values = true)]
     query_rays: usize,
@@ -262,21 +269,33 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             first_res.0,
             first_res.1
         );
-        let meshes = studies::scaling_meshes(data_dir.as_deref(), max_tris, &mut log);
-        let sc = studies::scaling(
-            meshes,
-            first_res,
-            sides,
-            Mode::Cast,
-            cfg.accels[0],
-            cfg.warmup,
-            cfg.reps,
-            &mut log,
-        )?;
-        for f in &sc.fits {
-            println!("  exponent {:<32} {:.3} ({} points)", f.series, f.exponent, f.points);
+        // The CPU series, then the GPU's on the same meshes (the paper's study was on its GPU).
+        let mut on: Vec<Option<&std::sync::Arc<GpuContext>>> = Vec::new();
+        if run_cpu {
+            on.push(None);
         }
-        report.scaling = Some(sc);
+        if let Some(g) = gpu.as_ref() {
+            on.push(Some(g));
+        }
+        for g in on {
+            println!("  on the {}:", if g.is_some() { "gpu" } else { "cpu" });
+            let meshes = studies::scaling_meshes(data_dir.as_deref(), max_tris, &mut log);
+            let sc = studies::scaling(
+                meshes,
+                g,
+                first_res,
+                sides,
+                Mode::Cast,
+                cfg.accels[0],
+                cfg.warmup,
+                cfg.reps,
+                &mut log,
+            )?;
+            for f in &sc.fits {
+                println!("  exponent {:<32} {:.3} ({} points)", f.series, f.exponent, f.points);
+            }
+            report.scaling.push(sc);
+        }
     }
     if a.pc_study {
         println!("proximity-cloud study ({}x{}):", first_res.0, first_res.1);
@@ -324,6 +343,24 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             cfg.reps,
             &mut log,
         )?;
+    }
+    if !a.ablate.is_empty() {
+        println!("ablations ({}x{}):", first_res.0, first_res.1);
+        let plan = bench::ablation::AblationPlan {
+            scenes: &cfg.scenes,
+            data_dir: data_dir.as_deref(),
+            grid: cfg.grid,
+            paper_grids: cfg.paper_grids,
+            size: first_res,
+            modes: &cfg.modes,
+            accels: &cfg.accels,
+            ablations: &a.ablate,
+            cpu: run_cpu,
+            gpu: gpu.as_ref(),
+            warmup: cfg.warmup,
+            reps: cfg.reps,
+        };
+        report.ablation = bench::ablation::ablation_study(&plan, &mut log)?;
     }
     if a.export_rays.is_some() || a.export_hits.is_some() {
         let mode = [Mode::Trace, Mode::Shadow, Mode::Cast]

@@ -271,13 +271,23 @@ fn ablations_keep_images() {
                     ..base
                 };
                 let (got, gs) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
-                assert!(got == want, "gpu {} {} without {name}: the image changed", accel.name(), mode.name());
+                assert!(
+                    got == want,
+                    "gpu {} {} without {name}: the image changed",
+                    accel.name(),
+                    mode.name()
+                );
                 assert_eq!(
                     (gs.render.rays.shadow, gs.render.rays.reflection),
                     (ws.render.rays.shadow, ws.render.rays.reflection)
                 );
                 let (cpu_got, _) = gridtrace::cpu::render(scene, &opts, None).unwrap();
-                assert!(cpu_got == cpu_want, "cpu {} {} without {name}", accel.name(), mode.name());
+                assert!(
+                    cpu_got == cpu_want,
+                    "cpu {} {} without {name}",
+                    accel.name(),
+                    mode.name()
+                );
             }
         }
     }
