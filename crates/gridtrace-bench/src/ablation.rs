@@ -49,12 +49,7 @@ impl Target<'_> {
             }
             Target::Gpu(g) => {
                 let (_, s) = g.render(&scene.camera, &scene.lights, opts)?;
-                let ms = if s.timings.from_timestamps {
-                    s.timings.total_ms
-                } else {
-                    s.render.render_ms
-                };
-                Ok((ms, s.render.rays.shadow))
+                Ok((s.frame_ms(), s.render.rays.shadow))
             }
         }
     }

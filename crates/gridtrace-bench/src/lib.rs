@@ -293,12 +293,7 @@ pub fn time_gpu(
 ) -> Result<(Vec<f64>, Summary, gridtrace::gpu::GpuRenderStats)> {
     let (times, mut outs) = repeat(warmup, reps, || {
         let (_, s) = gpu.render(&prepared.camera, &prepared.lights, opts)?;
-        let t = if s.timings.from_timestamps {
-            s.timings.total_ms
-        } else {
-            s.render.render_ms
-        };
-        Ok((t, s))
+        Ok((s.frame_ms(), s))
     })?;
     let summary = Summary::of(&times);
     let best = times

@@ -100,10 +100,7 @@ fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
             .zip(&o)
             .filter(|(r, o)| **o != brute_force_occluded(tris, r, 0.0, t_max))
             .count();
-        assert!(
-            wrong <= allowed,
-            "{name}: {wrong} bounded any-hit results disagree"
-        );
+        assert!(wrong <= allowed, "{name}: {wrong} bounded any-hit results disagree");
     }
     let hits = want.iter().filter(|h| h.is_hit()).count();
     eprintln!("{name}: {} rays, {hits} hits, {} disagree", rays.len(), bad.len());

@@ -7,12 +7,7 @@ pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f3
     let mut best = Hit { t: t_max, ..Hit::MISS };
     for (i, tri) in tris.iter().enumerate() {
         if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
-            best = Hit {
-                t: h.t,
-                tri: i as u32,
-                u: h.u,
-                v: h.v,
-            };
+            best = h.on(i as u32);
         }
     }
     if best.tri == u32::MAX { Hit::MISS } else { best }

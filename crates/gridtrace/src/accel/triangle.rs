@@ -22,6 +22,19 @@ pub struct TriHit {
     pub v: f32,
 }
 
+impl TriHit {
+    /// This hit as a structure's `Hit` on triangle `tri`.
+    #[inline]
+    pub fn on(self, tri: u32) -> super::Hit {
+        super::Hit {
+            t: self.t,
+            tri,
+            u: self.u,
+            v: self.v,
+        }
+    }
+}
+
 /// Barycentric slack: a hit within this fraction of the triangle's size outside an edge still
 /// counts. Exactly on a shared edge, rounding (which differs between the CPU and GPU compilers,
 /// e.g. fused multiply-adds) can put the point a hair outside *both* triangles and let the ray

@@ -200,12 +200,7 @@ pub fn walk<const ANY: bool, C: Counters>(
             counters.tri_test();
             let tri = prims[k as usize];
             if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
-                best = Hit {
-                    t: h.t,
-                    tri,
-                    u: h.u,
-                    v: h.v,
-                };
+                best = h.on(tri);
                 if ANY {
                     return best;
                 }

@@ -26,6 +26,18 @@ pub struct GpuRenderStats {
     pub tiles: u32,
 }
 
+impl GpuRenderStats {
+    /// The frame's milliseconds as benchmarks report them: the sum of the stages' timestamps
+    /// where the adapter has timestamp queries, else wall time around the submissions.
+    pub fn frame_ms(&self) -> f64 {
+        if self.timings.from_timestamps {
+            self.timings.total_ms
+        } else {
+            self.render.render_ms
+        }
+    }
+}
+
 /// What one tile's submission reads back.
 struct TileOutput {
     /// RGBA per pixel of the tile.

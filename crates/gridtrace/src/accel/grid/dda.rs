@@ -33,12 +33,7 @@ impl Grid {
             for &tri in refs {
                 counters.tri_test();
                 if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
-                    best = Hit {
-                        t: h.t,
-                        tri,
-                        u: h.u,
-                        v: h.v,
-                    };
+                    best = h.on(tri);
                 }
             }
             // A hit beyond this cell's exit may be beaten by a triangle in a later cell; only a
