@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of the project: the Rust workspace (CPU and GPU) and the Python package.
 # Needs Rust, python3 (with venv) and, for the GPU tests, a Vulkan adapter: lavapipe will do
-# (`apt-get install mesa-vulkan-drivers`). Python packages go into .venv/ (created here).
+# (`apt-get install mesa-vulkan-drivers`), and for the window tests a display or Xvfb (`xvfb`).
+# Python packages go into .venv/ (created here).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Mesa's software Vulkan complains loudly when this is unset; give it a private directory.
@@ -9,7 +10,13 @@ if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
     export XDG_RUNTIME_DIR="$(mktemp -d)"
 fi
 
-cargo test --workspace --exclude gridtrace-py --locked
+# The viewer's window tests need a display: a virtual one (Xvfb) when there is none. Without
+# either they fail under CI=1 and are skipped (with a message) otherwise.
+run=()
+if [ -z "${DISPLAY:-}" ] && command -v xvfb-run >/dev/null 2>&1; then
+    run=(xvfb-run -a)
+fi
+"${run[@]}" cargo test --workspace --exclude gridtrace-py --locked
 
 # Python: build the extension into a virtual environment, then pytest (the tests compare with
 # the release CLI on the same rays).

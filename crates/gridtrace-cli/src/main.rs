@@ -6,6 +6,7 @@ mod common;
 mod info;
 mod rays;
 mod render;
+mod view;
 
 use clap::{Parser, Subcommand};
 
@@ -30,6 +31,8 @@ enum Command {
     Rays(rays::RaysArgs),
     /// Benchmark the paper's scenes and modes (and grid sweeps, scaling, proximity clouds).
     Bench(bench::BenchArgs),
+    /// Fly around a scene in a window: drag to orbit, wheel to zoom, 1-4 modes, G structure.
+    View(view::ViewArgs),
 }
 
 /// Points `XDG_RUNTIME_DIR` at a private folder when it is unset or not a directory.
@@ -76,6 +79,7 @@ fn main() {
         Command::Info(a) => info::run(a),
         Command::Rays(a) => rays::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::View(a) => view::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

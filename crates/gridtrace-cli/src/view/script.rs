@@ -1,0 +1,119 @@
+//! `gridtrace view --script FILE`: timed input replayed from a file, one action a line, for tests
+//! and demos. Each line becomes the `Action` the same input from a person would.
+//!
+//! ```text
+//! # comments and blank lines are ignored
+//! key 2              # a key: 1-4 modes, g next structure, p screenshot (named by frame)
+//! drag 40 -20        # orbit by a mouse drag of (dx, dy) pixels
+//! zoom 2             # wheel steps, positive: closer
+//! resize 320 240     # window size in physical pixels
+//! screenshot a.png   # save the frame on screen, print its camera
+//! quit               # (implied at the end of the file)
+//! ```
+
+use std::path::Path;
+
+use super::controls::{Action, mode_key};
+
+/// The actions of a script file; errors name the file and line.
+pub fn load(path: &Path) -> gridtrace::Result<Vec<Action>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| gridtrace::Error::InvalidInput(format!("{}: {e}", path.display())))?;
+    parse(&text).map_err(|(line, m)| gridtrace::Error::InvalidInput(format!("{}:{line}: {m}", path.display())))
+}
+
+/// The actions of a script's text, or (line number, message) of the first bad line.
+pub fn parse(text: &str) -> Result<Vec<Action>, (usize, String)> {
+    let mut out = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let mut words = line.split_whitespace();
+        let cmd = words.next().unwrap_or("");
+        let args: Vec<&str> = words.collect();
+        let num = |k: usize| -> Result<f32, (usize, String)> {
+            args.get(k)
+                .and_then(|a| a.parse::<f32>().ok().filter(|v| v.is_finite()))
+                .ok_or((i + 1, format!("'{cmd}' needs a number as argument {}: '{line}'", k + 1)))
+        };
+        let want = |n: usize| -> Result<(), (usize, String)> {
+            if args.len() == n {
+                Ok(())
+            } else {
+                Err((i + 1, format!("'{cmd}' takes {n} argument(s): '{line}'")))
+            }
+        };
+        let action = match cmd {
+            "key" => {
+                want(1)?;
+                match args[0] {
+                    "g" => Action::NextAccel,
+                    k => Action::SetMode(mode_key(k).ok_or((i + 1, format!("unknown key '{k}' (1-4, g)")))?),
+                }
+            }
+            "drag" => {
+                want(2)?;
+                Action::Orbit(num(0)?, num(1)?)
+            }
+            "zoom" => {
+                want(1)?;
+                Action::Zoom(num(0)?)
+            }
+            "resize" => {
+                want(2)?;
+                let (w, h) = (num(0)?, num(1)?);
+                if w < 0.0 || h < 0.0 || w.fract() != 0.0 || h.fract() != 0.0 {
+                    return Err((i + 1, format!("resize takes whole pixel counts: '{line}'")));
+                }
+                Action::Resize(w as u32, h as u32)
+            }
+            "screenshot" => {
+                want(1)?;
+                Action::Screenshot(args[0].into())
+            }
+            "quit" => {
+                want(0)?;
+                Action::Quit
+            }
+            _ => {
+                return Err((
+                    i + 1,
+                    format!("unknown command '{cmd}' (key, drag, zoom, resize, screenshot, quit)"),
+                ));
+            }
+        };
+        out.push(action);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gridtrace::Mode;
+
+    #[test]
+    fn parses_and_names_bad_lines() {
+        let a = parse("# demo\nkey 2\ndrag 40 -20 # orbit\nzoom 1.5\n\nresize 0 0\nscreenshot a.png\nkey g\nquit\n")
+            .unwrap();
+        assert_eq!(
+            a,
+            vec![
+                Action::SetMode(Mode::Shadow),
+                Action::Orbit(40.0, -20.0),
+                Action::Zoom(1.5),
+                Action::Resize(0, 0),
+                Action::Screenshot("a.png".into()),
+                Action::NextAccel,
+                Action::Quit
+            ]
+        );
+        assert_eq!(parse("key 2\nfly 1").unwrap_err().0, 2);
+        assert_eq!(parse("drag 1").unwrap_err().0, 1);
+        assert_eq!(parse("zoom nan").unwrap_err().0, 1);
+        assert_eq!(parse("resize -1 5").unwrap_err().0, 1);
+        assert!(parse("key 7").unwrap_err().1.contains("unknown key"));
+    }
+}
