@@ -293,3 +293,35 @@ fn ablations_keep_images() {
     }
     assert!(Ablation::named("nonsense").is_none());
 }
+
+/// Per frame only uniforms and lights go to the device, whatever the scene's size: the camera,
+/// the scene constants, the lights and three pass uniforms per tile (the paper's point: the
+/// scene stays on the GPU while the view changes).
+#[test]
+fn per_frame_uploads_are_uniforms_only() {
+    use gridtrace::gpu::layout::{PassUniform, SceneUniform};
+    use gridtrace::scene::CameraFrame;
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    for name in ["knot-box", "sparse-room"] {
+        let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
+        let Some(mut gpu) = renderer(&scene) else { return };
+        let opts = RenderOptions::new(64, 48, Mode::Trace, AccelKind::Grid);
+        let mut cam = scene.camera;
+        let mut sizes = Vec::new();
+        for _ in 0..3 {
+            cam.eye += Vec3::new(0.05, 0.0, 0.0);
+            let (_, s) = gpu.render(&cam, &scene.lights, &opts).unwrap();
+            let want = (size_of::<CameraFrame>()
+                + size_of::<SceneUniform>()
+                + std::mem::size_of_val(&scene.lights[..])
+                + s.tiles as usize * 3 * size_of::<PassUniform>()) as u64;
+            assert_eq!(s.uploaded_bytes, want, "{name}");
+            sizes.push(s.uploaded_bytes);
+        }
+        assert!(
+            sizes.iter().all(|&b| b < 1024),
+            "{name}: {sizes:?} ({} triangles)",
+            scene.accel.tris.len()
+        );
+    }
+}

@@ -176,9 +176,14 @@ impl App {
         let f = r.render(&camera, &self.lights, &opts, None)?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         let describe = r.describe();
+        // What this frame sent to the device: uniforms and lights only (the scene stays there).
+        let up = f
+            .gpu
+            .as_ref()
+            .map_or(String::new(), |g| format!(", {} B uploaded", g.uploaded_bytes));
         if let Some(win) = &self.window {
             win.set_title(&format!(
-                "gridtrace: {} - {} {} - {ms:.1} ms - {describe}",
+                "gridtrace: {} - {} {} - {ms:.1} ms{up} - {describe}",
                 self.name,
                 self.mode.name(),
                 accel.name()

@@ -260,7 +260,7 @@ impl GpuRenderer {
     }
 
     /// Writes every bounce's pass uniform for a tile of `tile_pixels` starting at pixel
-    /// `tile_offset`.
+    /// `tile_offset`; returns the bytes written.
     pub(super) fn write_pass_uniforms(
         &self,
         tile_offset: u32,
@@ -268,7 +268,8 @@ impl GpuRenderer {
         mode: Mode,
         accel: AccelKind,
         ablation: Ablation,
-    ) {
+    ) -> u64 {
+        let mut bytes = 0;
         for d in 0..MAX_PASSES as u32 {
             let p = PassUniform {
                 depth: d,
@@ -289,7 +290,9 @@ impl GpuRenderer {
                 d as u64 * PASS_UNIFORM_STRIDE_BYTES,
                 bytemuck::bytes_of(&p),
             );
+            bytes += size_of::<PassUniform>() as u64;
         }
+        bytes
     }
 }
 

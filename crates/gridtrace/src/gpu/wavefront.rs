@@ -24,6 +24,9 @@ pub struct GpuRenderStats {
     pub render: RenderStats,
     pub timings: GpuTimings,
     pub tiles: u32,
+    /// Bytes written to the device for this frame: the camera, the scene constants (its light
+    /// count), the lights and each tile's pass uniforms. The scene itself is uploaded once.
+    pub uploaded_bytes: u64,
 }
 
 impl GpuRenderStats {
@@ -71,10 +74,12 @@ impl GpuRenderer {
             ..self.scene.consts
         };
         q.write_buffer(&self.scene.uniform, 0, bytemuck::bytes_of(&consts));
+        let mut uploaded = (std::mem::size_of_val(&frame) + std::mem::size_of_val(&consts)) as u64;
         {
             let w = self.work.as_ref().unwrap();
             if !lights.is_empty() {
                 q.write_buffer(&w.lights, 0, bytemuck::cast_slice(lights));
+                uploaded += std::mem::size_of_val(lights) as u64;
             }
         }
         let mut img = Image::new(opts.width, opts.height);
@@ -82,7 +87,7 @@ impl GpuRenderer {
         let mut offset = 0u32;
         while offset < pixels {
             let tp = tile.min(pixels - offset);
-            self.write_pass_uniforms(offset, tp, opts.mode, opts.accel, opts.ablation);
+            uploaded += self.write_pass_uniforms(offset, tp, opts.mode, opts.accel, opts.ablation);
             let out = self.run_tile(tp, opts.mode, opts.ablation)?;
             for (i, px) in out.accum.chunks_exact(4).enumerate() {
                 img.pixels[offset as usize + i] = Vec3::new(px[0], px[1], px[2]);
@@ -96,6 +101,7 @@ impl GpuRenderer {
             stats.tiles += 1;
             offset += tp;
         }
+        stats.uploaded_bytes = uploaded;
         let wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.timings.from_timestamps = self.timed();
         stats.timings.total_ms = if self.timed() {
