@@ -77,7 +77,7 @@ fn scripted_session_equals_render() {
         std::fs::write(
             &script,
             "key 2\ndrag 40 -20\nzoom 1\nscreenshot a.png\nkey g\nkey g\nkey 3\nscreenshot b.png\n\
-             resize 1 1\nresize 0 0\nresize 120 90\nkey g\nkey 1\ndrag -80 10\nscreenshot c.png\n",
+             resize 1 1\nresize 0 0\nresize 120 90\nkey g\nkey 1\ndrag -80 10\nkey f\nkey w\nkey d\nkey e\nscreenshot c.png\n",
         )
         .unwrap();
         let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))

@@ -12,6 +12,10 @@ pub enum Action {
     Orbit(f32, f32),
     /// Zoom by wheel steps (positive: closer).
     Zoom(f32),
+    /// Fly: move along the view (forward, right, up) in steps of 5% of the orbit distance.
+    Fly(f32, f32, f32),
+    /// Frame the scene: target its centre, at a distance that shows all of it.
+    Frame,
     SetMode(Mode),
     /// The next structure (grid, pc, bvh, grid ...).
     NextAccel,
@@ -26,6 +30,8 @@ pub enum Action {
 const ORBIT_PER_PIXEL: f32 = 0.01;
 /// Distance factor per wheel step.
 const ZOOM_PER_STEP: f32 = 0.9;
+/// A fly step, as a fraction of the orbit distance.
+const FLY_STEP: f32 = 0.05;
 /// The orbit stops short of the poles, where `up` and the view direction would coincide.
 const MAX_PITCH: f32 = 1.5;
 
@@ -80,6 +86,28 @@ impl Orbit {
         self.pitch = (self.pitch + dy * ORBIT_PER_PIXEL).clamp(-MAX_PITCH, MAX_PITCH);
     }
 
+    /// Moves the target (and the eye with it) along the view's axes, in steps of 5% of the
+    /// distance, so flying feels the same at every scale.
+    pub fn fly(&mut self, forward: f32, right: f32, up: f32) {
+        let c = self.camera();
+        let f = (c.target - c.eye).normalize_or(Vec3::NEG_Z);
+        let r = f.cross(self.up).normalize_or(Vec3::X);
+        let u = r.cross(f);
+        self.target += (f * forward + r * right + u * up) * (FLY_STEP * self.distance);
+    }
+
+    /// Targets the box's centre from far enough that its bounding sphere fills the vertical
+    /// field of view; the direction stays.
+    pub fn frame(&mut self, lo: Vec3, hi: Vec3) {
+        if !(lo.is_finite() && hi.is_finite()) || lo.cmpgt(hi).any() {
+            return;
+        }
+        let radius = ((hi - lo).length() * 0.5).max(1e-6);
+        let half = (self.vfov_deg.to_radians() * 0.5).clamp(0.01, 1.5);
+        self.target = (lo + hi) * 0.5;
+        self.distance = radius / half.sin();
+    }
+
     pub fn zoom(&mut self, steps: f32) {
         self.distance = (self.distance * ZOOM_PER_STEP.powf(steps)).max(1e-6);
     }
@@ -92,6 +120,20 @@ pub fn next_accel(a: AccelKind) -> AccelKind {
         AccelKind::ProximityCloud => AccelKind::Bvh,
         AccelKind::Bvh => AccelKind::Grid,
     }
+}
+
+/// The fly step a key makes, (forward, right, up): W/S forward and back, D/A right and left,
+/// E/Q up and down.
+pub fn fly_key(k: &str) -> Option<(f32, f32, f32)> {
+    Some(match k.to_ascii_lowercase().as_str() {
+        "w" => (1.0, 0.0, 0.0),
+        "s" => (-1.0, 0.0, 0.0),
+        "d" => (0.0, 1.0, 0.0),
+        "a" => (0.0, -1.0, 0.0),
+        "e" => (0.0, 0.0, 1.0),
+        "q" => (0.0, 0.0, -1.0),
+        _ => return None,
+    })
 }
 
 /// The mode a number key selects: 1 cast, 2 shadow, 3 trace, 4 heat.
@@ -129,6 +171,33 @@ mod tests {
         o.drag(0.0, 1e6);
         assert!(o.pitch <= MAX_PITCH);
         assert!(o.camera().eye.is_finite());
+    }
+
+    #[test]
+    fn fly_moves_along_the_view_and_frame_shows_the_box() {
+        let c = Camera {
+            eye: Vec3::new(0.0, 0.0, 5.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            vfov_deg: 60.0,
+        };
+        let mut o = Orbit::from_camera(&c);
+        o.fly(1.0, 0.0, 0.0);
+        let moved = o.camera();
+        // Forward is -z here: both eye and target moved 5% of the distance that way.
+        assert!((moved.target - Vec3::new(0.0, 0.0, -0.25)).length() < 1e-5, "{moved:?}");
+        assert!((moved.eye - Vec3::new(0.0, 0.0, 4.75)).length() < 1e-5);
+        o.fly(0.0, 1.0, 1.0);
+        let m2 = o.camera();
+        assert!(m2.target.x > 0.2 && m2.target.y > 0.2);
+        o.frame(Vec3::new(10.0, 0.0, 0.0), Vec3::new(12.0, 2.0, 2.0));
+        let f = o.camera();
+        assert!((f.target - Vec3::new(11.0, 1.0, 1.0)).length() < 1e-5);
+        // The bounding sphere (radius sqrt(3)) fits the 60-degree field: distance = r / sin(30).
+        assert!(((f.eye - f.target).length() - 3f32.sqrt() * 2.0).abs() < 1e-4);
+        let before = o;
+        o.frame(Vec3::ONE, Vec3::ZERO);
+        assert_eq!(o, before, "an empty box changes nothing");
     }
 
     #[test]

@@ -6,8 +6,8 @@
 //! This first form presents by copying the traced image into the surface texture (a queue
 //! write on a presentation device of its own, so the CPU and GPU tracers present alike); the
 //! GPU tracer's frame goes through host memory on the way. Controls: drag to orbit, wheel to
-//! zoom, 1-4 for cast/shadow/trace/heat, G for the next structure (grid, pc, bvh), P for a
-//! screenshot, Esc to quit. `--script FILE` replays the same actions from a file (script.rs).
+//! zoom, WASD + QE to fly, F to frame the scene, 1-4 for cast/shadow/trace/heat, G for the next
+//! structure (grid, pc, bvh), P for a screenshot, Esc to quit. `--script FILE` replays the same actions from a file (script.rs).
 
 mod controls;
 mod present;
@@ -27,7 +27,7 @@ use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
 use crate::common::{Backend, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
-use controls::{Action, Orbit, mode_key, next_accel};
+use controls::{Action, Orbit, fly_key, mode_key, next_accel};
 
 #[derive(Args)]
 pub struct ViewArgs {
@@ -204,6 +204,15 @@ impl App {
                 self.orbit.zoom(s);
                 self.dirty = true;
             }
+            Action::Fly(f, r, u) => {
+                self.orbit.fly(f, r, u);
+                self.dirty = true;
+            }
+            Action::Frame => {
+                let b = self.grid_scene.accel.bounds();
+                self.orbit.frame(b.min, b.max);
+                self.dirty = true;
+            }
             Action::SetMode(m) => {
                 self.dirty |= m != self.mode;
                 self.mode = m;
@@ -339,11 +348,14 @@ impl ApplicationHandler for App {
                     Key::Named(NamedKey::Escape) => Some(Action::Quit),
                     Key::Character(c) => match c.as_str() {
                         "g" | "G" => Some(Action::NextAccel),
+                        "f" | "F" => Some(Action::Frame),
                         "p" | "P" => {
                             self.shots += 1;
                             Some(Action::Screenshot(format!("gridtrace-view-{}.png", self.shots).into()))
                         }
-                        k => mode_key(k).map(Action::SetMode),
+                        k => mode_key(k)
+                            .map(Action::SetMode)
+                            .or_else(|| fly_key(k).map(|(f, r, u)| Action::Fly(f, r, u))),
                     },
                     _ => None,
                 };

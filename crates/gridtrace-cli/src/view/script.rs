@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! # comments and blank lines are ignored
-//! key 2              # a key: 1-4 modes, g next structure, p screenshot (named by frame)
+//! key 2              # a key: 1-4 modes, g next structure, f frame the scene,
+//!                    # w/s a/d e/q fly forward/back, right/left, up/down
 //! drag 40 -20        # orbit by a mouse drag of (dx, dy) pixels
 //! zoom 2             # wheel steps, positive: closer
 //! resize 320 240     # window size in physical pixels
@@ -13,7 +14,7 @@
 
 use std::path::Path;
 
-use super::controls::{Action, mode_key};
+use super::controls::{Action, fly_key, mode_key};
 
 /// The actions of a script file; errors name the file and line.
 pub fn load(path: &Path) -> gridtrace::Result<Vec<Action>> {
@@ -50,7 +51,14 @@ pub fn parse(text: &str) -> Result<Vec<Action>, (usize, String)> {
                 want(1)?;
                 match args[0] {
                     "g" => Action::NextAccel,
-                    k => Action::SetMode(mode_key(k).ok_or((i + 1, format!("unknown key '{k}' (1-4, g)")))?),
+                    "f" => Action::Frame,
+                    k if fly_key(k).is_some() => {
+                        let (a, b, c) = fly_key(k).unwrap_or_default();
+                        Action::Fly(a, b, c)
+                    }
+                    k => Action::SetMode(
+                        mode_key(k).ok_or((i + 1, format!("unknown key '{k}' (1-4, g, f, w a s d q e)")))?,
+                    ),
                 }
             }
             "drag" => {
@@ -115,5 +123,9 @@ mod tests {
         assert_eq!(parse("zoom nan").unwrap_err().0, 1);
         assert_eq!(parse("resize -1 5").unwrap_err().0, 1);
         assert!(parse("key 7").unwrap_err().1.contains("unknown key"));
+        assert_eq!(
+            parse("key w\nkey q\nkey f").unwrap(),
+            vec![Action::Fly(1.0, 0.0, 0.0), Action::Fly(0.0, 0.0, -1.0), Action::Frame]
+        );
     }
 }
