@@ -1,15 +1,7 @@
 //! `gridtrace bench --quick`: the reports are written, well formed and agree with each other.
 
-use std::process::Command;
-
-fn gridtrace(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
-        .args(args)
-        .output()
-        .expect("run gridtrace");
-    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
+mod common;
+use common::gridtrace;
 
 #[test]
 fn quick_bench_writes_consistent_reports() {

@@ -2,14 +2,8 @@
 
 use std::process::Command;
 
-fn gridtrace(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
-        .args(args)
-        .output()
-        .expect("run gridtrace");
-    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
+mod common;
+use common::gridtrace;
 
 #[test]
 fn render_builtin_scene_writes_png() {

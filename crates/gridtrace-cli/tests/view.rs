@@ -8,14 +8,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn gridtrace(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
-        .args(args)
-        .output()
-        .expect("run gridtrace");
-    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
+mod common;
+use common::gridtrace;
 
 fn have_display() -> bool {
     if std::env::var_os("DISPLAY").is_some() {
