@@ -8,7 +8,7 @@ use glam::{Mat4, Vec3};
 use serde::Serialize;
 
 use super::scenes::{self, BenchScene, ScalingMesh};
-use super::{GridInfo, Summary, loglog_fit, time_cpu, time_gpu};
+use super::{GridInfo, Summary, loglog_fit, repeat, time_cpu, time_gpu};
 use gridtrace::Result;
 use gridtrace::accel::grid::DEFAULT_LAMBDA;
 use gridtrace::accel::{AccelKind, Resolution};
@@ -187,18 +187,23 @@ pub fn scaling(
 ) -> Result<Scaling> {
     let mut by_triangles = Vec::new();
     let mut pixel_mesh = None;
-    let time = |prepared: &gridtrace::scene::PreparedScene, opts: &RenderOptions| match gpu {
+    // On the GPU each mesh is uploaded once and timed at every size asked of it.
+    let upload = |prepared: &gridtrace::scene::PreparedScene| {
+        gpu.map(|ctx| gridtrace::gpu::GpuRenderer::new(ctx.clone(), prepared))
+            .transpose()
+    };
+    let time = |prepared: &gridtrace::scene::PreparedScene,
+                on_gpu: &mut Option<gridtrace::gpu::GpuRenderer>,
+                opts: &RenderOptions| match on_gpu {
         None => time_cpu(prepared, opts, warmup, reps).map(|(_, s, r)| (s, r)),
-        Some(ctx) => {
-            let mut r = gridtrace::gpu::GpuRenderer::new(ctx.clone(), prepared)?;
-            time_gpu(&mut r, prepared, opts, warmup, reps).map(|(_, s, out)| (s, out.render.rays))
-        }
+        Some(r) => time_gpu(r, prepared, opts, warmup, reps).map(|(_, s, out)| (s, out.render.rays)),
     };
     for m in meshes {
         let scene = builtin::mesh_scene(m.mesh, false);
         let prepared = scene.prepare_for(accel, Resolution::default())?;
+        let mut on_gpu = upload(&prepared)?;
         let opts = RenderOptions::new(res.0, res.1, mode, accel);
-        let (summary, rays) = time(&prepared, &opts)?;
+        let (summary, rays) = time(&prepared, &mut on_gpu, &opts)?;
         let p = ScalingPoint {
             family: family(&m.name),
             triangles: prepared.accel.tris.len(),
@@ -225,15 +230,15 @@ pub fn scaling(
         ));
         // The pixel series uses the Stanford bunny if present, else the first mesh.
         if pixel_mesh.is_none() || p.mesh == "bun_zipper" {
-            pixel_mesh = Some((p.mesh.clone(), p.family.clone(), p.source.clone(), prepared));
+            pixel_mesh = Some((p.mesh.clone(), p.family.clone(), p.source.clone(), prepared, on_gpu));
         }
         by_triangles.push(p);
     }
     let mut by_pixels = Vec::new();
-    if let Some((name, fam, source, prepared)) = pixel_mesh {
+    if let Some((name, fam, source, prepared, mut on_gpu)) = pixel_mesh {
         for &side in pixel_sides {
             let opts = RenderOptions::new(side, side, mode, accel);
-            let (summary, rays) = time(&prepared, &opts)?;
+            let (summary, rays) = time(&prepared, &mut on_gpu, &opts)?;
             log(&format!(
                 "  pixels  {:<22} {:>5}x{:<5} best {:>8.2} ms",
                 name, side, side, summary.best_ms
@@ -452,13 +457,17 @@ pub fn incoherent_rays(bounds: gridtrace::accel::Aabb, n: usize, seed: u64) -> (
     (origins, dirs)
 }
 
+fn ms_since(t0: std::time::Instant) -> f64 {
+    t0.elapsed().as_secs_f64() * 1e3
+}
+
 /// Work per ray of one structure's walk, counted on a sample of the rays: cells (grid, pc) or
-/// nodes (BVH) visited, and triangle tests. On the GPU the BVH is walked as two-wide nodes
-/// (`gpu::bvh::walk` counts that walk on the CPU, step for step); the grids walk alike on both.
+/// nodes (BVH) visited, and triangle tests. `gpu_bvh_walk`: count the GPU's BVH walk over
+/// two-wide nodes (`gpu::bvh::walk` counts it on the CPU, step for step) instead of the CPU's.
 fn work_per_ray(
     tm: &gridtrace::query::TraceMesh,
     accel: AccelKind,
-    on_gpu: bool,
+    gpu_bvh_walk: bool,
     o: &[[f32; 3]],
     d: &[[f32; 3]],
 ) -> (f64, f64) {
@@ -466,7 +475,7 @@ fn work_per_ray(
     let sample = o.len().min(100_000);
     let scene = tm.prepared();
     let mut c = TraversalCounters::default();
-    let gpu_bvh = match (on_gpu, scene.accel.bvh()) {
+    let gpu_bvh = match (gpu_bvh_walk, scene.accel.bvh()) {
         (true, Some(b)) => gridtrace::gpu::bvh::gpu_nodes(&b.bvh).ok().map(|n| (n, &b.bvh.prims)),
         _ => None,
     };
@@ -515,11 +524,12 @@ pub fn query_study(
             let (o, d) = incoherent_rays(tm.prepared().accel.bounds(), rays, 7);
             let mut runs: Vec<(&str, Vec<f64>, usize)> = Vec::new();
             if cpu {
-                let (times, hits) = time_reps(warmup, reps, || {
+                let (times, hits) = repeat(warmup, reps, || {
+                    let t0 = std::time::Instant::now();
                     let h = tm.intersect(&o, &d, 0.0, f32::INFINITY)?;
-                    Ok(h.t.iter().filter(|t| t.is_finite()).count())
+                    Ok((ms_since(t0), h.t.iter().filter(|t| t.is_finite()).count()))
                 })?;
-                runs.push(("cpu", times, hits));
+                runs.push(("cpu", times, hits[0]));
             }
             if let Some(ctx) = gpu {
                 let mut r = gridtrace::gpu::GpuRenderer::new(ctx.clone(), tm.prepared())?;
@@ -528,14 +538,19 @@ pub fn query_study(
                     .zip(&d)
                     .map(|(a, b)| Ray::new((*a).into(), (*b).into()))
                     .collect();
-                let (times, hits) = time_reps(warmup, reps, || {
+                let (times, hits) = repeat(warmup, reps, || {
+                    let t0 = std::time::Instant::now();
                     let h = r.intersect(&ray_vec, 0.0, f32::INFINITY, accel)?;
-                    Ok(h.iter().filter(|h| h.is_hit()).count())
+                    Ok((ms_since(t0), h.iter().filter(|h| h.is_hit()).count()))
                 })?;
-                runs.push(("gpu", times, hits));
+                runs.push(("gpu", times, hits[0]));
             }
+            // Counted once per walk: the grids walk alike on both backends, the BVH differs.
+            let mut work: [Option<(f64, f64)>; 2] = [None; 2];
             for (backend, times, hits) in runs {
-                let (cells_per_ray, tri_tests_per_ray) = work_per_ray(&tm, accel, backend == "gpu", &o, &d);
+                let gpu_walk = backend == "gpu" && accel == AccelKind::Bvh;
+                let (cells_per_ray, tri_tests_per_ray) =
+                    *work[gpu_walk as usize].get_or_insert_with(|| work_per_ray(&tm, accel, gpu_walk, &o, &d));
                 let summary = Summary::of(&times);
                 let row = QueryStudyRow {
                     scene: name.clone(),
@@ -567,20 +582,6 @@ pub fn query_study(
         }
     }
     Ok(rows)
-}
-
-/// Runs `f` `warmup + reps` times; the timed runs' milliseconds and the last run's result.
-fn time_reps(warmup: u32, reps: u32, mut f: impl FnMut() -> Result<usize>) -> Result<(Vec<f64>, usize)> {
-    let mut times = Vec::new();
-    let mut out = 0;
-    for rep in 0..warmup + reps {
-        let t0 = std::time::Instant::now();
-        out = f()?;
-        if rep >= warmup {
-            times.push(t0.elapsed().as_secs_f64() * 1e3);
-        }
-    }
-    Ok((times, out))
 }
 
 /// What `--export-rays` / `--export-hits` wrote.

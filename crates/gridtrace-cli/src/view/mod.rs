@@ -18,7 +18,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use clap::Args;
-use gridtrace::scene::{PointLight, PreparedScene};
+use gridtrace::scene::PreparedScene;
 use gridtrace::{AccelKind, Mode, RenderOptions, Renderer};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -75,7 +75,6 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         accel: a.grid.accel,
         mode: a.mode,
         orbit,
-        lights: grid_scene.lights.clone(),
         size: a.res,
         window: None,
         presenter: None,
@@ -120,7 +119,6 @@ struct App {
     accel: AccelKind,
     mode: Mode,
     orbit: Orbit,
-    lights: Vec<PointLight>,
     /// Window (and image) size in physical pixels.
     size: (u32, u32),
     window: Option<Arc<Window>>,
@@ -173,7 +171,7 @@ impl App {
         let opts = RenderOptions::new(w.min(MAX_SIDE), h.min(MAX_SIDE), self.mode, accel);
         let r = &mut self.renderers.iter_mut().find(|(b, _)| *b == is_bvh).unwrap().1;
         let t0 = Instant::now();
-        let f = r.render(&camera, &self.lights, &opts, None)?;
+        let f = r.render(&camera, &self.grid_scene.lights, &opts, None)?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         let describe = r.describe();
         // What this frame sent to the device: uniforms and lights only (the scene stays there).

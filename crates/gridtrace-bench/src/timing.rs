@@ -1,0 +1,89 @@
+//! Timing a measurement: repetitions after warm-ups, and their summary (median, best, mean).
+
+use serde::Serialize;
+
+use gridtrace::Result;
+use gridtrace::gpu::{GpuRenderStats, GpuRenderer};
+use gridtrace::render::{RayCounts, RenderOptions};
+use gridtrace::scene::PreparedScene;
+
+/// Median, best (minimum) and mean of a set of timings.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct Summary {
+    pub median_ms: f64,
+    pub best_ms: f64,
+    pub mean_ms: f64,
+}
+
+impl Summary {
+    pub fn of(times: &[f64]) -> Summary {
+        if times.is_empty() {
+            return Summary::default();
+        }
+        let mut t = times.to_vec();
+        t.sort_by(f64::total_cmp);
+        let n = t.len();
+        let median = if n % 2 == 1 {
+            t[n / 2]
+        } else {
+            0.5 * (t[n / 2 - 1] + t[n / 2])
+        };
+        Summary {
+            median_ms: median,
+            best_ms: t[0],
+            mean_ms: t.iter().sum::<f64>() / n as f64,
+        }
+    }
+}
+
+/// Times `f` `warmup + reps` times, keeping the last `reps` results.
+pub fn repeat<T>(warmup: u32, reps: u32, mut f: impl FnMut() -> Result<(f64, T)>) -> Result<(Vec<f64>, Vec<T>)> {
+    for _ in 0..warmup {
+        f()?;
+    }
+    let mut times = Vec::new();
+    let mut outs = Vec::new();
+    for _ in 0..reps.max(1) {
+        let (t, o) = f()?;
+        times.push(t);
+        outs.push(o);
+    }
+    Ok((times, outs))
+}
+
+/// One CPU measurement: best, median and all times of a render, with its ray counts.
+pub fn time_cpu(
+    prepared: &PreparedScene,
+    opts: &RenderOptions,
+    warmup: u32,
+    reps: u32,
+) -> Result<(Vec<f64>, Summary, RayCounts)> {
+    let (times, outs) = repeat(warmup, reps, || {
+        let (_, s) = gridtrace::cpu::render(prepared, opts, None)?;
+        Ok((s.render_ms, s.rays))
+    })?;
+    Ok((times.clone(), Summary::of(&times), outs[0]))
+}
+
+/// One GPU measurement: all times (the timestamps' sum where the adapter has them, else wall
+/// time), their summary, and the statistics of the fastest frame.
+pub fn time_gpu(
+    gpu: &mut GpuRenderer,
+    prepared: &PreparedScene,
+    opts: &RenderOptions,
+    warmup: u32,
+    reps: u32,
+) -> Result<(Vec<f64>, Summary, GpuRenderStats)> {
+    let (times, mut outs) = repeat(warmup, reps, || {
+        let (_, s) = gpu.render(&prepared.camera, &prepared.lights, opts)?;
+        Ok((s.frame_ms(), s))
+    })?;
+    let summary = Summary::of(&times);
+    let best = times
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    Ok((times, summary, outs.swap_remove(best)))
+}
