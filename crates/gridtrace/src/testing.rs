@@ -488,21 +488,26 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
 }
 
 /// One structure per traversal kind over the same triangles, for tests that compare them all:
-/// the grid (serving `grid` and `pc`) and the BVH.
+/// the grid (serving `grid` and `pc`), the BVH and the irregular grid.
 pub struct AllAccels {
     pub grid: Accel,
     pub bvh: Accel,
+    pub irregular: Accel,
 }
 
 impl AllAccels {
     pub fn build(tris: Vec<TriAccel>, resolution: Resolution) -> crate::Result<AllAccels> {
         let grid = Accel::from_grid(Grid::build(&tris, resolution)?, tris.clone());
-        let bvh = Accel::build(tris, AccelKind::Bvh, resolution)?;
-        Ok(AllAccels { grid, bvh })
+        let bvh = Accel::build(tris.clone(), AccelKind::Bvh, resolution)?;
+        let irregular = Accel::build(tris, AccelKind::Irregular, resolution)?;
+        Ok(AllAccels { grid, bvh, irregular })
     }
 
     /// The structure that serves `kind`.
     pub fn get(&self, kind: AccelKind) -> &Accel {
-        if self.grid.serves(kind) { &self.grid } else { &self.bvh }
+        [&self.grid, &self.bvh, &self.irregular]
+            .into_iter()
+            .find(|a| a.serves(kind))
+            .expect("every kind has a structure")
     }
 }

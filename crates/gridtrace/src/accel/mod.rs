@@ -1,5 +1,6 @@
 //! The acceleration structures, one folder each, behind one front door (`Accel`): the paper's
-//! uniform grid with proximity clouds (`grid/`) and a wide BVH to compare it with (`bvh/`).
+//! uniform grid with proximity clouds (`grid/`), a wide BVH to compare it with (`bvh/`), and
+//! the irregular grid that followed the paper (`irregular/`).
 //!
 //! A structure is built over `TriAccel`s (`triangle.rs`, the one edge-safe triangle test every
 //! structure shares) and answers closest-hit and any-hit queries for single rays and batches.
@@ -11,6 +12,7 @@ pub mod brute_force;
 pub mod bvh;
 pub mod grid;
 pub mod huge;
+pub mod irregular;
 pub mod ray;
 pub mod triangle;
 
@@ -20,6 +22,7 @@ pub use aabb::Aabb;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
 pub use grid::{Cell, Grid, GridStats, Resolution, Stepping};
+pub use irregular::{IrrCell, IrregularGrid, IrregularParams};
 pub use ray::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
 pub use triangle::{TriAccel, TriAccel4, TriHit, TriHit4};
 
@@ -34,6 +37,9 @@ pub enum Structure {
     /// The eight-wide BVH (`AccelKind::Bvh`); it keeps its own copy of the triangles in leaf
     /// order.
     Bvh(BvhAccel),
+    /// The irregular grid (`AccelKind::Irregular`), built with `IrregularParams::default()`
+    /// unless `Accel::build_irregular` says otherwise.
+    Irregular(IrregularGrid),
 }
 
 /// The triangles and the structure over them: everything a ray query needs.
@@ -51,7 +57,14 @@ impl Accel {
         let structure = match kind {
             AccelKind::Grid | AccelKind::ProximityCloud => Structure::Grid(Grid::build(&tris, resolution)?),
             AccelKind::Bvh => Structure::Bvh(BvhAccel::build(&tris)),
+            AccelKind::Irregular => Structure::Irregular(IrregularGrid::build(&tris, IrregularParams::default())?),
         };
+        Ok(Accel { tris, structure })
+    }
+
+    /// The irregular grid over `tris`, with the given parameters.
+    pub fn build_irregular(tris: Vec<TriAccel>, params: IrregularParams) -> Result<Accel> {
+        let structure = Structure::Irregular(IrregularGrid::build(&tris, params)?);
         Ok(Accel { tris, structure })
     }
 
@@ -79,11 +92,20 @@ impl Accel {
         }
     }
 
+    /// The irregular grid, if that is the structure.
+    pub fn irregular(&self) -> Option<&IrregularGrid> {
+        match &self.structure {
+            Structure::Irregular(g) => Some(g),
+            _ => None,
+        }
+    }
+
     /// The box every ray set over these triangles is drawn from: the grid's bounds, which any
     /// structure over the same triangles shares (`grid::grid_bounds`).
     pub fn bounds(&self) -> Aabb {
         match &self.structure {
             Structure::Grid(g) => g.bounds,
+            Structure::Irregular(g) => g.bounds,
             // The triangles were checked finite when the structure was built.
             _ => grid::grid_bounds(&self.tris).unwrap_or(Aabb::EMPTY),
         }
@@ -94,6 +116,7 @@ impl Accel {
         match self.structure {
             Structure::Grid(_) => "grid",
             Structure::Bvh(_) => "bvh",
+            Structure::Irregular(_) => "irregular",
         }
     }
 
@@ -101,7 +124,9 @@ impl Accel {
     pub fn serves(&self, kind: AccelKind) -> bool {
         matches!(
             (&self.structure, kind),
-            (Structure::Grid(_), AccelKind::Grid | AccelKind::ProximityCloud) | (Structure::Bvh(_), AccelKind::Bvh)
+            (Structure::Grid(_), AccelKind::Grid | AccelKind::ProximityCloud)
+                | (Structure::Bvh(_), AccelKind::Bvh)
+                | (Structure::Irregular(_), AccelKind::Irregular)
         )
     }
 
@@ -128,6 +153,7 @@ impl Accel {
         match &self.structure {
             Structure::Grid(g) => g.intersect(&self.tris, ray, t_min, t_max, stepping(kind), counters),
             Structure::Bvh(b) => b.intersect(ray, t_min, t_max, counters),
+            Structure::Irregular(g) => g.intersect(&self.tris, ray, t_min, t_max, counters),
         }
     }
 
@@ -138,6 +164,7 @@ impl Accel {
         match &self.structure {
             Structure::Grid(g) => g.occluded(&self.tris, ray, t_min, t_max, stepping(kind), counters),
             Structure::Bvh(b) => b.occluded(ray, t_min, t_max, counters),
+            Structure::Irregular(g) => g.occluded(&self.tris, ray, t_min, t_max, counters),
         }
     }
 
@@ -158,7 +185,7 @@ impl Accel {
     ) {
         match &self.structure {
             Structure::Bvh(b) => b.intersect_batch_each(rays, t_min, t_max, f),
-            Structure::Grid(_) => {
+            Structure::Grid(_) | Structure::Irregular(_) => {
                 for (i, r) in rays.iter().enumerate() {
                     let hit = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
                     f(i, hit, self.hit_normal(&hit));
@@ -178,7 +205,7 @@ impl Accel {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         match &self.structure {
             Structure::Bvh(b) => b.occluded_batch(rays, t_min, t_max, out),
-            Structure::Grid(_) => {
+            Structure::Grid(_) | Structure::Irregular(_) => {
                 for (r, o) in rays.iter().zip(out) {
                     *o = self.occluded(r, t_min, t_max, kind, &mut NoCounters);
                 }
@@ -204,6 +231,7 @@ impl Accel {
                 ("refs", std::mem::size_of_val(g.refs.as_slice())),
             ],
             Structure::Bvh(b) => vec![("bvh", b.memory())],
+            Structure::Irregular(g) => g.memory(),
         };
         v.push(("triangles", std::mem::size_of_val(self.tris.as_slice())));
         v

@@ -49,6 +49,8 @@ pub enum AccelKind {
     ProximityCloud,
     /// Bounding volume hierarchy (binned SAH), the comparison the paper left as future work.
     Bvh,
+    /// Irregular grid (merged and expanded cells, no DDA), the grid that adapts.
+    Irregular,
 }
 
 impl std::str::FromStr for AccelKind {
@@ -58,21 +60,34 @@ impl std::str::FromStr for AccelKind {
             "grid" | "g" => Ok(AccelKind::Grid),
             "pc" | "proximity" => Ok(AccelKind::ProximityCloud),
             "bvh" => Ok(AccelKind::Bvh),
-            _ => Err(format!("accel must be 'grid', 'pc' or 'bvh', got '{s}'")),
+            "irregular" | "irr" => Ok(AccelKind::Irregular),
+            _ => Err(format!("accel must be 'grid', 'pc', 'bvh' or 'irregular', got '{s}'")),
         }
     }
 }
 
 impl AccelKind {
     /// Every kind (the CPU and the GPU run them all).
-    pub const ALL: [AccelKind; 3] = [AccelKind::Grid, AccelKind::ProximityCloud, AccelKind::Bvh];
+    pub const ALL: [AccelKind; 4] = [
+        AccelKind::Grid,
+        AccelKind::ProximityCloud,
+        AccelKind::Bvh,
+        AccelKind::Irregular,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             AccelKind::Grid => "grid",
             AccelKind::ProximityCloud => "pc",
             AccelKind::Bvh => "bvh",
+            AccelKind::Irregular => "irregular",
         }
+    }
+
+    /// Whether this kind runs on the uniform grid (`grid` and `pc` share one); every other
+    /// kind has a structure of its own, built apart.
+    pub fn uses_grid(self) -> bool {
+        matches!(self, AccelKind::Grid | AccelKind::ProximityCloud)
     }
 }
 

@@ -49,6 +49,7 @@ pub const fn accel_code(accel: AccelKind) -> u32 {
         AccelKind::Grid => 0,
         AccelKind::ProximityCloud => 1,
         AccelKind::Bvh => 2,
+        AccelKind::Irregular => 3,
     }
 }
 

@@ -77,6 +77,9 @@ fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
                 inv_cell_size: Vec3::ZERO,
             })
         }
+        Structure::Irregular(_) => Err(Error::InvalidInput(
+            "the irregular grid has no GPU walk yet: use --backend cpu".into(),
+        )),
     }
 }
 

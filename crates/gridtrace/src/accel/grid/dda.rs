@@ -181,7 +181,7 @@ impl Grid {
 /// Index of the smallest element, the first on ties (glam's `min_position`; the WGSL
 /// `min_position` in common.wgsl is the same).
 #[inline(always)]
-fn min_position(v: [f32; 3]) -> usize {
+pub(crate) fn min_position(v: [f32; 3]) -> usize {
     let mut m = v[0];
     let mut i = 0;
     if v[1] < m {
@@ -195,7 +195,7 @@ fn min_position(v: [f32; 3]) -> usize {
 }
 
 #[inline(always)]
-fn sign(x: f32) -> i32 {
+pub(crate) fn sign(x: f32) -> i32 {
     if x > 0.0 {
         1
     } else if x < 0.0 {

@@ -145,51 +145,9 @@ impl Grid {
         // rounding error is referenced from both cells. Traversal accepts a hit in a cell only up
         // to that cell's exit distance; a hit computed a hair beyond the face it truly lies on
         // is then found again in the next cell instead of being lost.
-        let margin = cell_size * 1e-3 + Vec3::splat(1e-6 * bounds.min.abs().max(bounds.max.abs()).max_element());
+        let margin = cell_margin(cell_size, bounds);
 
-        let keys: Vec<u64> = tris
-            .par_iter()
-            .enumerate()
-            .fold(Vec::new, |mut out, (i, tri)| {
-                let [a, b, c] = tri.vertices();
-                // At least the triangle test's own slack (large triangles), else the cell margin.
-                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-                let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
-                let lo = lo - margin;
-                let hi = hi + margin;
-                let clamp = |p: Vec3| {
-                    ((p - bounds.min) * inv_cell_size)
-                        .floor()
-                        .max(Vec3::ZERO)
-                        .as_uvec3()
-                        .min(dims - 1)
-                };
-                let (c0, c1) = (clamp(lo), clamp(hi));
-                let single = c0 == c1;
-                for z in c0.z..=c1.z {
-                    for y in c0.y..=c1.y {
-                        for x in c0.x..=c1.x {
-                            let cell = UVec3::new(x, y, z);
-                            let box_min = bounds.min + cell.as_vec3() * cell_size;
-                            let half = cell_size * 0.5 + margin;
-                            if single || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c) {
-                                let idx = x as u64 + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
-                                out.push(idx << 32 | i as u64);
-                            }
-                        }
-                    }
-                }
-                out
-            })
-            .reduce(Vec::new, |mut a, mut b| {
-                if a.len() < b.len() {
-                    std::mem::swap(&mut a, &mut b);
-                }
-                a.extend_from_slice(&b);
-                a
-            });
-        let mut keys = keys;
-        keys.par_sort_unstable();
+        let keys = overlap_pairs(tris, bounds, dims, margin);
 
         let n_cells = (dims.x * dims.y * dims.z) as usize;
         let mut cells = vec![Cell::zeroed(); n_cells];
@@ -244,6 +202,66 @@ impl Grid {
     pub fn bytes(&self) -> usize {
         std::mem::size_of_val(self.cells.as_slice()) + std::mem::size_of_val(self.refs.as_slice())
     }
+}
+
+/// How much a cell box is grown before the overlap test: a thousandth of the cell, plus the
+/// rounding of coordinates of the bounds' magnitude (see `Grid::build`).
+pub(crate) fn cell_margin(cell_size: Vec3, bounds: Aabb) -> Vec3 {
+    cell_size * 1e-3 + Vec3::splat(1e-6 * bounds.min.abs().max(bounds.max.abs()).max_element())
+}
+
+/// Every (cell, triangle) pair of a grid of `dims` cells over `bounds` whose cell box, grown by
+/// `margin` (and at least the triangle test's slack, `slack_pad`), overlaps the triangle (exact
+/// test, `triangle_overlaps_box`), as `cell << 32 | triangle`, sorted: cell after cell, and
+/// ascending triangles within a cell. The uniform grid and the irregular grid's top level share
+/// it.
+pub(crate) fn overlap_pairs(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margin: Vec3) -> Vec<u64> {
+    let cell_size = bounds.extent() / dims.as_vec3();
+    let inv_cell_size = cell_size.recip();
+    let keys: Vec<u64> = tris
+        .par_iter()
+        .enumerate()
+        .fold(Vec::new, |mut out, (i, tri)| {
+            let [a, b, c] = tri.vertices();
+            // At least the triangle test's own slack (large triangles), else the cell margin.
+            let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+            let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
+            let lo = lo - margin;
+            let hi = hi + margin;
+            let clamp = |p: Vec3| {
+                ((p - bounds.min) * inv_cell_size)
+                    .floor()
+                    .max(Vec3::ZERO)
+                    .as_uvec3()
+                    .min(dims - 1)
+            };
+            let (c0, c1) = (clamp(lo), clamp(hi));
+            let single = c0 == c1;
+            for z in c0.z..=c1.z {
+                for y in c0.y..=c1.y {
+                    for x in c0.x..=c1.x {
+                        let cell = UVec3::new(x, y, z);
+                        let box_min = bounds.min + cell.as_vec3() * cell_size;
+                        let half = cell_size * 0.5 + margin;
+                        if single || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c) {
+                            let idx = x as u64 + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
+                            out.push(idx << 32 | i as u64);
+                        }
+                    }
+                }
+            }
+            out
+        })
+        .reduce(Vec::new, |mut a, mut b| {
+            if a.len() < b.len() {
+                std::mem::swap(&mut a, &mut b);
+            }
+            a.extend_from_slice(&b);
+            a
+        });
+    let mut keys = keys;
+    keys.par_sort_unstable();
+    keys
 }
 
 /// Grid dimensions as everyone prints them: `AxBxC`.

@@ -1,0 +1,418 @@
+//! The build, in five phases (`IrregularStats::PHASES`): the top grid's references (the
+//! uniform grid's own pair generation), each top cell split by its reference count, merging,
+//! expansion, and the final arrays.
+
+use std::time::Instant;
+
+use glam::{UVec3, Vec3};
+use rayon::prelude::*;
+
+use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
+use crate::accel::TriAccel;
+use crate::accel::grid::tri_box::triangle_overlaps_box;
+use crate::accel::grid::{auto_dims, cell_margin, grid_bounds, overlap_pairs};
+use crate::accel::triangle::slack_pad;
+use crate::{Error, Result};
+
+/// Cost of stepping through a cell, in triangle tests, for the merge decision. A step is a
+/// top-cell entry, a voxel-map entry and a 32-byte cell, about what one triangle test costs.
+const COST_STEP: f64 = 1.0;
+/// Probes of neighbouring cells one face of one cell may make in one expansion attempt: a
+/// large face next to many small cells gives up rather than spend the build's time there (the
+/// traversal is exact whatever the expansion).
+const MAX_PROBES: u32 = 4096;
+
+/// A cell's box in voxels, `min` inclusive and `max` exclusive.
+type VoxBox = [UVec3; 2];
+
+/// A cell's references during the build: a slice of the second level's array until a merge
+/// with a different set gives it its own.
+#[derive(Debug, Clone)]
+enum Refs {
+    Span(u32, u32),
+    Owned(Vec<u32>),
+}
+
+impl Refs {
+    fn get<'a>(&'a self, flat: &'a [u32]) -> &'a [u32] {
+        match self {
+            Refs::Span(s, n) => &flat[*s as usize..(*s + *n) as usize],
+            Refs::Owned(v) => v,
+        }
+    }
+}
+
+pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<IrregularGrid> {
+    let mut phase_ms = [0.0; 5];
+    let mut clock = Instant::now();
+    let mut lap = |i: usize| {
+        phase_ms[i] = clock.elapsed().as_secs_f64() * 1e3;
+        clock = Instant::now();
+    };
+
+    // Phase 1: the top grid and its (top cell, triangle) pairs.
+    let bounds = grid_bounds(tris)?;
+    let top_dims = auto_dims(bounds.extent(), tris.len(), params.top_density);
+    let top_size = bounds.extent() / top_dims.as_vec3();
+    let pairs = overlap_pairs(tris, bounds, top_dims, cell_margin(top_size, bounds));
+    let n_top = (top_dims.x * top_dims.y * top_dims.z) as usize;
+    let mut top_start = vec![0u32; n_top + 1];
+    for p in &pairs {
+        top_start[(p >> 32) as usize + 1] += 1;
+    }
+    for i in 0..n_top {
+        top_start[i + 1] += top_start[i];
+    }
+    lap(0);
+
+    // Phase 2: split each top cell into 2^level cells per axis, about `cell_density` cells per
+    // reference, and find each small cell's triangles with the exact overlap test.
+    let levels: Vec<u32> = (0..n_top)
+        .map(|t| {
+            let n = top_start[t + 1] - top_start[t];
+            if n == 0 {
+                0
+            } else {
+                let per_axis = (params.cell_density as f64 * n as f64).cbrt();
+                (per_axis.log2().round().max(0.0) as u32).min(MAX_LEVEL)
+            }
+        })
+        .collect();
+    let shift = levels.iter().copied().max().unwrap_or(0);
+    let voxel_dims = top_dims << shift;
+    let voxel_size = bounds.extent() / voxel_dims.as_vec3();
+    let mut begin = Vec::with_capacity(n_top);
+    let mut n_init: u64 = 0;
+    for &l in &levels {
+        begin.push(n_init);
+        n_init += 1u64 << (3 * l);
+    }
+    if n_init >= 1 << (32 - LEVEL_BITS) {
+        return Err(Error::InvalidInput(format!(
+            "irregular grid: {n_init} second-level cells; at most 2^{} can be addressed (lower the densities)",
+            32 - LEVEL_BITS
+        )));
+    }
+    let n_init = n_init as usize;
+    let top_coord = |t: usize| {
+        let t = t as u32;
+        UVec3::new(
+            t % top_dims.x,
+            (t / top_dims.x) % top_dims.y,
+            t / (top_dims.x * top_dims.y),
+        )
+    };
+    // Per top cell: its cells' boxes, reference counts and references.
+    let per_top: Vec<(Vec<VoxBox>, Vec<u32>, Vec<u32>)> = (0..n_top)
+        .into_par_iter()
+        .map(|t| {
+            let level = levels[t];
+            let side = 1u32 << level;
+            let cell_voxels = 1u32 << (shift - level);
+            let origin = top_coord(t) << shift;
+            let tri_ids = pairs[top_start[t] as usize..top_start[t + 1] as usize]
+                .iter()
+                .map(|p| *p as u32);
+            let n_cells = 1usize << (3 * level);
+            let boxes: Vec<VoxBox> = (0..n_cells as u32)
+                .map(|i| {
+                    let local = UVec3::new(i & (side - 1), (i >> level) & (side - 1), i >> (2 * level));
+                    let min = origin + local * cell_voxels;
+                    [min, min + cell_voxels]
+                })
+                .collect();
+            if level == 0 {
+                let refs: Vec<u32> = tri_ids.collect();
+                return (boxes, vec![refs.len() as u32], refs);
+            }
+            let size = voxel_size * cell_voxels as f32;
+            let margin = cell_margin(size, bounds);
+            let top_min = bounds.min + (origin.as_vec3()) * voxel_size;
+            let mut keys: Vec<u64> = Vec::new();
+            for tri in tri_ids {
+                let [a, b, c] = tris[tri as usize].vertices();
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
+                let local = |p: Vec3| {
+                    ((p - top_min) / size)
+                        .floor()
+                        .max(Vec3::ZERO)
+                        .as_uvec3()
+                        .min(UVec3::splat(side - 1))
+                };
+                let (c0, c1) = (local(lo - margin), local(hi + margin));
+                for z in c0.z..=c1.z {
+                    for y in c0.y..=c1.y {
+                        for x in c0.x..=c1.x {
+                            let i = x + (y << level) + (z << (2 * level));
+                            let [min, _] = boxes[i as usize];
+                            let center = bounds.min + min.as_vec3() * voxel_size + size * 0.5;
+                            if triangle_overlaps_box(center, size * 0.5 + margin, a, b, c) {
+                                keys.push((i as u64) << 32 | tri as u64);
+                            }
+                        }
+                    }
+                }
+            }
+            keys.sort_unstable();
+            let mut counts = vec![0u32; n_cells];
+            for k in &keys {
+                counts[(k >> 32) as usize] += 1;
+            }
+            (boxes, counts, keys.into_iter().map(|k| k as u32).collect())
+        })
+        .collect();
+    let mut boxes: Vec<VoxBox> = Vec::with_capacity(n_init);
+    let mut refs_of: Vec<Refs> = Vec::with_capacity(n_init);
+    let mut flat: Vec<u32> = Vec::with_capacity(per_top.iter().map(|p| p.2.len()).sum());
+    for (b, counts, refs) in per_top {
+        boxes.extend_from_slice(&b);
+        let mut s = flat.len() as u32;
+        for n in counts {
+            refs_of.push(Refs::Span(s, n));
+            s += n;
+        }
+        flat.extend_from_slice(&refs);
+    }
+    lap(1);
+
+    // The second-level cell (its index before merging) that holds voxel `v`.
+    let initial_at = |v: UVec3| -> u32 {
+        let top = v >> shift;
+        let t = (top.x + top_dims.x * (top.y + top_dims.y * top.z)) as usize;
+        let level = levels[t];
+        let local = (v & UVec3::splat((1 << shift) - 1)) >> (shift - level);
+        begin[t] as u32 + local.x + (local.y << level) + (local.z << (2 * level))
+    };
+
+    // Phase 3: merging. A cell absorbs its neighbour across its upper face on one axis when
+    // the neighbour has the same extent on the other two axes and the surface-area cost
+    // (`COST_STEP` + references, times area) of the merged cell is at most `merge_alpha`
+    // times that of the two. Absorbed cells point to their absorber (union-find).
+    let mut parent: Vec<u32> = (0..n_init as u32).collect();
+    let mut alive = vec![true; n_init];
+    let area = |b: &VoxBox| {
+        let d = ((b[1] - b[0]).as_vec3() * voxel_size).as_dvec3();
+        d.x * d.y + d.y * d.z + d.z * d.x
+    };
+    let alpha = params.merge_alpha as f64;
+    for _ in 0..params.merge_passes {
+        let mut merged = 0usize;
+        for axis in 0..3 {
+            let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+            for cell in 0..n_init {
+                if !alive[cell] {
+                    continue;
+                }
+                loop {
+                    let mine = boxes[cell];
+                    if mine[1][axis] >= voxel_dims[axis] {
+                        break;
+                    }
+                    let mut probe = mine[0];
+                    probe[axis] = mine[1][axis];
+                    let other = find(&mut parent, initial_at(probe)) as usize;
+                    let theirs = boxes[other];
+                    if theirs[0][b] != mine[0][b]
+                        || theirs[1][b] != mine[1][b]
+                        || theirs[0][c] != mine[0][c]
+                        || theirs[1][c] != mine[1][c]
+                    {
+                        break;
+                    }
+                    let mut joined = mine;
+                    joined[1][axis] = theirs[1][axis];
+                    let (ra, rb) = (refs_of[cell].get(&flat), refs_of[other].get(&flat));
+                    let separate =
+                        area(&mine) * (COST_STEP + ra.len() as f64) + area(&theirs) * (COST_STEP + rb.len() as f64);
+                    let new_refs = if ra == rb {
+                        None
+                    } else {
+                        // The union has at least the larger set: skip the merge of sorted lists
+                        // when even that is too costly.
+                        let lower = area(&joined) * (COST_STEP + ra.len().max(rb.len()) as f64);
+                        if lower > alpha * separate {
+                            break;
+                        }
+                        Some(union(ra, rb))
+                    };
+                    let n_joined = new_refs.as_ref().map_or(ra.len(), Vec::len);
+                    if area(&joined) * (COST_STEP + n_joined as f64) > alpha * separate {
+                        break;
+                    }
+                    if let Some(v) = new_refs {
+                        refs_of[cell] = Refs::Owned(v);
+                    }
+                    refs_of[other] = Refs::Span(0, 0);
+                    boxes[cell] = joined;
+                    parent[other] = cell as u32;
+                    alive[other] = false;
+                    merged += 1;
+                }
+            }
+        }
+        if merged == 0 {
+            break;
+        }
+    }
+    // Every initial cell's surviving cell, and the survivors' new indices.
+    let rep: Vec<u32> = (0..n_init as u32).map(|i| find(&mut parent, i)).collect();
+    let live: Vec<u32> = (0..n_init as u32).filter(|&i| alive[i as usize]).collect();
+    let mut new_index = vec![u32::MAX; n_init];
+    for (k, &i) in live.iter().enumerate() {
+        new_index[i as usize] = k as u32;
+    }
+    lap(2);
+
+    // Phase 4: expansion. Each cell's box grows across a face when every cell just beyond that
+    // face (over the face's whole extent) is empty, by as far as the nearest of those cells
+    // reaches. The cells it grows over are the unexpanded partition, so a grown box covers its
+    // own cell and empty cells only.
+    let empty = |i: u32| refs_of[i as usize].get(&flat).is_empty();
+    let grow = |g: &mut VoxBox, axis: usize, up: bool| {
+        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+        let plane = if up {
+            if g[1][axis] >= voxel_dims[axis] {
+                return;
+            }
+            g[1][axis]
+        } else {
+            if g[0][axis] == 0 {
+                return;
+            }
+            g[0][axis] - 1
+        };
+        let mut depth = u32::MAX;
+        let mut probes = 0;
+        let mut z = g[0][c];
+        while z < g[1][c] {
+            let mut z_step = u32::MAX;
+            let mut y = g[0][b];
+            while y < g[1][b] {
+                let mut v = UVec3::ZERO;
+                v[axis] = plane;
+                v[b] = y;
+                v[c] = z;
+                let n = rep[initial_at(v) as usize];
+                probes += 1;
+                if !empty(n) || probes > MAX_PROBES {
+                    return;
+                }
+                let nb = boxes[n as usize];
+                depth = depth.min(if up {
+                    nb[1][axis] - plane
+                } else {
+                    plane + 1 - nb[0][axis]
+                });
+                z_step = z_step.min(nb[1][c] - z);
+                y = nb[1][b];
+            }
+            z += z_step;
+        }
+        if up {
+            g[1][axis] += depth;
+        } else {
+            g[0][axis] -= depth;
+        }
+    };
+    let grown: Vec<VoxBox> = live
+        .par_iter()
+        .map(|&i| {
+            let mut g = boxes[i as usize];
+            for _ in 0..params.expand_passes {
+                for axis in 0..3 {
+                    grow(&mut g, axis, true);
+                    grow(&mut g, axis, false);
+                }
+            }
+            g
+        })
+        .collect();
+    lap(3);
+
+    // Phase 5: the arrays the traversal reads.
+    let mut cells = Vec::with_capacity(live.len());
+    let mut refs = Vec::new();
+    for (k, &i) in live.iter().enumerate() {
+        let r = refs_of[i as usize].get(&flat);
+        let g = grown[k];
+        cells.push(IrrCell {
+            min: g[0].to_array(),
+            start: refs.len() as u32,
+            max: g[1].to_array(),
+            count: r.len() as u32,
+        });
+        refs.extend_from_slice(r);
+    }
+    if refs.len() > u32::MAX as usize {
+        return Err(Error::InvalidInput(format!(
+            "irregular grid: {} references do not fit 32-bit indices",
+            refs.len()
+        )));
+    }
+    let voxel_map: Vec<u32> = rep.par_iter().map(|&r| new_index[r as usize]).collect();
+    let entries: Vec<u32> = (0..n_top)
+        .map(|t| (begin[t] as u32) << LEVEL_BITS | levels[t])
+        .collect();
+    let partition: Vec<VoxBox> = live.iter().map(|&i| boxes[i as usize]).collect();
+    lap(4);
+
+    let stats = IrregularStats {
+        triangles: tris.len(),
+        top_dims: top_dims.to_array(),
+        initial_cells: n_init,
+        cells: cells.len(),
+        empty_cells: cells.iter().filter(|c| c.count == 0).count(),
+        references: refs.len(),
+        max_level: shift,
+        phase_ms,
+    };
+    Ok(IrregularGrid {
+        bounds,
+        top_dims,
+        shift,
+        voxel_size,
+        entries,
+        voxel_map,
+        cells,
+        refs,
+        partition,
+        stats,
+    })
+}
+
+/// The root of `x`'s set, halving the path on the way.
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let p = parent[x as usize];
+        parent[x as usize] = parent[p as usize];
+        x = p;
+    }
+    x
+}
+
+/// The union of two ascending lists, ascending.
+fn union(a: &[u32], b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].cmp(&b[j]) {
+            std::cmp::Ordering::Less => {
+                out.push(a[i]);
+                i += 1;
+            }
+            std::cmp::Ordering::Greater => {
+                out.push(b[j]);
+                j += 1;
+            }
+            std::cmp::Ordering::Equal => {
+                out.push(a[i]);
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    out.extend_from_slice(&a[i..]);
+    out.extend_from_slice(&b[j..]);
+    out
+}

@@ -1,0 +1,225 @@
+//! The build's invariants, checked exhaustively on small random scenes, and traversal against
+//! brute force (the integration tests in tests/traversal.rs run it on every scene too).
+
+use glam::{UVec3, Vec3};
+
+use super::{IrregularGrid, IrregularParams};
+use crate::accel::grid::tri_box::triangle_overlaps_box;
+use crate::accel::{Hit, NoCounters, Ray, TriAccel, brute_force_intersect, brute_force_occluded};
+use crate::util::Rng;
+
+/// Clustered triangles in a large empty box: dense spots, empty space, shared references.
+fn clusters(n: usize, seed: u64) -> Vec<TriAccel> {
+    let mut rng = Rng::new(seed);
+    let centres: Vec<Vec3> = (0..4)
+        .map(|_| Vec3::new(rng.range(0.0, 10.0), rng.range(0.0, 10.0), rng.range(0.0, 10.0)))
+        .collect();
+    let mut tris: Vec<TriAccel> = (0..n)
+        .map(|i| {
+            let c = centres[i % centres.len()];
+            let p = c + Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), rng.range(-0.5, 0.5));
+            let mut q = || p + Vec3::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
+            TriAccel::new(p, q(), q())
+        })
+        .collect();
+    // Two far corners and a long sliver, so the grid is large and mostly empty.
+    tris.push(TriAccel::new(
+        Vec3::ZERO,
+        Vec3::new(0.1, 0.0, 0.0),
+        Vec3::new(0.0, 0.1, 0.0),
+    ));
+    tris.push(TriAccel::new(
+        Vec3::splat(10.0),
+        Vec3::new(9.9, 10.0, 10.0),
+        Vec3::new(10.0, 9.9, 10.0),
+    ));
+    tris.push(TriAccel::new(
+        Vec3::new(0.0, 5.0, 5.0),
+        Vec3::new(10.0, 5.0, 5.05),
+        Vec3::new(10.0, 5.02, 5.0),
+    ));
+    tris
+}
+
+fn params() -> [IrregularParams; 3] {
+    let d = IrregularParams::default();
+    [
+        d,
+        // No merging or expansion: the plain two-level grid.
+        IrregularParams {
+            merge_passes: 0,
+            expand_passes: 0,
+            ..d
+        },
+        // Fine cells, merging of different sets.
+        IrregularParams {
+            top_density: 0.5,
+            cell_density: 8.0,
+            merge_alpha: 1.5,
+            ..d
+        },
+    ]
+}
+
+fn voxel_box(g: &IrregularGrid, b: [UVec3; 2], grow: Vec3) -> (Vec3, Vec3) {
+    let lo = g.bounds.min + b[0].as_vec3() * g.voxel_size;
+    let hi = g.bounds.min + b[1].as_vec3() * g.voxel_size;
+    ((lo + hi) * 0.5, (hi - lo) * 0.5 + grow)
+}
+
+#[test]
+fn build_invariants() {
+    for (k, p) in params().into_iter().enumerate() {
+        let tris = clusters(400, 11 + k as u64);
+        let g = IrregularGrid::build(&tris, p).unwrap();
+        let dims = g.voxel_dims();
+        let grown = g
+            .cells
+            .iter()
+            .zip(&g.partition)
+            .filter(|(c, b)| UVec3::from(c.max) - UVec3::from(c.min) != b[1] - b[0])
+            .count();
+        eprintln!("params {k}: {:?}, {grown} cells grown", g.stats);
+        assert!(grown > 0 || p.expand_passes == 0);
+        assert!(
+            g.stats.cells < g.stats.initial_cells || p.merge_passes == 0,
+            "{:?}",
+            g.stats
+        );
+        // The cells' own boxes partition the virtual grid: every voxel's cell holds it, and the
+        // volumes add up to the grid's.
+        let volume: u64 = g
+            .partition
+            .iter()
+            .map(|b| (b[1] - b[0]).as_u64vec3().element_product())
+            .sum();
+        assert_eq!(volume, dims.as_u64vec3().element_product(), "params {k}");
+        for z in 0..dims.z {
+            for y in 0..dims.y {
+                for x in 0..dims.x {
+                    let v = UVec3::new(x, y, z);
+                    let c = g.cell_at(v.to_array()) as usize;
+                    let [lo, hi] = g.partition[c];
+                    assert!(v.cmpge(lo).all() && v.cmplt(hi).all(), "voxel {v} not in its cell {c}");
+                    // The grown box holds the cell's own.
+                    let cell = g.cells[c];
+                    assert!(
+                        UVec3::from(cell.min).cmple(lo).all() && UVec3::from(cell.max).cmpge(hi).all(),
+                        "cell {c}"
+                    );
+                }
+            }
+        }
+        for (i, cell) in g.cells.iter().enumerate() {
+            let (gmin, gmax) = (UVec3::from(cell.min), UVec3::from(cell.max));
+            for z in gmin.z..gmax.z {
+                for y in gmin.y..gmax.y {
+                    for x in gmin.x..gmax.x {
+                        let other = g.cell_at([x, y, z]) as usize;
+                        assert!(
+                            other == i || g.cells[other].count == 0,
+                            "params {k}: cell {i} grown over non-empty cell {other}"
+                        );
+                    }
+                }
+            }
+        }
+        // Every triangle that overlaps a cell's own box (exact test, no margin) is in its list.
+        for (i, b) in g.partition.iter().enumerate() {
+            let refs = g.cell_refs(i as u32);
+            assert!(refs.windows(2).all(|w| w[0] < w[1]));
+            let (centre, half) = voxel_box(&g, *b, Vec3::ZERO);
+            for (t, tri) in tris.iter().enumerate() {
+                let [a, bb, c] = tri.vertices();
+                if triangle_overlaps_box(centre, half, a, bb, c) {
+                    assert!(refs.contains(&(t as u32)), "params {k}: cell {i} misses triangle {t}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn traversal_equals_brute_force() {
+    let tris = clusters(2000, 5);
+    let mut rng = Rng::new(99);
+    for p in params() {
+        let g = IrregularGrid::build(&tris, p).unwrap();
+        for i in 0..20_000 {
+            // Rays from outside and inside, towards the clusters or anywhere; some axis-aligned.
+            let o = Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0));
+            let mut d = if i % 2 == 0 {
+                tris[rng.below(tris.len() as u32) as usize].vertices()[0] - o
+            } else {
+                Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0))
+            };
+            if i % 7 == 0 {
+                d.x = 0.0;
+            }
+            if i % 11 == 0 {
+                d.y = 0.0;
+            }
+            let r = Ray::new(o, d);
+            let want = brute_force_intersect(&tris, &r, 0.0, f32::INFINITY);
+            let got: Hit = g.intersect(&tris, &r, 0.0, f32::INFINITY, &mut NoCounters);
+            assert_eq!(got.is_hit(), want.is_hit(), "{r:?} got {got:?} want {want:?}");
+            if want.is_hit() {
+                assert!(
+                    (got.t - want.t).abs() <= 1e-6 * want.t,
+                    "{r:?} got {got:?} want {want:?}"
+                );
+                let t_max = want.t * 0.999;
+                assert_eq!(
+                    g.occluded(&tris, &r, 0.0, t_max, &mut NoCounters),
+                    brute_force_occluded(&tris, &r, 0.0, t_max)
+                );
+            }
+            assert_eq!(
+                g.occluded(&tris, &r, 0.0, f32::INFINITY, &mut NoCounters),
+                want.is_hit()
+            );
+        }
+    }
+}
+
+#[test]
+fn bad_parameters_are_errors() {
+    let tris = clusters(10, 1);
+    for s in [
+        "top=0",
+        "cell=-1",
+        "top=nan",
+        "cell=1e9",
+        "alpha=-2",
+        "merge=1000",
+        "bogus=1",
+        "top",
+    ] {
+        let parsed = s.parse::<IrregularParams>();
+        assert!(parsed.is_err(), "{s} accepted");
+    }
+    let p = IrregularParams {
+        top_density: f32::INFINITY,
+        ..Default::default()
+    };
+    assert!(IrregularGrid::build(&tris, p).is_err());
+    assert_eq!(
+        "top=0.5,expand=0".parse::<IrregularParams>().unwrap(),
+        IrregularParams {
+            top_density: 0.5,
+            expand_passes: 0,
+            ..Default::default()
+        }
+    );
+}
+
+#[test]
+fn no_triangles_and_one() {
+    let g = IrregularGrid::build(&[], IrregularParams::default()).unwrap();
+    let r = Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X);
+    assert!(!g.intersect(&[], &r, 0.0, f32::INFINITY, &mut NoCounters).is_hit());
+    let tri = [TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y)];
+    let g = IrregularGrid::build(&tri, IrregularParams::default()).unwrap();
+    let r = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z);
+    assert_eq!(g.intersect(&tri, &r, 0.0, f32::INFINITY, &mut NoCounters).t, 1.0);
+}
