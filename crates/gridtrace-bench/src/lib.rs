@@ -7,6 +7,7 @@
 
 pub mod ablation;
 pub mod charts;
+pub mod irregular;
 pub mod rays;
 pub mod report;
 pub mod scenes;
@@ -290,12 +291,14 @@ pub fn run_matrix(
             info.grid.choice,
             bs.description
         ));
-        // The grid serves grid and pc; the BVH rows get their own structure, built once.
-        let bvh = match cfg.accels.contains(&AccelKind::Bvh) {
-            true => Some(prepared.with_accel(AccelKind::Bvh, res)?),
-            false => None,
-        };
-        let for_accel = |accel: AccelKind| bvh.as_ref().filter(|_| accel == AccelKind::Bvh).unwrap_or(&prepared);
+        // The grid serves grid and pc; every other kind gets its own structure, built once.
+        let mut own: Vec<(AccelKind, PreparedScene)> = Vec::new();
+        for &accel in cfg.accels.iter().filter(|a| !a.uses_grid()) {
+            if !own.iter().any(|(k, _)| *k == accel) {
+                own.push((accel, prepared.with_accel(accel, res)?));
+            }
+        }
+        let for_accel = |accel: AccelKind| own.iter().find(|(k, _)| *k == accel).map_or(&prepared, |(_, s)| s);
         if cpu {
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
@@ -309,25 +312,25 @@ pub fn run_matrix(
             }
         }
         if let Some(ctx) = &gpu {
-            // One renderer per structure uploaded: the grid's (grid, pc) and the BVH's.
+            // One renderer per structure uploaded: the grid's (grid, pc) and each other one's.
             let mut grid_gpu = GpuRenderer::new(ctx.clone(), &prepared)?;
-            let mut bvh_gpu = match &bvh {
-                Some(b) => Some(GpuRenderer::new(ctx.clone(), b)?),
-                None => None,
-            };
+            let mut own_gpu: Vec<(AccelKind, GpuRenderer)> = Vec::new();
+            for (k, s) in &own {
+                own_gpu.push((*k, GpuRenderer::new(ctx.clone(), s)?));
+            }
             let mut largest = 0u64;
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
                     for &accel in &cfg.accels {
                         let opts = RenderOptions::new(w, h, mode, accel);
-                        let r = match bvh_gpu.as_mut() {
-                            Some(b) if accel == AccelKind::Bvh => b,
-                            _ => &mut grid_gpu,
+                        let r = match own_gpu.iter_mut().find(|(k, _)| *k == accel) {
+                            Some((_, r)) => r,
+                            None => &mut grid_gpu,
                         };
                         let row = gpu_row(&bs.name, for_accel(accel), r, &opts, cfg)?;
                         log(&row_line(&row));
                         out.rows.push(row);
-                        if accel == AccelKind::Bvh {
+                        if !accel.uses_grid() {
                             // The scene's memory is the paper's structure's (the grid's).
                             continue;
                         }
@@ -476,6 +479,7 @@ pub struct BenchReport {
     pub scaling: Vec<studies::Scaling>,
     pub pc_study: Vec<studies::PcStudyRow>,
     pub query_study: Vec<studies::QueryStudyRow>,
+    pub irregular_sweep: Vec<irregular::IrregularSweepRow>,
     pub ablation: Vec<ablation::AblationRow>,
     pub ray_export: Option<studies::RayExport>,
 }
@@ -527,6 +531,7 @@ impl BenchReport {
             scaling: Vec::new(),
             pc_study: Vec::new(),
             query_study: Vec::new(),
+            irregular_sweep: Vec::new(),
             ablation: Vec::new(),
             ray_export: None,
         }

@@ -322,6 +322,26 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+    if !report.irregular_sweep.is_empty() {
+        md.push_str("\n## Irregular grid parameters (incoherent rays, closest hit, all threads; pc and bvh on the same rays)\n\n| scene | accel | params | build ms | cells/nodes | refs/tri | bytes/tri | steps/ray | tri tests/ray | best ms | Mrays/s |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+        for r in &report.irregular_sweep {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.1} | {} | {:.2} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                r.scene,
+                r.accel,
+                r.params,
+                r.build_ms,
+                r.cells,
+                r.refs_per_triangle,
+                r.bytes_per_triangle,
+                r.steps_per_ray,
+                r.tri_tests_per_ray,
+                r.summary.best_ms,
+                r.mrays_per_s
+            );
+        }
+    }
     if !report.ablation.is_empty() {
         md.push_str("\n## Ablations (median ms per frame with the optimisation and without it; the two alternate run by run)\n\n| scene | backend | accel | mode | without | size | with ms | without ms | slowdown | shadow rays |\n|---|---|---|---|---|---|---:|---:|---:|---:|\n");
         for r in &report.ablation {

@@ -91,6 +91,12 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_name = "NAMES",
           value_parser = clap::builder::PossibleValuesParser::new(gridtrace::render::Ablation::NAMES))]
     ablate: Vec<String>,
+    /// Also sweep the irregular grid's build parameters on the query study's meshes and the
+    /// bunny in a room (incoherent rays, pc and bvh beside it). Each value is a parameter set
+    /// as `--irregular` spells it (`top=0.12,cell=2`), separated by ';'; `default` tries the
+    /// defaults and one change at a time.
+    #[arg(long, value_name = "SETS")]
+    irregular_sweep: Option<String>,
     /// Rays per mesh for --query-study.
     #[arg(long, default_value_t = 1_000_000, allow_hyphen_values = true)]
     query_rays: usize,
@@ -343,6 +349,23 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             cfg.reps,
             &mut log,
         )?;
+    }
+    if let Some(sets) = &a.irregular_sweep {
+        let sweep = if sets.trim() == "default" {
+            bench::irregular::default_sweep()
+        } else {
+            sets.split(';')
+                .map(|s| s.parse::<gridtrace::accel::IrregularParams>())
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(gridtrace::Error::InvalidInput)?
+        };
+        println!("irregular-grid sweep ({} incoherent rays per mesh):", a.query_rays);
+        let mut meshes = Vec::new();
+        for (name, scene) in bench::irregular::sweep_scenes(data_dir.as_deref()) {
+            meshes.push((name, scene.prepare(Resolution::default())?.accel.tris));
+        }
+        report.irregular_sweep =
+            bench::irregular::irregular_sweep(&meshes, a.query_rays, &sweep, cfg.warmup, cfg.reps, &mut log)?;
     }
     if !a.ablate.is_empty() {
         println!("ablations ({}x{}):", first_res.0, first_res.1);

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use glam::Vec3;
+use gridtrace::accel::IrregularParams;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
 use gridtrace::{AccelKind, Resolution};
 
@@ -23,13 +24,17 @@ pub struct SceneArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct GridArgs {
-    /// Acceleration: grid (plain uniform grid), pc (grid with proximity clouds) or bvh (a
-    /// bounding volume hierarchy); each runs on the CPU and the GPU.
+    /// Acceleration: grid (plain uniform grid), pc (grid with proximity clouds), bvh (a
+    /// bounding volume hierarchy) or irregular (an irregular grid: merged and expanded cells).
     #[arg(long, default_value = "grid", value_parser = accel_parser())]
     pub accel: AccelKind,
     /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.
     #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Resolution>())]
     pub grid: Resolution,
+    /// The irregular grid's build: top=TOP_CELLS_PER_TRI,cell=CELLS_PER_REF,alpha=MERGE_ALPHA,
+    /// merge=PASSES,expand=PASSES, any subset (defaults: top=0.12,cell=2,alpha=1,merge=8,expand=3).
+    #[arg(long, default_value = "", value_parser = |s: &str| s.parse::<IrregularParams>())]
+    pub irregular: IrregularParams,
 }
 
 impl SceneArgs {
@@ -75,6 +80,7 @@ pub fn accel_parser() -> impl TypedValueParser<Value = AccelKind> {
         PossibleValue::new("grid").alias("g"),
         PossibleValue::new("pc").alias("proximity"),
         PossibleValue::new("bvh"),
+        PossibleValue::new("irregular").alias("irr"),
     ])
     .map(|s| s.parse::<AccelKind>().expect("every listed accel parses"))
 }
@@ -122,15 +128,23 @@ pub fn fmt_bytes(b: usize) -> String {
 
 pub use gridtrace::query::Backend;
 
-/// `Scene::prepare_for`, with a scene-level error (nothing to trace, NaN camera...) naming the
-/// scene or file it came from.
+/// The scene prepared with the structure that serves `accel` (which may differ from
+/// `grid.accel`: the viewer switches), built with `grid`'s resolution or irregular parameters,
+/// and a scene-level error (nothing to trace, NaN camera...) naming the scene or file it came
+/// from.
 pub fn prepare(
     scene: &Scene,
     name: &str,
     accel: AccelKind,
-    grid: Resolution,
+    grid: &GridArgs,
 ) -> gridtrace::Result<gridtrace::PreparedScene> {
-    scene.prepare_for(accel, grid).map_err(|e| match e {
+    let (res, params) = (grid.grid, grid.irregular);
+    let prepared = if accel == AccelKind::Irregular {
+        scene.prepare_with(|tris| gridtrace::Accel::build_irregular(tris, params))
+    } else {
+        scene.prepare_for(accel, res)
+    };
+    prepared.map_err(|e| match e {
         gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
         e => e,
     })
@@ -156,5 +170,17 @@ pub fn describe_structure(accel: &gridtrace::Accel) -> String {
             b.bvh.depth,
             fmt_bytes(b.memory())
         ),
+        Structure::Irregular(g) => {
+            let s = &g.stats;
+            format!(
+                "irregular top {} x {} levels, {} cells, {:.2} refs/tri, {} (built in {:.1} ms)",
+                dims_str(s.top_dims),
+                s.max_level,
+                s.cells,
+                s.refs_per_triangle(),
+                fmt_bytes(g.bytes()),
+                s.build_ms()
+            )
+        }
     }
 }

@@ -4,6 +4,7 @@ use clap::Args;
 use gridtrace::accel::grid::dims_str;
 
 use gridtrace::accel::Structure;
+use gridtrace::accel::irregular::IrregularStats;
 
 use crate::common::{GridArgs, SceneArgs, describe_structure, fmt_bytes};
 
@@ -21,7 +22,7 @@ pub struct InfoArgs {
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     let (scene, name) = a.scene.load(a.with_floor)?;
-    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, a.grid.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, &a.grid)?;
     println!("scene            {name}");
     println!("vertices         {}", scene.mesh.positions.len());
     println!(
@@ -47,6 +48,33 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
             println!("build            {:.2} ms", s.build_ms);
         }
         Structure::Bvh(_) => println!("structure        {}", describe_structure(&prepared.accel)),
+        Structure::Irregular(g) => {
+            let s = &g.stats;
+            let v = g.voxel_dims();
+            println!(
+                "irregular grid   top {} cells, up to {} levels below (virtual {}x{}x{} voxels)",
+                dims_str(s.top_dims),
+                s.max_level,
+                v.x,
+                v.y,
+                v.z
+            );
+            println!(
+                "cells            {} ({} before merging), {:.1}% empty",
+                s.cells,
+                s.initial_cells,
+                s.empty_cells as f64 * 100.0 / s.cells.max(1) as f64
+            );
+            println!(
+                "references       {} ({:.2} per triangle)",
+                s.references,
+                s.refs_per_triangle()
+            );
+            println!("build            {:.2} ms", s.build_ms());
+            for (phase, ms) in IrregularStats::PHASES.iter().zip(s.phase_ms) {
+                println!("  {phase:<14} {ms:>9.2} ms");
+            }
+        }
     }
     println!("memory:");
     let mut total = 0;

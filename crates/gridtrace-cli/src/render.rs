@@ -95,7 +95,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         );
     }
     let t_build = Instant::now();
-    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, a.grid.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, &a.grid)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
     println!(
         "scene {name}: {} triangles ({} degenerate dropped), {}",

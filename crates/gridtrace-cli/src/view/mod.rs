@@ -58,7 +58,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         Some(p) => Some(script::load(p)?),
         None => None,
     };
-    let grid_scene = crate::common::prepare(&scene, &name, AccelKind::Grid, a.grid.grid)?;
+    let grid_scene = crate::common::prepare(&scene, &name, AccelKind::Grid, &a.grid)?;
     // The viewer keeps its scenes for the life of the process: renderers borrow them.
     let grid_scene: &'static PreparedScene = Box::leak(Box::new(grid_scene));
     let orbit = Orbit::from_camera(&grid_scene.camera);
@@ -67,9 +67,9 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     let mut app = App {
         name,
         scene_src: scene,
-        grid_res: a.grid.grid,
+        grid_args: a.grid.clone(),
         grid_scene,
-        bvh_scene: None,
+        own_scenes: Vec::new(),
         renderers: Vec::new(),
         backend: a.backend,
         accel: a.grid.accel,
@@ -110,11 +110,12 @@ struct Frame {
 struct App {
     name: String,
     scene_src: gridtrace::scene::Scene,
-    grid_res: gridtrace::Resolution,
+    grid_args: crate::common::GridArgs,
     grid_scene: &'static PreparedScene,
-    bvh_scene: Option<&'static PreparedScene>,
-    /// Opened renderers: (serves the BVH, renderer).
-    renderers: Vec<(bool, Renderer<'static>)>,
+    /// The scenes prepared for structures other than the grid, when first asked for.
+    own_scenes: Vec<(AccelKind, &'static PreparedScene)>,
+    /// Opened renderers, by the structure they trace (`AccelKind::structure_name`).
+    renderers: Vec<(&'static str, Renderer<'static>)>,
     backend: Backend,
     accel: AccelKind,
     mode: Mode,
@@ -136,14 +137,20 @@ struct App {
 
 impl App {
     fn scene_for(&mut self, accel: AccelKind) -> gridtrace::Result<&'static PreparedScene> {
-        if accel != AccelKind::Bvh {
+        if accel.uses_grid() {
             return Ok(self.grid_scene);
         }
-        if self.bvh_scene.is_none() {
-            let s = crate::common::prepare(&self.scene_src, &self.name, AccelKind::Bvh, self.grid_res)?;
-            self.bvh_scene = Some(Box::leak(Box::new(s)));
+        if let Some((_, s)) = self.own_scenes.iter().find(|(k, _)| *k == accel) {
+            return Ok(s);
         }
-        Ok(self.bvh_scene.unwrap())
+        let s: &'static PreparedScene = Box::leak(Box::new(crate::common::prepare(
+            &self.scene_src,
+            &self.name,
+            accel,
+            &self.grid_args,
+        )?));
+        self.own_scenes.push((accel, s));
+        Ok(s)
     }
 
     /// Traces the current view if it changed.
@@ -158,18 +165,18 @@ impl App {
             return Ok(());
         }
         let accel = self.accel;
-        let is_bvh = accel == AccelKind::Bvh;
-        if !self.renderers.iter().any(|(b, _)| *b == is_bvh) {
+        let structure = accel.structure_name();
+        if !self.renderers.iter().any(|(b, _)| *b == structure) {
             let scene = self.scene_for(accel)?;
             let (r, notes) = Renderer::open(self.backend, scene, accel)?;
             for n in notes {
                 eprintln!("note: {n}");
             }
-            self.renderers.push((is_bvh, r));
+            self.renderers.push((structure, r));
         }
         let camera = self.orbit.camera();
         let opts = RenderOptions::new(w.min(MAX_SIDE), h.min(MAX_SIDE), self.mode, accel);
-        let r = &mut self.renderers.iter_mut().find(|(b, _)| *b == is_bvh).unwrap().1;
+        let r = &mut self.renderers.iter_mut().find(|(b, _)| *b == structure).unwrap().1;
         let t0 = Instant::now();
         let f = r.render(&camera, &self.grid_scene.lights, &opts, None)?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;

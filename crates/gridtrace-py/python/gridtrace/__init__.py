@@ -114,8 +114,9 @@ class Mesh:
     """An accelerated triangle mesh for ray queries.
 
     ``vertices`` is an (N, 3) float array, ``faces`` an (M, 3) integer array of vertex indices.
-    ``accel`` is ``"grid"``, ``"pc"`` (proximity clouds) or ``"bvh"`` (a bounding volume hierarchy,
-    the fastest for incoherent rays; on the GPU too), ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
+    ``accel`` is ``"grid"``, ``"pc"`` (proximity clouds), ``"bvh"`` (a bounding volume hierarchy,
+    the fastest for incoherent rays) or ``"irregular"`` (an irregular grid, the grid that adapts to
+    the mesh), each on the CPU and the GPU; ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (GPU if present, else CPU), ``"gpu"`` or ``"cpu"``.
     Degenerate faces are kept in the numbering but can never be hit.
     """

@@ -185,7 +185,10 @@ impl Accel {
     ) {
         match &self.structure {
             Structure::Bvh(b) => b.intersect_batch_each(rays, t_min, t_max, f),
-            Structure::Grid(_) | Structure::Irregular(_) => {
+            Structure::Irregular(g) => g.interleaved::<false>(&self.tris, rays, t_min, t_max, |i, hit| {
+                f(i, hit, self.hit_normal(&hit))
+            }),
+            Structure::Grid(_) => {
                 for (i, r) in rays.iter().enumerate() {
                     let hit = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
                     f(i, hit, self.hit_normal(&hit));
@@ -205,7 +208,10 @@ impl Accel {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         match &self.structure {
             Structure::Bvh(b) => b.occluded_batch(rays, t_min, t_max, out),
-            Structure::Grid(_) | Structure::Irregular(_) => {
+            Structure::Irregular(g) => {
+                g.interleaved::<true>(&self.tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
+            }
+            Structure::Grid(_) => {
                 for (r, o) in rays.iter().zip(out) {
                     *o = self.occluded(r, t_min, t_max, kind, &mut NoCounters);
                 }

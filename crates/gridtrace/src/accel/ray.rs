@@ -89,6 +89,11 @@ impl AccelKind {
     pub fn uses_grid(self) -> bool {
         matches!(self, AccelKind::Grid | AccelKind::ProximityCloud)
     }
+
+    /// The structure this kind traverses, as `Accel::structure_name` names it.
+    pub fn structure_name(self) -> &'static str {
+        if self.uses_grid() { "grid" } else { self.name() }
+    }
 }
 
 /// Traversal counters. The no-op implementation compiles to nothing, so the hot loop pays for

@@ -106,6 +106,12 @@ impl Scene {
 
     /// `prepare`, building the structure that serves `accel` (`resolution` sizes a grid).
     pub fn prepare_for(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
+        self.prepare_with(|tris| Accel::build(tris, accel, resolution))
+    }
+
+    /// `prepare`, with the structure `build` makes of the checked triangles (a structure with
+    /// parameters of its own: `Accel::build_irregular`).
+    pub fn prepare_with(&self, build: impl FnOnce(Vec<TriAccel>) -> Result<Accel>) -> Result<PreparedScene> {
         self.camera.validate().map_err(Error::Scene)?;
         for (i, l) in self.lights.iter().enumerate() {
             if !(Vec3::from(l.position).is_finite() && Vec3::from(l.intensity).is_finite()) {
@@ -169,7 +175,7 @@ impl Scene {
         // coordinates, because f32 hit points far from the origin carry larger absolute error.
         let ray_epsilon = (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE);
         Ok(PreparedScene {
-            accel: Accel::build(tris, accel, resolution)?,
+            accel: build(tris)?,
             normals,
             tri_vertices,
             tri_material,

@@ -31,6 +31,7 @@ use build::LEAF_BLOCK;
 pub(crate) use build::STACK;
 pub use build::{Bvh, BvhNode, MAX_LEAF};
 use walk::Walk;
+pub(crate) use walk::prefetch;
 use wide::collapse;
 pub use wide::{ChildRef, WIDTH, WideNode};
 

@@ -149,8 +149,9 @@ pub(super) fn has_avx2() -> bool {
 /// only adds bookkeeping).
 pub(super) const LANES: usize = 8;
 
+/// Asks for the cache line at `p` (a hint: any address will do).
 #[inline(always)]
-pub(super) fn prefetch(p: *const i8) {
+pub(crate) fn prefetch(p: *const i8) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is only a hint; it never faults, whatever the address.
     unsafe {

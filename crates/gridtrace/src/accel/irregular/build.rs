@@ -20,7 +20,7 @@ const COST_STEP: f64 = 1.0;
 /// Probes of neighbouring cells one face of one cell may make in one expansion attempt: a
 /// large face next to many small cells gives up rather than spend the build's time there (the
 /// traversal is exact whatever the expansion).
-const MAX_PROBES: u32 = 4096;
+const MAX_PROBES: u32 = 256;
 
 /// A cell's box in voxels, `min` inclusive and `max` exclusive.
 type VoxBox = [UVec3; 2];
@@ -196,11 +196,14 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         d.x * d.y + d.y * d.z + d.z * d.x
     };
     let alpha = params.merge_alpha as f64;
+    // The cells still alive, refreshed each pass: after the first pass most are gone.
+    let mut live: Vec<u32> = (0..n_init as u32).collect();
     for _ in 0..params.merge_passes {
         let mut merged = 0usize;
         for axis in 0..3 {
             let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
-            for cell in 0..n_init {
+            for &cell in &live {
+                let cell = cell as usize;
                 if !alive[cell] {
                     continue;
                 }
@@ -251,13 +254,14 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 }
             }
         }
+        live.retain(|&i| alive[i as usize]);
         if merged == 0 {
             break;
         }
     }
     // Every initial cell's surviving cell, and the survivors' new indices.
     let rep: Vec<u32> = (0..n_init as u32).map(|i| find(&mut parent, i)).collect();
-    let live: Vec<u32> = (0..n_init as u32).filter(|&i| alive[i as usize]).collect();
+    live.retain(|&i| alive[i as usize]);
     let mut new_index = vec![u32::MAX; n_init];
     for (k, &i) in live.iter().enumerate() {
         new_index[i as usize] = k as u32;

@@ -212,18 +212,8 @@ impl IrregularGrid {
     }
 
     /// The index of the cell that holds voxel `v` (which must be inside the grid).
-    #[inline(always)]
     pub fn cell_at(&self, v: [u32; 3]) -> u32 {
-        let s = self.shift;
-        let top = [v[0] >> s, v[1] >> s, v[2] >> s];
-        let t = self.top_dims;
-        let entry = self.entries[(top[0] + t.x * (top[1] + t.y * top[2])) as usize];
-        let level = entry & ((1 << LEVEL_BITS) - 1);
-        let begin = entry >> LEVEL_BITS;
-        let mask = (1u32 << s) - 1;
-        let drop = s - level;
-        let local = [(v[0] & mask) >> drop, (v[1] & mask) >> drop, (v[2] & mask) >> drop];
-        self.voxel_map[(begin + local[0] + (local[1] << level) + (local[2] << (2 * level))) as usize]
+        self.voxel_map[self.slot(v.map(|x| x as i32))]
     }
 
     /// The references of cell `c`.
