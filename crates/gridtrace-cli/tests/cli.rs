@@ -75,41 +75,86 @@ fn render_from_mesh_file_and_scene_file() {
     assert!(text.contains("grid 4x4x4"), "{text}");
 }
 
-/// The BVH renders on every backend, and the GPU's image is the CPU's (lavapipe in CI).
+/// The structures with walks of their own (the BVH, the irregular grid) render on every
+/// backend, and the GPU's image is the CPU's (lavapipe in CI).
 #[test]
-fn bvh_renders_on_cpu_and_gpu() {
+fn bvh_and_irregular_render_on_cpu_and_gpu() {
     let dir = std::env::temp_dir().join(format!("gridtrace-cli-bvh-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let png = dir.join("bvh.png");
-    let args = |backend| {
-        [
-            "render",
+    let png = dir.join("own.png");
+    for accel in ["bvh", "irregular"] {
+        let args = |backend| {
+            [
+                "render",
+                "--scene",
+                "knot-box",
+                "--accel",
+                accel,
+                "--res",
+                "32",
+                "--backend",
+                backend,
+                "-o",
+                png.to_str().unwrap(),
+            ]
+        };
+        let mut images = Vec::new();
+        for backend in ["cpu", "gpu"] {
+            let (ok, text) = gridtrace(&args(backend));
+            assert!(ok, "{accel} {backend}: {text}");
+            assert!(text.contains(accel) && !text.contains("CPU only"), "{text}");
+            images.push(image::open(&png).unwrap().to_rgb8());
+        }
+        let differing = images[0]
+            .pixels()
+            .zip(images[1].pixels())
+            .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 2))
+            .count();
+        // The CPU/GPU image tolerance of tests/gpu.rs: 0.5% of pixels beyond 2 levels.
+        assert!(differing * 200 <= 32 * 32, "{accel}: {differing} pixels differ");
+    }
+}
+
+/// `info` describes the irregular grid's build phase by phase, takes its parameters, and
+/// refuses bad ones with a message naming the parameter.
+#[test]
+fn info_prints_the_irregular_grid() {
+    let (ok, text) = gridtrace(&[
+        "info",
+        "--scene",
+        "knot-box",
+        "--accel",
+        "irregular",
+        "--irregular",
+        "top=0.2,expand=1",
+    ]);
+    assert!(ok, "{text}");
+    for want in [
+        "irregular grid   top",
+        "before merging",
+        "second level",
+        "expand",
+        "voxel map",
+        "refs",
+    ] {
+        assert!(text.contains(want), "missing '{want}' in:\n{text}");
+    }
+    for (bad, says) in [
+        ("top=0", "top density"),
+        ("cell=1e9", "cell density"),
+        ("size=3", "unknown irregular parameter 'size'"),
+    ] {
+        let (ok, text) = gridtrace(&[
+            "info",
             "--scene",
             "knot-box",
             "--accel",
-            "bvh",
-            "--res",
-            "32",
-            "--backend",
-            backend,
-            "-o",
-            png.to_str().unwrap(),
-        ]
-    };
-    let mut images = Vec::new();
-    for backend in ["cpu", "gpu"] {
-        let (ok, text) = gridtrace(&args(backend));
-        assert!(ok, "{backend}: {text}");
-        assert!(text.contains("bvh") && !text.contains("CPU only"), "{text}");
-        images.push(image::open(&png).unwrap().to_rgb8());
+            "irregular",
+            "--irregular",
+            bad,
+        ]);
+        assert!(!ok && text.contains(says), "{bad}: {text}");
     }
-    let differing = images[0]
-        .pixels()
-        .zip(images[1].pixels())
-        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 2))
-        .count();
-    // The CPU/GPU image tolerance of tests/gpu.rs: 0.5% of pixels beyond 2 levels.
-    assert!(differing * 200 <= 32 * 32, "{differing} pixels differ");
 }
 
 #[test]

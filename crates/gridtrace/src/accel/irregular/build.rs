@@ -376,6 +376,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         top_dims,
         shift,
         voxel_size,
+        inv_voxel_size: voxel_size.recip(),
         entries,
         voxel_map,
         cells,

@@ -182,8 +182,10 @@ pub struct IrregularGrid {
     pub top_dims: UVec3,
     /// Levels of the finest top cell: the virtual grid has `top_dims << shift` voxels.
     pub shift: u32,
-    /// World-space size of one virtual voxel per axis.
+    /// World-space size of one virtual voxel per axis, and its reciprocal (the walk multiplies
+    /// by it; the GPU gets the same value).
     pub voxel_size: Vec3,
+    pub inv_voxel_size: Vec3,
     /// One per top cell, x fastest: `begin << LEVEL_BITS | level`; the top cell's
     /// `8^level` voxel-map entries start at `begin`.
     pub entries: Vec<u32>,

@@ -85,7 +85,7 @@ impl IrregularGrid {
     /// of non-negative voxels. (`floor` is a libm call on baseline x86-64.)
     #[inline(always)]
     fn world_to_voxel(&self, p: Vec3) -> [i32; 3] {
-        ((p - self.bounds.min) / self.voxel_size).as_ivec3().to_array()
+        ((p - self.bounds.min) * self.inv_voxel_size).as_ivec3().to_array()
     }
 
     /// The voxel-map slot of voxel `v` (inside the grid).
