@@ -1,7 +1,7 @@
 //! Watertightness: rays aimed exactly at shared edges and vertices of closed meshes (and at the
 //! interior edges of the open Stanford Bunny) must not slip through, on the CPU and the GPU, for
-//! the plain grid, proximity clouds and the BVH. A ray "leaks" if it misses, or if its first hit lies
-//! beyond the aim point (relative 1e-5).
+//! every structure (the plain grid, proximity clouds, the BVH and the irregular grid). A ray
+//! "leaks" if it misses, or if its first hit lies beyond the aim point (relative 1e-4).
 
 use std::path::Path;
 
@@ -55,6 +55,17 @@ fn scene_and_rays(mesh: gridtrace::Mesh, n: usize) -> (PreparedScene, Vec<AimedR
     (scene, rays)
 }
 
+/// The scene prepared for every structure: the grid (serving `grid` and `pc`) and one per kind
+/// with a structure of its own.
+fn all_structures(scene: PreparedScene) -> Vec<PreparedScene> {
+    let own: Vec<PreparedScene> = AccelKind::ALL
+        .into_iter()
+        .filter(|k| !k.uses_grid())
+        .map(|k| scene.with_accel(k, Resolution::default()).unwrap())
+        .collect();
+    std::iter::once(scene).chain(own).collect()
+}
+
 /// Leaking rays per mesh and accel kind, on the CPU.
 fn cpu_leaks() -> (usize, Vec<String>) {
     let mut total = 0;
@@ -62,9 +73,9 @@ fn cpu_leaks() -> (usize, Vec<String>) {
     for (name, mesh, n) in meshes() {
         let (scene, rays) = scene_and_rays(mesh, n);
         total += rays.len();
-        let bvh = scene.with_accel(AccelKind::Bvh, Resolution::default()).unwrap();
+        let scenes = all_structures(scene);
         for kind in AccelKind::ALL {
-            let scene = if kind == AccelKind::Bvh { &bvh } else { &scene };
+            let scene = scenes.iter().find(|s| s.accel.serves(kind)).unwrap();
             let hits: Vec<Hit> = rays
                 .par_iter()
                 .map(|r| scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, kind, &mut NoCounters))
@@ -111,16 +122,16 @@ fn gpu_edges_and_vertices_do_not_leak() {
             gridtrace::gpu::GpuContext::new()
                 .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")),
         );
-        let bvh = scene.with_accel(AccelKind::Bvh, Resolution::default()).unwrap();
-        let mut grid_gpu = gridtrace::gpu::GpuRenderer::new(ctx.clone(), &scene).unwrap();
-        let mut bvh_gpu = gridtrace::gpu::GpuRenderer::new(ctx, &bvh).unwrap();
+        let mut gpus: Vec<(PreparedScene, gridtrace::gpu::GpuRenderer)> = all_structures(scene)
+            .into_iter()
+            .map(|s| {
+                let g = gridtrace::gpu::GpuRenderer::new(ctx.clone(), &s).unwrap();
+                (s, g)
+            })
+            .collect();
         let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
         for kind in AccelKind::ALL {
-            let gpu = if kind == AccelKind::Bvh {
-                &mut bvh_gpu
-            } else {
-                &mut grid_gpu
-            };
+            let (_, gpu) = gpus.iter_mut().find(|(s, _)| s.accel.serves(kind)).unwrap();
             let hits = gpu.intersect(&plain, 0.0, f32::INFINITY, kind).unwrap();
             let bad = leaks(&rays, &hits);
             assert!(

@@ -49,16 +49,26 @@ fn agree(accel: &Accel, r: &gridtrace::Ray, cpu: &Hit, gpu: &Hit) -> bool {
             .is_some_and(|h| close(h.t, cpu.t))
 }
 
-/// The scene prepared for each structure, with its GPU renderer: one for the grid (which
-/// serves `grid` and `pc`) and one for the BVH.
-fn prepared(scene: &PreparedScene, res: Resolution) -> [(PreparedScene, Option<GpuRenderer>); 2] {
-    let bvh = scene.with_accel(AccelKind::Bvh, res).unwrap();
-    let (g, b) = (renderer(scene), renderer(&bvh));
-    [(scene.clone(), g), (bvh, b)]
+/// The scene prepared for each structure, with its GPU renderer: the grid (which serves `grid`
+/// and `pc`), then one for every kind with a structure of its own (the BVH, the irregular grid).
+type Prepared = Vec<(PreparedScene, Option<GpuRenderer>)>;
+
+fn prepared(scene: &PreparedScene, res: Resolution) -> Prepared {
+    let mut p = vec![(scene.clone(), renderer(scene))];
+    for kind in AccelKind::ALL.into_iter().filter(|k| !k.uses_grid()) {
+        let s = scene.with_accel(kind, res).unwrap();
+        let g = renderer(&s);
+        p.push((s, g));
+    }
+    p
 }
 
-fn for_kind(p: &mut [(PreparedScene, Option<GpuRenderer>); 2], kind: AccelKind) -> (&PreparedScene, &mut GpuRenderer) {
-    let (s, g) = &mut p[(kind == AccelKind::Bvh) as usize];
+/// The prepared scene that serves `kind`, and its renderer.
+fn for_kind(p: &mut Prepared, kind: AccelKind) -> (&PreparedScene, &mut GpuRenderer) {
+    let (s, g) = p
+        .iter_mut()
+        .find(|(s, _)| s.accel.serves(kind))
+        .unwrap_or_else(|| panic!("no prepared scene serves {}", kind.name()));
     (s, g.as_mut().unwrap())
 }
 
@@ -125,6 +135,38 @@ fn per_ray_mirror_spheres() {
 #[test]
 fn per_ray_sparse_room_pc() {
     per_ray_agreement("sparse-room", Resolution::Fixed([48, 48, 48]));
+}
+
+/// A GPU scene answers the kinds its structure serves and refuses the others with an error
+/// that names the kind asked for (as the CPU's `Accel::check_serves`).
+#[test]
+fn uploads_serve_their_kinds_only() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let mut p = prepared(&scene, Resolution::default());
+    if p[0].1.is_none() {
+        return;
+    }
+    let rays = ray_set(&scene.accel, 100, 5);
+    for (s, g) in &mut p {
+        let gpu = g.as_mut().unwrap();
+        for kind in AccelKind::ALL {
+            let got = gpu.intersect(&rays, 0.0, f32::INFINITY, kind);
+            assert_eq!(
+                got.is_ok(),
+                s.accel.serves(kind),
+                "{} on a {}",
+                kind.name(),
+                s.accel.structure_name()
+            );
+            if let Err(e) = got {
+                assert!(e.to_string().contains(&format!("'{}'", kind.name())), "{e}");
+            }
+        }
+    }
 }
 
 /// Fraction of pixels whose 8-bit sRGB channels differ by more than `tol` levels.

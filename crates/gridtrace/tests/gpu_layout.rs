@@ -4,7 +4,7 @@
 
 use std::mem::{offset_of, size_of};
 
-use gridtrace::accel::{Cell, TriAccel};
+use gridtrace::accel::{Cell, IrrCell, TriAccel};
 use gridtrace::gpu::bindings::{self, Access};
 use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
 use gridtrace::gpu::layout::{
@@ -56,6 +56,7 @@ fn wgsl_structs_match_rust() {
     check!(m, RayRec, "RayRec", [origin, pixel, dir, t_max, weight, t_min]);
     check!(m, GpuHit, "GpuHit", [t, tri, u, v]);
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
+    check!(m, IrrCell, "IrrCell", [min, start, max, count]);
     check!(
         m,
         SceneUniform,
@@ -70,7 +71,7 @@ fn wgsl_structs_match_rust() {
             inv_cell_size,
             _pad0,
             dims,
-            _pad1,
+            shift,
             background,
             _pad2,
             ambient,

@@ -44,6 +44,11 @@ pub enum FrameSlot {
     Counters,
     /// The BVH's nodes (a grid scene binds one unused node).
     BvhNodes,
+    /// The irregular grid's top-cell entries, voxel map and cells (other scenes bind one unused
+    /// element of each).
+    IrrEntries,
+    IrrVoxels,
+    IrrCells,
 }
 
 pub const FRAME_GROUP: u32 = 0;
@@ -60,7 +65,7 @@ const fn row<S>(index: u32, name: &'static str, access: Access, slot: S) -> Bind
 use Access::{StorageRead, StorageReadWrite, Uniform};
 
 /// Group 0, as declared in common.wgsl.
-pub const FRAME_BINDINGS: [Binding<FrameSlot>; 17] = [
+pub const FRAME_BINDINGS: [Binding<FrameSlot>; 20] = [
     row(0, "scene", Uniform, FrameSlot::SceneUniform),
     row(1, "camera", Uniform, FrameSlot::CameraUniform),
     row(2, "pass_", Uniform, FrameSlot::PassUniform),
@@ -78,6 +83,9 @@ pub const FRAME_BINDINGS: [Binding<FrameSlot>; 17] = [
     row(14, "accum", StorageReadWrite, FrameSlot::Accum),
     row(15, "counters", StorageReadWrite, FrameSlot::Counters),
     row(16, "bvh_nodes", StorageRead, FrameSlot::BvhNodes),
+    row(17, "irr_entries", StorageRead, FrameSlot::IrrEntries),
+    row(18, "irr_voxels", StorageRead, FrameSlot::IrrVoxels),
+    row(19, "irr_cells", StorageRead, FrameSlot::IrrCells),
 ];
 
 /// What group 1 binds: the indirect arguments, written as storage by the one kernel that
@@ -153,8 +161,10 @@ mod tests {
     #[test]
     fn tables_are_unique() {
         let rows = all();
-        // 14 in group 0 (13 before the GPU BVH) and the indirect args.
-        assert_eq!(storage_buffers_needed(), 15);
+        // 17 in group 0 (13 before the GPU BVH, 14 before the irregular grid) and the indirect
+        // args: within what desktop and mobile Vulkan, Metal (31 buffers a stage, uniforms
+        // included) and D3D12 allow.
+        assert_eq!(storage_buffers_needed(), 18);
         for (i, a) in rows.iter().enumerate() {
             for b in &rows[i + 1..] {
                 assert!(!(a.0 == b.0 && a.1 == b.1), "binding {}/{} twice", a.0, a.1);

@@ -8,6 +8,7 @@ use std::fmt::Write as _;
 use super::bvh::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
 use crate::accel::bvh;
+use crate::accel::irregular;
 use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_ULPS};
 use crate::render::Mode;
 
@@ -43,7 +44,8 @@ pub const fn mode_code(mode: Mode) -> u32 {
 }
 
 /// `PassUniform::accel`: 1 walks the proximity clouds (`ACCEL_PC`), 0 the plain grid, 2 the BVH
-/// (whose kernels are their own pipelines, `Kernel::for_accel`, and do not read it).
+/// and 3 the irregular grid (whose kernels are their own pipelines, `Kernel::walking`, and do
+/// not read it).
 pub const fn accel_code(accel: AccelKind) -> u32 {
     match accel {
         AccelKind::Grid => 0,
@@ -66,7 +68,7 @@ pub enum WgslConst {
 
 /// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
 /// `TriAccel::intersect`'s own, so both backends accept the same hits.
-pub const WGSL_CONSTANTS: [(&str, WgslConst); 26] = [
+pub const WGSL_CONSTANTS: [(&str, WgslConst); 27] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -93,6 +95,7 @@ pub const WGSL_CONSTANTS: [(&str, WgslConst); 26] = [
     ("DIR_TINY", WgslConst::F32(bvh::DIR_TINY)),
     ("FAR_SCALE", WgslConst::F32(bvh::FAR_SCALE)),
     ("T_SLOP", WgslConst::F32(bvh::T_SLOP)),
+    ("IRR_LEVEL_BITS", WgslConst::U32(irregular::LEVEL_BITS)),
 ];
 
 /// One WGSL literal that denotes exactly `v`: Rust's `{:?}` prints the shortest decimal that

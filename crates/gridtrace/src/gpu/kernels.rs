@@ -29,18 +29,27 @@ pub(crate) enum Kernel {
     /// `occlusion` finding closest hits: the `shadow_closest_hit` ablation, for each walk.
     OcclusionClosest,
     OcclusionBvhClosest,
+    /// `traverse` and `occlusion` compiled to walk the irregular grid, as the BVH's four.
+    TraverseIrregular,
+    TraverseIrregularHeat,
+    OcclusionIrregular,
+    OcclusionIrregularClosest,
 }
 
 impl Kernel {
     /// The pipeline that runs this kernel on a scene walked as `structure`: the traversal
-    /// kernels have one per walk, specialised by the `BVH` override so that neither carries the
-    /// other's code and registers.
+    /// kernels have one per walk, specialised by the `BVH` and `IRREGULAR` overrides so that
+    /// none carries another's code and registers.
     pub fn walking(self, structure: GpuStructure) -> Kernel {
         match (self, structure) {
             (Kernel::Traverse, GpuStructure::Bvh) => Kernel::TraverseBvh,
             (Kernel::TraverseHeat, GpuStructure::Bvh) => Kernel::TraverseBvhHeat,
             (Kernel::Occlusion, GpuStructure::Bvh) => Kernel::OcclusionBvh,
             (Kernel::OcclusionClosest, GpuStructure::Bvh) => Kernel::OcclusionBvhClosest,
+            (Kernel::Traverse, GpuStructure::Irregular) => Kernel::TraverseIrregular,
+            (Kernel::TraverseHeat, GpuStructure::Irregular) => Kernel::TraverseIrregularHeat,
+            (Kernel::Occlusion, GpuStructure::Irregular) => Kernel::OcclusionIrregular,
+            (Kernel::OcclusionClosest, GpuStructure::Irregular) => Kernel::OcclusionIrregularClosest,
             (k, _) => k,
         }
     }
@@ -92,7 +101,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 12] = [
+const SPECS: [KernelSpec; 16] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -147,6 +156,44 @@ const SPECS: [KernelSpec; 12] = [
         ..spec(
             Kernel::OcclusionBvhClosest,
             "occlusion (bvh, closest hit)",
+            "occlusion",
+            shaders::OCCLUSION,
+        )
+    },
+    KernelSpec {
+        overrides: &[("IRREGULAR", 1.0)],
+        ..spec(
+            Kernel::TraverseIrregular,
+            "traverse (irregular)",
+            "traverse",
+            shaders::TRAVERSE,
+        )
+    },
+    KernelSpec {
+        overrides: &[("IRREGULAR", 1.0), ("COUNT_WORK", 1.0)],
+        ..spec(
+            Kernel::TraverseIrregularHeat,
+            "traverse (irregular, heat)",
+            "traverse",
+            shaders::TRAVERSE,
+        )
+    },
+    KernelSpec {
+        launch: SHADOW_QUEUE,
+        overrides: &[("IRREGULAR", 1.0)],
+        ..spec(
+            Kernel::OcclusionIrregular,
+            "occlusion (irregular)",
+            "occlusion",
+            shaders::OCCLUSION,
+        )
+    },
+    KernelSpec {
+        launch: SHADOW_QUEUE,
+        overrides: &[("IRREGULAR", 1.0), ("SHADOW_CLOSEST", 1.0)],
+        ..spec(
+            Kernel::OcclusionIrregularClosest,
+            "occlusion (irregular, closest hit)",
             "occlusion",
             shaders::OCCLUSION,
         )
@@ -288,6 +335,42 @@ mod tests {
     fn specs_are_in_kernel_order() {
         for (i, s) in SPECS.iter().enumerate() {
             assert_eq!(s.kernel as usize, i, "{}", s.label);
+        }
+    }
+
+    /// Every traversal kernel on every structure runs the pipeline compiled for that walk (its
+    /// override set, the others' not), and the other kernels are the same for all.
+    #[test]
+    fn walking_picks_each_structures_pipeline() {
+        let overrides = |k: Kernel| spec_of(k).overrides.iter().map(|o| o.0).collect::<Vec<_>>();
+        for structure in GpuStructure::ALL {
+            let want = match structure {
+                GpuStructure::Grid => None,
+                GpuStructure::Bvh => Some("BVH"),
+                GpuStructure::Irregular => Some("IRREGULAR"),
+            };
+            for k in [
+                Kernel::Traverse,
+                Kernel::TraverseHeat,
+                Kernel::Occlusion,
+                Kernel::OcclusionClosest,
+            ] {
+                let got = overrides(k.walking(structure));
+                for walk in ["BVH", "IRREGULAR"] {
+                    assert_eq!(
+                        got.contains(&walk),
+                        want == Some(walk),
+                        "{k:?} on {structure:?}: {got:?}"
+                    );
+                }
+                // Heat and the closest-hit ablation survive the specialisation.
+                assert_eq!(got.contains(&"COUNT_WORK"), k == Kernel::TraverseHeat);
+                assert_eq!(got.contains(&"SHADOW_CLOSEST"), k == Kernel::OcclusionClosest);
+                assert_eq!(spec_of(k.walking(structure)).stage, spec_of(k).stage);
+            }
+            for k in [Kernel::Raygen, Kernel::Shade, Kernel::Resolve, Kernel::Indirect] {
+                assert_eq!(k.walking(structure), k);
+            }
         }
     }
 

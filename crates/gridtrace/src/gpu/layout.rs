@@ -48,6 +48,11 @@ pub struct GpuHit {
 
 /// Scene constants (uniform; vec3 fields are 16-byte aligned in WGSL uniforms, so each is
 /// followed by a 4-byte scalar).
+///
+/// The uniform grid and the irregular grid both count their planes on a regular lattice over
+/// `bounds_min..bounds_max`, so they share its fields: for the uniform grid the lattice is its
+/// cells, for the irregular grid its virtual voxels (`IrregularGrid::voxel_dims`,
+/// `voxel_size`), whose top cells are `dims >> shift`. A BVH scene leaves them zero.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct SceneUniform {
@@ -55,12 +60,17 @@ pub struct SceneUniform {
     pub ray_epsilon: f32,
     pub bounds_max: [f32; 3],
     pub n_lights: u32,
+    /// World-space size of one cell (irregular grid: one virtual voxel) per axis.
     pub cell_size: [f32; 3],
     pub n_tris: u32,
+    /// `1 / cell_size`, computed on the host as the CPU walks compute it (`Vec3::recip`), so
+    /// both backends map a point to the same cell or voxel; a GPU's division may differ by ulps.
     pub inv_cell_size: [f32; 3],
     pub _pad0: u32,
+    /// Cells (irregular grid: virtual voxels) per axis.
     pub dims: [u32; 3],
-    pub _pad1: u32,
+    /// Irregular grid: levels of the finest top cell (`IrregularGrid::shift`); zero otherwise.
+    pub shift: u32,
     pub background: [f32; 3],
     pub _pad2: u32,
     pub ambient: [f32; 3],

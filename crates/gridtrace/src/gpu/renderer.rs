@@ -118,18 +118,16 @@ impl GpuRenderer {
     }
 
     /// Whether this scene's upload serves `accel`: a grid scene walks `grid` and `pc`, a BVH
-    /// scene `bvh`. An error that says what to do otherwise.
+    /// scene `bvh`, an irregular-grid scene `irregular`. An error that says what to do
+    /// otherwise.
     pub(super) fn check_serves(&self, accel: AccelKind) -> Result<()> {
-        let ok = match self.scene.structure {
-            GpuStructure::Grid => accel != AccelKind::Bvh,
-            GpuStructure::Bvh => accel == AccelKind::Bvh,
-        };
-        if ok {
+        if self.scene.structure.serves(accel) {
             return Ok(());
         }
         let uploaded = match self.scene.structure {
             GpuStructure::Grid => "a grid",
             GpuStructure::Bvh => "a bvh",
+            GpuStructure::Irregular => "an irregular grid",
         };
         Err(Error::InvalidInput(format!(
             "accel '{}' asked of a GPU scene uploaded with {uploaded}: prepare the scene for '{}'",
@@ -237,6 +235,9 @@ impl GpuRenderer {
                     FrameSlot::Accum => accum.as_entire_binding(),
                     FrameSlot::Counters => self.counters.as_entire_binding(),
                     FrameSlot::BvhNodes => self.scene.bvh_nodes.as_entire_binding(),
+                    FrameSlot::IrrEntries => self.scene.irr_entries.as_entire_binding(),
+                    FrameSlot::IrrVoxels => self.scene.irr_voxels.as_entire_binding(),
+                    FrameSlot::IrrCells => self.scene.irr_cells.as_entire_binding(),
                 });
                 dev.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("gridtrace"),

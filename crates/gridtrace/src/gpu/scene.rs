@@ -1,4 +1,4 @@
-//! The scene on the GPU: grid cells or BVH nodes, references, triangles, per-triangle shading data,
+//! The scene on the GPU: grid cells, BVH nodes or the irregular grid's arrays, references, triangles, per-triangle shading data,
 //! materials and the scene constants, uploaded once per renderer. Camera and lights are not
 //! here; they change per frame.
 
@@ -11,7 +11,7 @@ use super::bvh::gpu_nodes;
 use super::constants::BVH_STACK;
 use super::context::GpuContext;
 use super::layout::{GpuBvhNode, GpuMaterial, SceneUniform, TriShade};
-use crate::accel::{Aabb, Cell, Structure, TriAccel};
+use crate::accel::{Aabb, AccelKind, Cell, IrrCell, Structure, TriAccel};
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
 
@@ -22,22 +22,60 @@ pub(crate) enum GpuStructure {
     Grid,
     /// The BVH walk over `bvh_nodes`.
     Bvh,
+    /// The irregular grid's walk over `irr_entries`, `irr_voxels` and `irr_cells`.
+    Irregular,
 }
 
-/// What the kernels read of the prepared scene's acceleration structure. The structure a scene
-/// was not prepared with gets one unused element (bindings cannot be empty).
+impl GpuStructure {
+    pub const ALL: [GpuStructure; 3] = [GpuStructure::Grid, GpuStructure::Bvh, GpuStructure::Irregular];
+
+    /// Whether a scene uploaded with this structure can run traversal `accel` (as
+    /// `Accel::serves`: the grid serves `grid` and `pc`, every other structure its own kind).
+    pub fn serves(self, accel: AccelKind) -> bool {
+        match self {
+            GpuStructure::Grid => accel.uses_grid(),
+            GpuStructure::Bvh => accel == AccelKind::Bvh,
+            GpuStructure::Irregular => accel == AccelKind::Irregular,
+        }
+    }
+
+    /// The scene arrays only this structure reads: another structure's scene binds one unused
+    /// element in their place, which is not the scene's memory.
+    fn own_arrays(self) -> &'static [&'static str] {
+        match self {
+            GpuStructure::Grid => &["cells"],
+            GpuStructure::Bvh => &["bvh_nodes"],
+            GpuStructure::Irregular => &["irr_entries", "irr_voxels", "irr_cells"],
+        }
+    }
+}
+
+/// What the kernels read of the prepared scene's acceleration structure. The structures a scene
+/// was not prepared with get one unused element each (bindings cannot be empty).
 struct AccelArrays<'a> {
     structure: GpuStructure,
     cells: Cow<'a, [Cell]>,
-    /// Grid: the cells' triangle lists. BVH: triangle indices in leaf order.
+    /// Grid and irregular grid: the cells' triangle lists. BVH: triangle indices in leaf order.
     refs: &'a [u32],
     bvh_nodes: Vec<GpuBvhNode>,
+    irr_entries: Cow<'a, [u32]>,
+    irr_voxels: Cow<'a, [u32]>,
+    irr_cells: Cow<'a, [IrrCell]>,
     tris: &'a [TriAccel],
     bounds: Aabb,
+    /// The lattice the walk counts planes on (`SceneUniform`): the grid's cells or the
+    /// irregular grid's virtual voxels; zero for a BVH.
     dims: UVec3,
-    /// World-space size of one cell per axis, and its reciprocal (zero for a BVH).
+    /// World-space size of one cell or voxel per axis, and its reciprocal.
     cell_size: Vec3,
     inv_cell_size: Vec3,
+    /// Irregular grid: `IrregularGrid::shift`.
+    shift: u32,
+}
+
+/// One unused element, for the bindings of a structure the scene was not prepared with.
+fn unused<T: Clone + bytemuck::Zeroable>() -> Cow<'static, [T]> {
+    Cow::Owned(vec![T::zeroed()])
 }
 
 /// The one place the GPU backend reads `scene.accel`: when its types change, only this function
@@ -50,11 +88,15 @@ fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
             cells: Cow::Borrowed(&g.cells),
             refs: &g.refs,
             bvh_nodes: vec![bytemuck::Zeroable::zeroed()],
+            irr_entries: unused(),
+            irr_voxels: unused(),
+            irr_cells: unused(),
             tris,
             bounds: g.bounds,
             dims: g.dims,
             cell_size: g.cell_size,
             inv_cell_size: g.inv_cell_size,
+            shift: 0,
         }),
         Structure::Bvh(b) => {
             if b.bvh.depth >= BVH_STACK as usize {
@@ -67,19 +109,36 @@ fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
             }
             Ok(AccelArrays {
                 structure: GpuStructure::Bvh,
-                cells: Cow::Owned(vec![bytemuck::Zeroable::zeroed()]),
+                cells: unused(),
                 refs: &b.bvh.prims,
                 bvh_nodes: gpu_nodes(&b.bvh)?,
+                irr_entries: unused(),
+                irr_voxels: unused(),
+                irr_cells: unused(),
                 tris,
                 bounds: scene.accel.bounds(),
                 dims: UVec3::ZERO,
                 cell_size: Vec3::ZERO,
                 inv_cell_size: Vec3::ZERO,
+                shift: 0,
             })
         }
-        Structure::Irregular(_) => Err(Error::InvalidInput(
-            "the irregular grid has no GPU walk yet: use --backend cpu".into(),
-        )),
+        Structure::Irregular(g) => Ok(AccelArrays {
+            structure: GpuStructure::Irregular,
+            cells: unused(),
+            refs: &g.refs,
+            bvh_nodes: vec![bytemuck::Zeroable::zeroed()],
+            irr_entries: Cow::Borrowed(&g.entries),
+            irr_voxels: Cow::Borrowed(&g.voxel_map),
+            irr_cells: Cow::Borrowed(&g.cells),
+            tris,
+            bounds: g.bounds,
+            dims: g.voxel_dims(),
+            cell_size: g.voxel_size,
+            // The walk's own reciprocal (walk.rs: `inv_voxel`), bit for bit.
+            inv_cell_size: g.voxel_size.recip(),
+            shift: g.shift,
+        }),
     }
 }
 
@@ -105,6 +164,9 @@ pub(crate) struct SceneBuffers {
     pub structure: GpuStructure,
     pub cells: wgpu::Buffer,
     pub bvh_nodes: wgpu::Buffer,
+    pub irr_entries: wgpu::Buffer,
+    pub irr_voxels: wgpu::Buffer,
+    pub irr_cells: wgpu::Buffer,
     pub refs: wgpu::Buffer,
     pub tris: wgpu::Buffer,
     pub tri_shade: wgpu::Buffer,
@@ -141,9 +203,12 @@ impl SceneBuffers {
                 reflectivity: m.reflectivity,
             })
             .collect();
-        let arrays: [(&'static str, &[u8]); 6] = [
+        let arrays: [(&'static str, &[u8]); 9] = [
             ("cells", bytemuck::cast_slice(&accel.cells)),
             ("bvh_nodes", bytemuck::cast_slice(&accel.bvh_nodes)),
+            ("irr_entries", bytemuck::cast_slice(&accel.irr_entries)),
+            ("irr_voxels", bytemuck::cast_slice(&accel.irr_voxels)),
+            ("irr_cells", bytemuck::cast_slice(&accel.irr_cells)),
             ("refs", bytemuck::cast_slice(accel.refs)),
             ("triangles", bytemuck::cast_slice(accel.tris)),
             ("tri_shade", bytemuck::cast_slice(&tri_shade)),
@@ -151,12 +216,14 @@ impl SceneBuffers {
         ];
         let mut bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
         check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
-        // The other structure's placeholder is not the scene's memory.
-        let unused = match accel.structure {
-            GpuStructure::Grid => "bvh_nodes",
-            GpuStructure::Bvh => "cells",
-        };
-        bytes.retain(|(n, _)| *n != unused);
+        // The other structures' placeholders are not the scene's memory.
+        let placeholders: Vec<&str> = GpuStructure::ALL
+            .into_iter()
+            .filter(|&st| st != accel.structure)
+            .flat_map(GpuStructure::own_arrays)
+            .copied()
+            .collect();
+        bytes.retain(|(n, _)| !placeholders.contains(n));
         let storage = |label: &str, data: &[u8]| {
             // Zero-length bindings are invalid; give empty arrays one element of padding.
             let contents: &[u8] = if data.is_empty() { &[0u8; 16] } else { data };
@@ -166,7 +233,17 @@ impl SceneBuffers {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             })
         };
-        let [cells, bvh_nodes, refs, tris, tri_shade, materials] = arrays.map(|(n, d)| storage(n, d));
+        let [
+            cells,
+            bvh_nodes,
+            irr_entries,
+            irr_voxels,
+            irr_cells,
+            refs,
+            tris,
+            tri_shade,
+            materials,
+        ] = arrays.map(|(n, d)| storage(n, d));
 
         let consts = SceneUniform {
             bounds_min: accel.bounds.min.to_array(),
@@ -178,7 +255,7 @@ impl SceneBuffers {
             inv_cell_size: accel.inv_cell_size.to_array(),
             _pad0: 0,
             dims: accel.dims.to_array(),
-            _pad1: 0,
+            shift: accel.shift,
             background: scene.background.to_array(),
             _pad2: 0,
             ambient: scene.ambient.to_array(),
@@ -195,6 +272,9 @@ impl SceneBuffers {
             structure: accel.structure,
             cells,
             bvh_nodes,
+            irr_entries,
+            irr_voxels,
+            irr_cells,
             refs,
             tris,
             tri_shade,

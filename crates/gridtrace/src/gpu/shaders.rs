@@ -1,12 +1,14 @@
 //! WGSL sources: the shared file and one per kernel. WGSL has no includes, so a kernel's module
-//! is the generated constant prelude, then `common.wgsl` and `bvh.wgsl`, then the kernel's own
-//! file.
+//! is the generated constant prelude, then `common.wgsl`, `bvh.wgsl` and `irregular.wgsl`, then
+//! the kernel's own file.
 
 use super::constants::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
 /// BVH traversal, shared like `COMMON` (the grid's DDA is in `COMMON`).
 pub const BVH: &str = include_str!("shaders/bvh.wgsl");
+/// The irregular grid's traversal, shared like `COMMON`.
+pub const IRREGULAR: &str = include_str!("shaders/irregular.wgsl");
 pub const RAYGEN: &str = include_str!("shaders/raygen.wgsl");
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
@@ -23,10 +25,10 @@ pub const KERNELS: [(&str, &str); 6] = [
     ("indirect", INDIRECT),
 ];
 
-/// The prelude, `common.wgsl` and `bvh.wgsl`: every declaration the kernels share (layout
-/// tests parse this).
+/// The prelude, `common.wgsl`, `bvh.wgsl` and `irregular.wgsl`: every declaration the kernels
+/// share (layout tests parse this).
 pub fn common_source() -> String {
-    format!("{}\n{}\n{}", wgsl_prelude(), COMMON, BVH)
+    format!("{}\n{}\n{}\n{}", wgsl_prelude(), COMMON, BVH, IRREGULAR)
 }
 
 /// The whole module of one kernel, as the device compiles it.

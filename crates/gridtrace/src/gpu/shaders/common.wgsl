@@ -17,13 +17,18 @@ struct RayRec { origin: array<f32, 3>, pixel: u32, dir: array<f32, 3>, t_max: f3
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
 // A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
 struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
+// An irregular-grid cell (IrrCell in accel/irregular/mod.rs): its grown box in virtual voxels
+// (`min` inclusive, `max` exclusive) and its slice of `refs`. A vec3<u32> in storage is 16-byte
+// aligned with a 4-byte scalar after it, so this is the Rust layout (32 bytes) read as two
+// 16-byte loads.
+struct IrrCell { min: vec3<u32>, start: u32, max: vec3<u32>, count: u32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,
     bounds_max: vec3<f32>, n_lights: u32,
     cell_size: vec3<f32>, n_tris: u32,
     inv_cell_size: vec3<f32>, _pad0: u32,
-    dims: vec3<u32>, _pad1: u32,
+    dims: vec3<u32>, shift: u32,
     background: vec3<f32>, _pad2: u32,
     ambient: vec3<f32>, _pad3: u32,
 }
@@ -47,8 +52,10 @@ struct IndirectArgs { rays: array<u32, 3>, shadow: array<u32, 3> }
 
 // Set per pipeline: the heat pipeline counts traversal work, the others compile it away.
 override COUNT_WORK: bool = false;
-// Set per pipeline: the BVH pipelines walk `bvh_nodes`, the others the grid.
+// Set per pipeline: the BVH pipelines walk `bvh_nodes`, the irregular grid's its three arrays,
+// the others the grid. (At most one is set.)
 override BVH: bool = false;
+override IRREGULAR: bool = false;
 // Set per pipeline: the occlusion kernel of the `shadow closest hit` ablation finds the closest
 // hit of each shadow ray instead of stopping at the first (RenderOptions::ablation).
 override SHADOW_CLOSEST: bool = false;
@@ -72,6 +79,12 @@ override SHADOW_CLOSEST: bool = false;
 // The BVH's nodes (a BVH scene's `refs` are its triangle indices in leaf order; a grid scene
 // binds one unused node here, a BVH scene one unused cell in `cells`).
 @group(0) @binding(16) var<storage, read> bvh_nodes: array<BvhNode>;
+// The irregular grid (its `refs` are its cells' triangle lists, as the grid's): one entry per
+// top cell (`begin << IRR_LEVEL_BITS | level`), the voxel map of every top cell, and the cells.
+// Other scenes bind one unused element of each.
+@group(0) @binding(17) var<storage, read> irr_entries: array<u32>;
+@group(0) @binding(18) var<storage, read> irr_voxels: array<u32>;
+@group(0) @binding(19) var<storage, read> irr_cells: array<IrrCell>;
 
 // Queues. Compacted (the tracer's way): each kernel appends the rays it emits with an atomic
 // counter, finished rays are never queued, and the next kernel runs over the queue's length.

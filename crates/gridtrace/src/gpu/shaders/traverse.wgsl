@@ -1,6 +1,7 @@
 // Traverse + intersect: closest hit for every ray of the input queue, one invocation per ray.
-// The BVH pipelines are this kernel compiled with BVH = true; the grid's take the DDA, with or
-// without proximity-cloud jumps as the pass says.
+// The BVH pipelines are this kernel compiled with BVH = true, the irregular grid's with
+// IRREGULAR = true; the grid's take the DDA, with or without proximity-cloud jumps as the pass
+// says.
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -11,6 +12,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var work = 0u;
     if (BVH) {
         hits[i] = bvh_closest(v3(r.origin), v3(r.dir), r.t_min, r.t_max, &work);
+    } else if (IRREGULAR) {
+        hits[i] = irr_closest(v3(r.origin), v3(r.dir), r.t_min, r.t_max, &work);
     } else {
         hits[i] = closest_hit(v3(r.origin), v3(r.dir), r.t_min, r.t_max, pass_.accel == ACCEL_PC, &work);
     }

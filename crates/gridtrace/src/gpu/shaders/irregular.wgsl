@@ -1,0 +1,136 @@
+// Irregular grid traversal: closest and any hit, mirroring IrregularGrid::walk (accel/irregular/
+// walk.rs) step for step, and using the same triangle test as the grid (`intersect_tri`).
+//
+// No DDA: the walk looks up the cell under its current voxel (the top cell's entry, then that
+// top cell's voxel map), tests the cell's triangles, and leaves the cell's grown box in one
+// step. The scene uniform's lattice fields are the virtual voxels here (`dims` voxels per axis
+// of `cell_size`, `scene.shift` levels below the top cells), so `world_to_grid` maps a point
+// to its voxel exactly as the CPU's `world_to_voxel` does (same host-computed reciprocal).
+//
+// Why it terminates and misses nothing in floating point (walk.rs says it at length): the next
+// voxel is never found by rounding the exit point alone. On the exit axis it is the voxel just
+// past the grown box's face, in integers; on the other axes the exit point's voxel clamped into
+// the box's range and never behind the current voxel in the ray's direction. Every step moves
+// forward on one axis and back on none, so `sum(dims)` steps bound the walk; the budget is
+// there all the same, as in the DDA. Where rounding puts the ray a voxel off near a face, the
+// build's `cell_margin` put the triangles that close to the face in both cells.
+
+struct IrrWalk {
+    o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>,
+    // The voxel the walk is in, and the sign of the direction per axis (0: parallel).
+    v: vec3<i32>, step: vec3<i32>,
+    t_leave: f32, budget: u32,
+}
+
+// The index of the cell holding voxel `v` (inside the grid); mirrors IrregularGrid::cell_at.
+fn irr_cell_at(v: vec3<u32>) -> u32 {
+    let s = scene.shift;
+    let top = v >> vec3<u32>(s);
+    let t = scene.dims >> vec3<u32>(s);
+    let entry = irr_entries[top.x + t.x * (top.y + t.y * top.z)];
+    let level = entry & ((1u << IRR_LEVEL_BITS) - 1u);
+    let begin = entry >> IRR_LEVEL_BITS;
+    let local = (v & vec3<u32>((1u << s) - 1u)) >> vec3<u32>(s - level);
+    return irr_voxels[begin + local.x + (local.y << level) + (local.z << (2u * level))];
+}
+
+// The parameter where the ray crosses voxel plane `k` of `axis`: from the integer plane index
+// each time, as the DDA's `boundary_t`, so nothing accumulates; infinite along a parallel axis.
+fn irr_plane_t(w: ptr<function, IrrWalk>, axis: i32, k: u32) -> f32 {
+    if ((*w).step[axis] == 0) { return inf(); }
+    return (scene.bounds_min[axis] + f32(k) * scene.cell_size[axis] - (*w).o[axis]) * (*w).inv_d[axis];
+}
+
+// Starts the walk at the voxel of the entry point, clamped into the grid (the entry point lies
+// on the box within rounding); false if the ray misses the grid within [t_min, t_max].
+fn irr_start(w: ptr<function, IrrWalk>, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    (*w).o = o;
+    (*w).d = d;
+    (*w).inv_d = 1.0 / d;
+    let c = clip_box(o, (*w).inv_d, d, t_min, t_max);
+    if (c.z == 0.0) { return false; }
+    (*w).t_leave = c.y;
+    (*w).step = vec3<i32>(sign(d));
+    let dims = vec3<i32>(scene.dims);
+    (*w).v = clamp(world_to_grid(o + d * c.x), vec3<i32>(0), dims - 1);
+    (*w).budget = u32(dims.x + dims.y + dims.z) + 8u;
+    return true;
+}
+
+// Where the ray leaves `cell`'s grown box on each axis: through the face ahead.
+fn irr_faces(w: ptr<function, IrrWalk>, cell: IrrCell) -> vec3<f32> {
+    let face = select(cell.min, cell.max, (*w).step > vec3<i32>(0));
+    return vec3<f32>(irr_plane_t(w, 0, face.x), irr_plane_t(w, 1, face.y), irr_plane_t(w, 2, face.z));
+}
+
+// Leaves `cell` (whose faces the ray crosses at `t_faces`) for the voxel just past its exit;
+// false when the walk is over: the exit is past the grid's, the next voxel is outside the grid,
+// or the budget is spent.
+fn irr_advance(w: ptr<function, IrrWalk>, cell: IrrCell, t_faces: vec3<f32>) -> bool {
+    let t_exit = min3(t_faces);
+    if (t_exit >= (*w).t_leave) { return false; }
+    let axis = min_position(t_faces);
+    let at_exit = world_to_grid((*w).o + (*w).d * t_exit);
+    let lo = vec3<i32>(cell.min);
+    let hi = vec3<i32>(cell.max) - 1;
+    let v = (*w).v;
+    let step = (*w).step;
+    var next = v;
+    for (var a = 0; a < 3; a++) {
+        if (a == axis) {
+            // The voxel past the face, in integers: never the cell just left.
+            next[a] = select(lo[a] - 1, hi[a] + 1, step[a] > 0);
+        } else if (step[a] != 0) {
+            // The exact exit point is in the box, so its voxel is clamped into the box's range;
+            // and the ray never moves back along an axis, whatever the rounding.
+            let inside = clamp(at_exit[a], lo[a], hi[a]);
+            next[a] = select(min(inside, v[a]), max(inside, v[a]), step[a] > 0);
+        }
+    }
+    if (next[axis] < 0 || next[axis] >= i32(scene.dims[axis])) { return false; }
+    (*w).v = next;
+    if ((*w).budget <= 1u) { return false; }
+    (*w).budget -= 1u;
+    return true;
+}
+
+// Closest hit with t_min < t < t_max; mirrors IrregularGrid::intersect. `work` gets the cost
+// (cells visited + triangle tests) when COUNT_WORK is set, as the CPU's counters count it.
+fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(t_max, MISS, 0.0, 0.0);
+    var w: IrrWalk;
+    if (!irr_start(&w, o, d, t_min, t_max)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    loop {
+        if (COUNT_WORK) { *work += 1u; }
+        let cell = irr_cells[irr_cell_at(vec3<u32>(w.v))];
+        let t_faces = irr_faces(&w, cell);
+        if (cell.count > 0u) {
+            for (var i = cell.start; i < cell.start + cell.count; i++) {
+                if (COUNT_WORK) { *work += 1u; }
+                let tri = refs[i];
+                let h = intersect_tri(tris[tri], o, d, t_min, best.t);
+                if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
+            }
+            // As in the grid: a hit is final only inside the (grown) cell; a triangle that
+            // reaches beyond it may hide a nearer one in a later cell.
+            if (best.tri != MISS && best.t <= min(min3(t_faces), w.t_leave)) { break; }
+        }
+        if (!irr_advance(&w, cell, t_faces)) { break; }
+    }
+    if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    return best;
+}
+
+// Any hit with t_min < t < t_max; mirrors IrregularGrid::occluded.
+fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    var w: IrrWalk;
+    if (!irr_start(&w, o, d, t_min, t_max)) { return false; }
+    loop {
+        let cell = irr_cells[irr_cell_at(vec3<u32>(w.v))];
+        for (var i = cell.start; i < cell.start + cell.count; i++) {
+            if (intersect_tri(tris[refs[i]], o, d, t_min, t_max).w != 0.0) { return true; }
+        }
+        if (!irr_advance(&w, cell, irr_faces(&w, cell))) { break; }
+    }
+    return false;
+}
