@@ -135,8 +135,8 @@ fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
             bounds: g.bounds,
             dims: g.voxel_dims(),
             cell_size: g.voxel_size,
-            // The walk's own reciprocal (walk.rs: `inv_voxel`), bit for bit.
-            inv_cell_size: g.voxel_size.recip(),
+            // The CPU walk's own reciprocal, bit for bit.
+            inv_cell_size: g.inv_voxel_size,
             shift: g.shift,
         }),
     }
