@@ -358,7 +358,7 @@ fn help_shows_formats_and_values() {
         "--light <X,Y,Z>",
         "--res <WxH|N>",
         "N for a square N x N image",
-        "[possible values: grid, pc, bvh]",
+        "[possible values: grid, pc, bvh, irregular]",
         "[possible values: cast, shadow, trace, heat]",
         "[possible values: auto, gpu, cpu]",
     ] {
@@ -366,7 +366,7 @@ fn help_shows_formats_and_values() {
     }
     let (ok, help) = gridtrace(&["bench", "--help"]);
     assert!(
-        ok && help.contains("[possible values: grid, pc, bvh]") && help.contains("--res <WxH|N>"),
+        ok && help.contains("[possible values: grid, pc, bvh, irregular]") && help.contains("--res <WxH|N>"),
         "{help}"
     );
     let (ok, help) = gridtrace(&["info", "--help"]);
@@ -377,7 +377,10 @@ fn help_shows_formats_and_values() {
     let (ok, text) = gridtrace(&["render", "--res", "64x0"]);
     assert!(!ok && text.contains("image size must be positive"), "{text}");
     let (ok, text) = gridtrace(&["render", "--accel", "kd-tree"]);
-    assert!(!ok && text.contains("[possible values: grid, pc, bvh]"), "{text}");
+    assert!(
+        !ok && text.contains("[possible values: grid, pc, bvh, irregular]"),
+        "{text}"
+    );
     // The short aliases the library accepts still work.
     let (ok, text) = gridtrace(&["info", "--scene", "knot-box", "--accel", "proximity", "--grid", "4"]);
     assert!(ok, "{text}");

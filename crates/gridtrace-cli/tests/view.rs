@@ -57,7 +57,7 @@ fn differing(a: &Path, b: &Path) -> f64 {
     n as f64 / (a.width() * a.height()) as f64
 }
 
-/// Orbit, zoom, switch modes and structures, resize (to 1x1, to nothing, back): every
+/// Orbit, zoom, switch modes and structures (grid, bvh, then the irregular grid), resize (to 1x1, to nothing, back): every
 /// screenshot is `render`'s image of what it printed, on the CPU bit for bit, and on the GPU
 /// within the CPU/GPU tolerance of the GPU tests (0.5% of pixels beyond 2 levels).
 #[test]
@@ -95,7 +95,7 @@ fn scripted_session_equals_render() {
         let want = [
             ("shadow", "grid", "96x72"),
             ("trace", "bvh", "96x72"),
-            ("cast", "grid", "120x90"),
+            ("cast", "irregular", "120x90"),
         ];
         assert_eq!(shots.len(), want.len(), "{text}");
         for ((path, kv), (mode, accel, res)) in shots.iter().zip(want) {

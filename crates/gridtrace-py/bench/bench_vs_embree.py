@@ -64,7 +64,7 @@ def main():
 
     results = {}
     all_hits = {}
-    for accel in ("grid", "pc", "bvh"):
+    for accel in ("grid", "pc", "bvh", "irregular"):
         t0 = time.perf_counter()
         mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
         build = time.perf_counter() - t0
