@@ -304,12 +304,22 @@ pub fn scaling(
 }
 
 /// The grid's dims and build time, zero for a scene prepared with a BVH.
+/// The grid's dimensions (the irregular grid's top level); zero for a BVH.
 fn grid_dims_of(p: &gridtrace::scene::PreparedScene) -> [u32; 3] {
-    p.accel.grid().map_or([0; 3], |g| g.stats.dims)
+    match (p.accel.grid(), p.accel.irregular()) {
+        (Some(g), _) => g.stats.dims,
+        (_, Some(g)) => g.stats.top_dims,
+        _ => [0; 3],
+    }
 }
 
+/// The grid's build time (either grid's); zero for a BVH.
 fn grid_build_ms_of(p: &gridtrace::scene::PreparedScene) -> f64 {
-    p.accel.grid().map_or(0.0, |g| g.stats.build_ms)
+    match (p.accel.grid(), p.accel.irregular()) {
+        (Some(g), _) => g.stats.build_ms,
+        (_, Some(g)) => g.stats.build_ms(),
+        _ => 0.0,
+    }
 }
 
 /// Traversal work per ray and time, grid against proximity clouds, for one scene and mode.
