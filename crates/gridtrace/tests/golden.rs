@@ -102,9 +102,9 @@ fn comparison_detects_differences() {
     assert!(compare_rgb8(&a, &c).is_err(), "mean difference 1 exceeds 0.5");
 }
 
-/// Proximity clouds and the BVH change speed, never pictures.
+/// Proximity clouds, the BVH and the irregular grid change speed, never pictures.
 #[test]
-fn pc_and_bvh_render_the_same_image() {
+fn every_structure_renders_the_same_image() {
     let scene = builtin::scene("mirror-spheres").unwrap();
     let render = |accel| {
         let prepared = scene.prepare_for(accel, Resolution::default()).unwrap();
@@ -113,7 +113,7 @@ fn pc_and_bvh_render_the_same_image() {
         (img.to_rgb8(), stats.rays)
     };
     let (g, rg) = render(AccelKind::Grid);
-    for accel in [AccelKind::ProximityCloud, AccelKind::Bvh] {
+    for accel in AccelKind::ALL.into_iter().filter(|&a| a != AccelKind::Grid) {
         let (p, rp) = render(accel);
         assert_eq!(rg, rp, "{}: ray counts", accel.name());
         compare_rgb8(&p, &g).unwrap_or_else(|e| panic!("{}: {e}", accel.name()));
