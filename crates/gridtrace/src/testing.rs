@@ -511,3 +511,51 @@ impl AllAccels {
             .expect("every kind has a structure")
     }
 }
+
+/// Whether the GPU tests are skipped knowingly (`GRIDTRACE_SKIP_GPU` set); says so when they
+/// are. Without it they fail, not skip, when there is no adapter: a test that silently skips
+/// proves nothing.
+pub fn skip_gpu() -> bool {
+    let s = std::env::var_os("GRIDTRACE_SKIP_GPU").is_some();
+    if s {
+        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
+    }
+    s
+}
+
+/// The triangles as vertex and face arrays (three vertices of its own per triangle).
+pub fn soup_arrays(tris: &[TriAccel]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let vertices = tris.iter().flat_map(|t| t.vertices().map(|v| v.to_array())).collect();
+    let faces = (0..tris.len() as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    (vertices, faces)
+}
+
+/// A strip a million units long and one wide, in `2 n` triangles, with a gentle wave so that
+/// it is not planar: cells and boxes of every aspect.
+pub fn long_strip(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut v = Vec::new();
+    let mut f = Vec::new();
+    for i in 0..=n {
+        let x = 1e6 * i as f32 / n as f32;
+        let z = (i as f32 * 0.37).sin() * 0.3;
+        v.push([x, 0.0, z]);
+        v.push([x, 1.0, -z]);
+    }
+    for i in 0..n {
+        let a = 2 * i;
+        f.push([a, a + 2, a + 1]);
+        f.push([a + 1, a + 2, a + 3]);
+    }
+    (v, f)
+}
+
+/// The mesh traced with `accel` on the GPU; panics, naming the fix, without an adapter.
+pub fn gpu_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]], accel: AccelKind) -> crate::query::TraceMesh {
+    let opts = crate::query::QueryOptions {
+        accel,
+        backend: crate::Backend::Gpu,
+        ..Default::default()
+    };
+    crate::query::TraceMesh::from_arrays(vertices, faces, &opts)
+        .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"))
+}

@@ -10,30 +10,11 @@ use std::sync::Mutex;
 use glam::Vec3;
 use gridtrace::Backend;
 use gridtrace::accel::{Accel, AccelKind, Hit, Ray, Resolution, TriAccel, brute_force_intersect, brute_force_occluded};
-use gridtrace::query::{QueryOptions, TraceMesh};
-use gridtrace::testing::{flat_scene, ray_set, triangle_soup};
+use gridtrace::query::TraceMesh;
+use gridtrace::testing::{flat_scene, gpu_mesh, long_strip, ray_set, skip_gpu, soup_arrays, triangle_soup};
 use rayon::prelude::*;
 
 static GPU_LOCK: Mutex<()> = Mutex::new(());
-
-fn skip() -> bool {
-    let s = std::env::var_os("GRIDTRACE_SKIP_GPU").is_some();
-    if s {
-        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
-    }
-    s
-}
-
-/// The triangles as a mesh traced by the BVH on the GPU.
-fn gpu_bvh_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> TraceMesh {
-    let opts = QueryOptions {
-        accel: AccelKind::Bvh,
-        backend: Backend::Gpu,
-        ..Default::default()
-    };
-    TraceMesh::from_arrays(vertices, faces, &opts)
-        .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"))
-}
 
 /// `testing::ray_set`'s adversarial rays (drawn from a grid over the mesh's triangles).
 fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
@@ -44,12 +25,6 @@ fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
     )
     .unwrap();
     ray_set(&grid, n, seed)
-}
-
-fn soup_arrays(tris: &[TriAccel]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let vertices = tris.iter().flat_map(|t| t.vertices().map(|v| v.to_array())).collect();
-    let faces = (0..tris.len() as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
-    (vertices, faces)
 }
 
 /// GPU closest and any hits equal brute force over the mesh's own (kept) triangles: same hit
@@ -109,27 +84,31 @@ fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
 
 #[test]
 fn soup_100k_rays() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let (v, f) = soup_arrays(&triangle_soup(3000, 0xB7));
-    let mesh = gpu_bvh_mesh(&v, &f);
+    let mesh = gpu_mesh(&v, &f, AccelKind::Bvh);
     let rays = rays_for(&mesh, 100_000, 0xB8);
     check("soup", &mesh, &rays);
 }
 
 #[test]
 fn one_triangle_and_one_plane() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let mesh = gpu_bvh_mesh(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[[0, 1, 2]]);
+    let mesh = gpu_mesh(
+        &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        &[[0, 1, 2]],
+        AccelKind::Bvh,
+    );
     let rays = rays_for(&mesh, 20_000, 1);
     check("one triangle", &mesh, &rays);
     let (v, f) = soup_arrays(&flat_scene(5));
-    let mesh = gpu_bvh_mesh(&v, &f);
+    let mesh = gpu_mesh(&v, &f, AccelKind::Bvh);
     let rays = rays_for(&mesh, 20_000, 2);
     check("one plane", &mesh, &rays);
 }
@@ -137,26 +116,12 @@ fn one_triangle_and_one_plane() {
 /// A strip a million units long and one wide: boxes of every aspect, rays at every angle.
 #[test]
 fn aspect_ratio_one_million() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let n = 1000u32;
-    let mut v = Vec::new();
-    let mut f = Vec::new();
-    for i in 0..=n {
-        let x = 1e6 * i as f32 / n as f32;
-        // A gentle wave, so the strip is not planar.
-        let z = (i as f32 * 0.37).sin() * 0.3;
-        v.push([x, 0.0, z]);
-        v.push([x, 1.0, -z]);
-    }
-    for i in 0..n {
-        let a = 2 * i;
-        f.push([a, a + 2, a + 1]);
-        f.push([a + 1, a + 2, a + 3]);
-    }
-    let mesh = gpu_bvh_mesh(&v, &f);
+    let (v, f) = long_strip(1000);
+    let mesh = gpu_mesh(&v, &f, AccelKind::Bvh);
     let rays = rays_for(&mesh, 20_000, 3);
     check("1e6:1 strip", &mesh, &rays);
 }
@@ -166,13 +131,13 @@ fn aspect_ratio_one_million() {
 /// and the hit is the triangle's.
 #[test]
 fn a_million_copies_of_one_triangle() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let v = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let f = vec![[0u32, 1, 2]; 1_000_000];
-    let mesh = gpu_bvh_mesh(&v, &f);
+    let mesh = gpu_mesh(&v, &f, AccelKind::Bvh);
     assert_eq!(mesh.triangle_count(), 1_000_000);
     // 16 rays through the triangle (every one visits every leaf), 16 beside it, 16 along it.
     let mut rays = Vec::new();

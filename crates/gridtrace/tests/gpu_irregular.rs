@@ -22,36 +22,11 @@ use gridtrace::accel::{
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::query::{QueryOptions, TraceMesh};
 use gridtrace::scene::PreparedScene;
-use gridtrace::testing::{flat_scene, ray_set, triangle_soup};
+use gridtrace::testing::{flat_scene, gpu_mesh, long_strip, ray_set, skip_gpu, soup_arrays, triangle_soup};
 use gridtrace::util::Rng;
 use rayon::prelude::*;
 
 static GPU_LOCK: Mutex<()> = Mutex::new(());
-
-fn skip() -> bool {
-    let s = std::env::var_os("GRIDTRACE_SKIP_GPU").is_some();
-    if s {
-        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
-    }
-    s
-}
-
-/// The triangles as a mesh traced by the irregular grid on the GPU.
-fn gpu_irregular_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> TraceMesh {
-    let opts = QueryOptions {
-        accel: AccelKind::Irregular,
-        backend: Backend::Gpu,
-        ..Default::default()
-    };
-    TraceMesh::from_arrays(vertices, faces, &opts)
-        .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"))
-}
-
-fn soup_arrays(tris: &[TriAccel]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let vertices = tris.iter().flat_map(|t| t.vertices().map(|v| v.to_array())).collect();
-    let faces = (0..tris.len() as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
-    (vertices, faces)
-}
 
 /// `n` rays where the irregular grid's walk is on a knife edge, in turn: in a voxel plane that
 /// is a face of some cell's grown box (origin on the plane, direction within it); through a
@@ -274,7 +249,7 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
 
 /// Checks the mesh through the query API (`TraceMesh` with the GPU backend).
 fn check_mesh(name: &str, vertices: &[[f32; 3]], faces: &[[u32; 3]], n: usize, seed: u64) {
-    let mesh = gpu_irregular_mesh(vertices, faces);
+    let mesh = gpu_mesh(vertices, faces, AccelKind::Irregular);
     let accel = &mesh.prepared().accel;
     let rays = rays_for(accel, n, seed);
     check(name, accel, &mut &mesh, &rays);
@@ -282,7 +257,7 @@ fn check_mesh(name: &str, vertices: &[[f32; 3]], faces: &[[u32; 3]], n: usize, s
 
 #[test]
 fn soup_100k_rays() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
@@ -292,7 +267,7 @@ fn soup_100k_rays() {
 
 #[test]
 fn one_triangle_and_one_plane() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
@@ -311,25 +286,11 @@ fn one_triangle_and_one_plane() {
 /// angle.
 #[test]
 fn aspect_ratio_one_million() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let n = 1000u32;
-    let mut v = Vec::new();
-    let mut f = Vec::new();
-    for i in 0..=n {
-        let x = 1e6 * i as f32 / n as f32;
-        // A gentle wave, so the strip is not planar.
-        let z = (i as f32 * 0.37).sin() * 0.3;
-        v.push([x, 0.0, z]);
-        v.push([x, 1.0, -z]);
-    }
-    for i in 0..n {
-        let a = 2 * i;
-        f.push([a, a + 2, a + 1]);
-        f.push([a + 1, a + 2, a + 3]);
-    }
+    let (v, f) = long_strip(1000);
     check_mesh("1e6:1 strip", &v, &f, 20_000, 3);
 }
 
@@ -338,13 +299,13 @@ fn aspect_ratio_one_million() {
 /// cell the triangle overlaps, by design.) The hit is the triangle's.
 #[test]
 fn many_copies_of_one_triangle() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let v = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let f = vec![[0u32, 1, 2]; 300];
-    let mesh = gpu_irregular_mesh(&v, &f);
+    let mesh = gpu_mesh(&v, &f, AccelKind::Irregular);
     assert_eq!(mesh.triangle_count(), 300);
     let rays = rays_for(&mesh.prepared().accel, 20_000, 4);
     check("300 copies", &mesh.prepared().accel, &mut &mesh, &rays);
@@ -357,7 +318,7 @@ fn many_copies_of_one_triangle() {
 /// cross boxes of very different sizes.
 #[test]
 fn teapot_in_a_stadium() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
@@ -383,7 +344,7 @@ fn teapot_in_a_stadium() {
         }
     }
     let (v, f) = soup_arrays(&tris);
-    let mesh = gpu_irregular_mesh(&v, &f);
+    let mesh = gpu_mesh(&v, &f, AccelKind::Irregular);
     let accel = &mesh.prepared().accel;
     let g = accel.irregular().unwrap();
     // The build really made boxes of very different sizes.
@@ -408,7 +369,7 @@ fn teapot_in_a_stadium() {
 /// and fine cells merged aggressively (cells that share few triangles merge too).
 #[test]
 fn other_build_parameters() {
-    if skip() {
+    if skip_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
