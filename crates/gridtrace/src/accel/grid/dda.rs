@@ -6,6 +6,7 @@ use std::ops::ControlFlow;
 use glam::{IVec3, Vec3};
 
 use super::{Cell, Grid};
+use crate::accel::triangle::{any_in, closest_in};
 use crate::accel::{Counters, Hit, Ray, TriAccel};
 
 /// How the DDA crosses empty cells.
@@ -30,12 +31,7 @@ impl Grid {
     ) -> Hit {
         let mut best = Hit { t: t_max, ..Hit::MISS };
         self.walk(ray, t_min, t_max, stepping, counters, |refs, t_cell_exit, counters| {
-            for &tri in refs {
-                counters.tri_test();
-                if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
-                    best = h.on(tri);
-                }
-            }
+            closest_in(tris, refs, ray, t_min, &mut best, counters);
             // A hit beyond this cell's exit may be beaten by a triangle in a later cell; only a
             // hit inside the cell (or before it) is final.
             if best.tri != u32::MAX && best.t <= t_cell_exit {
@@ -59,17 +55,12 @@ impl Grid {
     ) -> bool {
         let mut hit = false;
         self.walk(ray, t_min, t_max, stepping, counters, |refs, _, counters| {
-            for &tri in refs {
-                counters.tri_test();
-                if tris[tri as usize]
-                    .intersect(ray.origin, ray.dir, t_min, t_max)
-                    .is_some()
-                {
-                    hit = true;
-                    return ControlFlow::Break(());
-                }
+            hit = any_in(tris, refs, ray, t_min, t_max, counters);
+            if hit {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
             }
-            ControlFlow::Continue(())
         });
         hit
     }

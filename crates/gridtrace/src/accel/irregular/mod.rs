@@ -21,6 +21,7 @@ use glam::{UVec3, Vec3};
 
 use bytemuck::{Pod, Zeroable};
 
+use super::triangle::{any_in, closest_in};
 use super::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
 
@@ -250,12 +251,7 @@ impl IrregularGrid {
     ) -> Hit {
         let mut best = Hit { t: t_max, ..Hit::MISS };
         self.walk(ray, t_min, t_max, counters, |refs, t_cell_exit, counters| {
-            for &tri in refs {
-                counters.tri_test();
-                if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
-                    best = h.on(tri);
-                }
-            }
+            closest_in(tris, refs, ray, t_min, &mut best, counters);
             // As in the uniform grid: a hit is final only inside the (grown) cell.
             best.tri != u32::MAX && best.t <= t_cell_exit
         });
@@ -273,17 +269,8 @@ impl IrregularGrid {
     ) -> bool {
         let mut hit = false;
         self.walk(ray, t_min, t_max, counters, |refs, _, counters| {
-            for &tri in refs {
-                counters.tri_test();
-                if tris[tri as usize]
-                    .intersect(ray.origin, ray.dir, t_min, t_max)
-                    .is_some()
-                {
-                    hit = true;
-                    return true;
-                }
-            }
-            false
+            hit = any_in(tris, refs, ray, t_min, t_max, counters);
+            hit
         });
         hit
     }
