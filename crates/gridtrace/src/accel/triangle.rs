@@ -325,6 +325,44 @@ impl TriAccel4 {
     }
 }
 
+/// The closest hit among the triangles `refs` names (indices into `tris`) with
+/// `t_min < t < best.t`, into `best`: a grid cell's triangle loop, shared by the uniform and the
+/// irregular grid.
+#[inline(always)]
+pub(crate) fn closest_in<C: super::Counters>(
+    tris: &[TriAccel],
+    refs: &[u32],
+    ray: &super::Ray,
+    t_min: f32,
+    best: &mut super::Hit,
+    counters: &mut C,
+) {
+    for &tri in refs {
+        counters.tri_test();
+        if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
+            *best = h.on(tri);
+        }
+    }
+}
+
+/// Whether any triangle `refs` names is hit with `t_min < t < t_max` (stops at the first).
+#[inline(always)]
+pub(crate) fn any_in<C: super::Counters>(
+    tris: &[TriAccel],
+    refs: &[u32],
+    ray: &super::Ray,
+    t_min: f32,
+    t_max: f32,
+    counters: &mut C,
+) -> bool {
+    refs.iter().any(|&tri| {
+        counters.tri_test();
+        tris[tri as usize]
+            .intersect(ray.origin, ray.dir, t_min, t_max)
+            .is_some()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -399,42 +437,4 @@ mod tests {
         // The rays really exercise hits, edges included.
         assert!(hits > 10_000 && edge_hits > 3_000, "{hits} hits, {edge_hits} on edges");
     }
-}
-
-/// The closest hit among the triangles `refs` names (indices into `tris`) with
-/// `t_min < t < best.t`, into `best`: a grid cell's triangle loop, shared by the uniform and the
-/// irregular grid.
-#[inline(always)]
-pub(crate) fn closest_in<C: super::Counters>(
-    tris: &[TriAccel],
-    refs: &[u32],
-    ray: &super::Ray,
-    t_min: f32,
-    best: &mut super::Hit,
-    counters: &mut C,
-) {
-    for &tri in refs {
-        counters.tri_test();
-        if let Some(h) = tris[tri as usize].intersect(ray.origin, ray.dir, t_min, best.t) {
-            *best = h.on(tri);
-        }
-    }
-}
-
-/// Whether any triangle `refs` names is hit with `t_min < t < t_max` (stops at the first).
-#[inline(always)]
-pub(crate) fn any_in<C: super::Counters>(
-    tris: &[TriAccel],
-    refs: &[u32],
-    ray: &super::Ray,
-    t_min: f32,
-    t_max: f32,
-    counters: &mut C,
-) -> bool {
-    refs.iter().any(|&tri| {
-        counters.tri_test();
-        tris[tri as usize]
-            .intersect(ray.origin, ray.dir, t_min, t_max)
-            .is_some()
-    })
 }
