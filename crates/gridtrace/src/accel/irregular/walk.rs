@@ -17,12 +17,12 @@
 //! rays (`interleaved`) with the same arithmetic as the single-ray walk: their answers are
 //! identical.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 use super::{IrrCell, IrregularGrid, LEVEL_BITS};
 use crate::accel::bvh::prefetch;
 use crate::accel::grid::dda::{min_position, sign};
-use crate::accel::{Counters, Hit, Ray, TriAccel};
+use crate::accel::{Counters, Hit, Ray, TriAccel, TriAccel4};
 
 /// Rays in flight in a batch: enough to cover the three dependent loads of a step (voxel map,
 /// cell, references) and the triangles.
@@ -251,15 +251,28 @@ impl IrregularGrid {
                         l.stage = Stage::Tris(cell, t_faces);
                     }
                     Stage::Tris(cell, t_faces) => {
-                        let (o, d) = (Vec3::from(l.c.origin), l.c.dir);
                         let t_exit = t_faces[0].min(t_faces[1]).min(t_faces[2]);
-                        for &tri in &self.refs[cell.start as usize..(cell.start + cell.count) as usize] {
+                        let o4 = l.c.origin.map(Vec4::splat);
+                        let d4 = l.c.dir.to_array().map(Vec4::splat);
+                        // Four triangles per test (`TriAccel4`, bit for bit the scalar test):
+                        // the closest lane, the first on ties, is what the scalar loop keeps.
+                        for chunk in self.refs[cell.start as usize..(cell.start + cell.count) as usize].chunks(4) {
+                            let mut four: [TriAccel; 4] = bytemuck::Zeroable::zeroed();
+                            for (f, &tri) in four.iter_mut().zip(chunk) {
+                                *f = tris[tri as usize];
+                            }
                             let t_far = if ANY { t_max } else { l.best.t };
-                            if let Some(h) = tris[tri as usize].intersect(o, d, t_min, t_far) {
-                                l.best = h.on(tri);
-                                if ANY {
-                                    break;
+                            let hits = TriAccel4::pack(&four[..chunk.len()]).intersect(&o4, &d4, t_min, t_far);
+                            let mut mask = hits.mask();
+                            while mask != 0 {
+                                let k = mask.trailing_zeros() as usize;
+                                mask &= mask - 1;
+                                if hits.t[k] < l.best.t || ANY {
+                                    l.best = hits.lane(k).on(chunk[k]);
                                 }
+                            }
+                            if ANY && l.best.is_hit() {
+                                break;
                             }
                         }
                         // As `intersect`: a hit is final inside the (grown) cell; any hit is.
