@@ -64,6 +64,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let opts = QueryOptions {
         accel: a.grid.accel,
         grid: a.grid.grid,
+        irregular: a.grid.irregular,
         backend: a.backend,
     };
     let t_build = Instant::now();

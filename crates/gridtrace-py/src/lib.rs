@@ -23,10 +23,11 @@ fn parse<T: std::str::FromStr<Err = String>>(what: &str, s: &str) -> PyResult<T>
         .map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
 }
 
-fn options(accel: &str, grid: &str, backend: &str) -> PyResult<QueryOptions> {
+fn options(accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<QueryOptions> {
     Ok(QueryOptions {
         accel: parse("accel", accel)?,
         grid: parse("grid", grid)?,
+        irregular: parse("irregular", irregular)?,
         backend: parse("backend", backend)?,
     })
 }
@@ -74,9 +75,10 @@ impl NativeMesh {
         faces: PyReadonlyArray2<'_, u32>,
         accel: &str,
         grid: &str,
+        irregular: &str,
         backend: &str,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, backend)?;
+        let opts = options(accel, grid, irregular, backend)?;
         let v = rows3(&vertices, "vertices")?.to_vec();
         let f = rows3(&faces, "faces")?.to_vec();
         let inner = py
@@ -86,8 +88,8 @@ impl NativeMesh {
     }
 
     #[staticmethod]
-    fn load(py: Python<'_>, path: PathBuf, accel: &str, grid: &str, backend: &str) -> PyResult<Self> {
-        let opts = options(accel, grid, backend)?;
+    fn load(py: Python<'_>, path: PathBuf, accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<Self> {
+        let opts = options(accel, grid, irregular, backend)?;
         let inner = py.detach(move || TraceMesh::load(&path, &opts)).map_err(to_py)?;
         Ok(NativeMesh { inner })
     }

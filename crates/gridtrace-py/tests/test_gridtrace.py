@@ -295,3 +295,22 @@ def test_bvh_equals_grid_on_cpu_and_gpu():
         np.testing.assert_allclose(h.t[np.isfinite(g.t)], g.t[np.isfinite(g.t)], rtol=rtol)
         occ = b.occluded(o, d)
         np.testing.assert_array_equal(occ, np.isfinite(g.t))
+
+
+def test_irregular_parameters():
+    """The irregular grid's build parameters reach the library: other parameters, same hits as
+    brute force; a bad one is a ValueError that names it."""
+    vertices, faces = sphere_soup(seed=9)
+    o, d = random_rays(3000, seed=10)
+    t_ref, _, margin, _ = brute_force(vertices, faces, o, d)
+    clear = (margin > 1e-4) | ~np.isfinite(t_ref)
+    for params in ["", "top=0.5,cell=8,expand=0", "alpha=1.5,merge=1"]:
+        mesh = gridtrace.Mesh(vertices, faces, accel="irregular", backend="cpu", irregular=params)
+        hits = mesh.intersect(o, d)
+        assert (np.isfinite(hits.t) == np.isfinite(t_ref))[clear].all(), params
+        both = np.isfinite(t_ref) & clear
+        np.testing.assert_allclose(hits.t[both], t_ref[both], rtol=2e-5)
+    with pytest.raises(ValueError, match="irregular: .*top density"):
+        gridtrace.Mesh(vertices, faces, accel="irregular", irregular="top=0")
+    with pytest.raises(ValueError, match="unknown irregular parameter 'depth'"):
+        gridtrace.Mesh(vertices, faces, accel="irregular", irregular="depth=3")

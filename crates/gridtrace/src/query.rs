@@ -35,7 +35,7 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::huge::advise_huge_pages_within;
-use crate::accel::{AccelKind, Hit, Ray, Resolution};
+use crate::accel::{Accel, AccelKind, Hit, IrregularParams, Ray, Resolution};
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::scene::{Mesh, PreparedScene, Scene};
 use crate::{Error, Result};
@@ -47,6 +47,8 @@ pub use crate::backend::Backend;
 pub struct QueryOptions {
     pub accel: AccelKind,
     pub grid: Resolution,
+    /// The irregular grid's build (`accel = irregular` only).
+    pub irregular: IrregularParams,
     pub backend: Backend,
 }
 
@@ -55,6 +57,7 @@ impl Default for QueryOptions {
         QueryOptions {
             accel: AccelKind::Grid,
             grid: Resolution::default(),
+            irregular: IrregularParams::default(),
             backend: Backend::Auto,
         }
     }
@@ -212,7 +215,11 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let prepared = scene.prepare_for(opts.accel, opts.grid)?;
+        let prepared = if opts.accel == AccelKind::Irregular {
+            scene.prepare_with(|tris| Accel::build_irregular(tris, opts.irregular))?
+        } else {
+            scene.prepare_for(opts.accel, opts.grid)?
+        };
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
         let mesh = TraceMesh {

@@ -116,12 +116,14 @@ class Mesh:
     ``vertices`` is an (N, 3) float array, ``faces`` an (M, 3) integer array of vertex indices.
     ``accel`` is ``"grid"``, ``"pc"`` (proximity clouds), ``"bvh"`` (a bounding volume hierarchy,
     the fastest for incoherent rays) or ``"irregular"`` (an irregular grid, the grid that adapts to
-    the mesh), each on the CPU and the GPU; ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
+    the mesh), each on the CPU and the GPU; ``irregular`` tunes the irregular grid's build
+    (``"top=0.12,cell=2,alpha=1,merge=8,expand=3"``, any subset; ``""`` for the defaults);
+    ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (GPU if present, else CPU), ``"gpu"`` or ``"cpu"``.
     Degenerate faces are kept in the numbering but can never be hit.
     """
 
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "grid", grid: str = "auto", backend: str = "auto"):
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "grid", grid: str = "auto", backend: str = "auto", irregular: str = ""):
         v = _points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3:
@@ -131,14 +133,14 @@ class Mesh:
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(f"faces index vertices out of range 0..{len(v) - 1}")
         self._backend = backend
-        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, backend)
+        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, irregular, backend)
 
     @classmethod
-    def load(cls, path: Union[str, PathLike], accel: str = "grid", grid: str = "auto", backend: str = "auto") -> "Mesh":
+    def load(cls, path: Union[str, PathLike], accel: str = "grid", grid: str = "auto", backend: str = "auto", irregular: str = "") -> "Mesh":
         """Loads an OBJ, PLY, glTF/GLB, STL or OFF file."""
         self = cls.__new__(cls)
         self._backend = backend
-        self._native = _NativeMesh.load(str(path), accel, grid, backend)
+        self._native = _NativeMesh.load(str(path), accel, grid, irregular, backend)
         return self
 
     @property
