@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::studies::incoherent_rays;
+use super::query_study::incoherent_rays;
 use super::{Summary, repeat};
 use gridtrace::Result;
 use gridtrace::accel::{Accel, AccelKind, Hit, IrregularParams, Ray, Resolution, TraversalCounters};
@@ -78,7 +78,7 @@ pub fn irregular_sweep(
         }
         for p in sweep {
             let t0 = std::time::Instant::now();
-            let a = Accel::build_irregular(tris.clone(), *p)?;
+            let a = Accel::build_with(tris.clone(), AccelKind::Irregular, Resolution::default(), *p)?;
             builds.push((AccelKind::Irregular, params_str(p), t0.elapsed().as_secs_f64() * 1e3, a));
         }
         let (o, d) = incoherent_rays(builds[0].3.bounds(), rays, 7);

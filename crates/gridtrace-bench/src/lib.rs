@@ -8,6 +8,7 @@
 pub mod ablation;
 pub mod charts;
 pub mod irregular;
+pub mod query_study;
 pub mod rays;
 pub mod report;
 pub mod scenes;

@@ -138,16 +138,12 @@ pub fn prepare(
     accel: AccelKind,
     grid: &GridArgs,
 ) -> gridtrace::Result<gridtrace::PreparedScene> {
-    let (res, params) = (grid.grid, grid.irregular);
-    let prepared = if accel == AccelKind::Irregular {
-        scene.prepare_with(|tris| gridtrace::Accel::build_irregular(tris, params))
-    } else {
-        scene.prepare_for(accel, res)
-    };
-    prepared.map_err(|e| match e {
-        gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
-        e => e,
-    })
+    scene
+        .prepare_with(accel, grid.grid, grid.irregular)
+        .map_err(|e| match e {
+            gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
+            e => e,
+        })
 }
 
 /// The structure in a few words: a grid's dimensions and references per triangle, a BVH's

@@ -35,7 +35,7 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::huge::advise_huge_pages_within;
-use crate::accel::{Accel, AccelKind, Hit, IrregularParams, Ray, Resolution};
+use crate::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::scene::{Mesh, PreparedScene, Scene};
 use crate::{Error, Result};
@@ -215,11 +215,7 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let prepared = if opts.accel == AccelKind::Irregular {
-            scene.prepare_with(|tris| Accel::build_irregular(tris, opts.irregular))?
-        } else {
-            scene.prepare_for(opts.accel, opts.grid)?
-        };
+        let prepared = scene.prepare_with(opts.accel, opts.grid, opts.irregular)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
         let mesh = TraceMesh {

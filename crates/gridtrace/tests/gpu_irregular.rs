@@ -400,7 +400,13 @@ fn other_build_parameters() {
     );
     for (i, (name, params)) in variants.into_iter().enumerate() {
         let scene = PreparedScene {
-            accel: Accel::build_irregular(mesh.prepared().accel.tris.clone(), params).unwrap(),
+            accel: Accel::build_with(
+                mesh.prepared().accel.tris.clone(),
+                AccelKind::Irregular,
+                Resolution::default(),
+                params,
+            )
+            .unwrap(),
             ..mesh.prepared().clone()
         };
         let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap();

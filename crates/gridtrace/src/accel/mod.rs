@@ -52,19 +52,23 @@ pub struct Accel {
 
 impl Accel {
     /// Builds the structure that serves `kind` over `tris` (`resolution` sizes a grid; the BVH
-    /// ignores it).
+    /// ignores it; the irregular grid gets `IrregularParams::default()`).
     pub fn build(tris: Vec<TriAccel>, kind: AccelKind, resolution: Resolution) -> Result<Accel> {
+        Self::build_with(tris, kind, resolution, IrregularParams::default())
+    }
+
+    /// `build`, with the irregular grid's parameters (the other structures ignore them).
+    pub fn build_with(
+        tris: Vec<TriAccel>,
+        kind: AccelKind,
+        resolution: Resolution,
+        irregular: IrregularParams,
+    ) -> Result<Accel> {
         let structure = match kind {
             AccelKind::Grid | AccelKind::ProximityCloud => Structure::Grid(Grid::build(&tris, resolution)?),
             AccelKind::Bvh => Structure::Bvh(BvhAccel::build(&tris)),
-            AccelKind::Irregular => Structure::Irregular(IrregularGrid::build(&tris, IrregularParams::default())?),
+            AccelKind::Irregular => Structure::Irregular(IrregularGrid::build(&tris, irregular)?),
         };
-        Ok(Accel { tris, structure })
-    }
-
-    /// The irregular grid over `tris`, with the given parameters.
-    pub fn build_irregular(tris: Vec<TriAccel>, params: IrregularParams) -> Result<Accel> {
-        let structure = Structure::Irregular(IrregularGrid::build(&tris, params)?);
         Ok(Accel { tris, structure })
     }
 

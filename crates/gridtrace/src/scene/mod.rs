@@ -11,7 +11,7 @@ use glam::{Mat4, Vec3};
 pub use crate::mesh::{Material, Mesh};
 pub use camera::{Camera, CameraFrame};
 
-use crate::accel::{Aabb, Accel, AccelKind, Resolution, TriAccel};
+use crate::accel::{Aabb, Accel, AccelKind, IrregularParams, Resolution, TriAccel};
 use crate::{Error, Result};
 
 /// A point light. Irradiance falls off with the squared distance: `intensity / d^2`.
@@ -106,12 +106,16 @@ impl Scene {
 
     /// `prepare`, building the structure that serves `accel` (`resolution` sizes a grid).
     pub fn prepare_for(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
-        self.prepare_with(|tris| Accel::build(tris, accel, resolution))
+        self.prepare_with(accel, resolution, IrregularParams::default())
     }
 
-    /// `prepare`, with the structure `build` makes of the checked triangles (a structure with
-    /// parameters of its own: `Accel::build_irregular`).
-    pub fn prepare_with(&self, build: impl FnOnce(Vec<TriAccel>) -> Result<Accel>) -> Result<PreparedScene> {
+    /// `prepare_for`, with the irregular grid's build parameters (`Accel::build_with`).
+    pub fn prepare_with(
+        &self,
+        accel: AccelKind,
+        resolution: Resolution,
+        irregular: IrregularParams,
+    ) -> Result<PreparedScene> {
         self.camera.validate().map_err(Error::Scene)?;
         for (i, l) in self.lights.iter().enumerate() {
             if !(Vec3::from(l.position).is_finite() && Vec3::from(l.intensity).is_finite()) {
@@ -175,7 +179,7 @@ impl Scene {
         // coordinates, because f32 hit points far from the origin carry larger absolute error.
         let ray_epsilon = (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE);
         Ok(PreparedScene {
-            accel: build(tris)?,
+            accel: Accel::build_with(tris, accel, resolution, irregular)?,
             normals,
             tri_vertices,
             tri_material,

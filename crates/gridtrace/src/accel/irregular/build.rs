@@ -188,15 +188,15 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     // Phase 3: merging. A cell absorbs its neighbour across its upper face on one axis when
     // the neighbour has the same extent on the other two axes and the surface-area cost
     // (`COST_STEP` + references, times area) of the merged cell is at most `merge_alpha`
-    // times that of the two. Absorbed cells point to their absorber (union-find).
+    // times that of the two. Absorbed cells point to their absorber (union-find): a cell is
+    // alive while it is its own root.
     let mut parent: Vec<u32> = (0..n_init as u32).collect();
-    let mut alive = vec![true; n_init];
     let area = |b: &VoxBox| {
         let d = ((b[1] - b[0]).as_vec3() * voxel_size).as_dvec3();
         d.x * d.y + d.y * d.z + d.z * d.x
     };
     let alpha = params.merge_alpha as f64;
-    // The cells still alive, refreshed each pass: after the first pass most are gone.
+    // The cells still alive (roots), refreshed after each pass: after the first most are gone.
     let mut live: Vec<u32> = (0..n_init as u32).collect();
     for _ in 0..params.merge_passes {
         let mut merged = 0usize;
@@ -204,7 +204,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
             for &cell in &live {
                 let cell = cell as usize;
-                if !alive[cell] {
+                if parent[cell] != cell as u32 {
                     continue;
                 }
                 loop {
@@ -249,19 +249,17 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                     refs_of[other] = Refs::Span(0, 0);
                     boxes[cell] = joined;
                     parent[other] = cell as u32;
-                    alive[other] = false;
                     merged += 1;
                 }
             }
         }
-        live.retain(|&i| alive[i as usize]);
+        live.retain(|&i| parent[i as usize] == i);
         if merged == 0 {
             break;
         }
     }
     // Every initial cell's surviving cell, and the survivors' new indices.
     let rep: Vec<u32> = (0..n_init as u32).map(|i| find(&mut parent, i)).collect();
-    live.retain(|&i| alive[i as usize]);
     let mut new_index = vec![u32::MAX; n_init];
     for (k, &i) in live.iter().enumerate() {
         new_index[i as usize] = k as u32;
