@@ -8,8 +8,9 @@ use std::fmt::Write as _;
 use super::bvh::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
 use crate::accel::bvh;
+use crate::accel::grid::proximity;
 use crate::accel::irregular;
-use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_ULPS};
+use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_PAD, SLACK_ULPS};
 use crate::render::Mode;
 
 /// Counter slots of the `counters` array (atomic u32s). Slots 0 and 1 are the two ray queues'
@@ -29,6 +30,21 @@ pub const WORKGROUP: u32 = 64;
 /// Most workgroups in x of one dispatch; larger dispatches go 2-D (`flat_index` in common.wgsl),
 /// which keeps them under WebGPU's 65535 per dimension.
 pub const MAX_GROUPS_X: u32 = 32768;
+/// Elements one workgroup of the GPU grid build's scan sums (256 invocations, 4 each); the
+/// host sizes the scan's levels by it.
+pub const SCAN_BLOCK: u32 = 1024;
+/// Cells one triangle may span in the GPU grid build; a grid with a larger triangle is built
+/// on the CPU instead. One invocation walks a triangle's cells, and lavapipe (Mesa's llvmpipe)
+/// stops an invocation's loops after 65535 iterations in total, silently: measured, a triangle
+/// over 64,000 cells got only its first 22,000 or so. A quarter of that budget leaves room;
+/// at the automatic resolution only floor-like triangles of million-triangle scenes come near.
+pub const MAX_CELLS_PER_TRI: u32 = 16384;
+/// Longest line of cells the GPU distance transform takes (about three loop iterations per
+/// cell; see `MAX_CELLS_PER_TRI`). The automatic resolution stays under 1024.
+pub const MAX_GPU_LINE: u32 = 16384;
+/// Cells with more references keep the GPU placing order (insertion sort is quadratic: 256
+/// references take at most 32,640 steps, within the budget above).
+pub const SORT_MAX_REFS: u32 = 256;
 /// `GpuHit::tri` of a miss.
 pub const MISS: u32 = u32::MAX;
 
@@ -68,7 +84,7 @@ pub enum WgslConst {
 
 /// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
 /// `TriAccel::intersect`'s own, so both backends accept the same hits.
-pub const WGSL_CONSTANTS: [(&str, WgslConst); 27] = [
+pub const WGSL_CONSTANTS: [(&str, WgslConst); 32] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -96,6 +112,11 @@ pub const WGSL_CONSTANTS: [(&str, WgslConst); 27] = [
     ("FAR_SCALE", WgslConst::F32(bvh::FAR_SCALE)),
     ("T_SLOP", WgslConst::F32(bvh::T_SLOP)),
     ("IRR_LEVEL_BITS", WgslConst::U32(irregular::LEVEL_BITS)),
+    ("SLACK_PAD", WgslConst::F32(SLACK_PAD)),
+    ("SCAN_BLOCK", WgslConst::U32(SCAN_BLOCK)),
+    ("DIST_FAR", WgslConst::U32(proximity::FAR)),
+    ("MAX_CELLS_PER_TRI", WgslConst::U32(MAX_CELLS_PER_TRI)),
+    ("SORT_MAX_REFS", WgslConst::U32(SORT_MAX_REFS)),
 ];
 
 /// One WGSL literal that denotes exactly `v`: Rust's `{:?}` prints the shortest decimal that

@@ -5,6 +5,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
 use super::bindings::storage_buffers_needed;
+use super::grid_build::BuildKernels;
 use super::kernels::Kernels;
 use crate::{Error, Result};
 
@@ -22,6 +23,8 @@ pub struct GpuContext {
     errors: Arc<Mutex<Option<String>>>,
     /// The compiled kernels, built by the first renderer and shared by the later ones.
     kernels: OnceLock<Arc<Kernels>>,
+    /// The grid build's kernels, compiled on the first GPU build.
+    build_kernels: OnceLock<Arc<BuildKernels>>,
 }
 
 /// Adapter kinds in order of preference.
@@ -117,6 +120,7 @@ impl GpuContext {
             timestamps,
             errors,
             kernels: OnceLock::new(),
+            build_kernels: OnceLock::new(),
         })
     }
 
@@ -148,6 +152,15 @@ impl GpuContext {
         // Two threads may both compile; the first to finish is kept, the other's dropped.
         let built = Arc::new(Kernels::new(&self.device)?);
         Ok(self.kernels.get_or_init(|| built).clone())
+    }
+
+    /// The grid build's kernels of this device, compiled on first use.
+    pub(crate) fn build_kernels(&self) -> Result<Arc<BuildKernels>> {
+        if let Some(k) = self.build_kernels.get() {
+            return Ok(k.clone());
+        }
+        let built = Arc::new(BuildKernels::new(&self.device)?);
+        Ok(self.build_kernels.get_or_init(|| built).clone())
     }
 
     /// Returns the first device error since the last call, as an `Error`.

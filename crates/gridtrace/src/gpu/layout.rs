@@ -132,3 +132,30 @@ pub struct GpuBvhNode {
     /// The children as stack entries; the last two words are unused.
     pub child: [u32; 4],
 }
+
+/// The GPU grid build's parameters (`shaders/build/common.wgsl`): the lattice, the sizes, and
+/// per dispatch the scan level or distance axis it works on. 80 bytes, one per 256-byte slot.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct BuildParams {
+    pub bounds_min: [f32; 3],
+    pub n_tris: u32,
+    pub cell_size: [f32; 3],
+    pub n_cells: u32,
+    pub inv_cell_size: [f32; 3],
+    /// Slots of the references buffer; a build that needs more is run again, larger.
+    pub refs_capacity: u32,
+    pub margin: [f32; 3],
+    /// Distance transform: the axis of this pass (0 = x).
+    pub axis: u32,
+    pub dims: [u32; 3],
+    /// Elements of this scan level, or lines of this distance pass.
+    pub n: u32,
+    /// Scan: where this level's elements (`in_offset`) and block totals (`out_offset`) are in
+    /// the sums buffer.
+    pub in_offset: u32,
+    pub out_offset: u32,
+    /// Scan: 1 on the top level, whose single block total is the number of references.
+    pub last: u32,
+    pub _pad0: u32,
+}

@@ -21,12 +21,15 @@
 //!   the irregular grid is uploaded as the CPU builds it, its walk is `shaders/irregular.wgsl`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
 //! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded;
-//! - `timing`: timestamp queries and per-stage milliseconds.
+//! - `timing`: timestamp queries and per-stage milliseconds;
+//! - `grid_build`: the grid and its proximity cloud built on the GPU (`shaders/build/`), for
+//!   meshes that move.
 
 pub mod bindings;
 pub mod bvh;
 pub mod constants;
 mod context;
+mod grid_build;
 mod kernels;
 pub mod layout;
 mod queries;
@@ -37,6 +40,7 @@ mod timing;
 mod wavefront;
 
 pub use context::GpuContext;
+pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use renderer::{GpuRenderer, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
 pub use timing::GpuTimings;

@@ -35,3 +35,16 @@ pub fn common_source() -> String {
 pub fn module_source(kernel: &str) -> String {
     format!("{}\n{}", common_source(), kernel)
 }
+
+/// The GPU grid build's shared file and kernels (`grid_build.rs`): their own bindings, so their
+/// modules are the prelude, `build/common.wgsl` and the kernel, without the tracer's files.
+pub const BUILD_COMMON: &str = include_str!("shaders/build/common.wgsl");
+pub const BUILD_REFS: &str = include_str!("shaders/build/refs.wgsl");
+pub const BUILD_SCAN: &str = include_str!("shaders/build/scan.wgsl");
+pub const BUILD_SORT: &str = include_str!("shaders/build/sort.wgsl");
+pub const BUILD_DISTANCE: &str = include_str!("shaders/build/distance.wgsl");
+
+/// The whole module of one grid-build kernel.
+pub fn build_module_source(kernel: &str) -> String {
+    format!("{}\n{}\n{}", wgsl_prelude(), BUILD_COMMON, kernel)
+}

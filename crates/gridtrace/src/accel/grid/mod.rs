@@ -119,10 +119,24 @@ pub struct Grid {
     pub stats: GridStats,
 }
 
-impl Grid {
-    /// Builds the grid over the given triangles. An empty triangle list gives a 1x1x1 empty grid.
-    pub fn build(tris: &[TriAccel], resolution: Resolution) -> Result<Grid> {
-        let t0 = Instant::now();
+/// Where a grid's cells lie: everything about a grid but its contents. The CPU build
+/// (`Grid::build`) and the GPU build (`gpu::GpuGridBuilder`) both start from this one value, so
+/// both put every cell face at the same float and test the same cell boxes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridLattice {
+    /// Grid bounds in world space (scene bounds, slightly padded).
+    pub bounds: Aabb,
+    pub dims: UVec3,
+    /// World-space size of one cell per axis, and its reciprocal.
+    pub cell_size: Vec3,
+    pub inv_cell_size: Vec3,
+    /// How much a cell box is grown before the overlap test (`cell_margin`).
+    pub margin: Vec3,
+}
+
+impl GridLattice {
+    /// The lattice a grid over `tris` at `resolution` has.
+    pub fn new(tris: &[TriAccel], resolution: Resolution) -> Result<GridLattice> {
         let scene_bounds = tri_bounds(tris)?;
         let bounds = pad_bounds(scene_bounds);
         let dims = match resolution {
@@ -139,14 +153,44 @@ impl Grid {
             }
         };
         let cell_size = bounds.extent() / dims.as_vec3();
-        let inv_cell_size = cell_size.recip();
-
         // Cell boxes are tested slightly enlarged, so a triangle that touches a cell face within
-        // rounding error is referenced from both cells. Traversal accepts a hit in a cell only up
-        // to that cell's exit distance; a hit computed a hair beyond the face it truly lies on
-        // is then found again in the next cell instead of being lost.
+        // rounding error is referenced from both cells. Traversal accepts a hit in a cell only
+        // up to that cell's exit distance; a hit computed a hair beyond the face it truly lies
+        // on is then found again in the next cell instead of being lost.
         let margin = cell_margin(cell_size, bounds);
+        Ok(GridLattice {
+            bounds,
+            dims,
+            cell_size,
+            inv_cell_size: cell_size.recip(),
+            margin,
+        })
+    }
 
+    /// Number of cells.
+    pub fn cells(&self) -> usize {
+        (self.dims.x as usize) * (self.dims.y as usize) * (self.dims.z as usize)
+    }
+}
+
+impl Grid {
+    /// Builds the grid over the given triangles. An empty triangle list gives a 1x1x1 empty grid.
+    pub fn build(tris: &[TriAccel], resolution: Resolution) -> Result<Grid> {
+        let t0 = Instant::now();
+        let lattice = GridLattice::new(tris, resolution)?;
+        Ok(Self::build_on(tris, lattice, t0))
+    }
+
+    /// Builds the grid over `tris` on a given lattice (`GridLattice::new` over the same
+    /// triangles); `t0` is when the build started, for `GridStats::build_ms`.
+    pub fn build_on(tris: &[TriAccel], lattice: GridLattice, t0: Instant) -> Grid {
+        let GridLattice {
+            bounds,
+            dims,
+            cell_size,
+            inv_cell_size,
+            margin,
+        } = lattice;
         let keys = overlap_pairs(tris, bounds, dims, margin);
 
         let n_cells = (dims.x * dims.y * dims.z) as usize;
@@ -176,7 +220,7 @@ impl Grid {
             build_ms: t0.elapsed().as_secs_f64() * 1e3,
             max_refs_in_cell: cells.iter().map(|c| c.count).max().unwrap_or(0),
         };
-        Ok(Grid {
+        Grid {
             bounds,
             dims,
             cell_size,
@@ -184,7 +228,7 @@ impl Grid {
             cells,
             refs,
             stats,
-        })
+        }
     }
 
     #[inline]

@@ -1,0 +1,707 @@
+//! The uniform grid and its proximity cloud built on the GPU, for meshes whose vertices move
+//! (Kalojanov and Slusallek 2009, with the sort replaced by a counting sort; see below). The
+//! result has the CPU build's layout (`Grid`: cells of `start, count, dist` and one packed
+//! reference list, ascending within a cell), so the same traversal kernels walk it, and a test
+//! compares the two builds cell by cell.
+//!
+//! Stages, each a kernel in `shaders/build/`:
+//! 1. `count` (per triangle): every cell the triangle overlaps (the CPU's exact test, on the
+//!    same lattice, `GridLattice`) gets one more reference, by an atomic add;
+//! 2. `scan`: exclusive prefix sums of the counts give the cells' `start`s and the total;
+//! 3. `place` (per triangle): the same test again, each triangle written into its cells' next
+//!    free slots (an atomic cursor per cell);
+//! 4. `sort` (per cell): the cell's slots into ascending triangle order;
+//! 5. `distance`: the chessboard distance transform, one pass per axis.
+//!
+//! Why a counting sort and not Kalojanov's radix sort of (cell, triangle) pairs: the sort key
+//! is the cell index, and the key histogram a radix sort would build *is* the per-cell count
+//! of stage 1; sorting by the whole key in one counting pass needs no pair array (8 bytes per
+//! reference written and read back four to seven times, once per radix digit) and no sort
+//! library. No maintained wgpu sort or scan crate targets wgpu 30 (those found, such as
+//! `wgpu_sort`, pin older wgpu versions and need subgroup operations that lavapipe and WebGPU do
+//! not guarantee), so the scan is this module's own, in plain WGSL. The price of the atomic
+//! placement is a scheduling-dependent order inside a cell, which stage 4 undoes.
+//!
+//! The lattice (bounds and dimensions) comes from the host, computed by the same function as
+//! the CPU build's: it decides buffer sizes, which the host must know before it records the
+//! build, and it makes both builds test the very same cell boxes.
+
+use std::mem::size_of;
+use std::sync::Arc;
+use std::time::Instant;
+
+use wgpu::util::DeviceExt;
+
+use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK};
+use super::context::GpuContext;
+use super::layout::BuildParams;
+use super::scene::check_scene_fits;
+use super::shaders;
+use super::timing::{StageTimer, Timestamps};
+use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
+use crate::{Error, Result};
+
+/// Bytes between two dispatches' parameters (dynamic uniform offsets must be multiples of the
+/// device's alignment; 256 is WebGPU's largest).
+const PARAMS_STRIDE: u64 = 256;
+/// Invocations per workgroup of the per-triangle, per-cell and per-line kernels.
+const GROUP: u32 = 64;
+/// Invocations per workgroup of the scan kernels (`scan.wgsl`'s `partial` array).
+const SCAN_GROUP: u32 = 256;
+/// Most workgroups in x; larger dispatches go 2-D (`flat_id`).
+const MAX_GROUPS_X: u32 = 32768;
+/// Words at the start of the sums buffer before the scan levels: word 0 is the total.
+const STATUS_WORDS: u32 = 4;
+/// References a first build of an unknown mesh allows per triangle before it has to grow the
+/// buffer and run again (the automatic resolution gives 1.5-3 on the meshes we measured).
+const INITIAL_REFS_PER_TRI: u64 = 4;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    Count,
+    Place,
+    ScanCells,
+    ScanSums,
+    AddCells,
+    AddSums,
+    Sort,
+    Distance,
+}
+
+struct StageSpec {
+    stage: Stage,
+    /// Stage name in the build's timings.
+    name: &'static str,
+    source: &'static str,
+    entry: &'static str,
+    overrides: &'static [(&'static str, f64)],
+}
+
+/// Every pipeline of the build, in `Stage` order.
+const STAGES: [StageSpec; 8] = [
+    StageSpec {
+        stage: Stage::Count,
+        name: "count",
+        source: shaders::BUILD_REFS,
+        entry: "main",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::Place,
+        name: "place",
+        source: shaders::BUILD_REFS,
+        entry: "main",
+        overrides: &[("PLACE", 1.0)],
+    },
+    StageSpec {
+        stage: Stage::ScanCells,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "scan_cells",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::ScanSums,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "scan_sums",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::AddCells,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "add_cells",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::AddSums,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "add_sums",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::Sort,
+        name: "sort",
+        source: shaders::BUILD_SORT,
+        entry: "main",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::Distance,
+        name: "distance",
+        source: shaders::BUILD_DISTANCE,
+        entry: "main",
+        overrides: &[],
+    },
+];
+
+/// The build's pipelines, compiled once per device (`GpuContext::build_kernels`).
+pub(crate) struct BuildKernels {
+    layout: wgpu::BindGroupLayout,
+    pipelines: Vec<wgpu::ComputePipeline>,
+}
+
+impl BuildKernels {
+    pub fn new(dev: &wgpu::Device) -> Result<BuildKernels> {
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let mut entries = vec![
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(size_of::<BuildParams>() as u64),
+                },
+                count: None,
+            },
+            storage(1, true),
+        ];
+        entries.extend((2..=7).map(|b| storage(b, false)));
+        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("grid build"),
+            entries: &entries,
+        });
+        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("grid build"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipelines = STAGES
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                debug_assert_eq!(s.stage as usize, i);
+                let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(s.name),
+                    source: wgpu::ShaderSource::Wgsl(shaders::build_module_source(s.source).into()),
+                });
+                dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(s.name),
+                    layout: Some(&pipeline_layout),
+                    module: &module,
+                    entry_point: Some(s.entry),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: s.overrides,
+                        ..Default::default()
+                    },
+                    cache: None,
+                })
+            })
+            .collect();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Gpu(format!("creating the grid-build kernels failed: {e}")));
+        }
+        Ok(BuildKernels { layout, pipelines })
+    }
+}
+
+/// What one GPU build did and how long it took.
+#[derive(Debug, Clone, Default)]
+pub struct GpuBuildStats {
+    pub dims: [u32; 3],
+    pub references: u64,
+    /// GPU time of the build's passes when the device has timestamp queries; else the wall
+    /// time from submission to the result being known (which includes one read-back).
+    pub ms: f64,
+    pub from_timestamps: bool,
+    /// Milliseconds per stage (`count`, `scan`, `place`, `sort`, `distance`), with timestamps.
+    pub stages_ms: Vec<(&'static str, f64)>,
+    /// Submissions it took: 2 when the references outgrew their buffer and it ran again.
+    pub attempts: u32,
+    /// Whether the cell or reference buffers were reallocated (bind groups over them are stale).
+    pub reallocated: bool,
+    /// Why this grid was built on the CPU and uploaded instead (a triangle over
+    /// `MAX_CELLS_PER_TRI` cells, a line over `MAX_GPU_LINE`); `None` for a GPU build.
+    pub cpu_fallback: Option<String>,
+}
+
+/// A grid built, and rebuilt, on the device: its cells and references in the CPU build's
+/// layout, and the scratch the build needs, kept between builds so that a rebuild per frame
+/// allocates nothing unless the grid grows.
+pub struct GpuGrid {
+    ctx: Arc<GpuContext>,
+    kernels: Arc<BuildKernels>,
+    pub(crate) cells: wgpu::Buffer,
+    pub(crate) refs: wgpu::Buffer,
+    sums: wgpu::Buffer,
+    dt_a: wgpu::Buffer,
+    dt_b: wgpu::Buffer,
+    stack: wgpu::Buffer,
+    params: wgpu::Buffer,
+    timestamps: Option<Timestamps>,
+    lattice: Option<GridLattice>,
+    references: u64,
+}
+
+/// A storage buffer of `bytes` (at least 16: empty bindings are invalid).
+fn storage_buffer(dev: &wgpu::Device, label: &str, bytes: u64) -> wgpu::Buffer {
+    dev.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16).next_multiple_of(4),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+/// Workgroups for `n` items in groups of `per_group`, as a 2-D dispatch.
+fn groups(n: u32, per_group: u32) -> (u32, u32) {
+    let g = n.div_ceil(per_group);
+    let x = g.min(MAX_GROUPS_X);
+    (x, if x == 0 { 0 } else { g.div_ceil(x) })
+}
+
+/// The scan's levels above the cells: `(offset in sums, elements)` of each level of block
+/// totals, the last of one element (the total).
+fn scan_levels(n_cells: u32) -> Vec<(u32, u32)> {
+    let mut levels = Vec::new();
+    let mut offset = STATUS_WORDS;
+    let mut n = n_cells.div_ceil(SCAN_BLOCK).max(1);
+    loop {
+        levels.push((offset, n));
+        offset += n;
+        if n == 1 {
+            return levels;
+        }
+        n = n.div_ceil(SCAN_BLOCK);
+    }
+}
+
+impl GpuGrid {
+    /// An empty grid on `ctx`'s device (compiles the build kernels on first use).
+    pub fn new(ctx: Arc<GpuContext>) -> Result<GpuGrid> {
+        let kernels = ctx.build_kernels()?;
+        let dev = &ctx.device;
+        let params = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("grid build params"),
+            size: PARAMS_STRIDE * 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let timestamps = Timestamps::new(&ctx);
+        Ok(GpuGrid {
+            cells: storage_buffer(dev, "cells", 0),
+            refs: storage_buffer(dev, "refs", 0),
+            sums: storage_buffer(dev, "scan sums", 0),
+            dt_a: storage_buffer(dev, "distance x", 0),
+            dt_b: storage_buffer(dev, "distance xy", 0),
+            stack: storage_buffer(dev, "distance stack", 0),
+            params,
+            timestamps,
+            lattice: None,
+            references: 0,
+            kernels,
+            ctx,
+        })
+    }
+
+    /// Uploads `tris` and builds the grid at `resolution` over them: for tests and benchmarks
+    /// that start from triangles on the host.
+    pub fn build_from(
+        ctx: Arc<GpuContext>,
+        tris: &[TriAccel],
+        resolution: Resolution,
+    ) -> Result<(GpuGrid, GpuBuildStats)> {
+        let lattice = GridLattice::new(tris, resolution)?;
+        check_scene_fits(
+            &[("triangles", std::mem::size_of_val(tris) as u64)],
+            &ctx.limits(),
+            &ctx.info.name,
+        )?;
+        let buf = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("triangles"),
+            contents: if tris.is_empty() {
+                &[0u8; 36]
+            } else {
+                bytemuck::cast_slice(tris)
+            },
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let mut grid = GpuGrid::new(ctx)?;
+        let stats = grid.build(&buf, tris, &lattice)?;
+        Ok((grid, stats))
+    }
+
+    /// The lattice of the last build.
+    pub fn lattice(&self) -> Option<&GridLattice> {
+        self.lattice.as_ref()
+    }
+
+    /// References of the last build.
+    pub fn references(&self) -> u64 {
+        self.references
+    }
+
+    /// Bytes of the grid's own arrays (cells and references) and of the build's scratch.
+    pub fn memory(&self) -> Vec<(&'static str, u64)> {
+        let cells = self.lattice.map_or(0, |l| l.cells() as u64);
+        vec![
+            ("cells", cells * size_of::<Cell>() as u64),
+            ("refs", self.references * 4),
+            (
+                "build scratch",
+                self.sums.size() + self.dt_a.size() + self.dt_b.size() + self.stack.size(),
+            ),
+        ]
+    }
+
+    /// Builds the grid over the triangles `host_tris`, uploaded in `tris`, on `lattice`
+    /// (`GridLattice::new` over the same triangles). The previous grid is replaced; on an
+    /// error it may be partly overwritten, and the caller must not trace it. The host's copy
+    /// serves the rare grid the GPU build does not take (`GpuBuildStats::cpu_fallback`).
+    pub fn build(
+        &mut self,
+        tris: &wgpu::Buffer,
+        host_tris: &[TriAccel],
+        lattice: &GridLattice,
+    ) -> Result<GpuBuildStats> {
+        let n_tris = host_tris.len() as u32;
+        let n_cells = lattice.cells() as u64;
+        if lattice.dims.max_element() > MAX_GPU_LINE {
+            return self.build_on_cpu(
+                host_tris,
+                lattice,
+                format!(
+                    "the grid is {} cells long; the GPU distance transform takes lines up to {MAX_GPU_LINE}",
+                    lattice.dims.max_element()
+                ),
+            );
+        }
+        if (tris.size() / size_of::<TriAccel>() as u64) < n_tris as u64 {
+            return Err(Error::InvalidInput(format!(
+                "the triangle buffer holds {} triangles, the build was asked for {n_tris}",
+                tris.size() / size_of::<TriAccel>() as u64
+            )));
+        }
+        let mut stats = GpuBuildStats {
+            dims: lattice.dims.to_array(),
+            ..Default::default()
+        };
+        // Start from the last build's references (a moving mesh changes them little), or a
+        // guess; a build that outgrows the buffer is run again with room for all of them.
+        let mut want_refs = (self.references + self.references / 4).max(n_tris as u64 * INITIAL_REFS_PER_TRI);
+        loop {
+            stats.attempts += 1;
+            stats.reallocated |= self.reserve(n_cells, want_refs)?;
+            let t0 = Instant::now();
+            let timer = self.record(tris, n_tris, lattice)?;
+            let status = self.ctx.read_buffer(&self.sums, 8)?;
+            let word =
+                |i: usize| u32::from_le_bytes([status[4 * i], status[4 * i + 1], status[4 * i + 2], status[4 * i + 3]]);
+            let total = word(0) as u64;
+            if word(1) != 0 {
+                return self.build_on_cpu(
+                    host_tris,
+                    lattice,
+                    format!("a triangle spans more than {MAX_CELLS_PER_TRI} cells"),
+                );
+            }
+            let wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+            let stages = timer.read(&self.ctx)?;
+            self.ctx.check_errors()?;
+            if total > self.refs.size() / 4 {
+                if stats.attempts >= 2 {
+                    return Err(Error::Gpu(format!(
+                        "the grid build needed {total} references after growing its buffer to {}",
+                        self.refs.size() / 4
+                    )));
+                }
+                want_refs = total + total / 8;
+                continue;
+            }
+            self.references = total;
+            self.lattice = Some(*lattice);
+            stats.references = total;
+            stats.from_timestamps = !stages.is_empty();
+            stats.ms = if stats.from_timestamps {
+                stages.iter().map(|s| s.1).sum()
+            } else {
+                wall_ms
+            };
+            let mut merged: Vec<(&'static str, f64)> = Vec::new();
+            for (name, ms) in stages {
+                match merged.iter_mut().find(|m| m.0 == name) {
+                    Some(m) => m.1 += ms,
+                    None => merged.push((name, ms)),
+                }
+            }
+            stats.stages_ms = merged;
+            return Ok(stats);
+        }
+    }
+
+    /// Builds on the CPU and uploads the result into the grid's buffers.
+    fn build_on_cpu(&mut self, host_tris: &[TriAccel], lattice: &GridLattice, why: String) -> Result<GpuBuildStats> {
+        let t0 = Instant::now();
+        let grid = Grid::build_on(host_tris, *lattice, t0);
+        let reallocated = self.reserve(grid.cells.len() as u64, grid.refs.len() as u64)?;
+        self.ctx
+            .queue
+            .write_buffer(&self.cells, 0, bytemuck::cast_slice(&grid.cells));
+        if !grid.refs.is_empty() {
+            self.ctx
+                .queue
+                .write_buffer(&self.refs, 0, bytemuck::cast_slice(&grid.refs));
+        }
+        self.ctx.wait()?;
+        self.references = grid.refs.len() as u64;
+        self.lattice = Some(*lattice);
+        Ok(GpuBuildStats {
+            dims: lattice.dims.to_array(),
+            references: self.references,
+            ms: t0.elapsed().as_secs_f64() * 1e3,
+            attempts: 1,
+            reallocated,
+            cpu_fallback: Some(why),
+            ..Default::default()
+        })
+    }
+
+    /// Makes the buffers hold `n_cells` cells and `n_refs` references; returns whether the
+    /// cell or reference buffer was reallocated. Sizes over the device's limits are errors
+    /// that name the array and the limit.
+    fn reserve(&mut self, n_cells: u64, n_refs: u64) -> Result<bool> {
+        let levels = scan_levels(n_cells as u32);
+        let sums_words = levels.last().map_or(STATUS_WORDS, |l| l.0 + l.1) as u64;
+        let need = [
+            ("cells", n_cells * size_of::<Cell>() as u64),
+            ("refs", n_refs * 4),
+            ("distance stack", n_cells * 8),
+            ("distance x", n_cells * 4),
+        ];
+        check_scene_fits(&need, &self.ctx.limits(), &self.ctx.info.name)?;
+        let dev = &self.ctx.device;
+        let mut grown = false;
+        let mut grow = |buf: &mut wgpu::Buffer, label: &str, bytes: u64, main: bool| {
+            if buf.size() < bytes {
+                // Room to grow a little, so that a moving mesh does not reallocate every frame.
+                *buf = storage_buffer(dev, label, bytes + bytes / 8);
+                grown |= main;
+            }
+        };
+        grow(&mut self.cells, "cells", need[0].1, true);
+        grow(&mut self.refs, "refs", need[1].1.max(4), true);
+        grow(&mut self.stack, "distance stack", need[2].1, false);
+        grow(&mut self.dt_a, "distance x", need[3].1, false);
+        grow(&mut self.dt_b, "distance xy", need[3].1, false);
+        grow(&mut self.sums, "scan sums", sums_words * 4, false);
+        // The dispatches: count, place, sort, three distance passes, and per scan level at
+        // most a scan and an add.
+        let params_bytes = (6 + 2 * levels.len() as u64 + 1) * PARAMS_STRIDE;
+        if self.params.size() < params_bytes {
+            self.params = dev.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("grid build params"),
+                size: params_bytes,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+        }
+        Ok(grown)
+    }
+
+    /// Records and submits the build over `tris`.
+    fn record(&self, tris: &wgpu::Buffer, n_tris: u32, lattice: &GridLattice) -> Result<StageTimer<'_>> {
+        let dev = &self.ctx.device;
+        let n_cells = lattice.cells() as u32;
+        let refs_capacity = (self.refs.size() / 4).min(u32::MAX as u64) as u32;
+        let base = BuildParams {
+            bounds_min: lattice.bounds.min.to_array(),
+            n_tris,
+            cell_size: lattice.cell_size.to_array(),
+            n_cells,
+            inv_cell_size: lattice.inv_cell_size.to_array(),
+            refs_capacity,
+            margin: lattice.margin.to_array(),
+            axis: 0,
+            dims: lattice.dims.to_array(),
+            n: 0,
+            in_offset: 0,
+            out_offset: 0,
+            last: 0,
+            _pad0: 0,
+        };
+        // Every dispatch: stage, parameters, workgroups. (The bind group is made per build: the
+        // triangle buffer is the caller's and may change.)
+        let mut plan: Vec<(Stage, BuildParams, (u32, u32))> = Vec::new();
+        let per_tri = groups(n_tris, GROUP);
+        plan.push((Stage::Count, base, per_tri));
+        let levels = scan_levels(n_cells);
+        let top = levels.len() - 1;
+        plan.push((
+            Stage::ScanCells,
+            BuildParams {
+                n: n_cells,
+                out_offset: levels[0].0,
+                last: (top == 0) as u32,
+                ..base
+            },
+            groups(n_cells, SCAN_BLOCK),
+        ));
+        for j in 0..top {
+            let (offset, n) = levels[j];
+            plan.push((
+                Stage::ScanSums,
+                BuildParams {
+                    n,
+                    in_offset: offset,
+                    out_offset: levels[j + 1].0,
+                    last: (j + 1 == top) as u32,
+                    ..base
+                },
+                groups(n, SCAN_BLOCK),
+            ));
+        }
+        for j in (0..top).rev() {
+            let (offset, n) = levels[j];
+            // The scanned block totals one level up go back into the level. A level of one
+            // block has nothing to add (and the level above it is the raw total, not scanned).
+            if n > SCAN_BLOCK {
+                plan.push((
+                    Stage::AddSums,
+                    BuildParams {
+                        n,
+                        in_offset: offset,
+                        out_offset: levels[j + 1].0,
+                        ..base
+                    },
+                    groups(n, SCAN_GROUP),
+                ));
+            }
+        }
+        if n_cells > SCAN_BLOCK {
+            plan.push((
+                Stage::AddCells,
+                BuildParams {
+                    n: n_cells,
+                    out_offset: levels[0].0,
+                    ..base
+                },
+                groups(n_cells, SCAN_GROUP),
+            ));
+        }
+        plan.push((Stage::Place, base, per_tri));
+        plan.push((Stage::Sort, base, groups(n_cells, GROUP)));
+        let d = lattice.dims;
+        for (axis, lines) in [(0u32, d.y * d.z), (1, d.x * d.z), (2, d.x * d.y)] {
+            plan.push((
+                Stage::Distance,
+                BuildParams { axis, n: lines, ..base },
+                groups(lines, GROUP),
+            ));
+        }
+
+        let params_bytes = plan.len() as u64 * PARAMS_STRIDE;
+        debug_assert!(params_bytes <= self.params.size(), "`reserve` sizes the params");
+        let mut bytes = vec![0u8; params_bytes as usize];
+        for (i, (_, p, _)) in plan.iter().enumerate() {
+            let at = i * PARAMS_STRIDE as usize;
+            bytes[at..at + size_of::<BuildParams>()].copy_from_slice(bytemuck::bytes_of(p));
+        }
+        self.ctx.queue.write_buffer(&self.params, 0, &bytes);
+
+        let entries = [
+            (0, &self.params),
+            (1, tris),
+            (2, &self.cells),
+            (3, &self.refs),
+            (4, &self.sums),
+            (5, &self.dt_a),
+            (6, &self.dt_b),
+            (7, &self.stack),
+        ];
+        let bind_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("grid build"),
+            layout: &self.kernels.layout,
+            entries: &entries
+                .iter()
+                .map(|&(binding, buffer)| wgpu::BindGroupEntry {
+                    binding,
+                    resource: if binding == 0 {
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer,
+                            offset: 0,
+                            size: wgpu::BufferSize::new(size_of::<BuildParams>() as u64),
+                        })
+                    } else {
+                        buffer.as_entire_binding()
+                    },
+                })
+                .collect::<Vec<_>>(),
+        });
+
+        let mut timer = StageTimer::new(self.timestamps.as_ref());
+        let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("grid build"),
+        });
+        enc.clear_buffer(&self.cells, 0, Some(n_cells as u64 * size_of::<Cell>() as u64));
+        enc.clear_buffer(&self.sums, 0, Some(STATUS_WORDS as u64 * 4));
+        for (i, (stage, _, (x, y))) in plan.iter().enumerate() {
+            if *x == 0 {
+                continue;
+            }
+            let spec = &STAGES[*stage as usize];
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(spec.name),
+                timestamp_writes: timer.pass_writes(spec.name),
+            });
+            pass.set_pipeline(&self.kernels.pipelines[*stage as usize]);
+            pass.set_bind_group(0, &bind_group, &[(i as u64 * PARAMS_STRIDE) as u32]);
+            pass.dispatch_workgroups(*x, *y, 1);
+        }
+        timer.resolve(&mut enc);
+        self.ctx.queue.submit([enc.finish()]);
+        Ok(timer)
+    }
+
+    /// The grid's cells and references, read back (for tests and for the CPU to trace a grid
+    /// the GPU built).
+    pub fn read_back(&self) -> Result<(Vec<Cell>, Vec<u32>)> {
+        let Some(lattice) = self.lattice else {
+            return Ok((Vec::new(), Vec::new()));
+        };
+        let cells = self
+            .ctx
+            .read_buffer(&self.cells, lattice.cells() as u64 * size_of::<Cell>() as u64)?;
+        let refs = self.ctx.read_buffer(&self.refs, self.references * 4)?;
+        Ok((
+            bytemuck::cast_slice(&cells).to_vec(),
+            bytemuck::cast_slice(&refs).to_vec(),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scan_levels_end_in_one_total() {
+        assert_eq!(scan_levels(1), vec![(STATUS_WORDS, 1)]);
+        assert_eq!(scan_levels(SCAN_BLOCK), vec![(STATUS_WORDS, 1)]);
+        assert_eq!(
+            scan_levels(SCAN_BLOCK + 1),
+            vec![(STATUS_WORDS, 2), (STATUS_WORDS + 2, 1)]
+        );
+        let l = scan_levels(1 << 26);
+        assert_eq!(l.iter().map(|x| x.1).collect::<Vec<_>>(), vec![65536, 64, 1]);
+    }
+
+    #[test]
+    fn dispatches_stay_under_the_limit() {
+        let (x, y) = groups(1 << 26, GROUP);
+        assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * GROUP as u64 >= 1 << 26);
+        assert_eq!(groups(0, GROUP), (0, 0));
+    }
+}
