@@ -419,7 +419,11 @@ fn refit_traversal_equals_brute_force() {
         for (i, r) in rays.iter().enumerate() {
             let want = brute_force_intersect(&tris, r, 0.0, f32::INFINITY);
             let got = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
-            assert_eq!(got.is_hit(), want.is_hit(), "{name}, ray {i}: got {got:?} want {want:?}");
+            assert_eq!(
+                got.is_hit(),
+                want.is_hit(),
+                "{name}, ray {i}: got {got:?} want {want:?}"
+            );
             assert_eq!(batch[i], got, "{name}, ray {i}: batch");
             assert_eq!(occ_batch[i], want.is_hit(), "{name}, ray {i}: batch any hit");
             assert_eq!(
