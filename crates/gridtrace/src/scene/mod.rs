@@ -1,5 +1,6 @@
 //! Scene description: meshes, materials, lights, camera; and its preparation for ray tracing.
 
+pub mod animated;
 pub mod builtin;
 pub mod camera;
 pub mod file;

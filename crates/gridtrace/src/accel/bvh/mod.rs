@@ -21,6 +21,7 @@ use super::{Aabb, Counters, Hit, Ray, TriAccel, TriAccel4};
 
 mod box_test;
 mod build;
+mod refit;
 #[cfg(test)]
 mod tests;
 mod walk;
@@ -34,6 +35,21 @@ use walk::Walk;
 pub(crate) use walk::prefetch;
 use wide::collapse;
 pub use wide::{ChildRef, WIDTH, WideNode};
+
+/// The box of each triangle as the BVH bounds it, padded so that every hit the triangle test
+/// accepts lies inside (`SLACK_PAD`). `build` and `refit` both bound triangles with this.
+fn padded_boxes(tris: &[TriAccel]) -> Vec<Aabb> {
+    tris.par_iter()
+        .map(|t| {
+            let b = Aabb::from_points(&t.vertices());
+            let pad = slack_pad(b.min, b.max);
+            Aabb {
+                min: b.min - pad,
+                max: b.max + pad,
+            }
+        })
+        .collect()
+}
 
 /// A BVH over triangles: the eight-wide nodes, and the triangles copied into leaf order, four
 /// to a block, so that a leaf's triangles are adjacent in memory and tested together.
@@ -52,18 +68,7 @@ pub struct BvhAccel {
 
 impl BvhAccel {
     pub fn build(tris: &[TriAccel]) -> BvhAccel {
-        let boxes: Vec<Aabb> = tris
-            .par_iter()
-            .map(|t| {
-                // Padded so that every hit the triangle test accepts lies inside (`SLACK_PAD`).
-                let b = Aabb::from_points(&t.vertices());
-                let pad = slack_pad(b.min, b.max);
-                Aabb {
-                    min: b.min - pad,
-                    max: b.max + pad,
-                }
-            })
-            .collect();
+        let boxes = padded_boxes(tris);
         let centers: Vec<Vec3> = boxes.par_iter().map(Aabb::center).collect();
         let bvh = Bvh::build(&boxes, &centers);
         let (nodes, blocks, lane_prims) = collapse(&bvh, tris);

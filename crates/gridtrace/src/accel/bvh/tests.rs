@@ -9,6 +9,7 @@ use super::build::{MAX_LEAF, STACK};
 #[cfg(target_arch = "x86_64")]
 use super::walk::has_avx2;
 use super::*;
+use crate::accel::{NoCounters, brute_force_intersect, brute_force_occluded};
 
 #[test]
 fn depth_is_bounded_for_exponentially_spaced_boxes() {
@@ -279,4 +280,174 @@ fn avx_and_baseline_traversals_agree() {
         assert_eq!(bits(a), bits(b), "ray {i}: {a:?} against {b:?}");
     }
     assert_eq!(any(false), any(true));
+}
+
+/// A mesh of `n` small random triangles with their own vertices (`3 * n` positions) in
+/// [-1, 1]^3, as positions and triangles.
+fn random_mesh(rng: &mut crate::util::Rng, n: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let mut positions = Vec::with_capacity(3 * n);
+    for _ in 0..n {
+        let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        for _ in 0..3 {
+            positions.push(c + Vec3::new(rng.range(-0.1, 0.1), rng.range(-0.1, 0.1), rng.range(-0.1, 0.1)));
+        }
+    }
+    let triangles = (0..n as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    (positions, triangles)
+}
+
+fn tris_of(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<TriAccel> {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            TriAccel::new(a, b, c)
+        })
+        .collect()
+}
+
+/// The binary boxes, the prims, and the wide nodes, blocks and lane map, compared exactly.
+fn assert_same_accel(a: &BvhAccel, b: &BvhAccel, what: &str) {
+    assert_eq!(a.bvh.nodes, b.bvh.nodes, "{what}: binary nodes");
+    assert_eq!(a.bvh.prims, b.bvh.prims, "{what}: primitive order");
+    assert_eq!(a.nodes.len(), b.nodes.len(), "{what}: wide node count");
+    for (i, (x, y)) in a.nodes.iter().zip(b.nodes.iter()).enumerate() {
+        assert_eq!(x.planes, y.planes, "{what}: wide node {i} boxes");
+        assert_eq!(x.child, y.child, "{what}: wide node {i} children");
+    }
+    assert_eq!(a.blocks[..], b.blocks[..], "{what}: triangle blocks");
+    assert_eq!(a.lane_prims[..], b.lane_prims[..], "{what}: lane map");
+}
+
+/// Children come after their parents in the node array, also across the parallel subtrees
+/// stitched in by `Bvh::build` (the property the refit's reverse sweep relies on); a refit
+/// with the triangles of the build reproduces the build exactly, and so does a refit back to
+/// them from another pose. 30,000 triangles: several deferred subtrees (at most 4,096 each).
+#[test]
+fn refit_with_unchanged_triangles_is_the_build() {
+    let mut rng = crate::util::Rng::new(0x8EF1);
+    let (positions, triangles) = random_mesh(&mut rng, 30_000);
+    let tris = tris_of(&positions, &triangles);
+    let built = BvhAccel::build(&tris);
+    for (i, node) in built.bvh.nodes.iter().enumerate() {
+        if !node.is_leaf() {
+            assert!(node.first as usize > i, "node {i}: children at {}", node.first);
+        }
+    }
+    let mut refit = built.clone();
+    refit.refit(&tris);
+    assert_same_accel(&refit, &built, "refit in place");
+
+    let moved: Vec<Vec3> = positions.iter().map(|p| *p * 1.5 + Vec3::new(0.3, -2.0, 0.1)).collect();
+    refit.refit(&tris_of(&moved, &triangles));
+    assert_ne!(refit.bvh.nodes, built.bvh.nodes, "the boxes moved");
+    refit.refit(&tris);
+    assert_same_accel(&refit, &built, "refit there and back");
+
+    // An empty BVH refits to itself.
+    let mut empty = BvhAccel::build(&[]);
+    empty.refit(&[]);
+    assert_same_accel(&empty, &BvhAccel::build(&[]), "empty");
+}
+
+#[test]
+#[should_panic(expected = "refit needs the triangles the BVH was built over")]
+fn refit_with_another_triangle_count_panics() {
+    let mut rng = crate::util::Rng::new(5);
+    let (positions, triangles) = random_mesh(&mut rng, 100);
+    let tris = tris_of(&positions, &triangles);
+    BvhAccel::build(&tris).refit(&tris[..99]);
+}
+
+/// Built on one pose and refitted to others, the BVH finds what brute force finds: closest
+/// hits (same t; the same triangle unless another is hit at the same t) and any hits, per ray
+/// and in batches. The poses: a smooth displacement, a twist with a stretch, and a scramble
+/// that moves every triangle somewhere else in the mesh (the worst case for a refit's speed,
+/// not its answers).
+#[test]
+fn refit_traversal_equals_brute_force() {
+    let mut rng = crate::util::Rng::new(0x2EF17);
+    let (pose_a, triangles) = random_mesh(&mut rng, 3000);
+    let mut accel = BvhAccel::build(&tris_of(&pose_a, &triangles));
+    let smooth: Vec<Vec3> = pose_a
+        .iter()
+        .map(|&p| p + 0.25 * Vec3::new((2.5 * p.y).sin(), (2.5 * p.z).sin(), (2.5 * p.x).sin()))
+        .collect();
+    let twist: Vec<Vec3> = pose_a
+        .iter()
+        .map(|&p| {
+            let (s, c) = (2.5 * p.y).sin_cos();
+            Vec3::new(1.6 * (c * p.x - s * p.z), 0.5 * p.y, 1.6 * (s * p.x + c * p.z))
+        })
+        .collect();
+    let offsets: Vec<Vec3> = (0..triangles.len())
+        .map(|_| Vec3::new(rng.range(-1.5, 1.5), rng.range(-1.5, 1.5), rng.range(-1.5, 1.5)))
+        .collect();
+    let scramble: Vec<Vec3> = pose_a
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| (p + offsets[i / 3]).clamp(Vec3::splat(-1.2), Vec3::splat(1.2)))
+        .collect();
+    for (name, pose) in [("smooth", smooth), ("twist", twist), ("scramble", scramble)] {
+        let tris = tris_of(&pose, &triangles);
+        accel.refit(&tris);
+        let rays: Vec<Ray> = (0..4000)
+            .map(|i| {
+                let o = Vec3::new(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), rng.range(-3.0, 3.0));
+                let mut d = if i % 2 == 0 {
+                    pose[rng.below(pose.len() as u32) as usize] - o
+                } else {
+                    Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0))
+                };
+                if i % 7 == 0 {
+                    d.x = 0.0;
+                }
+                if i % 11 == 0 {
+                    d.z = 0.0;
+                }
+                if d == Vec3::ZERO {
+                    d = Vec3::Y;
+                }
+                Ray::new(o, d)
+            })
+            .collect();
+        let mut batch = vec![Hit::MISS; rays.len()];
+        accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut batch);
+        let mut occ_batch = vec![false; rays.len()];
+        accel.occluded_batch(&rays, 0.0, f32::INFINITY, &mut occ_batch);
+        let mut hits = 0;
+        for (i, r) in rays.iter().enumerate() {
+            let want = brute_force_intersect(&tris, r, 0.0, f32::INFINITY);
+            let got = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+            assert_eq!(
+                got.is_hit(),
+                want.is_hit(),
+                "{name}, ray {i}: got {got:?} want {want:?}"
+            );
+            assert_eq!(batch[i], got, "{name}, ray {i}: batch");
+            assert_eq!(occ_batch[i], want.is_hit(), "{name}, ray {i}: batch any hit");
+            assert_eq!(
+                accel.occluded(r, 0.0, f32::INFINITY, &mut NoCounters),
+                want.is_hit(),
+                "{name}, ray {i}: any hit"
+            );
+            if !want.is_hit() {
+                continue;
+            }
+            hits += 1;
+            assert_eq!(got.t, want.t, "{name}, ray {i}: got {got:?} want {want:?}");
+            if got.tri != want.tri {
+                // A tie: the other triangle is hit at the same t.
+                let alt = tris[got.tri as usize].intersect(r.origin, r.dir, 0.0, f32::INFINITY);
+                assert_eq!(alt.map(|h| h.t), Some(want.t), "{name}, ray {i}: not a tie");
+            }
+            let before = want.t * (1.0 - 1e-5);
+            assert_eq!(
+                accel.occluded(r, 0.0, before, &mut NoCounters),
+                brute_force_occluded(&tris, r, 0.0, before),
+                "{name}, ray {i}: any hit before the closest"
+            );
+        }
+        assert!(hits > 1000 && hits < 3900, "{name}: a varied ray set ({hits} hits)");
+    }
 }
