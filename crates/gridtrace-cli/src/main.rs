@@ -1,6 +1,7 @@
 //! `gridtrace`: the command-line tool. Thin: parsing, printing and files; the work is in the
 //! library.
 
+mod animate;
 mod bench;
 mod common;
 mod info;

@@ -17,18 +17,18 @@ use crate::common::{Backend, GridArgs, SceneArgs, backend_parser, mode_parser, p
 #[derive(Args)]
 pub struct RenderArgs {
     #[command(flatten)]
-    scene: SceneArgs,
+    pub scene: SceneArgs,
     /// With a mesh file: leave out the floor of the auto-framed scene (the mesh alone).
     #[arg(long)]
     no_floor: bool,
     #[command(flatten)]
-    grid: GridArgs,
+    pub grid: GridArgs,
     /// cast (eye rays), shadow (+ shadow rays), trace (+ two levels of reflection), heat (cost).
     #[arg(long, default_value = "trace", value_parser = mode_parser())]
-    mode: Mode,
+    pub mode: Mode,
     /// Image size in pixels: WxH, or N for a square N x N image.
     #[arg(long, value_name = "WxH|N", default_value = "512x512", value_parser = parse_res, allow_hyphen_values = true)]
-    res: (u32, u32),
+    pub res: (u32, u32),
     /// Camera position x,y,z (overrides the scene's), e.g. --eye -1,2,3.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     eye: Option<Vec3>,
@@ -47,24 +47,39 @@ pub struct RenderArgs {
     light: Vec<Vec3>,
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
-    backend: Backend,
+    pub backend: Backend,
     /// Count traversal work (cells, jumps, triangle tests) and print it.
     #[arg(long)]
     stats: bool,
     /// Frames to render (the first is written): the first frame's time and the median and best
     /// of the rest are reported, so the figure compares with `bench` (warm, not one cold frame).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100_000))]
-    frames: u32,
+    pub frames: u32,
     /// Move the camera along a circle around its target over the frames (about the up axis,
     /// one turn in all): the paper's dynamic camera.
     #[arg(long)]
     orbit: bool,
+    /// Play an animated scene (--scene animated, twisting-knot or bouncing-spheres; default
+    /// animated) over the frames: every frame moves the vertices, updates the structure (the
+    /// grids rebuilt, on the GPU with the GPU backend; the BVH refitted) and traces. Prints each
+    /// frame's build and trace times.
+    #[arg(long)]
+    pub animate: bool,
+    /// With --animate: frames per second of animation time.
+    #[arg(long, default_value_t = 30.0, requires = "animate")]
+    pub fps: f32,
+    /// With --animate: also write every frame as DIR/frame_0000.png, ...
+    #[arg(long, value_name = "DIR", requires = "animate")]
+    pub sequence: Option<PathBuf>,
     /// Output PNG.
     #[arg(short, long, default_value = "gridtrace.png")]
-    output: PathBuf,
+    pub output: PathBuf,
 }
 
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
+    if a.animate {
+        return crate::animate::run(&a);
+    }
     let (mut scene, name) = a.scene.load(!a.no_floor)?;
     if let Some(e) = a.eye {
         scene.camera.eye = e;

@@ -48,6 +48,14 @@ pub struct Accel {
     /// The triangles, in the order hits name them (`Hit::tri`).
     pub tris: Vec<TriAccel>,
     pub structure: Structure,
+    /// How the structure was built, so that `update` builds it the same way after the
+    /// triangles move.
+    pub resolution: Resolution,
+    pub irregular: IrregularParams,
+    /// Set when the triangles moved and the structure was left to a GPU to rebuild
+    /// (`update_triangles_only`): CPU traversal of it would be wrong, and `check_current`
+    /// says so.
+    pub structure_stale: bool,
 }
 
 impl Accel {
@@ -69,15 +77,81 @@ impl Accel {
             AccelKind::Bvh => Structure::Bvh(BvhAccel::build(&tris)),
             AccelKind::Irregular => Structure::Irregular(IrregularGrid::build(&tris, irregular)?),
         };
-        Ok(Accel { tris, structure })
+        Ok(Accel {
+            tris,
+            structure,
+            resolution,
+            irregular,
+            structure_stale: false,
+        })
     }
 
     /// A grid built elsewhere (over these triangles).
     pub fn from_grid(grid: Grid, tris: Vec<TriAccel>) -> Accel {
         Accel {
             tris,
+            resolution: Resolution::Fixed(grid.dims.to_array()),
             structure: Structure::Grid(grid),
+            irregular: IrregularParams::default(),
+            structure_stale: false,
         }
+    }
+
+    /// New positions of the same triangles (same count and order): the grids are rebuilt as
+    /// they were built (a grid costs about what a refit would, and a refit grid would keep the
+    /// old bounds), the BVH is refitted (its tree kept, its boxes recomputed: much cheaper than a
+    /// rebuild, at a quality that degrades as the vertices move away from the build pose).
+    /// On an error nothing has changed. Returns what was done.
+    pub fn update(&mut self, tris: Vec<TriAccel>) -> Result<&'static str> {
+        self.check_same_count(&tris)?;
+        let (structure, how) = match &self.structure {
+            Structure::Grid(_) => (Structure::Grid(Grid::build(&tris, self.resolution)?), "rebuilt"),
+            Structure::Bvh(b) => {
+                let mut b = b.clone();
+                b.refit(&tris);
+                (Structure::Bvh(b), "refitted")
+            }
+            Structure::Irregular(_) => (
+                Structure::Irregular(IrregularGrid::build(&tris, self.irregular)?),
+                "rebuilt",
+            ),
+        };
+        self.tris = tris;
+        self.structure = structure;
+        self.structure_stale = false;
+        Ok(how)
+    }
+
+    /// New positions of the triangles, the structure left for a GPU to rebuild (which only the
+    /// uniform grid's has): until `update` runs, CPU traversal is refused (`check_current`).
+    pub fn update_triangles_only(&mut self, tris: Vec<TriAccel>) -> Result<()> {
+        self.check_same_count(&tris)?;
+        self.tris = tris;
+        self.structure_stale = true;
+        Ok(())
+    }
+
+    fn check_same_count(&self, tris: &[TriAccel]) -> Result<()> {
+        if tris.len() != self.tris.len() {
+            return Err(Error::InvalidInput(format!(
+                "an update gives {} triangles; the structure holds {}",
+                tris.len(),
+                self.tris.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// An error when the structure does not match the triangles (`structure_stale`).
+    pub fn check_current(&self) -> Result<()> {
+        if self.structure_stale {
+            return Err(Error::InvalidInput(
+                "the mesh moved and its structure was rebuilt on the GPU only: trace it there, or \
+                 update it on the CPU (PreparedScene::update_vertices with RebuildOn::Cpu)"
+                    .into(),
+            ));
+        }
+        Ok(())
     }
 
     /// The grid, if that is the structure.

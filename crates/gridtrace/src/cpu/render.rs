@@ -67,6 +67,7 @@ pub fn render_view(
     opts: &RenderOptions,
     progress: Option<&(dyn Fn(u32) + Sync)>,
 ) -> Result<(Image, RenderStats)> {
+    scene.accel.check_current()?;
     let view = View { camera, lights };
     if opts.mode == Mode::Heat {
         render_generic::<TraversalCounters>(scene, &view, opts, progress)
@@ -82,6 +83,7 @@ pub fn render_with_counters(
     lights: &[PointLight],
     opts: &RenderOptions,
 ) -> Result<(Image, RenderStats)> {
+    scene.accel.check_current()?;
     render_generic::<TraversalCounters>(scene, &View { camera, lights }, opts, None)
 }
 

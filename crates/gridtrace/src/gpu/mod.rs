@@ -41,7 +41,7 @@ mod wavefront;
 
 pub use context::GpuContext;
 pub use grid_build::{GpuBuildStats, GpuGrid};
-pub use renderer::{GpuRenderer, MAX_TILE_PIXELS};
+pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
 pub use timing::GpuTimings;
 pub use wavefront::GpuRenderStats;

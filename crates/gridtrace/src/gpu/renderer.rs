@@ -4,15 +4,17 @@
 
 use std::mem::size_of;
 use std::sync::Arc;
+use std::time::Instant;
 
 use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot};
 use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
 use super::context::GpuContext;
+use super::grid_build::{GpuBuildStats, GpuGrid};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
-use super::scene::{GpuStructure, SceneBuffers};
+use super::scene::{GpuStructure, SceneBuffers, tri_shade};
 use super::timing::{StageTimer, Timestamps};
-use crate::accel::AccelKind;
+use crate::accel::{AccelKind, GridLattice};
 use crate::render::{Ablation, Mode};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
 use crate::{Error, Result};
@@ -59,14 +61,27 @@ pub struct GpuRenderer {
     indirect_group: wgpu::BindGroup,
     timestamps: Option<Timestamps>,
     pub(super) work: Option<WorkBuffers>,
+    /// The grid the GPU builds when the mesh moves (`update_vertices`), once it has.
+    device_grid: Option<GpuGrid>,
+}
+
+/// What `GpuRenderer::update_vertices` did, and its times.
+#[derive(Debug, Clone, Default)]
+pub struct GpuUpdateStats {
+    /// Writing the moved triangles and normals to the device (wall clock, host side).
+    pub upload_ms: f64,
+    /// The grid's build on the device, when it was built there.
+    pub build: Option<GpuBuildStats>,
+    /// Uploading a structure the CPU updated (BVH, irregular grid; wall clock).
+    pub structure_upload_ms: f64,
 }
 
 impl GpuRenderer {
     /// Uploads the scene (grid, references, triangles, shading data, materials) once; compiles
     /// the kernels unless an earlier renderer on `ctx` did.
-    pub fn new(ctx: Arc<GpuContext>, scene: &PreparedScene) -> Result<GpuRenderer> {
+    pub fn new(ctx: Arc<GpuContext>, prepared: &PreparedScene) -> Result<GpuRenderer> {
         let dev = &ctx.device;
-        let scene = SceneBuffers::upload(&ctx, scene)?;
+        let scene = SceneBuffers::upload(&ctx, prepared)?;
         let uniform = |label: &str, size: u64| {
             dev.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -99,7 +114,7 @@ impl GpuRenderer {
         });
         let timestamps = Timestamps::new(&ctx);
         ctx.check_errors()?;
-        Ok(GpuRenderer {
+        let mut renderer = GpuRenderer {
             ctx,
             kernels,
             scene,
@@ -110,7 +125,69 @@ impl GpuRenderer {
             indirect_group,
             timestamps,
             work: None,
-        })
+            device_grid: None,
+        };
+        // A scene whose grid was left to the GPU: build it now.
+        if prepared.accel.structure_stale {
+            renderer.update_vertices(prepared)?;
+        }
+        Ok(renderer)
+    }
+
+    /// The scene's vertices moved (`PreparedScene::update_vertices`): uploads the new triangles
+    /// and normals, and brings the structure up to date: a grid is built here on the device
+    /// (`GpuGrid`; with the scene's `RebuildOn::Device` the CPU never builds it), any other
+    /// structure, which the CPU updated, is uploaded again. The triangles must be the ones
+    /// this renderer was made with, moved.
+    pub fn update_vertices(&mut self, scene: &PreparedScene) -> Result<GpuUpdateStats> {
+        let tris = &scene.accel.tris;
+        if tris.len() as u32 != self.scene.consts.n_tris {
+            return Err(Error::InvalidInput(format!(
+                "the scene has {} triangles; this GPU renderer was made for {}",
+                tris.len(),
+                self.scene.consts.n_tris
+            )));
+        }
+        let mut stats = GpuUpdateStats::default();
+        if self.scene.structure != GpuStructure::Grid {
+            let t0 = Instant::now();
+            self.scene = SceneBuffers::upload(&self.ctx, scene)?;
+            self.work = None;
+            self.ctx.wait()?;
+            stats.structure_upload_ms = t0.elapsed().as_secs_f64() * 1e3;
+            return Ok(stats);
+        }
+        let t0 = Instant::now();
+        let q = &self.ctx.queue;
+        q.write_buffer(&self.scene.tris, 0, bytemuck::cast_slice(tris));
+        q.write_buffer(&self.scene.tri_shade, 0, bytemuck::cast_slice(&tri_shade(scene)));
+        stats.upload_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let lattice = GridLattice::new(tris, scene.accel.resolution)?;
+        let grid = match &mut self.device_grid {
+            Some(g) => g,
+            None => self.device_grid.insert(GpuGrid::new(self.ctx.clone())?),
+        };
+        let build = grid.build(&self.scene.tris, tris, &lattice)?;
+        if build.reallocated || self.scene.cells != grid.cells || self.scene.refs != grid.refs {
+            self.scene.cells = grid.cells.clone();
+            self.scene.refs = grid.refs.clone();
+            // The bind groups name the old buffers.
+            self.work = None;
+        }
+        let c = &mut self.scene.consts;
+        c.bounds_min = lattice.bounds.min.to_array();
+        c.bounds_max = lattice.bounds.max.to_array();
+        c.dims = lattice.dims.to_array();
+        c.cell_size = lattice.cell_size.to_array();
+        c.inv_cell_size = lattice.inv_cell_size.to_array();
+        c.ray_epsilon = scene.ray_epsilon;
+        for (name, bytes) in grid.memory() {
+            if let Some(e) = self.scene.bytes.iter_mut().find(|e| e.0 == name) {
+                e.1 = bytes;
+            }
+        }
+        stats.build = Some(build);
+        Ok(stats)
     }
 
     pub fn context(&self) -> &GpuContext {

@@ -142,6 +142,22 @@ fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
     }
 }
 
+/// Per-triangle shading data: the vertex normals and the material.
+pub(crate) fn tri_shade(scene: &PreparedScene) -> Vec<TriShade> {
+    use rayon::prelude::*;
+    scene
+        .tri_vertices
+        .par_iter()
+        .zip(&scene.tri_material)
+        .map(|(v, &m)| TriShade {
+            n0: scene.normals[v[0] as usize].to_array(),
+            n1: scene.normals[v[1] as usize].to_array(),
+            n2: scene.normals[v[2] as usize].to_array(),
+            material: m,
+        })
+        .collect()
+}
+
 /// Checks every scene array (`(name, bytes)`) against the device's per-binding limits before
 /// anything is allocated: a scene too large for the device is an error that names the array and
 /// the limit, not a validation panic or a lost device.
@@ -184,17 +200,7 @@ impl SceneBuffers {
     pub fn upload(ctx: &GpuContext, scene: &PreparedScene) -> Result<SceneBuffers> {
         let dev = &ctx.device;
         let accel = accel_arrays(scene)?;
-        let tri_shade: Vec<TriShade> = scene
-            .tri_vertices
-            .iter()
-            .zip(&scene.tri_material)
-            .map(|(v, &m)| TriShade {
-                n0: scene.normals[v[0] as usize].to_array(),
-                n1: scene.normals[v[1] as usize].to_array(),
-                n2: scene.normals[v[2] as usize].to_array(),
-                material: m,
-            })
-            .collect();
+        let tri_shade = tri_shade(scene);
         let materials: Vec<GpuMaterial> = scene
             .materials
             .iter()

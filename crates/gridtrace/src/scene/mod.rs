@@ -173,12 +173,7 @@ impl Scene {
                 materials.len()
             )));
         }
-        let bounds = Aabb::from_points(&m.positions);
-        let max_coord = bounds.min.abs().max(bounds.max.abs()).max_element();
-        // Secondary rays start this far off the surface (along the geometric normal, towards
-        // the side they leave on). It scales with the scene size, and with the magnitude of the
-        // coordinates, because f32 hit points far from the origin carry larger absolute error.
-        let ray_epsilon = (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE);
+        let ray_epsilon = ray_epsilon(&m.positions);
         Ok(PreparedScene {
             accel: Accel::build_with(tris, accel, resolution, irregular)?,
             normals,
@@ -243,6 +238,57 @@ impl PreparedScene {
             .expect("a grid-only code path reached a scene prepared without a grid")
     }
 
+    /// Moves the mesh's vertices to `positions` (as many as the mesh has, in its order; the
+    /// triangles and materials stay): new triangles, vertex normals (area-weighted, recomputed
+    /// even where the mesh had its own) and ray offset, and the structure updated as
+    /// `Accel::update` says, here or, with `RebuildOn::Device`, by the GPU renderer. A wrong
+    /// length or a non-finite coordinate is an error that leaves the previous mesh in place.
+    ///
+    /// Triangles that the move makes degenerate stay in the list (they cannot be hit), so
+    /// triangle indices keep their meaning from frame to frame.
+    pub fn update_vertices(&mut self, positions: &[Vec3], on: RebuildOn) -> Result<UpdateTimes> {
+        use rayon::prelude::*;
+        let t0 = std::time::Instant::now();
+        let n = self.normals.len();
+        if positions.len() != n {
+            return Err(Error::InvalidInput(format!(
+                "the vertex array has {} vertices; the mesh has {n}",
+                positions.len()
+            )));
+        }
+        if let Some(i) = positions.par_iter().position_first(|p| !p.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "vertex {i} has a non-finite coordinate {}",
+                positions[i]
+            )));
+        }
+        let tris: Vec<TriAccel> = self
+            .tri_vertices
+            .par_iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| positions[i as usize]);
+                TriAccel::new(a, b, c)
+            })
+            .collect();
+        let normals = vertex_normals(positions, &self.tri_vertices);
+        let geometry_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let t1 = std::time::Instant::now();
+        let how = if on == RebuildOn::Device && self.accel.grid().is_some() {
+            self.accel.update_triangles_only(tris)?;
+            "left to the GPU"
+        } else {
+            self.accel.update(tris)?
+        };
+        let structure_ms = t1.elapsed().as_secs_f64() * 1e3;
+        self.normals = normals;
+        self.ray_epsilon = ray_epsilon(positions);
+        Ok(UpdateTimes {
+            geometry_ms,
+            structure_ms,
+            how,
+        })
+    }
+
     /// The same scene with the structure for `accel` (rebuilt unless it already serves it).
     pub fn with_accel(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
         if self.accel.serves(accel) {
@@ -253,6 +299,36 @@ impl PreparedScene {
             ..self.clone()
         })
     }
+}
+
+/// Secondary rays start this far off the surface (along the geometric normal, towards the side
+/// they leave on). It scales with the scene size, and with the magnitude of the coordinates,
+/// because f32 hit points far from the origin carry larger absolute error.
+fn ray_epsilon(positions: &[Vec3]) -> f32 {
+    let bounds = Aabb::from_points(positions);
+    let max_coord = bounds.min.abs().max(bounds.max.abs()).max_element();
+    (bounds.diagonal() * 1e-4).max(max_coord * 4e-6).max(f32::MIN_POSITIVE)
+}
+
+/// Where a moved mesh's structure is rebuilt (`PreparedScene::update_vertices`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RebuildOn {
+    /// Rebuilt or refitted on the CPU, ready for either backend (the GPU uploads it).
+    Cpu,
+    /// Left to the GPU renderer that traces the scene (`GpuRenderer::update_vertices`), where
+    /// it has a GPU build (the uniform grid); every other structure is updated on the CPU.
+    Device,
+}
+
+/// What an update did, and its times.
+#[derive(Debug, Clone, Default)]
+pub struct UpdateTimes {
+    /// New triangles, normals and checks.
+    pub geometry_ms: f64,
+    /// The structure's rebuild or refit on the CPU (0 when left to the GPU).
+    pub structure_ms: f64,
+    /// "rebuilt", "refitted" or "left to the GPU".
+    pub how: &'static str,
 }
 
 /// Area-weighted vertex normals: the unnormalised face normal `(b-a) x (c-a)` has length twice

@@ -1,0 +1,142 @@
+//! `gridtrace render --animate`: an animated scene played frame by frame, each frame timed as
+//! the structures' dynamic paths are compared: moving the vertices (geometry), updating the
+//! structure (build: the grids rebuilt, on the GPU with the GPU backend; the BVH refitted),
+//! and tracing.
+
+use std::time::Instant;
+
+use gridtrace::RenderOptions;
+use gridtrace::gpu::GpuRenderer;
+use gridtrace::scene::RebuildOn;
+use gridtrace::scene::animated::Animation;
+
+use crate::render::RenderArgs;
+
+pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
+    let name = a.scene.scene.as_deref().unwrap_or("animated");
+    if a.scene.file.is_some() || a.scene.mesh.is_some() {
+        return Err(gridtrace::Error::InvalidInput(
+            "--animate plays a built-in animated scene (--scene NAME), not a file".into(),
+        ));
+    }
+    let anim = Animation::by_name(name).ok_or_else(|| {
+        gridtrace::Error::InvalidInput(format!(
+            "unknown animated scene '{name}'; animated scenes: {}",
+            Animation::NAMES.join(", ")
+        ))
+    })?;
+    if !(a.fps.is_finite() && a.fps > 0.0) {
+        return Err(gridtrace::Error::InvalidInput(format!(
+            "--fps must be positive, got {}",
+            a.fps
+        )));
+    }
+    let accel = a.grid.accel;
+    let t0 = Instant::now();
+    let mut scene = crate::common::prepare(&anim.scene, name, accel, &a.grid)?;
+    println!(
+        "scene {name} (animated): {} triangles, {}; first build {:.1} ms",
+        scene.accel.tris.len(),
+        crate::common::describe_structure(&scene.accel),
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    let (ctx, notes) = a.backend.open_device()?;
+    for n in notes {
+        eprintln!("note: {n}");
+    }
+    let mut gpu = match ctx {
+        Some(ctx) => {
+            println!("backend gpu: {}", ctx.describe());
+            if ctx.is_software() {
+                println!("        (a software adapter: CPU speed, not GPU speed)");
+            }
+            Some(GpuRenderer::new(ctx, &scene)?)
+        }
+        None => {
+            println!("backend cpu ({} threads)", rayon::current_num_threads());
+            None
+        }
+    };
+    let on = if gpu.is_some() {
+        RebuildOn::Device
+    } else {
+        RebuildOn::Cpu
+    };
+    if let Some(dir) = &a.sequence {
+        std::fs::create_dir_all(dir).map_err(|e| gridtrace::Error::io(dir, e))?;
+    }
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel);
+    println!("frame  time_s  move_ms  geometry_ms  build_ms  trace_ms  total_ms  structure");
+    let mut rows = Vec::with_capacity(a.frames as usize);
+    for i in 0..a.frames {
+        let time = i as f32 / a.fps;
+        let t_frame = Instant::now();
+        let t_move = Instant::now();
+        let positions = anim.positions_at(time);
+        let move_ms = t_move.elapsed().as_secs_f64() * 1e3;
+        let up = scene.update_vertices(&positions, on)?;
+        let mut build_ms = up.structure_ms;
+        let mut how = up.how.to_string();
+        let (image, trace_ms) = match &mut gpu {
+            Some(g) => {
+                let u = g.update_vertices(&scene)?;
+                build_ms += u.structure_upload_ms + u.upload_ms;
+                if let Some(b) = &u.build {
+                    build_ms += b.ms;
+                    how = match &b.cpu_fallback {
+                        Some(why) => format!("rebuilt on the CPU ({why})"),
+                        None => format!(
+                            "rebuilt on the GPU ({})",
+                            if b.from_timestamps { "timestamps" } else { "wall clock" }
+                        ),
+                    };
+                }
+                let (image, stats) = g.render(&scene.camera, &scene.lights, &opts)?;
+                (image, stats.frame_ms())
+            }
+            None => {
+                let (image, stats) = gridtrace::cpu::render_view(&scene, &scene.camera, &scene.lights, &opts, None)?;
+                (image, stats.render_ms)
+            }
+        };
+        let total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+        println!(
+            "{i:5}  {time:6.3}  {move_ms:7.2}  {:11.2}  {build_ms:8.2}  {trace_ms:8.2}  {total_ms:8.2}  {how}",
+            up.geometry_ms
+        );
+        rows.push((up.geometry_ms, build_ms, trace_ms));
+        let image = if a.mode == gridtrace::Mode::Heat {
+            image.heat_to_color()
+        } else {
+            image
+        };
+        if let Some(dir) = &a.sequence {
+            image.save_png(&dir.join(format!("frame_{i:04}.png")))?;
+        }
+        if i == 0 {
+            image.save_png(&a.output)?;
+        }
+    }
+    if rows.len() > 1 {
+        // The first frame pays for first-use costs (buffer growth, caches): the median of the
+        // rest is the steady state.
+        let median = |k: usize| {
+            let mut v: Vec<f64> = rows[1..].iter().map(|r| [r.0, r.1, r.2][k]).collect();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        println!(
+            "median of frames 1..{}: geometry {:.2} ms, build {:.2} ms, trace {:.2} ms [{} {} {}x{}]",
+            rows.len(),
+            median(0),
+            median(1),
+            median(2),
+            a.mode.name(),
+            accel.name(),
+            a.res.0,
+            a.res.1
+        );
+    }
+    println!("wrote   {}", a.output.display());
+    Ok(())
+}
