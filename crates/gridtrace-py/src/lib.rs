@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use std::sync::RwLock;
+
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -63,7 +65,14 @@ fn batch<'a>(
 /// An accelerated triangle mesh (native part of `gridtrace.Mesh`).
 #[pyclass(module = "gridtrace._gridtrace", frozen)]
 struct NativeMesh {
-    inner: TraceMesh,
+    /// Queries share it; `update_vertices` takes it alone.
+    inner: RwLock<TraceMesh>,
+}
+
+impl NativeMesh {
+    fn mesh(&self) -> std::sync::RwLockReadGuard<'_, TraceMesh> {
+        self.inner.read().unwrap_or_else(|p| p.into_inner())
+    }
 }
 
 #[pymethods]
@@ -84,24 +93,41 @@ impl NativeMesh {
         let inner = py
             .detach(move || TraceMesh::from_arrays(&v, &f, &opts))
             .map_err(to_py)?;
-        Ok(NativeMesh { inner })
+        Ok(NativeMesh {
+            inner: RwLock::new(inner),
+        })
     }
 
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf, accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<Self> {
         let opts = options(accel, grid, irregular, backend)?;
         let inner = py.detach(move || TraceMesh::load(&path, &opts)).map_err(to_py)?;
-        Ok(NativeMesh { inner })
+        Ok(NativeMesh {
+            inner: RwLock::new(inner),
+        })
+    }
+
+    /// Moves the vertices (an (N, 3) float32 array of the mesh's N vertices); the structure is
+    /// updated where the mesh traces. Errors leave the previous mesh in place.
+    fn update_vertices(&self, py: Python<'_>, vertices: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+        let v = rows3(&vertices, "vertices")?.to_vec();
+        py.detach(|| {
+            self.inner
+                .write()
+                .unwrap_or_else(|p| p.into_inner())
+                .update_vertices(&v)
+        })
+        .map_err(to_py)
     }
 
     #[getter]
     fn triangle_count(&self) -> usize {
-        self.inner.triangle_count()
+        self.mesh().triangle_count()
     }
 
     fn device(&self, py: Python<'_>, backend: &str) -> PyResult<String> {
         let b: Backend = parse("backend", backend)?;
-        Ok(py.detach(|| self.inner.device_for(b)))
+        Ok(py.detach(|| self.mesh().device_for(b)))
     }
 
     /// Returns (t, tri, u, v, normal) as numpy arrays.
@@ -123,7 +149,7 @@ impl NativeMesh {
     )> {
         let (b, o, d) = batch(backend, &origins, &directions)?;
         let hits = py
-            .detach(|| self.inner.intersect_with(b, o, d, t_min, t_max))
+            .detach(|| self.mesh().intersect_with(b, o, d, t_min, t_max))
             .map_err(to_py)?;
         let n = hits.len();
         // The same allocation, seen as 3n floats: no copy (12 bytes a ray, in fresh pages).
@@ -149,7 +175,7 @@ impl NativeMesh {
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let (b, o, d) = batch(backend, &origins, &directions)?;
         let occ = py
-            .detach(|| self.inner.occluded_with(b, o, d, t_min, t_max))
+            .detach(|| self.mesh().occluded_with(b, o, d, t_min, t_max))
             .map_err(to_py)?;
         Ok(occ.into_pyarray(py))
     }

@@ -314,3 +314,38 @@ def test_irregular_parameters():
         gridtrace.Mesh(vertices, faces, accel="irregular", irregular="top=0")
     with pytest.raises(ValueError, match="unknown irregular parameter 'depth'"):
         gridtrace.Mesh(vertices, faces, accel="irregular", irregular="depth=3")
+
+
+@pytest.mark.parametrize("accel", ["grid", "pc", "bvh", "irregular"])
+@pytest.mark.parametrize("backend", ["cpu", "gpu"])
+def test_update_vertices_equals_brute_force(accel, backend):
+    """Moved vertices: hits equal brute force on the moved mesh (grid rebuilt on the device the
+    mesh traces on, BVH refitted), and bad updates raise and keep the previous vertices."""
+    if backend == "gpu" and os.environ.get("GRIDTRACE_SKIP_GPU"):
+        pytest.skip("GRIDTRACE_SKIP_GPU set")
+    vertices, faces = sphere_soup(seed=21)
+    mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend=backend)
+    o, d = random_rays(3000, seed=22)
+    for step in range(1, 3):
+        # Twist about y and stretch along x: every triangle moves and deforms.
+        a = 0.4 * step * vertices[:, 1]
+        moved = np.stack(
+            [(1 + 0.3 * step) * (vertices[:, 0] * np.cos(a) - vertices[:, 2] * np.sin(a)),
+             vertices[:, 1],
+             vertices[:, 0] * np.sin(a) + vertices[:, 2] * np.cos(a)],
+            axis=1,
+        ).astype(np.float32)
+        mesh.update_vertices(moved)
+        want_t, _, _, _ = brute_force(moved, faces, o, d)
+        got = mesh.intersect(o, d)
+        hit = np.isfinite(want_t)
+        assert (np.isfinite(got.t) == hit).mean() > 0.999
+        np.testing.assert_allclose(got.t[hit & np.isfinite(got.t)], want_t[hit & np.isfinite(got.t)], rtol=1e-4)
+    before = mesh.intersect(o, d).t
+    with pytest.raises(ValueError, match="vertices"):
+        mesh.update_vertices(moved[:-1])
+    bad = moved.copy()
+    bad[5, 2] = np.nan
+    with pytest.raises(ValueError, match="vertex 5"):
+        mesh.update_vertices(bad)
+    np.testing.assert_array_equal(mesh.intersect(o, d).t, before)

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use crate::accel::huge::advise_huge_pages_within;
 use crate::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
 use crate::gpu::{GpuContext, GpuRenderer};
-use crate::scene::{Mesh, PreparedScene, Scene};
+use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
 
 /// Where ray queries run (the same choice as rendering's).
@@ -240,6 +240,15 @@ impl TraceMesh {
     /// The GPU renderer for `backend`: `None` means the CPU. `Gpu` without an adapter is an
     /// error; `Auto` falls back to the CPU.
     fn renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
+        let r = self.open_renderer(backend)?;
+        if r.is_none() {
+            // A grid the GPU rebuilt after `update_vertices` is not the CPU's to trace.
+            self.scene.accel.check_current()?;
+        }
+        Ok(r)
+    }
+
+    fn open_renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
         if backend == Backend::Cpu {
             return Ok(None);
         }
@@ -278,6 +287,30 @@ impl TraceMesh {
             },
             Err(e) => format!("unavailable: {e}"),
         }
+    }
+
+    /// Moves the mesh's vertices (as many as it was made with, in the same order; the faces
+    /// stay) and updates the structure on the device the mesh traces on: with its GPU open,
+    /// the grid is rebuilt there (every other structure on the CPU, and uploaded), else on the
+    /// CPU (grids rebuilt, the BVH refitted). A wrong length or a non-finite coordinate is an
+    /// error that leaves the previous mesh in place. Faces dropped as degenerate when the mesh
+    /// was made stay dropped.
+    pub fn update_vertices(&mut self, vertices: &[[f32; 3]]) -> Result<()> {
+        let positions: Vec<Vec3> = vertices.iter().map(|&v| Vec3::from(v)).collect();
+        let gpu = match self.gpu.get_mut() {
+            Some(Ok((r, _))) => Some(r.get_mut().unwrap_or_else(|p| p.into_inner())),
+            _ => None,
+        };
+        let on = if gpu.is_some() {
+            RebuildOn::Device
+        } else {
+            RebuildOn::Cpu
+        };
+        self.scene.update_vertices(&positions, on)?;
+        if let Some(g) = gpu {
+            g.update_vertices(&self.scene)?;
+        }
+        Ok(())
     }
 
     pub fn prepared(&self) -> &PreparedScene {

@@ -122,7 +122,7 @@ fn awkward_inputs() {
     let big = TriAccel::new(Vec3::ZERO, Vec3::new(10.0, 0.5, 3.0), Vec3::new(2.0, 9.0, 7.0));
     assert_same_grid(&[big, one], Resolution::Fixed([25, 25, 25]), "big triangle");
     let res = Resolution::Fixed([40, 40, 40]);
-    assert!(40 * 40 * 40 > MAX_CELLS_PER_TRI);
+    const { assert!(40 * 40 * 40 > MAX_CELLS_PER_TRI) };
     let (gpu, stats) = GpuGrid::build_from(ctx(), &[big, one], res).unwrap();
     let why = stats.cpu_fallback.expect("built on the CPU");
     assert!(why.contains("cells"), "{why}");

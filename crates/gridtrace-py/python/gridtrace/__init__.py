@@ -143,6 +143,14 @@ class Mesh:
         self._native = _NativeMesh.load(str(path), accel, grid, irregular, backend)
         return self
 
+    def update_vertices(self, vertices: ArrayLike) -> None:
+        """Moves the mesh's vertices: an (N, 3) array of all N vertices it was made with, in the
+        same order (the faces stay). The structure is updated where the mesh traces: the grid
+        is rebuilt on the GPU when the mesh has it open, else on the CPU; the BVH is refitted.
+        A wrong shape or a non-finite coordinate raises ValueError and leaves the previous
+        vertices in place."""
+        self._native.update_vertices(np.ascontiguousarray(vertices, dtype=np.float32))
+
     @property
     def triangle_count(self) -> int:
         """Faces with non-zero area (the ones rays can hit)."""
