@@ -45,6 +45,44 @@ macro_rules! check {
     }};
 }
 
+/// The GPU grid build's modules declare their own structs (they do not include common.wgsl):
+/// checked the same way, in every build kernel's module.
+#[test]
+fn grid_build_structs_match_rust() {
+    use gridtrace::gpu::layout::BuildParams;
+    for kernel in [
+        shaders::BUILD_REFS,
+        shaders::BUILD_SCAN,
+        shaders::BUILD_SORT,
+        shaders::BUILD_DISTANCE,
+    ] {
+        let m = naga::front::wgsl::parse_str(&shaders::build_module_source(kernel)).expect("build kernel parses");
+        check!(m, Cell, "Cell", [start, count, dist]);
+        check!(m, TriAccel, "TriAccel", [v0, e1, e2]);
+        check!(
+            m,
+            BuildParams,
+            "BuildParams",
+            [
+                bounds_min,
+                n_tris,
+                cell_size,
+                n_cells,
+                inv_cell_size,
+                refs_capacity,
+                margin,
+                axis,
+                dims,
+                n,
+                in_offset,
+                out_offset,
+                last,
+                _pad0
+            ]
+        );
+    }
+}
+
 #[test]
 fn wgsl_structs_match_rust() {
     let m = module();

@@ -181,6 +181,10 @@ impl GpuRenderer {
         c.cell_size = lattice.cell_size.to_array();
         c.inv_cell_size = lattice.inv_cell_size.to_array();
         c.ray_epsilon = scene.ray_epsilon;
+        // Queries read the uniform as it is (frames rewrite it with their light count).
+        self.ctx
+            .queue
+            .write_buffer(&self.scene.uniform, 0, bytemuck::bytes_of(&self.scene.consts));
         for (name, bytes) in grid.memory() {
             if let Some(e) = self.scene.bytes.iter_mut().find(|e| e.0 == name) {
                 e.1 = bytes;
