@@ -559,3 +559,14 @@ pub fn gpu_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]], accel: AccelKind) -> 
     crate::query::TraceMesh::from_arrays(vertices, faces, &opts)
         .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"))
 }
+
+/// Fraction of pixels (8-bit RGB, 3 bytes each) whose channels differ by more than `tol`
+/// levels: the image tests' tolerance measure.
+pub fn differing_pixels(a: &[u8], b: &[u8], tol: u8) -> f64 {
+    let n = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > tol))
+        .count();
+    n as f64 / (a.len() / 3).max(1) as f64
+}

@@ -17,7 +17,7 @@ use gridtrace::accel::{AccelKind, Resolution};
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::scene::animated::Animation;
 use gridtrace::scene::{PreparedScene, RebuildOn, Scene};
-use gridtrace::testing::skip_gpu;
+use gridtrace::testing::{differing_pixels, skip_gpu};
 use gridtrace::{Mode, RenderOptions};
 
 /// Times that deform the knot and squash a sphere (the helper's tests show both happen).
@@ -40,16 +40,6 @@ fn cpu_image(scene: &PreparedScene, accel: AccelKind) -> Vec<u8> {
     gridtrace::cpu::render(scene, &opts(accel), None).unwrap().0.to_rgb8()
 }
 
-/// Fraction of pixels whose 8-bit channels differ by more than `tol` levels.
-fn differing(a: &[u8], b: &[u8], tol: u8) -> f64 {
-    let n = a
-        .chunks(3)
-        .zip(b.chunks(3))
-        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > tol))
-        .count();
-    n as f64 / (a.len() / 3) as f64
-}
-
 #[test]
 fn cpu_updates_equal_fresh_builds() {
     let anim = Animation::by_name("animated").unwrap();
@@ -62,7 +52,7 @@ fn cpu_updates_equal_fresh_builds() {
             let expect = cpu_image(&want, accel);
             if accel == AccelKind::Bvh {
                 assert_eq!(up.how, "refitted");
-                let d = differing(&got, &expect, 2);
+                let d = differing_pixels(&got, &expect, 2);
                 assert!(d <= 0.005, "bvh refit at t={t}: {:.3}% of pixels differ", d * 100.0);
             } else {
                 assert_eq!(up.how, "rebuilt");
@@ -136,7 +126,7 @@ fn gpu_frames_equal_fresh_cpu_renders() {
             }
             let (image, _) = gpu.render(&scene.camera, &scene.lights, &opts(accel)).unwrap();
             let expect = cpu_image(&fresh(&anim, t, accel), accel);
-            let d = differing(&image.to_rgb8(), &expect, 2);
+            let d = differing_pixels(&image.to_rgb8(), &expect, 2);
             assert!(
                 d <= 0.005,
                 "{} at t={t}: {:.3}% of pixels differ",

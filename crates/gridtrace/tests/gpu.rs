@@ -9,7 +9,7 @@ use glam::Vec3;
 use gridtrace::accel::{Accel, AccelKind, Hit, NoCounters, Resolution};
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::scene::{PointLight, PreparedScene, builtin};
-use gridtrace::testing::ray_set;
+use gridtrace::testing::{differing_pixels, ray_set};
 use gridtrace::{Mode, RenderOptions};
 
 // One test at a time on the device: lavapipe uses every core for each dispatch anyway.
@@ -169,16 +169,6 @@ fn uploads_serve_their_kinds_only() {
     }
 }
 
-/// Fraction of pixels whose 8-bit sRGB channels differ by more than `tol` levels.
-fn differing(a: &[u8], b: &[u8], tol: u8) -> f64 {
-    let n = a
-        .chunks(3)
-        .zip(b.chunks(3))
-        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > tol))
-        .count();
-    n as f64 / (a.len() / 3) as f64
-}
-
 /// Images of the built-in scenes in every mode equal the CPU's: at most 0.5% of pixels may
 /// differ by more than 2 levels (rays through exact edges, shadow boundaries), and ray counts
 /// by kind are equal up to those pixels.
@@ -221,7 +211,7 @@ fn images_match_cpu() {
                 } else {
                     (ci, gi)
                 };
-                let frac = differing(&ci.to_rgb8(), &gi.to_rgb8(), 2);
+                let frac = differing_pixels(&ci.to_rgb8(), &gi.to_rgb8(), 2);
                 assert!(
                     frac <= 0.005,
                     "{name} {} {}: {:.3}% of pixels differ",
@@ -282,7 +272,7 @@ fn dynamic_camera_and_lights() {
     assert_eq!(second, want);
     // And the CPU agrees with the changed frame.
     let (cpu, _) = gridtrace::cpu::render(&moved, &opts, None).unwrap();
-    assert!(differing(&cpu.to_rgb8(), &second.to_rgb8(), 2) <= 0.005);
+    assert!(differing_pixels(&cpu.to_rgb8(), &second.to_rgb8(), 2) <= 0.005);
 }
 
 /// The ablations (`bench --ablate`) change what runs, not what is seen: with shadow rays
