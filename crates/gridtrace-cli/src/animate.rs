@@ -82,12 +82,16 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
                 let u = g.update_vertices(&scene)?;
                 build_ms += u.structure_upload_ms + u.upload_ms;
                 if let Some(b) = &u.build {
-                    build_ms += b.ms;
+                    build_ms += b.timings.total_ms;
                     how = match &b.cpu_fallback {
                         Some(why) => format!("rebuilt on the CPU ({why})"),
                         None => format!(
                             "rebuilt on the GPU ({})",
-                            if b.from_timestamps { "timestamps" } else { "wall clock" }
+                            if b.timings.from_timestamps {
+                                "timestamps"
+                            } else {
+                                "wall clock"
+                            }
                         ),
                     };
                 }

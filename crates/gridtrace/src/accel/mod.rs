@@ -104,20 +104,23 @@ impl Accel {
     /// On an error nothing has changed. Returns what was done.
     pub fn update(&mut self, tris: Vec<TriAccel>) -> Result<&'static str> {
         self.check_same_count(&tris)?;
-        let (structure, how) = match &self.structure {
-            Structure::Grid(_) => (Structure::Grid(Grid::build(&tris, self.resolution)?), "rebuilt"),
-            Structure::Bvh(b) => {
-                let mut b = b.clone();
-                b.refit(&tris);
-                (Structure::Bvh(b), "refitted")
+        // A build that fails returns before anything is assigned; a refit cannot fail (the
+        // count is checked), so the BVH is refitted in place, not copied first.
+        let how = match &mut self.structure {
+            Structure::Grid(g) => {
+                *g = Grid::build(&tris, self.resolution)?;
+                "rebuilt"
             }
-            Structure::Irregular(_) => (
-                Structure::Irregular(IrregularGrid::build(&tris, self.irregular)?),
-                "rebuilt",
-            ),
+            Structure::Bvh(b) => {
+                b.refit(&tris);
+                "refitted"
+            }
+            Structure::Irregular(g) => {
+                *g = IrregularGrid::build(&tris, self.irregular)?;
+                "rebuilt"
+            }
         };
         self.tris = tris;
-        self.structure = structure;
         self.structure_stale = false;
         Ok(how)
     }

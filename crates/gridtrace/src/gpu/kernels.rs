@@ -209,7 +209,13 @@ fn spec_of(kernel: Kernel) -> &'static KernelSpec {
 /// Workgroups for `n` items as a 2-D dispatch (the kernels use `flat_index`); mirrors `groups`
 /// in indirect.wgsl.
 fn dispatch_size(n: u32) -> (u32, u32) {
-    let g = n.div_ceil(WORKGROUP);
+    dispatch_groups(n, WORKGROUP)
+}
+
+/// Workgroups for `n` items, `per_group` to a workgroup, as a 2-D dispatch of at most
+/// `MAX_GROUPS_X` in x (so under WebGPU's 65535 per dimension).
+pub(super) fn dispatch_groups(n: u32, per_group: u32) -> (u32, u32) {
+    let g = n.div_ceil(per_group);
     let x = g.min(MAX_GROUPS_X);
     (x, if x == 0 { 0 } else { g.div_ceil(x) })
 }
@@ -383,5 +389,9 @@ mod tests {
         assert_eq!(dispatch_size(WORKGROUP + 1), (2, 1));
         let (x, y) = dispatch_size(u32::MAX);
         assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * WORKGROUP as u64 >= u32::MAX as u64);
+        // The grid build's scan: a workgroup per 1024 cells of 2^26.
+        let block = crate::gpu::constants::SCAN_BLOCK;
+        let (x, y) = dispatch_groups(1 << 26, block);
+        assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * block as u64 >= 1 << 26);
     }
 }

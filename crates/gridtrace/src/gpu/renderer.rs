@@ -168,7 +168,7 @@ impl GpuRenderer {
             None => self.device_grid.insert(GpuGrid::new(self.ctx.clone())?),
         };
         let build = grid.build(&self.scene.tris, tris, &lattice)?;
-        if build.reallocated || self.scene.cells != grid.cells || self.scene.refs != grid.refs {
+        if self.scene.cells != grid.cells || self.scene.refs != grid.refs {
             self.scene.cells = grid.cells.clone();
             self.scene.refs = grid.refs.clone();
             // The bind groups name the old buffers.

@@ -36,7 +36,7 @@ pub fn module_source(kernel: &str) -> String {
     format!("{}\n{}", common_source(), kernel)
 }
 
-/// The GPU grid build's shared file and kernels (`grid_build.rs`): their own bindings, so their
+/// The GPU grid build's shared file and kernels (`grid_build/`): their own bindings, so their
 /// modules are the prelude, `build/common.wgsl` and the kernel, without the tracer's files.
 pub const BUILD_COMMON: &str = include_str!("shaders/build/common.wgsl");
 pub const BUILD_REFS: &str = include_str!("shaders/build/refs.wgsl");

@@ -59,13 +59,13 @@ fn sep(i: i32, u: i32) -> i32 {
     return min(u - gi, (i + u) / 2);
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP)
 fn main(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let line = flat_id(wg, nwg, lid, 64u);
+    let line = flat_id(wg, nwg, lid, WORKGROUP);
     if line >= P.n {
         return;
     }

@@ -16,13 +16,13 @@ struct CellAtomic { start: u32, count: atomic<u32>, dist: atomic<u32> }
 // this grid on the CPU instead).
 @group(0) @binding(4) var<storage, read_write> status: array<atomic<u32>>;
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP)
 fn main(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = flat_id(wg, nwg, lid, 64u);
+    let i = flat_id(wg, nwg, lid, WORKGROUP);
     if i >= P.n_tris {
         return;
     }

@@ -4,8 +4,8 @@
 // block's offset back down. `sums` holds every level's block totals (`in_offset`, `out_offset`
 // say where) and, in word 0, the grand total: the number of references.
 //
-// Entry points: `scan_cells` (level 0, over the cells), `scan_sums` (the levels above),
-// `add_cells` and `add_sums` (the way back down).
+// Entry points: `scan` (a level) and `add` (the way back down), each compiled for level 0,
+// the cells (`CELLS`), and for the levels of block totals above it.
 
 @group(0) @binding(2) var<storage, read_write> cells: array<Cell>;
 @group(0) @binding(4) var<storage, read_write> sums: array<u32>;
@@ -43,8 +43,27 @@ fn write_block_total(block: u32, lid: u32) {
     }
 }
 
+// Level 0 (the cells' counts, written back as their starts) or a level of block totals in
+// `sums` (scanned in place): the same code compiled twice, as refs.wgsl's two passes.
+override CELLS: bool = false;
+
+fn load(i: u32) -> u32 {
+    if CELLS {
+        return cells[i].count;
+    }
+    return sums[P.in_offset + i];
+}
+
+fn store(i: u32, v: u32) {
+    if CELLS {
+        cells[i].start = v;
+    } else {
+        sums[P.in_offset + i] = v;
+    }
+}
+
 @compute @workgroup_size(256)
-fn scan_cells(
+fn scan(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
@@ -54,65 +73,35 @@ fn scan_cells(
     var v = array<u32, 4>(0u, 0u, 0u, 0u);
     for (var k = 0u; k < 4u; k++) {
         if base + k < P.n {
-            v[k] = cells[base + k].count;
+            v[k] = load(base + k);
         }
     }
     var run = block_offset(lid, v[0] + v[1] + v[2] + v[3]);
     for (var k = 0u; k < 4u; k++) {
         if base + k < P.n {
-            cells[base + k].start = run;
+            store(base + k, run);
         }
         run += v[k];
     }
     write_block_total(block, lid);
 }
 
+// One invocation per element: element i of the level (level 0: the cells' starts) gets the
+// scanned total of its block, at `out_offset`.
 @compute @workgroup_size(256)
-fn scan_sums(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let block = block_of(wg, nwg);
-    let base = block * SCAN_BLOCK + lid * 4u;
-    var v = array<u32, 4>(0u, 0u, 0u, 0u);
-    for (var k = 0u; k < 4u; k++) {
-        if base + k < P.n {
-            v[k] = sums[P.in_offset + base + k];
-        }
-    }
-    var run = block_offset(lid, v[0] + v[1] + v[2] + v[3]);
-    for (var k = 0u; k < 4u; k++) {
-        if base + k < P.n {
-            sums[P.in_offset + base + k] = run;
-        }
-        run += v[k];
-    }
-    write_block_total(block, lid);
-}
-
-// One invocation per element: element i of the level at `in_offset` (level 0: the cells) gets
-// the scanned total of its block, at `out_offset`.
-@compute @workgroup_size(256)
-fn add_cells(
+fn add(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
     let i = flat_id(wg, nwg, lid, 256u);
-    if i < P.n {
-        cells[i].start += sums[P.out_offset + i / SCAN_BLOCK];
+    if i >= P.n {
+        return;
     }
-}
-
-@compute @workgroup_size(256)
-fn add_sums(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let i = flat_id(wg, nwg, lid, 256u);
-    if i < P.n {
-        sums[P.in_offset + i] += sums[P.out_offset + i / SCAN_BLOCK];
+    let offset = sums[P.out_offset + i / SCAN_BLOCK];
+    if CELLS {
+        cells[i].start += offset;
+    } else {
+        sums[P.in_offset + i] += offset;
     }
 }

@@ -6,13 +6,13 @@
 @group(0) @binding(2) var<storage, read_write> cells: array<Cell>;
 @group(0) @binding(3) var<storage, read_write> refs: array<u32>;
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP)
 fn main(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = flat_id(wg, nwg, lid, 64u);
+    let i = flat_id(wg, nwg, lid, WORKGROUP);
     if i >= P.n_cells {
         return;
     }

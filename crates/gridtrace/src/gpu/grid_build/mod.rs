@@ -32,197 +32,43 @@ use std::time::Instant;
 
 use wgpu::util::DeviceExt;
 
-use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK};
+mod pipelines;
+
+pub(crate) use pipelines::BuildKernels;
+use pipelines::{STAGES, Stage};
+
+use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK, WORKGROUP};
 use super::context::GpuContext;
+use super::kernels::dispatch_groups;
 use super::layout::BuildParams;
 use super::scene::check_scene_fits;
-use super::shaders;
-use super::timing::{StageTimer, Timestamps};
+use super::timing::{GpuTimings, StageTimer, Timestamps};
 use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
 use crate::{Error, Result};
 
 /// Bytes between two dispatches' parameters (dynamic uniform offsets must be multiples of the
 /// device's alignment; 256 is WebGPU's largest).
 const PARAMS_STRIDE: u64 = 256;
-/// Invocations per workgroup of the per-triangle, per-cell and per-line kernels.
-const GROUP: u32 = 64;
-/// Invocations per workgroup of the scan kernels (`scan.wgsl`'s `partial` array).
+/// Invocations per workgroup of the scan's `add` (`scan.wgsl`'s `partial` array); the other
+/// kernels have `WORKGROUP`.
 const SCAN_GROUP: u32 = 256;
-/// Most workgroups in x; larger dispatches go 2-D (`flat_id`).
-const MAX_GROUPS_X: u32 = 32768;
 /// Words at the start of the sums buffer before the scan levels: word 0 is the total.
 const STATUS_WORDS: u32 = 4;
 /// References a first build of an unknown mesh allows per triangle before it has to grow the
 /// buffer and run again (the automatic resolution gives 1.5-3 on the meshes we measured).
 const INITIAL_REFS_PER_TRI: u64 = 4;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Stage {
-    Count,
-    Place,
-    ScanCells,
-    ScanSums,
-    AddCells,
-    AddSums,
-    Sort,
-    Distance,
-}
-
-struct StageSpec {
-    stage: Stage,
-    /// Stage name in the build's timings.
-    name: &'static str,
-    source: &'static str,
-    entry: &'static str,
-    overrides: &'static [(&'static str, f64)],
-}
-
-/// Every pipeline of the build, in `Stage` order.
-const STAGES: [StageSpec; 8] = [
-    StageSpec {
-        stage: Stage::Count,
-        name: "count",
-        source: shaders::BUILD_REFS,
-        entry: "main",
-        overrides: &[],
-    },
-    StageSpec {
-        stage: Stage::Place,
-        name: "place",
-        source: shaders::BUILD_REFS,
-        entry: "main",
-        overrides: &[("PLACE", 1.0)],
-    },
-    StageSpec {
-        stage: Stage::ScanCells,
-        name: "scan",
-        source: shaders::BUILD_SCAN,
-        entry: "scan_cells",
-        overrides: &[],
-    },
-    StageSpec {
-        stage: Stage::ScanSums,
-        name: "scan",
-        source: shaders::BUILD_SCAN,
-        entry: "scan_sums",
-        overrides: &[],
-    },
-    StageSpec {
-        stage: Stage::AddCells,
-        name: "scan",
-        source: shaders::BUILD_SCAN,
-        entry: "add_cells",
-        overrides: &[],
-    },
-    StageSpec {
-        stage: Stage::AddSums,
-        name: "scan",
-        source: shaders::BUILD_SCAN,
-        entry: "add_sums",
-        overrides: &[],
-    },
-    StageSpec {
-        stage: Stage::Sort,
-        name: "sort",
-        source: shaders::BUILD_SORT,
-        entry: "main",
-        overrides: &[],
-    },
-    StageSpec {
-        stage: Stage::Distance,
-        name: "distance",
-        source: shaders::BUILD_DISTANCE,
-        entry: "main",
-        overrides: &[],
-    },
-];
-
-/// The build's pipelines, compiled once per device (`GpuContext::build_kernels`).
-pub(crate) struct BuildKernels {
-    layout: wgpu::BindGroupLayout,
-    pipelines: Vec<wgpu::ComputePipeline>,
-}
-
-impl BuildKernels {
-    pub fn new(dev: &wgpu::Device) -> Result<BuildKernels> {
-        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let mut entries = vec![
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<BuildParams>() as u64),
-                },
-                count: None,
-            },
-            storage(1, true),
-        ];
-        entries.extend((2..=7).map(|b| storage(b, false)));
-        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grid build"),
-            entries: &entries,
-        });
-        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("grid build"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipelines = STAGES
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                debug_assert_eq!(s.stage as usize, i);
-                let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(s.name),
-                    source: wgpu::ShaderSource::Wgsl(shaders::build_module_source(s.source).into()),
-                });
-                dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(s.name),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some(s.entry),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: s.overrides,
-                        ..Default::default()
-                    },
-                    cache: None,
-                })
-            })
-            .collect();
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(Error::Gpu(format!("creating the grid-build kernels failed: {e}")));
-        }
-        Ok(BuildKernels { layout, pipelines })
-    }
-}
-
 /// What one GPU build did and how long it took.
 #[derive(Debug, Clone, Default)]
 pub struct GpuBuildStats {
     pub dims: [u32; 3],
     pub references: u64,
-    /// GPU time of the build's passes when the device has timestamp queries; else the wall
-    /// time from submission to the result being known (which includes one read-back).
-    pub ms: f64,
-    pub from_timestamps: bool,
-    /// Milliseconds per stage (`count`, `scan`, `place`, `sort`, `distance`), with timestamps.
-    pub stages_ms: Vec<(&'static str, f64)>,
+    /// Per stage (`count`, `scan`, `place`, `sort`, `distance`) and in total: GPU time from
+    /// timestamp queries where the device has them; else the total is the wall time from
+    /// submission to the result being known (which includes one read-back).
+    pub timings: GpuTimings,
     /// Submissions it took: 2 when the references outgrew their buffer and it ran again.
     pub attempts: u32,
-    /// Whether the cell or reference buffers were reallocated (bind groups over them are stale).
-    pub reallocated: bool,
     /// Why this grid was built on the CPU and uploaded instead (a triangle over
     /// `MAX_CELLS_PER_TRI` cells, a line over `MAX_GPU_LINE`); `None` for a GPU build.
     pub cpu_fallback: Option<String>,
@@ -254,13 +100,6 @@ fn storage_buffer(dev: &wgpu::Device, label: &str, bytes: u64) -> wgpu::Buffer {
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     })
-}
-
-/// Workgroups for `n` items in groups of `per_group`, as a 2-D dispatch.
-fn groups(n: u32, per_group: u32) -> (u32, u32) {
-    let g = n.div_ceil(per_group);
-    let x = g.min(MAX_GROUPS_X);
-    (x, if x == 0 { 0 } else { g.div_ceil(x) })
 }
 
 /// The scan's levels above the cells: `(offset in sums, elements)` of each level of block
@@ -394,7 +233,7 @@ impl GpuGrid {
         let mut want_refs = (self.references + self.references / 4).max(n_tris as u64 * INITIAL_REFS_PER_TRI);
         loop {
             stats.attempts += 1;
-            stats.reallocated |= self.reserve(n_cells, want_refs)?;
+            self.reserve(n_cells, want_refs)?;
             let t0 = Instant::now();
             let timer = self.record(tris, n_tris, lattice)?;
             let status = self.ctx.read_buffer(&self.sums, 8)?;
@@ -424,20 +263,16 @@ impl GpuGrid {
             self.references = total;
             self.lattice = Some(*lattice);
             stats.references = total;
-            stats.from_timestamps = !stages.is_empty();
-            stats.ms = if stats.from_timestamps {
-                stages.iter().map(|s| s.1).sum()
+            let t = &mut stats.timings;
+            t.from_timestamps = !stages.is_empty();
+            for (name, ms) in stages {
+                *t.stages_ms.entry(name).or_default() += ms;
+            }
+            t.total_ms = if t.from_timestamps {
+                t.stages_ms.values().sum()
             } else {
                 wall_ms
             };
-            let mut merged: Vec<(&'static str, f64)> = Vec::new();
-            for (name, ms) in stages {
-                match merged.iter_mut().find(|m| m.0 == name) {
-                    Some(m) => m.1 += ms,
-                    None => merged.push((name, ms)),
-                }
-            }
-            stats.stages_ms = merged;
             return Ok(stats);
         }
     }
@@ -446,7 +281,7 @@ impl GpuGrid {
     fn build_on_cpu(&mut self, host_tris: &[TriAccel], lattice: &GridLattice, why: String) -> Result<GpuBuildStats> {
         let t0 = Instant::now();
         let grid = Grid::build_on(host_tris, *lattice, t0);
-        let reallocated = self.reserve(grid.cells.len() as u64, grid.refs.len() as u64)?;
+        self.reserve(grid.cells.len() as u64, grid.refs.len() as u64)?;
         self.ctx
             .queue
             .write_buffer(&self.cells, 0, bytemuck::cast_slice(&grid.cells));
@@ -461,18 +296,19 @@ impl GpuGrid {
         Ok(GpuBuildStats {
             dims: lattice.dims.to_array(),
             references: self.references,
-            ms: t0.elapsed().as_secs_f64() * 1e3,
+            timings: GpuTimings {
+                total_ms: t0.elapsed().as_secs_f64() * 1e3,
+                ..Default::default()
+            },
             attempts: 1,
-            reallocated,
             cpu_fallback: Some(why),
-            ..Default::default()
         })
     }
 
-    /// Makes the buffers hold `n_cells` cells and `n_refs` references; returns whether the
-    /// cell or reference buffer was reallocated. Sizes over the device's limits are errors
-    /// that name the array and the limit.
-    fn reserve(&mut self, n_cells: u64, n_refs: u64) -> Result<bool> {
+    /// Makes the buffers hold `n_cells` cells and `n_refs` references (a renderer binding
+    /// `cells` and `refs` sees a reallocation as a different buffer). Sizes over the device's
+    /// limits are errors that name the array and the limit.
+    fn reserve(&mut self, n_cells: u64, n_refs: u64) -> Result<()> {
         let levels = scan_levels(n_cells as u32);
         let sums_words = levels.last().map_or(STATUS_WORDS, |l| l.0 + l.1) as u64;
         let need = [
@@ -483,20 +319,18 @@ impl GpuGrid {
         ];
         check_scene_fits(&need, &self.ctx.limits(), &self.ctx.info.name)?;
         let dev = &self.ctx.device;
-        let mut grown = false;
-        let mut grow = |buf: &mut wgpu::Buffer, label: &str, bytes: u64, main: bool| {
+        let grow = |buf: &mut wgpu::Buffer, label: &str, bytes: u64| {
             if buf.size() < bytes {
                 // Room to grow a little, so that a moving mesh does not reallocate every frame.
                 *buf = storage_buffer(dev, label, bytes + bytes / 8);
-                grown |= main;
             }
         };
-        grow(&mut self.cells, "cells", need[0].1, true);
-        grow(&mut self.refs, "refs", need[1].1.max(4), true);
-        grow(&mut self.stack, "distance stack", need[2].1, false);
-        grow(&mut self.dt_a, "distance x", need[3].1, false);
-        grow(&mut self.dt_b, "distance xy", need[3].1, false);
-        grow(&mut self.sums, "scan sums", sums_words * 4, false);
+        grow(&mut self.cells, "cells", need[0].1);
+        grow(&mut self.refs, "refs", need[1].1.max(4));
+        grow(&mut self.stack, "distance stack", need[2].1);
+        grow(&mut self.dt_a, "distance x", need[3].1);
+        grow(&mut self.dt_b, "distance xy", need[3].1);
+        grow(&mut self.sums, "scan sums", sums_words * 4);
         // The dispatches: count, place, sort, three distance passes, and per scan level at
         // most a scan and an add.
         let params_bytes = (6 + 2 * levels.len() as u64 + 1) * PARAMS_STRIDE;
@@ -508,7 +342,7 @@ impl GpuGrid {
                 mapped_at_creation: false,
             });
         }
-        Ok(grown)
+        Ok(())
     }
 
     /// Records and submits the build over `tris`.
@@ -535,7 +369,7 @@ impl GpuGrid {
         // Every dispatch: stage, parameters, workgroups. (The bind group is made per build: the
         // triangle buffer is the caller's and may change.)
         let mut plan: Vec<(Stage, BuildParams, (u32, u32))> = Vec::new();
-        let per_tri = groups(n_tris, GROUP);
+        let per_tri = dispatch_groups(n_tris, WORKGROUP);
         plan.push((Stage::Count, base, per_tri));
         let levels = scan_levels(n_cells);
         let top = levels.len() - 1;
@@ -547,7 +381,7 @@ impl GpuGrid {
                 last: (top == 0) as u32,
                 ..base
             },
-            groups(n_cells, SCAN_BLOCK),
+            dispatch_groups(n_cells, SCAN_BLOCK),
         ));
         for j in 0..top {
             let (offset, n) = levels[j];
@@ -560,7 +394,7 @@ impl GpuGrid {
                     last: (j + 1 == top) as u32,
                     ..base
                 },
-                groups(n, SCAN_BLOCK),
+                dispatch_groups(n, SCAN_BLOCK),
             ));
         }
         for j in (0..top).rev() {
@@ -576,7 +410,7 @@ impl GpuGrid {
                         out_offset: levels[j + 1].0,
                         ..base
                     },
-                    groups(n, SCAN_GROUP),
+                    dispatch_groups(n, SCAN_GROUP),
                 ));
             }
         }
@@ -588,17 +422,17 @@ impl GpuGrid {
                     out_offset: levels[0].0,
                     ..base
                 },
-                groups(n_cells, SCAN_GROUP),
+                dispatch_groups(n_cells, SCAN_GROUP),
             ));
         }
         plan.push((Stage::Place, base, per_tri));
-        plan.push((Stage::Sort, base, groups(n_cells, GROUP)));
+        plan.push((Stage::Sort, base, dispatch_groups(n_cells, WORKGROUP)));
         let d = lattice.dims;
         for (axis, lines) in [(0u32, d.y * d.z), (1, d.x * d.z), (2, d.x * d.y)] {
             plan.push((
                 Stage::Distance,
                 BuildParams { axis, n: lines, ..base },
-                groups(lines, GROUP),
+                dispatch_groups(lines, WORKGROUP),
             ));
         }
 
@@ -696,12 +530,5 @@ mod tests {
         );
         let l = scan_levels(1 << 26);
         assert_eq!(l.iter().map(|x| x.1).collect::<Vec<_>>(), vec![65536, 64, 1]);
-    }
-
-    #[test]
-    fn dispatches_stay_under_the_limit() {
-        let (x, y) = groups(1 << 26, GROUP);
-        assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * GROUP as u64 >= 1 << 26);
-        assert_eq!(groups(0, GROUP), (0, 0));
     }
 }

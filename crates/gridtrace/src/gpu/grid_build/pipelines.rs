@@ -1,0 +1,161 @@
+//! The GPU grid build's pipelines: one per stage, compiled once per device
+//! (`GpuContext::build_kernels`), over one bind group layout that every stage shares.
+
+use std::mem::size_of;
+
+use super::super::layout::BuildParams;
+use super::super::shaders;
+use crate::{Error, Result};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Stage {
+    Count,
+    Place,
+    ScanCells,
+    ScanSums,
+    AddCells,
+    AddSums,
+    Sort,
+    Distance,
+}
+
+pub(super) struct StageSpec {
+    pub stage: Stage,
+    /// Stage name in the build's timings.
+    pub name: &'static str,
+    source: &'static str,
+    entry: &'static str,
+    overrides: &'static [(&'static str, f64)],
+}
+
+/// Every pipeline of the build, in `Stage` order.
+pub(super) const STAGES: [StageSpec; 8] = [
+    StageSpec {
+        stage: Stage::Count,
+        name: "count",
+        source: shaders::BUILD_REFS,
+        entry: "main",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::Place,
+        name: "place",
+        source: shaders::BUILD_REFS,
+        entry: "main",
+        overrides: &[("PLACE", 1.0)],
+    },
+    StageSpec {
+        stage: Stage::ScanCells,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "scan",
+        overrides: &[("CELLS", 1.0)],
+    },
+    StageSpec {
+        stage: Stage::ScanSums,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "scan",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::AddCells,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "add",
+        overrides: &[("CELLS", 1.0)],
+    },
+    StageSpec {
+        stage: Stage::AddSums,
+        name: "scan",
+        source: shaders::BUILD_SCAN,
+        entry: "add",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::Sort,
+        name: "sort",
+        source: shaders::BUILD_SORT,
+        entry: "main",
+        overrides: &[],
+    },
+    StageSpec {
+        stage: Stage::Distance,
+        name: "distance",
+        source: shaders::BUILD_DISTANCE,
+        entry: "main",
+        overrides: &[],
+    },
+];
+
+/// The build's pipelines, compiled once per device (`GpuContext::build_kernels`).
+pub(crate) struct BuildKernels {
+    pub(super) layout: wgpu::BindGroupLayout,
+    /// In `STAGES` order.
+    pub(super) pipelines: Vec<wgpu::ComputePipeline>,
+}
+
+impl BuildKernels {
+    pub fn new(dev: &wgpu::Device) -> Result<BuildKernels> {
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let mut entries = vec![
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(size_of::<BuildParams>() as u64),
+                },
+                count: None,
+            },
+            storage(1, true),
+        ];
+        entries.extend((2..=7).map(|b| storage(b, false)));
+        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("grid build"),
+            entries: &entries,
+        });
+        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("grid build"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipelines = STAGES
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                debug_assert_eq!(s.stage as usize, i);
+                let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(s.name),
+                    source: wgpu::ShaderSource::Wgsl(shaders::build_module_source(s.source).into()),
+                });
+                dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(s.name),
+                    layout: Some(&pipeline_layout),
+                    module: &module,
+                    entry_point: Some(s.entry),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: s.overrides,
+                        ..Default::default()
+                    },
+                    cache: None,
+                })
+            })
+            .collect();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Gpu(format!("creating the grid-build kernels failed: {e}")));
+        }
+        Ok(BuildKernels { layout, pipelines })
+    }
+}
