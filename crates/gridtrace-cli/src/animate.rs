@@ -6,11 +6,10 @@
 use std::time::Instant;
 
 use gridtrace::RenderOptions;
-use gridtrace::gpu::GpuRenderer;
-use gridtrace::scene::RebuildOn;
 use gridtrace::scene::animated::Animation;
 
 use crate::render::RenderArgs;
+use crate::tracer::Tracer;
 
 pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let name = a.scene.scene.as_deref().unwrap_or("animated");
@@ -33,35 +32,27 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     }
     let accel = a.grid.accel;
     let t0 = Instant::now();
-    let mut scene = crate::common::prepare(&anim.scene, name, accel, &a.grid)?;
+    let scene = crate::common::prepare(&anim.scene, name, accel, &a.grid)?;
     println!(
         "scene {name} (animated): {} triangles, {}; first build {:.1} ms",
         scene.accel.tris.len(),
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let (ctx, notes) = a.backend.open_device()?;
-    for n in notes {
-        eprintln!("note: {n}");
-    }
-    let mut gpu = match ctx {
+    let (ctx, mut notes) = a.backend.open_device()?;
+    match &ctx {
         Some(ctx) => {
             println!("backend gpu: {}", ctx.describe());
             if ctx.is_software() {
                 println!("        (a software adapter: CPU speed, not GPU speed)");
             }
-            Some(GpuRenderer::new(ctx, &scene)?)
         }
-        None => {
-            println!("backend cpu ({} threads)", rayon::current_num_threads());
-            None
-        }
-    };
-    let on = if gpu.is_some() {
-        RebuildOn::Device
-    } else {
-        RebuildOn::Cpu
-    };
+        None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
+    }
+    let mut tracer = Tracer::open(scene, ctx.as_ref(), a.backend, &mut notes)?;
+    for n in notes {
+        eprintln!("note: {n}");
+    }
     if let Some(dir) = &a.sequence {
         std::fs::create_dir_all(dir).map_err(|e| gridtrace::Error::io(dir, e))?;
     }
@@ -74,35 +65,15 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         let t_move = Instant::now();
         let positions = anim.positions_at(time);
         let move_ms = t_move.elapsed().as_secs_f64() * 1e3;
-        let up = scene.update_vertices(&positions, on)?;
-        let mut build_ms = up.structure_ms;
-        let mut how = up.how.to_string();
-        let (image, trace_ms) = match &mut gpu {
-            Some(g) => {
-                let u = g.update_vertices(&scene)?;
-                build_ms += u.structure_upload_ms + u.upload_ms;
-                if let Some(b) = &u.build {
-                    build_ms += b.timings.total_ms;
-                    how = match &b.cpu_fallback {
-                        Some(why) => format!("rebuilt on the CPU ({why})"),
-                        None => format!(
-                            "rebuilt on the GPU ({})",
-                            if b.timings.from_timestamps {
-                                "timestamps"
-                            } else {
-                                "wall clock"
-                            }
-                        ),
-                    };
-                }
-                let (image, stats) = g.render(&scene.camera, &scene.lights, &opts)?;
-                (image, stats.frame_ms())
-            }
-            None => {
-                let (image, stats) = gridtrace::cpu::render_view(&scene, &scene.camera, &scene.lights, &opts, None)?;
-                (image, stats.render_ms)
-            }
-        };
+        let up = tracer.update_vertices(&positions)?;
+        let (camera, lights) = (tracer.scene.camera, tracer.scene.lights.clone());
+        let frame = tracer.render(&camera, &lights, &opts)?;
+        let (image, trace_ms, build_ms, how) = (
+            frame.image,
+            frame.gpu.as_ref().map_or(frame.stats.render_ms, |g| g.frame_ms()),
+            up.build_ms,
+            up.how,
+        );
         let total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
         println!(
             "{i:5}  {time:6.3}  {move_ms:7.2}  {:11.2}  {build_ms:8.2}  {trace_ms:8.2}  {total_ms:8.2}  {how}",

@@ -42,9 +42,10 @@ pub struct RenderArgs {
     #[arg(long, value_name = "DEGREES", allow_hyphen_values = true)]
     vfov: Option<f32>,
     /// A point light at x,y,z (repeatable; replaces the scene's lights). Its intensity is set
-    /// so that it lights the scene centre with unit irradiance.
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    light: Vec<Vec3>,
+    /// so that it lights the scene centre with unit irradiance, or given as X,Y,Z:R,G,B (as the
+    /// viewer's screenshots print it).
+    #[arg(long, value_name = "X,Y,Z[:R,G,B]", value_parser = parse_light, allow_hyphen_values = true)]
+    light: Vec<(Vec3, Option<Vec3>)>,
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
     pub backend: Backend,
@@ -98,7 +99,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         scene.lights = a
             .light
             .iter()
-            .map(|&p| PointLight::new(p, Vec3::splat((p - c).length_squared())))
+            .map(|&(p, i)| PointLight::new(p, i.unwrap_or(Vec3::splat((p - c).length_squared()))))
             .collect();
     }
     // Without lights only the ambient term shows (and shadow rays have nothing to test): a
@@ -247,6 +248,14 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     out.save_png(&a.output)?;
     println!("wrote   {}", a.output.display());
     Ok(())
+}
+
+/// `--light`: X,Y,Z, or X,Y,Z:R,G,B with the intensity.
+fn parse_light(s: &str) -> Result<(Vec3, Option<Vec3>), String> {
+    match s.split_once(':') {
+        Some((p, i)) => Ok((parse_vec3(p)?, Some(parse_vec3(i)?))),
+        None => Ok((parse_vec3(s)?, None)),
+    }
 }
 
 /// The camera `turn` of the way (0..1) round its orbit: rotated about the up axis through the

@@ -57,97 +57,180 @@ fn differing(a: &Path, b: &Path) -> f64 {
     n as f64 / (a.width() * a.height()) as f64
 }
 
-/// Orbit, zoom, switch modes and structures (grid, bvh, then the irregular grid), resize (to 1x1, to nothing, back): every
-/// screenshot is `render`'s image of what it printed, on the CPU bit for bit, and on the GPU
-/// within the CPU/GPU tolerance of the GPU tests (0.5% of pixels beyond 2 levels).
+/// Runs `view` with `script` (written to the test's folder) on `backend` and extra
+/// arguments; the folder, the output (stdout then stderr) and the screenshots it printed.
+fn run_script(
+    tag: &str,
+    backend: &str,
+    args: &[&str],
+    script: &str,
+) -> (PathBuf, String, Vec<(PathBuf, HashMap<String, String>)>) {
+    let d = dir(&format!("{tag}-{backend}"));
+    let file = d.join("s.txt");
+    std::fs::write(&file, script).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
+        .current_dir(&d)
+        .arg("view")
+        .args(args)
+        .args(["--backend", backend, "--script"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{backend}: {text}");
+    let shots = screenshots(&text);
+    (d, text, shots)
+}
+
+/// `render`'s image of what a screenshot line printed (camera, lights, mode, structure, size)
+/// of `scene` (render's arguments naming it) equals the screenshot: on the CPU bit for bit, on
+/// the GPU within the CPU/GPU tolerance of the GPU tests (0.5% of pixels beyond 2 levels).
+fn equals_render(d: &Path, backend: &str, scene: &[&str], (path, kv): &(PathBuf, HashMap<String, String>)) {
+    let shot = d.join(path);
+    let reference = d.join(format!("render-{}", path.display()));
+    let mut args: Vec<String> = vec!["render".into()];
+    args.extend(scene.iter().map(|s| s.to_string()));
+    for k in ["eye", "target", "up", "vfov", "mode", "accel", "res"] {
+        args.push(format!("--{k}"));
+        args.push(kv[k].clone());
+    }
+    for l in kv["lights"].split(';').filter(|l| !l.is_empty()) {
+        args.push("--light".into());
+        args.push(l.into());
+    }
+    args.extend([
+        "--backend".into(),
+        "cpu".into(),
+        "-o".into(),
+        reference.display().to_string(),
+    ]);
+    let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let (ok, rtext) = gridtrace(&args);
+    assert!(ok, "{rtext}");
+    let frac = differing(&shot, &reference);
+    if backend == "cpu" {
+        assert_eq!(
+            frac,
+            0.0,
+            "{}: the viewer's CPU frame differs from render's",
+            path.display()
+        );
+    } else {
+        assert!(
+            frac <= 0.005,
+            "{}: {:.3}% of pixels differ",
+            path.display(),
+            frac * 100.0
+        );
+    }
+}
+
+/// Orbit, zoom, switch modes and structures (grid, bvh, then the irregular grid), move the
+/// lights (a gizmo drag, a key), change the resolution scale, resize (to 1x1, to nothing, back):
+/// every screenshot is `render`'s image of the camera, lights, mode and size it printed.
 #[test]
 fn scripted_session_equals_render() {
     if !have_display() {
         return;
     }
     for backend in ["cpu", "gpu"] {
-        let d = dir(backend);
-        let script = d.join("s.txt");
-        std::fs::write(
-            &script,
-            "key 2\ndrag 40 -20\nzoom 1\nscreenshot a.png\nkey g\nkey g\nkey 3\nscreenshot b.png\n\
-             resize 1 1\nresize 0 0\nresize 120 90\nkey g\nkey 1\ndrag -80 10\nkey f\nkey w\nkey d\nkey e\nscreenshot c.png\n",
-        )
-        .unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
-            .current_dir(&d)
-            .args([
-                "view",
-                "--scene",
-                "knot-box",
-                "--res",
-                "96x72",
-                "--backend",
-                backend,
-                "--script",
-            ])
-            .arg(&script)
-            .output()
-            .unwrap();
-        let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-        assert!(out.status.success(), "{backend}: {text}");
-        let shots = screenshots(&text);
+        let (d, text, shots) = run_script(
+            "session",
+            backend,
+            &["--scene", "knot-box", "--res", "96x72"],
+            "key 2\ndrag 40 -20\nzoom 1\npan 6 -4\nscreenshot a.png\nkey g\nkey g\nkey 3\nlight 12 -6\nscreenshot b.png\n\
+             resize 1 1\nresize 0 0\nresize 120 90\nkey g\nkey 1\ndrag -80 10\nkey f\nkey w\nkey d\nkey e\n\
+             key l\nkey right\nkey pageup\nkey [\nscreenshot c.png\nkey ]\nkey 4\nscreenshot d.png\n",
+        );
         let want = [
             ("shadow", "grid", "96x72"),
             ("trace", "bvh", "96x72"),
-            ("cast", "irregular", "120x90"),
+            ("cast", "irregular", "60x45"),
+            ("heat", "irregular", "120x90"),
         ];
         assert_eq!(shots.len(), want.len(), "{text}");
-        for ((path, kv), (mode, accel, res)) in shots.iter().zip(want) {
+        for (shot, (mode, accel, res)) in shots.iter().zip(want) {
+            let kv = &shot.1;
             assert_eq!(
                 (kv["mode"].as_str(), kv["accel"].as_str(), kv["res"].as_str()),
                 (mode, accel, res)
             );
-            let shot = d.join(path);
-            let reference = d.join(format!("render-{}", path.display()));
-            let (ok, rtext) = gridtrace(&[
-                "render",
-                "--scene",
-                "knot-box",
-                "--backend",
-                "cpu",
-                "--eye",
-                &kv["eye"],
-                "--target",
-                &kv["target"],
-                "--up",
-                &kv["up"],
-                "--vfov",
-                &kv["vfov"],
-                "--mode",
-                mode,
-                "--accel",
-                accel,
-                "--res",
-                res,
-                "-o",
-                reference.to_str().unwrap(),
-            ]);
-            assert!(ok, "{rtext}");
-            let frac = differing(&shot, &reference);
-            if backend == "cpu" {
-                assert_eq!(
-                    frac,
-                    0.0,
-                    "{}: the viewer's CPU frame differs from render's",
-                    path.display()
-                );
-            } else {
-                assert!(
-                    frac <= 0.005,
-                    "{}: {:.3}% of pixels differ",
-                    path.display(),
-                    frac * 100.0
-                );
-            }
+            equals_render(&d, backend, &["--scene", "knot-box"], shot);
         }
-        // The orbit moved the camera between the first and the last screenshot.
+        // The orbit moved the camera between the first and the last screenshot, and the
+        // gizmo drag and the keys moved the lights.
         assert_ne!(shots[0].1["eye"], shots[2].1["eye"]);
+        assert_ne!(shots[0].1["lights"], shots[1].1["lights"]);
+        assert_ne!(shots[1].1["lights"], shots[2].1["lights"]);
+    }
+}
+
+/// Files dropped on the window: a malformed one leaves the scene on screen and shows its error
+/// (in the overlay and on stderr), a good one replaces the scene; the overlay names the tracer
+/// and the scene and counts under 1 KiB sent to the GPU per frame; resizing to 8192x8192 and
+/// back works; a capture of the window has its size.
+#[test]
+fn dropped_files_and_the_overlay() {
+    if !have_display() {
+        return;
+    }
+    for backend in ["cpu", "gpu"] {
+        let d = dir(&format!("drop-files-{backend}"));
+        let good = d.join("good.obj");
+        std::fs::write(
+            &good,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+        )
+        .unwrap();
+        let bad = d.join("bad.obj");
+        std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").unwrap();
+        let script = format!(
+            "overlay o1.txt\ndrop {}\noverlay o2.txt\nscreenshot a.png\ndrop {}\nscreenshot b.png\noverlay o3.txt\n\
+             resize 8192 8192\nkey [\nkey [\nkey [\nresize 100 80\nkey ]\nkey ]\nkey ]\ncapture w.png\n",
+            bad.display(),
+            good.display()
+        );
+        let (d2, text, shots) = run_script("drop", backend, &["--scene", "knot-box", "--res", "96x72"], &script);
+        let read = |f: &str| std::fs::read_to_string(d2.join(f)).unwrap();
+        let (o1, o2, o3) = (read("o1.txt"), read("o2.txt"), read("o3.txt"));
+        let tracer = if backend == "gpu" {
+            "tracer    gpu:"
+        } else {
+            "tracer    cpu"
+        };
+        assert!(
+            o1.contains(tracer) && o1.contains("scene     knot-box: 1020 triangles"),
+            "{o1}"
+        );
+        assert!(!o1.contains("error"), "{o1}");
+        if backend == "gpu" {
+            let up = o1
+                .lines()
+                .find(|l| l.starts_with("uploaded"))
+                .expect("an uploaded line");
+            let bytes: u64 = up.split_whitespace().nth(1).unwrap().parse().unwrap();
+            assert!(bytes > 0 && bytes < 1024, "{up}");
+        }
+        // The bad file: its error names the file and line, the scene stays.
+        assert!(
+            text.contains(&format!("drop {}: error: {}:4", bad.display(), bad.display())),
+            "{text}"
+        );
+        assert!(
+            o2.contains("error") && o2.contains("bad.obj:4") && o2.contains("knot-box"),
+            "{o2}"
+        );
+        equals_render(&d2, backend, &["--scene", "knot-box"], &shots[0]);
+        // The good file replaces it (four triangles and the floor under them).
+        assert!(
+            text.contains(&format!("drop {}: loaded 6 triangles", good.display())),
+            "{text}"
+        );
+        assert!(!o3.contains("error") && o3.contains("good.obj: 6 triangles"), "{o3}");
+        equals_render(&d2, backend, &[good.to_str().unwrap()], &shots[1]);
+        let w = image::open(d2.join("w.png")).unwrap().to_rgb8();
+        assert_eq!(w.dimensions(), (100, 80));
+        assert!(w.pixels().any(|p| p != w.get_pixel(0, 0)), "the capture is blank");
     }
 }
 

@@ -68,6 +68,30 @@ impl Backend {
     }
 }
 
+impl Backend {
+    /// The scene uploaded to the device `ctx` that this backend opened (`open_device`), or
+    /// `None` to trace it on the CPU: with `auto`, a scene the GPU cannot hold (over its buffer
+    /// limits) is traced on the CPU, with a note; with `gpu` that is an error that says so.
+    pub fn upload(
+        self,
+        ctx: Arc<GpuContext>,
+        scene: &PreparedScene,
+        notes: &mut Vec<String>,
+    ) -> Result<Option<GpuRenderer>> {
+        match GpuRenderer::new(ctx, scene) {
+            Ok(gpu) => Ok(Some(gpu)),
+            Err(e) if self == Backend::Auto => {
+                notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
+                Ok(None)
+            }
+            Err(Error::Gpu(m)) => Err(Error::Gpu(format!(
+                "{m}; use --backend cpu (or auto) to trace it on the CPU"
+            ))),
+            Err(e) => Err(e),
+        }
+    }
+}
+
 /// A scene ready to render frames on the CPU or a GPU. The scene stays where it is (on the GPU:
 /// uploaded once); each frame takes its own camera and lights.
 pub enum Renderer<'s> {
@@ -94,26 +118,20 @@ impl<'s> Renderer<'s> {
     pub fn open(backend: Backend, scene: &'s PreparedScene, accel: AccelKind) -> Result<(Renderer<'s>, Vec<String>)> {
         scene.accel.check_serves(accel)?;
         let (ctx, mut notes) = backend.open_device()?;
-        let Some(ctx) = ctx else {
-            return Ok((Renderer::Cpu(scene), notes));
+        let gpu = match ctx {
+            Some(ctx) => backend.upload(ctx, scene, &mut notes)?,
+            None => None,
         };
-        match GpuRenderer::new(ctx, scene) {
-            Ok(gpu) => Ok((
+        Ok(match gpu {
+            Some(gpu) => (
                 Renderer::Gpu {
                     gpu: Box::new(gpu),
                     scene,
                 },
                 notes,
-            )),
-            Err(e) if backend == Backend::Auto => {
-                notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
-                Ok((Renderer::Cpu(scene), notes))
-            }
-            Err(Error::Gpu(m)) => Err(Error::Gpu(format!(
-                "{m}; use --backend cpu (or auto) to trace it on the CPU"
-            ))),
-            Err(e) => Err(e),
-        }
+            ),
+            None => (Renderer::Cpu(scene), notes),
+        })
     }
 
     /// "cpu (N threads)" or the GPU adapter's description.

@@ -61,6 +61,11 @@ pub struct RenderOptions {
     pub accel: AccelKind,
     /// Optimisations turned off, to measure what they buy (`bench --ablate`); none by default.
     pub ablation: Ablation,
+    /// Trace only image rows `first..end` of the `width` x `height` frame (the camera still
+    /// frames the whole image); the returned image is `width` x `end - first`. `None`: every
+    /// row. The interactive viewer traces a frame band by band within a time budget, so a slow
+    /// frame never holds up input; a band's pixels equal the same rows of the whole frame.
+    pub rows: Option<(u32, u32)>,
 }
 
 /// Switches that each turn off one optimisation the paper credits (its any-hit shadow rays, its
@@ -103,13 +108,39 @@ impl RenderOptions {
             mode,
             accel,
             ablation: Ablation::default(),
+            rows: None,
         }
     }
+
+    /// These options for rows `first..end` only (see `rows`).
+    pub fn band(self, first: u32, end: u32) -> Self {
+        RenderOptions {
+            rows: Some((first, end)),
+            ..self
+        }
+    }
+
+    /// The rows traced: `first..end`, the whole image when `rows` is `None`.
+    pub fn row_range(&self) -> std::ops::Range<u32> {
+        match self.rows {
+            Some((first, end)) => first..end,
+            None => 0..self.height,
+        }
+    }
+
     pub fn validate(&self) -> crate::Result<()> {
         if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
             return Err(crate::Error::InvalidInput(format!(
                 "image size {}x{} must be between 1x1 and 16384x16384",
                 self.width, self.height
+            )));
+        }
+        if let Some((first, end)) = self.rows
+            && (first >= end || end > self.height)
+        {
+            return Err(crate::Error::InvalidInput(format!(
+                "rows {first}..{end} must be a non-empty range within the image's {} rows",
+                self.height
             )));
         }
         Ok(())
@@ -171,7 +202,18 @@ impl Image {
 
     /// Maps raw per-pixel traversal cost to a colour ramp, normalised by the image's maximum.
     pub fn heat_to_color(&self) -> Image {
-        let max = self.pixels.iter().map(|p| p.x).fold(1.0f32, f32::max);
+        self.heat_to_color_scaled(self.heat_max())
+    }
+
+    /// The largest raw cost of a heat image (at least 1): what `heat_to_color` normalises by.
+    pub fn heat_max(&self) -> f32 {
+        self.pixels.iter().map(|p| p.x).fold(1.0f32, f32::max)
+    }
+
+    /// `heat_to_color` normalised by `max` instead of this image's own maximum: how the viewer
+    /// colours a band of a frame before the whole frame's maximum is known.
+    pub fn heat_to_color_scaled(&self, max: f32) -> Image {
+        let max = max.max(1.0);
         let ramp = |v: f32| {
             // Black - blue - green - yellow - red - white, on a square-root scale so that low
             // costs remain distinguishable.

@@ -357,3 +357,54 @@ fn per_frame_uploads_are_uniforms_only() {
         );
     }
 }
+
+/// A band of rows (`RenderOptions::rows`, how the viewer traces a frame within its time budget)
+/// equals the same rows of the whole frame, bit for bit, on the GPU and the CPU, in every mode
+/// and for every structure; the bands' rays add up to the frame's. Bands that do not start at
+/// a tile boundary, a one-row band and the last row are among them.
+#[test]
+fn bands_equal_rows_of_the_frame() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("mirror-spheres")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let mut p = prepared(&scene, Resolution::default());
+    if p[0].1.is_none() {
+        return;
+    }
+    let (w, h) = (53u32, 41u32);
+    for accel in AccelKind::ALL {
+        let (scene, gpu) = for_kind(&mut p, accel);
+        for mode in Mode::ALL {
+            let whole = RenderOptions::new(w, h, mode, accel);
+            let (gpu_whole, gpu_stats) = gpu.render(&scene.camera, &scene.lights, &whole).unwrap();
+            let (cpu_whole, cpu_stats) = gridtrace::cpu::render(scene, &whole, None).unwrap();
+            let (mut gpu_rays, mut cpu_rays) = (
+                gridtrace::render::RayCounts::default(),
+                gridtrace::render::RayCounts::default(),
+            );
+            for (first, end) in [(0, 7), (7, 8), (8, 40), (40, 41)] {
+                let band = whole.band(first, end);
+                let rows = (first * w) as usize..(end * w) as usize;
+                let (g, gs) = gpu.render(&scene.camera, &scene.lights, &band).unwrap();
+                let (c, cs) = gridtrace::cpu::render(scene, &band, None).unwrap();
+                assert_eq!((g.width, g.height), (w, end - first));
+                let what = format!("{} {} rows {first}..{end}", accel.name(), mode.name());
+                assert!(g.pixels == gpu_whole.pixels[rows.clone()], "gpu {what}");
+                assert!(c.pixels == cpu_whole.pixels[rows], "cpu {what}");
+                gpu_rays += gs.render.rays;
+                cpu_rays += cs.rays;
+            }
+            assert_eq!(gpu_rays, gpu_stats.render.rays);
+            assert_eq!(cpu_rays, cpu_stats.rays);
+        }
+    }
+    // Bands outside the image, or empty, are errors, not panics.
+    let (scene, gpu) = for_kind(&mut p, AccelKind::Grid);
+    for (first, end) in [(0, 0), (5, 3), (40, 42)] {
+        let band = RenderOptions::new(w, h, Mode::Cast, AccelKind::Grid).band(first, end);
+        assert!(gpu.render(&scene.camera, &scene.lights, &band).is_err());
+        assert!(gridtrace::cpu::render(scene, &band, None).is_err());
+    }
+}

@@ -10,6 +10,9 @@ use gridtrace::{AccelKind, Mode};
 pub enum Action {
     /// Orbit about the target by a mouse drag of (dx, dy) pixels.
     Orbit(f32, f32),
+    /// Pan by a (right-button) drag of (dx, dy) pixels: the target moves in the view plane so
+    /// that the point under the pointer at the target's depth follows it.
+    Pan(f32, f32),
     /// Zoom by wheel steps (positive: closer).
     Zoom(f32),
     /// Fly: move along the view (forward, right, up) in steps of 5% of the orbit distance.
@@ -21,9 +24,66 @@ pub enum Action {
     NextAccel,
     /// Resize the window to (width, height) physical pixels.
     Resize(u32, u32),
-    /// Save the frame on screen as a PNG and print its camera, mode and structure.
+    /// Save the frame on screen as a PNG and print its camera, lights, mode and structure.
     Screenshot(std::path::PathBuf),
+    /// Save the window as it looks, overlay included, as a PNG.
+    Capture(std::path::PathBuf),
+    /// Write the overlay's text, one line each, to a file (what the overlay says, for tests).
+    OverlayText(std::path::PathBuf),
+    /// Select the next light (its gizmo turns yellow).
+    NextLight,
+    /// Drag the selected light's gizmo by (dx, dy) window pixels: the light moves in the plane
+    /// through it parallel to the image, following the pointer.
+    DragLight(f32, f32),
+    /// Move the selected light along the view (forward, right, up) in fly steps.
+    MoveLight(f32, f32, f32),
+    /// Resolution scale: trace every pixel (0), every other pixel a side (1), ... (3 at most).
+    ScaleStep(i32),
+    /// Fly faster (positive) or slower, a factor of two a step.
+    SpeedStep(i32),
+    /// Load a mesh or scene file, as if dropped on the window (on a worker thread; a bad file
+    /// keeps the scene on screen and shows its error).
+    Drop(std::path::PathBuf),
+    /// Show or hide the overlay.
+    ToggleOverlay,
+    /// Play or pause an animated scene.
+    PlayPause,
     Quit,
+}
+
+/// Halvings of the resolution at most (`ScaleStep`): 1/8 of the window a side.
+pub const MAX_SCALE_STEPS: u32 = 3;
+
+/// Where the world point `p` appears in a `w` x `h` image of camera `c`: window pixel
+/// coordinates (x right, y down, pixel centres at +0.5, as `CameraFrame::ray`) and the depth
+/// along the view; `None` behind the eye.
+pub fn project(c: &Camera, (w, h): (f32, f32), p: Vec3) -> Option<(f32, f32, f32)> {
+    let (f, r, u, tan_half) = view_axes(c);
+    let d = p - c.eye;
+    let z = d.dot(f);
+    if z <= 1e-6 {
+        return None;
+    }
+    let aspect = w / h;
+    let nx = d.dot(r) / (z * aspect * tan_half);
+    let ny = d.dot(u) / (z * tan_half);
+    Some(((nx + 1.0) * 0.5 * w, (1.0 - ny) * 0.5 * h, z))
+}
+
+/// The world point at window pixel (x, y) and view depth `z`: the inverse of `project`.
+pub fn unproject(c: &Camera, (w, h): (f32, f32), (x, y): (f32, f32), z: f32) -> Vec3 {
+    let (f, r, u, tan_half) = view_axes(c);
+    let nx = 2.0 * x / w - 1.0;
+    let ny = 1.0 - 2.0 * y / h;
+    c.eye + z * (f + nx * (w / h) * tan_half * r + ny * tan_half * u)
+}
+
+/// The camera's unit forward, right and up axes (as `Camera::frame`) and tan(vfov/2).
+fn view_axes(c: &Camera) -> (Vec3, Vec3, Vec3, f32) {
+    let f = (c.target - c.eye).normalize_or(Vec3::NEG_Z);
+    let r = f.cross(c.up).normalize_or(Vec3::X);
+    let u = r.cross(f);
+    (f, r, u, (c.vfov_deg.to_radians() * 0.5).tan())
 }
 
 /// Radians of orbit per pixel of drag.
@@ -89,11 +149,13 @@ impl Orbit {
     /// Moves the target (and the eye with it) along the view's axes, in steps of 5% of the
     /// distance, so flying feels the same at every scale.
     pub fn fly(&mut self, forward: f32, right: f32, up: f32) {
-        let c = self.camera();
-        let f = (c.target - c.eye).normalize_or(Vec3::NEG_Z);
-        let r = f.cross(self.up).normalize_or(Vec3::X);
-        let u = r.cross(f);
-        self.target += (f * forward + r * right + u * up) * (FLY_STEP * self.distance);
+        self.target += self.view_offset(forward, right, up);
+    }
+
+    /// (forward, right, up) fly steps as a world-space offset along the view's axes.
+    pub fn view_offset(&self, forward: f32, right: f32, up: f32) -> Vec3 {
+        let (f, r, u, _) = view_axes(&self.camera());
+        (f * forward + r * right + u * up) * self.step_length()
     }
 
     /// Targets the box's centre from far enough that its bounding sphere fills the vertical
@@ -106,6 +168,19 @@ impl Orbit {
         let half = (self.vfov_deg.to_radians() * 0.5).clamp(0.01, 1.5);
         self.target = (lo + hi) * 0.5;
         self.distance = radius / half.sin();
+    }
+
+    /// Moves the target (and the eye) so that a point at the target's depth moves by (dx, dy)
+    /// pixels of an image `height_px` tall: the world spans 2 d tan(vfov/2) over its height.
+    pub fn pan(&mut self, dx: f32, dy: f32, height_px: f32) {
+        let per_pixel = 2.0 * self.distance * (self.vfov_deg.to_radians() * 0.5).tan() / height_px.max(1.0);
+        let (_, r, u, _) = view_axes(&self.camera());
+        self.target += (-dx * r + dy * u) * per_pixel;
+    }
+
+    /// The fly step's length in world units (5% of the orbit distance).
+    pub fn step_length(&self) -> f32 {
+        FLY_STEP * self.distance
     }
 
     pub fn zoom(&mut self, steps: f32) {
@@ -134,6 +209,37 @@ pub fn fly_key(k: &str) -> Option<(f32, f32, f32)> {
         "e" => (0.0, 0.0, 1.0),
         "q" => (0.0, 0.0, -1.0),
         _ => return None,
+    })
+}
+
+/// The action of a key by name: characters as typed ("g", "1", "["), named keys in lower case
+/// ("space", "left", "pageup", "escape"). `fast` multiplies fly steps (shift held). P (the
+/// screenshot, which needs a file name) is the window's own.
+pub fn key_action(name: &str, fast: f32) -> Option<Action> {
+    Some(match name.to_ascii_lowercase().as_str() {
+        "escape" => Action::Quit,
+        "space" => Action::PlayPause,
+        "left" => Action::MoveLight(0.0, -1.0, 0.0),
+        "right" => Action::MoveLight(0.0, 1.0, 0.0),
+        "up" => Action::MoveLight(0.0, 0.0, 1.0),
+        "down" => Action::MoveLight(0.0, 0.0, -1.0),
+        "pageup" => Action::MoveLight(1.0, 0.0, 0.0),
+        "pagedown" => Action::MoveLight(-1.0, 0.0, 0.0),
+        "g" => Action::NextAccel,
+        "f" => Action::Frame,
+        "l" => Action::NextLight,
+        "h" => Action::ToggleOverlay,
+        "[" => Action::ScaleStep(1),
+        "]" => Action::ScaleStep(-1),
+        "-" => Action::SpeedStep(-1),
+        "=" | "+" => Action::SpeedStep(1),
+        k => match mode_key(k) {
+            Some(m) => Action::SetMode(m),
+            None => {
+                let (f, r, u) = fly_key(k)?;
+                Action::Fly(f * fast, r * fast, u * fast)
+            }
+        },
     })
 }
 
@@ -199,6 +305,55 @@ mod tests {
         let before = o;
         o.frame(Vec3::ONE, Vec3::ZERO);
         assert_eq!(o, before, "an empty box changes nothing");
+    }
+
+    /// A point projects to the pixel whose eye ray passes through it, and back.
+    #[test]
+    fn project_matches_the_eye_rays() {
+        let c = Camera {
+            eye: Vec3::new(1.0, 2.0, 3.0),
+            target: Vec3::new(0.5, 0.0, -1.0),
+            up: Vec3::Y,
+            vfov_deg: 50.0,
+        };
+        let (w, h) = (160u32, 90u32);
+        let frame = c.frame(w, h);
+        for (x, y) in [(0u32, 0u32), (80, 45), (159, 89), (17, 60)] {
+            let ray = frame.ray(x, y);
+            let p = ray.origin + ray.dir * 4.0;
+            let (px, py, z) = project(&c, (w as f32, h as f32), p).unwrap();
+            assert!(
+                (px - (x as f32 + 0.5)).abs() < 1e-3 && (py - (y as f32 + 0.5)).abs() < 1e-3,
+                "{px} {py}"
+            );
+            let back = unproject(&c, (w as f32, h as f32), (px, py), z);
+            assert!((back - p).length() < 1e-4, "{back} {p}");
+        }
+        assert!(
+            project(&c, (w as f32, h as f32), c.eye - (c.target - c.eye)).is_none(),
+            "behind the eye"
+        );
+    }
+
+    /// Panning keeps the target's image point under the pointer.
+    #[test]
+    fn pan_follows_the_pointer() {
+        let c = Camera {
+            eye: Vec3::new(0.0, 1.0, 4.0),
+            target: Vec3::new(0.0, 0.5, 0.0),
+            up: Vec3::Y,
+            vfov_deg: 45.0,
+        };
+        let mut o = Orbit::from_camera(&c);
+        let size = (200.0, 100.0);
+        let p = c.target + Vec3::new(0.3, 0.1, 0.0);
+        let (x, y, _) = project(&c, size, p).unwrap();
+        o.pan(15.0, -7.0, size.1);
+        let (x2, y2, _) = project(&o.camera(), size, p).unwrap();
+        assert!(
+            (x2 - x - 15.0).abs() < 0.05 && (y2 - y + 7.0).abs() < 0.05,
+            "{x} {y} -> {x2} {y2}"
+        );
     }
 
     #[test]

@@ -1,33 +1,45 @@
 //! `gridtrace view`: the interactive tracer in a window (winit), the paper's point. The scene is
-//! prepared and uploaded once; a frame is traced only when the camera, mode, structure or size
-//! changes, by the same `Renderer` as `render` (GPU, or the CPU with `--backend cpu` or when no
-//! GPU is usable; the title says which), and presented on the window's surface.
+//! prepared and uploaded once; per frame only the camera, the lights and the pass uniforms go to
+//! the device. Frames are traced by the same tracers as `render` (GPU, or the CPU with
+//! `--backend cpu` or when no GPU is usable; the overlay and title say which), in bands within a
+//! time budget (progressive.rs), so input is answered between bands however slow a frame is, and
+//! presented with an egui overlay (present.rs, overlay.rs).
 //!
-//! This first form presents by copying the traced image into the surface texture (a queue
-//! write on a presentation device of its own, so the CPU and GPU tracers present alike); the
-//! GPU tracer's frame goes through host memory on the way. Controls: drag to orbit, wheel to
-//! zoom, WASD + QE to fly, F to frame the scene, 1-4 for cast/shadow/trace/heat, G for the next
-//! structure (grid, pc, bvh), P for a screenshot, Esc to quit. `--script FILE` replays the same actions from a file (script.rs).
+//! Module map: controls.rs (actions, the orbit camera, projection for the light gizmos),
+//! script.rs (`--script`), progressive.rs (bands, preview, the display image), present.rs (the
+//! surface, the image blit, egui), overlay.rs (what the overlay shows), loader.rs (dropped
+//! files on a worker thread), headless.rs (`--headless`: frames along an orbit, timed).
 
 mod controls;
+mod headless;
+mod loader;
+mod overlay;
 mod present;
+mod progressive;
 mod script;
 
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use clap::Args;
-use gridtrace::scene::PreparedScene;
-use gridtrace::{AccelKind, Mode, RenderOptions, Renderer};
+use glam::Vec3;
+use gridtrace::gpu::GpuContext;
+use gridtrace::scene::animated::Animation;
+use gridtrace::scene::{PointLight, Scene};
+use gridtrace::{AccelKind, Backend, Mode, RenderOptions};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
-use winit::keyboard::{Key, NamedKey};
+use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::common::{Backend, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
-use controls::{Action, Orbit, fly_key, mode_key, next_accel};
+use crate::common::{GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
+use crate::tracer::Tracer;
+use controls::{Action, MAX_SCALE_STEPS, Orbit, key_action, next_accel, project, unproject};
+use overlay::{GIZMO_RADIUS_PT, HISTORY, Hud};
+use progressive::Refiner;
 
 #[derive(Args)]
 pub struct ViewArgs {
@@ -38,54 +50,119 @@ pub struct ViewArgs {
     /// The first mode: cast, shadow, trace or heat (keys 1-4 switch).
     #[arg(long, default_value = "shadow", value_parser = mode_parser())]
     mode: Mode,
-    /// Window size in physical pixels, WxH or N.
+    /// Window size in physical pixels, WxH or N (with --headless: the image size).
     #[arg(long, value_name = "WxH|N", default_value = "800x600", value_parser = parse_res, allow_hyphen_values = true)]
     res: (u32, u32),
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
     backend: Backend,
+    /// Trace 1/2^N of the window's pixels a side (0-3; keys [ and ] change it): speed for
+    /// sharpness.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=MAX_SCALE_STEPS as i64))]
+    scale: u32,
+    /// Milliseconds of tracing per presented frame: a frame that takes longer is traced in
+    /// bands over several, with a coarse preview first, and input is handled between them.
+    #[arg(long, default_value_t = 30.0, value_name = "MS")]
+    budget_ms: f64,
     /// Replay actions from this file, then exit (see `gridtrace view` in the README).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "headless")]
     script: Option<PathBuf>,
+    /// No window: trace --frames frames along a camera orbit with the lights circling the other
+    /// way, and print per-frame times (first, median, p95, best) and Mrays/s.
+    #[arg(long)]
+    headless: bool,
+    /// With --headless: frames to trace.
+    #[arg(long, default_value_t = 60, requires = "headless", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    frames: u32,
+    /// With --headless: move the camera round its orbit (one turn over the frames); without
+    /// it the view stays and only the lights move.
+    #[arg(long, requires = "headless")]
+    orbit: bool,
 }
 
 /// The largest image the tracers take per side (`RenderOptions::validate`).
 const MAX_SIDE: u32 = 16384;
+/// Animation time per presented frame in scripts (wall time otherwise), so scripted runs of
+/// animated scenes repeat exactly.
+const SCRIPT_FRAME_S: f32 = 1.0 / 30.0;
+/// Largest animation step per presented frame: a stall (a window drag) does not jump ahead.
+const MAX_ANIM_STEP_S: f32 = 0.1;
 
 pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
-    let (scene, name) = a.scene.load(true)?;
+    if !(a.budget_ms.is_finite() && a.budget_ms > 0.0) {
+        return Err(gridtrace::Error::InvalidInput(format!(
+            "--budget-ms must be positive, got {}",
+            a.budget_ms
+        )));
+    }
+    // A built-in animated scene plays (space pauses); anything else is still.
+    let anim = match (&a.scene.scene, &a.scene.file, &a.scene.mesh) {
+        (Some(n), None, None) => Animation::by_name(n),
+        _ => None,
+    };
+    let (src, name) = match &anim {
+        Some(an) => (an.scene.clone(), a.scene.scene.clone().unwrap_or_default()),
+        None => a.scene.load(true)?,
+    };
+    if a.headless {
+        return headless::run(&a, src, &name);
+    }
     let script = match &a.script {
         Some(p) => Some(script::load(p)?),
         None => None,
     };
-    let grid_scene = crate::common::prepare(&scene, &name, AccelKind::Grid, &a.grid)?;
-    // The viewer keeps its scenes for the life of the process: renderers borrow them.
-    let grid_scene: &'static PreparedScene = Box::leak(Box::new(grid_scene));
-    let orbit = Orbit::from_camera(&grid_scene.camera);
-    let event_loop = EventLoop::new().map_err(|e| window_error("opening the event loop", e))?;
-    event_loop.set_control_flow(ControlFlow::Wait);
+    let (ctx, notes) = a.backend.open_device()?;
+    for n in &notes {
+        eprintln!("note: {n}");
+    }
+    let orbit = Orbit::from_camera(&src.camera);
     let mut app = App {
         name,
-        scene_src: scene,
+        src,
         grid_args: a.grid.clone(),
-        grid_scene,
-        own_scenes: Vec::new(),
-        renderers: Vec::new(),
         backend: a.backend,
+        ctx,
+        notes,
+        tracers: Vec::new(),
         accel: a.grid.accel,
         mode: a.mode,
         orbit,
+        lights: Vec::new(),
+        selected_light: 0,
+        scale_steps: a.scale,
+        fly_speed: 1.0,
         size: a.res,
+        budget: Duration::from_secs_f64(a.budget_ms / 1e3),
         window: None,
         presenter: None,
-        frame: None,
+        egui_ctx: egui::Context::default(),
+        egui: None,
+        show_overlay: true,
+        refiner: Refiner::new(),
         dirty: true,
+        history: VecDeque::with_capacity(HISTORY),
         script: script.map(|s| s.into_iter().rev().collect()),
         drag: None,
         cursor: (0.0, 0.0),
+        modifiers: ModifiersState::empty(),
         error: None,
+        drop_error: None,
+        loader: None,
         shots: 0,
+        anim: anim.map(|animation| Playback {
+            animation,
+            time: 0.0,
+            playing: true,
+            last_tick: Instant::now(),
+            last_update: None,
+        }),
     };
+    app.reset_view();
+    // Prepare and upload the first structure before the window opens: errors in the scene
+    // come out as errors, not as a window that closes.
+    app.tracer()?;
+    let event_loop = EventLoop::new().map_err(|e| window_error("opening the event loop", e))?;
+    event_loop.set_control_flow(ControlFlow::Wait);
     event_loop
         .run_app(&mut app)
         .map_err(|e| window_error("running the event loop", e))?;
@@ -101,102 +178,283 @@ fn window_error(what: &str, e: impl std::fmt::Display) -> gridtrace::Error {
     ))
 }
 
-/// The frame on screen.
-struct Frame {
-    image: gridtrace::Image,
-    ms: f64,
+/// The light intensity vector and position as `render --light` takes them: X,Y,Z:R,G,B.
+fn light_arg(l: &PointLight) -> String {
+    let [x, y, z] = l.position;
+    let [r, g, b] = l.intensity;
+    format!("{x:?},{y:?},{z:?}:{r:?},{g:?},{b:?}")
+}
+
+/// An animated scene being played.
+struct Playback {
+    animation: Animation,
+    /// Animation time of the frame on screen, in seconds.
+    time: f32,
+    playing: bool,
+    last_tick: Instant,
+    /// The last update's geometry and build times, in words.
+    last_update: Option<String>,
+}
+
+/// What a mouse drag moves.
+#[derive(Clone, Copy)]
+enum Drag {
+    Orbit,
+    Pan,
+    Light,
 }
 
 struct App {
     name: String,
-    scene_src: gridtrace::scene::Scene,
-    grid_args: crate::common::GridArgs,
-    grid_scene: &'static PreparedScene,
-    /// The scenes prepared for structures other than the grid, when first asked for.
-    own_scenes: Vec<(AccelKind, &'static PreparedScene)>,
-    /// Opened renderers, by the structure they trace (`AccelKind::structure_name`).
-    renderers: Vec<(&'static str, Renderer<'static>)>,
+    src: Scene,
+    grid_args: GridArgs,
     backend: Backend,
+    /// The device every structure's tracer shares (`None`: the CPU).
+    ctx: Option<Arc<GpuContext>>,
+    notes: Vec<String>,
+    /// Opened tracers by the structure they trace (`AccelKind::structure_name`), with the
+    /// animation time their vertices are at.
+    tracers: Vec<(&'static str, Tracer, f32)>,
     accel: AccelKind,
     mode: Mode,
     orbit: Orbit,
-    /// Window (and image) size in physical pixels.
+    lights: Vec<PointLight>,
+    selected_light: usize,
+    /// The traced image is the window halved this many times a side.
+    scale_steps: u32,
+    fly_speed: f32,
+    /// Window size in physical pixels.
     size: (u32, u32),
+    budget: Duration,
     window: Option<Arc<Window>>,
     presenter: Option<present::Presenter>,
-    frame: Option<Frame>,
-    /// The view changed since the frame on screen was traced.
+    egui_ctx: egui::Context,
+    egui: Option<egui_winit::State>,
+    show_overlay: bool,
+    refiner: Refiner,
+    /// The view changed since the frame being refined was started.
     dirty: bool,
+    /// Finished frames' times (ms), oldest first.
+    history: VecDeque<f64>,
     /// Script actions still to run, last first.
     script: Option<Vec<Action>>,
-    drag: Option<(f64, f64)>,
+    drag: Option<(Drag, (f64, f64))>,
     cursor: (f64, f64),
+    modifiers: ModifiersState,
     error: Option<gridtrace::Error>,
+    /// The last dropped file's error, shown until the next drop.
+    drop_error: Option<String>,
+    loader: Option<loader::Loader>,
     shots: u32,
+    anim: Option<Playback>,
 }
 
 impl App {
-    fn scene_for(&mut self, accel: AccelKind) -> gridtrace::Result<&'static PreparedScene> {
-        if accel.uses_grid() {
-            return Ok(self.grid_scene);
-        }
-        if let Some((_, s)) = self.own_scenes.iter().find(|(k, _)| *k == accel) {
-            return Ok(s);
-        }
-        let s: &'static PreparedScene = Box::leak(Box::new(crate::common::prepare(
-            &self.scene_src,
-            &self.name,
-            accel,
-            &self.grid_args,
-        )?));
-        self.own_scenes.push((accel, s));
-        Ok(s)
+    /// Camera and lights from the scene (at start, and when a new file is loaded).
+    fn reset_view(&mut self) {
+        self.orbit = Orbit::from_camera(&self.src.camera);
+        self.lights = self.src.lights.clone();
+        self.selected_light = 0;
     }
 
-    /// Traces the current view if it changed.
-    fn trace(&mut self) -> gridtrace::Result<()> {
+    /// The traced image's size: the window's, halved `scale_steps` times.
+    fn traced_size(&self) -> (u32, u32) {
         let (w, h) = self.size;
-        if !self.dirty {
-            return Ok(());
+        let d = 1u32 << self.scale_steps;
+        (w.div_ceil(d).min(MAX_SIDE), h.div_ceil(d).min(MAX_SIDE))
+    }
+
+    fn scale(&self) -> f32 {
+        1.0 / (1u32 << self.scale_steps) as f32
+    }
+
+    /// The tracer of the structure on screen, prepared and uploaded when first asked for, its
+    /// vertices at the animation's time.
+    fn tracer(&mut self) -> gridtrace::Result<&mut Tracer> {
+        let structure = self.accel.structure_name();
+        let i = match self.tracers.iter().position(|(s, _, _)| *s == structure) {
+            Some(i) => i,
+            None => {
+                let t0 = Instant::now();
+                let scene = crate::common::prepare(&self.src, &self.name, self.accel, &self.grid_args)?;
+                let tracer = Tracer::open(scene, self.ctx.as_ref(), self.backend, &mut self.notes)?;
+                eprintln!(
+                    "{} prepared in {:.0} ms; tracing on {}",
+                    structure,
+                    t0.elapsed().as_secs_f64() * 1e3,
+                    tracer.describe()
+                );
+                self.tracers.push((structure, tracer, 0.0));
+                self.tracers.len() - 1
+            }
+        };
+        let (_, tracer, at) = &mut self.tracers[i];
+        if let Some(p) = &mut self.anim
+            && *at != p.time
+        {
+            let u = tracer.update_vertices(&p.animation.positions_at(p.time))?;
+            p.last_update = Some(format!(
+                "geometry {:.1} ms, build {:.1} ms, {}",
+                u.geometry_ms, u.build_ms, u.how
+            ));
+            *at = p.time;
         }
+        Ok(tracer)
+    }
+
+    /// The options of the frame for the current view.
+    fn frame_opts(&self) -> RenderOptions {
+        let (w, h) = self.traced_size();
+        RenderOptions::new(w, h, self.mode, self.accel)
+    }
+
+    /// Traces within the budget (all of the frame with `finish`), and puts what changed into
+    /// the image texture.
+    fn trace(&mut self, finish: bool) -> gridtrace::Result<()> {
+        let (w, h) = self.size;
         if w == 0 || h == 0 {
             // Minimised: nothing to trace until the window has an area again (`resized`).
-            self.dirty = false;
             return Ok(());
         }
-        let accel = self.accel;
-        let structure = accel.structure_name();
-        if !self.renderers.iter().any(|(b, _)| *b == structure) {
-            let scene = self.scene_for(accel)?;
-            let (r, notes) = Renderer::open(self.backend, scene, accel)?;
-            for n in notes {
-                eprintln!("note: {n}");
+        if self.dirty {
+            self.refiner.restart(self.frame_opts(), self.budget);
+            self.dirty = false;
+        }
+        if !self.refiner.done() {
+            let camera = self.orbit.camera();
+            let budget = self.budget;
+            self.tracer()?;
+            let lights = &self.lights;
+            let structure = self.accel.structure_name();
+            let tracer = &mut self
+                .tracers
+                .iter_mut()
+                .find(|(s, _, _)| *s == structure)
+                .expect("opened above")
+                .1;
+            let mut trace = |o: &RenderOptions| tracer.render(&camera, lights, o);
+            if finish {
+                self.refiner.finish(&mut trace)?;
+            } else {
+                self.refiner.step(budget, &mut trace)?;
             }
-            self.renderers.push((structure, r));
+            if self.refiner.done() {
+                if self.history.len() == HISTORY {
+                    self.history.pop_front();
+                }
+                self.history.push_back(self.refiner.summary().ms);
+                self.set_title();
+            }
         }
-        let camera = self.orbit.camera();
-        let opts = RenderOptions::new(w.min(MAX_SIDE), h.min(MAX_SIDE), self.mode, accel);
-        let r = &mut self.renderers.iter_mut().find(|(b, _)| *b == structure).unwrap().1;
-        let t0 = Instant::now();
-        let f = r.render(&camera, &self.grid_scene.lights, &opts, None)?;
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        let describe = r.describe();
-        // What this frame sent to the device: uniforms and lights only (the scene stays there).
-        let up = f
-            .gpu
-            .as_ref()
-            .map_or(String::new(), |g| format!(", {} B uploaded", g.uploaded_bytes));
-        if let Some(win) = &self.window {
-            win.set_title(&format!(
-                "gridtrace: {} - {} {} - {ms:.1} ms{up} - {describe}",
-                self.name,
-                self.mode.name(),
-                accel.name()
-            ));
+        if self.refiner.take_changed()
+            && let Some(p) = &mut self.presenter
+        {
+            let o = self.refiner.opts();
+            p.upload(&self.refiner.display, (o.width, o.height));
         }
-        self.frame = Some(Frame { image: f.image, ms });
-        self.dirty = false;
         Ok(())
+    }
+
+    fn set_title(&self) {
+        let Some(win) = &self.window else { return };
+        let tracer = self
+            .tracers
+            .iter()
+            .find(|(s, _, _)| *s == self.accel.structure_name())
+            .map_or(String::new(), |(_, t, _)| t.describe());
+        let s = self.refiner.summary();
+        let up = if s.uploaded_bytes > 0 {
+            format!(", {} B uploaded", s.uploaded_bytes)
+        } else {
+            String::new()
+        };
+        win.set_title(&format!(
+            "gridtrace: {} - {} {} - {:.1} ms{up} - {tracer}",
+            self.name,
+            self.mode.name(),
+            self.accel.name(),
+            s.ms
+        ));
+    }
+
+    /// Window pixel positions of the lights' gizmos (`None`: behind the camera).
+    fn gizmos(&self) -> Vec<Option<(f32, f32)>> {
+        let c = self.orbit.camera();
+        let size = (self.size.0.max(1) as f32, self.size.1.max(1) as f32);
+        self.lights
+            .iter()
+            .map(|l| project(&c, size, Vec3::from(l.position)).map(|(x, y, _)| (x, y)))
+            .collect()
+    }
+
+    fn hud(&self) -> Hud {
+        let structure = self.accel.structure_name();
+        let t = self.tracers.iter().find(|(s, _, _)| *s == structure).map(|(_, t, _)| t);
+        let (triangles, structure, memory_bytes, paper_model_bytes) = match t {
+            Some(t) => (
+                t.scene.accel.tris.len(),
+                crate::common::describe_structure(&t.scene.accel),
+                t.scene.memory().iter().map(|(_, b)| b).sum(),
+                t.scene.paper_memory_model(),
+            ),
+            None => (0, "(not prepared)".into(), 0, None),
+        };
+        Hud {
+            tracer: t.map_or("(none yet)".into(), |t| t.short()),
+            notes: self.notes.clone(),
+            presenter: self.presenter.as_ref().map_or(String::new(), |p| p.adapter.clone()),
+            scene: std::path::Path::new(&self.name)
+                .file_name()
+                .map_or(self.name.clone(), |f| f.to_string_lossy().into_owned()),
+            triangles,
+            structure,
+            memory_bytes,
+            paper_model_bytes,
+            mode: self.mode.name(),
+            accel: self.accel.name(),
+            traced: self.traced_size(),
+            window: self.size,
+            scale: self.scale(),
+            pixels_per_point: self.egui_ctx.pixels_per_point(),
+            last: (!self.history.is_empty()).then(|| self.refiner.summary().clone()),
+            progress: self.refiner.progress(),
+            lights: self.lights.iter().map(|l| Vec3::from(l.position)).collect(),
+            selected_light: self.selected_light,
+            fly_speed: self.fly_speed,
+            loading: self.loader.as_ref().map(|l| l.describe()),
+            error: self.drop_error.clone(),
+            animation: self.anim.as_ref().map(|p| {
+                format!(
+                    "t = {:.2} s, {}{}",
+                    p.time,
+                    if p.playing { "playing" } else { "paused" },
+                    p.last_update.as_ref().map_or(String::new(), |u| format!("; {u}"))
+                )
+            }),
+        }
+    }
+
+    /// Runs egui for this pass: the overlay's shapes, ready to draw.
+    fn overlay(&mut self) -> Option<present::Overlay> {
+        let window = self.window.clone()?;
+        let hud = self.hud();
+        let gizmos = self.gizmos();
+        let show = self.show_overlay;
+        let state = self.egui.as_mut()?;
+        let input = state.take_egui_input(&window);
+        let history = &self.history;
+        let out = self.egui_ctx.run_pass(input, |ctx| {
+            if show {
+                hud.show(ctx, history, &gizmos);
+            }
+        });
+        state.handle_platform_output(&window, out.platform_output);
+        let ppp = out.pixels_per_point;
+        Some(present::Overlay {
+            primitives: self.egui_ctx.tessellate(out.shapes, ppp),
+            textures: out.textures_delta,
+            pixels_per_point: ppp,
+        })
     }
 
     fn apply(&mut self, action: Action, el: &ActiveEventLoop) -> gridtrace::Result<()> {
@@ -205,16 +463,21 @@ impl App {
                 self.orbit.drag(dx, dy);
                 self.dirty = true;
             }
+            Action::Pan(dx, dy) => {
+                self.orbit.pan(dx, dy, self.size.1 as f32);
+                self.dirty = true;
+            }
             Action::Zoom(s) => {
                 self.orbit.zoom(s);
                 self.dirty = true;
             }
             Action::Fly(f, r, u) => {
-                self.orbit.fly(f, r, u);
+                let k = self.fly_speed;
+                self.orbit.fly(f * k, r * k, u * k);
                 self.dirty = true;
             }
             Action::Frame => {
-                let b = self.grid_scene.accel.bounds();
+                let b = self.src.bounds();
                 self.orbit.frame(b.min, b.max);
                 self.dirty = true;
             }
@@ -232,33 +495,162 @@ impl App {
                 }
                 self.resized(w, h);
             }
+            Action::NextLight => {
+                if !self.lights.is_empty() {
+                    self.selected_light = (self.selected_light + 1) % self.lights.len();
+                }
+            }
+            Action::DragLight(dx, dy) => {
+                let c = self.orbit.camera();
+                let size = (self.size.0.max(1) as f32, self.size.1.max(1) as f32);
+                if let Some(l) = self.lights.get_mut(self.selected_light)
+                    && let Some((x, y, z)) = project(&c, size, Vec3::from(l.position))
+                {
+                    l.position = unproject(&c, size, (x + dx, y + dy), z).to_array();
+                    self.dirty = true;
+                }
+            }
+            Action::MoveLight(f, r, u) => {
+                let offset = self.orbit.view_offset(f, r, u) * self.fly_speed;
+                if let Some(l) = self.lights.get_mut(self.selected_light) {
+                    l.position = (Vec3::from(l.position) + offset).to_array();
+                    self.dirty = true;
+                }
+            }
+            Action::ScaleStep(d) => {
+                let s = (self.scale_steps as i32 + d).clamp(0, MAX_SCALE_STEPS as i32) as u32;
+                self.dirty |= s != self.scale_steps;
+                self.scale_steps = s;
+            }
+            Action::SpeedStep(d) => {
+                self.fly_speed = (self.fly_speed * 2f32.powi(d)).clamp(1.0 / 64.0, 64.0);
+            }
+            Action::ToggleOverlay => self.show_overlay = !self.show_overlay,
+            Action::PlayPause => {
+                if let Some(p) = &mut self.anim {
+                    p.playing = !p.playing;
+                    p.last_tick = Instant::now();
+                }
+            }
+            Action::Drop(path) => {
+                println!("drop {}: loading", path.display());
+                self.loader = Some(loader::Loader::start(path, self.accel, self.grid_args.clone()));
+            }
             Action::Screenshot(path) => {
-                self.trace()?;
-                let Some(f) = &self.frame else {
+                self.trace(true)?;
+                let Some(image) = self.refiner.image() else {
                     return Err(gridtrace::Error::InvalidInput(
                         "screenshot: no frame yet (the window has no area)".into(),
                     ));
                 };
-                f.image.save_png(&path)?;
+                image.save_png(&path)?;
                 let c = self.orbit.camera();
-                let v = |v: glam::Vec3| format!("{:?},{:?},{:?}", v.x, v.y, v.z);
+                let v = |v: Vec3| format!("{:?},{:?},{:?}", v.x, v.y, v.z);
+                let lights: Vec<String> = self.lights.iter().map(light_arg).collect();
                 println!(
-                    "screenshot {} eye={} target={} up={} vfov={:?} mode={} accel={} res={}x{} ms={:.1}",
+                    "screenshot {} eye={} target={} up={} vfov={:?} lights={} mode={} accel={} res={}x{} ms={:.1}",
                     path.display(),
                     v(c.eye),
                     v(c.target),
                     v(c.up),
                     c.vfov_deg,
+                    lights.join(";"),
                     self.mode.name(),
                     self.accel.name(),
-                    f.image.width,
-                    f.image.height,
-                    f.ms
+                    image.width,
+                    image.height,
+                    self.refiner.summary().ms
                 );
+            }
+            Action::Capture(path) => {
+                self.trace(true)?;
+                // egui sizes a window from the pass before: one pass on screen first.
+                if let (Some(o), true) = (self.overlay(), self.presenter.is_some()) {
+                    self.presenter.as_mut().expect("checked").present(&o)?;
+                }
+                let overlay = self.overlay();
+                if let (Some(p), Some(o)) = (&mut self.presenter, overlay) {
+                    p.capture(&o)?
+                        .save(&path)
+                        .map_err(|e| gridtrace::Error::io(&path, std::io::Error::other(e)))?;
+                    println!("capture {}", path.display());
+                }
+            }
+            Action::OverlayText(path) => {
+                self.trace(true)?;
+                let text = self.hud().lines().join("\n") + "\n";
+                std::fs::write(&path, text).map_err(|e| gridtrace::Error::io(&path, e))?;
             }
             Action::Quit => el.exit(),
         }
         Ok(())
+    }
+
+    /// A finished load: the new scene replaces the old one; a failed one leaves it and says why.
+    fn loaded(&mut self, path: PathBuf, result: gridtrace::Result<loader::Loaded>) -> gridtrace::Result<()> {
+        match result {
+            Ok(l) => {
+                let mut notes = Vec::new();
+                let tracer = match Tracer::open(l.prepared, self.ctx.as_ref(), self.backend, &mut notes) {
+                    Ok(t) => t,
+                    Err(e) => return self.loaded(path, Err(e)),
+                };
+                println!(
+                    "drop {}: loaded {} triangles",
+                    path.display(),
+                    tracer.scene.accel.tris.len()
+                );
+                self.notes.extend(notes);
+                self.src = l.src;
+                self.name = l.name;
+                self.tracers = vec![(self.accel.structure_name(), tracer, 0.0)];
+                self.anim = None;
+                self.drop_error = None;
+                self.reset_view();
+                self.dirty = true;
+            }
+            Err(e) => {
+                // The scene on screen stays; the error is shown until the next drop.
+                eprintln!("drop {}: error: {e}", path.display());
+                self.drop_error = Some(e.to_string());
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks on a file being loaded; true while it is still loading.
+    fn poll_loader(&mut self) -> gridtrace::Result<bool> {
+        let Some(l) = &mut self.loader else {
+            return Ok(false);
+        };
+        match l.poll() {
+            None => Ok(true),
+            Some(result) => {
+                let path = l.path.clone();
+                self.loader = None;
+                self.loaded(path, result)?;
+                Ok(false)
+            }
+        }
+    }
+
+    /// Moves an animated scene on by the wall time since the last frame (a fixed step in
+    /// scripts).
+    fn tick_animation(&mut self) {
+        let scripted = self.script.is_some();
+        if let Some(p) = &mut self.anim
+            && p.playing
+        {
+            let now = Instant::now();
+            let dt = if scripted {
+                SCRIPT_FRAME_S
+            } else {
+                now.duration_since(p.last_tick).as_secs_f32().min(MAX_ANIM_STEP_S)
+            };
+            p.last_tick = now;
+            p.time += dt;
+            self.dirty = true;
+        }
     }
 
     fn resized(&mut self, w: u32, h: u32) {
@@ -276,17 +668,50 @@ impl App {
         }
     }
 
+    /// One pass: trace within the budget, draw the overlay, present.
     fn redraw(&mut self) -> gridtrace::Result<()> {
-        self.trace()?;
-        if let (Some(p), Some(f)) = (&mut self.presenter, &self.frame) {
-            p.present(&f.image)?;
+        if self.refiner.done() && !self.dirty {
+            self.tick_animation();
+        }
+        self.trace(false)?;
+        let overlay = self.overlay();
+        if let (Some(p), Some(o)) = (&mut self.presenter, overlay) {
+            p.present(&o)?;
         }
         Ok(())
+    }
+
+    /// Whether more passes are wanted without input: a frame being refined, a file loading,
+    /// an animation playing.
+    fn busy(&self) -> bool {
+        self.dirty || !self.refiner.done() || self.loader.is_some() || self.anim.as_ref().is_some_and(|p| p.playing)
     }
 
     fn fail(&mut self, el: &ActiveEventLoop, e: gridtrace::Error) {
         self.error = Some(e);
         el.exit();
+    }
+
+    /// The action of a key press, if any.
+    fn key_action(&mut self, key: &Key) -> Option<Action> {
+        let fast = if self.modifiers.shift_key() { 5.0 } else { 1.0 };
+        let name = match key {
+            Key::Character(c) if c.eq_ignore_ascii_case("p") => {
+                self.shots += 1;
+                return Some(Action::Screenshot(format!("gridtrace-view-{}.png", self.shots).into()));
+            }
+            Key::Character(c) => c.as_str(),
+            Key::Named(NamedKey::Escape) => "escape",
+            Key::Named(NamedKey::Space) => "space",
+            Key::Named(NamedKey::ArrowLeft) => "left",
+            Key::Named(NamedKey::ArrowRight) => "right",
+            Key::Named(NamedKey::ArrowUp) => "up",
+            Key::Named(NamedKey::ArrowDown) => "down",
+            Key::Named(NamedKey::PageUp) => "pageup",
+            Key::Named(NamedKey::PageDown) => "pagedown",
+            _ => return None,
+        };
+        key_action(name, fast)
     }
 }
 
@@ -303,7 +728,17 @@ impl ApplicationHandler for App {
             Err(e) => return self.fail(el, window_error("opening a window", e)),
         };
         match present::Presenter::new(el, window.clone()) {
-            Ok(p) => self.presenter = Some(p),
+            Ok(p) => {
+                self.egui = Some(egui_winit::State::new(
+                    self.egui_ctx.clone(),
+                    egui::ViewportId::ROOT,
+                    &window,
+                    Some(window.scale_factor() as f32),
+                    None,
+                    Some(p.max_side() as usize),
+                ));
+                self.presenter = Some(p);
+            }
             Err(e) => return self.fail(el, e),
         }
         let s = window.inner_size();
@@ -313,6 +748,16 @@ impl ApplicationHandler for App {
     }
 
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        // The overlay sees every event first; a press on it, or a drag that started there, is
+        // its own.
+        let mut consumed = false;
+        if let (Some(state), Some(win)) = (&mut self.egui, &self.window) {
+            let r = state.on_window_event(win, &event);
+            consumed = r.consumed;
+            if r.repaint {
+                win.request_redraw();
+            }
+        }
         let result = match event {
             WindowEvent::CloseRequested => {
                 el.exit();
@@ -322,49 +767,77 @@ impl ApplicationHandler for App {
                 self.resized(s.width, s.height);
                 Ok(())
             }
+            WindowEvent::ScaleFactorChanged { .. } => {
+                // egui follows the new scale (its state saw the event); the window's physical
+                // size arrives as a Resized event.
+                self.dirty = true;
+                Ok(())
+            }
             WindowEvent::RedrawRequested => self.redraw(),
+            WindowEvent::ModifiersChanged(m) => {
+                self.modifiers = m.state();
+                Ok(())
+            }
+            WindowEvent::DroppedFile(path) => self.apply(Action::Drop(path), el),
             WindowEvent::MouseInput {
                 state,
                 button: MouseButton::Left,
                 ..
             } => {
-                self.drag = (state == ElementState::Pressed).then_some(self.cursor);
+                if state == ElementState::Pressed && !consumed && !self.egui_ctx.is_pointer_over_egui() {
+                    // A press on a light's gizmo drags the light; anywhere else it orbits.
+                    let ppp = self.egui_ctx.pixels_per_point();
+                    let (cx, cy) = (self.cursor.0 as f32, self.cursor.1 as f32);
+                    let hit = self.gizmos().iter().position(|g| {
+                        g.is_some_and(|(x, y)| ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() <= GIZMO_RADIUS_PT * ppp)
+                    });
+                    let kind = match hit {
+                        Some(i) => {
+                            self.selected_light = i;
+                            Drag::Light
+                        }
+                        None => Drag::Orbit,
+                    };
+                    self.drag = Some((kind, self.cursor));
+                } else if state == ElementState::Released {
+                    self.drag = None;
+                }
+                Ok(())
+            }
+            WindowEvent::MouseInput {
+                state,
+                button: MouseButton::Right | MouseButton::Middle,
+                ..
+            } => {
+                self.drag = (state == ElementState::Pressed && !consumed && !self.egui_ctx.is_pointer_over_egui())
+                    .then_some((Drag::Pan, self.cursor));
                 Ok(())
             }
             WindowEvent::CursorMoved { position, .. } => {
                 self.cursor = (position.x, position.y);
                 match self.drag {
-                    Some((x, y)) => {
-                        self.drag = Some(self.cursor);
-                        self.apply(Action::Orbit((position.x - x) as f32, (position.y - y) as f32), el)
+                    Some((kind, (x, y))) => {
+                        self.drag = Some((kind, self.cursor));
+                        let (dx, dy) = ((position.x - x) as f32, (position.y - y) as f32);
+                        let action = match kind {
+                            Drag::Orbit => Action::Orbit(dx, dy),
+                            Drag::Pan => Action::Pan(dx, dy),
+                            Drag::Light => Action::DragLight(dx, dy),
+                        };
+                        self.apply(action, el)
                     }
                     None => Ok(()),
                 }
             }
-            WindowEvent::MouseWheel { delta, .. } => {
+            WindowEvent::MouseWheel { delta, .. } if !consumed => {
                 let steps = match delta {
                     MouseScrollDelta::LineDelta(_, y) => y,
                     MouseScrollDelta::PixelDelta(p) => (p.y / 40.0) as f32,
                 };
                 self.apply(Action::Zoom(steps), el)
             }
-            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
-                let action = match &event.logical_key {
-                    Key::Named(NamedKey::Escape) => Some(Action::Quit),
-                    Key::Character(c) => match c.as_str() {
-                        "g" | "G" => Some(Action::NextAccel),
-                        "f" | "F" => Some(Action::Frame),
-                        "p" | "P" => {
-                            self.shots += 1;
-                            Some(Action::Screenshot(format!("gridtrace-view-{}.png", self.shots).into()))
-                        }
-                        k => mode_key(k)
-                            .map(Action::SetMode)
-                            .or_else(|| fly_key(k).map(|(f, r, u)| Action::Fly(f, r, u))),
-                    },
-                    _ => None,
-                };
-                match action {
+            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed && !consumed => {
+                match self.key_action(&event.logical_key) {
                     Some(a) => self.apply(a, el),
                     None => Ok(()),
                 }
@@ -374,7 +847,7 @@ impl ApplicationHandler for App {
         if let Err(e) = result {
             return self.fail(el, e);
         }
-        if self.dirty
+        if self.busy()
             && let Some(w) = &self.window
         {
             w.request_redraw();
@@ -382,20 +855,39 @@ impl ApplicationHandler for App {
     }
 
     fn about_to_wait(&mut self, el: &ActiveEventLoop) {
-        // A script runs one action per pass of the event loop, after the frame before it was
-        // traced and presented, so a screenshot shows what a person would have seen.
+        let loading = match self.poll_loader() {
+            Ok(l) => l,
+            Err(e) => return self.fail(el, e),
+        };
         if self.script.is_none() || self.window.is_none() {
+            // Keep passes coming while there is work; a loader is polled ten times a second.
+            if loading {
+                el.set_control_flow(ControlFlow::WaitUntil(Instant::now() + Duration::from_millis(100)));
+                if let Some(w) = &self.window {
+                    w.request_redraw();
+                }
+            } else {
+                el.set_control_flow(ControlFlow::Wait);
+            }
             return;
         }
-        // Trace and present here rather than wait for a redraw request: a script must not
-        // depend on the window system's timing.
+        // A script runs one action per pass of the event loop, after a pass of tracing (within
+        // the budget, as for a person) and presenting; screenshots, captures and the overlay's
+        // text finish the frame first, so they show the frame a person would have seen once it
+        // was done. Trace and present here rather than wait for a redraw request: a script
+        // must not depend on the window system's timing. A file being loaded holds the script
+        // until it is in (or has failed).
         if let Err(e) = self.redraw() {
             return self.fail(el, e);
         }
+        el.set_control_flow(ControlFlow::Poll);
+        if loading {
+            std::thread::sleep(Duration::from_millis(10));
+            return;
+        }
         let next = self.script.as_mut().and_then(|s| s.pop()).unwrap_or(Action::Quit);
         if let Err(e) = self.apply(next, el) {
-            return self.fail(el, e);
+            self.fail(el, e);
         }
-        el.set_control_flow(ControlFlow::Poll);
     }
 }

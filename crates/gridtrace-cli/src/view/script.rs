@@ -3,18 +3,24 @@
 //!
 //! ```text
 //! # comments and blank lines are ignored
-//! key 2              # a key: 1-4 modes, g next structure, f frame the scene,
-//!                    # w/s a/d e/q fly forward/back, right/left, up/down
+//! key 2              # a key, as the window takes it: 1-4 modes, g next structure, f frame,
+//!                    # w/s a/d e/q fly, l next light, left/right/up/down/pageup/pagedown move
+//!                    # it, [ and ] resolution scale, - and = fly speed, h overlay, space play
 //! drag 40 -20        # orbit by a mouse drag of (dx, dy) pixels
+//! pan 10 5           # pan by a right-button drag of (dx, dy) pixels
+//! light 30 10        # drag the selected light's gizmo by (dx, dy) pixels
 //! zoom 2             # wheel steps, positive: closer
 //! resize 320 240     # window size in physical pixels
-//! screenshot a.png   # save the frame on screen, print its camera
+//! drop mesh.ply      # load a file as if dropped on the window (the script waits for it)
+//! screenshot a.png   # save the traced frame, print its camera, lights, mode and structure
+//! capture w.png      # save the window as it looks, overlay included
+//! overlay o.txt      # write the overlay's text to a file
 //! quit               # (implied at the end of the file)
 //! ```
 
 use std::path::Path;
 
-use super::controls::{Action, fly_key, mode_key};
+use super::controls::{Action, key_action};
 
 /// The actions of a script file; errors name the file and line.
 pub fn load(path: &Path) -> gridtrace::Result<Vec<Action>> {
@@ -49,17 +55,33 @@ pub fn parse(text: &str) -> Result<Vec<Action>, (usize, String)> {
         let action = match cmd {
             "key" => {
                 want(1)?;
-                match args[0] {
-                    "g" => Action::NextAccel,
-                    "f" => Action::Frame,
-                    k if fly_key(k).is_some() => {
-                        let (a, b, c) = fly_key(k).unwrap_or_default();
-                        Action::Fly(a, b, c)
-                    }
-                    k => Action::SetMode(
-                        mode_key(k).ok_or((i + 1, format!("unknown key '{k}' (1-4, g, f, w a s d q e)")))?,
+                key_action(args[0], 1.0).ok_or((
+                    i + 1,
+                    format!(
+                        "unknown key '{}' (1-4, g, f, w a s d q e, l, left right up down pageup pagedown, [ ], - =, h, space, escape)",
+                        args[0]
                     ),
-                }
+                ))?
+            }
+            "pan" => {
+                want(2)?;
+                Action::Pan(num(0)?, num(1)?)
+            }
+            "light" => {
+                want(2)?;
+                Action::DragLight(num(0)?, num(1)?)
+            }
+            "drop" => {
+                want(1)?;
+                Action::Drop(args[0].into())
+            }
+            "capture" => {
+                want(1)?;
+                Action::Capture(args[0].into())
+            }
+            "overlay" => {
+                want(1)?;
+                Action::OverlayText(args[0].into())
             }
             "drag" => {
                 want(2)?;
@@ -88,7 +110,9 @@ pub fn parse(text: &str) -> Result<Vec<Action>, (usize, String)> {
             _ => {
                 return Err((
                     i + 1,
-                    format!("unknown command '{cmd}' (key, drag, zoom, resize, screenshot, quit)"),
+                    format!(
+                        "unknown command '{cmd}' (key, drag, pan, light, zoom, resize, drop, screenshot, capture, overlay, quit)"
+                    ),
                 ));
             }
         };

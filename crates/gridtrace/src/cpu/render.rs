@@ -122,7 +122,8 @@ fn render_generic<C: Collect>(
     view.camera.validate().map_err(crate::Error::Scene)?;
     let t0 = Instant::now();
     let cam = view.camera.frame(opts.width, opts.height);
-    let mut img = Image::new(opts.width, opts.height);
+    let frame_rows = opts.row_range();
+    let mut img = Image::new(opts.width, frame_rows.len() as u32);
     const BAND: usize = 4;
     let width = opts.width as usize;
     let (rays, counters) = img
@@ -134,7 +135,7 @@ fn render_generic<C: Collect>(
             let mut total = TraversalCounters::default();
             for (i, px) in rows.iter_mut().enumerate() {
                 let x = (i % width) as u32;
-                let y = (band * BAND + i / width) as u32;
+                let y = frame_rows.start + (band * BAND + i / width) as u32;
                 let mut c = C::default();
                 *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
                 if opts.mode == Mode::Heat {

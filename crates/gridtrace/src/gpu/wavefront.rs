@@ -62,8 +62,10 @@ impl GpuRenderer {
         self.check_serves(opts.accel)?;
         camera.validate().map_err(Error::Scene)?;
         let n_lights = lights.len() as u32;
-        let pixels = opts.width * opts.height;
-        let tile = self.tile_capacity(n_lights).min(pixels);
+        // The frame's pixels are numbered row by row; a band of rows is a range of them.
+        let rows = opts.row_range();
+        let (first, pixels) = (rows.start * opts.width, rows.end * opts.width);
+        let tile = self.tile_capacity(n_lights).min(pixels - first);
         self.ensure_work(tile, n_lights);
         let t0 = Instant::now();
         let frame = camera.frame(opts.width, opts.height);
@@ -82,15 +84,15 @@ impl GpuRenderer {
                 uploaded += std::mem::size_of_val(lights) as u64;
             }
         }
-        let mut img = Image::new(opts.width, opts.height);
+        let mut img = Image::new(opts.width, rows.len() as u32);
         let mut stats = GpuRenderStats::default();
-        let mut offset = 0u32;
+        let mut offset = first;
         while offset < pixels {
             let tp = tile.min(pixels - offset);
             uploaded += self.write_pass_uniforms(offset, tp, opts.mode, opts.accel, opts.ablation);
             let out = self.run_tile(tp, opts.mode, opts.ablation)?;
             for (i, px) in out.accum.chunks_exact(4).enumerate() {
-                img.pixels[offset as usize + i] = Vec3::new(px[0], px[1], px[2]);
+                img.pixels[(offset - first) as usize + i] = Vec3::new(px[0], px[1], px[2]);
             }
             stats.render.rays.eye += tp as u64;
             stats.render.rays.shadow += out.counters[SLOT_SHADOW_TOTAL] as u64;

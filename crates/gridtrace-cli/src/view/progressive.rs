@@ -1,0 +1,348 @@
+//! Progressive frames: the viewer traces a frame in bands of rows, a few per pass of the event
+//! loop within a time budget, so input is handled between bands however slow the frame is (a
+//! huge mesh on a software adapter). When the last frame's pace says the whole frame will not
+//! fit the budget, a coarse preview (one ray per block of pixels) is traced first, so something
+//! of the new view shows at once; the full-resolution bands then replace it from the top.
+//!
+//! The bands of the full level are the same rows of the same frame (`RenderOptions::rows`), so
+//! the finished image is the one `render` makes, bit for bit on the CPU.
+
+use std::time::{Duration, Instant};
+
+use gridtrace::render::{RayCounts, linear_to_srgb8};
+use gridtrace::{Frame, Image, Mode, RenderOptions};
+
+/// Pixels a side of the coarsest preview block.
+const MAX_BLOCK: u32 = 16;
+/// The preview takes at most this share of the budget (the rest starts the full level).
+const PREVIEW_SHARE: f64 = 0.5;
+/// The first band of a frame when nothing is known of the pace yet: small enough to come
+/// back quickly even on a software adapter.
+const FIRST_BAND_PIXELS: u64 = 16 * 1024;
+
+/// What one finished frame took: the full-resolution level's bands, summed.
+#[derive(Debug, Clone, Default)]
+pub struct FrameSummary {
+    /// Wall time of the full level's bands (tracing plus read-back).
+    pub ms: f64,
+    /// Wall time from the start of the frame to its last band, preview included.
+    pub total_ms: f64,
+    pub rays: RayCounts,
+    /// GPU stage times summed over the bands (empty on the CPU).
+    pub stages_ms: Vec<(&'static str, f64)>,
+    pub from_timestamps: bool,
+    /// Bytes written to the device for the frame, all bands (camera, lights, pass uniforms).
+    pub uploaded_bytes: u64,
+    /// Bands the full level took.
+    pub bands: u32,
+}
+
+pub struct Refiner {
+    width: u32,
+    height: u32,
+    opts: RenderOptions,
+    /// Block sizes still to trace, coarse to fine; the last is 1.
+    levels: Vec<u32>,
+    level: usize,
+    /// The next row of the current level's image.
+    next_row: u32,
+    /// The frame on screen, RGBA8 (sRGB-encoded), `width` x `height`: finished rows of the full
+    /// level, the preview's blocks below them.
+    pub display: Vec<u8>,
+    /// The full level's linear image, filled band by band (heat: raw costs).
+    full: Image,
+    /// Largest raw cost seen in this frame (heat), to colour bands before the frame is done.
+    heat_max: f32,
+    /// Milliseconds per traced pixel, from the bands so far (kept across frames).
+    ms_per_pixel: Option<f64>,
+    started: Instant,
+    summary: FrameSummary,
+    /// The frame is finished; `summary` describes it.
+    done: bool,
+    /// `display` changed since `take_changed`.
+    changed: bool,
+}
+
+impl Refiner {
+    pub fn new() -> Refiner {
+        Refiner {
+            width: 0,
+            height: 0,
+            opts: RenderOptions::new(1, 1, Mode::Cast, gridtrace::AccelKind::Grid),
+            levels: Vec::new(),
+            level: 0,
+            next_row: 0,
+            display: Vec::new(),
+            full: Image::new(0, 0),
+            heat_max: 1.0,
+            ms_per_pixel: None,
+            started: Instant::now(),
+            summary: FrameSummary::default(),
+            done: true,
+            changed: false,
+        }
+    }
+
+    /// Starts a new frame of `opts` (its size, mode and structure). A preview level is planned
+    /// when the pace of the frames before says the whole frame would take over `budget`.
+    pub fn restart(&mut self, opts: RenderOptions, budget: Duration) {
+        let (w, h) = (opts.width, opts.height);
+        if (w, h) != (self.width, self.height) {
+            self.display = vec![0; (w * h * 4) as usize];
+            for px in self.display.chunks_exact_mut(4) {
+                px[3] = 255;
+            }
+        }
+        self.width = w;
+        self.height = h;
+        self.opts = RenderOptions { rows: None, ..opts };
+        self.full = Image::new(w, h);
+        self.heat_max = 1.0;
+        self.levels = vec![1];
+        if let Some(pace) = self.ms_per_pixel {
+            let budget_ms = budget.as_secs_f64() * 1e3;
+            let full_ms = pace * (w as f64) * (h as f64);
+            if full_ms > budget_ms {
+                // The finest block whose preview fits its share of the budget (a block of b x b
+                // pixels costs one ray's work).
+                let mut b = 2;
+                while b < MAX_BLOCK && full_ms / (b * b) as f64 > budget_ms * PREVIEW_SHARE {
+                    b *= 2;
+                }
+                self.levels = vec![b, 1];
+            }
+        }
+        self.level = 0;
+        self.next_row = 0;
+        self.started = Instant::now();
+        self.summary = FrameSummary::default();
+        self.done = false;
+    }
+
+    pub fn done(&self) -> bool {
+        self.done
+    }
+
+    /// The finished frame's full image (heat: coloured), or `None` while it is being traced.
+    pub fn image(&self) -> Option<Image> {
+        self.done.then(|| {
+            if self.opts.mode == Mode::Heat {
+                self.full.heat_to_color()
+            } else {
+                self.full.clone()
+            }
+        })
+    }
+
+    /// The last finished frame's figures (valid once `done`).
+    pub fn summary(&self) -> &FrameSummary {
+        &self.summary
+    }
+
+    /// The options of the frame being traced (or last traced).
+    pub fn opts(&self) -> &RenderOptions {
+        &self.opts
+    }
+
+    /// Whether the displayed image changed since the last call.
+    pub fn take_changed(&mut self) -> bool {
+        std::mem::take(&mut self.changed)
+    }
+
+    /// The share of the frame's full level traced, 0..=1.
+    pub fn progress(&self) -> f64 {
+        if self.done {
+            return 1.0;
+        }
+        if self.level + 1 < self.levels.len() {
+            return 0.0;
+        }
+        self.next_row as f64 / self.height.max(1) as f64
+    }
+
+    /// Traces bands with `trace` until `budget` is spent (at least one band, so every call
+    /// makes progress) or the frame is finished.
+    pub fn step(
+        &mut self,
+        budget: Duration,
+        trace: &mut dyn FnMut(&RenderOptions) -> gridtrace::Result<Frame>,
+    ) -> gridtrace::Result<()> {
+        let t0 = Instant::now();
+        while !self.done {
+            let left_ms = (budget.saturating_sub(t0.elapsed())).as_secs_f64() * 1e3;
+            self.band(left_ms, trace)?;
+            if t0.elapsed() >= budget {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Traces the rest of the frame, whatever it takes (a screenshot, a headless frame).
+    pub fn finish(
+        &mut self,
+        trace: &mut dyn FnMut(&RenderOptions) -> gridtrace::Result<Frame>,
+    ) -> gridtrace::Result<()> {
+        while !self.done {
+            self.band(f64::INFINITY, trace)?;
+        }
+        Ok(())
+    }
+
+    /// One band of the current level, sized to take about `left_ms` at the measured pace.
+    fn band(
+        &mut self,
+        left_ms: f64,
+        trace: &mut dyn FnMut(&RenderOptions) -> gridtrace::Result<Frame>,
+    ) -> gridtrace::Result<()> {
+        let block = self.levels[self.level];
+        let (lw, lh) = (self.width.div_ceil(block), self.height.div_ceil(block));
+        let rows_left = lh - self.next_row;
+        let rows = match self.ms_per_pixel {
+            _ if left_ms.is_infinite() => rows_left,
+            Some(pace) if pace > 0.0 => (left_ms / (pace * lw as f64)).floor() as u32,
+            _ => (FIRST_BAND_PIXELS / lw as u64) as u32,
+        }
+        .clamp(1, rows_left);
+        let first = self.next_row;
+        let opts = RenderOptions {
+            width: lw,
+            height: lh,
+            ..self.opts
+        }
+        .band(first, first + rows);
+        let t0 = Instant::now();
+        let frame = trace(&opts)?;
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        // The pace: a running mean that follows a change of view within a few bands.
+        let pace = ms / (lw as f64 * rows as f64);
+        self.ms_per_pixel = Some(match self.ms_per_pixel {
+            Some(p) => 0.5 * p + 0.5 * pace,
+            None => pace,
+        });
+        self.paint(block, first, &frame.image);
+        if block == 1 {
+            let at = (first * self.width) as usize;
+            self.full.pixels[at..at + frame.image.pixels.len()].copy_from_slice(&frame.image.pixels);
+            let s = &mut self.summary;
+            s.ms += ms;
+            s.rays += frame.stats.rays;
+            s.bands += 1;
+            if let Some(g) = &frame.gpu {
+                s.uploaded_bytes += g.uploaded_bytes;
+                s.from_timestamps = g.timings.from_timestamps;
+                for (k, v) in &g.timings.stages_ms {
+                    match s.stages_ms.iter_mut().find(|(n, _)| n == k) {
+                        Some((_, t)) => *t += v,
+                        None => s.stages_ms.push((k, *v)),
+                    }
+                }
+            }
+        }
+        self.next_row += rows;
+        if self.next_row == lh {
+            self.level += 1;
+            self.next_row = 0;
+            if self.level == self.levels.len() {
+                self.done = true;
+                self.summary.total_ms = self.started.elapsed().as_secs_f64() * 1e3;
+                if self.opts.mode == Mode::Heat {
+                    // Colour the whole frame by its own maximum, as `render` does.
+                    let img = self.full.heat_to_color();
+                    self.paint(1, 0, &img);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes a band of a level's image (rows from `first`, blocks of `block` pixels) into the
+    /// display.
+    fn paint(&mut self, block: u32, first: u32, band: &Image) {
+        let heat;
+        let band = if self.opts.mode == Mode::Heat && !self.done {
+            self.heat_max = self.heat_max.max(band.heat_max());
+            heat = band.heat_to_color_scaled(self.heat_max);
+            &heat
+        } else {
+            band
+        };
+        let (w, h) = (self.width, self.height);
+        for by in 0..band.height {
+            let y0 = (first + by) * block;
+            for y in y0..(y0 + block).min(h) {
+                for x in 0..w {
+                    let p = band.pixels[(by * band.width + x / block) as usize];
+                    let i = ((y * w + x) * 4) as usize;
+                    self.display[i] = linear_to_srgb8(p.x);
+                    self.display[i + 1] = linear_to_srgb8(p.y);
+                    self.display[i + 2] = linear_to_srgb8(p.z);
+                }
+            }
+        }
+        self.changed = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gridtrace::scene::builtin;
+    use gridtrace::{AccelKind, Resolution};
+
+    /// Whatever the budget, bands and previews, the finished frame is `render`'s image bit for
+    /// bit (CPU), and the display shows it; heat frames are coloured by the whole frame's
+    /// maximum as `render` colours them.
+    #[test]
+    fn refined_frames_equal_render() {
+        let scene = builtin::scene("mirror-spheres")
+            .unwrap()
+            .prepare(Resolution::default())
+            .unwrap();
+        let mut trace = |o: &RenderOptions| -> gridtrace::Result<Frame> {
+            let (image, stats) = gridtrace::cpu::render_view(&scene, &scene.camera, &scene.lights, o, None)?;
+            Ok(Frame {
+                image,
+                stats,
+                gpu: None,
+            })
+        };
+        let mut r = Refiner::new();
+        for (mode, budget_us) in [
+            (Mode::Shadow, 0),
+            (Mode::Trace, 50),
+            (Mode::Heat, 0),
+            (Mode::Cast, 1_000_000),
+        ] {
+            let opts = RenderOptions::new(61, 47, mode, AccelKind::Grid);
+            r.restart(opts, Duration::from_micros(budget_us));
+            let mut steps = 0;
+            while !r.done() {
+                r.step(Duration::from_micros(budget_us), &mut trace).unwrap();
+                steps += 1;
+                assert!(steps < 10_000);
+            }
+            let (want, stats) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
+            let want = if mode == Mode::Heat { want.heat_to_color() } else { want };
+            let got = r.image().unwrap();
+            assert!(got == want, "{} differs from render", mode.name());
+            let rgba: Vec<u8> = want.to_rgb8().chunks(3).flat_map(|c| [c[0], c[1], c[2], 255]).collect();
+            assert!(r.display == rgba, "{}: the display is not the frame", mode.name());
+            assert_eq!(r.summary().rays, stats.rays);
+            if budget_us == 0 {
+                // A zero budget traces one band a step: the frame took several.
+                assert!(steps > 1, "{}", mode.name());
+            }
+        }
+        // The pace is known now: a zero budget plans a preview before the full level.
+        r.restart(
+            RenderOptions::new(61, 47, Mode::Shadow, AccelKind::Grid),
+            Duration::ZERO,
+        );
+        assert_eq!(r.levels.len(), 2);
+        r.step(Duration::ZERO, &mut trace).unwrap();
+        assert_eq!(r.progress(), 0.0, "the preview's band comes first");
+        r.finish(&mut trace).unwrap();
+        assert!(r.done() && r.progress() == 1.0);
+    }
+}
