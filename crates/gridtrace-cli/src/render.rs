@@ -260,7 +260,7 @@ fn parse_light(s: &str) -> Result<(Vec3, Option<Vec3>), String> {
 
 /// The camera `turn` of the way (0..1) round its orbit: rotated about the up axis through the
 /// target, at the same distance and height.
-fn orbit(camera: &gridtrace::scene::Camera, turn: f32) -> gridtrace::scene::Camera {
+pub(crate) fn orbit(camera: &gridtrace::scene::Camera, turn: f32) -> gridtrace::scene::Camera {
     let up = camera.up.normalize_or_zero();
     let rot = glam::Quat::from_axis_angle(up, turn * std::f32::consts::TAU);
     gridtrace::scene::Camera {

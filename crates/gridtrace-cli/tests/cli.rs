@@ -355,7 +355,7 @@ fn help_shows_formats_and_values() {
         "--eye <X,Y,Z>",
         "--target <X,Y,Z>",
         "--up <X,Y,Z>",
-        "--light <X,Y,Z>",
+        "--light <X,Y,Z[:R,G,B]>",
         "--res <WxH|N>",
         "N for a square N x N image",
         "[possible values: grid, pc, bvh, irregular]",

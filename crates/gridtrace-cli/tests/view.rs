@@ -213,11 +213,11 @@ fn dropped_files_and_the_overlay() {
         }
         // The bad file: its error names the file and line, the scene stays.
         assert!(
-            text.contains(&format!("drop {}: error: {}:4", bad.display(), bad.display())),
+            text.contains(&format!("drop {}: error: {}:line 4", bad.display(), bad.display())),
             "{text}"
         );
         assert!(
-            o2.contains("error") && o2.contains("bad.obj:4") && o2.contains("knot-box"),
+            o2.contains("error") && o2.contains("bad.obj:line 4") && o2.contains("knot-box"),
             "{o2}"
         );
         equals_render(&d2, backend, &["--scene", "knot-box"], &shots[0]);

@@ -63,6 +63,14 @@ fn prepared(scene: &PreparedScene, res: Resolution) -> Prepared {
     p
 }
 
+/// The built-in scene `name` at the default resolution, prepared for every structure with its
+/// renderer; `None` when the GPU tests are skipped.
+fn builtin_prepared(name: &str) -> Option<Prepared> {
+    let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
+    let p = prepared(&scene, Resolution::default());
+    p[0].1.is_some().then_some(p)
+}
+
 /// The prepared scene that serves `kind`, and its renderer.
 fn for_kind(p: &mut Prepared, kind: AccelKind) -> (&PreparedScene, &mut GpuRenderer) {
     let (s, g) = p
@@ -142,15 +150,10 @@ fn per_ray_sparse_room_pc() {
 #[test]
 fn uploads_serve_their_kinds_only() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
-    let mut p = prepared(&scene, Resolution::default());
-    if p[0].1.is_none() {
+    let Some(mut p) = builtin_prepared("knot-box") else {
         return;
-    }
-    let rays = ray_set(&scene.accel, 100, 5);
+    };
+    let rays = ray_set(&p[0].0.accel, 100, 5);
     for (s, g) in &mut p {
         let gpu = g.as_mut().unwrap();
         for kind in AccelKind::ALL {
@@ -283,14 +286,9 @@ fn dynamic_camera_and_lights() {
 fn ablations_keep_images() {
     use gridtrace::render::Ablation;
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = builtin::scene("mirror-spheres")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
-    let mut p = prepared(&scene, Resolution::default());
-    if p[0].1.is_none() {
+    let Some(mut p) = builtin_prepared("mirror-spheres") else {
         return;
-    }
+    };
     for accel in AccelKind::ALL {
         let (scene, gpu) = for_kind(&mut p, accel);
         for mode in [Mode::Shadow, Mode::Trace, Mode::Heat] {
@@ -365,14 +363,9 @@ fn per_frame_uploads_are_uniforms_only() {
 #[test]
 fn bands_equal_rows_of_the_frame() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = builtin::scene("mirror-spheres")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
-    let mut p = prepared(&scene, Resolution::default());
-    if p[0].1.is_none() {
+    let Some(mut p) = builtin_prepared("mirror-spheres") else {
         return;
-    }
+    };
     let (w, h) = (53u32, 41u32);
     for accel in AccelKind::ALL {
         let (scene, gpu) = for_kind(&mut p, accel);

@@ -8,19 +8,11 @@ use std::time::Instant;
 
 use glam::{Quat, Vec3};
 use gridtrace::RenderOptions;
-use gridtrace::scene::{Camera, PointLight, Scene};
+use gridtrace::scene::{PointLight, Scene};
 
 use super::ViewArgs;
+use crate::render::orbit;
 use crate::tracer::Tracer;
-
-/// The camera `turn` of the way (0..1) round its orbit about the up axis through its target.
-fn orbit(camera: &Camera, turn: f32) -> Camera {
-    let rot = Quat::from_axis_angle(camera.up.normalize_or(Vec3::Y), turn * std::f32::consts::TAU);
-    Camera {
-        eye: camera.target + rot * (camera.eye - camera.target),
-        ..*camera
-    }
-}
 
 /// The lights `turn` of the way round the other way, about the camera's up axis through `centre`.
 fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Vec<PointLight> {

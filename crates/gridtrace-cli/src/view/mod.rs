@@ -566,11 +566,11 @@ impl App {
                 self.trace(true)?;
                 // egui sizes a window from the pass before: one pass on screen first.
                 if let (Some(o), true) = (self.overlay(), self.presenter.is_some()) {
-                    self.presenter.as_mut().expect("checked").present(&o)?;
+                    self.presenter.as_mut().expect("checked").present(o)?;
                 }
                 let overlay = self.overlay();
                 if let (Some(p), Some(o)) = (&mut self.presenter, overlay) {
-                    p.capture(&o)?
+                    p.capture(o)?
                         .save(&path)
                         .map_err(|e| gridtrace::Error::io(&path, std::io::Error::other(e)))?;
                     println!("capture {}", path.display());
@@ -676,7 +676,7 @@ impl App {
         self.trace(false)?;
         let overlay = self.overlay();
         if let (Some(p), Some(o)) = (&mut self.presenter, overlay) {
-            p.present(&o)?;
+            p.present(o)?;
         }
         Ok(())
     }

@@ -159,20 +159,13 @@ impl Presenter {
             return;
         }
         if self.image.as_ref().is_none_or(|t| t.size != (w, h)) {
-            let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("traced image"),
-                size: wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: self.image_format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            });
+            let texture = texture_2d(
+                &self.device,
+                "traced image",
+                (w, h),
+                self.image_format,
+                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            );
             let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
             let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("traced image"),
@@ -216,8 +209,11 @@ impl Presenter {
         );
     }
 
-    /// Draws the image and the overlay into the window.
-    pub fn present(&mut self, overlay: &Overlay) -> gridtrace::Result<()> {
+    /// Draws the image and the overlay into the window. egui's texture changes (its font atlas
+    /// among them) are applied even when there is nothing to draw on (a minimised window):
+    /// egui sends each change once.
+    pub fn present(&mut self, mut overlay: Overlay) -> gridtrace::Result<()> {
+        self.apply_textures(&mut overlay);
         if !self.live {
             return Ok(());
         }
@@ -235,31 +231,25 @@ impl Presenter {
         };
         let view = tex.texture.create_view(&wgpu::TextureViewDescriptor::default());
         let size = [self.config.width, self.config.height];
-        self.draw(&view, size, overlay);
+        self.draw(&view, size, &overlay);
         self.queue.present(tex);
         Ok(())
     }
 
     /// The window as it looks (image and overlay), drawn into a texture of its own and read
     /// back: RGBA8, `width` x `height` of the surface.
-    pub fn capture(&mut self, overlay: &Overlay) -> gridtrace::Result<image::RgbaImage> {
+    pub fn capture(&mut self, mut overlay: Overlay) -> gridtrace::Result<image::RgbaImage> {
+        self.apply_textures(&mut overlay);
         let (w, h) = (self.config.width, self.config.height);
-        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("window capture"),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: self.config.format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        let texture = texture_2d(
+            &self.device,
+            "window capture",
+            (w, h),
+            self.config.format,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        self.draw(&view, [w, h], overlay);
+        self.draw(&view, [w, h], &overlay);
         // Rows of a texture copy are padded to 256 bytes.
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -328,11 +318,6 @@ impl Presenter {
             size_in_pixels: size,
             pixels_per_point: overlay.pixels_per_point,
         };
-        for (id, deltas) in &overlay.textures.set {
-            for delta in deltas {
-                self.egui.update_texture(&self.device, &self.queue, *id, delta);
-            }
-        }
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("present") });
@@ -366,10 +351,43 @@ impl Presenter {
             self.egui.render(&mut pass, &overlay.primitives, &screen);
         }
         self.queue.submit(extra.into_iter().chain([enc.finish()]));
+    }
+
+    /// Applies egui's texture changes (new, changed, freed) and clears them.
+    fn apply_textures(&mut self, overlay: &mut Overlay) {
+        for (id, deltas) in &overlay.textures.set {
+            for delta in deltas {
+                self.egui.update_texture(&self.device, &self.queue, *id, delta);
+            }
+        }
         for id in &overlay.textures.free {
             self.egui.free_texture(id);
         }
+        overlay.textures.clear();
     }
+}
+
+fn texture_2d(
+    device: &wgpu::Device,
+    label: &str,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
 }
 
 /// The pipeline that draws the traced image over the whole target (`blit.wgsl`).
