@@ -38,7 +38,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let (ctx, mut notes) = a.backend.open_device()?;
+    let (ctx, mut notes) = super::open_device(a.backend)?;
     let mut tracer = Tracer::open(scene, ctx.as_ref(), a.backend, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");

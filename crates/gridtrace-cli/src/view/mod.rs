@@ -111,7 +111,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         Some(p) => Some(script::load(p)?),
         None => None,
     };
-    let (ctx, notes) = a.backend.open_device()?;
+    let (ctx, notes) = open_device(a.backend)?;
     for n in &notes {
         eprintln!("note: {n}");
     }
@@ -169,6 +169,23 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     match app.error {
         Some(e) => Err(e),
         None => Ok(()),
+    }
+}
+
+/// The device the viewer traces on. With `auto`, a software adapter alone (lavapipe) is passed
+/// over for the CPU tracer: on the same cores it is about 5x slower (Stanford Bunny, 1024x768,
+/// docs/benchmarks.md), and the viewer is about speed; `--backend gpu` still takes it.
+fn open_device(backend: Backend) -> gridtrace::Result<(Option<Arc<GpuContext>>, Vec<String>)> {
+    let (ctx, mut notes) = backend.open_device()?;
+    match ctx {
+        Some(c) if backend == Backend::Auto && c.is_software() => {
+            notes.push(format!(
+                "the only adapter is a software rasteriser ({}), slower than the CPU tracer on the same cores: tracing on the CPU (--backend gpu to use it)",
+                c.info.name
+            ));
+            Ok((None, notes))
+        }
+        ctx => Ok((ctx, notes)),
     }
 }
 
@@ -413,7 +430,6 @@ impl App {
             mode: self.mode.name(),
             accel: self.accel.name(),
             traced: self.traced_size(),
-            window: self.size,
             scale: self.scale(),
             pixels_per_point: self.egui_ctx.pixels_per_point(),
             last: (!self.history.is_empty()).then(|| self.refiner.summary().clone()),

@@ -12,7 +12,9 @@ use super::progressive::FrameSummary;
 use crate::common::fmt_bytes;
 
 /// Frames the graph shows.
-pub const HISTORY: usize = 240;
+pub const HISTORY: usize = 120;
+/// Points of width per frame in the graph.
+const GRAPH_STEP_PT: f32 = 2.0;
 
 /// Everything the overlay shows, gathered by the app each pass.
 pub struct Hud {
@@ -30,9 +32,8 @@ pub struct Hud {
     pub paper_model_bytes: Option<usize>,
     pub mode: &'static str,
     pub accel: &'static str,
-    /// Traced image size, window size (physical pixels) and the resolution scale.
+    /// Traced image size (physical pixels) and the resolution scale.
     pub traced: (u32, u32),
-    pub window: (u32, u32),
     pub scale: f32,
     pub pixels_per_point: f32,
     /// The last finished frame.
@@ -87,13 +88,11 @@ impl Hud {
         }
         l.push(mem);
         l.push(format!(
-            "view      {} {}, {}x{} traced ({}x{} window, scale 1/{}, {:.2} px/pt)",
+            "view      {} {}, {}x{} traced, scale 1/{}, {:.2} px/pt",
             self.mode,
             self.accel,
             self.traced.0,
             self.traced.1,
-            self.window.0,
-            self.window.1,
             (1.0 / self.scale).round(),
             self.pixels_per_point
         ));
@@ -195,7 +194,7 @@ impl Hud {
         }
         egui::Window::new("gridtrace")
             .default_pos(pos2(8.0, 8.0))
-            .default_width(440.0)
+            .default_width(460.0)
             .resizable(false)
             .frame(egui::Frame::window(&ctx.global_style()).fill(Color32::from_black_alpha(190)))
             .show(ctx, |ui| {
@@ -226,9 +225,11 @@ impl Hud {
 /// A light's gizmo: a circle of this radius (points); a press within it drags the light.
 pub const GIZMO_RADIUS_PT: f32 = 9.0;
 
-/// The last frames' times as a line, with the slowest's figure and a 60 fps mark when it fits.
+/// The last frames' times, newest on the right, with the slowest's figure and a 60 fps mark
+/// when it is in range.
 fn graph(ui: &mut egui::Ui, history: &VecDeque<f64>) {
-    let (rect, _) = ui.allocate_exact_size(vec2(HISTORY as f32, 60.0), egui::Sense::hover());
+    let width = HISTORY as f32 * GRAPH_STEP_PT;
+    let (rect, _) = ui.allocate_exact_size(vec2(width, 60.0), egui::Sense::hover());
     let p = ui.painter_at(rect);
     p.rect_filled(rect, 2.0, Color32::from_black_alpha(120));
     let max = history.iter().copied().fold(1.0f64, f64::max) * 1.1;
@@ -240,21 +241,30 @@ fn graph(ui: &mut egui::Ui, history: &VecDeque<f64>) {
             Stroke::new(1.0, Color32::from_rgb(80, 160, 80)),
         );
     }
+    let first_x = rect.right() - (history.len().max(1) - 1) as f32 * GRAPH_STEP_PT;
     let pts: Vec<egui::Pos2> = history
         .iter()
         .enumerate()
-        .map(|(i, ms)| pos2(rect.left() + i as f32, y(*ms)))
+        .map(|(i, ms)| pos2(first_x + i as f32 * GRAPH_STEP_PT, y(*ms)))
         .collect();
+    let colour = Color32::from_rgb(120, 190, 255);
     if pts.len() > 1 {
-        p.add(egui::Shape::line(
-            pts,
-            Stroke::new(1.5, Color32::from_rgb(120, 190, 255)),
-        ));
+        p.add(egui::Shape::line(pts.clone(), Stroke::new(1.5, colour)));
+    }
+    if pts.len() < 30 {
+        // Few frames: points, so each one shows.
+        for q in &pts {
+            p.circle_filled(*q, 2.0, colour);
+        }
     }
     p.text(
-        rect.left_top() + vec2(4.0, 2.0),
-        Align2::LEFT_TOP,
-        format!("frame ms (max {:.1})", history.iter().copied().fold(0.0f64, f64::max)),
+        rect.left_bottom() + vec2(4.0, -2.0),
+        Align2::LEFT_BOTTOM,
+        format!(
+            "frame ms: last {:.1}, max {:.1}",
+            history.back().copied().unwrap_or(0.0),
+            history.iter().copied().fold(0.0f64, f64::max)
+        ),
         FontId::monospace(11.0),
         Color32::from_gray(200),
     );
