@@ -248,3 +248,38 @@ fn bad_script_names_file_and_line() {
         "{text}"
     );
 }
+
+/// An animated scene plays in the window (a fixed step per presented frame in scripts), space
+/// pauses it, and a structure opened later starts at the animation's time.
+#[test]
+fn animated_scene_plays_and_pauses() {
+    if !have_display() {
+        return;
+    }
+    let (d, text, _) = run_script(
+        "anim",
+        "cpu",
+        &["--scene", "bouncing-spheres", "--res", "64x48", "--accel", "pc"],
+        "overlay a1.txt\nkey 2\noverlay a2.txt\nkey space\noverlay a3.txt\nkey 1\noverlay a4.txt\nkey g\noverlay a5.txt\n",
+    );
+    let time = |f: &str| -> (f32, String) {
+        let o = std::fs::read_to_string(d.join(f)).unwrap();
+        let line = o
+            .lines()
+            .find(|l| l.starts_with("animation"))
+            .unwrap_or_else(|| panic!("no animation line in {f}: {o}\n{text}"))
+            .to_string();
+        let t: f32 = line.split_whitespace().nth(3).unwrap().parse().unwrap();
+        (t, line)
+    };
+    let (t1, _) = time("a1.txt");
+    let (t2, l2) = time("a2.txt");
+    let (t3, l3) = time("a3.txt");
+    let (t4, l4) = time("a4.txt");
+    let (t5, l5) = time("a5.txt");
+    assert!(t2 > t1 && l2.contains("playing"), "{l2}");
+    assert!(l3.contains("paused") && l4.contains("paused"), "{l3} / {l4}");
+    assert_eq!((t3, t4, t5), (t3, t3, t3), "{l5}");
+    // The BVH, opened while paused, was refitted to the paused pose.
+    assert!(l5.contains("refit"), "{l5}");
+}
