@@ -191,21 +191,22 @@ impl Grid {
             inv_cell_size,
             margin,
         } = lattice;
-        let keys = overlap_pairs(tris, bounds, dims, margin);
-
+        let pairs = overlap_pairs_by_triangle(tris, bounds, dims, margin);
         let n_cells = (dims.x * dims.y * dims.z) as usize;
-        let mut cells = vec![Cell::zeroed(); n_cells];
-        let refs: Vec<u32> = keys.par_iter().map(|k| *k as u32).collect();
-        let mut i = 0;
-        while i < keys.len() {
-            let cell = (keys[i] >> 32) as usize;
-            let start = i;
-            while i < keys.len() && (keys[i] >> 32) as usize == cell {
-                i += 1;
-            }
-            cells[cell].start = start as u32;
-            cells[cell].count = (i - start) as u32;
-        }
+        let (counts, refs) = bucket_by_cell(&pairs, n_cells, |k| k as u32);
+        let mut start = 0u32;
+        let mut cells: Vec<Cell> = counts
+            .iter()
+            .map(|&count| {
+                let c = Cell {
+                    start,
+                    count,
+                    ..Cell::zeroed()
+                };
+                start += count;
+                c
+            })
+            .collect();
         let occupied: Vec<bool> = cells.iter().map(|c| c.count > 0).collect();
         let dist = chebyshev_distance_transform(dims.to_array(), &occupied);
         for (c, d) in cells.iter_mut().zip(dist) {
@@ -260,52 +261,84 @@ pub(crate) fn cell_margin(cell_size: Vec3, bounds: Aabb) -> Vec3 {
 /// ascending triangles within a cell. The uniform grid and the irregular grid's top level share
 /// it.
 pub(crate) fn overlap_pairs(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margin: Vec3) -> Vec<u64> {
+    let pairs = overlap_pairs_by_triangle(tris, bounds, dims, margin);
+    let n_cells = (dims.x as usize) * (dims.y as usize) * (dims.z as usize);
+    bucket_by_cell(&pairs, n_cells, |k| k).1
+}
+
+/// The pairs of `overlap_pairs` in triangle order (each triangle's cells in x, y, z order),
+/// chunk by chunk: found on all cores, in the order a sequential loop would find them.
+fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margin: Vec3) -> Vec<Vec<u64>> {
+    /// Triangles per task: enough to amortise a task, few enough to balance two to many cores.
+    const CHUNK: usize = 2048;
     let cell_size = bounds.extent() / dims.as_vec3();
     let inv_cell_size = cell_size.recip();
-    let keys: Vec<u64> = tris
-        .par_iter()
+    tris.par_chunks(CHUNK)
         .enumerate()
-        .fold(Vec::new, |mut out, (i, tri)| {
-            let [a, b, c] = tri.vertices();
-            // At least the triangle test's own slack (large triangles), else the cell margin.
-            let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-            let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
-            let lo = lo - margin;
-            let hi = hi + margin;
-            let clamp = |p: Vec3| {
-                ((p - bounds.min) * inv_cell_size)
-                    .floor()
-                    .max(Vec3::ZERO)
-                    .as_uvec3()
-                    .min(dims - 1)
-            };
-            let (c0, c1) = (clamp(lo), clamp(hi));
-            let single = c0 == c1;
-            for z in c0.z..=c1.z {
-                for y in c0.y..=c1.y {
-                    for x in c0.x..=c1.x {
-                        let cell = UVec3::new(x, y, z);
-                        let box_min = bounds.min + cell.as_vec3() * cell_size;
-                        let half = cell_size * 0.5 + margin;
-                        if single || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c) {
-                            let idx = x as u64 + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
-                            out.push(idx << 32 | i as u64);
+        .map(|(chunk, tris)| {
+            let mut out = Vec::with_capacity(tris.len() * 4);
+            for (j, tri) in tris.iter().enumerate() {
+                let i = chunk * CHUNK + j;
+                let [a, b, c] = tri.vertices();
+                // At least the triangle test's own slack (large triangles), else the cell margin.
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
+                let lo = lo - margin;
+                let hi = hi + margin;
+                let clamp = |p: Vec3| {
+                    ((p - bounds.min) * inv_cell_size)
+                        .floor()
+                        .max(Vec3::ZERO)
+                        .as_uvec3()
+                        .min(dims - 1)
+                };
+                let (c0, c1) = (clamp(lo), clamp(hi));
+                let single = c0 == c1;
+                for z in c0.z..=c1.z {
+                    for y in c0.y..=c1.y {
+                        for x in c0.x..=c1.x {
+                            let cell = UVec3::new(x, y, z);
+                            let box_min = bounds.min + cell.as_vec3() * cell_size;
+                            let half = cell_size * 0.5 + margin;
+                            if single || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c) {
+                                let idx = x as u64 + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
+                                out.push(idx << 32 | i as u64);
+                            }
                         }
                     }
                 }
             }
             out
         })
-        .reduce(Vec::new, |mut a, mut b| {
-            if a.len() < b.len() {
-                std::mem::swap(&mut a, &mut b);
-            }
-            a.extend_from_slice(&b);
-            a
-        });
-    let mut keys = keys;
-    keys.par_sort_unstable();
-    keys
+        .collect()
+}
+
+/// A counting sort of `cell << 32 | item` pairs by cell: the number of pairs per cell, and
+/// `value(pair)` for every pair, cell after cell. Stable, so items given in ascending order stay
+/// ascending within a cell. It replaces a comparison sort of the 64-bit keys: the key's
+/// histogram is the cells' counts, which the grid needs anyway (the GPU build does the same).
+fn bucket_by_cell<T: Copy + Default>(
+    pairs: &[Vec<u64>],
+    n_cells: usize,
+    value: impl Fn(u64) -> T,
+) -> (Vec<u32>, Vec<T>) {
+    let mut counts = vec![0u32; n_cells];
+    for k in pairs.iter().flatten() {
+        counts[(k >> 32) as usize] += 1;
+    }
+    let mut cursor = Vec::with_capacity(n_cells);
+    let mut at = 0u32;
+    for &n in &counts {
+        cursor.push(at);
+        at += n;
+    }
+    let mut out = vec![T::default(); at as usize];
+    for &k in pairs.iter().flatten() {
+        let c = &mut cursor[(k >> 32) as usize];
+        out[*c as usize] = value(k);
+        *c += 1;
+    }
+    (counts, out)
 }
 
 /// Grid dimensions as everyone prints them: `AxBxC`.
