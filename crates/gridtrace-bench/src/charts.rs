@@ -222,6 +222,40 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .save(&path)?;
         out.push(path);
     }
+    if !report.build_scaling.is_empty() {
+        let b = &report.build_scaling;
+        let threads = b[0].cpu_threads;
+        let mut series = vec![
+            ("grid+pc, cpu 1 thread".to_string(), b.iter().map(|p| Some(p.cpu_1t_ms)).collect::<Vec<_>>()),
+            (format!("grid+pc, cpu {threads} threads"), b.iter().map(|p| Some(p.cpu_ms)).collect()),
+            ("grid+pc, gpu".to_string(), b.iter().map(|p| p.gpu_ms).collect()),
+            (format!("bvh, cpu {threads} threads"), b.iter().map(|p| Some(p.bvh_ms)).collect()),
+            ("embree bvh".to_string(), b.iter().map(|p| p.embree_ms).collect()),
+        ];
+        series.retain(|(_, v)| v.iter().any(Option::is_some));
+        let path = dir.join("build_scaling.png");
+        LineChart {
+            title: "Build time vs triangle count",
+            x_label: "triangles (log)",
+            y_label: "ms (log)",
+            log_x: true,
+            log_y: true,
+            series: series
+                .into_iter()
+                .map(|(name, v)| Series {
+                    name,
+                    points: b
+                        .iter()
+                        .zip(v)
+                        .filter_map(|(p, ms)| ms.map(|ms| (p.triangles as f64, ms)))
+                        .collect(),
+                    reference: false,
+                })
+                .collect(),
+        }
+        .save(&path)?;
+        out.push(path);
+    }
     for sc in &report.scaling {
         // The CPU's charts keep their old names; the GPU's get a suffix.
         let suffix = if sc.backend == "cpu" {

@@ -6,6 +6,7 @@
 //! best (the paper reports best values of several runs).
 
 pub mod ablation;
+pub mod build_scaling;
 pub mod charts;
 pub mod irregular;
 pub mod query_study;
@@ -482,6 +483,8 @@ pub struct BenchReport {
     pub query_study: Vec<studies::QueryStudyRow>,
     pub irregular_sweep: Vec<irregular::IrregularSweepRow>,
     pub ablation: Vec<ablation::AblationRow>,
+    /// Build time against triangle count (`--build-scaling`).
+    pub build_scaling: Vec<build_scaling::BuildPoint>,
     pub ray_export: Option<studies::RayExport>,
 }
 
@@ -534,6 +537,7 @@ impl BenchReport {
             query_study: Vec::new(),
             irregular_sweep: Vec::new(),
             ablation: Vec::new(),
+            build_scaling: Vec::new(),
             ray_export: None,
         }
     }

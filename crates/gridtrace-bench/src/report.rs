@@ -284,6 +284,31 @@ pub fn markdown(report: &BenchReport) -> String {
         }
     }
 
+    if !report.build_scaling.is_empty() {
+        md.push_str(
+            "\n## Build time against triangle count (best, ms)\n\n| mesh | triangles | grid | refs | grid+pc cpu 1 thread | grid+pc cpu all threads | grid+pc gpu | bvh cpu | embree | grid cpu / embree |\n|---|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
+        );
+        let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+        for p in &report.build_scaling {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {:.2} | {:.2} ({} threads) | {}{} | {:.2} | {} | {} |",
+                p.mesh,
+                p.triangles,
+                dims_str(p.grid_dims),
+                p.references,
+                p.cpu_1t_ms,
+                p.cpu_ms,
+                p.cpu_threads,
+                ms(p.gpu_ms),
+                p.gpu_fallback.as_ref().map_or(String::new(), |w| format!(" ({w})")),
+                p.bvh_ms,
+                ms(p.embree_ms),
+                p.embree_ms.map_or("-".to_string(), |e| format!("{:.2}", p.cpu_ms / e))
+            );
+        }
+    }
+
     if !report.pc_study.is_empty() {
         md.push_str("\n## Proximity-cloud study\n\n| scene | mode | accel | grid | empty | cells/ray | jumps/ray | tri tests/ray | best ms |\n|---|---|---|---|---:|---:|---:|---:|---:|\n");
         for r in &report.pc_study {

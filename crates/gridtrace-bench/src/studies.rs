@@ -172,6 +172,25 @@ pub fn scaling_meshes(data_dir: Option<&Path>, max_tris: usize, log: &mut dyn Fn
     v
 }
 
+/// The meshes of the build-time series, smallest first: icospheres of 1,280 to 5.2 M
+/// triangles and torus knots up to 10.2 M (procedural, the same on every machine), and the
+/// scaling series' files where present; at most `max_tris` triangles each.
+pub fn build_scaling_meshes(data_dir: Option<&Path>, max_tris: usize, log: &mut dyn FnMut(&str)) -> Vec<ScalingMesh> {
+    let mut v = scaling_meshes(data_dir, max_tris, log);
+    v.retain(|m| !m.name.starts_with("icosphere"));
+    v.extend(scenes::procedural_scaling(3..=9, false));
+    for (rings, sides) in [(2_000u32, 32u32), (40_000, 128)] {
+        v.push(ScalingMesh {
+            name: format!("torus-knot-{}", 2 * rings * sides),
+            source: "procedural".into(),
+            mesh: gridtrace::scene::procedural::torus_knot(2, 3, 0.16, rings, sides),
+        });
+    }
+    v.retain(|m| m.mesh.triangles.len() <= max_tris);
+    v.sort_by_key(|m| m.mesh.triangles.len());
+    v
+}
+
 /// Time per ray against triangle count (each mesh alone, auto-framed) and against pixel count,
 /// on the CPU, or on the GPU when `gpu` is given (each mesh uploaded once, then timed).
 #[allow(clippy::too_many_arguments)]

@@ -75,6 +75,22 @@ pub struct BenchArgs {
     /// up to 1.3 M triangles) and against pixel count, with fitted growth exponents.
     #[arg(long)]
     scaling: bool,
+    /// Also time the builds against triangle count: the grid and proximity cloud on the CPU
+    /// (1 thread and all), on the GPU (when one is benchmarked), and the BVH, on meshes of 1k to
+    /// --build-max-tris triangles (icospheres, torus knots and the scaling series' files).
+    #[arg(long)]
+    build_scaling: bool,
+    /// Largest mesh of --build-scaling, in triangles.
+    #[arg(long, default_value_t = 10_500_000, value_name = "N")]
+    build_max_tris: usize,
+    /// With --build-scaling: write each mesh's triangles here for the Embree script
+    /// (crates/gridtrace-py/bench/build_vs_embree.py).
+    #[arg(long, value_name = "DIR", requires = "build_scaling")]
+    export_meshes: Option<PathBuf>,
+    /// With --build-scaling: Embree's build times (the Embree script's JSON), for the table and
+    /// chart.
+    #[arg(long, value_name = "FILE", requires = "build_scaling")]
+    embree: Option<PathBuf>,
     /// Also count traversal work (cells, jumps, triangle tests per ray) grid vs pc on sparse
     /// scenes (sparse-room, a mesh seen from far away) and the torus knot.
     #[arg(long)]
@@ -302,6 +318,21 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             }
             report.scaling.push(sc);
         }
+    }
+    if a.build_scaling {
+        let max = if a.quick { 100_000 } else { a.build_max_tris };
+        println!("build scaling (up to {max} triangles):");
+        let meshes = studies::build_scaling_meshes(data_dir.as_deref(), max, &mut log);
+        if let Some(dir) = &a.export_meshes {
+            bench::build_scaling::export(&meshes, dir)?;
+            println!("  wrote the meshes to {}", dir.display());
+        }
+        let gpu_ctx = if backend == BenchBackendArg::Cpu { None } else { gpu.as_ref() };
+        let mut points = bench::build_scaling::build_scaling(&meshes, gpu_ctx, cfg.reps, &mut log)?;
+        if let Some(e) = &a.embree {
+            bench::build_scaling::with_embree(&mut points, e)?;
+        }
+        report.build_scaling = points;
     }
     if a.pc_study {
         println!("proximity-cloud study ({}x{}):", first_res.0, first_res.1);
