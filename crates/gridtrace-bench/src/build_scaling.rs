@@ -86,7 +86,9 @@ pub fn build_scaling(
         }
         let (cpu_1t_ms, _) = one.install(|| best(reps, || Grid::build(&tris, Resolution::default())))?;
         let (cpu_ms, grid) = best(reps, || Grid::build(&tris, Resolution::default()))?;
-        let (bvh_ms, _) = best(reps, || Accel::build(tris.clone(), AccelKind::Bvh, Resolution::default()))?;
+        let (bvh_ms, _) = best(reps, || {
+            Accel::build(tris.clone(), AccelKind::Bvh, Resolution::default())
+        })?;
         // The clone is part of what `Accel::build` takes; time it alone and take it off.
         let (clone_ms, _) = best(reps, || Ok(tris.clone()))?;
         let bvh_ms = (bvh_ms - clone_ms).max(0.0);
@@ -98,7 +100,10 @@ pub fn build_scaling(
                     Ok((_, stats)) => {
                         fastest = fastest.min(stats.timings.total_ms);
                         gpu_from_timestamps = stats.timings.from_timestamps;
-                        gpu_fallback = stats.cpu_fallback.as_ref().map(|w| format!("built on the CPU instead: {w}"));
+                        gpu_fallback = stats
+                            .cpu_fallback
+                            .as_ref()
+                            .map(|w| format!("built on the CPU instead: {w}"));
                     }
                     // A mesh over the device's buffer limits: said in the table, not fatal.
                     Err(Error::Gpu(e)) => {

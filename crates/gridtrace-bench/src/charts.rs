@@ -226,10 +226,19 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         let b = &report.build_scaling;
         let threads = b[0].cpu_threads;
         let mut series = vec![
-            ("grid+pc, cpu 1 thread".to_string(), b.iter().map(|p| Some(p.cpu_1t_ms)).collect::<Vec<_>>()),
-            (format!("grid+pc, cpu {threads} threads"), b.iter().map(|p| Some(p.cpu_ms)).collect()),
+            (
+                "grid+pc, cpu 1 thread".to_string(),
+                b.iter().map(|p| Some(p.cpu_1t_ms)).collect::<Vec<_>>(),
+            ),
+            (
+                format!("grid+pc, cpu {threads} threads"),
+                b.iter().map(|p| Some(p.cpu_ms)).collect(),
+            ),
             ("grid+pc, gpu".to_string(), b.iter().map(|p| p.gpu_ms).collect()),
-            (format!("bvh, cpu {threads} threads"), b.iter().map(|p| Some(p.bvh_ms)).collect()),
+            (
+                format!("bvh, cpu {threads} threads"),
+                b.iter().map(|p| Some(p.bvh_ms)).collect(),
+            ),
             ("embree bvh".to_string(), b.iter().map(|p| p.embree_ms).collect()),
         ];
         series.retain(|(_, v)| v.iter().any(Option::is_some));

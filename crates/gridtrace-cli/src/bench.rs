@@ -80,7 +80,7 @@ pub struct BenchArgs {
     /// --build-max-tris triangles (icospheres, torus knots and the scaling series' files).
     #[arg(long)]
     build_scaling: bool,
-    /// Largest mesh of --build-scaling, in triangles.
+    /// Largest mesh of --build-scaling, in triangles (with --quick at most 100,000).
     #[arg(long, default_value_t = 10_500_000, value_name = "N")]
     build_max_tris: usize,
     /// With --build-scaling: write each mesh's triangles here for the Embree script
@@ -320,14 +320,22 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
         }
     }
     if a.build_scaling {
-        let max = if a.quick { 100_000 } else { a.build_max_tris };
+        let max = if a.quick {
+            a.build_max_tris.min(100_000)
+        } else {
+            a.build_max_tris
+        };
         println!("build scaling (up to {max} triangles):");
         let meshes = studies::build_scaling_meshes(data_dir.as_deref(), max, &mut log);
         if let Some(dir) = &a.export_meshes {
             bench::build_scaling::export(&meshes, dir)?;
             println!("  wrote the meshes to {}", dir.display());
         }
-        let gpu_ctx = if backend == BenchBackendArg::Cpu { None } else { gpu.as_ref() };
+        let gpu_ctx = if backend == BenchBackendArg::Cpu {
+            None
+        } else {
+            gpu.as_ref()
+        };
         let mut points = bench::build_scaling::build_scaling(&meshes, gpu_ctx, cfg.reps, &mut log)?;
         if let Some(e) = &a.embree {
             bench::build_scaling::with_embree(&mut points, e)?;

@@ -123,3 +123,77 @@ fn bench_rejects_unknown_scene() {
     assert!(!ok);
     assert!(text.contains("unknown scene 'teapot'"), "{text}");
 }
+
+/// `bench --build-scaling`: one point per mesh, smallest first, with the grid's own figures (its
+/// references are at least its triangles: each is in a cell), the exported triangles byte for
+/// byte the right size, Embree's figures joined by name, and a malformed Embree file an error
+/// that names it.
+#[test]
+fn build_scaling_exports_and_joins_embree() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-build-scaling-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let meshes = dir.join("meshes");
+    let embree = dir.join("embree.json");
+    std::fs::write(&embree, r#"{"icosphere-3": 0.5, "icosphere-4": 1.5}"#).unwrap();
+    // An empty data folder: the procedural meshes only, the same on every machine.
+    let no_files = dir.join("no-files");
+    std::fs::create_dir_all(&no_files).unwrap();
+    let args = |extra: &[&str]| {
+        let mut v = vec![
+            "bench",
+            "--quick",
+            "--backend",
+            "cpu",
+            "--scenes",
+            "knot-box",
+            "--build-scaling",
+            "--build-max-tris",
+            "6000",
+            "--data-dir",
+            no_files.to_str().unwrap(),
+        ];
+        v.extend_from_slice(extra);
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let a = args(&[
+        "--out",
+        dir.to_str().unwrap(),
+        "--export-meshes",
+        meshes.to_str().unwrap(),
+        "--embree",
+        embree.to_str().unwrap(),
+    ]);
+    let (ok, text) = gridtrace(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{text}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
+    let points = json["build_scaling"].as_array().unwrap();
+    let names: Vec<&str> = points.iter().map(|p| p["mesh"].as_str().unwrap()).collect();
+    assert_eq!(names, ["icosphere-3", "icosphere-4"], "{text}");
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(meshes.join("index.json")).unwrap()).unwrap();
+    for p in points {
+        let n = p["triangles"].as_u64().unwrap();
+        assert_eq!(n, 20 * 4u64.pow(if p["mesh"] == "icosphere-3" { 3 } else { 4 }));
+        assert!(p["references"].as_u64().unwrap() >= n, "{p}");
+        for k in ["cpu_1t_ms", "cpu_ms", "bvh_ms"] {
+            assert!(p[k].as_f64().unwrap() > 0.0, "{k}: {p}");
+        }
+        assert!(p["gpu_ms"].is_null(), "no GPU asked for: {p}");
+        let name = p["mesh"].as_str().unwrap();
+        assert_eq!(index[name].as_u64(), Some(n));
+        let bytes = std::fs::metadata(meshes.join(format!("{name}.f32"))).unwrap().len();
+        assert_eq!(bytes, n * 36, "{name}");
+    }
+    assert_eq!(points[0]["embree_ms"].as_f64(), Some(0.5));
+    assert_eq!(points[1]["embree_ms"].as_f64(), Some(1.5));
+    let md = std::fs::read_to_string(dir.join("bench.md")).unwrap();
+    assert!(md.contains("## Build time against triangle count"), "{md}");
+    assert!(dir.join("build_scaling.png").exists());
+
+    std::fs::write(&embree, "[1, 2]").unwrap();
+    let a = args(&["--embree", embree.to_str().unwrap()]);
+    let (ok, text) = gridtrace(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!ok && text.contains("embree.json"), "{text}");
+}

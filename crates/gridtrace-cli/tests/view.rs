@@ -29,8 +29,11 @@ fn dir(tag: &str) -> PathBuf {
     d
 }
 
+/// A screenshot's file and the `key=value` fields its line printed.
+type Shot = (PathBuf, HashMap<String, String>);
+
 /// The `key=value` fields of each "screenshot PATH ..." line.
-fn screenshots(out: &str) -> Vec<(PathBuf, HashMap<String, String>)> {
+fn screenshots(out: &str) -> Vec<Shot> {
     out.lines()
         .filter_map(|l| l.strip_prefix("screenshot "))
         .map(|l| {
@@ -59,12 +62,7 @@ fn differing(a: &Path, b: &Path) -> f64 {
 
 /// Runs `view` with `script` (written to the test's folder) on `backend` and extra
 /// arguments; the folder, the output (stdout then stderr) and the screenshots it printed.
-fn run_script(
-    tag: &str,
-    backend: &str,
-    args: &[&str],
-    script: &str,
-) -> (PathBuf, String, Vec<(PathBuf, HashMap<String, String>)>) {
+fn run_script(tag: &str, backend: &str, args: &[&str], script: &str) -> (PathBuf, String, Vec<Shot>) {
     let d = dir(&format!("{tag}-{backend}"));
     let file = d.join("s.txt");
     std::fs::write(&file, script).unwrap();
@@ -85,7 +83,7 @@ fn run_script(
 /// `render`'s image of what a screenshot line printed (camera, lights, mode, structure, size)
 /// of `scene` (render's arguments naming it) equals the screenshot: on the CPU bit for bit, on
 /// the GPU within the CPU/GPU tolerance of the GPU tests (0.5% of pixels beyond 2 levels).
-fn equals_render(d: &Path, backend: &str, scene: &[&str], (path, kv): &(PathBuf, HashMap<String, String>)) {
+fn equals_render(d: &Path, backend: &str, scene: &[&str], (path, kv): &Shot) {
     let shot = d.join(path);
     let reference = d.join(format!("render-{}", path.display()));
     let mut args: Vec<String> = vec!["render".into()];
