@@ -9,6 +9,20 @@ use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::scene::{Camera, PointLight, PreparedScene, RebuildOn};
 use gridtrace::{Backend, Frame, RenderOptions};
 
+/// An adapter in a few words: "NAME (BACKEND)", with ", software" for a software rasteriser.
+pub fn adapter_words(info: &wgpu::AdapterInfo) -> String {
+    format!(
+        "{} ({:?}{})",
+        info.name,
+        info.backend,
+        if info.device_type == wgpu::DeviceType::Cpu {
+            ", software"
+        } else {
+            ""
+        }
+    )
+}
+
 pub struct Tracer {
     pub scene: PreparedScene,
     gpu: Option<GpuRenderer>,
@@ -56,15 +70,7 @@ impl Tracer {
     /// The same in a few words: "gpu: NAME (BACKEND)", "software" for a software adapter.
     pub fn short(&self) -> String {
         match &self.gpu {
-            Some(g) => {
-                let c = g.context();
-                format!(
-                    "gpu: {} ({:?}{})",
-                    c.info.name,
-                    c.info.backend,
-                    if c.is_software() { ", software" } else { "" }
-                )
-            }
+            Some(g) => format!("gpu: {}", adapter_words(&g.context().info)),
             None => self.describe(),
         }
     }

@@ -14,6 +14,8 @@ use crate::common::{GridArgs, SceneArgs};
 
 /// A loaded file: its scene, its name, and the scene prepared for the structure on screen.
 pub struct Loaded {
+    /// The structure it was prepared for.
+    pub accel: AccelKind,
     pub src: Scene,
     pub name: String,
     pub prepared: PreparedScene,
@@ -43,7 +45,12 @@ impl Loader {
             let (src, name) = args.load(true)?;
             *s.lock().unwrap_or_else(|e| e.into_inner()) = "building the structure";
             let prepared = crate::common::prepare(&src, &name, accel, &grid)?;
-            Ok(Loaded { src, name, prepared })
+            Ok(Loaded {
+                accel,
+                src,
+                name,
+                prepared,
+            })
         });
         Loader {
             path,

@@ -139,6 +139,8 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         egui: None,
         show_overlay: true,
         refiner: Refiner::new(),
+        last: None,
+        egui_repaint: false,
         dirty: true,
         history: VecDeque::with_capacity(HISTORY),
         script: script.map(|s| s.into_iter().rev().collect()),
@@ -249,6 +251,10 @@ struct App {
     egui: Option<egui_winit::State>,
     show_overlay: bool,
     refiner: Refiner,
+    /// The last finished frame's figures (the refiner's own are reset by each new frame).
+    last: Option<progressive::FrameSummary>,
+    /// egui asked to be drawn again at once (an animation of its own).
+    egui_repaint: bool,
     /// The view changed since the frame being refined was started.
     dirty: bool,
     /// Finished frames' times (ms), oldest first.
@@ -319,6 +325,12 @@ impl App {
         Ok(tracer)
     }
 
+    /// The tracer of the structure on screen, if it is open.
+    fn current_tracer(&self) -> Option<&Tracer> {
+        let structure = self.accel.structure_name();
+        self.tracers.iter().find(|(s, _, _)| *s == structure).map(|(_, t, _)| t)
+    }
+
     /// The options of the frame for the current view.
     fn frame_opts(&self) -> RenderOptions {
         let (w, h) = self.traced_size();
@@ -360,6 +372,7 @@ impl App {
                     self.history.pop_front();
                 }
                 self.history.push_back(self.refiner.summary().ms);
+                self.last = Some(self.refiner.summary().clone());
                 self.set_title();
             }
         }
@@ -373,13 +386,10 @@ impl App {
     }
 
     fn set_title(&self) {
-        let Some(win) = &self.window else { return };
-        let tracer = self
-            .tracers
-            .iter()
-            .find(|(s, _, _)| *s == self.accel.structure_name())
-            .map_or(String::new(), |(_, t, _)| t.describe());
-        let s = self.refiner.summary();
+        let (Some(win), Some(s)) = (&self.window, &self.last) else {
+            return;
+        };
+        let tracer = self.current_tracer().map_or(String::new(), |t| t.describe());
         let up = if s.uploaded_bytes > 0 {
             format!(", {} B uploaded", s.uploaded_bytes)
         } else {
@@ -405,8 +415,7 @@ impl App {
     }
 
     fn hud(&self) -> Hud {
-        let structure = self.accel.structure_name();
-        let t = self.tracers.iter().find(|(s, _, _)| *s == structure).map(|(_, t, _)| t);
+        let t = self.current_tracer();
         let (triangles, structure, memory_bytes, paper_model_bytes) = match t {
             Some(t) => (
                 t.scene.accel.tris.len(),
@@ -432,7 +441,7 @@ impl App {
             traced: self.traced_size(),
             scale: self.scale(),
             pixels_per_point: self.egui_ctx.pixels_per_point(),
-            last: (!self.history.is_empty()).then(|| self.refiner.summary().clone()),
+            last: self.last.clone(),
             progress: self.refiner.progress(),
             lights: self.lights.iter().map(|l| Vec3::from(l.position)).collect(),
             selected_light: self.selected_light,
@@ -465,6 +474,10 @@ impl App {
             }
         });
         state.handle_platform_output(&window, out.platform_output);
+        self.egui_repaint = out
+            .viewport_output
+            .get(&egui::ViewportId::ROOT)
+            .is_some_and(|v| v.repaint_delay.is_zero());
         let ppp = out.pixels_per_point;
         Some(present::Overlay {
             primitives: self.egui_ctx.tessellate(out.shapes, ppp),
@@ -549,8 +562,20 @@ impl App {
                 }
             }
             Action::Drop(path) => {
-                println!("drop {}: loading", path.display());
-                self.loader = Some(loader::Loader::start(path, self.accel, self.grid_args.clone()));
+                if let Some(l) = &self.loader {
+                    // One load at a time: a worker thread cannot be stopped half way.
+                    let e = format!(
+                        "{}: still loading {}; drop it again when that is in",
+                        path.display(),
+                        l.path.display()
+                    );
+                    eprintln!("drop {e}");
+                    self.drop_error = Some(e);
+                } else {
+                    println!("drop {}: loading", path.display());
+                    self.drop_error = None;
+                    self.loader = Some(loader::Loader::start(path, self.accel, self.grid_args.clone()));
+                }
             }
             Action::Screenshot(path) => {
                 self.trace(true)?;
@@ -575,15 +600,13 @@ impl App {
                     self.accel.name(),
                     image.width,
                     image.height,
-                    self.refiner.summary().ms
+                    self.last.as_ref().map_or(0.0, |s| s.ms)
                 );
             }
             Action::Capture(path) => {
                 self.trace(true)?;
                 // egui sizes a window from the pass before: one pass on screen first.
-                if let (Some(o), true) = (self.overlay(), self.presenter.is_some()) {
-                    self.presenter.as_mut().expect("checked").present(o)?;
-                }
+                self.present()?;
                 let overlay = self.overlay();
                 if let (Some(p), Some(o)) = (&mut self.presenter, overlay) {
                     p.capture(o)?
@@ -619,7 +642,9 @@ impl App {
                 self.notes.extend(notes);
                 self.src = l.src;
                 self.name = l.name;
-                self.tracers = vec![(self.accel.structure_name(), tracer, 0.0)];
+                // Prepared for the structure on screen when the file was dropped (G may have
+                // been pressed since): keyed by that one.
+                self.tracers = vec![(l.accel.structure_name(), tracer, 0.0)];
                 self.anim = None;
                 self.drop_error = None;
                 self.reset_view();
@@ -684,15 +709,24 @@ impl App {
         }
     }
 
-    /// One pass: trace within the budget, draw the overlay, present.
-    fn redraw(&mut self) -> gridtrace::Result<()> {
-        if self.refiner.done() && !self.dirty {
+    /// One pass: move an animation on (`tick`) once the frame before is done, trace within
+    /// the budget, draw the overlay, present.
+    fn redraw(&mut self, tick: bool) -> gridtrace::Result<()> {
+        if tick && self.refiner.done() && !self.dirty {
             self.tick_animation();
         }
         self.trace(false)?;
+        self.present()
+    }
+
+    /// Draws the overlay and presents; a frame the surface could not take is asked for again.
+    fn present(&mut self) -> gridtrace::Result<()> {
         let overlay = self.overlay();
-        if let (Some(p), Some(o)) = (&mut self.presenter, overlay) {
-            p.present(o)?;
+        if let (Some(p), Some(o)) = (&mut self.presenter, overlay)
+            && !p.present(o)?
+            && let Some(w) = &self.window
+        {
+            w.request_redraw();
         }
         Ok(())
     }
@@ -700,7 +734,15 @@ impl App {
     /// Whether more passes are wanted without input: a frame being refined, a file loading,
     /// an animation playing.
     fn busy(&self) -> bool {
-        self.dirty || !self.refiner.done() || self.loader.is_some() || self.anim.as_ref().is_some_and(|p| p.playing)
+        if self.size.0 == 0 || self.size.1 == 0 {
+            // Minimised: nothing to draw until the window has an area again.
+            return false;
+        }
+        self.dirty
+            || !self.refiner.done()
+            || self.loader.is_some()
+            || self.egui_repaint
+            || self.anim.as_ref().is_some_and(|p| p.playing)
     }
 
     fn fail(&mut self, el: &ActiveEventLoop, e: gridtrace::Error) {
@@ -770,7 +812,9 @@ impl ApplicationHandler for App {
         if let (Some(state), Some(win)) = (&mut self.egui, &self.window) {
             let r = state.on_window_event(win, &event);
             consumed = r.consumed;
-            if r.repaint {
+            // egui asks to repaint after every redraw as well: following that would redraw
+            // forever; what needs another pass is in `busy`.
+            if r.repaint && !matches!(event, WindowEvent::RedrawRequested) {
                 win.request_redraw();
             }
         }
@@ -789,7 +833,8 @@ impl ApplicationHandler for App {
                 self.dirty = true;
                 Ok(())
             }
-            WindowEvent::RedrawRequested => self.redraw(),
+            // A script draws its own passes (about_to_wait), so its animation steps are its own.
+            WindowEvent::RedrawRequested => self.redraw(self.script.is_none()),
             WindowEvent::ModifiersChanged(m) => {
                 self.modifiers = m.state();
                 Ok(())
@@ -801,10 +846,12 @@ impl ApplicationHandler for App {
                 ..
             } => {
                 if state == ElementState::Pressed && !consumed && !self.egui_ctx.is_pointer_over_egui() {
-                    // A press on a light's gizmo drags the light; anywhere else it orbits.
+                    // A press on a light's gizmo (drawn with the overlay) drags the light;
+                    // anywhere else it orbits.
                     let ppp = self.egui_ctx.pixels_per_point();
                     let (cx, cy) = (self.cursor.0 as f32, self.cursor.1 as f32);
-                    let hit = self.gizmos().iter().position(|g| {
+                    let gizmos = if self.show_overlay { self.gizmos() } else { Vec::new() };
+                    let hit = gizmos.iter().position(|g| {
                         g.is_some_and(|(x, y)| ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() <= GIZMO_RADIUS_PT * ppp)
                     });
                     let kind = match hit {
@@ -876,7 +923,8 @@ impl ApplicationHandler for App {
             Err(e) => return self.fail(el, e),
         };
         if self.script.is_none() || self.window.is_none() {
-            // Keep passes coming while there is work; a loader is polled ten times a second.
+            // Passes keep coming while there is work (`busy`, a file loading among it); when
+            // idle, a loader is still polled ten times a second.
             if loading {
                 el.set_control_flow(ControlFlow::WaitUntil(Instant::now() + Duration::from_millis(100)));
                 if let Some(w) = &self.window {
@@ -893,7 +941,7 @@ impl ApplicationHandler for App {
         // was done. Trace and present here rather than wait for a redraw request: a script
         // must not depend on the window system's timing. A file being loaded holds the script
         // until it is in (or has failed).
-        if let Err(e) = self.redraw() {
+        if let Err(e) = self.redraw(true) {
             return self.fail(el, e);
         }
         el.set_control_flow(ControlFlow::Poll);

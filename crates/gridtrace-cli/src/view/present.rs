@@ -124,16 +124,7 @@ impl Presenter {
             egui,
             max_side,
             live: false,
-            adapter: format!(
-                "{} ({:?}{})",
-                info.name,
-                info.backend,
-                if info.device_type == wgpu::DeviceType::Cpu {
-                    ", software"
-                } else {
-                    ""
-                }
-            ),
+            adapter: crate::tracer::adapter_words(&info),
         };
         p.resize(size.width, size.height);
         Ok(p)
@@ -209,37 +200,42 @@ impl Presenter {
         );
     }
 
-    /// Draws the image and the overlay into the window. egui's texture changes (its font atlas
-    /// among them) are applied even when there is nothing to draw on (a minimised window):
-    /// egui sends each change once.
-    pub fn present(&mut self, mut overlay: Overlay) -> gridtrace::Result<()> {
-        self.apply_textures(&mut overlay);
+    /// Draws the image and the overlay into the window; false when the surface took no frame
+    /// (it changed under us and was configured again: ask for another pass). egui's texture
+    /// changes (its font atlas among them) are applied even when there is nothing to draw on (a
+    /// minimised window): egui sends each change once.
+    pub fn present(&mut self, mut overlay: Overlay) -> gridtrace::Result<bool> {
+        self.set_textures(&overlay);
         if !self.live {
-            return Ok(());
+            self.free_textures(&mut overlay);
+            return Ok(true);
         }
         let tex = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
                 // The window changed under us: configure again, present next time.
                 self.surface.configure(&self.device, &self.config);
-                return Ok(());
+                self.free_textures(&mut overlay);
+                return Ok(false);
             }
             other => {
                 eprintln!("note: frame skipped ({other:?})");
-                return Ok(());
+                self.free_textures(&mut overlay);
+                return Ok(false);
             }
         };
         let view = tex.texture.create_view(&wgpu::TextureViewDescriptor::default());
         let size = [self.config.width, self.config.height];
         self.draw(&view, size, &overlay);
         self.queue.present(tex);
-        Ok(())
+        self.free_textures(&mut overlay);
+        Ok(true)
     }
 
     /// The window as it looks (image and overlay), drawn into a texture of its own and read
     /// back: RGBA8, `width` x `height` of the surface.
     pub fn capture(&mut self, mut overlay: Overlay) -> gridtrace::Result<image::RgbaImage> {
-        self.apply_textures(&mut overlay);
+        self.set_textures(&overlay);
         let (w, h) = (self.config.width, self.config.height);
         let texture = texture_2d(
             &self.device,
@@ -250,6 +246,7 @@ impl Presenter {
         );
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
         self.draw(&view, [w, h], &overlay);
+        self.free_textures(&mut overlay);
         // Rows of a texture copy are padded to 256 bytes.
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -353,13 +350,17 @@ impl Presenter {
         self.queue.submit(extra.into_iter().chain([enc.finish()]));
     }
 
-    /// Applies egui's texture changes (new, changed, freed) and clears them.
-    fn apply_textures(&mut self, overlay: &mut Overlay) {
+    /// Applies egui's new and changed textures (before painting).
+    fn set_textures(&mut self, overlay: &Overlay) {
         for (id, deltas) in &overlay.textures.set {
             for delta in deltas {
                 self.egui.update_texture(&self.device, &self.queue, *id, delta);
             }
         }
+    }
+
+    /// Frees the textures egui is done with (after painting) and marks the changes handled.
+    fn free_textures(&mut self, overlay: &mut Overlay) {
         for id in &overlay.textures.free {
             self.egui.free_texture(id);
         }

@@ -23,7 +23,8 @@ pub fn chebyshev_distance_transform(dims: [u32; 3], occupied: &[bool]) -> Vec<u3
     if occupied.is_empty() {
         return Vec::new();
     }
-    // Larger than any real distance; sums of two stay far inside i32 (dims are < 2^21 a side).
+    // Larger than any real distance; sums of two stay far inside i32 (a grid has at most
+    // MAX_CELLS = 2^26 cells, so nx + ny + nz < 2^27).
     let inf = (nx + ny + nz) as i32 + 1;
     let slab = nx * ny;
     let mut g: Vec<i32> = occupied.par_iter().map(|&o| if o { 0 } else { inf }).collect();
