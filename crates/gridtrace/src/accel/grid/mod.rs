@@ -14,7 +14,7 @@ pub mod tri_box;
 
 pub use dda::Stepping;
 use proximity::chebyshev_distance_transform;
-use tri_box::triangle_overlaps_box;
+use tri_box::triangle_overlaps_boxes4;
 
 use crate::accel::triangle::slack_pad;
 use crate::accel::{Aabb, TriAccel};
@@ -293,19 +293,43 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
                         .min(dims - 1)
                 };
                 let (c0, c1) = (clamp(lo), clamp(hi));
-                let single = c0 == c1;
+                let key = |cell: UVec3| {
+                    let idx = cell.x as u64 + dims.x as u64 * (cell.y as u64 + dims.y as u64 * cell.z as u64);
+                    idx << 32 | i as u64
+                };
+                if c0 == c1 {
+                    out.push(key(c0));
+                    continue;
+                }
+                // The candidate cells, four at a time through the exact test (the scalar test's
+                // answers bit for bit, `triangle_overlaps_boxes4`), pushed in x, y, z order.
+                let half = cell_size * 0.5 + margin;
+                let center = |cell: UVec3| bounds.min + cell.as_vec3() * cell_size + cell_size * 0.5;
+                let mut batch = [UVec3::ZERO; 4];
+                let mut n = 0;
+                let flush = |batch: &[UVec3; 4], n: usize, out: &mut Vec<u64>| {
+                    let centers = std::array::from_fn(|k| center(batch[k.min(n - 1)]));
+                    let takes = triangle_overlaps_boxes4(centers, half, a, b, c).bitmask();
+                    for (k, &cell) in batch[..n].iter().enumerate() {
+                        if takes >> k & 1 == 1 {
+                            out.push(key(cell));
+                        }
+                    }
+                };
                 for z in c0.z..=c1.z {
                     for y in c0.y..=c1.y {
                         for x in c0.x..=c1.x {
-                            let cell = UVec3::new(x, y, z);
-                            let box_min = bounds.min + cell.as_vec3() * cell_size;
-                            let half = cell_size * 0.5 + margin;
-                            if single || triangle_overlaps_box(box_min + cell_size * 0.5, half, a, b, c) {
-                                let idx = x as u64 + dims.x as u64 * (y as u64 + dims.y as u64 * z as u64);
-                                out.push(idx << 32 | i as u64);
+                            batch[n] = UVec3::new(x, y, z);
+                            n += 1;
+                            if n == 4 {
+                                flush(&batch, n, &mut out);
+                                n = 0;
                             }
                         }
                     }
+                }
+                if n > 0 {
+                    flush(&batch, n, &mut out);
                 }
             }
             out
@@ -437,6 +461,7 @@ pub fn auto_dims(extent: Vec3, n_tris: usize, lambda: f32) -> UVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tri_box::triangle_overlaps_box;
 
     #[test]
     fn auto_dims_cube_and_flat() {
