@@ -61,10 +61,7 @@ impl Tracer {
 
     /// "cpu (N threads)" or the GPU adapter's description.
     pub fn describe(&self) -> String {
-        match &self.gpu {
-            Some(g) => format!("gpu: {}", g.context().describe()),
-            None => format!("cpu ({} threads)", rayon::current_num_threads()),
-        }
+        gridtrace::backend::describe_tracer(self.gpu.as_ref())
     }
 
     /// The same in a few words: "gpu: NAME (BACKEND)", "software" for a software adapter.

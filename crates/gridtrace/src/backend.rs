@@ -92,6 +92,15 @@ impl Backend {
     }
 }
 
+/// Where frames are traced, in words: "cpu (N threads)" or "gpu: " and the adapter's
+/// description (`None`: the CPU).
+pub fn describe_tracer(gpu: Option<&GpuRenderer>) -> String {
+    match gpu {
+        Some(g) => format!("gpu: {}", g.context().describe()),
+        None => format!("cpu ({} threads)", rayon::current_num_threads()),
+    }
+}
+
 /// A scene ready to render frames on the CPU or a GPU. The scene stays where it is (on the GPU:
 /// uploaded once); each frame takes its own camera and lights.
 pub enum Renderer<'s> {
@@ -136,10 +145,7 @@ impl<'s> Renderer<'s> {
 
     /// "cpu (N threads)" or the GPU adapter's description.
     pub fn describe(&self) -> String {
-        match self {
-            Renderer::Cpu(_) => format!("cpu ({} threads)", rayon::current_num_threads()),
-            Renderer::Gpu { gpu, .. } => format!("gpu: {}", gpu.context().describe()),
-        }
+        describe_tracer(self.gpu())
     }
 
     pub fn gpu(&self) -> Option<&GpuRenderer> {
