@@ -285,20 +285,30 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
                 let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
                 let lo = lo - margin;
                 let hi = hi + margin;
-                let clamp = |p: Vec3| {
-                    ((p - bounds.min) * inv_cell_size)
-                        .floor()
-                        .max(Vec3::ZERO)
-                        .as_uvec3()
-                        .min(dims - 1)
-                };
+                // The float-to-integer cast truncates, which equals `floor` (what the GPU build
+                // writes) on the non-negative values left after `max`; `floor` itself is a libm
+                // call on baseline x86-64 and was 5% of the build.
+                let clamp = |p: Vec3| ((p - bounds.min) * inv_cell_size).max(Vec3::ZERO).as_uvec3().min(dims - 1);
                 let (c0, c1) = (clamp(lo), clamp(hi));
                 let key = |cell: UVec3| {
                     let idx = cell.x as u64 + dims.x as u64 * (cell.y as u64 + dims.y as u64 * cell.z as u64);
                     idx << 32 | i as u64
                 };
-                if c0 == c1 {
-                    out.push(key(c0));
+                if c1.cmpgt(c0).bitmask().count_ones() <= 1 {
+                    // A range one cell thick on two axes (or a single cell) needs no test: the
+                    // triangle's grown box lies inside the row's grown cross-section, and a
+                    // triangle is connected, so it crosses every cell's slab along the row. In
+                    // exact arithmetic every cell overlaps it; where rounding would make the
+                    // exact test refuse a cell at the row's end by a hair, the extra reference
+                    // costs one triangle test and misses nothing. This is 41% of the bunny's
+                    // triangles and 27% of its candidate cells. The GPU build's `takes` agrees.
+                    for z in c0.z..=c1.z {
+                        for y in c0.y..=c1.y {
+                            for x in c0.x..=c1.x {
+                                out.push(key(UVec3::new(x, y, z)));
+                            }
+                        }
+                    }
                     continue;
                 }
                 // The candidate cells, four at a time through the exact test (the scalar test's
@@ -374,12 +384,18 @@ pub fn dims_str(d: [u32; 3]) -> String {
 fn tri_bounds(tris: &[TriAccel]) -> Result<Aabb> {
     // The bounds hold every triangle's slack-padded box: a hit the triangle test accepts a
     // hair outside a large triangle can lie outside the vertices' bounds (`SLACK_PAD`).
-    let scene_bounds = tris.iter().fold(Aabb::EMPTY, |b, t| {
-        let [a, bb, c] = t.vertices();
-        let (lo, hi) = (a.min(bb).min(c), a.max(bb).max(c));
-        let pad = slack_pad(lo, hi);
-        b.grow(lo - pad).grow(hi + pad)
-    });
+    // On all cores (min and max are exact, so any grouping gives the same box).
+    let scene_bounds = tris
+        .par_chunks(8192)
+        .map(|chunk| {
+            chunk.iter().fold(Aabb::EMPTY, |b, t| {
+                let [a, bb, c] = t.vertices();
+                let (lo, hi) = (a.min(bb).min(c), a.max(bb).max(c));
+                let pad = slack_pad(lo, hi);
+                b.grow(lo - pad).grow(hi + pad)
+            })
+        })
+        .reduce(|| Aabb::EMPTY, Aabb::union);
     let scene_bounds = if scene_bounds.is_empty() {
         Aabb {
             min: Vec3::ZERO,

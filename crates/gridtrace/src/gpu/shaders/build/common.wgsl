@@ -106,10 +106,12 @@ fn overlaps_box(center: vec3<f32>, half: vec3<f32>, v: Verts) -> bool {
     return abs(d) <= radius(half, n);
 }
 
-// Whether cell `c` of the range takes the triangle: every cell of a one-cell range does (as in
-// `overlap_pairs`), else the exact test on the cell box grown by the margin.
+// Whether cell `c` of the range takes the triangle: every cell of a range one cell thick on
+// at least two axes does (as in `overlap_pairs_by_triangle`, which says why), else the exact
+// test on the cell box grown by the margin.
 fn takes(c: vec3<u32>, r: CellRange, v: Verts) -> bool {
-    if all(r.c0 == r.c1) {
+    let spans = vec3<u32>(r.c1 > r.c0);
+    if spans.x + spans.y + spans.z <= 1u {
         return true;
     }
     let box_min = P.bounds_min + vec3<f32>(c) * P.cell_size;
