@@ -30,6 +30,12 @@ fn main() -> gridtrace::Result<()> {
     };
     let grid = Grid::build(&tris, Resolution::default())?;
     let occ: Vec<bool> = grid.cells.iter().map(|c| c.count > 0).collect();
+    if std::env::var_os("DT_ONLY").is_some() {
+        for _ in 0..reps {
+            std::hint::black_box(chebyshev_distance_transform(grid.stats.dims, &occ));
+        }
+        return Ok(());
+    }
     let build = best(&mut || {
         Grid::build(&tris, Resolution::default()).unwrap();
     });

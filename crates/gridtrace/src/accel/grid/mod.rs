@@ -193,22 +193,34 @@ impl Grid {
         } = lattice;
         let pairs = overlap_pairs_by_triangle(tris, bounds, dims, margin);
         let n_cells = (dims.x * dims.y * dims.z) as usize;
-        let (counts, refs) = bucket_by_cell(&pairs, n_cells, |k| k as u32);
-        let mut start = 0u32;
-        let mut cells: Vec<Cell> = counts
-            .iter()
-            .map(|&count| {
-                let c = Cell {
-                    start,
-                    count,
-                    ..Cell::zeroed()
-                };
-                start += count;
-                c
-            })
-            .collect();
-        let occupied: Vec<bool> = cells.iter().map(|c| c.count > 0).collect();
-        let dist = chebyshev_distance_transform(dims.to_array(), &occupied);
+        let counts = count_by_cell(&pairs, n_cells);
+        // The references are placed (one thread, random writes) while the proximity cloud,
+        // which needs only the counts, is computed beside it: the Stanford Bunny's 1.3 ms
+        // transform hid the 0.9 ms of placing and cells.
+        let ((refs, mut cells), (occupied, dist)) = rayon::join(
+            || {
+                let refs = place_by_cell(&pairs, &counts, |k| k as u32);
+                let mut start = 0u32;
+                let cells: Vec<Cell> = counts
+                    .iter()
+                    .map(|&count| {
+                        let c = Cell {
+                            start,
+                            count,
+                            ..Cell::zeroed()
+                        };
+                        start += count;
+                        c
+                    })
+                    .collect();
+                (refs, cells)
+            },
+            || {
+                let occupied: Vec<bool> = counts.iter().map(|&n| n > 0).collect();
+                let dist = chebyshev_distance_transform(dims.to_array(), &occupied);
+                (occupied, dist)
+            },
+        );
         for (c, d) in cells.iter_mut().zip(dist) {
             c.dist = d;
         }
@@ -263,7 +275,7 @@ pub(crate) fn cell_margin(cell_size: Vec3, bounds: Aabb) -> Vec3 {
 pub(crate) fn overlap_pairs(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margin: Vec3) -> Vec<u64> {
     let pairs = overlap_pairs_by_triangle(tris, bounds, dims, margin);
     let n_cells = (dims.x as usize) * (dims.y as usize) * (dims.z as usize);
-    bucket_by_cell(&pairs, n_cells, |k| k).1
+    place_by_cell(&pairs, &count_by_cell(&pairs, n_cells), |k| k)
 }
 
 /// The pairs of `overlap_pairs` in triangle order (each triangle's cells in x, y, z order),
@@ -347,22 +359,25 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
         .collect()
 }
 
-/// A counting sort of `cell << 32 | item` pairs by cell: the number of pairs per cell, and
-/// `value(pair)` for every pair, cell after cell. Stable, so items given in ascending order stay
-/// ascending within a cell. It replaces a comparison sort of the 64-bit keys: the key's
-/// histogram is the cells' counts, which the grid needs anyway (the GPU build does the same).
-fn bucket_by_cell<T: Copy + Default>(
-    pairs: &[Vec<u64>],
-    n_cells: usize,
-    value: impl Fn(u64) -> T,
-) -> (Vec<u32>, Vec<T>) {
+/// A counting sort of `cell << 32 | item` pairs by cell, first half: the number of pairs per
+/// cell. It replaces a comparison sort of the 64-bit keys: the key's histogram is the cells'
+/// counts, which the grid needs anyway (the GPU build does the same).
+fn count_by_cell(pairs: &[Vec<u64>], n_cells: usize) -> Vec<u32> {
     let mut counts = vec![0u32; n_cells];
     for k in pairs.iter().flatten() {
         counts[(k >> 32) as usize] += 1;
     }
-    let mut cursor = Vec::with_capacity(n_cells);
+    counts
+}
+
+/// Second half: `value(pair)` for every pair, cell after cell (`counts` from `count_by_cell`).
+/// Stable, so items given in ascending order stay ascending within a cell. (Splitting the cells
+/// among threads, each reading every pair, was measured slower on two cores: 8.0 against 7.2 ms
+/// for the Bunny's whole build.)
+fn place_by_cell<T: Copy + Default>(pairs: &[Vec<u64>], counts: &[u32], value: impl Fn(u64) -> T) -> Vec<T> {
+    let mut cursor = Vec::with_capacity(counts.len());
     let mut at = 0u32;
-    for &n in &counts {
+    for &n in counts {
         cursor.push(at);
         at += n;
     }
@@ -372,7 +387,7 @@ fn bucket_by_cell<T: Copy + Default>(
         out[*c as usize] = value(k);
         *c += 1;
     }
-    (counts, out)
+    out
 }
 
 /// Grid dimensions as everyone prints them: `AxBxC`.
