@@ -49,7 +49,7 @@ fn voxel_rays(g: &IrregularGrid, n: usize, seed: u64) -> Vec<Ray> {
     };
     let mut rays = Vec::with_capacity(n);
     while rays.len() < n {
-        let cell = g.cells[rng.below(g.cells.len() as u32) as usize];
+        let cell = g.cell(rng.below(g.cell_count() as u32));
         // A corner of the cell's grown box.
         let corner = [0, 1, 2].map(|a| if rng.below(2) == 0 { cell.min[a] } else { cell.max[a] });
         let axis = rng.below(3) as usize;
@@ -238,7 +238,7 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
     let g = accel.irregular().unwrap();
     eprintln!(
         "{name}: {} cells over {:?} voxels; {} rays, {hits} hits, {} disagree with brute force, {} with the CPU walk",
-        g.cells.len(),
+        g.cell_count(),
         g.voxel_dims(),
         rays.len(),
         bad.len(),
@@ -348,9 +348,12 @@ fn teapot_in_a_stadium() {
     let accel = &mesh.prepared().accel;
     let g = accel.irregular().unwrap();
     // The build really made boxes of very different sizes.
-    let volume = |c: &gridtrace::accel::IrrCell| (0..3).map(|a| (c.max[a] - c.min[a]) as u64).product::<u64>();
-    let largest = g.cells.iter().map(volume).max().unwrap();
-    let smallest = g.cells.iter().map(volume).min().unwrap();
+    let volume = |c: u32| {
+        let c = g.cell(c);
+        (0..3).map(|a| (c.max[a] - c.min[a]) as u64).product::<u64>()
+    };
+    let largest = (0..g.cell_count() as u32).map(volume).max().unwrap();
+    let smallest = (0..g.cell_count() as u32).map(volume).min().unwrap();
     assert!(largest >= 1000 * smallest, "{largest} vs {smallest} voxels");
     let mut rays = rays_for(accel, 40_000, 5);
     // And rays from inside the room at the cluster, where the small boxes are.

@@ -94,7 +94,7 @@ fn wgsl_structs_match_rust() {
     check!(m, RayRec, "RayRec", [origin, pixel, dir, t_max, weight, t_min]);
     check!(m, GpuHit, "GpuHit", [t, tri, u, v]);
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
-    check!(m, IrrCell, "IrrCell", [min, start, max, count]);
+    check!(m, IrrCell, "IrrCell", [bounds, start]);
     check!(
         m,
         SceneUniform,

@@ -14,8 +14,10 @@ use crate::accel::grid::{auto_dims, cell_margin, grid_bounds, overlap_pairs};
 use crate::accel::triangle::slack_pad;
 use crate::{Error, Result};
 
+/// Top cells per axis at most (see `build`).
+const MAX_TOP_PER_AXIS: u32 = 4096;
 /// Cost of stepping through a cell, in triangle tests, for the merge decision. A step is a
-/// top-cell entry, a voxel-map entry and a 32-byte cell, about what one triangle test costs.
+/// top-cell entry, a voxel-map entry and a 16-byte cell, about what one triangle test costs.
 const COST_STEP: f64 = 1.0;
 /// Probes of neighbouring cells one face of one cell may make in one expansion attempt: a
 /// large face next to many small cells gives up rather than spend the build's time there (the
@@ -52,7 +54,14 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
 
     // Phase 1: the top grid and its (top cell, triangle) pairs.
     let bounds = grid_bounds(tris)?;
-    let top_dims = auto_dims(bounds.extent(), tris.len(), params.top_density);
+    // Cells store their boxes in 16-bit voxel coordinates (`IrrCell`): at most 4,096 top
+    // cells per axis (a scene flat in two axes would otherwise put its whole budget on one),
+    // and as many levels below them as keep the virtual grid under 2^16 voxels per axis.
+    let top_dims = auto_dims(bounds.extent(), tris.len(), params.top_density).min(UVec3::splat(MAX_TOP_PER_AXIS));
+    let max_shift = (0..=MAX_LEVEL)
+        .rev()
+        .find(|&s| (top_dims.max_element() as u64) << s <= 0xffff)
+        .unwrap_or(0);
     let top_size = bounds.extent() / top_dims.as_vec3();
     let pairs = overlap_pairs(tris, bounds, top_dims, cell_margin(top_size, bounds));
     let n_top = (top_dims.x * top_dims.y * top_dims.z) as usize;
@@ -74,7 +83,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 0
             } else {
                 let per_axis = (params.cell_density as f64 * n as f64).cbrt();
-                (per_axis.log2().round().max(0.0) as u32).min(MAX_LEVEL)
+                (per_axis.log2().round().max(0.0) as u32).min(max_shift)
             }
         })
         .collect();
@@ -338,14 +347,11 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     for (k, &i) in live.iter().enumerate() {
         let r = refs_of[i as usize].get(&flat);
         let g = grown[k];
-        cells.push(IrrCell {
-            min: g[0].to_array(),
-            start: refs.len() as u32,
-            max: g[1].to_array(),
-            count: r.len() as u32,
-        });
+        cells.push(IrrCell::new(g[0].to_array(), g[1].to_array(), refs.len() as u32));
         refs.extend_from_slice(r);
     }
+    // The sentinel: where the last cell's references end.
+    cells.push(IrrCell::new([0; 3], [0; 3], refs.len() as u32));
     if refs.len() > u32::MAX as usize {
         return Err(Error::InvalidInput(format!(
             "irregular grid: {} references do not fit 32-bit indices",
@@ -363,8 +369,8 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         triangles: tris.len(),
         top_dims: top_dims.to_array(),
         initial_cells: n_init,
-        cells: cells.len(),
-        empty_cells: cells.iter().filter(|c| c.count == 0).count(),
+        cells: cells.len() - 1,
+        empty_cells: cells.windows(2).filter(|c| c[0].start == c[1].start).count(),
         references: refs.len(),
         max_level: shift,
         phase_ms,

@@ -15,7 +15,7 @@
 //! Traversal is no DDA: the ray looks up the cell under its current point (top cell, then the
 //! voxel map of that top cell), tests the cell's triangles, and leaves through the grown box's
 //! exit in one step (`walk.rs`). Large boxes mean few steps; a step is two dependent loads and a
-//! 32-byte cell.
+//! 16-byte cell.
 
 use glam::{UVec3, Vec3};
 
@@ -30,14 +30,50 @@ mod build;
 mod tests;
 mod walk;
 
-/// One cell as the traversal reads it: its grown box in virtual voxels (`min` inclusive, `max`
-/// exclusive) and its slice of `IrregularGrid::refs`. 32 bytes: two 16-byte loads on the GPU.
+/// One cell as stored: its grown box in virtual voxels (`min` inclusive, `max` exclusive) as
+/// six 16-bit coordinates, and the first of its references in `IrregularGrid::refs`; they end
+/// where the next cell's begin (the cells' arrays end with a sentinel cell whose `start` is the
+/// number of references). 16 bytes, one load on the GPU: half the 32 of a cell with 32-bit
+/// coordinates and a count, which brought the structure from 71 to 54 bytes per triangle on the
+/// Stanford Bunny (docs/benchmarks.md). Virtual grids are at most `16 x 1024` voxels per axis
+/// (`MAX_LEVEL`, `auto_dims`), inside 16 bits.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct IrrCell {
-    pub min: [u32; 3],
+    /// `min.x | min.y << 16`, `min.z | max.x << 16`, `max.y | max.z << 16`.
+    pub bounds: [u32; 3],
     pub start: u32,
+}
+
+impl IrrCell {
+    /// Packs a box (coordinates below 2^16, which the build checks) and a start.
+    pub fn new(min: [u32; 3], max: [u32; 3], start: u32) -> IrrCell {
+        debug_assert!(min.iter().chain(&max).all(|&c| c <= 0xffff));
+        IrrCell {
+            bounds: [min[0] | min[1] << 16, min[2] | max[0] << 16, max[1] | max[2] << 16],
+            start,
+        }
+    }
+
+    #[inline(always)]
+    pub fn min(&self) -> [u32; 3] {
+        let b = self.bounds;
+        [b[0] & 0xffff, b[0] >> 16, b[1] & 0xffff]
+    }
+
+    #[inline(always)]
+    pub fn max(&self) -> [u32; 3] {
+        let b = self.bounds;
+        [b[1] >> 16, b[2] & 0xffff, b[2] >> 16]
+    }
+}
+
+/// A cell unpacked for the walk: its grown box and its slice of the references.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CellView {
+    pub min: [u32; 3],
     pub max: [u32; 3],
+    pub start: u32,
     pub count: u32,
 }
 
@@ -193,6 +229,7 @@ pub struct IrregularGrid {
     /// Cell index of each second-level cell of the two-level grid (merged cells appear many
     /// times).
     pub voxel_map: Vec<u32>,
+    /// The cells, then a sentinel (`start` = number of references; no voxel maps to it).
     pub cells: Vec<IrrCell>,
     /// Packed triangle indices, cell after cell, ascending within a cell.
     pub refs: Vec<u32>,
@@ -219,9 +256,27 @@ impl IrregularGrid {
         self.voxel_map[self.slot(v.map(|x| x as i32))]
     }
 
+    /// Cells (not counting the sentinel at the end of `cells`).
+    pub fn cell_count(&self) -> usize {
+        self.cells.len() - 1
+    }
+
+    /// Cell `c` unpacked (`c < cell_count()`).
+    #[inline(always)]
+    pub fn cell(&self, c: u32) -> CellView {
+        let cell = self.cells[c as usize];
+        let end = self.cells[c as usize + 1].start;
+        CellView {
+            min: cell.min(),
+            max: cell.max(),
+            start: cell.start,
+            count: end - cell.start,
+        }
+    }
+
     /// The references of cell `c`.
     pub fn cell_refs(&self, c: u32) -> &[u32] {
-        let cell = self.cells[c as usize];
+        let cell = self.cell(c);
         &self.refs[cell.start as usize..(cell.start + cell.count) as usize]
     }
 

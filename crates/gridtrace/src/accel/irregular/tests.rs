@@ -73,9 +73,10 @@ fn build_invariants() {
         let tris = clusters(400, 11 + k as u64);
         let g = IrregularGrid::build(&tris, p).unwrap();
         let dims = g.voxel_dims();
-        let grown = g
-            .cells
-            .iter()
+        assert_eq!(g.cell_count(), g.partition.len());
+        assert_eq!(g.cells.last().map(|c| c.start as usize), Some(g.refs.len()), "the sentinel");
+        let grown = (0..g.cell_count() as u32)
+            .map(|c| g.cell(c))
             .zip(&g.partition)
             .filter(|(c, b)| UVec3::from(c.max) - UVec3::from(c.min) != b[1] - b[0])
             .count();
@@ -102,7 +103,7 @@ fn build_invariants() {
                     let [lo, hi] = g.partition[c];
                     assert!(v.cmpge(lo).all() && v.cmplt(hi).all(), "voxel {v} not in its cell {c}");
                     // The grown box holds the cell's own.
-                    let cell = g.cells[c];
+                    let cell = g.cell(c as u32);
                     assert!(
                         UVec3::from(cell.min).cmple(lo).all() && UVec3::from(cell.max).cmpge(hi).all(),
                         "cell {c}"
@@ -110,14 +111,14 @@ fn build_invariants() {
                 }
             }
         }
-        for (i, cell) in g.cells.iter().enumerate() {
+        for (i, cell) in (0..g.cell_count() as u32).map(|c| g.cell(c)).enumerate() {
             let (gmin, gmax) = (UVec3::from(cell.min), UVec3::from(cell.max));
             for z in gmin.z..gmax.z {
                 for y in gmin.y..gmax.y {
                     for x in gmin.x..gmax.x {
                         let other = g.cell_at([x, y, z]) as usize;
                         assert!(
-                            other == i || g.cells[other].count == 0,
+                            other == i || g.cell(other as u32).count == 0,
                             "params {k}: cell {i} grown over non-empty cell {other}"
                         );
                     }

@@ -19,7 +19,7 @@
 
 use glam::{Vec3, Vec4};
 
-use super::{IrrCell, IrregularGrid, LEVEL_BITS};
+use super::{CellView, IrregularGrid, LEVEL_BITS};
 use crate::accel::bvh::prefetch;
 use crate::accel::grid::dda::{min_position, sign};
 use crate::accel::{Counters, Hit, Ray, TriAccel, TriAccel4};
@@ -49,9 +49,9 @@ enum Stage {
     /// The cell.
     Cell(u32),
     /// The cell's references (with the cell's exit distances).
-    Refs(IrrCell, [f32; 3]),
+    Refs(CellView, [f32; 3]),
     /// Their triangles.
-    Tris(IrrCell, [f32; 3]),
+    Tris(CellView, [f32; 3]),
 }
 
 /// One ray of the batch walk.
@@ -106,7 +106,7 @@ impl IrregularGrid {
     /// ahead, from the integer plane index each time as the DDA does, so nothing accumulates
     /// (infinite on an axis the ray does not move along).
     #[inline(always)]
-    fn face_t(&self, c: &Cursor, cell: &IrrCell) -> [f32; 3] {
+    fn face_t(&self, c: &Cursor, cell: &CellView) -> [f32; 3] {
         std::array::from_fn(|a| {
             if c.step[a] == 0 {
                 f32::INFINITY
@@ -120,7 +120,7 @@ impl IrregularGrid {
     /// Moves the cursor into the voxel just past the cell's exit face (see the module notes);
     /// false when the ray leaves the grid there (or the step budget is spent).
     #[inline(always)]
-    fn advance(&self, c: &mut Cursor, cell: &IrrCell, t_faces: [f32; 3], t_exit: f32) -> bool {
+    fn advance(&self, c: &mut Cursor, cell: &CellView, t_faces: [f32; 3], t_exit: f32) -> bool {
         let dims = self.voxel_dims().as_ivec3().to_array();
         let axis = min_position(t_faces);
         let p = Ray::new(Vec3::from(c.origin), c.dir).at(t_exit);
@@ -166,7 +166,7 @@ impl IrregularGrid {
         };
         loop {
             counters.cell();
-            let cell = self.cells[self.voxel_map[self.slot(c.v)] as usize];
+            let cell = self.cell(self.voxel_map[self.slot(c.v)]);
             let t_faces = self.face_t(&c, &cell);
             let t_exit = t_faces[0].min(t_faces[1]).min(t_faces[2]);
             if cell.count > 0 {
@@ -227,13 +227,14 @@ impl IrregularGrid {
                     Stage::Map(slot) => {
                         let id = self.voxel_map[slot];
                         let at = self.cells.as_ptr().wrapping_add(id as usize) as *const i8;
+                        // The 16-byte cell and the next one's start (where its references
+                        // end): 32 bytes, which may straddle two lines.
                         prefetch(at);
-                        // A 32-byte cell may straddle two lines.
                         prefetch(at.wrapping_add(31));
                         l.stage = Stage::Cell(id);
                     }
                     Stage::Cell(id) => {
-                        let cell = self.cells[id as usize];
+                        let cell = self.cell(id);
                         let t_faces = self.face_t(&l.c, &cell);
                         if cell.count > 0 {
                             prefetch(self.refs.as_ptr().wrapping_add(cell.start as usize) as *const i8);
@@ -291,7 +292,7 @@ impl IrregularGrid {
     /// After a cell: the lane moves to the next one and asks for its voxel-map entry; false
     /// when the ray is done.
     #[inline(always)]
-    fn step_on(&self, l: &mut Lane, cell: &IrrCell, t_faces: [f32; 3]) -> bool {
+    fn step_on(&self, l: &mut Lane, cell: &CellView, t_faces: [f32; 3]) -> bool {
         let t_exit = t_faces[0].min(t_faces[1]).min(t_faces[2]);
         if t_exit >= l.c.t_leave || !self.advance(&mut l.c, cell, t_faces, t_exit) {
             return false;

@@ -17,11 +17,12 @@ struct RayRec { origin: array<f32, 3>, pixel: u32, dir: array<f32, 3>, t_max: f3
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
 // A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
 struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
-// An irregular-grid cell (IrrCell in accel/irregular/mod.rs): its grown box in virtual voxels
-// (`min` inclusive, `max` exclusive) and its slice of `refs`. A vec3<u32> in storage is 16-byte
-// aligned with a 4-byte scalar after it, so this is the Rust layout (32 bytes) read as two
-// 16-byte loads.
-struct IrrCell { min: vec3<u32>, start: u32, max: vec3<u32>, count: u32 }
+// An irregular-grid cell as stored (IrrCell in accel/irregular/mod.rs): its grown box in virtual
+// voxels as six 16-bit coordinates (`min.x | min.y << 16, min.z | max.x << 16, max.y | max.z <<
+// 16`) and the first of its `refs`, which end where the next cell's start (the array ends with
+// a sentinel cell). A vec3<u32> in storage is 16-byte aligned with a 4-byte scalar after it, so
+// this is the Rust layout: 16 bytes, one load. `irr_cell` unpacks it.
+struct IrrCell { bounds: vec3<u32>, start: u32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,

@@ -22,6 +22,17 @@ struct IrrWalk {
     t_leave: f32, budget: u32,
 }
 
+// A cell unpacked (`IrregularGrid::cell`): its grown box (`min` inclusive, `max` exclusive) and
+// its slice of `refs`.
+struct IrrBox { min: vec3<u32>, max: vec3<u32>, start: u32, count: u32 }
+fn irr_cell(id: u32) -> IrrBox {
+    let c = irr_cells[id];
+    let end = irr_cells[id + 1u].start;
+    let lo = vec3<u32>(c.bounds.x & 0xffffu, c.bounds.x >> 16u, c.bounds.y & 0xffffu);
+    let hi = vec3<u32>(c.bounds.y >> 16u, c.bounds.z & 0xffffu, c.bounds.z >> 16u);
+    return IrrBox(lo, hi, c.start, end - c.start);
+}
+
 // The index of the cell holding voxel `v` (inside the grid); mirrors IrregularGrid::cell_at.
 fn irr_cell_at(v: vec3<u32>) -> u32 {
     let s = scene.shift;
@@ -58,7 +69,7 @@ fn irr_start(w: ptr<function, IrrWalk>, o: vec3<f32>, d: vec3<f32>, t_min: f32, 
 }
 
 // Where the ray leaves `cell`'s grown box on each axis: through the face ahead.
-fn irr_faces(w: ptr<function, IrrWalk>, cell: IrrCell) -> vec3<f32> {
+fn irr_faces(w: ptr<function, IrrWalk>, cell: IrrBox) -> vec3<f32> {
     let face = select(cell.min, cell.max, (*w).step > vec3<i32>(0));
     return vec3<f32>(irr_plane_t(w, 0, face.x), irr_plane_t(w, 1, face.y), irr_plane_t(w, 2, face.z));
 }
@@ -66,7 +77,7 @@ fn irr_faces(w: ptr<function, IrrWalk>, cell: IrrCell) -> vec3<f32> {
 // Leaves `cell` (whose faces the ray crosses at `t_faces`) for the voxel just past its exit;
 // false when the walk is over: the exit is past the grid's, the next voxel is outside the grid,
 // or the budget is spent.
-fn irr_advance(w: ptr<function, IrrWalk>, cell: IrrCell, t_faces: vec3<f32>) -> bool {
+fn irr_advance(w: ptr<function, IrrWalk>, cell: IrrBox, t_faces: vec3<f32>) -> bool {
     let t_exit = min3(t_faces);
     if (t_exit >= (*w).t_leave) { return false; }
     let axis = min_position(t_faces);
@@ -102,7 +113,7 @@ fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
     if (!irr_start(&w, o, d, t_min, t_max)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
     loop {
         if (COUNT_WORK) { *work += 1u; }
-        let cell = irr_cells[irr_cell_at(vec3<u32>(w.v))];
+        let cell = irr_cell(irr_cell_at(vec3<u32>(w.v)));
         let t_faces = irr_faces(&w, cell);
         if (cell.count > 0u) {
             for (var i = cell.start; i < cell.start + cell.count; i++) {
@@ -126,7 +137,7 @@ fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     var w: IrrWalk;
     if (!irr_start(&w, o, d, t_min, t_max)) { return false; }
     loop {
-        let cell = irr_cells[irr_cell_at(vec3<u32>(w.v))];
+        let cell = irr_cell(irr_cell_at(vec3<u32>(w.v)));
         for (var i = cell.start; i < cell.start + cell.count; i++) {
             if (intersect_tri(tris[refs[i]], o, d, t_min, t_max).w != 0.0) { return true; }
         }
