@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
 use crate::accel::TriAccel;
-use crate::accel::grid::tri_box::triangle_overlaps_box;
+use crate::accel::grid::tri_box::triangle_overlaps_boxes4;
 use crate::accel::grid::{auto_dims, cell_margin, grid_bounds, overlap_pairs};
 use crate::accel::triangle::slack_pad;
 use crate::{Error, Result};
@@ -135,40 +135,69 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 return (boxes, vec![refs.len() as u32], refs);
             }
             let size = voxel_size * cell_voxels as f32;
+            let inv_size = size.recip();
             let margin = cell_margin(size, bounds);
             let top_min = bounds.min + (origin.as_vec3()) * voxel_size;
-            let mut keys: Vec<u64> = Vec::new();
+            // The (cell, triangle) pairs in triangle order; candidate cells four at a time
+            // through the exact test (`triangle_overlaps_boxes4`: the scalar test's answers).
+            let mut pairs_here: Vec<(u32, u32)> = Vec::new();
             for tri in tri_ids {
                 let [a, b, c] = tris[tri as usize].vertices();
                 let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
                 let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
-                let local = |p: Vec3| {
-                    ((p - top_min) / size)
-                        .floor()
-                        .max(Vec3::ZERO)
-                        .as_uvec3()
-                        .min(UVec3::splat(side - 1))
-                };
+                // Truncation equals `floor` on the non-negative values left after `max`.
+                let local = |p: Vec3| ((p - top_min) * inv_size).max(Vec3::ZERO).as_uvec3().min(UVec3::splat(side - 1));
                 let (c0, c1) = (local(lo - margin), local(hi + margin));
+                let half = size * 0.5 + margin;
+                let mut batch = [0u32; 4];
+                let mut n = 0;
+                let mut flush = |batch: &[u32; 4], n: usize| {
+                    let centers = std::array::from_fn(|k| {
+                        let [min, _] = boxes[batch[k.min(n - 1)] as usize];
+                        bounds.min + min.as_vec3() * voxel_size + size * 0.5
+                    });
+                    let takes = triangle_overlaps_boxes4(centers, half, a, b, c).bitmask();
+                    for (k, &i) in batch[..n].iter().enumerate() {
+                        if takes >> k & 1 == 1 {
+                            pairs_here.push((i, tri));
+                        }
+                    }
+                };
                 for z in c0.z..=c1.z {
                     for y in c0.y..=c1.y {
                         for x in c0.x..=c1.x {
-                            let i = x + (y << level) + (z << (2 * level));
-                            let [min, _] = boxes[i as usize];
-                            let center = bounds.min + min.as_vec3() * voxel_size + size * 0.5;
-                            if triangle_overlaps_box(center, size * 0.5 + margin, a, b, c) {
-                                keys.push((i as u64) << 32 | tri as u64);
+                            batch[n] = x + (y << level) + (z << (2 * level));
+                            n += 1;
+                            if n == 4 {
+                                flush(&batch, n);
+                                n = 0;
                             }
                         }
                     }
                 }
+                if n > 0 {
+                    flush(&batch, n);
+                }
             }
-            keys.sort_unstable();
+            // A counting sort by cell (stable: triangles stay ascending within a cell).
             let mut counts = vec![0u32; n_cells];
-            for k in &keys {
-                counts[(k >> 32) as usize] += 1;
+            for &(i, _) in &pairs_here {
+                counts[i as usize] += 1;
             }
-            (boxes, counts, keys.into_iter().map(|k| k as u32).collect())
+            let mut cursor: Vec<u32> = counts
+                .iter()
+                .scan(0u32, |at, &n| {
+                    let c = *at;
+                    *at += n;
+                    Some(c)
+                })
+                .collect();
+            let mut refs = vec![0u32; pairs_here.len()];
+            for &(i, tri) in &pairs_here {
+                refs[cursor[i as usize] as usize] = tri;
+                cursor[i as usize] += 1;
+            }
+            (boxes, counts, refs)
         })
         .collect();
     let mut boxes: Vec<VoxBox> = Vec::with_capacity(n_init);
