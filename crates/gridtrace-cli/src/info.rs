@@ -3,7 +3,7 @@
 use clap::Args;
 use gridtrace::accel::grid::dims_str;
 
-use gridtrace::accel::Structure;
+use gridtrace::accel::{IrregularGrid, Structure};
 use gridtrace::accel::irregular::IrregularStats;
 
 use crate::common::{GridArgs, SceneArgs, describe_structure, fmt_bytes};
@@ -74,6 +74,15 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
             for (phase, ms) in IrregularStats::PHASES.iter().zip(s.phase_ms) {
                 println!("  {phase:<14} {ms:>9.2} ms");
             }
+            // What `IrregularGrid::memory_bound` says before a build, beside what this one made.
+            let m = IrregularGrid::memory_bound(&prepared.accel.tris, a.grid.irregular)?;
+            println!(
+                "bound            at most {} cells before merging, {} references, structure {}, build peak {}",
+                m.initial_cells,
+                m.references,
+                fmt_bytes(m.structure_bytes as usize),
+                fmt_bytes(m.build_peak_bytes as usize)
+            );
         }
     }
     println!("memory:");

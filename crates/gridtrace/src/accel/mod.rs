@@ -22,7 +22,7 @@ pub use aabb::Aabb;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
 pub use grid::{Cell, Grid, GridLattice, GridStats, Resolution, Stepping};
-pub use irregular::{IrrCell, IrregularGrid, IrregularParams};
+pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
 pub use ray::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
 pub use triangle::{TriAccel, TriAccel4, TriHit, TriHit4};
 

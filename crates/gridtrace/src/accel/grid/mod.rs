@@ -292,16 +292,7 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
             for (j, tri) in tris.iter().enumerate() {
                 let i = chunk * CHUNK + j;
                 let [a, b, c] = tri.vertices();
-                // At least the triangle test's own slack (large triangles), else the cell margin.
-                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-                let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
-                let lo = lo - margin;
-                let hi = hi + margin;
-                // The float-to-integer cast truncates, which equals `floor` (what the GPU build
-                // writes) on the non-negative values left after `max`; `floor` itself is a libm
-                // call on baseline x86-64 and was 5% of the build.
-                let clamp = |p: Vec3| ((p - bounds.min) * inv_cell_size).max(Vec3::ZERO).as_uvec3().min(dims - 1);
-                let (c0, c1) = (clamp(lo), clamp(hi));
+                let (c0, c1, margin) = candidate_cells(tri, bounds.min, inv_cell_size, dims, margin);
                 let key = |cell: UVec3| {
                     let idx = cell.x as u64 + dims.x as u64 * (cell.y as u64 + dims.y as u64 * cell.z as u64);
                     idx << 32 | i as u64
@@ -357,6 +348,21 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
             out
         })
         .collect()
+}
+
+/// The cells (inclusive range) a triangle may overlap in a grid of `dims` cells from `grid_min`
+/// (the triangle's box grown by `margin`, at least its own `slack_pad`), and that margin.
+#[inline(always)]
+pub(crate) fn candidate_cells(tri: &TriAccel, grid_min: Vec3, inv_cell_size: Vec3, dims: UVec3, margin: Vec3) -> (UVec3, UVec3, Vec3) {
+    let [a, b, c] = tri.vertices();
+    // At least the triangle test's own slack (large triangles), else the cell margin.
+    let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+    let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
+    // The float-to-integer cast truncates, which equals `floor` (what the GPU build writes) on
+    // the non-negative values left after `max`; `floor` itself is a libm call on baseline
+    // x86-64 and was 5% of the build.
+    let clamp = |p: Vec3| ((p - grid_min) * inv_cell_size).max(Vec3::ZERO).as_uvec3().min(dims - 1);
+    (clamp(lo - margin), clamp(hi + margin), margin)
 }
 
 /// A counting sort of `cell << 32 | item` pairs by cell, first half: the number of pairs per

@@ -8,7 +8,7 @@ use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
-use crate::accel::TriAccel;
+use crate::accel::{Aabb, TriAccel};
 use crate::accel::grid::tri_box::triangle_overlaps_boxes4;
 use crate::accel::grid::{auto_dims, cell_margin, grid_bounds, overlap_pairs};
 use crate::accel::triangle::slack_pad;
@@ -30,7 +30,7 @@ type VoxBox = [UVec3; 2];
 /// A cell's references during the build: a slice of the second level's array until a merge
 /// with a different set gives it its own.
 #[derive(Debug, Clone)]
-enum Refs {
+pub(super) enum Refs {
     Span(u32, u32),
     Owned(Vec<u32>),
 }
@@ -53,15 +53,11 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     };
 
     // Phase 1: the top grid and its (top cell, triangle) pairs.
-    let bounds = grid_bounds(tris)?;
-    // Cells store their boxes in 16-bit voxel coordinates (`IrrCell`): at most 4,096 top
-    // cells per axis (a scene flat in two axes would otherwise put its whole budget on one),
-    // and as many levels below them as keep the virtual grid under 2^16 voxels per axis.
-    let top_dims = auto_dims(bounds.extent(), tris.len(), params.top_density).min(UVec3::splat(MAX_TOP_PER_AXIS));
-    let max_shift = (0..=MAX_LEVEL)
-        .rev()
-        .find(|&s| (top_dims.max_element() as u64) << s <= 0xffff)
-        .unwrap_or(0);
+    let TopGrid {
+        bounds,
+        top_dims,
+        max_shift,
+    } = TopGrid::new(tris, params)?;
     let top_size = bounds.extent() / top_dims.as_vec3();
     let pairs = overlap_pairs(tris, bounds, top_dims, cell_margin(top_size, bounds));
     let n_top = (top_dims.x * top_dims.y * top_dims.z) as usize;
@@ -77,15 +73,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     // Phase 2: split each top cell into 2^level cells per axis, about `cell_density` cells per
     // reference, and find each small cell's triangles with the exact overlap test.
     let levels: Vec<u32> = (0..n_top)
-        .map(|t| {
-            let n = top_start[t + 1] - top_start[t];
-            if n == 0 {
-                0
-            } else {
-                let per_axis = (params.cell_density as f64 * n as f64).cbrt();
-                (per_axis.log2().round().max(0.0) as u32).min(max_shift)
-            }
-        })
+        .map(|t| level_for(top_start[t + 1] - top_start[t], params.cell_density, max_shift))
         .collect();
     let shift = levels.iter().copied().max().unwrap_or(0);
     let voxel_dims = top_dims << shift;
@@ -200,6 +188,8 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             (boxes, counts, refs)
         })
         .collect();
+    // Freed here, not at the end of the build (`memory.rs` counts on it).
+    drop(pairs);
     let mut boxes: Vec<VoxBox> = Vec::with_capacity(n_init);
     let mut refs_of: Vec<Refs> = Vec::with_capacity(n_init);
     let mut flat: Vec<u32> = Vec::with_capacity(per_top.iter().map(|p| p.2.len()).sum());
@@ -371,8 +361,8 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     lap(3);
 
     // Phase 5: the arrays the traversal reads.
-    let mut cells = Vec::with_capacity(live.len());
-    let mut refs = Vec::new();
+    let mut cells = Vec::with_capacity(live.len() + 1);
+    let mut refs = Vec::with_capacity(live.iter().map(|&i| refs_of[i as usize].get(&flat).len()).sum());
     for (k, &i) in live.iter().enumerate() {
         let r = refs_of[i as usize].get(&flat);
         let g = grown[k];
@@ -417,6 +407,43 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         partition,
         stats,
     })
+}
+
+/// The top grid of a build: where it lies, its cells, and how many levels its cells may have.
+pub(super) struct TopGrid {
+    pub bounds: Aabb,
+    pub top_dims: UVec3,
+    pub max_shift: u32,
+}
+
+impl TopGrid {
+    pub fn new(tris: &[TriAccel], params: IrregularParams) -> Result<TopGrid> {
+        let bounds = grid_bounds(tris)?;
+        // Cells store their boxes in 16-bit voxel coordinates (`IrrCell`): at most 4,096 top
+        // cells per axis (a scene flat in two axes would otherwise put its whole budget on
+        // one), and as many levels below them as keep the virtual grid under 2^16 voxels per
+        // axis.
+        let top_dims = auto_dims(bounds.extent(), tris.len(), params.top_density).min(UVec3::splat(MAX_TOP_PER_AXIS));
+        let max_shift = (0..=MAX_LEVEL)
+            .rev()
+            .find(|&s| (top_dims.max_element() as u64) << s <= 0xffff)
+            .unwrap_or(0);
+        Ok(TopGrid {
+            bounds,
+            top_dims,
+            max_shift,
+        })
+    }
+}
+
+/// Levels of a top cell with `n` references: about `cell_density` cells per reference (never
+/// fewer levels for more references, which `memory.rs` relies on).
+pub(super) fn level_for(n: u32, cell_density: f32, max_shift: u32) -> u32 {
+    if n == 0 {
+        return 0;
+    }
+    let per_axis = (cell_density as f64 * n as f64).cbrt();
+    (per_axis.log2().round().max(0.0) as u32).min(max_shift)
 }
 
 /// The root of `x`'s set, halving the path on the way.

@@ -26,9 +26,12 @@ use super::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
 
 mod build;
+mod memory;
 #[cfg(test)]
 mod tests;
 mod walk;
+
+pub use memory::MemoryBound;
 
 /// One cell as stored: its grown box in virtual voxels (`min` inclusive, `max` exclusive) as
 /// six 16-bit coordinates, and the first of its references in `IrregularGrid::refs`; they end

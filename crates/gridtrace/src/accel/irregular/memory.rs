@@ -1,0 +1,143 @@
+//! What an irregular-grid build will take, known before it runs: upper bounds on its arrays
+//! (`MemoryBound`), from one cheap pass over the triangles' candidate cells, so `gridtrace info`
+//! can say whether a mesh fits before the build spends its time, and a test can hold the build
+//! to it (`tests/irregular_memory.rs`, a counting allocator).
+//!
+//! Why these are bounds and not estimates:
+//! - Top-level references: the build keeps a (top cell, triangle) pair only among the candidate
+//!   cells of the triangle's grown box (`candidate_cells`, the same function), so their number
+//!   bounds the pairs, overall and per top cell.
+//! - Levels: `level_for` never gives fewer levels to more references, so the levels from the
+//!   candidate counts bound the build's, and with them the second-level cells.
+//! - Second-level references: per candidate (top cell, triangle), the candidate cells at the
+//!   bounding level with the top cells' margin (the largest any level uses). Finer cells and a
+//!   wider box can only cover more cells than the build's range at its own level and margin;
+//!   the margins differ by at least a two-thousandth of a top cell, far above rounding.
+//! - Merging only unites reference sets and expansion adds none, so the final references and
+//!   cells are at most the second level's.
+//! - The build's own arrays are listed phase by phase below with their element sizes and
+//!   capacities (`build.rs` allocates them exactly so: `with_capacity`, `vec![..; n]`, exact
+//!   collects); a `Vec` that grows by doubling is counted at three times its length (its last
+//!   reallocation holds the old block and one twice as large). The peak is the largest phase.
+
+use glam::UVec3;
+
+use super::build::{level_for, Refs, TopGrid};
+use super::{IrrCell, IrregularGrid, IrregularParams};
+use crate::accel::grid::{candidate_cells, cell_margin};
+use crate::accel::TriAccel;
+use crate::Result;
+
+/// Upper bounds on an irregular-grid build over given triangles and parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MemoryBound {
+    pub top_cells: u64,
+    /// (top cell, triangle) candidates: at least the top level's references.
+    pub top_pairs: u64,
+    /// Second-level cells at most (the cells after merging are fewer).
+    pub initial_cells: u64,
+    /// References at most, before and after merging.
+    pub references: u64,
+    /// Bytes of the arrays a ray reads (`IrregularGrid::bytes`) at most.
+    pub structure_bytes: u64,
+    /// Bytes the build holds at once at most (heap, its own allocations; the triangles are the
+    /// caller's).
+    pub build_peak_bytes: u64,
+}
+
+impl IrregularGrid {
+    /// Upper bounds on what `build(tris, params)` will allocate and make (see the module
+    /// notes); a pass over the triangles' candidate cells, a small part of a build's time.
+    pub fn memory_bound(tris: &[TriAccel], params: IrregularParams) -> Result<MemoryBound> {
+        params.check()?;
+        let TopGrid {
+            bounds,
+            top_dims,
+            max_shift,
+        } = TopGrid::new(tris, params)?;
+        let n_top = (top_dims.x as usize) * (top_dims.y as usize) * (top_dims.z as usize);
+        let top_size = bounds.extent() / top_dims.as_vec3();
+        let inv_top = top_size.recip();
+        let top_margin = cell_margin(top_size, bounds);
+        let mut candidates = vec![0u32; n_top];
+        let mut top_pairs = 0u64;
+        let index = |c: UVec3| (c.x + top_dims.x * (c.y + top_dims.y * c.z)) as usize;
+        for tri in tris {
+            let (c0, c1, _) = candidate_cells(tri, bounds.min, inv_top, top_dims, top_margin);
+            for z in c0.z..=c1.z {
+                for y in c0.y..=c1.y {
+                    for x in c0.x..=c1.x {
+                        let n = &mut candidates[index(UVec3::new(x, y, z))];
+                        *n = n.saturating_add(1);
+                        top_pairs += 1;
+                    }
+                }
+            }
+        }
+        let levels: Vec<u32> = candidates
+            .iter()
+            .map(|&n| level_for(n, params.cell_density, max_shift))
+            .collect();
+        let initial_cells: u64 = levels.iter().map(|&l| 1u64 << (3 * l)).sum();
+        let mut references = 0u64;
+        for tri in tris {
+            let (c0, c1, margin) = candidate_cells(tri, bounds.min, inv_top, top_dims, top_margin);
+            for z in c0.z..=c1.z {
+                for y in c0.y..=c1.y {
+                    for x in c0.x..=c1.x {
+                        let top = UVec3::new(x, y, z);
+                        let level = levels[index(top)];
+                        if level == 0 {
+                            references += 1;
+                            continue;
+                        }
+                        let side = 1u32 << level;
+                        let size = top_size / side as f32;
+                        let top_min = bounds.min + top.as_vec3() * top_size;
+                        let (s0, s1, _) = candidate_cells(tri, top_min, size.recip(), UVec3::splat(side), margin);
+                        references += ((s1 - s0) + 1).as_u64vec3().element_product();
+                    }
+                }
+            }
+        }
+        Ok(account(tris.len() as u64, n_top as u64, top_pairs, initial_cells, references))
+    }
+}
+
+/// The build's arrays, phase by phase (`build.rs`), from the bounds on their lengths.
+fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
+    const CHUNK: u64 = 2048; // `overlap_pairs_by_triangle`'s triangles per task
+    let refs_enum = std::mem::size_of::<Refs>() as u64;
+    let cell = std::mem::size_of::<IrrCell>() as u64;
+    let vox_box = 24u64; // [UVec3; 2]
+    // Phase 1, `overlap_pairs`: the per-chunk pair lists (capacity 4 per triangle, doubled
+    // when full), their outer list, the counts and cursors per top cell, the sorted pairs.
+    let chunks = n.div_ceil(CHUNK);
+    let phase1 = 8 * (4 * n + 3 * p1) + 24 * chunks + 8 * top + 8 * p1;
+    // Kept from phase 1: the pairs (until phase 2's cells are made) and the top cells' starts.
+    let kept1 = 8 * p1 + 4 * (top + 1);
+    // Phase 2: levels and begins; per top cell its boxes, counts and references (72 bytes of
+    // list headers each), and while its task runs a growing (cell, triangle) list and a cursor
+    // per cell; then the boxes, reference sets and flat references of all cells.
+    let levels = 4 * top + 8 * top;
+    let per_top = 72 * top + (vox_box + 4) * i + 4 * r2;
+    let tasks = 24 * r2 + 96 * top + 4 * i;
+    let cells2 = (vox_box + refs_enum) * i + 4 * r2;
+    let phase2 = kept1 + levels + per_top + tasks + cells2;
+    // Phases 3-5: union-find parents, the live list, merged reference sets (at most the
+    // second level's references alive, as much again while a union is made), representatives
+    // and new indices; the grown boxes; the final cells (and sentinel), references, voxel map,
+    // entries and partition.
+    let merged = 4 * i + 4 * i + 8 * r2 + 4 * i + 4 * i;
+    let expanded = vox_box * i;
+    let arrays = cell * (i + 1) + 4 * r2 + 4 * i + 4 * top + vox_box * i;
+    let late = 4 * (top + 1) + levels + cells2 + merged + expanded + arrays;
+    MemoryBound {
+        top_cells: top,
+        top_pairs: p1,
+        initial_cells: i,
+        references: r2,
+        structure_bytes: 4 * top + 4 * i + cell * (i + 1) + 4 * r2,
+        build_peak_bytes: phase1.max(phase2).max(late),
+    }
+}
