@@ -124,20 +124,22 @@ fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
     let tasks = 24 * r2 + 96 * top + 4 * i;
     let cells2 = (vox_box + refs_enum) * i + 4 * r2;
     let phase2 = kept1 + levels + per_top + tasks + cells2;
-    // Phases 3-5: union-find parents, the live list, merged reference sets (at most the
-    // second level's references alive, as much again while a union is made), representatives
-    // and new indices; the grown boxes; the final cells (and sentinel), references, voxel map,
-    // entries and partition.
-    let merged = 4 * i + 4 * i + 8 * r2 + 4 * i + 4 * i;
-    let expanded = vox_box * i;
-    let arrays = cell * (i + 1) + 4 * r2 + 4 * i + 4 * top + vox_box * i;
-    let late = 4 * (top + 1) + levels + cells2 + merged + expanded + arrays;
+    // Phase 3, merging: union-find parents, the live list, merged reference sets (at most
+    // the second level's references alive, as much again while a union is made); at its end
+    // the representatives, new indices, the voxel map and the survivors' boxes, the parents
+    // and new indices dropped as soon as done with.
+    let kept2 = 4 * (top + 1) + levels + cells2 + 8 * r2 + 4 * i;
+    let merged = kept2 + 4 * i + 4 * i + 4 * i + 4 * i + vox_box * i;
+    // Phases 4-5: the grown boxes, then the final cells (and sentinel) and references, the
+    // top cells' entries; the build's own arrays are dropped before the entries are made.
+    let kept3 = kept2 + 4 * i + 4 * i + vox_box * i;
+    let late = kept3 + vox_box * i + cell * (i + 1) + 4 * r2 + 4 * top;
     MemoryBound {
         top_cells: top,
         top_pairs: p1,
         initial_cells: i,
         references: r2,
         structure_bytes: 4 * top + 4 * i + cell * (i + 1) + 4 * r2,
-        build_peak_bytes: phase1.max(phase2).max(late),
+        build_peak_bytes: phase1.max(phase2).max(merged).max(late),
     }
 }
