@@ -46,12 +46,7 @@ pub struct BuildPoint {
 
 /// The meshes' triangles, as the scene preparation makes them (degenerate ones dropped).
 fn triangles(m: &gridtrace::Mesh) -> Vec<TriAccel> {
-    m.triangles
-        .iter()
-        .map(|t| t.map(|i| m.positions[i as usize]))
-        .filter(|[a, b, c]| (*b - *a).cross(*c - *a).length_squared() > 0.0)
-        .map(|[a, b, c]| TriAccel::new(a, b, c))
-        .collect()
+    TriAccel::from_mesh(m)
 }
 
 /// The best of `reps` runs of `f` after one warm-up, in ms, and the last result.

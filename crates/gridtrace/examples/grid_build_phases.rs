@@ -12,13 +12,7 @@ fn main() -> gridtrace::Result<()> {
     let path = args.get(1).expect("usage: grid_build_phases MESH [REPS]");
     let reps: usize = args.get(2).map_or(20, |r| r.parse().expect("REPS is a count"));
     let mesh = gridtrace::io::load_mesh(std::path::Path::new(path))?;
-    let tris: Vec<TriAccel> = mesh
-        .triangles
-        .iter()
-        .map(|t| t.map(|i| mesh.positions[i as usize]))
-        .filter(|[a, b, c]| (*b - *a).cross(*c - *a).length_squared() > 0.0)
-        .map(|[a, b, c]| TriAccel::new(a, b, c))
-        .collect();
+    let tris = TriAccel::from_mesh(&mesh);
     let best = |f: &mut dyn FnMut()| {
         (0..reps)
             .map(|_| {

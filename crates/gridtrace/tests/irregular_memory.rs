@@ -69,12 +69,7 @@ static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn tris_of(mut m: gridtrace::Mesh, at: Mat4) -> Vec<TriAccel> {
     procedural::transform(&mut m, at);
-    m.triangles
-        .iter()
-        .map(|t| t.map(|i| m.positions[i as usize]))
-        .filter(|[a, b, c]| (*b - *a).cross(*c - *a).length_squared() > 0.0)
-        .map(|[a, b, c]| TriAccel::new(a, b, c))
-        .collect()
+    TriAccel::from_mesh(&m)
 }
 
 /// Builds the grid, checks it and the heap's peak against the bound; returns (peak, bound).

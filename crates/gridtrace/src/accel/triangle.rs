@@ -89,6 +89,18 @@ impl TriAccel {
         }
     }
 
+    /// A mesh's triangles with non-zero area, in order: what a scene's preparation traces
+    /// (it drops and counts the degenerate ones), for benchmarks and tests that build
+    /// structures from a mesh directly.
+    pub fn from_mesh(m: &crate::Mesh) -> Vec<TriAccel> {
+        m.triangles
+            .iter()
+            .map(|t| t.map(|i| m.positions[i as usize]))
+            .filter(|[a, b, c]| (*b - *a).cross(*c - *a).length_squared() > 0.0)
+            .map(|[a, b, c]| TriAccel::new(a, b, c))
+            .collect()
+    }
+
     pub fn vertices(&self) -> [Vec3; 3] {
         let v0 = Vec3::from(self.v0);
         [v0, v0 + Vec3::from(self.e1), v0 + Vec3::from(self.e2)]
