@@ -27,6 +27,23 @@ const MAX_PROBES: u32 = 256;
 /// A cell's box in voxels, `min` inclusive and `max` exclusive.
 type VoxBox = [UVec3; 2];
 
+/// A second-level cell's box as the build keeps it, one per cell through merging: 16-bit
+/// coordinates (the virtual grid is under 2^16 voxels per axis, `TopGrid::new`), 12 bytes
+/// where a `VoxBox` takes 24.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Box16([[u16; 3]; 2]);
+
+impl Box16 {
+    #[inline(always)]
+    fn pack(b: VoxBox) -> Box16 {
+        Box16(b.map(|c| c.to_array().map(|v| v as u16)))
+    }
+    #[inline(always)]
+    fn unpack(self) -> VoxBox {
+        self.0.map(|c| UVec3::from(c.map(u32::from)))
+    }
+}
+
 /// A cell's references during the build: a slice of the second level's array until a merge
 /// with a different set gives it its own.
 #[derive(Debug, Clone)]
@@ -99,8 +116,33 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             t / (top_dims.x * top_dims.y),
         )
     };
-    // Per top cell: its cells' boxes, reference counts and references.
-    let per_top: Vec<(Vec<VoxBox>, Vec<u32>, Vec<u32>)> = (0..n_top)
+    // Every second-level cell's box, by its index (`begin` of its top cell + its index there).
+    let cell_box = |t: usize, i: u32| -> VoxBox {
+        let level = levels[t];
+        let side = 1u32 << level;
+        let cell_voxels = 1u32 << (shift - level);
+        let local = UVec3::new(i & (side - 1), (i >> level) & (side - 1), i >> (2 * level));
+        let min = (top_coord(t) << shift) + local * cell_voxels;
+        [min, min + cell_voxels]
+    };
+    let mut boxes: Vec<Box16> = vec![Box16([[0; 3]; 2]); n_init];
+    {
+        // Split at the top cells' beginnings, so each top cell's boxes are filled on one core.
+        let mut slices: Vec<(usize, &mut [Box16])> = Vec::with_capacity(n_top);
+        let mut rest = boxes.as_mut_slice();
+        for (t, &l) in levels.iter().enumerate() {
+            let (mine, tail) = rest.split_at_mut(1 << (3 * l));
+            slices.push((t, mine));
+            rest = tail;
+        }
+        slices.into_par_iter().for_each(|(t, out)| {
+            for (i, b) in out.iter_mut().enumerate() {
+                *b = Box16::pack(cell_box(t, i as u32));
+            }
+        });
+    }
+    // Per top cell: its cells' reference counts and references.
+    let per_top: Vec<(Vec<u32>, Vec<u32>)> = (0..n_top)
         .into_par_iter()
         .map(|t| {
             let level = levels[t];
@@ -111,16 +153,9 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 .iter()
                 .map(|p| *p as u32);
             let n_cells = 1usize << (3 * level);
-            let boxes: Vec<VoxBox> = (0..n_cells as u32)
-                .map(|i| {
-                    let local = UVec3::new(i & (side - 1), (i >> level) & (side - 1), i >> (2 * level));
-                    let min = origin + local * cell_voxels;
-                    [min, min + cell_voxels]
-                })
-                .collect();
             if level == 0 {
                 let refs: Vec<u32> = tri_ids.collect();
-                return (boxes, vec![refs.len() as u32], refs);
+                return (vec![refs.len() as u32], refs);
             }
             let size = voxel_size * cell_voxels as f32;
             let inv_size = size.recip();
@@ -141,7 +176,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 let mut n = 0;
                 let mut flush = |batch: &[u32; 4], n: usize| {
                     let centers = std::array::from_fn(|k| {
-                        let [min, _] = boxes[batch[k.min(n - 1)] as usize];
+                        let [min, _] = cell_box(t, batch[k.min(n - 1)]);
                         bounds.min + min.as_vec3() * voxel_size + size * 0.5
                     });
                     let takes = triangle_overlaps_boxes4(centers, half, a, b, c).bitmask();
@@ -185,16 +220,14 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 refs[cursor[i as usize] as usize] = tri;
                 cursor[i as usize] += 1;
             }
-            (boxes, counts, refs)
+            (counts, refs)
         })
         .collect();
     // Freed here, not at the end of the build (`memory.rs` counts on it).
     drop(pairs);
-    let mut boxes: Vec<VoxBox> = Vec::with_capacity(n_init);
     let mut refs_of: Vec<Refs> = Vec::with_capacity(n_init);
-    let mut flat: Vec<u32> = Vec::with_capacity(per_top.iter().map(|p| p.2.len()).sum());
-    for (b, counts, refs) in per_top {
-        boxes.extend_from_slice(&b);
+    let mut flat: Vec<u32> = Vec::with_capacity(per_top.iter().map(|p| p.1.len()).sum());
+    for (counts, refs) in per_top {
         let mut s = flat.len() as u32;
         for n in counts {
             refs_of.push(Refs::Span(s, n));
@@ -236,14 +269,14 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                     continue;
                 }
                 loop {
-                    let mine = boxes[cell];
+                    let mine = boxes[cell].unpack();
                     if mine[1][axis] >= voxel_dims[axis] {
                         break;
                     }
                     let mut probe = mine[0];
                     probe[axis] = mine[1][axis];
                     let other = find(&mut parent, initial_at(probe)) as usize;
-                    let theirs = boxes[other];
+                    let theirs = boxes[other].unpack();
                     if theirs[0][b] != mine[0][b]
                         || theirs[1][b] != mine[1][b]
                         || theirs[0][c] != mine[0][c]
@@ -275,7 +308,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                         refs_of[cell] = Refs::Owned(v);
                     }
                     refs_of[other] = Refs::Span(0, 0);
-                    boxes[cell] = joined;
+                    boxes[cell] = Box16::pack(joined);
                     parent[other] = cell as u32;
                     merged += 1;
                 }
@@ -298,7 +331,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     }
     let voxel_map: Vec<u32> = rep.par_iter().map(|&r| new_index[r as usize]).collect();
     drop(new_index);
-    let partition: Vec<VoxBox> = live.iter().map(|&i| boxes[i as usize]).collect();
+    let partition: Vec<VoxBox> = live.iter().map(|&i| boxes[i as usize].unpack()).collect();
     lap(2);
 
     // Phase 4: expansion. Each cell's box grows across a face when every cell just beyond that
@@ -335,7 +368,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 if !empty(n) || probes > MAX_PROBES {
                     return;
                 }
-                let nb = boxes[n as usize];
+                let nb = boxes[n as usize].unpack();
                 depth = depth.min(if up {
                     nb[1][axis] - plane
                 } else {
@@ -355,7 +388,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     let grown: Vec<VoxBox> = live
         .par_iter()
         .map(|&i| {
-            let mut g = boxes[i as usize];
+            let mut g = boxes[i as usize].unpack();
             for _ in 0..params.expand_passes {
                 for axis in 0..3 {
                     grow(&mut g, axis, true);

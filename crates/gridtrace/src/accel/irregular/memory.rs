@@ -22,7 +22,7 @@
 
 use glam::UVec3;
 
-use super::build::{level_for, Refs, TopGrid};
+use super::build::{level_for, Box16, Refs, TopGrid};
 use super::{IrrCell, IrregularGrid, IrregularParams};
 use crate::accel::grid::{candidate_cells, cell_margin};
 use crate::accel::TriAccel;
@@ -109,20 +109,22 @@ fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
     const CHUNK: u64 = 2048; // `overlap_pairs_by_triangle`'s triangles per task
     let refs_enum = std::mem::size_of::<Refs>() as u64;
     let cell = std::mem::size_of::<IrrCell>() as u64;
-    let vox_box = 24u64; // [UVec3; 2]
+    let vox_box = 24u64; // [UVec3; 2]: the partition and the grown boxes
+    let box16 = std::mem::size_of::<Box16>() as u64; // every second-level cell's box
     // Phase 1, `overlap_pairs`: the per-chunk pair lists (capacity 4 per triangle, doubled
     // when full), their outer list, the counts and cursors per top cell, the sorted pairs.
     let chunks = n.div_ceil(CHUNK);
     let phase1 = 8 * (4 * n + 3 * p1) + 24 * chunks + 8 * top + 8 * p1;
     // Kept from phase 1: the pairs (until phase 2's cells are made) and the top cells' starts.
     let kept1 = 8 * p1 + 4 * (top + 1);
-    // Phase 2: levels and begins; per top cell its boxes, counts and references (72 bytes of
-    // list headers each), and while its task runs a growing (cell, triangle) list and a cursor
-    // per cell; then the boxes, reference sets and flat references of all cells.
+    // Phase 2: levels and begins, every second-level cell's box; per top cell its counts and
+    // references (48 bytes of list headers each), and while its task runs a growing (cell,
+    // triangle) list and a cursor per cell; then the reference sets and flat references of all
+    // cells.
     let levels = 4 * top + 8 * top;
-    let per_top = 72 * top + (vox_box + 4) * i + 4 * r2;
+    let per_top = 48 * top + 4 * i + 4 * r2;
     let tasks = 24 * r2 + 96 * top + 4 * i;
-    let cells2 = (vox_box + refs_enum) * i + 4 * r2;
+    let cells2 = (box16 + refs_enum) * i + 4 * r2;
     let phase2 = kept1 + levels + per_top + tasks + cells2;
     // Phase 3, merging: union-find parents, the live list, merged reference sets (at most
     // the second level's references alive, as much again while a union is made); at its end
