@@ -27,20 +27,24 @@ fn grew(by: usize) {
 
 // SAFETY: every call forwards to the system allocator with the caller's own arguments, whose
 // contracts are the caller's; the counters only observe sizes.
+// Blocks are counted before they are asked for (and uncounted if refused), so a peak that
+// threads reach together is never missed.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        grew(layout.size());
         // SAFETY: as above.
         let p = unsafe { System.alloc(layout) };
-        if !p.is_null() {
-            grew(layout.size());
+        if p.is_null() {
+            LIVE.fetch_sub(layout.size(), Relaxed);
         }
         p
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        grew(layout.size());
         // SAFETY: as above.
         let p = unsafe { System.alloc_zeroed(layout) };
-        if !p.is_null() {
-            grew(layout.size());
+        if p.is_null() {
+            LIVE.fetch_sub(layout.size(), Relaxed);
         }
         p
     }
@@ -52,12 +56,10 @@ unsafe impl GlobalAlloc for Counting {
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         // Counted as a new block beside the old one (a moving realloc holds both), then the
         // old one freed.
+        grew(new_size);
         // SAFETY: as above.
         let p = unsafe { System.realloc(ptr, layout, new_size) };
-        if !p.is_null() {
-            grew(new_size);
-            LIVE.fetch_sub(layout.size(), Relaxed);
-        }
+        LIVE.fetch_sub(if p.is_null() { new_size } else { layout.size() }, Relaxed);
         p
     }
 }

@@ -22,6 +22,10 @@ pub const FAR: u32 = u32::MAX;
 
 /// `occupied[x + dims[0]*(y + dims[1]*z)]` -> distance per cell (0 for occupied cells).
 pub fn chebyshev_distance_transform(dims: [u32; 3], occupied: &[bool]) -> Vec<u32> {
+    assert_eq!(occupied.len(), dims.iter().map(|&d| d as usize).product::<usize>());
+    if occupied.is_empty() {
+        return Vec::new(); // a zero dimension: no cells
+    }
     let cap = dilation_rounds_cap(dims);
     by_dilation(dims, occupied, cap).unwrap_or_else(|| by_envelopes(dims, occupied))
 }

@@ -207,14 +207,13 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             for &(i, _) in &pairs_here {
                 counts[i as usize] += 1;
             }
-            let mut cursor: Vec<u32> = counts
-                .iter()
-                .scan(0u32, |at, &n| {
-                    let c = *at;
-                    *at += n;
-                    Some(c)
-                })
-                .collect();
+            // Sized exactly (`memory.rs` counts 4 bytes a cell).
+            let mut cursor: Vec<u32> = Vec::with_capacity(n_cells);
+            let mut at = 0u32;
+            for &n in &counts {
+                cursor.push(at);
+                at += n;
+            }
             let mut refs = vec![0u32; pairs_here.len()];
             for &(i, tri) in &pairs_here {
                 refs[cursor[i as usize] as usize] = tri;

@@ -1,7 +1,8 @@
-//! What an irregular-grid build will take, known before it runs: upper bounds on its arrays
-//! (`MemoryBound`), from one cheap pass over the triangles' candidate cells, so `gridtrace info`
-//! can say whether a mesh fits before the build spends its time, and a test can hold the build
-//! to it (`tests/irregular_memory.rs`, a counting allocator).
+//! What an irregular-grid build will take, known without running it: upper bounds on its arrays
+//! (`MemoryBound`), from one cheap pass over the triangles' candidate cells, so a caller can
+//! tell whether a mesh fits before a build spends its time (`gridtrace info` prints the bound
+//! beside what its build made), and a test can hold the build to it
+//! (`tests/irregular_memory.rs`, a counting allocator).
 //!
 //! Why these are bounds and not estimates:
 //! - Top-level references: the build keeps a (top cell, triangle) pair only among the candidate
@@ -10,9 +11,13 @@
 //! - Levels: `level_for` never gives fewer levels to more references, so the levels from the
 //!   candidate counts bound the build's, and with them the second-level cells.
 //! - Second-level references: per candidate (top cell, triangle), the candidate cells at the
-//!   bounding level with the top cells' margin (the largest any level uses). Finer cells and a
-//!   wider box can only cover more cells than the build's range at its own level and margin;
-//!   the margins differ by at least a two-thousandth of a top cell, far above rounding.
+//!   bounding level, of the triangle's box grown by the build's largest margin (the top cells',
+//!   or the triangle's own slack) plus the top cells' margin once more. Finer cells and a wider
+//!   box cover at least the cells of the build's range at its own level and margin. The extra
+//!   margin (a thousandth of a top cell plus a millionth of the coordinates' magnitude) is what
+//!   makes it hold in floating point too: the two ranges place their cells through different
+//!   roundings (`top_min` and the reciprocal computed another way), errors of a few ulps of
+//!   the coordinates, far below it.
 //! - Merging only unites reference sets and expansion adds none, so the final references and
 //!   cells are at most the second level's.
 //! - The build's own arrays are listed phase by phase below with their element sizes and
@@ -82,6 +87,7 @@ impl IrregularGrid {
         let mut references = 0u64;
         for tri in tris {
             let (c0, c1, margin) = candidate_cells(tri, bounds.min, inv_top, top_dims, top_margin);
+            let margin = margin + top_margin;
             for z in c0.z..=c1.z {
                 for y in c0.y..=c1.y {
                     for x in c0.x..=c1.x {

@@ -38,8 +38,8 @@ pub use memory::MemoryBound;
 /// where the next cell's begin (the cells' arrays end with a sentinel cell whose `start` is the
 /// number of references). 16 bytes, one load on the GPU: half the 32 of a cell with 32-bit
 /// coordinates and a count, which brought the structure from 71 to 54 bytes per triangle on the
-/// Stanford Bunny (docs/benchmarks.md). Virtual grids are at most `16 x 1024` voxels per axis
-/// (`MAX_LEVEL`, `auto_dims`), inside 16 bits.
+/// Stanford Bunny (docs/benchmarks.md). Virtual grids are under 2^16 voxels per axis: the build
+/// caps the top grid at 4,096 cells per axis and the levels below it to fit (`TopGrid::new`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct IrrCell {
@@ -82,8 +82,8 @@ pub struct CellView {
 
 /// Top cells are split into at most `2^MAX_LEVEL` cells per axis. Four levels (16^3 cells for a
 /// top cell) is more than the default densities ask for on any of our meshes (the densest top
-/// cell of the Stanford Bunny asks for 3); it bounds the virtual grid to 16 x 1024 voxels per
-/// axis, exact in f32 and u32.
+/// cell of the Stanford Bunny asks for 3). The build may use fewer where the top grid is large
+/// (`TopGrid::new` keeps the virtual grid under 2^16 voxels per axis, for `IrrCell`).
 pub const MAX_LEVEL: u32 = 4;
 /// Bits of a top-cell entry that hold its level (`entry = begin << LEVEL_BITS | level`).
 pub const LEVEL_BITS: u32 = 3;

@@ -1,7 +1,8 @@
 // The grid build's two passes over the triangles (one invocation per triangle), the same code
 // compiled twice: `PLACE = false` counts each cell's references (`count`), `PLACE = true`
-// writes each triangle into the slots the scan gave its cells. Both run the exact overlap test,
-// so they agree on every (cell, triangle) pair without storing the pairs in between.
+// writes each triangle into the slots the scan gave its cells. Both decide each (cell, triangle)
+// pair with `takes` (the exact overlap test, or none for a range one cell thick on two axes),
+// so they agree on every pair without storing the pairs in between.
 //
 // Placement order within a cell depends on which invocation wins the atomic; the sort kernel
 // restores ascending triangle order afterwards, so the result does not depend on scheduling.
