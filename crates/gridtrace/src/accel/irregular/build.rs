@@ -338,16 +338,21 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     // reaches. The cells it grows over are the unexpanded partition, so a grown box covers its
     // own cell and empty cells only.
     let empty = |i: u32| refs_of[i as usize].get(&flat).is_empty();
-    let grow = |g: &mut VoxBox, axis: usize, up: bool| {
+    // Grows `g` across one face; true when that face can never grow: it lies on the grid's
+    // boundary, or a non-empty cell lies just beyond it. The region beyond a face only widens
+    // as the box grows on the other axes, so that cell stays in it and later passes need not
+    // probe the face again (on the Stanford Bunny 69% of the probes were in faces that failed).
+    // A face that gave up on `MAX_PROBES` is tried again.
+    let grow = |g: &mut VoxBox, axis: usize, up: bool| -> bool {
         let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
         let plane = if up {
             if g[1][axis] >= voxel_dims[axis] {
-                return;
+                return true;
             }
             g[1][axis]
         } else {
             if g[0][axis] == 0 {
-                return;
+                return true;
             }
             g[0][axis] - 1
         };
@@ -363,9 +368,12 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 v[b] = y;
                 v[c] = z;
                 let n = rep[initial_at(v) as usize];
+                if !empty(n) {
+                    return true;
+                }
                 probes += 1;
-                if !empty(n) || probes > MAX_PROBES {
-                    return;
+                if probes > MAX_PROBES {
+                    return false;
                 }
                 let nb = boxes[n as usize].unpack();
                 depth = depth.min(if up {
@@ -383,15 +391,24 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         } else {
             g[0][axis] -= depth;
         }
+        false
     };
     let grown: Vec<VoxBox> = live
         .par_iter()
         .map(|&i| {
             let mut g = boxes[i as usize].unpack();
+            // Faces that can never grow, a bit each (axis * 2 + down).
+            let mut stuck = 0u8;
             for _ in 0..params.expand_passes {
                 for axis in 0..3 {
-                    grow(&mut g, axis, true);
-                    grow(&mut g, axis, false);
+                    for (k, up) in [(2 * axis, true), (2 * axis + 1, false)] {
+                        if stuck >> k & 1 == 0 && grow(&mut g, axis, up) {
+                            stuck |= 1 << k;
+                        }
+                    }
+                }
+                if stuck == 0x3f {
+                    break;
                 }
             }
             g
