@@ -3,8 +3,8 @@
 use clap::Args;
 use gridtrace::accel::grid::dims_str;
 
-use gridtrace::accel::{IrregularGrid, Structure};
 use gridtrace::accel::irregular::IrregularStats;
+use gridtrace::accel::{IrregularGrid, Structure};
 
 use crate::common::{GridArgs, SceneArgs, describe_structure, fmt_bytes};
 

@@ -4,7 +4,7 @@
 //! (`RAYON_NUM_THREADS=1` for one thread).
 use std::time::Instant;
 
-use gridtrace::accel::grid::{proximity::chebyshev_distance_transform, Grid};
+use gridtrace::accel::grid::{Grid, proximity::chebyshev_distance_transform};
 use gridtrace::accel::{Resolution, TriAccel};
 
 fn main() -> gridtrace::Result<()> {
@@ -60,8 +60,14 @@ fn shapes(grid: &Grid, tris: &[TriAccel]) {
     for t in tris {
         let [a, b, c] = t.vertices();
         let m = grid.cell_size * 1e-3;
-        let lo = ((a.min(b).min(c) - m - grid.bounds.min) * grid.inv_cell_size).max(glam::Vec3::ZERO).as_uvec3().min(grid.dims - 1);
-        let hi = ((a.max(b).max(c) + m - grid.bounds.min) * grid.inv_cell_size).max(glam::Vec3::ZERO).as_uvec3().min(grid.dims - 1);
+        let lo = ((a.min(b).min(c) - m - grid.bounds.min) * grid.inv_cell_size)
+            .max(glam::Vec3::ZERO)
+            .as_uvec3()
+            .min(grid.dims - 1);
+        let hi = ((a.max(b).max(c) + m - grid.bounds.min) * grid.inv_cell_size)
+            .max(glam::Vec3::ZERO)
+            .as_uvec3()
+            .min(grid.dims - 1);
         let e = hi - lo + 1;
         let k = (e.x > 1) as usize + (e.y > 1) as usize + (e.z > 1) as usize;
         hist[k] += 1;

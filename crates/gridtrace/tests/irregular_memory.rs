@@ -95,13 +95,27 @@ fn check(name: &str, tris: &[TriAccel], params: IrregularParams) -> (usize, u64)
         g.bytes(),
         bound.structure_bytes
     );
-    assert!(peak as u64 <= bound.build_peak_bytes, "{name}: peak {peak} over the bound {bound:?}");
-    assert!(s.initial_cells as u64 <= bound.initial_cells, "{name}: {:?} {bound:?}", s);
+    assert!(
+        peak as u64 <= bound.build_peak_bytes,
+        "{name}: peak {peak} over the bound {bound:?}"
+    );
+    assert!(
+        s.initial_cells as u64 <= bound.initial_cells,
+        "{name}: {:?} {bound:?}",
+        s
+    );
     assert!(s.references as u64 <= bound.references, "{name}: {:?} {bound:?}", s);
-    assert!(g.bytes() as u64 <= bound.structure_bytes, "{name}: {} {bound:?}", g.bytes());
+    assert!(
+        g.bytes() as u64 <= bound.structure_bytes,
+        "{name}: {} {bound:?}",
+        g.bytes()
+    );
     // The bound is a bound, not a guess an order of magnitude off (1.2-2x on these meshes; 3.9x
     // on the 10M torus knot, whose slivers have bounding boxes much larger than their cells).
-    assert!(bound.build_peak_bytes < 5 * peak as u64 + (1 << 20), "{name}: {peak} against {bound:?}");
+    assert!(
+        bound.build_peak_bytes < 5 * peak as u64 + (1 << 20),
+        "{name}: {peak} against {bound:?}"
+    );
     (peak, bound.build_peak_bytes)
 }
 
@@ -114,13 +128,22 @@ fn clusters(n: usize, seed: u64) -> Vec<TriAccel> {
         .collect();
     let mut tris: Vec<TriAccel> = (0..n)
         .map(|i| {
-            let p = centres[i % centres.len()] + Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+            let p = centres[i % centres.len()]
+                + Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
             let mut q = || p + Vec3::new(rng.range(-0.1, 0.1), rng.range(-0.1, 0.1), rng.range(-0.1, 0.1));
             TriAccel::new(p, q(), q())
         })
         .collect();
-    tris.push(TriAccel::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)));
-    tris.push(TriAccel::new(Vec3::splat(100.0), Vec3::new(99.0, 100.0, 100.0), Vec3::new(100.0, 99.0, 100.0)));
+    tris.push(TriAccel::new(
+        Vec3::ZERO,
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+    ));
+    tris.push(TriAccel::new(
+        Vec3::splat(100.0),
+        Vec3::new(99.0, 100.0, 100.0),
+        Vec3::new(100.0, 99.0, 100.0),
+    ));
     tris.push(TriAccel::new(Vec3::ZERO, Vec3::splat(100.0), Vec3::new(0.0, 0.1, 0.0)));
     tris
 }
@@ -133,7 +156,11 @@ fn builds_stay_within_the_bound() {
     let _ = IrregularGrid::build(&clusters(100, 1), params).unwrap();
     let knot = tris_of(procedural::torus_knot(2, 3, 0.16, 1000, 64), Mat4::IDENTITY);
     check("torus knot", &knot, params);
-    check("icosphere", &tris_of(procedural::icosphere(Vec3::ZERO, 1.0, 6), Mat4::IDENTITY), params);
+    check(
+        "icosphere",
+        &tris_of(procedural::icosphere(Vec3::ZERO, 1.0, 6), Mat4::IDENTITY),
+        params,
+    );
     check("clusters", &clusters(60_000, 7), params);
     // Flat: the top grid's budget goes to two axes.
     check("plane", &tris_of(procedural::plane(10.0, 200), Mat4::IDENTITY), params);

@@ -353,7 +353,13 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
 /// The cells (inclusive range) a triangle may overlap in a grid of `dims` cells from `grid_min`
 /// (the triangle's box grown by `margin`, at least its own `slack_pad`), and that margin.
 #[inline(always)]
-pub(crate) fn candidate_cells(tri: &TriAccel, grid_min: Vec3, inv_cell_size: Vec3, dims: UVec3, margin: Vec3) -> (UVec3, UVec3, Vec3) {
+pub(crate) fn candidate_cells(
+    tri: &TriAccel,
+    grid_min: Vec3,
+    inv_cell_size: Vec3,
+    dims: UVec3,
+    margin: Vec3,
+) -> (UVec3, UVec3, Vec3) {
     let [a, b, c] = tri.vertices();
     // At least the triangle test's own slack (large triangles), else the cell margin.
     let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
@@ -361,7 +367,12 @@ pub(crate) fn candidate_cells(tri: &TriAccel, grid_min: Vec3, inv_cell_size: Vec
     // The float-to-integer cast truncates, which equals `floor` (what the GPU build writes) on
     // the non-negative values left after `max`; `floor` itself is a libm call on baseline
     // x86-64 and was 5% of the build.
-    let clamp = |p: Vec3| ((p - grid_min) * inv_cell_size).max(Vec3::ZERO).as_uvec3().min(dims - 1);
+    let clamp = |p: Vec3| {
+        ((p - grid_min) * inv_cell_size)
+            .max(Vec3::ZERO)
+            .as_uvec3()
+            .min(dims - 1)
+    };
     (clamp(lo - margin), clamp(hi + margin), margin)
 }
 

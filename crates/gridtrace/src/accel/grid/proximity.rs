@@ -55,7 +55,11 @@ fn by_dilation(dims: [u32; 3], occupied: &[bool], cap: u32) -> Option<Vec<u32>> 
     let rw = row_words(nx);
     let slab_words = rw * ny;
     // The last word of a row holds `nx % 64` cells; bits past them stay clear.
-    let last_mask = if nx % 64 == 0 { u64::MAX } else { (1u64 << (nx % 64)) - 1 };
+    let last_mask = if nx % 64 == 0 {
+        u64::MAX
+    } else {
+        (1u64 << (nx % 64)) - 1
+    };
     // Slabs per task: ~2k words (a round over the bunny's 7,810 words ran 1.35x faster on two
     // threads split so than as one task; 512 and 1024 were no better).
     let min_slabs = (2048 / slab_words.max(1)).max(1);
@@ -325,11 +329,19 @@ mod tests {
             let density = [0.0, 0.002, 0.01, 0.05, 0.2, 0.6][case % 6];
             let occ: Vec<bool> = (0..n).map(|_| rng.next_f32() < density).collect();
             let want = brute(dims, &occ);
-            assert_eq!(chebyshev_distance_transform(dims, &occ), want, "dims {dims:?} case {case}");
+            assert_eq!(
+                chebyshev_distance_transform(dims, &occ),
+                want,
+                "dims {dims:?} case {case}"
+            );
             // Both algorithms, whichever the cap picks.
             assert_eq!(by_envelopes(dims, &occ), want, "envelopes, dims {dims:?} case {case}");
             let rounds = want.iter().filter(|&&d| d != FAR).max().copied().unwrap_or(0);
-            assert_eq!(by_dilation(dims, &occ, rounds), Some(want), "dilation, dims {dims:?} case {case}");
+            assert_eq!(
+                by_dilation(dims, &occ, rounds),
+                Some(want),
+                "dilation, dims {dims:?} case {case}"
+            );
             // One round short of the largest distance: the dilation gives up (and the
             // envelopes answer).
             if rounds > 0 {
@@ -357,7 +369,11 @@ mod tests {
                 }
             }
             let want = brute(dims, &occ);
-            assert_eq!(chebyshev_distance_transform(dims, &occ), want, "dims {dims:?} case {case}");
+            assert_eq!(
+                chebyshev_distance_transform(dims, &occ),
+                want,
+                "dims {dims:?} case {case}"
+            );
             assert_eq!(by_dilation(dims, &occ, 4096), Some(want), "dims {dims:?} case {case}");
         }
         // One occupied cell in a long line: more rounds than the cap allows, so the envelopes.

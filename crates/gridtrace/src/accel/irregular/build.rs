@@ -8,10 +8,10 @@ use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
-use crate::accel::{Aabb, TriAccel};
 use crate::accel::grid::tri_box::triangle_overlaps_boxes4;
 use crate::accel::grid::{auto_dims, cell_margin, grid_bounds, overlap_pairs};
 use crate::accel::triangle::slack_pad;
+use crate::accel::{Aabb, TriAccel};
 use crate::{Error, Result};
 
 /// Top cells per axis at most (see `build`).
@@ -169,7 +169,12 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
                 let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
                 // Truncation equals `floor` on the non-negative values left after `max`.
-                let local = |p: Vec3| ((p - top_min) * inv_size).max(Vec3::ZERO).as_uvec3().min(UVec3::splat(side - 1));
+                let local = |p: Vec3| {
+                    ((p - top_min) * inv_size)
+                        .max(Vec3::ZERO)
+                        .as_uvec3()
+                        .min(UVec3::splat(side - 1))
+                };
                 let (c0, c1) = (local(lo - margin), local(hi + margin));
                 let half = size * 0.5 + margin;
                 let mut batch = [0u32; 4];

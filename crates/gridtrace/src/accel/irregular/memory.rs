@@ -27,11 +27,11 @@
 
 use glam::UVec3;
 
-use super::build::{level_for, Box16, Refs, TopGrid};
+use super::build::{Box16, Refs, TopGrid, level_for};
 use super::{IrrCell, IrregularGrid, IrregularParams};
-use crate::accel::grid::{candidate_cells, cell_margin};
-use crate::accel::TriAccel;
 use crate::Result;
+use crate::accel::TriAccel;
+use crate::accel::grid::{candidate_cells, cell_margin};
 
 /// Upper bounds on an irregular-grid build over given triangles and parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -106,7 +106,13 @@ impl IrregularGrid {
                 }
             }
         }
-        Ok(account(tris.len() as u64, n_top as u64, top_pairs, initial_cells, references))
+        Ok(account(
+            tris.len() as u64,
+            n_top as u64,
+            top_pairs,
+            initial_cells,
+            references,
+        ))
     }
 }
 

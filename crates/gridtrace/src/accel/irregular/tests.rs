@@ -74,7 +74,11 @@ fn build_invariants() {
         let g = IrregularGrid::build(&tris, p).unwrap();
         let dims = g.voxel_dims();
         assert_eq!(g.cell_count(), g.partition.len());
-        assert_eq!(g.cells.last().map(|c| c.start as usize), Some(g.refs.len()), "the sentinel");
+        assert_eq!(
+            g.cells.last().map(|c| c.start as usize),
+            Some(g.refs.len()),
+            "the sentinel"
+        );
         let grown = (0..g.cell_count() as u32)
             .map(|c| g.cell(c))
             .zip(&g.partition)
