@@ -314,36 +314,10 @@ fn overlap_pairs_by_triangle(tris: &[TriAccel], bounds: Aabb, dims: UVec3, margi
                     }
                     continue;
                 }
-                // The candidate cells, four at a time through the exact test (the scalar test's
-                // answers bit for bit, `triangle_overlaps_boxes4`), pushed in x, y, z order.
+                // The candidate cells through the exact test, pushed in x, y, z order.
                 let half = cell_size * 0.5 + margin;
                 let center = |cell: UVec3| bounds.min + cell.as_vec3() * cell_size + cell_size * 0.5;
-                let mut batch = [UVec3::ZERO; 4];
-                let mut n = 0;
-                let flush = |batch: &[UVec3; 4], n: usize, out: &mut Vec<u64>| {
-                    let centers = std::array::from_fn(|k| center(batch[k.min(n - 1)]));
-                    let takes = triangle_overlaps_boxes4(centers, half, a, b, c).bitmask();
-                    for (k, &cell) in batch[..n].iter().enumerate() {
-                        if takes >> k & 1 == 1 {
-                            out.push(key(cell));
-                        }
-                    }
-                };
-                for z in c0.z..=c1.z {
-                    for y in c0.y..=c1.y {
-                        for x in c0.x..=c1.x {
-                            batch[n] = UVec3::new(x, y, z);
-                            n += 1;
-                            if n == 4 {
-                                flush(&batch, n, &mut out);
-                                n = 0;
-                            }
-                        }
-                    }
-                }
-                if n > 0 {
-                    flush(&batch, n, &mut out);
-                }
+                overlapping_cells(c0, c1, half, [a, b, c], center, |cell| out.push(key(cell)));
             }
             out
         })
@@ -376,10 +350,51 @@ pub(crate) fn candidate_cells(
     (clamp(lo - margin), clamp(hi + margin), margin)
 }
 
+/// Calls `take(cell)` for every cell of the candidate range `c0..=c1` (x fastest, then y, then
+/// z) whose box, centred at `center(cell)` with half size `half`, overlaps the triangle: four
+/// cells at a time through `triangle_overlaps_boxes4` (the scalar test's answers bit for bit).
+/// The uniform grid's cells and the irregular grid's second-level cells both go through it.
+#[inline(always)]
+pub(crate) fn overlapping_cells(
+    c0: UVec3,
+    c1: UVec3,
+    half: Vec3,
+    [a, b, c]: [Vec3; 3],
+    center: impl Fn(UVec3) -> Vec3,
+    mut take: impl FnMut(UVec3),
+) {
+    let mut batch = [UVec3::ZERO; 4];
+    let mut n = 0;
+    let mut flush = |batch: &[UVec3; 4], n: usize| {
+        let centers = std::array::from_fn(|k| center(batch[k.min(n - 1)]));
+        let takes = triangle_overlaps_boxes4(centers, half, a, b, c).bitmask();
+        for (k, &cell) in batch[..n].iter().enumerate() {
+            if takes >> k & 1 == 1 {
+                take(cell);
+            }
+        }
+    };
+    for z in c0.z..=c1.z {
+        for y in c0.y..=c1.y {
+            for x in c0.x..=c1.x {
+                batch[n] = UVec3::new(x, y, z);
+                n += 1;
+                if n == 4 {
+                    flush(&batch, n);
+                    n = 0;
+                }
+            }
+        }
+    }
+    if n > 0 {
+        flush(&batch, n);
+    }
+}
+
 /// A counting sort of `cell << 32 | item` pairs by cell, first half: the number of pairs per
 /// cell. It replaces a comparison sort of the 64-bit keys: the key's histogram is the cells'
 /// counts, which the grid needs anyway (the GPU build does the same).
-fn count_by_cell(pairs: &[Vec<u64>], n_cells: usize) -> Vec<u32> {
+pub(crate) fn count_by_cell(pairs: &[Vec<u64>], n_cells: usize) -> Vec<u32> {
     let mut counts = vec![0u32; n_cells];
     for k in pairs.iter().flatten() {
         counts[(k >> 32) as usize] += 1;
@@ -391,7 +406,7 @@ fn count_by_cell(pairs: &[Vec<u64>], n_cells: usize) -> Vec<u32> {
 /// Stable, so items given in ascending order stay ascending within a cell. (Splitting the cells
 /// among threads, each reading every pair, was measured slower on two cores: 8.0 against 7.2 ms
 /// for the Bunny's whole build.)
-fn place_by_cell<T: Copy + Default>(pairs: &[Vec<u64>], counts: &[u32], value: impl Fn(u64) -> T) -> Vec<T> {
+pub(crate) fn place_by_cell<T: Copy + Default>(pairs: &[Vec<u64>], counts: &[u32], value: impl Fn(u64) -> T) -> Vec<T> {
     let mut cursor = Vec::with_capacity(counts.len());
     let mut at = 0u32;
     for &n in counts {

@@ -145,16 +145,6 @@ fn dilate_xy(out: &mut [u64], slab: &[u64], rw: usize, last_mask: u64) {
         }
         dst[rw - 1] &= last_mask;
     }
-    if rw == 1 {
-        // Rows of one word (grids up to 64 cells wide, the common case): a running window.
-        let mut below = 0;
-        for y in 0..out.len() {
-            let own = out[y];
-            out[y] = own | below | out.get(y + 1).copied().unwrap_or(0);
-            below = own;
-        }
-        return;
-    }
     let mut below = vec![0u64; rw];
     let rows = out.len() / rw;
     for y in 0..rows {

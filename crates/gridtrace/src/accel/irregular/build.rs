@@ -4,13 +4,14 @@
 
 use std::time::Instant;
 
-use glam::{UVec3, Vec3};
+use glam::UVec3;
 use rayon::prelude::*;
 
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
-use crate::accel::grid::tri_box::triangle_overlaps_boxes4;
-use crate::accel::grid::{auto_dims, cell_margin, grid_bounds, overlap_pairs};
-use crate::accel::triangle::slack_pad;
+use crate::accel::grid::{
+    auto_dims, candidate_cells, cell_margin, count_by_cell, grid_bounds, overlap_pairs, overlapping_cells,
+    place_by_cell,
+};
 use crate::accel::{Aabb, TriAccel};
 use crate::{Error, Result};
 
@@ -161,69 +162,22 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             let inv_size = size.recip();
             let margin = cell_margin(size, bounds);
             let top_min = bounds.min + (origin.as_vec3()) * voxel_size;
-            // The (cell, triangle) pairs in triangle order; candidate cells four at a time
-            // through the exact test (`triangle_overlaps_boxes4`: the scalar test's answers).
-            let mut pairs_here: Vec<(u32, u32)> = Vec::new();
+            let index = |l: UVec3| l.x + (l.y << level) + (l.z << (2 * level));
+            let center = |l: UVec3| bounds.min + (origin + l * cell_voxels).as_vec3() * voxel_size + size * 0.5;
+            // The (cell, triangle) pairs in triangle order, as `cell << 32 | triangle`.
+            let mut pairs_here: Vec<u64> = Vec::new();
             for tri in tri_ids {
-                let [a, b, c] = tris[tri as usize].vertices();
-                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-                let margin = margin.max(Vec3::splat(slack_pad(lo, hi)));
-                // Truncation equals `floor` on the non-negative values left after `max`.
-                let local = |p: Vec3| {
-                    ((p - top_min) * inv_size)
-                        .max(Vec3::ZERO)
-                        .as_uvec3()
-                        .min(UVec3::splat(side - 1))
-                };
-                let (c0, c1) = (local(lo - margin), local(hi + margin));
-                let half = size * 0.5 + margin;
-                let mut batch = [0u32; 4];
-                let mut n = 0;
-                let mut flush = |batch: &[u32; 4], n: usize| {
-                    let centers = std::array::from_fn(|k| {
-                        let [min, _] = cell_box(t, batch[k.min(n - 1)]);
-                        bounds.min + min.as_vec3() * voxel_size + size * 0.5
-                    });
-                    let takes = triangle_overlaps_boxes4(centers, half, a, b, c).bitmask();
-                    for (k, &i) in batch[..n].iter().enumerate() {
-                        if takes >> k & 1 == 1 {
-                            pairs_here.push((i, tri));
-                        }
-                    }
-                };
-                for z in c0.z..=c1.z {
-                    for y in c0.y..=c1.y {
-                        for x in c0.x..=c1.x {
-                            batch[n] = x + (y << level) + (z << (2 * level));
-                            n += 1;
-                            if n == 4 {
-                                flush(&batch, n);
-                                n = 0;
-                            }
-                        }
-                    }
-                }
-                if n > 0 {
-                    flush(&batch, n);
-                }
+                let verts = tris[tri as usize].vertices();
+                let (c0, c1, margin) =
+                    candidate_cells(&tris[tri as usize], top_min, inv_size, UVec3::splat(side), margin);
+                overlapping_cells(c0, c1, size * 0.5 + margin, verts, center, |l| {
+                    pairs_here.push((index(l) as u64) << 32 | tri as u64)
+                });
             }
-            // A counting sort by cell (stable: triangles stay ascending within a cell).
-            let mut counts = vec![0u32; n_cells];
-            for &(i, _) in &pairs_here {
-                counts[i as usize] += 1;
-            }
-            // Sized exactly (`memory.rs` counts 4 bytes a cell).
-            let mut cursor: Vec<u32> = Vec::with_capacity(n_cells);
-            let mut at = 0u32;
-            for &n in &counts {
-                cursor.push(at);
-                at += n;
-            }
-            let mut refs = vec![0u32; pairs_here.len()];
-            for &(i, tri) in &pairs_here {
-                refs[cursor[i as usize] as usize] = tri;
-                cursor[i as usize] += 1;
-            }
+            // Sorted by cell (stable: triangles stay ascending within a cell).
+            let pairs_here = std::slice::from_ref(&pairs_here);
+            let counts = count_by_cell(pairs_here, n_cells);
+            let refs = place_by_cell(pairs_here, &counts, |k| k as u32);
             (counts, refs)
         })
         .collect();
