@@ -139,14 +139,16 @@ fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
     let cells2 = (box16 + refs_enum) * i + 4 * r2;
     let phase2 = kept1 + levels + per_top + tasks + cells2;
     // Phase 3, merging: union-find parents, the live list, merged reference sets (at most
-    // the second level's references alive, as much again while a union is made); at its end
-    // the representatives, new indices, the voxel map and the survivors' boxes, the parents
-    // and new indices dropped as soon as done with.
+    // the second level's references alive, as much again while a union is made; the top
+    // cells' merges run at once on all threads, each on its own cells, so their unions in
+    // progress are of disjoint sets); at its end the representatives, new indices, the voxel
+    // map, the survivors' boxes and a byte each saying whether it is empty, the parents,
+    // representatives and new indices dropped as soon as done with.
     let kept2 = 4 * (top + 1) + levels + cells2 + 8 * r2 + 4 * i;
-    let merged = kept2 + 4 * i + 4 * i + 4 * i + 4 * i + vox_box * i;
+    let merged = kept2 + 4 * i + 4 * i + 4 * i + 4 * i + vox_box * i + i;
     // Phases 4-5: the grown boxes, then the final cells (and sentinel) and references, the
     // top cells' entries; the build's own arrays are dropped before the entries are made.
-    let kept3 = kept2 + 4 * i + 4 * i + vox_box * i;
+    let kept3 = kept2 + 4 * i + 4 * i + vox_box * i + i;
     let late = kept3 + vox_box * i + cell * (i + 1) + 4 * r2 + 4 * top;
     MemoryBound {
         top_cells: top,
