@@ -3,8 +3,8 @@
 //! build's peak; the grid it makes is within the bounds on cells, references and bytes. Alone in
 //! its binary, so no other test allocates meanwhile.
 //!
-//! `ten_million_triangles` is the 10-million-triangle mesh: about 20 s and a 3.3 GB peak
-//! (5 GB resident), within CI's 24 GiB. The two tests take turns (`ONE_AT_A_TIME`): the
+//! `ten_million_triangles` is the 10-million-triangle mesh: about 12 s and a 1.4 GB peak
+//! (2.4 GB resident), within CI's 24 GiB. The two tests take turns (`ONE_AT_A_TIME`): the
 //! counter sees the whole process.
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -110,10 +110,14 @@ fn check(name: &str, tris: &[TriAccel], params: IrregularParams) -> (usize, u64)
         "{name}: {} {bound:?}",
         g.bytes()
     );
-    // The bound is a bound, not a guess an order of magnitude off (1.2-2x on these meshes; 3.9x
-    // on the 10M torus knot, whose slivers have bounding boxes much larger than their cells).
+    // The bound is a bound, not a guess an order of magnitude off: 1.2-3.6x on these meshes,
+    // 5.7x on the 10M torus knot, whose slivers have bounding boxes much larger than their
+    // cells (its reference bound is 4.1x the references). It was 4.6x there until the build
+    // stopped holding arrays for every second-level cell (the merge inside each top cell
+    // keeps only the survivors): the peak fell from 2.54 to 1.39 GB, and the bound, which
+    // must count the late arrays at the second level's cell count, fell less.
     assert!(
-        bound.build_peak_bytes < 5 * peak as u64 + (1 << 20),
+        bound.build_peak_bytes < 7 * peak as u64 + (1 << 20),
         "{name}: {peak} against {bound:?}"
     );
     (peak, bound.build_peak_bytes)

@@ -126,24 +126,18 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         let min = (top_coord(t) << shift) + local * cell_voxels;
         [min, min + cell_voxels]
     };
-    let mut boxes: Vec<Box16> = vec![Box16([[0; 3]; 2]); n_init];
-    {
-        // Split at the top cells' beginnings, so each top cell's boxes are filled on one core.
-        let mut slices: Vec<(usize, &mut [Box16])> = Vec::with_capacity(n_top);
-        let mut rest = boxes.as_mut_slice();
-        for (t, &l) in levels.iter().enumerate() {
-            let (mine, tail) = rest.split_at_mut(1 << (3 * l));
-            slices.push((t, mine));
-            rest = tail;
-        }
-        slices.into_par_iter().for_each(|(t, out)| {
-            for (i, b) in out.iter_mut().enumerate() {
-                *b = Box16::pack(cell_box(t, i as u32));
-            }
-        });
-    }
-    // Per top cell: its cells' reference counts and references.
-    let per_top: Vec<(Vec<u32>, Vec<u32>)> = (0..n_top)
+    let rule = MergeRule {
+        voxel_dims,
+        voxel_size,
+        alpha: params.merge_alpha as f64,
+    };
+    // Per top cell, on all cores: its cells' triangles, then the first part of phase 3, the
+    // merge inside the top cell, on the task's own arrays while they are in the core's cache.
+    // A top cell's cells form one dense array there, so a neighbour is a few bits of
+    // arithmetic away, and most merges happen there (empty space, a triangle's run of cells):
+    // the Stanford Bunny's 311,797 cells leave 86,254 survivors. Only the survivors leave the
+    // task, so the build never holds a box or a reference set for every second-level cell.
+    let top_cells: Vec<TopCells> = (0..n_top)
         .into_par_iter()
         .map(|t| {
             let level = levels[t];
@@ -154,44 +148,106 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 .iter()
                 .map(|p| *p as u32);
             let n_cells = 1usize << (3 * level);
-            if level == 0 {
+            let (counts, refs) = if level == 0 {
                 let refs: Vec<u32> = tri_ids.collect();
-                return (vec![refs.len() as u32], refs);
+                (vec![refs.len() as u32], refs)
+            } else {
+                let size = voxel_size * cell_voxels as f32;
+                let inv_size = size.recip();
+                let margin = cell_margin(size, bounds);
+                let top_min = bounds.min + (origin.as_vec3()) * voxel_size;
+                let index = |l: UVec3| l.x + (l.y << level) + (l.z << (2 * level));
+                let center = |l: UVec3| bounds.min + (origin + l * cell_voxels).as_vec3() * voxel_size + size * 0.5;
+                // The (cell, triangle) pairs in triangle order, as `cell << 32 | triangle`.
+                let mut pairs_here: Vec<u64> = Vec::new();
+                for tri in tri_ids {
+                    let verts = tris[tri as usize].vertices();
+                    let (c0, c1, margin) =
+                        candidate_cells(&tris[tri as usize], top_min, inv_size, UVec3::splat(side), margin);
+                    overlapping_cells(c0, c1, size * 0.5 + margin, verts, center, |l| {
+                        pairs_here.push((index(l) as u64) << 32 | tri as u64)
+                    });
+                }
+                // Sorted by cell (stable: triangles stay ascending within a cell).
+                let pairs_here = std::slice::from_ref(&pairs_here);
+                let counts = count_by_cell(pairs_here, n_cells);
+                let refs = place_by_cell(pairs_here, &counts, |k| k as u32);
+                (counts, refs)
+            };
+            let mut parent: Vec<u32> = (0..n_cells as u32).collect();
+            let mut boxes: Vec<Box16> = (0..n_cells as u32).map(|i| Box16::pack(cell_box(t, i))).collect();
+            let mut s = 0;
+            let mut refs_of: Vec<Refs> = counts
+                .iter()
+                .map(|&n| {
+                    s += n;
+                    Refs::Span(s - n, n)
+                })
+                .collect();
+            drop(counts);
+            if level > 0 {
+                let top = top_coord(t);
+                let local_at = |v: UVec3| {
+                    let l = (v - origin) >> (shift - level);
+                    l.x + (l.y << level) + (l.z << (2 * level))
+                };
+                let mut cells = Cells {
+                    parent: &mut parent,
+                    boxes: &mut boxes,
+                    refs_of: &mut refs_of,
+                    flat: &refs,
+                };
+                for _ in 0..params.merge_passes {
+                    let mut merged = 0;
+                    for axis in 0..3 {
+                        merged += rule.merge_along(&mut cells, 0..n_cells as u32, axis, |_, v| {
+                            (v[axis] >> shift == top[axis]).then(|| local_at(v))
+                        });
+                    }
+                    if merged == 0 {
+                        break;
+                    }
+                }
             }
-            let size = voxel_size * cell_voxels as f32;
-            let inv_size = size.recip();
-            let margin = cell_margin(size, bounds);
-            let top_min = bounds.min + (origin.as_vec3()) * voxel_size;
-            let index = |l: UVec3| l.x + (l.y << level) + (l.z << (2 * level));
-            let center = |l: UVec3| bounds.min + (origin + l * cell_voxels).as_vec3() * voxel_size + size * 0.5;
-            // The (cell, triangle) pairs in triangle order, as `cell << 32 | triangle`.
-            let mut pairs_here: Vec<u64> = Vec::new();
-            for tri in tri_ids {
-                let verts = tris[tri as usize].vertices();
-                let (c0, c1, margin) =
-                    candidate_cells(&tris[tri as usize], top_min, inv_size, UVec3::splat(side), margin);
-                overlapping_cells(c0, c1, size * 0.5 + margin, verts, center, |l| {
-                    pairs_here.push((index(l) as u64) << 32 | tri as u64)
-                });
-            }
-            // Sorted by cell (stable: triangles stay ascending within a cell).
-            let pairs_here = std::slice::from_ref(&pairs_here);
-            let counts = count_by_cell(pairs_here, n_cells);
-            let refs = place_by_cell(pairs_here, &counts, |k| k as u32);
-            (counts, refs)
+            TopCells::gather(parent, &boxes, &refs_of, &refs)
         })
         .collect();
     // Freed here, not at the end of the build (`memory.rs` counts on it).
     drop(pairs);
-    let mut refs_of: Vec<Refs> = Vec::with_capacity(n_init);
-    let mut flat: Vec<u32> = Vec::with_capacity(per_top.iter().map(|p| p.1.len()).sum());
-    for (counts, refs) in per_top {
+    // The survivors of all top cells in one set of arrays, and each initial cell's survivor.
+    let mut first = Vec::with_capacity(n_top);
+    let (mut n_surv, mut n_refs) = (0usize, 0usize);
+    for tc in &top_cells {
+        first.push(n_surv as u32);
+        n_surv += tc.boxes.len();
+        n_refs += tc.refs.len();
+    }
+    let mut survivor_of = vec![0u32; n_init];
+    {
+        let mut parts = Vec::with_capacity(n_top);
+        let mut rest = survivor_of.as_mut_slice();
+        for (t, tc) in top_cells.iter().enumerate() {
+            let (mine, tail) = std::mem::take(&mut rest).split_at_mut(tc.rep.len());
+            rest = tail;
+            parts.push((first[t], &tc.rep, mine));
+        }
+        parts.into_par_iter().for_each(|(first, rep, out)| {
+            for (o, &r) in out.iter_mut().zip(rep) {
+                *o = first + r;
+            }
+        });
+    }
+    let mut boxes: Vec<Box16> = Vec::with_capacity(n_surv);
+    let mut refs_of: Vec<Refs> = Vec::with_capacity(n_surv);
+    let mut flat: Vec<u32> = Vec::with_capacity(n_refs);
+    for tc in top_cells {
+        boxes.extend_from_slice(&tc.boxes);
         let mut s = flat.len() as u32;
-        for n in counts {
+        for &n in &tc.counts {
             refs_of.push(Refs::Span(s, n));
             s += n;
         }
-        flat.extend_from_slice(&refs);
+        flat.extend_from_slice(&tc.refs);
     }
     lap(1);
 
@@ -204,87 +260,37 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         begin[t] as u32 + local.x + (local.y << level) + (local.z << (2 * level))
     };
 
-    // Phase 3: merging. A cell absorbs its neighbour across its upper face on one axis when
-    // the neighbour has the same extent on the other two axes and the surface-area cost
-    // (`COST_STEP` + references, times area) of the merged cell is at most `merge_alpha`
-    // times that of the two (`MergeRule`). Absorbed cells point to their absorber
-    // (union-find): a cell is alive while it is its own root.
-    //
-    // First within each top cell, all top cells at once: there the cells form one dense
-    // array, so a neighbour is a few bits of arithmetic away and the whole top cell's state
-    // is in the core's cache. Most merges happen there (empty space inside a top cell, a
-    // triangle's run of cells). Then across top cells, sequentially, over the survivors only:
-    // the same rule, so a merge that crosses a top cell's face is still made. On the Stanford
-    // Bunny 311,797 cells become 86,254 in the first part and 77,267 in the second (one
-    // sweep over all cells made 76,652, with 3% more steps per ray); the merge phase went
-    // from 57 to 31 ms on two cores, the Dragon's from 780 to 400 ms (docs/benchmarks.md).
-    let mut parent: Vec<u32> = (0..n_init as u32).collect();
-    let rule = MergeRule {
-        flat: &flat,
-        voxel_dims,
-        voxel_size,
-        alpha: params.merge_alpha as f64,
-    };
-    {
-        let mut scopes: Vec<(usize, Cells)> = Vec::with_capacity(n_top);
-        let (mut p, mut b, mut r) = (parent.as_mut_slice(), boxes.as_mut_slice(), refs_of.as_mut_slice());
-        for (t, &l) in levels.iter().enumerate() {
-            let n = 1usize << (3 * l);
-            let (p1, p2) = p.split_at_mut(n);
-            let (b1, b2) = b.split_at_mut(n);
-            let (r1, r2) = r.split_at_mut(n);
-            (p, b, r) = (p2, b2, r2);
-            if l > 0 {
-                let base = begin[t] as u32;
-                scopes.push((
-                    t,
-                    Cells {
-                        base,
-                        parent: p1,
-                        boxes: b1,
-                        refs_of: r1,
-                    },
-                ));
-            }
-        }
-        scopes.into_par_iter().for_each(|(t, mut cells)| {
-            let top = top_coord(t);
-            let range = cells.base..cells.base + cells.parent.len() as u32;
-            for _ in 0..params.merge_passes {
-                let mut merged = 0;
-                for axis in 0..3 {
-                    merged += rule.merge_along(&mut cells, range.clone(), axis, |_, v| {
-                        (v[axis] >> shift == top[axis]).then(|| initial_at(v))
-                    });
-                }
-                if merged == 0 {
-                    break;
-                }
-            }
-        });
-    }
-    // The cells still alive (roots), refreshed after each pass.
+    // Phase 3: merging (its first part, inside each top cell, ran with phase 2). A cell
+    // absorbs its neighbour across its upper face on one axis when the neighbour has the same
+    // extent on the other two axes and the surface-area cost (`COST_STEP` + references, times
+    // area) of the merged cell is at most `merge_alpha` times that of the two (`MergeRule`).
+    // Absorbed cells point to their absorber (union-find): a cell is alive while it is its
+    // own root. Here, across top cells, sequentially, over the survivors: the same rule, so a
+    // merge that crosses a top cell's face is still made. The Stanford Bunny's 86,254
+    // survivors become 77,267 cells (one sweep over all 311,797 cells made 76,652, with 3%
+    // more steps per ray, in twice the time: docs/benchmarks.md).
     let top_mask = (1u32 << shift) - 1;
-    let mut live: Vec<u32> = (0..n_init as u32).collect();
-    live.retain(|&i| parent[i as usize] == i);
+    let mut parent: Vec<u32> = (0..n_surv as u32).collect();
+    // The cells still alive (roots), refreshed after each pass.
+    let mut live: Vec<u32> = (0..n_surv as u32).collect();
     for _ in 0..params.merge_passes {
         let mut merged = 0usize;
         let mut cells = Cells {
-            base: 0,
             parent: &mut parent,
             boxes: &mut boxes,
             refs_of: &mut refs_of,
+            flat: &flat,
         };
         for axis in 0..3 {
             merged += rule.merge_along(&mut cells, live.iter().copied(), axis, |mine, v| {
                 // Only across a top cell's face, or from a cell that a merge here made larger
-                // than a top cell: inside a top cell the first phase tried every face and
+                // than a top cell: inside a top cell the first part tried every face and
                 // nothing it found there changes after it (but for rare cascades through a
                 // neighbour that grew across a face; missing those leaves a cell unmerged,
                 // never a wrong one). Skips four in five probes on the Stanford Bunny.
                 let on_face = v[axis] & top_mask == 0;
                 let one_top = (mine[0] >> shift) == ((mine[1] - 1) >> shift);
-                (on_face || !one_top).then(|| initial_at(v))
+                (on_face || !one_top).then(|| survivor_of[initial_at(v) as usize])
             });
         }
         live.retain(|&i| parent[i as usize] == i);
@@ -292,22 +298,23 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             break;
         }
     }
-    // Every initial cell's surviving cell, the survivors' new indices, the voxel map, and the
-    // survivors' own boxes. Each array is dropped as soon as the build is done with it, so the
-    // peak holds about 68 bytes per second-level cell rather than 132 (`memory.rs` counts the
-    // arrays in this order).
-    let rep: Vec<u32> = (0..n_init as u32).map(|i| find(&mut parent, i)).collect();
+    // Every survivor's final cell, the final cells' indices, the voxel map, and the final
+    // cells' own boxes. Each array is dropped as soon as the build is done with it
+    // (`memory.rs` counts the arrays in this order).
+    let root: Vec<u32> = (0..n_surv as u32).map(|i| find(&mut parent, i)).collect();
     drop(parent);
-    let mut new_index = vec![u32::MAX; n_init];
+    let mut new_index = vec![u32::MAX; n_surv];
     for (k, &i) in live.iter().enumerate() {
         new_index[i as usize] = k as u32;
     }
-    let voxel_map: Vec<u32> = rep.par_iter().map(|&r| new_index[r as usize]).collect();
-    drop((new_index, rep));
+    let voxel_map: Vec<u32> = survivor_of
+        .par_iter()
+        .map(|&s| new_index[root[s as usize] as usize])
+        .collect();
+    drop((new_index, root, survivor_of));
     let partition: Vec<VoxBox> = live.iter().map(|&i| boxes[i as usize].unpack()).collect();
-    // Whether each surviving cell is empty, a byte each: the expansion asks it of cells all
-    // over the grid, and the reference sets (32 bytes a cell, indexed by initial cell) are
-    // eight times the memory to miss in.
+    // Whether each final cell is empty, a byte each: the expansion asks it of cells all over
+    // the grid, and the reference sets are 24 bytes a cell to miss in.
     let live_empty: Vec<bool> = live
         .iter()
         .map(|&i| refs_of[i as usize].get(&flat).is_empty())
@@ -444,38 +451,72 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     })
 }
 
-/// The merge's state over a range of second-level cells (all of them, or one top cell's):
-/// index `base + k` is element `k` of each slice.
+/// The merge's state over a set of cells (one top cell's, or all survivors): per cell its
+/// union-find parent, its box and its references (spans of `flat`, or sets of their own).
 struct Cells<'a> {
-    base: u32,
-    /// Union-find parents, as cell indices (`base + k`).
     parent: &'a mut [u32],
     boxes: &'a mut [Box16],
     refs_of: &'a mut [Refs],
+    flat: &'a [u32],
 }
 
 impl Cells<'_> {
     /// The root of cell `x`'s set, halving the path on the way.
-    fn find(&mut self, mut x: u32) -> u32 {
-        let b = self.base;
-        while self.parent[(x - b) as usize] != x {
-            let p = self.parent[(x - b) as usize];
-            self.parent[(x - b) as usize] = self.parent[(p - b) as usize];
-            x = p;
+    fn find(&mut self, x: u32) -> u32 {
+        find(self.parent, x)
+    }
+}
+
+/// A top cell's cells after the merge inside it: the survivors, in the order of their first
+/// initial cell, and for each initial cell its survivor.
+struct TopCells {
+    /// For each of the top cell's initial cells, its survivor (an index into `boxes`).
+    rep: Vec<u32>,
+    boxes: Vec<Box16>,
+    /// The survivors' reference counts, and their references one after another.
+    counts: Vec<u32>,
+    refs: Vec<u32>,
+}
+
+impl TopCells {
+    fn gather(mut parent: Vec<u32>, boxes: &[Box16], refs_of: &[Refs], flat: &[u32]) -> TopCells {
+        let n = parent.len();
+        let alive = |k: usize| parent[k] == k as u32;
+        let n_surv = (0..n).filter(|&k| alive(k)).count();
+        let n_refs = (0..n).filter(|&k| alive(k)).map(|k| refs_of[k].get(flat).len()).sum();
+        let mut out = TopCells {
+            rep: Vec::with_capacity(n),
+            boxes: Vec::with_capacity(n_surv),
+            counts: Vec::with_capacity(n_surv),
+            refs: Vec::with_capacity(n_refs),
+        };
+        // The survivors' new indices, in the place of their parents (a survivor is its own).
+        let mut ordinal = vec![u32::MAX; n];
+        for k in 0..n {
+            if alive(k) {
+                ordinal[k] = out.boxes.len() as u32;
+                let r = refs_of[k].get(flat);
+                out.boxes.push(boxes[k]);
+                out.counts.push(r.len() as u32);
+                out.refs.extend_from_slice(r);
+            }
         }
-        x
+        for k in 0..n as u32 {
+            let root = find(&mut parent, k);
+            out.rep.push(ordinal[root as usize]);
+        }
+        out
     }
 }
 
 /// When two cells merge (see phase 3 of `build`).
-struct MergeRule<'a> {
-    flat: &'a [u32],
+struct MergeRule {
     voxel_dims: UVec3,
     voxel_size: Vec3,
     alpha: f64,
 }
 
-impl MergeRule<'_> {
+impl MergeRule {
     fn area(&self, b: &VoxBox) -> f64 {
         let d = ((b[1] - b[0]).as_vec3() * self.voxel_size).as_dvec3();
         d.x * d.y + d.y * d.z + d.z * d.x
@@ -494,10 +535,9 @@ impl MergeRule<'_> {
         neighbour: impl Fn(&VoxBox, UVec3) -> Option<u32>,
     ) -> usize {
         let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
-        let base = cells.base;
         let mut merged = 0;
         for cell in order {
-            let k = (cell - base) as usize;
+            let k = cell as usize;
             if cells.parent[k] != cell {
                 continue;
             }
@@ -510,7 +550,7 @@ impl MergeRule<'_> {
                 probe[axis] = mine[1][axis];
                 let Some(initial) = neighbour(&mine, probe) else { break };
                 let other = cells.find(initial);
-                let o = (other - base) as usize;
+                let o = other as usize;
                 let theirs = cells.boxes[o].unpack();
                 if theirs[0][b] != mine[0][b]
                     || theirs[1][b] != mine[1][b]
@@ -521,7 +561,7 @@ impl MergeRule<'_> {
                 }
                 let mut joined = mine;
                 joined[1][axis] = theirs[1][axis];
-                let (ra, rb) = (cells.refs_of[k].get(self.flat), cells.refs_of[o].get(self.flat));
+                let (ra, rb) = (cells.refs_of[k].get(cells.flat), cells.refs_of[o].get(cells.flat));
                 let separate = self.area(&mine) * (COST_STEP + ra.len() as f64)
                     + self.area(&theirs) * (COST_STEP + rb.len() as f64);
                 let new_refs = if ra == rb {

@@ -24,6 +24,10 @@
 //!   capacities (`build.rs` allocates them exactly so: `with_capacity`, `vec![..; n]`, exact
 //!   collects); a `Vec` that grows by doubling is counted at three times its length (its last
 //!   reallocation holds the old block and one twice as large). The peak is the largest phase.
+//! - The second level runs a task per top cell whose working arrays live only while it runs,
+//!   and a thread runs one task at a time (a task calls nothing that runs on the pool): the
+//!   largest `rayon::current_num_threads()` tasks' working arrays are counted, so the bound is
+//!   for a build in the same pool (as `gridtrace info` and the test build).
 
 use glam::UVec3;
 
@@ -85,6 +89,8 @@ impl IrregularGrid {
             .collect();
         let initial_cells: u64 = levels.iter().map(|&l| 1u64 << (3 * l)).sum();
         let mut references = 0u64;
+        // Per top cell, for the tasks' working memory (`account`).
+        let mut refs_in = vec![0u64; n_top];
         for tri in tris {
             let (c0, c1, margin) = candidate_cells(tri, bounds.min, inv_top, top_dims, top_margin);
             let margin = margin + top_margin;
@@ -93,18 +99,33 @@ impl IrregularGrid {
                     for x in c0.x..=c1.x {
                         let top = UVec3::new(x, y, z);
                         let level = levels[index(top)];
-                        if level == 0 {
-                            references += 1;
-                            continue;
-                        }
-                        let side = 1u32 << level;
-                        let size = top_size / side as f32;
-                        let top_min = bounds.min + top.as_vec3() * top_size;
-                        let (s0, s1, _) = candidate_cells(tri, top_min, size.recip(), UVec3::splat(side), margin);
-                        references += ((s1 - s0) + 1).as_u64vec3().element_product();
+                        let r = if level == 0 {
+                            1
+                        } else {
+                            let side = 1u32 << level;
+                            let size = top_size / side as f32;
+                            let top_min = bounds.min + top.as_vec3() * top_size;
+                            let (s0, s1, _) = candidate_cells(tri, top_min, size.recip(), UVec3::splat(side), margin);
+                            ((s1 - s0) + 1).as_u64vec3().element_product()
+                        };
+                        references += r;
+                        refs_in[index(top)] += r;
                     }
                 }
             }
+        }
+        // The second level's tasks hold their working arrays only while they run, one task a
+        // thread at a time (a task calls nothing that runs on the pool): at most the largest
+        // `threads` of them at once, in the pool the build will run in.
+        let mut task_bytes: Vec<u64> = refs_in
+            .iter()
+            .zip(&levels)
+            .map(|(&r, &l)| task_working_bytes(r, 1u64 << (3 * l)))
+            .collect();
+        let threads = rayon::current_num_threads().max(1);
+        if task_bytes.len() > threads {
+            task_bytes.select_nth_unstable_by(threads - 1, |a, b| b.cmp(a));
+            task_bytes.truncate(threads);
         }
         Ok(account(
             tris.len() as u64,
@@ -112,12 +133,25 @@ impl IrregularGrid {
             top_pairs,
             initial_cells,
             references,
+            task_bytes.iter().sum(),
         ))
     }
 }
 
 /// The build's arrays, phase by phase (`build.rs`), from the bounds on their lengths.
-fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
+/// What one second-level task holds while it runs (`build.rs`, phase 2), beyond its output,
+/// for a top cell with at most `r` references in `n` cells: a growing (cell, triangle) list
+/// (doubled when full: three times its length), the counts, a cursor per cell, the
+/// references; for the merge the parents, boxes and reference sets, the merged sets (at most
+/// the task's references alive, as much again while a union is made); the survivors' new
+/// indices.
+fn task_working_bytes(r: u64, n: u64) -> u64 {
+    let refs_enum = std::mem::size_of::<Refs>() as u64;
+    let box16 = std::mem::size_of::<Box16>() as u64;
+    24 * r + 4 * n + 4 * n + 4 * r + (4 + box16 + refs_enum) * n + 8 * r + 4 * n
+}
+
+fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64, tasks: u64) -> MemoryBound {
     const CHUNK: u64 = 2048; // `overlap_pairs_by_triangle`'s triangles per task
     let refs_enum = std::mem::size_of::<Refs>() as u64;
     let cell = std::mem::size_of::<IrrCell>() as u64;
@@ -129,26 +163,29 @@ fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
     let phase1 = 8 * (4 * n + 3 * p1) + 24 * chunks + 8 * top + 8 * p1;
     // Kept from phase 1: the pairs (until phase 2's cells are made) and the top cells' starts.
     let kept1 = 8 * p1 + 4 * (top + 1);
-    // Phase 2: levels and begins, every second-level cell's box; per top cell its counts and
-    // references (48 bytes of list headers each), and while its task runs a growing (cell,
-    // triangle) list and a cursor per cell; then the reference sets and flat references of all
-    // cells.
+    // Phase 2: levels and begins; then per top cell a task that makes its cells' references,
+    // merges them and gathers the survivors: `tasks`, the working arrays of the tasks that
+    // can run at once (`task_working_bytes`), and every task's output, held to the end of
+    // the phase (a survivor per cell, the survivors' boxes, counts and references, with 96
+    // bytes of list headers).
     let levels = 4 * top + 8 * top;
-    let per_top = 48 * top + 4 * i + 4 * r2;
-    let tasks = 24 * r2 + 96 * top + 4 * i;
-    let cells2 = (box16 + refs_enum) * i + 4 * r2;
-    let phase2 = kept1 + levels + per_top + tasks + cells2;
-    // Phase 3, merging: union-find parents, the live list, merged reference sets (at most
-    // the second level's references alive, as much again while a union is made; the top
-    // cells' merges run at once on all threads, each on its own cells, so their unions in
-    // progress are of disjoint sets); at its end the representatives, new indices, the voxel
-    // map, the survivors' boxes and a byte each saying whether it is empty, the parents,
-    // representatives and new indices dropped as soon as done with.
-    let kept2 = 4 * (top + 1) + levels + cells2 + 8 * r2 + 4 * i;
-    let merged = kept2 + 4 * i + 4 * i + 4 * i + 4 * i + vox_box * i + i;
+    let outputs = 96 * top + 4 * i + box16 * i + 4 * i + 4 * r2;
+    let phase2 = kept1 + levels + tasks + outputs;
+    // Then every initial cell's survivor (filled through a list of the top cells' parts, 32
+    // bytes each), and the survivors' boxes, reference sets and references in one array each
+    // (made while the outputs are still held), the top cells' first survivors kept.
+    let survivors = 4 * i + (box16 + refs_enum) * i + 4 * r2;
+    let gathered = 4 * (top + 1) + levels + 4 * top + 32 * top + outputs + survivors;
+    // Phase 3, across top cells: union-find parents, the live list, merged reference sets (as
+    // in the tasks); at its end each survivor's root, new indices, the voxel map, the final
+    // cells' boxes and a byte each saying whether it is empty, the parents, roots, new
+    // indices and the initial cells' survivors dropped as soon as done with.
+    let kept2 = 4 * (top + 1) + levels + 4 * top + survivors + 8 * r2;
+    let merged = kept2 + 4 * i + 4 * i + 4 * i + 4 * i + 4 * i + vox_box * i + i;
     // Phases 4-5: the grown boxes, then the final cells (and sentinel) and references, the
-    // top cells' entries; the build's own arrays are dropped before the entries are made.
-    let kept3 = kept2 + 4 * i + 4 * i + vox_box * i + i;
+    // top cells' entries; the build's own arrays are dropped before the entries are made. No
+    // union is in progress any more: the merged sets alive are at most the references.
+    let kept3 = kept2 - 4 * r2 + 4 * i + 4 * i + vox_box * i + i;
     let late = kept3 + vox_box * i + cell * (i + 1) + 4 * r2 + 4 * top;
     MemoryBound {
         top_cells: top,
@@ -156,6 +193,6 @@ fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64) -> MemoryBound {
         initial_cells: i,
         references: r2,
         structure_bytes: 4 * top + 4 * i + cell * (i + 1) + 4 * r2,
-        build_peak_bytes: phase1.max(phase2).max(merged).max(late),
+        build_peak_bytes: phase1.max(phase2).max(gathered).max(merged).max(late),
     }
 }

@@ -200,7 +200,9 @@ pub struct IrregularStats {
     pub empty_cells: usize,
     pub references: usize,
     pub max_level: u32,
-    /// Milliseconds per phase: top level, second level, merge, expansion, final arrays.
+    /// Milliseconds per phase: top level, second level (with the merge inside each top cell,
+    /// which runs in the same task per top cell), merge (across top cells, and the voxel
+    /// map), expansion, final arrays.
     pub phase_ms: [f64; 5],
 }
 
