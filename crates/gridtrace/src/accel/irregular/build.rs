@@ -1,6 +1,7 @@
 //! The build, in five phases (`IrregularStats::PHASES`): the top grid's references (the
-//! uniform grid's own pair generation), each top cell split by its reference count, merging,
-//! expansion, and the final arrays.
+//! uniform grid's own pair generation), each top cell split by its reference count and its
+//! cells merged inside it (one task per top cell), merging across top cells, expansion, and
+//! the final arrays.
 
 use std::time::Instant;
 
@@ -28,9 +29,9 @@ const MAX_PROBES: u32 = 256;
 /// A cell's box in voxels, `min` inclusive and `max` exclusive.
 type VoxBox = [UVec3; 2];
 
-/// A second-level cell's box as the build keeps it, one per cell through merging: 16-bit
-/// coordinates (the virtual grid is under 2^16 voxels per axis, `TopGrid::new`), 12 bytes
-/// where a `VoxBox` takes 24.
+/// A cell's box as the build keeps it through merging (a task's cells, then the survivors):
+/// 16-bit coordinates (the virtual grid is under 2^16 voxels per axis, `TopGrid::new`), 12
+/// bytes where a `VoxBox` takes 24.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) struct Box16([[u16; 3]; 2]);
 
@@ -117,7 +118,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             t / (top_dims.x * top_dims.y),
         )
     };
-    // Every second-level cell's box, by its index (`begin` of its top cell + its index there).
+    // The box of second-level cell `i` of top cell `t` (`i` counted within the top cell).
     let cell_box = |t: usize, i: u32| -> VoxBox {
         let level = levels[t];
         let side = 1u32 << level;
@@ -284,10 +285,11 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         for axis in 0..3 {
             merged += rule.merge_along(&mut cells, live.iter().copied(), axis, |mine, v| {
                 // Only across a top cell's face, or from a cell that a merge here made larger
-                // than a top cell: inside a top cell the first part tried every face and
-                // nothing it found there changes after it (but for rare cascades through a
-                // neighbour that grew across a face; missing those leaves a cell unmerged,
-                // never a wrong one). Skips four in five probes on the Stanford Bunny.
+                // than a top cell: inside a top cell the first part tried every face (unless
+                // it ran out of `merge_passes` while still merging) and what it found there
+                // changes after it only through rare cascades (a neighbour that grew across
+                // a face). Either way the filter can only miss a merge, never make a wrong
+                // cell. Skips four in five probes on the Stanford Bunny.
                 let on_face = v[axis] & top_mask == 0;
                 let one_top = (mine[0] >> shift) == ((mine[1] - 1) >> shift);
                 (on_face || !one_top).then(|| survivor_of[initial_at(v) as usize])
@@ -523,9 +525,10 @@ impl MergeRule {
     }
 
     /// One sweep along `axis`: each live cell of `order`, in turn, absorbs its neighbours
-    /// across its upper face while the rule allows. `neighbour(mine, v)` is the initial cell
-    /// that holds voxel `v` just past the face of the cell `mine`, or `None` where the sweep
-    /// need not look.
+    /// across its upper face while the rule allows. `neighbour(mine, v)` is the cell of
+    /// `cells` (before `find`: a task's own cell, or the survivor of the initial cell) that
+    /// holds voxel `v` just past the face of the cell `mine`, or `None` where the sweep need
+    /// not look.
     /// Returns the number of merges.
     fn merge_along(
         &self,

@@ -138,7 +138,6 @@ impl IrregularGrid {
     }
 }
 
-/// The build's arrays, phase by phase (`build.rs`), from the bounds on their lengths.
 /// What one second-level task holds while it runs (`build.rs`, phase 2), beyond its output,
 /// for a top cell with at most `r` references in `n` cells: a growing (cell, triangle) list
 /// (doubled when full: three times its length), the counts, a cursor per cell, the
@@ -151,12 +150,15 @@ fn task_working_bytes(r: u64, n: u64) -> u64 {
     24 * r + 4 * n + 4 * n + 4 * r + (4 + box16 + refs_enum) * n + 8 * r + 4 * n
 }
 
+/// The build's arrays, phase by phase (`build.rs`), from the bounds on their lengths (`i`
+/// second-level cells, `r2` references; survivors and final cells are at most `i`, their
+/// references at most `r2`), and `tasks`, the second-level tasks' working arrays.
 fn account(n: u64, top: u64, p1: u64, i: u64, r2: u64, tasks: u64) -> MemoryBound {
     const CHUNK: u64 = 2048; // `overlap_pairs_by_triangle`'s triangles per task
     let refs_enum = std::mem::size_of::<Refs>() as u64;
     let cell = std::mem::size_of::<IrrCell>() as u64;
     let vox_box = 24u64; // [UVec3; 2]: the partition and the grown boxes
-    let box16 = std::mem::size_of::<Box16>() as u64; // every second-level cell's box
+    let box16 = std::mem::size_of::<Box16>() as u64; // a box through merging
     // Phase 1, `overlap_pairs`: the per-chunk pair lists (capacity 4 per triangle, doubled
     // when full), their outer list, the counts and cursors per top cell, the sorted pairs.
     let chunks = n.div_ceil(CHUNK);
