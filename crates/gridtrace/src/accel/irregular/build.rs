@@ -223,6 +223,13 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         n_surv += tc.boxes.len();
         n_refs += tc.refs.len();
     }
+    // References are addressed with 32 bits (spans here, cell starts at the end): say so
+    // before an offset could wrap.
+    if n_refs > u32::MAX as usize {
+        return Err(Error::InvalidInput(format!(
+            "irregular grid: {n_refs} references do not fit 32-bit indices (lower the densities)"
+        )));
+    }
     let mut survivor_of = vec![0u32; n_init];
     {
         let mut parts = Vec::with_capacity(n_top);
