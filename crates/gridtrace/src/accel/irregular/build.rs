@@ -5,9 +5,10 @@
 
 use std::time::Instant;
 
-use glam::{UVec3, Vec3};
+use glam::UVec3;
 use rayon::prelude::*;
 
+use super::merge::{Cells, MergeRule, Refs, TopCells, find};
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
 use crate::accel::grid::{
     auto_dims, candidate_cells, cell_margin, count_by_cell, grid_bounds, overlap_pairs, overlapping_cells,
@@ -18,16 +19,13 @@ use crate::{Error, Result};
 
 /// Top cells per axis at most (see `build`).
 const MAX_TOP_PER_AXIS: u32 = 4096;
-/// Cost of stepping through a cell, in triangle tests, for the merge decision. A step is a
-/// top-cell entry, a voxel-map entry and a 16-byte cell, about what one triangle test costs.
-const COST_STEP: f64 = 1.0;
 /// Probes of neighbouring cells one face of one cell may make in one expansion attempt: a
 /// large face next to many small cells gives up rather than spend the build's time there (the
 /// traversal is exact whatever the expansion).
 const MAX_PROBES: u32 = 256;
 
 /// A cell's box in voxels, `min` inclusive and `max` exclusive.
-type VoxBox = [UVec3; 2];
+pub(super) type VoxBox = [UVec3; 2];
 
 /// A cell's box as the build keeps it through merging (a task's cells, then the survivors):
 /// 16-bit coordinates (the virtual grid is under 2^16 voxels per axis, `TopGrid::new`), 12
@@ -37,29 +35,12 @@ pub(super) struct Box16([[u16; 3]; 2]);
 
 impl Box16 {
     #[inline(always)]
-    fn pack(b: VoxBox) -> Box16 {
+    pub(super) fn pack(b: VoxBox) -> Box16 {
         Box16(b.map(|c| c.to_array().map(|v| v as u16)))
     }
     #[inline(always)]
-    fn unpack(self) -> VoxBox {
+    pub(super) fn unpack(self) -> VoxBox {
         self.0.map(|c| UVec3::from(c.map(u32::from)))
-    }
-}
-
-/// A cell's references during the build: a slice of the second level's array until a merge
-/// with a different set gives it its own.
-#[derive(Debug, Clone)]
-pub(super) enum Refs {
-    Span(u32, u32),
-    Owned(Vec<u32>),
-}
-
-impl Refs {
-    fn get<'a>(&'a self, flat: &'a [u32]) -> &'a [u32] {
-        match self {
-            Refs::Span(s, n) => &flat[*s as usize..(*s + *n) as usize],
-            Refs::Owned(v) => v,
-        }
     }
 }
 
@@ -157,7 +138,6 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                 let inv_size = size.recip();
                 let margin = cell_margin(size, bounds);
                 let top_min = bounds.min + (origin.as_vec3()) * voxel_size;
-                let index = |l: UVec3| l.x + (l.y << level) + (l.z << (2 * level));
                 let center = |l: UVec3| bounds.min + (origin + l * cell_voxels).as_vec3() * voxel_size + size * 0.5;
                 // The (cell, triangle) pairs in triangle order, as `cell << 32 | triangle`.
                 let mut pairs_here: Vec<u64> = Vec::new();
@@ -166,7 +146,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
                     let (c0, c1, margin) =
                         candidate_cells(&tris[tri as usize], top_min, inv_size, UVec3::splat(side), margin);
                     overlapping_cells(c0, c1, size * 0.5 + margin, verts, center, |l| {
-                        pairs_here.push((index(l) as u64) << 32 | tri as u64)
+                        pairs_here.push((in_top(l, level) as u64) << 32 | tri as u64)
                     });
                 }
                 // Sorted by cell (stable: triangles stay ascending within a cell).
@@ -177,21 +157,11 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
             };
             let mut parent: Vec<u32> = (0..n_cells as u32).collect();
             let mut boxes: Vec<Box16> = (0..n_cells as u32).map(|i| Box16::pack(cell_box(t, i))).collect();
-            let mut s = 0;
-            let mut refs_of: Vec<Refs> = counts
-                .iter()
-                .map(|&n| {
-                    s += n;
-                    Refs::Span(s - n, n)
-                })
-                .collect();
+            let mut refs_of: Vec<Refs> = Refs::spans(&counts, 0).collect();
             drop(counts);
             if level > 0 {
                 let top = top_coord(t);
-                let local_at = |v: UVec3| {
-                    let l = (v - origin) >> (shift - level);
-                    l.x + (l.y << level) + (l.z << (2 * level))
-                };
+                let local_at = |v: UVec3| in_top((v - origin) >> (shift - level), level);
                 let mut cells = Cells {
                     parent: &mut parent,
                     boxes: &mut boxes,
@@ -250,11 +220,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     let mut flat: Vec<u32> = Vec::with_capacity(n_refs);
     for tc in top_cells {
         boxes.extend_from_slice(&tc.boxes);
-        let mut s = flat.len() as u32;
-        for &n in &tc.counts {
-            refs_of.push(Refs::Span(s, n));
-            s += n;
-        }
+        refs_of.extend(Refs::spans(&tc.counts, flat.len() as u32));
         flat.extend_from_slice(&tc.refs);
     }
     lap(1);
@@ -264,8 +230,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         let top = v >> shift;
         let t = (top.x + top_dims.x * (top.y + top_dims.y * top.z)) as usize;
         let level = levels[t];
-        let local = (v & UVec3::splat((1 << shift) - 1)) >> (shift - level);
-        begin[t] as u32 + local.x + (local.y << level) + (local.z << (2 * level))
+        begin[t] as u32 + in_top((v & UVec3::splat((1 << shift) - 1)) >> (shift - level), level)
     };
 
     // Phase 3: merging (its first part, inside each top cell, ran with phase 2). A cell
@@ -460,148 +425,6 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
     })
 }
 
-/// The merge's state over a set of cells (one top cell's, or all survivors): per cell its
-/// union-find parent, its box and its references (spans of `flat`, or sets of their own).
-struct Cells<'a> {
-    parent: &'a mut [u32],
-    boxes: &'a mut [Box16],
-    refs_of: &'a mut [Refs],
-    flat: &'a [u32],
-}
-
-impl Cells<'_> {
-    /// The root of cell `x`'s set, halving the path on the way.
-    fn find(&mut self, x: u32) -> u32 {
-        find(self.parent, x)
-    }
-}
-
-/// A top cell's cells after the merge inside it: the survivors, in the order of their first
-/// initial cell, and for each initial cell its survivor.
-struct TopCells {
-    /// For each of the top cell's initial cells, its survivor (an index into `boxes`).
-    rep: Vec<u32>,
-    boxes: Vec<Box16>,
-    /// The survivors' reference counts, and their references one after another.
-    counts: Vec<u32>,
-    refs: Vec<u32>,
-}
-
-impl TopCells {
-    fn gather(mut parent: Vec<u32>, boxes: &[Box16], refs_of: &[Refs], flat: &[u32]) -> TopCells {
-        let n = parent.len();
-        let alive = |k: usize| parent[k] == k as u32;
-        let n_surv = (0..n).filter(|&k| alive(k)).count();
-        let n_refs = (0..n).filter(|&k| alive(k)).map(|k| refs_of[k].get(flat).len()).sum();
-        let mut out = TopCells {
-            rep: Vec::with_capacity(n),
-            boxes: Vec::with_capacity(n_surv),
-            counts: Vec::with_capacity(n_surv),
-            refs: Vec::with_capacity(n_refs),
-        };
-        // The survivors' new indices, in the place of their parents (a survivor is its own).
-        let mut ordinal = vec![u32::MAX; n];
-        for k in 0..n {
-            if alive(k) {
-                ordinal[k] = out.boxes.len() as u32;
-                let r = refs_of[k].get(flat);
-                out.boxes.push(boxes[k]);
-                out.counts.push(r.len() as u32);
-                out.refs.extend_from_slice(r);
-            }
-        }
-        for k in 0..n as u32 {
-            let root = find(&mut parent, k);
-            out.rep.push(ordinal[root as usize]);
-        }
-        out
-    }
-}
-
-/// When two cells merge (see phase 3 of `build`).
-struct MergeRule {
-    voxel_dims: UVec3,
-    voxel_size: Vec3,
-    alpha: f64,
-}
-
-impl MergeRule {
-    fn area(&self, b: &VoxBox) -> f64 {
-        let d = ((b[1] - b[0]).as_vec3() * self.voxel_size).as_dvec3();
-        d.x * d.y + d.y * d.z + d.z * d.x
-    }
-
-    /// One sweep along `axis`: each live cell of `order`, in turn, absorbs its neighbours
-    /// across its upper face while the rule allows. `neighbour(mine, v)` is the cell of
-    /// `cells` (before `find`: a task's own cell, or the survivor of the initial cell) that
-    /// holds voxel `v` just past the face of the cell `mine`, or `None` where the sweep need
-    /// not look.
-    /// Returns the number of merges.
-    fn merge_along(
-        &self,
-        cells: &mut Cells,
-        order: impl Iterator<Item = u32>,
-        axis: usize,
-        neighbour: impl Fn(&VoxBox, UVec3) -> Option<u32>,
-    ) -> usize {
-        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
-        let mut merged = 0;
-        for cell in order {
-            let k = cell as usize;
-            if cells.parent[k] != cell {
-                continue;
-            }
-            loop {
-                let mine = cells.boxes[k].unpack();
-                if mine[1][axis] >= self.voxel_dims[axis] {
-                    break;
-                }
-                let mut probe = mine[0];
-                probe[axis] = mine[1][axis];
-                let Some(initial) = neighbour(&mine, probe) else { break };
-                let other = cells.find(initial);
-                let o = other as usize;
-                let theirs = cells.boxes[o].unpack();
-                if theirs[0][b] != mine[0][b]
-                    || theirs[1][b] != mine[1][b]
-                    || theirs[0][c] != mine[0][c]
-                    || theirs[1][c] != mine[1][c]
-                {
-                    break;
-                }
-                let mut joined = mine;
-                joined[1][axis] = theirs[1][axis];
-                let (ra, rb) = (cells.refs_of[k].get(cells.flat), cells.refs_of[o].get(cells.flat));
-                let separate = self.area(&mine) * (COST_STEP + ra.len() as f64)
-                    + self.area(&theirs) * (COST_STEP + rb.len() as f64);
-                let new_refs = if ra == rb {
-                    None
-                } else {
-                    // The union has at least the larger set: skip the merge of sorted lists
-                    // when even that is too costly.
-                    let lower = self.area(&joined) * (COST_STEP + ra.len().max(rb.len()) as f64);
-                    if lower > self.alpha * separate {
-                        break;
-                    }
-                    Some(union(ra, rb))
-                };
-                let n_joined = new_refs.as_ref().map_or(ra.len(), Vec::len);
-                if self.area(&joined) * (COST_STEP + n_joined as f64) > self.alpha * separate {
-                    break;
-                }
-                if let Some(v) = new_refs {
-                    cells.refs_of[k] = Refs::Owned(v);
-                }
-                cells.refs_of[o] = Refs::Span(0, 0);
-                cells.boxes[k] = Box16::pack(joined);
-                cells.parent[o] = cell;
-                merged += 1;
-            }
-        }
-        merged
-    }
-}
-
 /// The top grid of a build: where it lies, its cells, and how many levels its cells may have.
 pub(super) struct TopGrid {
     pub bounds: Aabb,
@@ -639,38 +462,10 @@ pub(super) fn level_for(n: u32, cell_density: f32, max_shift: u32) -> u32 {
     (per_axis.log2().round().max(0.0) as u32).min(max_shift)
 }
 
-/// The root of `x`'s set, halving the path on the way.
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        let p = parent[x as usize];
-        parent[x as usize] = parent[p as usize];
-        x = p;
-    }
-    x
-}
-
-/// The union of two ascending lists, ascending.
-fn union(a: &[u32], b: &[u32]) -> Vec<u32> {
-    let mut out = Vec::with_capacity(a.len() + b.len());
-    let (mut i, mut j) = (0, 0);
-    while i < a.len() && j < b.len() {
-        match a[i].cmp(&b[j]) {
-            std::cmp::Ordering::Less => {
-                out.push(a[i]);
-                i += 1;
-            }
-            std::cmp::Ordering::Greater => {
-                out.push(b[j]);
-                j += 1;
-            }
-            std::cmp::Ordering::Equal => {
-                out.push(a[i]);
-                i += 1;
-                j += 1;
-            }
-        }
-    }
-    out.extend_from_slice(&a[i..]);
-    out.extend_from_slice(&b[j..]);
-    out
+/// The index within its top cell of the cell at `l` (cells counted within the top cell, x
+/// fastest) in a top cell of `level` levels: the layout of the voxel map's entries, which
+/// `cell_box` inverts and `IrregularGrid::slot` reads.
+#[inline(always)]
+fn in_top(l: UVec3, level: u32) -> u32 {
+    l.x + (l.y << level) + (l.z << (2 * level))
 }

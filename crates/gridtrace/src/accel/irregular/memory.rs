@@ -21,8 +21,8 @@
 //! - Merging only unites reference sets and expansion adds none, so the final references and
 //!   cells are at most the second level's.
 //! - The build's own arrays are listed phase by phase below with their element sizes and
-//!   capacities (`build.rs` allocates them exactly so: `with_capacity`, `vec![..; n]`, exact
-//!   collects); a `Vec` that grows by doubling is counted at three times its length (its last
+//!   capacities (`build.rs` and `merge.rs` allocate them exactly so: `with_capacity`,
+//!   `vec![..; n]`, exact collects); a `Vec` that grows by doubling is counted at three times its length (its last
 //!   reallocation holds the old block and one twice as large). The peak is the largest phase.
 //! - The second level runs a task per top cell whose working arrays live only while it runs,
 //!   and a thread runs one task at a time (a task calls nothing that runs on the pool): the
@@ -31,7 +31,8 @@
 
 use glam::UVec3;
 
-use super::build::{Box16, Refs, TopGrid, level_for};
+use super::build::{Box16, TopGrid, level_for};
+use super::merge::Refs;
 use super::{IrrCell, IrregularGrid, IrregularParams};
 use crate::Result;
 use crate::accel::TriAccel;

@@ -27,6 +27,7 @@ use crate::{Error, Result};
 
 mod build;
 mod memory;
+mod merge;
 #[cfg(test)]
 mod tests;
 mod walk;
