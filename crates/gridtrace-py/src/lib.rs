@@ -49,12 +49,15 @@ fn rows3<'a, T: numpy::Element + bytemuck::Pod>(a: &'a PyReadonlyArray2<'_, T>, 
     Ok(bytemuck::cast_slice(flat))
 }
 
+/// A ray batch as the library takes it: the backend, the origins and the directions.
+type Batch<'a> = (Backend, &'a [[f32; 3]], &'a [[f32; 3]]);
+
 /// The backend and the two point arrays of a ray batch.
 fn batch<'a>(
     backend: &str,
     origins: &'a PyReadonlyArray2<'_, f32>,
     directions: &'a PyReadonlyArray2<'_, f32>,
-) -> PyResult<(Backend, &'a [[f32; 3]], &'a [[f32; 3]])> {
+) -> PyResult<Batch<'a>> {
     Ok((
         parse("backend", backend)?,
         rows3(origins, "origins")?,

@@ -22,7 +22,7 @@ pub use aabb::Aabb;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
 pub use grid::{Cell, Grid, GridLattice, GridStats, Resolution, Stepping};
-pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
+pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound, PACKET};
 pub use ray::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
 pub use triangle::{TriAccel, TriAccel4, TriHit, TriHit4};
 
@@ -235,6 +235,69 @@ impl Accel {
             Structure::Grid(g) => g.intersect(&self.tris, ray, t_min, t_max, stepping(kind), counters),
             Structure::Bvh(b) => b.intersect(ray, t_min, t_max, counters),
             Structure::Irregular(g) => g.intersect(&self.tris, ray, t_min, t_max, counters),
+        }
+    }
+
+    /// Whether this structure walks packets of rays together (`intersect_packet`), so that
+    /// callers with coherent rays (the renderer's eye rays) should hand it 2x2 blocks.
+    pub fn walks_packets(&self) -> bool {
+        matches!(self.structure, Structure::Irregular(_))
+    }
+
+    /// Closest hits of a packet of up to `PACKET` coherent rays (a 2x2 block of camera rays),
+    /// each counted into its own `counters[i]`: the same hits and counts as `intersect` ray by
+    /// ray. The irregular grid walks the packet together (`IrregularGrid::intersect_packet`);
+    /// the other structures trace its rays one by one. Hits past `rays.len()` are misses.
+    #[inline]
+    pub fn intersect_packet<C: Counters>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        assert!(
+            rays.len() <= PACKET && counters.len() == rays.len(),
+            "a packet is up to four rays, a counter each"
+        );
+        match &self.structure {
+            Structure::Irregular(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, counters),
+            _ => {
+                let mut hits = [Hit::MISS; PACKET];
+                for ((h, r), c) in hits.iter_mut().zip(rays).zip(counters) {
+                    *h = self.intersect(r, t_min, t_max, kind, c);
+                }
+                hits
+            }
+        }
+    }
+
+    /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (the
+    /// shadow rays of a 2x2 block towards one light), each counted into its own `counters[i]`:
+    /// the same answers and counts as `occluded` ray by ray. False past `rays.len()`.
+    #[inline]
+    pub fn occluded_packet<C: Counters>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+        kind: AccelKind,
+        counters: &mut [C],
+    ) -> [bool; PACKET] {
+        assert!(
+            rays.len() <= PACKET && counters.len() == rays.len(),
+            "a packet is up to four rays, a counter each"
+        );
+        match &self.structure {
+            Structure::Irregular(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, counters),
+            _ => {
+                let mut hits = [false; PACKET];
+                for (i, (r, c)) in rays.iter().zip(counters).enumerate() {
+                    hits[i] = self.occluded(r, t_min, t_max[i], kind, c);
+                }
+                hits
+            }
         }
     }
 

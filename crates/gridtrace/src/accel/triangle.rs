@@ -298,6 +298,24 @@ impl TriAccel4 {
     /// rejects), so that NaNs fall the same way.
     #[inline(always)]
     pub fn intersect(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: f32) -> TriHit4 {
+        self.intersect_upto(origin, dir, t_min, Vec4::splat(t_max))
+    }
+
+    /// One triangle in all four lanes: what `intersect_upto` tests four rays against.
+    #[inline(always)]
+    pub fn splat(tri: &TriAccel) -> TriAccel4 {
+        TriAccel4 {
+            v0: tri.v0.map(Vec4::splat),
+            e1: tri.e1.map(Vec4::splat),
+            e2: tri.e2.map(Vec4::splat),
+        }
+    }
+
+    /// `intersect` with a `t_max` per lane: four triangles against one ray each, or one
+    /// triangle (`splat`) against four rays (a packet walk: each ray up to its own closest hit).
+    /// Lane by lane the same bits as `TriAccel::intersect` with that lane's ray and `t_max`.
+    #[inline(always)]
+    pub fn intersect_upto(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: Vec4) -> TriHit4 {
         const LOOSE: f32 = BARY_EPS + MAX_SLACK;
         let p = cross4(dir, &self.e2);
         let det = dot4(&self.e1, &p);
@@ -313,7 +331,7 @@ impl TriAccel4 {
             & !v.cmplt(Vec4::splat(-LOOSE))
             & !(u + v).cmpgt(Vec4::splat(1.0 + 2.0 * LOOSE))
             & t.cmpgt(Vec4::splat(t_min))
-            & t.cmplt(Vec4::splat(t_max));
+            & t.cmplt(t_max);
         // The error-bound slack (see `TriAccel::intersect`). The scalar test skips it inside the
         // `BARY_EPS` box; computing it everywhere changes nothing, since the bounded box always
         // contains that one (each tolerance is at least `BARY_EPS`).

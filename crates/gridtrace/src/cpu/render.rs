@@ -7,7 +7,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::Result;
-use crate::accel::{Counters, Hit, NoCounters, Ray, TraversalCounters};
+use crate::accel::{Counters, Hit, NoCounters, PACKET, Ray, TraversalCounters};
 use crate::render::{Image, Mode, RayCounts, RenderOptions, RenderStats};
 use crate::scene::{Camera, CameraFrame, PointLight, PreparedScene};
 
@@ -95,6 +95,8 @@ struct View<'a> {
 
 trait Collect: Counters + Default + Send {
     fn total(&self) -> TraversalCounters;
+    /// Adds `other`'s counts to these.
+    fn absorb(&mut self, other: Self);
     fn cost(&self) -> u64 {
         let t = self.total();
         t.cells + t.tri_tests
@@ -104,10 +106,14 @@ impl Collect for NoCounters {
     fn total(&self) -> TraversalCounters {
         TraversalCounters::default()
     }
+    fn absorb(&mut self, _: Self) {}
 }
 impl Collect for TraversalCounters {
     fn total(&self) -> TraversalCounters {
         *self
+    }
+    fn absorb(&mut self, other: Self) {
+        *self += other;
     }
 }
 
@@ -133,15 +139,30 @@ fn render_generic<C: Collect>(
         .map(|(band, rows)| {
             let mut rays = RayCounts::default();
             let mut total = TraversalCounters::default();
-            for (i, px) in rows.iter_mut().enumerate() {
-                let x = (i % width) as u32;
-                let y = frame_rows.start + (band * BAND + i / width) as u32;
-                let mut c = C::default();
-                *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
-                if opts.mode == Mode::Heat {
-                    *px = Vec3::splat(c.cost() as f32);
+            if scene.accel.walks_packets() {
+                trace_blocks::<C>(scene, &cam, view, opts, (band * BAND, rows), (&mut rays, &mut total));
+            } else {
+                for (i, px) in rows.iter_mut().enumerate() {
+                    let x = (i % width) as u32;
+                    let y = frame_rows.start + (band * BAND + i / width) as u32;
+                    let mut c = C::default();
+                    let eye = |ray: &Ray, c: &mut C| scene.accel.intersect(ray, 0.0, f32::INFINITY, opts.accel, c);
+                    let shadow = |_: usize, ray: &Ray, dist: f32, c: &mut C| shadow_query(scene, opts, ray, dist, c);
+                    *px = trace_pixel(
+                        scene,
+                        &cam,
+                        view.lights,
+                        (x, y),
+                        opts,
+                        (&mut rays, &mut c),
+                        (eye, shadow),
+                        &mut (),
+                    );
+                    if opts.mode == Mode::Heat {
+                        *px = Vec3::splat(c.cost() as f32);
+                    }
+                    total += c.total();
                 }
-                total += c.total();
             }
             if let Some(p) = progress {
                 p((rows.len() / width) as u32);
@@ -162,6 +183,107 @@ fn render_generic<C: Collect>(
         render_ms: t0.elapsed().as_secs_f64() * 1e3,
     };
     Ok((img, stats))
+}
+
+/// The pixels of a band of rows (`first_row` of the frame's rows onwards) for a structure that
+/// walks packets of rays (`Accel::walks_packets`): 2x2 blocks of pixels, whose eye rays are
+/// traced as one packet (`Accel::intersect_packet`) and then, light by light, the shadow rays
+/// from their hits (`Accel::occluded_packet`); then each pixel's shading and further rays
+/// alone (`trace_pixel`, which takes those answers). Neighbouring pixels' rays are coherent,
+/// which is what a packet walk needs. The same rays as pixel by pixel, so the same image.
+fn trace_blocks<C: Collect>(
+    scene: &PreparedScene,
+    cam: &CameraFrame,
+    view: &View,
+    opts: &RenderOptions,
+    (first_row, rows): (usize, &mut [Vec3]),
+    (rays, total): (&mut RayCounts, &mut TraversalCounters),
+) {
+    let frame_rows = opts.row_range();
+    let width = opts.width as usize;
+    let band_rows = rows.len() / width;
+    // Shadow rays of the eye hits in packets: not with the ablation that traces them as
+    // closest-hit rays, which `trace_pixel` does ray by ray.
+    let shadow_packets = opts.mode.shadows() && !opts.ablation.shadow_closest_hit;
+    // Per light, whether each pixel's shadow ray towards it is occluded.
+    let mut occluded = vec![[false; PACKET]; view.lights.len()];
+    for by in (0..band_rows).step_by(2) {
+        for bx in (0..width).step_by(2) {
+            let mut at = [(0usize, 0u32, 0u32); PACKET];
+            let mut eye = [Ray::new(Vec3::ZERO, Vec3::X); PACKET];
+            let mut n = 0;
+            for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                let (row, col) = (by + dy, bx + dx);
+                if row < band_rows && col < width {
+                    let (x, y) = (col as u32, frame_rows.start + (first_row + row) as u32);
+                    at[n] = (row * width + col, x, y);
+                    eye[n] = cam.ray(x, y);
+                    n += 1;
+                }
+            }
+            let mut c: [C; PACKET] = std::array::from_fn(|_| C::default());
+            let hits = scene
+                .accel
+                .intersect_packet(&eye[..n], 0.0, f32::INFINITY, opts.accel, &mut c[..n]);
+            if shadow_packets {
+                // The shadow rays `trace_pixel` would trace at the eye hits, light by light.
+                let points: [Option<(Surface, Vec3)>; PACKET] = std::array::from_fn(|k| {
+                    (k < n && hits[k].is_hit()).then(|| {
+                        let s = surface_at(scene, &eye[k], &hits[k]);
+                        (s, shadow_origin(scene, &s))
+                    })
+                });
+                for (light, occluded) in view.lights.iter().zip(&mut occluded) {
+                    let mut shadow = [Ray::new(Vec3::ZERO, Vec3::X); PACKET];
+                    let mut dist = [0.0; PACKET];
+                    let mut lane_of = [0usize; PACKET];
+                    let mut m = 0;
+                    for (k, point) in points.iter().enumerate() {
+                        if let Some((s, origin)) = point
+                            && let Some((_, to_light, d)) = light_contribution(s, *origin, light)
+                        {
+                            (shadow[m], dist[m], lane_of[m]) = (Ray::new(*origin, to_light), d, k);
+                            m += 1;
+                        }
+                    }
+                    let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
+                    let answers = scene
+                        .accel
+                        .occluded_packet(&shadow[..m], 0.0, dist, opts.accel, &mut counted[..m]);
+                    for (j, counted) in counted.into_iter().take(m).enumerate() {
+                        occluded[lane_of[j]] = answers[j];
+                        c[lane_of[j]].absorb(counted);
+                    }
+                }
+            }
+            for k in 0..n {
+                let (i, x, y) = at[k];
+                let eye_hit = |_: &Ray, _: &mut C| hits[k];
+                let shadow = |light: usize, ray: &Ray, dist: f32, c: &mut C| {
+                    if shadow_packets {
+                        occluded[light][k]
+                    } else {
+                        shadow_query(scene, opts, ray, dist, c)
+                    }
+                };
+                let px = &mut rows[i];
+                *px = trace_pixel(
+                    scene,
+                    cam,
+                    view.lights,
+                    (x, y),
+                    opts,
+                    (rays, &mut c[k]),
+                    (eye_hit, shadow),
+                    &mut (),
+                );
+                if opts.mode == Mode::Heat {
+                    *px = Vec3::splat(c[k].cost() as f32);
+                }
+                *total += c[k].total();
+            }
+        }
+    }
 }
 
 /// Which kind of ray the renderer traced.
@@ -201,14 +323,21 @@ pub fn trace_pixel_observed(
         (x, y),
         opts,
         (&mut rays, &mut NoCounters),
+        (
+            |ray: &Ray, c: &mut NoCounters| scene.accel.intersect(ray, 0.0, f32::INFINITY, opts.accel, c),
+            |_: usize, ray: &Ray, dist: f32, c: &mut NoCounters| shadow_query(scene, opts, ray, dist, c),
+        ),
         observer,
     )
 }
 
 /// One pixel: eye ray, then shading and reflections, accumulating `weight * colour` as the GPU
 /// wavefront does (a reflection ray carries the weight `reflectivity` of its parent). Rays are
-/// counted into `tally` and shown to `observer`.
+/// counted into `tally` and shown to `observer`. `first` answers the eye ray (its closest hit)
+/// and the shadow rays from the eye hit (`first.1(light, ray, dist, counters)`: occluded?):
+/// traced there, or already traced in packets (`trace_blocks`, their work counted).
 #[inline]
+#[allow(clippy::too_many_arguments)]
 fn trace_pixel<C: Counters, O: RayObserver>(
     scene: &PreparedScene,
     cam: &CameraFrame,
@@ -216,16 +345,24 @@ fn trace_pixel<C: Counters, O: RayObserver>(
     (x, y): (u32, u32),
     opts: &RenderOptions,
     (rays, counters): (&mut RayCounts, &mut C),
+    (eye, mut first_shadow): (
+        impl FnOnce(&Ray, &mut C) -> Hit,
+        impl FnMut(usize, &Ray, f32, &mut C) -> bool,
+    ),
     observer: &mut O,
 ) -> Vec3 {
     let accel = &scene.accel;
     let mut ray = cam.ray(x, y);
+    let mut eye = Some(eye);
     let mut weight = Vec3::ONE;
     let mut color = Vec3::ZERO;
     let mut kind = RayKind::Eye;
     rays.eye += 1;
     for depth in 0..=opts.mode.reflection_depth() {
-        let hit = accel.intersect(&ray, 0.0, f32::INFINITY, opts.accel, counters);
+        let hit = match eye.take() {
+            Some(eye) => eye(&ray, counters),
+            None => accel.intersect(&ray, 0.0, f32::INFINITY, opts.accel, counters),
+        };
         observer.closest(kind, &ray, &hit);
         if !hit.is_hit() {
             color += weight * scene.background;
@@ -243,8 +380,8 @@ fn trace_pixel<C: Counters, O: RayObserver>(
         };
         let local = weight * (1.0 - reflect) * mat.diffuse;
         color += local * scene.ambient;
-        let origin = s.position + s.ng * scene.ray_epsilon;
-        for light in lights {
+        let origin = shadow_origin(scene, &s);
+        for (light_index, light) in lights.iter().enumerate() {
             let (contrib, to_light, dist) = match light_contribution(&s, origin, light) {
                 Some(v) => v,
                 None => continue,
@@ -252,10 +389,10 @@ fn trace_pixel<C: Counters, O: RayObserver>(
             if opts.mode.shadows() {
                 rays.shadow += 1;
                 let shadow = Ray::new(origin, to_light);
-                let occluded = if opts.ablation.shadow_closest_hit {
-                    accel.intersect(&shadow, 0.0, dist, opts.accel, counters).is_hit()
+                let occluded = if depth == 0 {
+                    first_shadow(light_index, &shadow, dist, counters)
                 } else {
-                    accel.occluded(&shadow, 0.0, dist, opts.accel, counters)
+                    shadow_query(scene, opts, &shadow, dist, counters)
                 };
                 observer.shadow(&shadow, dist, occluded);
                 if occluded {
@@ -275,6 +412,24 @@ fn trace_pixel<C: Counters, O: RayObserver>(
         }
     }
     color
+}
+
+/// Whether a shadow ray is occluded before `dist`: an any-hit query, or a closest-hit one
+/// under the ablation that measures what any-hit queries save.
+#[inline]
+fn shadow_query<C: Counters>(scene: &PreparedScene, opts: &RenderOptions, ray: &Ray, dist: f32, c: &mut C) -> bool {
+    if opts.ablation.shadow_closest_hit {
+        scene.accel.intersect(ray, 0.0, dist, opts.accel, c).is_hit()
+    } else {
+        scene.accel.occluded(ray, 0.0, dist, opts.accel, c)
+    }
+}
+
+/// Where the rays leaving a surface start: off it along the geometric normal, so that they do
+/// not hit it again.
+#[inline]
+fn shadow_origin(scene: &PreparedScene, s: &Surface) -> Vec3 {
+    s.position + s.ng * scene.ray_epsilon
 }
 
 /// Diffuse irradiance from a point light: `intensity * max(0, N.L) / d^2`, with the unit
@@ -298,4 +453,85 @@ fn light_contribution(
         return None;
     }
     Some((Vec3::from(light.intensity) * (ndl / d2), l, dist))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::{AccelKind, Resolution};
+    use crate::render::Ablation;
+    use crate::scene::builtin;
+
+    /// The irregular grid's renders trace eye and shadow rays in 2x2 packets (`trace_blocks`);
+    /// every pixel equals, bit for bit, what the pixel-by-pixel walk (`trace_pixel_observed`,
+    /// one ray at a time) gives, and heat images count each eye ray's own cells and tests: odd
+    /// sizes (blocks cut at the right edge and the band's last row), a band of rows starting on
+    /// an odd row, every shading mode, and the ablation that traces shadow rays one by one.
+    #[test]
+    fn packet_renders_equal_single_rays() {
+        for name in ["knot-box", "mirror-spheres", "sparse-room"] {
+            let scene = builtin::scene(name).unwrap();
+            let prepared = scene.prepare_for(AccelKind::Irregular, Resolution::default()).unwrap();
+            assert!(prepared.accel.walks_packets());
+            for (mode, ablation, rows) in [
+                (Mode::Cast, Ablation::default(), None),
+                (Mode::Shadow, Ablation::default(), Some((5, 18))),
+                (Mode::Trace, Ablation::default(), None),
+                (Mode::Shadow, Ablation::named("shadow-any-hit").unwrap(), None),
+                (Mode::Heat, Ablation::default(), Some((3, 22))),
+            ] {
+                let opts = RenderOptions {
+                    width: 37,
+                    height: 23,
+                    mode,
+                    accel: AccelKind::Irregular,
+                    ablation,
+                    rows,
+                };
+                let (img, stats) = render_with_counters(&prepared, &scene.camera, &scene.lights, &opts).unwrap();
+                let cam = scene.camera.frame(opts.width, opts.height);
+                let first = opts.row_range().start;
+                let mut expected_rays = RayCounts::default();
+                for (i, got) in img.pixels.iter().enumerate() {
+                    let (x, y) = (i as u32 % opts.width, first + i as u32 / opts.width);
+                    let want = if mode == Mode::Heat {
+                        let mut c = TraversalCounters::default();
+                        prepared
+                            .accel
+                            .intersect(&cam.ray(x, y), 0.0, f32::INFINITY, opts.accel, &mut c);
+                        Vec3::splat(c.cost() as f32)
+                    } else {
+                        let alone = |ray: &Ray, c: &mut NoCounters| {
+                            prepared.accel.intersect(ray, 0.0, f32::INFINITY, opts.accel, c)
+                        };
+                        let shadow = |_: usize, ray: &Ray, dist: f32, c: &mut NoCounters| {
+                            shadow_query(&prepared, &opts, ray, dist, c)
+                        };
+                        let tally = (&mut expected_rays, &mut NoCounters);
+                        trace_pixel(
+                            &prepared,
+                            &cam,
+                            &scene.lights,
+                            (x, y),
+                            &opts,
+                            tally,
+                            (alone, shadow),
+                            &mut (),
+                        )
+                    };
+                    assert_eq!(
+                        got.to_array().map(f32::to_bits),
+                        want.to_array().map(f32::to_bits),
+                        "{name} {mode:?} pixel ({x}, {y}): packets {got}, alone {want}"
+                    );
+                }
+                if mode != Mode::Heat {
+                    assert_eq!(stats.rays, expected_rays, "{name} {mode:?}: the same rays");
+                }
+                if mode == Mode::Shadow {
+                    assert!(stats.rays.shadow > 0, "{name}: shadow rays were traced");
+                }
+            }
+        }
+    }
 }

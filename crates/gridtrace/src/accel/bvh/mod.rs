@@ -32,6 +32,8 @@ use build::LEAF_BLOCK;
 pub(crate) use build::STACK;
 pub use build::{Bvh, BvhNode, MAX_LEAF};
 use walk::Walk;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use walk::has_avx2;
 pub(crate) use walk::prefetch;
 use wide::collapse;
 pub use wide::{ChildRef, WIDTH, WideNode};

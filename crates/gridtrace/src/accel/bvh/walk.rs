@@ -141,7 +141,7 @@ impl BvhAccel {
 /// `BoxRay::enter_avx2`: the features those enable). The standard library caches the answer.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub(super) fn has_avx2() -> bool {
+pub(crate) fn has_avx2() -> bool {
     std::arch::is_x86_feature_detected!("avx2")
 }
 

@@ -28,11 +28,13 @@ use crate::{Error, Result};
 mod build;
 mod memory;
 mod merge;
+mod packet;
 #[cfg(test)]
 mod tests;
 mod walk;
 
 pub use memory::MemoryBound;
+pub use packet::PACKET;
 
 /// One cell as stored: its grown box in virtual voxels (`min` inclusive, `max` exclusive) as
 /// six 16-bit coordinates, and the first of its references in `IrregularGrid::refs`; they end

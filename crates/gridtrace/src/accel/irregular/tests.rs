@@ -187,6 +187,82 @@ fn traversal_equals_brute_force() {
     }
 }
 
+/// Packets give each ray exactly what its single-ray walk gives (the same closest hit, bit for
+/// bit, or the same any-hit answer, and the same cells and triangle tests): coherent 2x2 blocks of camera rays from inside and
+/// outside the grid, with t limits; incoherent packets; axis-aligned and zero components;
+/// rays that miss the grid; packets of one to four rays.
+#[test]
+fn packets_equal_single_rays() {
+    use crate::accel::{PACKET, TraversalCounters};
+    let tris = clusters(2000, 17);
+    let mut rng = Rng::new(4242);
+    let mut multi_hit = 0;
+    for p in params() {
+        let g = IrregularGrid::build(&tris, p).unwrap();
+        for i in 0..6_000 {
+            let n = 1 + i % PACKET;
+            let eye = Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0));
+            let target = tris[rng.below(tris.len() as u32) as usize].vertices()[0];
+            let pixel = [0.0, 1e-3, 2e-2][i % 3];
+            let rays: Vec<Ray> = (0..n)
+                .map(|k| {
+                    let mut d = match i % 4 {
+                        // Incoherent: each ray its own origin and direction.
+                        3 => Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)),
+                        // A 2x2 block of a camera: the same eye, directions a pixel apart.
+                        _ => (target - eye).normalize() + Vec3::new((k % 2) as f32, (k / 2) as f32, 0.0) * pixel,
+                    };
+                    if (i + k) % 7 == 0 {
+                        d.x = 0.0;
+                    }
+                    if (i + k) % 13 == 0 {
+                        d.y = 0.0;
+                        d.z = 0.0;
+                    }
+                    let o = if i % 4 == 3 {
+                        Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0))
+                    } else {
+                        eye
+                    };
+                    Ray::new(o, d)
+                })
+                .collect();
+            let (t_min, t_max) = [(0.0, f32::INFINITY), (0.5, 6.0), (0.0, 1.0)][i % 3];
+            let mut counted = vec![TraversalCounters::default(); n];
+            let got = g.intersect_packet(&tris, &rays, t_min, t_max, &mut counted);
+            for (k, r) in rays.iter().enumerate() {
+                let mut alone = TraversalCounters::default();
+                let want = g.intersect(&tris, r, t_min, t_max, &mut alone);
+                assert_eq!(
+                    (got[k].t.to_bits(), got[k].tri, got[k].u.to_bits(), got[k].v.to_bits()),
+                    (want.t.to_bits(), want.tri, want.u.to_bits(), want.v.to_bits()),
+                    "ray {k} of {rays:?}: packet {:?}, alone {want:?}",
+                    got[k]
+                );
+                assert_eq!(counted[k], alone, "ray {k} of {rays:?}");
+            }
+            assert!(got[n..].iter().all(|h| !h.is_hit()), "lanes past the rays are misses");
+            multi_hit += (got.iter().filter(|h| h.is_hit()).count() > 1) as u32;
+            // Any hits, each ray up to its own distance (shadow rays towards a light).
+            let limits: [f32; PACKET] = std::array::from_fn(|k| [t_max, 3.0, 0.7, 12.0][(i + k) % 4]);
+            let mut counted = vec![TraversalCounters::default(); n];
+            let got = g.occluded_packet(&tris, &rays, t_min, limits, &mut counted);
+            for (k, r) in rays.iter().enumerate() {
+                let mut alone = TraversalCounters::default();
+                let want = g.occluded(&tris, r, t_min, limits[k], &mut alone);
+                assert_eq!(
+                    (got[k], counted[k]),
+                    (want, alone),
+                    "ray {k} of {rays:?} up to {limits:?}"
+                );
+            }
+            assert!(!got[n..].iter().any(|&h| h), "lanes past the rays are not occluded");
+        }
+    }
+    // Many packets had several rays hitting (else this would test single rays only).
+    assert!(multi_hit > 2_000, "{multi_hit} packets with two hits or more");
+}
+
 #[test]
 fn bad_parameters_are_errors() {
     let tris = clusters(10, 1);

@@ -30,15 +30,15 @@ const LANES: usize = 8;
 
 /// One ray's place in the grid.
 #[derive(Debug, Clone, Copy)]
-struct Cursor {
+pub(super) struct Cursor {
     origin: [f32; 3],
     dir: Vec3,
-    inv: [f32; 3],
-    step: [i32; 3],
+    pub(super) inv: [f32; 3],
+    pub(super) step: [i32; 3],
     /// The voxel the ray is in.
-    v: [i32; 3],
-    t_leave: f32,
-    budget: u32,
+    pub(super) v: [i32; 3],
+    pub(super) t_leave: f32,
+    pub(super) budget: u32,
 }
 
 /// Where a lane of the batch walk is: what it asked memory for last.
@@ -65,7 +65,7 @@ struct Lane {
 impl IrregularGrid {
     /// The cursor at the ray's entry into the grid, or `None` if it misses the grid.
     #[inline(always)]
-    fn cursor(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Cursor> {
+    pub(super) fn cursor(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Cursor> {
         let inv_dir = ray.dir.recip();
         let (t_enter, t_leave) = self.bounds.clip(ray.origin, inv_dir, t_min, t_max)?;
         let dims = self.voxel_dims().as_ivec3().to_array();
