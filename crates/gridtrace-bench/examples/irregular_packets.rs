@@ -42,7 +42,12 @@ fn main() -> gridtrace::Result<()> {
                 }
                 packet_ms = packet_ms.min(t0.elapsed().as_secs_f64() * 1e3);
             }
-            assert_eq!(single, packets, "{name} {}: packets differ from single rays", kind.name());
+            assert_eq!(
+                single,
+                packets,
+                "{name} {}: packets differ from single rays",
+                kind.name()
+            );
             line += &format!(
                 "  {:<9} single {single_ms:7.2} ms  packets {packet_ms:7.2} ms ({:.2}x)",
                 kind.name(),

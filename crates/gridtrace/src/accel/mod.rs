@@ -238,8 +238,9 @@ impl Accel {
         }
     }
 
-    /// Whether this structure walks packets of rays together (`intersect_packet`), so that
-    /// callers with coherent rays (the renderer's eye rays) should hand it 2x2 blocks.
+    /// Whether this structure walks packets of rays together (`intersect_packet`,
+    /// `occluded_packet`), so that callers with coherent rays should hand it 2x2 blocks (the
+    /// CPU renderer does: `cpu/blocks.rs`).
     pub fn walks_packets(&self) -> bool {
         matches!(self.structure, Structure::Irregular(_))
     }

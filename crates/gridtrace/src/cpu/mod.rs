@@ -1,7 +1,8 @@
 //! The multithreaded CPU path: renders and ray batches over rayon.
 
+mod blocks;
+mod path;
 mod render;
 
-pub use render::{
-    RayKind, RayObserver, Surface, render, render_view, render_with_counters, surface_at, trace_pixel_observed,
-};
+pub use path::{Surface, surface_at};
+pub use render::{RayKind, RayObserver, render, render_view, render_with_counters, trace_pixel_observed};

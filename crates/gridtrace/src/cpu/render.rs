@@ -1,5 +1,7 @@
 //! CPU renderer. Each pixel follows exactly the steps the GPU wavefront kernels take (eye ray,
-//! shading with shadow rays, up to two reflection rays), so the two images agree.
+//! shading with shadow rays, up to two reflection rays: `path.rs`), so the two images agree;
+//! pixel by pixel here, or in 2x2 blocks whose rays are traced as packets (`blocks.rs`) for a
+//! structure that walks packets.
 
 use std::time::Instant;
 
@@ -7,46 +9,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::Result;
-use crate::accel::{Counters, Hit, NoCounters, PACKET, Ray, TraversalCounters};
+use crate::accel::{Counters, Hit, NoCounters, Ray, TraversalCounters};
 use crate::render::{Image, Mode, RayCounts, RenderOptions, RenderStats};
 use crate::scene::{Camera, CameraFrame, PointLight, PreparedScene};
 
-/// Shading geometry at a hit, both normals facing the incoming ray.
-#[derive(Debug, Clone, Copy)]
-pub struct Surface {
-    pub position: Vec3,
-    /// Unit geometric normal.
-    pub ng: Vec3,
-    /// Unit interpolated vertex normal (the geometric one where interpolation degenerates).
-    pub ns: Vec3,
-}
-
-/// Surface at a hit of `ray` on triangle `hit.tri`.
-#[inline]
-pub fn surface_at(scene: &PreparedScene, ray: &Ray, hit: &Hit) -> Surface {
-    let tri = &scene.accel.tris[hit.tri as usize];
-    let mut ng = tri.normal().normalize();
-    let [i0, i1, i2] = scene.tri_vertices[hit.tri as usize];
-    let w = 1.0 - hit.u - hit.v;
-    let mut ns =
-        (scene.normals[i0 as usize] * w + scene.normals[i1 as usize] * hit.u + scene.normals[i2 as usize] * hit.v)
-            .normalize_or_zero();
-    if ns == Vec3::ZERO {
-        ns = ng;
-    }
-    // Two-sided surfaces: face both normals towards the viewer.
-    if ng.dot(ray.dir) > 0.0 {
-        ng = -ng;
-    }
-    if ns.dot(ng) < 0.0 {
-        ns = -ns;
-    }
-    Surface {
-        position: ray.at(hit.t),
-        ng,
-        ns,
-    }
-}
+use super::blocks::trace_blocks;
+use super::path::Path;
 
 /// Renders the scene with its own camera and lights. `progress` is called with the number of
 /// image rows finished, as bands of rows finish (from any thread).
@@ -93,7 +61,7 @@ struct View<'a> {
     lights: &'a [PointLight],
 }
 
-trait Collect: Counters + Default + Send {
+pub(super) trait Collect: Counters + Default + Send {
     fn total(&self) -> TraversalCounters;
     /// Adds `other`'s counts to these.
     fn absorb(&mut self, other: Self);
@@ -140,24 +108,20 @@ fn render_generic<C: Collect>(
             let mut rays = RayCounts::default();
             let mut total = TraversalCounters::default();
             if scene.accel.walks_packets() {
-                trace_blocks::<C>(scene, &cam, view, opts, (band * BAND, rows), (&mut rays, &mut total));
+                trace_blocks::<C>(
+                    scene,
+                    &cam,
+                    view.lights,
+                    opts,
+                    (band * BAND, rows),
+                    (&mut rays, &mut total),
+                );
             } else {
                 for (i, px) in rows.iter_mut().enumerate() {
                     let x = (i % width) as u32;
                     let y = frame_rows.start + (band * BAND + i / width) as u32;
                     let mut c = C::default();
-                    let eye = |ray: &Ray, c: &mut C| scene.accel.intersect(ray, 0.0, f32::INFINITY, opts.accel, c);
-                    let shadow = |_: usize, ray: &Ray, dist: f32, c: &mut C| shadow_query(scene, opts, ray, dist, c);
-                    *px = trace_pixel(
-                        scene,
-                        &cam,
-                        view.lights,
-                        (x, y),
-                        opts,
-                        (&mut rays, &mut c),
-                        (eye, shadow),
-                        &mut (),
-                    );
+                    *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
                     if opts.mode == Mode::Heat {
                         *px = Vec3::splat(c.cost() as f32);
                     }
@@ -183,107 +147,6 @@ fn render_generic<C: Collect>(
         render_ms: t0.elapsed().as_secs_f64() * 1e3,
     };
     Ok((img, stats))
-}
-
-/// The pixels of a band of rows (`first_row` of the frame's rows onwards) for a structure that
-/// walks packets of rays (`Accel::walks_packets`): 2x2 blocks of pixels, whose eye rays are
-/// traced as one packet (`Accel::intersect_packet`) and then, light by light, the shadow rays
-/// from their hits (`Accel::occluded_packet`); then each pixel's shading and further rays
-/// alone (`trace_pixel`, which takes those answers). Neighbouring pixels' rays are coherent,
-/// which is what a packet walk needs. The same rays as pixel by pixel, so the same image.
-fn trace_blocks<C: Collect>(
-    scene: &PreparedScene,
-    cam: &CameraFrame,
-    view: &View,
-    opts: &RenderOptions,
-    (first_row, rows): (usize, &mut [Vec3]),
-    (rays, total): (&mut RayCounts, &mut TraversalCounters),
-) {
-    let frame_rows = opts.row_range();
-    let width = opts.width as usize;
-    let band_rows = rows.len() / width;
-    // Shadow rays of the eye hits in packets: not with the ablation that traces them as
-    // closest-hit rays, which `trace_pixel` does ray by ray.
-    let shadow_packets = opts.mode.shadows() && !opts.ablation.shadow_closest_hit;
-    // Per light, whether each pixel's shadow ray towards it is occluded.
-    let mut occluded = vec![[false; PACKET]; view.lights.len()];
-    for by in (0..band_rows).step_by(2) {
-        for bx in (0..width).step_by(2) {
-            let mut at = [(0usize, 0u32, 0u32); PACKET];
-            let mut eye = [Ray::new(Vec3::ZERO, Vec3::X); PACKET];
-            let mut n = 0;
-            for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-                let (row, col) = (by + dy, bx + dx);
-                if row < band_rows && col < width {
-                    let (x, y) = (col as u32, frame_rows.start + (first_row + row) as u32);
-                    at[n] = (row * width + col, x, y);
-                    eye[n] = cam.ray(x, y);
-                    n += 1;
-                }
-            }
-            let mut c: [C; PACKET] = std::array::from_fn(|_| C::default());
-            let hits = scene
-                .accel
-                .intersect_packet(&eye[..n], 0.0, f32::INFINITY, opts.accel, &mut c[..n]);
-            if shadow_packets {
-                // The shadow rays `trace_pixel` would trace at the eye hits, light by light.
-                let points: [Option<(Surface, Vec3)>; PACKET] = std::array::from_fn(|k| {
-                    (k < n && hits[k].is_hit()).then(|| {
-                        let s = surface_at(scene, &eye[k], &hits[k]);
-                        (s, shadow_origin(scene, &s))
-                    })
-                });
-                for (light, occluded) in view.lights.iter().zip(&mut occluded) {
-                    let mut shadow = [Ray::new(Vec3::ZERO, Vec3::X); PACKET];
-                    let mut dist = [0.0; PACKET];
-                    let mut lane_of = [0usize; PACKET];
-                    let mut m = 0;
-                    for (k, point) in points.iter().enumerate() {
-                        if let Some((s, origin)) = point
-                            && let Some((_, to_light, d)) = light_contribution(s, *origin, light)
-                        {
-                            (shadow[m], dist[m], lane_of[m]) = (Ray::new(*origin, to_light), d, k);
-                            m += 1;
-                        }
-                    }
-                    let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
-                    let answers = scene
-                        .accel
-                        .occluded_packet(&shadow[..m], 0.0, dist, opts.accel, &mut counted[..m]);
-                    for (j, counted) in counted.into_iter().take(m).enumerate() {
-                        occluded[lane_of[j]] = answers[j];
-                        c[lane_of[j]].absorb(counted);
-                    }
-                }
-            }
-            for k in 0..n {
-                let (i, x, y) = at[k];
-                let eye_hit = |_: &Ray, _: &mut C| hits[k];
-                let shadow = |light: usize, ray: &Ray, dist: f32, c: &mut C| {
-                    if shadow_packets {
-                        occluded[light][k]
-                    } else {
-                        shadow_query(scene, opts, ray, dist, c)
-                    }
-                };
-                let px = &mut rows[i];
-                *px = trace_pixel(
-                    scene,
-                    cam,
-                    view.lights,
-                    (x, y),
-                    opts,
-                    (rays, &mut c[k]),
-                    (eye_hit, shadow),
-                    &mut (),
-                );
-                if opts.mode == Mode::Heat {
-                    *px = Vec3::splat(c[k].cost() as f32);
-                }
-                *total += c[k].total();
-            }
-        }
-    }
 }
 
 /// Which kind of ray the renderer traced.
@@ -323,21 +186,13 @@ pub fn trace_pixel_observed(
         (x, y),
         opts,
         (&mut rays, &mut NoCounters),
-        (
-            |ray: &Ray, c: &mut NoCounters| scene.accel.intersect(ray, 0.0, f32::INFINITY, opts.accel, c),
-            |_: usize, ray: &Ray, dist: f32, c: &mut NoCounters| shadow_query(scene, opts, ray, dist, c),
-        ),
         observer,
     )
 }
 
-/// One pixel: eye ray, then shading and reflections, accumulating `weight * colour` as the GPU
-/// wavefront does (a reflection ray carries the weight `reflectivity` of its parent). Rays are
-/// counted into `tally` and shown to `observer`. `first` answers the eye ray (its closest hit)
-/// and the shadow rays from the eye hit (`first.1(light, ray, dist, counters)`: occluded?):
-/// traced there, or already traced in packets (`trace_blocks`, their work counted).
+/// One pixel's path (`Path`) ray by ray: the eye ray, shading with a shadow ray per light,
+/// mirror rays. Rays are counted into `tally` and shown to `observer`.
 #[inline]
-#[allow(clippy::too_many_arguments)]
 fn trace_pixel<C: Counters, O: RayObserver>(
     scene: &PreparedScene,
     cam: &CameraFrame,
@@ -345,114 +200,55 @@ fn trace_pixel<C: Counters, O: RayObserver>(
     (x, y): (u32, u32),
     opts: &RenderOptions,
     (rays, counters): (&mut RayCounts, &mut C),
-    (eye, mut first_shadow): (
-        impl FnOnce(&Ray, &mut C) -> Hit,
-        impl FnMut(usize, &Ray, f32, &mut C) -> bool,
-    ),
     observer: &mut O,
 ) -> Vec3 {
-    let accel = &scene.accel;
-    let mut ray = cam.ray(x, y);
-    let mut eye = Some(eye);
-    let mut weight = Vec3::ONE;
-    let mut color = Vec3::ZERO;
-    let mut kind = RayKind::Eye;
+    let mut path = Path::new(cam.ray(x, y));
     rays.eye += 1;
-    for depth in 0..=opts.mode.reflection_depth() {
-        let hit = match eye.take() {
-            Some(eye) => eye(&ray, counters),
-            None => accel.intersect(&ray, 0.0, f32::INFINITY, opts.accel, counters),
-        };
-        observer.closest(kind, &ray, &hit);
-        if !hit.is_hit() {
-            color += weight * scene.background;
+    loop {
+        let hit = scene
+            .accel
+            .intersect(&path.ray, 0.0, f32::INFINITY, opts.accel, counters);
+        observer.closest(path.kind, &path.ray, &hit);
+        let Some(shading) = path.shade(scene, opts, &hit) else {
             break;
-        }
-        if opts.mode == Mode::Heat {
-            break;
-        }
-        let s = surface_at(scene, &ray, &hit);
-        let mat = &scene.materials[scene.tri_material[hit.tri as usize] as usize];
-        let reflect = if opts.mode == Mode::Trace {
-            mat.reflectivity
-        } else {
-            0.0
         };
-        let local = weight * (1.0 - reflect) * mat.diffuse;
-        color += local * scene.ambient;
-        let origin = shadow_origin(scene, &s);
-        for (light_index, light) in lights.iter().enumerate() {
-            let (contrib, to_light, dist) = match light_contribution(&s, origin, light) {
-                Some(v) => v,
-                None => continue,
+        for light in lights {
+            let Some((contribution, shadow, dist)) = shading.light(light) else {
+                continue;
             };
             if opts.mode.shadows() {
                 rays.shadow += 1;
-                let shadow = Ray::new(origin, to_light);
-                let occluded = if depth == 0 {
-                    first_shadow(light_index, &shadow, dist, counters)
-                } else {
-                    shadow_query(scene, opts, &shadow, dist, counters)
-                };
+                let occluded = shadow_query(scene, opts, &shadow, dist, counters);
                 observer.shadow(&shadow, dist, occluded);
                 if occluded {
                     continue;
                 }
             }
-            color += local * contrib;
+            path.lit(&shading, contribution);
         }
-        if reflect > 0.0 && depth < opts.mode.reflection_depth() {
-            weight *= reflect;
-            let d = ray.dir - 2.0 * ray.dir.dot(s.ns) * s.ns;
-            ray = Ray::new(origin, d.normalize());
-            kind = RayKind::Reflection;
-            rays.reflection += 1;
-        } else {
+        if !path.reflect(opts, &shading) {
             break;
         }
+        rays.reflection += 1;
     }
-    color
+    path.color
 }
 
 /// Whether a shadow ray is occluded before `dist`: an any-hit query, or a closest-hit one
 /// under the ablation that measures what any-hit queries save.
 #[inline]
-fn shadow_query<C: Counters>(scene: &PreparedScene, opts: &RenderOptions, ray: &Ray, dist: f32, c: &mut C) -> bool {
+pub(super) fn shadow_query<C: Counters>(
+    scene: &PreparedScene,
+    opts: &RenderOptions,
+    ray: &Ray,
+    dist: f32,
+    c: &mut C,
+) -> bool {
     if opts.ablation.shadow_closest_hit {
         scene.accel.intersect(ray, 0.0, dist, opts.accel, c).is_hit()
     } else {
         scene.accel.occluded(ray, 0.0, dist, opts.accel, c)
     }
-}
-
-/// Where the rays leaving a surface start: off it along the geometric normal, so that they do
-/// not hit it again.
-#[inline]
-fn shadow_origin(scene: &PreparedScene, s: &Surface) -> Vec3 {
-    s.position + s.ng * scene.ray_epsilon
-}
-
-/// Diffuse irradiance from a point light: `intensity * max(0, N.L) / d^2`, with the unit
-/// direction and distance for the shadow ray. `None` when the light is behind the surface
-/// (then no shadow ray is spent: the paper's masking of rays known not to contribute).
-#[inline]
-fn light_contribution(
-    s: &crate::cpu::Surface,
-    origin: Vec3,
-    light: &crate::scene::PointLight,
-) -> Option<(Vec3, Vec3, f32)> {
-    let to = Vec3::from(light.position) - origin;
-    let d2 = to.length_squared();
-    if d2 == 0.0 {
-        return None;
-    }
-    let dist = d2.sqrt();
-    let l = to / dist;
-    let ndl = s.ns.dot(l);
-    if ndl <= 0.0 || s.ng.dot(l) <= 0.0 {
-        return None;
-    }
-    Some((Vec3::from(light.intensity) * (ndl / d2), l, dist))
 }
 
 #[cfg(test)]
@@ -462,11 +258,12 @@ mod tests {
     use crate::render::Ablation;
     use crate::scene::builtin;
 
-    /// The irregular grid's renders trace eye and shadow rays in 2x2 packets (`trace_blocks`);
-    /// every pixel equals, bit for bit, what the pixel-by-pixel walk (`trace_pixel_observed`,
-    /// one ray at a time) gives, and heat images count each eye ray's own cells and tests: odd
-    /// sizes (blocks cut at the right edge and the band's last row), a band of rows starting on
-    /// an odd row, every shading mode, and the ablation that traces shadow rays one by one.
+    /// The irregular grid's renders trace every ray in 2x2 packets (`blocks.rs`: eye, shadow
+    /// and mirror rays); every pixel equals, bit for bit, what the pixel-by-pixel walk
+    /// (`trace_pixel`, one ray at a time) gives, with the same rays, and heat images count
+    /// each eye ray's own cells and tests: odd sizes (blocks cut at the right edge and the
+    /// band's last row), a band of rows starting on an odd row, every shading mode (mirrors in
+    /// `mirror-spheres` and `knot-box`), and the ablation that traces shadow rays one by one.
     #[test]
     fn packet_renders_equal_single_rays() {
         for name in ["knot-box", "mirror-spheres", "sparse-room"] {
@@ -501,23 +298,8 @@ mod tests {
                             .intersect(&cam.ray(x, y), 0.0, f32::INFINITY, opts.accel, &mut c);
                         Vec3::splat(c.cost() as f32)
                     } else {
-                        let alone = |ray: &Ray, c: &mut NoCounters| {
-                            prepared.accel.intersect(ray, 0.0, f32::INFINITY, opts.accel, c)
-                        };
-                        let shadow = |_: usize, ray: &Ray, dist: f32, c: &mut NoCounters| {
-                            shadow_query(&prepared, &opts, ray, dist, c)
-                        };
                         let tally = (&mut expected_rays, &mut NoCounters);
-                        trace_pixel(
-                            &prepared,
-                            &cam,
-                            &scene.lights,
-                            (x, y),
-                            &opts,
-                            tally,
-                            (alone, shadow),
-                            &mut (),
-                        )
+                        trace_pixel(&prepared, &cam, &scene.lights, (x, y), &opts, tally, &mut ())
                     };
                     assert_eq!(
                         got.to_array().map(f32::to_bits),

@@ -21,6 +21,7 @@ use glam::{BVec4A, Vec4};
 
 use super::IrregularGrid;
 use crate::accel::{Counters, Hit, Ray, TriAccel, TriAccel4};
+use crate::util::set_bits as bits;
 
 /// Rays in a packet: the four lanes of `TriAccel4`.
 pub const PACKET: usize = 4;
@@ -49,18 +50,6 @@ fn min_lanes(a: Vec4, b: Vec4) -> Vec4 {
 #[inline(always)]
 fn mask_lanes(mask: u32) -> BVec4A {
     BVec4A::new(mask & 1 != 0, mask & 2 != 0, mask & 4 != 0, mask & 8 != 0)
-}
-
-/// The set bits of `mask`, lowest first.
-#[inline(always)]
-fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (mask != 0).then(|| {
-            let i = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            i
-        })
-    })
 }
 
 impl IrregularGrid {

@@ -1,0 +1,145 @@
+//! The renderer's pixels in 2x2 blocks, for structures that walk packets of rays
+//! (`Accel::walks_packets`: the irregular grid). The four pixels' paths (`path.rs`) go through
+//! the stages side by side: their rays' closest hits as one packet (`Accel::intersect_packet`),
+//! then per light the shadow rays from those hits as one packet (`Accel::occluded_packet`),
+//! then their mirror rays as the next packet, until every path has ended. Neighbouring pixels'
+//! rays are coherent at every bounce off a smooth surface, which is what a packet walk needs
+//! (docs/design.md "The irregular grid": packets). The same rays and stages as pixel by pixel
+//! (`trace_pixel`), so the same image, bit for bit.
+
+use glam::Vec3;
+
+use crate::accel::{PACKET, Ray, TraversalCounters};
+use crate::render::{Mode, RayCounts, RenderOptions};
+use crate::scene::{CameraFrame, PointLight, PreparedScene};
+use crate::util::set_bits;
+
+use super::path::{Path, Shading};
+use super::render::{Collect, shadow_query};
+
+/// A ray for the unused lanes of a packet (never traced: packets are cut to their length).
+const IDLE: Ray = Ray {
+    origin: Vec3::ZERO,
+    dir: Vec3::X,
+};
+
+/// Traces the pixels of a band of rows (rows `first_row..` of the frame's rows, `rows` holding
+/// them) block by block, adding what it traced to `rays` and its work to `total`.
+pub(super) fn trace_blocks<C: Collect>(
+    scene: &PreparedScene,
+    cam: &CameraFrame,
+    lights: &[PointLight],
+    opts: &RenderOptions,
+    (first_row, rows): (usize, &mut [Vec3]),
+    (rays, total): (&mut RayCounts, &mut TraversalCounters),
+) {
+    let frame_rows = opts.row_range();
+    let width = opts.width as usize;
+    let band_rows = rows.len() / width;
+    for by in (0..band_rows).step_by(2) {
+        for bx in (0..width).step_by(2) {
+            let mut at = [0usize; PACKET];
+            let mut paths = [Path::new(IDLE); PACKET];
+            let mut n = 0;
+            for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                let (row, col) = (by + dy, bx + dx);
+                if row < band_rows && col < width {
+                    let y = frame_rows.start + (first_row + row) as u32;
+                    at[n] = row * width + col;
+                    paths[n] = Path::new(cam.ray(col as u32, y));
+                    n += 1;
+                }
+            }
+            rays.eye += n as u64;
+            let mut counters: [C; PACKET] = std::array::from_fn(|_| C::default());
+            trace_paths(scene, lights, opts, &mut paths[..n], &mut counters[..n], rays);
+            for k in 0..n {
+                rows[at[k]] = if opts.mode == Mode::Heat {
+                    Vec3::splat(counters[k].cost() as f32)
+                } else {
+                    paths[k].color
+                };
+                *total += counters[k].total();
+            }
+        }
+    }
+}
+
+/// Runs up to `PACKET` paths to their ends, each stage's rays as one packet, each path's work
+/// counted into its own `counters[k]`.
+fn trace_paths<C: Collect>(
+    scene: &PreparedScene,
+    lights: &[PointLight],
+    opts: &RenderOptions,
+    paths: &mut [Path],
+    counters: &mut [C],
+    rays: &mut RayCounts,
+) {
+    let mut live = (1u32 << paths.len()) - 1;
+    let mut shadings: [Option<Shading>; PACKET] = [None; PACKET];
+    while live != 0 {
+        // The live paths' rays, packed into the first lanes.
+        let (mut lane_of, mut m) = ([0usize; PACKET], 0);
+        let mut traced = [IDLE; PACKET];
+        for k in set_bits(live) {
+            (lane_of[m], traced[m]) = (k, paths[k].ray);
+            m += 1;
+        }
+        let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
+        let hits = scene
+            .accel
+            .intersect_packet(&traced[..m], 0.0, f32::INFINITY, opts.accel, &mut counted[..m]);
+        for (j, counted) in counted.into_iter().take(m).enumerate() {
+            let k = lane_of[j];
+            counters[k].absorb(counted);
+            shadings[k] = paths[k].shade(scene, opts, &hits[j]);
+            if shadings[k].is_none() {
+                live &= !(1 << k);
+            }
+        }
+        for light in lights {
+            // The shadow rays towards this light, packed; with the light's contribution each
+            // adds if nothing occludes it.
+            let (mut shadow, mut dist, mut adds, mut m) = ([IDLE; PACKET], [0.0; PACKET], [(0, Vec3::ZERO); PACKET], 0);
+            for k in set_bits(live) {
+                let shading = shadings[k].as_ref().expect("a live path has a shading");
+                let Some((contribution, ray, d)) = shading.light(light) else {
+                    continue;
+                };
+                if opts.mode.shadows() {
+                    (shadow[m], dist[m], adds[m]) = (ray, d, (k, contribution));
+                    m += 1;
+                } else {
+                    paths[k].lit(shading, contribution);
+                }
+            }
+            if m == 0 {
+                continue;
+            }
+            rays.shadow += m as u64;
+            let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
+            let occluded = if opts.ablation.shadow_closest_hit {
+                // The ablation traces shadow rays as closest-hit queries, one by one.
+                std::array::from_fn(|j| j < m && shadow_query(scene, opts, &shadow[j], dist[j], &mut counted[j]))
+            } else {
+                scene
+                    .accel
+                    .occluded_packet(&shadow[..m], 0.0, dist, opts.accel, &mut counted[..m])
+            };
+            for (j, counted) in counted.into_iter().take(m).enumerate() {
+                let (k, contribution) = adds[j];
+                counters[k].absorb(counted);
+                if !occluded[j] {
+                    paths[k].lit(shadings[k].as_ref().expect("a live path has a shading"), contribution);
+                }
+            }
+        }
+        for k in set_bits(live) {
+            if paths[k].reflect(opts, shadings[k].as_ref().expect("a live path has a shading")) {
+                rays.reflection += 1;
+            } else {
+                live &= !(1 << k);
+            }
+        }
+    }
+}
