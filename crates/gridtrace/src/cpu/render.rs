@@ -262,8 +262,8 @@ mod tests {
     /// and mirror rays); every pixel equals, bit for bit, what the pixel-by-pixel walk
     /// (`trace_pixel`, one ray at a time) gives, with the same rays, and heat images count
     /// each eye ray's own cells and tests: odd sizes (blocks cut at the right edge and the
-    /// band's last row), a band of rows starting on an odd row, every shading mode (mirrors in
-    /// `mirror-spheres` and `knot-box`), and the ablation that traces shadow rays one by one.
+    /// band's last row), a band of rows starting on an odd row, every shading mode (two levels
+    /// of mirrors in `mirror-spheres`), and the ablation that traces shadow rays one by one.
     #[test]
     fn packet_renders_equal_single_rays() {
         for name in ["knot-box", "mirror-spheres", "sparse-room"] {
