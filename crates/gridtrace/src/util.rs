@@ -34,7 +34,7 @@ impl Rng {
 
 /// The indices of the set bits of `mask`, lowest first (the lanes of a packet a mask selects).
 #[inline(always)]
-pub fn set_bits(mut mask: u32) -> impl Iterator<Item = usize> {
+pub(crate) fn set_bits(mut mask: u32) -> impl Iterator<Item = usize> {
     std::iter::from_fn(move || {
         (mask != 0).then(|| {
             let i = mask.trailing_zeros() as usize;

@@ -245,7 +245,7 @@ impl Accel {
         matches!(self.structure, Structure::Irregular(_))
     }
 
-    /// Closest hits of a packet of up to `PACKET` coherent rays (a 2x2 block of camera rays),
+    /// Closest hits of a packet of up to `PACKET` coherent rays (a 2x2 block of pixels' rays),
     /// each counted into its own `counters[i]`: the same hits and counts as `intersect` ray by
     /// ray. The irregular grid walks the packet together (`IrregularGrid::intersect_packet`);
     /// the other structures trace its rays one by one. Hits past `rays.len()` are misses.
@@ -258,6 +258,7 @@ impl Accel {
         kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
         assert!(
             rays.len() <= PACKET && counters.len() == rays.len(),
             "a packet is up to four rays, a counter each"
@@ -286,6 +287,7 @@ impl Accel {
         kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
         assert!(
             rays.len() <= PACKET && counters.len() == rays.len(),
             "a packet is up to four rays, a counter each"

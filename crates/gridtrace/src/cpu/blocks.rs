@@ -10,12 +10,12 @@
 use glam::Vec3;
 
 use crate::accel::{PACKET, Ray, TraversalCounters};
-use crate::render::{Mode, RayCounts, RenderOptions};
+use crate::render::{RayCounts, RenderOptions};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
 use crate::util::set_bits;
 
 use super::path::{Path, Shading};
-use super::render::{Collect, shadow_query};
+use super::render::{Collect, pixel_value, shadow_query};
 
 /// A ray for the unused lanes of a packet (never traced: packets are cut to their length).
 const IDLE: Ray = Ray {
@@ -23,17 +23,16 @@ const IDLE: Ray = Ray {
     dir: Vec3::X,
 };
 
-/// Traces the pixels of a band of rows (rows `first_row..` of the frame's rows, `rows` holding
-/// them) block by block, adding what it traced to `rays` and its work to `total`.
+/// Traces the pixels of a band of rows (frame rows `first_y..`, `rows` holding them) block by
+/// block, adding what it traced to `rays` and its work to `total`.
 pub(super) fn trace_blocks<C: Collect>(
     scene: &PreparedScene,
     cam: &CameraFrame,
     lights: &[PointLight],
     opts: &RenderOptions,
-    (first_row, rows): (usize, &mut [Vec3]),
+    (first_y, rows): (u32, &mut [Vec3]),
     (rays, total): (&mut RayCounts, &mut TraversalCounters),
 ) {
-    let frame_rows = opts.row_range();
     let width = opts.width as usize;
     let band_rows = rows.len() / width;
     for by in (0..band_rows).step_by(2) {
@@ -44,9 +43,8 @@ pub(super) fn trace_blocks<C: Collect>(
             for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
                 let (row, col) = (by + dy, bx + dx);
                 if row < band_rows && col < width {
-                    let y = frame_rows.start + (first_row + row) as u32;
                     at[n] = row * width + col;
-                    paths[n] = Path::new(cam.ray(col as u32, y));
+                    paths[n] = Path::new(cam.ray(col as u32, first_y + row as u32));
                     n += 1;
                 }
             }
@@ -54,11 +52,7 @@ pub(super) fn trace_blocks<C: Collect>(
             let mut counters: [C; PACKET] = std::array::from_fn(|_| C::default());
             trace_paths(scene, lights, opts, &mut paths[..n], &mut counters[..n], rays);
             for k in 0..n {
-                rows[at[k]] = if opts.mode == Mode::Heat {
-                    Vec3::splat(counters[k].cost() as f32)
-                } else {
-                    paths[k].color
-                };
+                rows[at[k]] = pixel_value(opts, paths[k].color, &counters[k]);
                 *total += counters[k].total();
             }
         }

@@ -108,23 +108,15 @@ fn render_generic<C: Collect>(
             let mut rays = RayCounts::default();
             let mut total = TraversalCounters::default();
             if scene.accel.walks_packets() {
-                trace_blocks::<C>(
-                    scene,
-                    &cam,
-                    view.lights,
-                    opts,
-                    (band * BAND, rows),
-                    (&mut rays, &mut total),
-                );
+                let first_y = frame_rows.start + (band * BAND) as u32;
+                trace_blocks::<C>(scene, &cam, view.lights, opts, (first_y, rows), (&mut rays, &mut total));
             } else {
                 for (i, px) in rows.iter_mut().enumerate() {
                     let x = (i % width) as u32;
                     let y = frame_rows.start + (band * BAND + i / width) as u32;
                     let mut c = C::default();
-                    *px = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
-                    if opts.mode == Mode::Heat {
-                        *px = Vec3::splat(c.cost() as f32);
-                    }
+                    let color = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
+                    *px = pixel_value(opts, color, &c);
                     total += c.total();
                 }
             }
@@ -191,7 +183,8 @@ pub fn trace_pixel_observed(
 }
 
 /// One pixel's path (`Path`) ray by ray: the eye ray, shading with a shadow ray per light,
-/// mirror rays. Rays are counted into `tally` and shown to `observer`.
+/// mirror rays. Rays are counted into `rays`, their work into `counters`, and each is shown to
+/// `observer`.
 #[inline]
 fn trace_pixel<C: Counters, O: RayObserver>(
     scene: &PreparedScene,
@@ -232,6 +225,16 @@ fn trace_pixel<C: Counters, O: RayObserver>(
         rays.reflection += 1;
     }
     path.color
+}
+
+/// What a pixel shows: its colour, or in heat mode the work its eye ray cost (`counters`).
+#[inline]
+pub(super) fn pixel_value<C: Collect>(opts: &RenderOptions, color: Vec3, counters: &C) -> Vec3 {
+    if opts.mode == Mode::Heat {
+        Vec3::splat(counters.cost() as f32)
+    } else {
+        color
+    }
 }
 
 /// Whether a shadow ray is occluded before `dist`: an any-hit query, or a closest-hit one

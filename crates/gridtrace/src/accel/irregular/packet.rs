@@ -1,21 +1,24 @@
-//! Packets: up to four coherent rays (a 2x2 block of camera rays) walked together, a ray per
-//! SIMD lane.
+//! Packets: up to four coherent rays (a 2x2 block of pixels' eye, shadow or mirror rays)
+//! walked together, a ray per SIMD lane.
 //!
 //! Why: a single ray's step is one long chain of dependent operations (voxel -> top cell ->
 //! voxel map -> cell -> exit distances -> exit point -> next voxel), about a hundred cycles of
 //! latency that no other work fills, and the triangle tests are the smaller part of a ray's
-//! cost (docs/benchmarks.md). Walking four rays as one only paid (about 10%) once the step
-//! itself ran in four lanes: neighbouring camera rays cross the same large cells one after
-//! another (3.5 of 4 rays take part in a round on the paper's scenes), so one chain of
+//! cost (docs/benchmarks.md). Sharing only the cell and its triangle tests among the rays of a
+//! round gained 6-10%; stepping them in four-lane arithmetic made packets 1.2-1.35x the single
+//! rays (docs/benchmarks.md "Packets"): neighbouring camera rays cross the same large cells one
+//! after another (3.5 of 4 rays take part in a round on the paper's scenes), so one chain of
 //! four-lane operations advances them all, and one `TriAccel4` test (the triangle in every
 //! lane, a ray per lane) tests a triangle against all of them.
 //!
 //! Each ray still goes through exactly the cells its single-ray walk (`walk.rs`) visits: a
 //! round takes the cell of the first ray still walking, the rays whose current cell it is
 //! take part, the others wait for a round of their own cell. Every lane computes what
-//! `face_t` and `advance` compute for it, in the same operations and order (voxel coordinates
-//! are integers below 2^16, exact in `f32`), so the hits and the counts (cells, triangle
-//! tests) are bit for bit those of `intersect`, ray by ray (tested against it).
+//! `face_t` and `advance` compute for it: the same operations in the same order for the face
+//! distances and the exit point, voxel coordinates as integers below 2^16 (exact in `f32`),
+//! and the exit voxel clamped before it is truncated, with NaN taken to the box's low side,
+//! which gives what the scalar saturating cast and clamp give. So the hits and the counts
+//! (cells, triangle tests) are bit for bit those of `intersect`, ray by ray (tested).
 
 use glam::{BVec4A, Vec4};
 
@@ -274,11 +277,7 @@ impl IrregularGrid {
 /// Bit `i` set where `best[i]` is a hit.
 #[inline(always)]
 fn bits_hit(best: &[Hit; PACKET]) -> u32 {
-    let mut m = 0;
-    for (i, h) in best.iter().enumerate() {
-        if h.tri != u32::MAX {
-            m |= 1 << i;
-        }
-    }
-    m
+    best.iter()
+        .enumerate()
+        .fold(0, |m, (i, h)| m | (h.is_hit() as u32) << i)
 }

@@ -188,9 +188,9 @@ fn traversal_equals_brute_force() {
 }
 
 /// Packets give each ray exactly what its single-ray walk gives (the same closest hit, bit for
-/// bit, or the same any-hit answer, and the same cells and triangle tests): coherent 2x2 blocks of camera rays from inside and
-/// outside the grid, with t limits; incoherent packets; axis-aligned and zero components;
-/// rays that miss the grid; packets of one to four rays.
+/// bit, or the same any-hit answer, and the same cells and triangle tests): coherent 2x2
+/// blocks of camera rays from inside and outside the grid, with t limits; incoherent packets;
+/// axis-aligned and zero components; rays that miss the grid; packets of one to four rays.
 #[test]
 fn packets_equal_single_rays() {
     use crate::accel::{PACKET, TraversalCounters};
