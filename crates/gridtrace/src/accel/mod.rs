@@ -332,7 +332,7 @@ impl Accel {
     ) {
         match &self.structure {
             Structure::Bvh(b) => b.intersect_batch_each(rays, t_min, t_max, f),
-            Structure::Irregular(g) => g.interleaved::<false>(&self.tris, rays, t_min, t_max, |i, hit| {
+            Structure::Irregular(g) => g.closest_batch(&self.tris, rays, t_min, t_max, |i, hit| {
                 f(i, hit, self.hit_normal(&hit))
             }),
             Structure::Grid(_) => {

@@ -263,6 +263,70 @@ fn packets_equal_single_rays() {
     assert!(multi_hit > 2_000, "{multi_hit} packets with two hits or more");
 }
 
+/// The batch query takes runs of a camera's neighbouring rays as packets and the rest one by
+/// one (`closest_batch`): every answer is the single-ray walk's, bit for bit, whatever the mix:
+/// image rows of pinhole cameras (rows end mid-quad), rays from one point in all directions,
+/// incoherent rays, and all of them shuffled into each other.
+#[test]
+fn batches_with_camera_rows_equal_single_rays() {
+    let tris = clusters(2000, 23);
+    let g = IrregularGrid::build(&tris, IrregularParams::default()).unwrap();
+    let mut rng = Rng::new(77);
+    let mut rays = Vec::new();
+    for _ in 0..6 {
+        let eye = Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0));
+        let target = tris[rng.below(tris.len() as u32) as usize].vertices()[0];
+        let ahead = (target - eye).normalize();
+        let (right, up) = ahead.any_orthonormal_pair();
+        let (right, up) = (right * 0.003, up * 0.003);
+        // Rows of 37 pixels: quads straddle the ends of rows.
+        for y in 0..20 {
+            for x in 0..37 {
+                rays.push(Ray::new(
+                    eye,
+                    ahead + right * (x as f32 - 18.0) + up * (y as f32 - 10.0),
+                ));
+            }
+        }
+        // From the same point in all directions: a shared origin, no coherence.
+        for _ in 0..64 {
+            let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            rays.push(Ray::new(eye, d));
+        }
+        for _ in 0..50 {
+            let o = Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0));
+            let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            rays.push(Ray::new(o, d));
+        }
+    }
+    let camera_rays = rays.len();
+    let mut shuffled = rays.clone();
+    for i in (1..shuffled.len()).rev() {
+        shuffled.swap(i, rng.below(i as u32 + 1) as usize);
+    }
+    rays.extend(shuffled);
+    let (t_min, t_max) = (0.0, 14.0);
+    let mut got = vec![None; rays.len()];
+    g.closest_batch(&tris, &rays, t_min, t_max, |i, hit| {
+        assert!(got[i].replace(hit).is_none(), "ray {i} answered twice");
+    });
+    let mut hits = 0;
+    for (i, r) in rays.iter().enumerate() {
+        let want = g.intersect(&tris, r, t_min, t_max, &mut NoCounters);
+        let got = got[i].unwrap_or_else(|| panic!("ray {i} not answered"));
+        assert_eq!(
+            (got.t.to_bits(), got.tri, got.u.to_bits(), got.v.to_bits()),
+            (want.t.to_bits(), want.tri, want.u.to_bits(), want.v.to_bits()),
+            "ray {i}: {r:?}"
+        );
+        hits += want.is_hit() as usize;
+    }
+    assert!(
+        hits > camera_rays / 3,
+        "{hits} hits of {camera_rays}: the cameras must see the clusters"
+    );
+}
+
 #[test]
 fn bad_parameters_are_errors() {
     let tris = clusters(10, 1);
