@@ -164,7 +164,9 @@ class Mesh:
         """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max``.
 
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
-        a single point (3,) used for every ray. Directions need not be normalised.
+        a single point (3,) used for every ray. Directions need not be normalised. On the CPU the
+        irregular grid traces a camera's rays (one origin, neighbouring directions, in image order)
+        four at a time, faster than the same rays in another order; the answers are the same.
         """
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
