@@ -332,7 +332,7 @@ impl Accel {
     ) {
         match &self.structure {
             Structure::Bvh(b) => b.intersect_batch_each(rays, t_min, t_max, f),
-            Structure::Irregular(g) => g.closest_batch(&self.tris, rays, t_min, t_max, |i, hit| {
+            Structure::Irregular(g) => g.batch::<false>(&self.tris, rays, t_min, t_max, |i, hit| {
                 f(i, hit, self.hit_normal(&hit))
             }),
             Structure::Grid(_) => {
@@ -355,9 +355,7 @@ impl Accel {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         match &self.structure {
             Structure::Bvh(b) => b.occluded_batch(rays, t_min, t_max, out),
-            Structure::Irregular(g) => {
-                g.interleaved::<true>(&self.tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
-            }
+            Structure::Irregular(g) => g.batch::<true>(&self.tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit()),
             Structure::Grid(_) => {
                 for (r, o) in rays.iter().zip(out) {
                     *o = self.occluded(r, t_min, t_max, kind, &mut NoCounters);

@@ -287,23 +287,26 @@ fn bits_hit(best: &[Hit; PACKET]) -> u32 {
 /// a row pass, and rays that merely share an origin (from a point in all directions) do not.
 const COHERENT_COS: f32 = 0.9998;
 
-/// Whether four rays are a camera's neighbouring pixels: the same origin, bit for bit, and
-/// nearly the same direction. Such a packet walks together; any other quad would walk apart
-/// and pay for the packet's bookkeeping.
-fn coherent(quad: &[Ray]) -> bool {
-    let (o, d) = (quad[0].origin, quad[0].dir);
-    quad[1..].iter().all(|r| {
-        r.origin.to_array().map(f32::to_bits) == o.to_array().map(f32::to_bits)
-            && r.dir.dot(d) >= COHERENT_COS * (r.dir.length() * d.length())
-    })
-}
-
 impl IrregularGrid {
-    /// Closest hits of a batch, handed to `finish(i, hit)` for each `rays[i]` in no particular
-    /// order, as `interleaved` does: runs of quads that are a camera's neighbouring rays
-    /// (`coherent`, e.g. an image's rays in row order from Python) go as packets, the rest
-    /// through the interleaved single-ray walk. The same answers either way.
-    pub(crate) fn closest_batch(
+    /// Whether four rays will walk together: origins within one virtual voxel of the first's
+    /// on every axis (one point for a camera's rays, neighbouring hit points for their shadow
+    /// or mirror rays) and directions within about a degree. Such a packet mostly shares its
+    /// cells; any other quad would walk apart and pay for the packet's bookkeeping. (The
+    /// answers do not depend on it.)
+    fn coherent(&self, quad: &[Ray]) -> bool {
+        let (o, d) = (quad[0].origin, quad[0].dir);
+        quad[1..].iter().all(|r| {
+            (r.origin - o).abs().cmple(self.voxel_size).all()
+                && r.dir.dot(d) >= COHERENT_COS * (r.dir.length() * d.length())
+        })
+    }
+
+    /// Closest hits (`ANY = false`) or any hits of a batch, handed to `finish(i, hit)` for each
+    /// `rays[i]` in no particular order, as `interleaved` does: runs of quads that walk
+    /// together (`coherent`: an image's rays in row order from Python, their shadow rays
+    /// towards a light) go as packets, the rest through the interleaved single-ray walk. The
+    /// same answers either way.
+    pub(crate) fn batch<const ANY: bool>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
@@ -311,12 +314,12 @@ impl IrregularGrid {
         t_max: f32,
         mut finish: impl FnMut(usize, Hit),
     ) {
-        let quad_at = |i: usize| i + PACKET <= rays.len() && coherent(&rays[i..i + PACKET]);
+        let quad_at = |i: usize| i + PACKET <= rays.len() && self.coherent(&rays[i..i + PACKET]);
         let mut i = 0;
         while i < rays.len() {
             while quad_at(i) {
                 let mut c = [NoCounters; PACKET];
-                let hits = self.intersect_packet(tris, &rays[i..i + PACKET], t_min, t_max, &mut c);
+                let hits = self.walk_packet::<ANY, _>(tris, &rays[i..i + PACKET], t_min, [t_max; PACKET], &mut c);
                 for (k, hit) in hits.into_iter().enumerate() {
                     finish(i + k, hit);
                 }
@@ -326,7 +329,7 @@ impl IrregularGrid {
             while i < rays.len() && !quad_at(i) {
                 i += 1;
             }
-            self.interleaved::<false>(tris, &rays[start..i], t_min, t_max, |j, hit| finish(start + j, hit));
+            self.interleaved::<ANY>(tris, &rays[start..i], t_min, t_max, |j, hit| finish(start + j, hit));
         }
     }
 }

@@ -263,16 +263,18 @@ fn packets_equal_single_rays() {
     assert!(multi_hit > 2_000, "{multi_hit} packets with two hits or more");
 }
 
-/// The batch query takes runs of a camera's neighbouring rays as packets and the rest one by
-/// one (`closest_batch`): every answer is the single-ray walk's, bit for bit, whatever the mix:
-/// image rows of pinhole cameras (rows end mid-quad), rays from one point in all directions,
-/// incoherent rays, and all of them shuffled into each other.
+/// Batch queries take runs of quads that walk together as packets and the rest one by one
+/// (`IrregularGrid::batch`): every answer is the single-ray walk's, bit for bit, whatever the
+/// mix: image rows of pinhole cameras (rows end mid-quad), the shadow rays from their hits
+/// towards a light (nearby origins), rays from one point in all directions, incoherent rays,
+/// and all of them shuffled into each other; closest and any hits.
 #[test]
 fn batches_with_camera_rows_equal_single_rays() {
     let tris = clusters(2000, 23);
     let g = IrregularGrid::build(&tris, IrregularParams::default()).unwrap();
     let mut rng = Rng::new(77);
     let mut rays = Vec::new();
+    let light = Vec3::new(5.0, 14.0, 5.0);
     for _ in 0..6 {
         let eye = Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0));
         let target = tris[rng.below(tris.len() as u32) as usize].vertices()[0];
@@ -280,14 +282,18 @@ fn batches_with_camera_rows_equal_single_rays() {
         let (right, up) = ahead.any_orthonormal_pair();
         let (right, up) = (right * 0.003, up * 0.003);
         // Rows of 37 pixels: quads straddle the ends of rows.
-        for y in 0..20 {
-            for x in 0..37 {
-                rays.push(Ray::new(
-                    eye,
-                    ahead + right * (x as f32 - 18.0) + up * (y as f32 - 10.0),
-                ));
+        let camera: Vec<Ray> = (0..20 * 37)
+            .map(|p| Ray::new(eye, ahead + right * (p % 37 - 18) as f32 + up * (p / 37 - 10) as f32))
+            .collect();
+        // Their shadow rays, in the same order, from just off each hit towards the light.
+        for r in &camera {
+            let hit = g.intersect(&tris, r, 0.0, f32::INFINITY, &mut NoCounters);
+            if hit.is_hit() {
+                let p = r.at(hit.t * 0.999);
+                rays.push(Ray::new(p, (light - p).normalize()));
             }
         }
+        rays.extend(camera);
         // From the same point in all directions: a shared origin, no coherence.
         for _ in 0..64 {
             let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
@@ -299,32 +305,40 @@ fn batches_with_camera_rows_equal_single_rays() {
             rays.push(Ray::new(o, d));
         }
     }
-    let camera_rays = rays.len();
+    let ordered = rays.len();
     let mut shuffled = rays.clone();
     for i in (1..shuffled.len()).rev() {
         shuffled.swap(i, rng.below(i as u32 + 1) as usize);
     }
     rays.extend(shuffled);
     let (t_min, t_max) = (0.0, 14.0);
-    let mut got = vec![None; rays.len()];
-    g.closest_batch(&tris, &rays, t_min, t_max, |i, hit| {
-        assert!(got[i].replace(hit).is_none(), "ray {i} answered twice");
+    let mut closest = vec![None; rays.len()];
+    g.batch::<false>(&tris, &rays, t_min, t_max, |i, hit| {
+        assert!(closest[i].replace(hit).is_none(), "ray {i} answered twice");
     });
-    let mut hits = 0;
+    let mut any = vec![None; rays.len()];
+    g.batch::<true>(&tris, &rays, t_min, t_max, |i, hit| {
+        assert!(any[i].replace(hit.is_hit()).is_none(), "ray {i} answered twice");
+    });
+    let (mut hits, mut occluded) = (0, 0);
     for (i, r) in rays.iter().enumerate() {
         let want = g.intersect(&tris, r, t_min, t_max, &mut NoCounters);
-        let got = got[i].unwrap_or_else(|| panic!("ray {i} not answered"));
+        let got = closest[i].unwrap_or_else(|| panic!("ray {i} not answered"));
         assert_eq!(
             (got.t.to_bits(), got.tri, got.u.to_bits(), got.v.to_bits()),
             (want.t.to_bits(), want.tri, want.u.to_bits(), want.v.to_bits()),
             "ray {i}: {r:?}"
         );
+        let want_any = g.occluded(&tris, r, t_min, t_max, &mut NoCounters);
+        assert_eq!(any[i], Some(want_any), "ray {i}: {r:?}");
         hits += want.is_hit() as usize;
+        occluded += want_any as usize;
     }
     assert!(
-        hits > camera_rays / 3,
-        "{hits} hits of {camera_rays}: the cameras must see the clusters"
+        hits > ordered / 3,
+        "{hits} hits of {ordered}: the cameras must see the clusters"
     );
+    assert_eq!(hits, occluded, "a ray with a closest hit is occluded and no other");
 }
 
 #[test]
