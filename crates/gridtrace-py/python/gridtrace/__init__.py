@@ -165,15 +165,17 @@ class Mesh:
 
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
         a single point (3,) used for every ray. Directions need not be normalised. On the CPU the
-        irregular grid traces a camera's rays (one origin, neighbouring directions, in image order)
-        four at a time, faster than the same rays in another order; the answers are the same.
+        irregular grid traces coherent rays (a camera's rays in image order, or their shadow rays
+        towards a light: neighbouring origins and directions) four at a time, faster than the same
+        rays in another order; the answers are the same.
         """
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
         return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend))
 
     def occluded(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None) -> np.ndarray:
-        """Whether each ray hits anything with ``t_min < t < t_max`` (boolean array)."""
+        """Whether each ray hits anything with ``t_min < t < t_max`` (boolean array). Coherent rays
+        in order go faster through the irregular grid, as for ``intersect``."""
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
         return self._native.occluded(o, d, t_min, t_max, backend or self._backend)
