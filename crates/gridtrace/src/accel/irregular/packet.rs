@@ -172,8 +172,6 @@ impl IrregularGrid {
         let voxel_size = self.voxel_size.to_array().map(Vec4::splat);
         let inv_voxel_size = self.inv_voxel_size.to_array().map(Vec4::splat);
         let dims = self.voxel_dims().as_vec3().to_array().map(Vec4::splat);
-        // Each lane's closest hit so far (its `t_max` for any hits): its tests reach up to it.
-        let mut t_best = Vec4::from_array(t_max);
         while walking != 0 {
             let id = cell_of[walking.trailing_zeros() as usize];
             let mut round = 0u32;
@@ -197,10 +195,12 @@ impl IrregularGrid {
             let t_exit = min_lanes(min_lanes(t_faces[0], t_faces[1]), t_faces[2]);
             let mut finished = 0u32;
             if cell.count > 0 {
-                // Lanes outside the round test up to `t_min`, which no hit passes (`t > t_min`
-                // and `t < t_min` cannot both hold), so they keep their hits.
+                // A lane's tests reach up to its closest hit so far (`t_max` until one, and for
+                // any hits, whose first hit ends them). Lanes outside the round test up to
+                // `t_min`, which no hit passes (`t > t_min` and `t < t_min` cannot both hold),
+                // so they keep their hits.
                 let mut testing = round;
-                let mut limit = Vec4::select(mask_lanes(round), t_best, Vec4::splat(t_min));
+                let mut limit = Vec4::select(mask_lanes(round), t_of(&best), Vec4::splat(t_min));
                 for &tri in &self.refs[cell.start as usize..(cell.start + cell.count) as usize] {
                     for i in bits(testing) {
                         counters[i].tri_test();
@@ -217,7 +217,6 @@ impl IrregularGrid {
                             // as in `closest_in`, a later triangle replaces an earlier one
                             // only if nearer.
                             limit[k] = best[k].t;
-                            t_best[k] = best[k].t;
                         }
                     }
                     if testing == 0 {
@@ -229,7 +228,7 @@ impl IrregularGrid {
                 finished |= if ANY {
                     round & !testing
                 } else {
-                    bits_hit(&best) & t_best.cmple(min_lanes(t_exit, l.t_leave)).bitmask()
+                    bits_hit(&best) & t_of(&best).cmple(min_lanes(t_exit, l.t_leave)).bitmask()
                 };
             }
             finished |= t_exit.cmpge(l.t_leave).bitmask();
@@ -272,6 +271,12 @@ impl IrregularGrid {
         }
         best.map(|h| if h.tri == u32::MAX { Hit::MISS } else { h })
     }
+}
+
+/// The hits' `t`, a lane each.
+#[inline(always)]
+fn t_of(best: &[Hit; PACKET]) -> Vec4 {
+    Vec4::from_array(best.map(|h| h.t))
 }
 
 /// Bit `i` set where `best[i]` is a hit.
