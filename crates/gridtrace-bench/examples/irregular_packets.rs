@@ -1,60 +1,103 @@
-//! Eye rays alone, no shading: each paper scene's 512 x 512 camera rays traced one by one and in
-//! 2x2 packets (`Accel::intersect_packet`), through the BVH and the irregular grid, on one
-//! thread (best of 5, ms); the packets' hits are checked to equal the single rays':
-//! `cargo run --release -p gridtrace-bench --example irregular_packets`
+//! Eye rays alone, no shading: each paper scene's 512 x 512 camera rays through the BVH one by
+//! one, and through the irregular grid one by one, in packets of four (2x2 pixels, SSE; a
+//! packet of eight as two of four, as CPUs without AVX2 run it) and of eight (4x2 pixels, AVX)
+//! on one thread (best of 5, ms); every packet's hits are checked to equal the single rays': `cargo run --release -p gridtrace-bench --example irregular_packets`
 //! (the mesh folder from `GRIDTRACE_DATA_DIR` or `../shared/data/meshes`).
-use gridtrace::accel::{AccelKind, Hit, IrregularParams, NoCounters, PACKET, Resolution};
+use gridtrace::accel::{AccelKind, Hit, IrregularParams, NoCounters, PACKET, Ray, Resolution, Structure};
+use gridtrace::scene::CameraFrame;
+
+/// The camera's rays block by block (`w` x `h` pixels, the renderer's order), and the pixel
+/// each ray is for.
+fn blocks(cam: &CameraFrame, size: u32, (w, h): (u32, u32)) -> (Vec<Ray>, Vec<usize>) {
+    let (mut rays, mut pixel) = (Vec::new(), Vec::new());
+    for by in (0..size).step_by(h as usize) {
+        for bx in (0..size).step_by(w as usize) {
+            for dy in 0..h {
+                for dx in 0..w {
+                    rays.push(cam.ray(bx + dx, by + dy));
+                    pixel.push(((by + dy) * size + bx + dx) as usize);
+                }
+            }
+        }
+    }
+    (rays, pixel)
+}
+
+/// Best of five runs of `f`, in ms.
+fn best_ms(mut f: impl FnMut()) -> f64 {
+    (0..5)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            f();
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The hits of packets, by pixel: eight rays in AVX registers, or (`fours`) as two packets of
+/// four.
+fn packets(
+    g: &gridtrace::accel::IrregularGrid,
+    tris: &[gridtrace::accel::TriAccel],
+    (rays, pixel): &(Vec<Ray>, Vec<usize>),
+    hits: &mut [Hit],
+    fours: bool,
+) {
+    for (chunk, at) in rays.chunks(PACKET).zip(pixel.chunks(PACKET)) {
+        let c = &mut [NoCounters; PACKET][..chunk.len()];
+        let got = if fours {
+            g.packet_in_fours::<false, _>(tris, chunk, 0.0, [f32::INFINITY; PACKET], c)
+        } else {
+            g.intersect_packet(tris, chunk, 0.0, f32::INFINITY, c)
+        };
+        for (k, &p) in at.iter().enumerate() {
+            hits[p] = got[k];
+        }
+    }
+}
 
 fn main() -> gridtrace::Result<()> {
     let data = std::env::var_os("GRIDTRACE_DATA_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| "../shared/data/meshes".into());
+    const SIZE: u32 = 512;
     for name in ["bunny", "knight", "torus-knot", "stanford-bunny"] {
         let scene = gridtrace_bench::scenes::build_paper_scene(name, Some(&data))?.scene;
-        let cam = scene.camera.frame(512, 512);
-        // In the renderer's order: 2x2 blocks, each block's four rays together.
-        let mut eye = Vec::new();
-        for by in (0..512).step_by(2) {
-            for bx in (0..512).step_by(2) {
-                for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-                    eye.push(cam.ray(bx + dx, by + dy));
-                }
+        let cam = scene.camera.frame(SIZE, SIZE);
+        let eye = blocks(&cam, SIZE, (1, 1)).0;
+        let (quads, octs) = (blocks(&cam, SIZE, (2, 2)), blocks(&cam, SIZE, (4, 2)));
+        let n = eye.len();
+        let bvh = scene.prepare_with(AccelKind::Bvh, Resolution::default(), IrregularParams::default())?;
+        let mut want = vec![Hit::MISS; n];
+        let bvh_ms = best_ms(|| {
+            for (h, r) in want.iter_mut().zip(&eye) {
+                *h = bvh
+                    .accel
+                    .intersect(r, 0.0, f32::INFINITY, AccelKind::Bvh, &mut NoCounters);
             }
-        }
-        let mut line = format!("{name:<15}");
-        for kind in [AccelKind::Bvh, AccelKind::Irregular] {
-            let prepared = scene.prepare_with(kind, Resolution::default(), IrregularParams::default())?;
-            let accel = &prepared.accel;
-            let (mut single_ms, mut packet_ms) = (f64::INFINITY, f64::INFINITY);
-            let mut single = vec![Hit::MISS; eye.len()];
-            let mut packets = vec![Hit::MISS; eye.len()];
-            for _ in 0..5 {
-                let t0 = std::time::Instant::now();
-                for (h, r) in single.iter_mut().zip(&eye) {
-                    *h = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
-                }
-                single_ms = single_ms.min(t0.elapsed().as_secs_f64() * 1e3);
-                let t0 = std::time::Instant::now();
-                for (hits, rays) in packets.chunks_mut(PACKET).zip(eye.chunks(PACKET)) {
-                    let mut c = [NoCounters; PACKET];
-                    let got = accel.intersect_packet(rays, 0.0, f32::INFINITY, kind, &mut c[..rays.len()]);
-                    hits.copy_from_slice(&got[..rays.len()]);
-                }
-                packet_ms = packet_ms.min(t0.elapsed().as_secs_f64() * 1e3);
+        });
+        let prepared = scene.prepare_with(AccelKind::Irregular, Resolution::default(), IrregularParams::default())?;
+        let accel = &prepared.accel;
+        let Structure::Irregular(g) = &accel.structure else {
+            unreachable!("an irregular grid was asked for")
+        };
+        let mut single = vec![Hit::MISS; n];
+        let single_ms = best_ms(|| {
+            for (h, r) in single.iter_mut().zip(&eye) {
+                *h = accel.intersect(r, 0.0, f32::INFINITY, AccelKind::Irregular, &mut NoCounters);
             }
-            assert_eq!(
-                single,
-                packets,
-                "{name} {}: packets differ from single rays",
-                kind.name()
-            );
-            line += &format!(
-                "  {:<9} single {single_ms:7.2} ms  packets {packet_ms:7.2} ms ({:.2}x)",
-                kind.name(),
-                single_ms / packet_ms
-            );
-        }
-        println!("{line}");
+        });
+        let (mut four, mut eight) = (vec![Hit::MISS; n], vec![Hit::MISS; n]);
+        let four_ms = best_ms(|| packets(g, &accel.tris, &quads, &mut four, true));
+        let eight_ms = best_ms(|| packets(g, &accel.tris, &octs, &mut eight, false));
+        assert_eq!(single, four, "{name}: packets of four differ from single rays");
+        assert_eq!(single, eight, "{name}: packets of eight differ from single rays");
+        println!(
+            "{name:<15} bvh {bvh_ms:7.2} ms  irregular single {single_ms:7.2}  x4 {four_ms:7.2}  x8 {eight_ms:7.2} ms  \
+             (x8/x4 {:.2}x, bvh/x8 {:.2}x)",
+            four_ms / eight_ms,
+            bvh_ms / eight_ms
+        );
     }
     Ok(())
 }

@@ -166,7 +166,7 @@ class Mesh:
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
         a single point (3,) used for every ray. Directions need not be normalised. On the CPU the
         irregular grid traces coherent rays (a camera's rays in image order, or their shadow rays
-        towards a light: neighbouring origins and directions) four at a time, faster than the same
+        towards a light: neighbouring origins and directions) eight at a time, faster than the same
         rays in another order; the answers are the same.
         """
         o, d = _rays(origins, directions)

@@ -13,6 +13,7 @@ pub mod bvh;
 pub mod grid;
 pub mod huge;
 pub mod irregular;
+pub mod lanes;
 pub mod ray;
 pub mod triangle;
 
@@ -24,7 +25,7 @@ pub use bvh::{Bvh, BvhAccel, BvhNode};
 pub use grid::{Cell, Grid, GridLattice, GridStats, Resolution, Stepping};
 pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound, PACKET};
 pub use ray::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
-pub use triangle::{TriAccel, TriAccel4, TriHit, TriHit4};
+pub use triangle::{LaneHits, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};
 
 use crate::{Error, Result};
 
@@ -239,13 +240,13 @@ impl Accel {
     }
 
     /// Whether this structure walks packets of rays together (`intersect_packet`,
-    /// `occluded_packet`), so that callers with coherent rays should hand it 2x2 blocks (the
+    /// `occluded_packet`), so that callers with coherent rays should hand it 4x2 blocks (the
     /// CPU renderer does: `cpu/blocks.rs`).
     pub fn walks_packets(&self) -> bool {
         matches!(self.structure, Structure::Irregular(_))
     }
 
-    /// Closest hits of a packet of up to `PACKET` coherent rays (a 2x2 block of pixels' rays),
+    /// Closest hits of a packet of up to `PACKET` coherent rays (a 4x2 block of pixels' rays),
     /// each counted into its own `counters[i]`: the same hits and counts as `intersect` ray by
     /// ray. The irregular grid walks the packet together (`IrregularGrid::intersect_packet`);
     /// the other structures trace its rays one by one. Hits past `rays.len()` are misses.
@@ -261,7 +262,7 @@ impl Accel {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
         assert!(
             rays.len() <= PACKET && counters.len() == rays.len(),
-            "a packet is up to four rays, a counter each"
+            "a packet is up to {PACKET} rays, a counter each"
         );
         match &self.structure {
             Structure::Irregular(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, counters),
@@ -276,7 +277,7 @@ impl Accel {
     }
 
     /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (the
-    /// shadow rays of a 2x2 block towards one light), each counted into its own `counters[i]`:
+    /// shadow rays of a 4x2 block towards one light), each counted into its own `counters[i]`:
     /// the same answers and counts as `occluded` ray by ray. False past `rays.len()`.
     #[inline]
     pub fn occluded_packet<C: Counters>(
@@ -290,7 +291,7 @@ impl Accel {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
         assert!(
             rays.len() <= PACKET && counters.len() == rays.len(),
-            "a packet is up to four rays, a counter each"
+            "a packet is up to {PACKET} rays, a counter each"
         );
         match &self.structure {
             Structure::Irregular(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, counters),

@@ -2,7 +2,9 @@
 //! which saves two vector subtractions in every Möller-Trumbore test.
 
 use bytemuck::{Pod, Zeroable};
-use glam::{BVec4A, Vec3, Vec4};
+use glam::{Vec3, Vec4};
+
+use super::lanes::{Lanes, Mask};
 
 /// One triangle as the traversal sees it. Plain `f32` fields (no `Vec3`, whose alignment
 /// differs between Rust and WGSL) so this exact struct is also the GPU storage layout: 36 bytes.
@@ -199,38 +201,15 @@ pub struct TriAccel4 {
 }
 
 /// The lanes of a `TriAccel4` test that hit, and where.
-#[derive(Debug, Clone, Copy)]
-pub struct TriHit4 {
-    pub hit: BVec4A,
-    pub t: Vec4,
-    pub u: Vec4,
-    pub v: Vec4,
-}
+pub type TriHit4 = LaneHits<4, Vec4>;
 
-impl TriHit4 {
-    /// The lanes that hit, bit `k` for lane `k`.
-    #[inline(always)]
-    pub fn mask(&self) -> u32 {
-        self.hit.bitmask()
-    }
-
-    /// The hit of lane `k` (meaningful where `mask` has bit `k`).
-    pub fn lane(&self, k: usize) -> TriHit {
-        TriHit {
-            t: self.t[k],
-            u: self.u[k],
-            v: self.v[k],
-        }
-    }
-}
-
-/// A `Vec3` computation done on four lanes at once: `[x, y, z]` with one triangle per lane.
-type Lanes3 = [Vec4; 3];
+/// A `Vec3` computation done on `N` lanes at once: `[x, y, z]`, a triangle or a ray per lane.
+type Lanes3<L> = [L; 3];
 
 /// `a x b`, in exactly the operation order of glam's scalar `Vec3::cross`, so that every lane
 /// rounds as `TriAccel::intersect` does.
 #[inline(always)]
-fn cross4(a: &Lanes3, b: &Lanes3) -> Lanes3 {
+fn cross_lanes<const N: usize, L: Lanes<N>>(a: &Lanes3<L>, b: &Lanes3<L>) -> Lanes3<L> {
     [
         a[1] * b[2] - b[1] * a[2],
         a[2] * b[0] - b[2] * a[0],
@@ -240,14 +219,90 @@ fn cross4(a: &Lanes3, b: &Lanes3) -> Lanes3 {
 
 /// `a . b`, in the operation order of glam's scalar `Vec3::dot`.
 #[inline(always)]
-fn dot4(a: &Lanes3, b: &Lanes3) -> Vec4 {
+fn dot_lanes<const N: usize, L: Lanes<N>>(a: &Lanes3<L>, b: &Lanes3<L>) -> L {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// `|x| + |y| + |z|`, in the order of `l1`.
 #[inline(always)]
-fn l1_4(a: &Lanes3) -> Vec4 {
+fn l1_lanes<const N: usize, L: Lanes<N>>(a: &Lanes3<L>) -> L {
     a[0].abs() + a[1].abs() + a[2].abs()
+}
+
+/// What a lane-parallel test found: the lanes that hit, and where.
+#[derive(Debug, Clone, Copy)]
+pub struct LaneHits<const N: usize, L: Lanes<N>> {
+    pub hit: L::Mask,
+    pub t: L,
+    pub u: L,
+    pub v: L,
+}
+
+impl<const N: usize, L: Lanes<N>> LaneHits<N, L> {
+    /// The lanes that hit, bit `k` for lane `k`.
+    #[inline(always)]
+    pub fn mask(&self) -> u32 {
+        self.hit.bits()
+    }
+
+    /// The hit of lane `k` (meaningful where `mask` has bit `k`).
+    #[inline(always)]
+    pub fn lane(&self, k: usize) -> TriHit {
+        TriHit {
+            t: self.t.to_array()[k],
+            u: self.u.to_array()[k],
+            v: self.v.to_array()[k],
+        }
+    }
+}
+
+/// `TriAccel::intersect` on `N` lanes at once (a triangle and a ray per lane, with a `t_max`
+/// per lane), with bit-identical results: the same operations in the same order (IEEE
+/// arithmetic rounds the same in a SIMD lane as in a scalar register, and Rust never fuses
+/// multiply-adds on its own). Every early return of the scalar test becomes a lane mask, each
+/// the same comparison (negated where the scalar test rejects), so that NaNs fall the same way.
+#[inline(always)]
+pub fn intersect_lanes<const N: usize, L: Lanes<N>>(
+    (v0, e1, e2): (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
+    origin: &Lanes3<L>,
+    dir: &Lanes3<L>,
+    t_min: f32,
+    t_max: L,
+) -> LaneHits<N, L> {
+    const LOOSE: f32 = BARY_EPS + MAX_SLACK;
+    let p = cross_lanes(dir, e2);
+    let det = dot_lanes(e1, &p);
+    let inv_det = L::ONE / det;
+    let s = [origin[0] - v0[0], origin[1] - v0[1], origin[2] - v0[2]];
+    let u = dot_lanes(&s, &p) * inv_det;
+    let q = cross_lanes(&s, e1);
+    let v = dot_lanes(dir, &q) * inv_det;
+    let t = dot_lanes(e2, &q) * inv_det;
+    let mut ok = det.ne(L::ZERO)
+        & u.ge(L::splat(-LOOSE))
+        & u.le(L::splat(1.0 + LOOSE))
+        & !v.lt(L::splat(-LOOSE))
+        & !(u + v).gt(L::splat(1.0 + 2.0 * LOOSE))
+        & t.gt(L::splat(t_min))
+        & t.lt(t_max);
+    // The error-bound slack (see `TriAccel::intersect`). The scalar test skips it inside the
+    // `BARY_EPS` box; computing it everywhere changes nothing, since the bounded box always
+    // contains that one (each tolerance is at least `BARY_EPS`).
+    let d1 = l1_lanes(dir);
+    let (s1, a1, b1) = (l1_lanes(&s), l1_lanes(e1), l1_lanes(e2));
+    let scale = L::splat(SLACK_ULPS * f32::EPSILON) * d1 * inv_det.abs();
+    let err_u = scale * b1 * (s1 + a1);
+    let err_v = scale * a1 * (s1 + b1);
+    // `f32::min` and the lanes' `min` both return `MAX_SLACK` when the bound is NaN.
+    let tol_u = L::splat(BARY_EPS) + err_u.min(L::splat(MAX_SLACK));
+    let tol_v = L::splat(BARY_EPS) + err_v.min(L::splat(MAX_SLACK));
+    ok = ok
+        & !(u.lt(L::ZERO - tol_u) | u.gt(L::ONE + tol_u) | v.lt(L::ZERO - tol_v) | (u + v).gt(L::ONE + tol_u + tol_v));
+    // Grazing rays (see `TriAccel::intersect`).
+    let e1_len2 = dot_lanes(e1, e1);
+    let p_len2 = dot_lanes(&p, &p);
+    ok = ok & !(det * det).le(L::splat(PARALLEL_COS2) * e1_len2 * p_len2);
+    LaneHits { hit: ok, t, u, v }
 }
 
 impl TriAccel4 {
@@ -316,42 +371,7 @@ impl TriAccel4 {
     /// Lane by lane the same bits as `TriAccel::intersect` with that lane's ray and `t_max`.
     #[inline(always)]
     pub fn intersect_upto(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: Vec4) -> TriHit4 {
-        const LOOSE: f32 = BARY_EPS + MAX_SLACK;
-        let p = cross4(dir, &self.e2);
-        let det = dot4(&self.e1, &p);
-        let inv_det = Vec4::ONE / det;
-        let s = [origin[0] - self.v0[0], origin[1] - self.v0[1], origin[2] - self.v0[2]];
-        let u = dot4(&s, &p) * inv_det;
-        let q = cross4(&s, &self.e1);
-        let v = dot4(dir, &q) * inv_det;
-        let t = dot4(&self.e2, &q) * inv_det;
-        let mut ok = det.cmpne(Vec4::ZERO)
-            & u.cmpge(Vec4::splat(-LOOSE))
-            & u.cmple(Vec4::splat(1.0 + LOOSE))
-            & !v.cmplt(Vec4::splat(-LOOSE))
-            & !(u + v).cmpgt(Vec4::splat(1.0 + 2.0 * LOOSE))
-            & t.cmpgt(Vec4::splat(t_min))
-            & t.cmplt(t_max);
-        // The error-bound slack (see `TriAccel::intersect`). The scalar test skips it inside the
-        // `BARY_EPS` box; computing it everywhere changes nothing, since the bounded box always
-        // contains that one (each tolerance is at least `BARY_EPS`).
-        let d1 = l1_4(dir);
-        let (s1, a1, b1) = (l1_4(&s), l1_4(&self.e1), l1_4(&self.e2));
-        let scale = Vec4::splat(SLACK_ULPS * f32::EPSILON) * d1 * inv_det.abs();
-        let err_u = scale * b1 * (s1 + a1);
-        let err_v = scale * a1 * (s1 + b1);
-        // `f32::min` and the SIMD min both return `MAX_SLACK` when the bound is NaN.
-        let tol_u = Vec4::splat(BARY_EPS) + err_u.min(Vec4::splat(MAX_SLACK));
-        let tol_v = Vec4::splat(BARY_EPS) + err_v.min(Vec4::splat(MAX_SLACK));
-        ok &= !(u.cmplt(-tol_u)
-            | u.cmpgt(Vec4::ONE + tol_u)
-            | v.cmplt(-tol_v)
-            | (u + v).cmpgt(Vec4::ONE + tol_u + tol_v));
-        // Grazing rays (see `TriAccel::intersect`).
-        let e1_len2 = dot4(&self.e1, &self.e1);
-        let p_len2 = dot4(&p, &p);
-        ok &= !(det * det).cmple(Vec4::splat(PARALLEL_COS2) * e1_len2 * p_len2);
-        TriHit4 { hit: ok, t, u, v }
+        intersect_lanes((&self.v0, &self.e1, &self.e2), origin, dir, t_min, t_max)
     }
 }
 

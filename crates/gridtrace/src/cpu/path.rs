@@ -1,7 +1,7 @@
 //! One pixel's path through the renderer's stages, as the GPU wavefront kernels take them: the
 //! eye ray, its closest hit, shading with a shadow ray per light, and a mirror ray (up to two
 //! levels), accumulating `weight * colour`. `render.rs` runs a pixel's path a ray at a time
-//! (`trace_pixel`); `blocks.rs` runs four pixels' paths side by side, each stage's rays as one
+//! (`trace_pixel`); `blocks.rs` runs eight pixels' paths side by side, each stage's rays as one
 //! packet. Both call the same stages, in the same order, so their images are the same bits.
 
 use glam::Vec3;

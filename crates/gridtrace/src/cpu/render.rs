@@ -1,6 +1,6 @@
 //! CPU renderer. Each pixel follows exactly the steps the GPU wavefront kernels take (eye ray,
 //! shading with shadow rays, up to two reflection rays: `path.rs`), so the two images agree;
-//! pixel by pixel here, or in 2x2 blocks whose rays are traced as packets (`blocks.rs`) for a
+//! pixel by pixel here, or in 4x2 blocks whose rays are traced as packets (`blocks.rs`) for a
 //! structure that walks packets.
 
 use std::time::Instant;
@@ -107,21 +107,15 @@ fn render_generic<C: Collect>(
         .map(|(band, rows)| {
             let mut rays = RayCounts::default();
             let mut total = TraversalCounters::default();
+            let first_y = frame_rows.start + (band * BAND) as u32;
+            let n_rows = rows.len() / width;
             if scene.accel.walks_packets() {
-                let first_y = frame_rows.start + (band * BAND) as u32;
                 trace_blocks::<C>(scene, &cam, view.lights, opts, (first_y, rows), (&mut rays, &mut total));
             } else {
-                for (i, px) in rows.iter_mut().enumerate() {
-                    let x = (i % width) as u32;
-                    let y = frame_rows.start + (band * BAND + i / width) as u32;
-                    let mut c = C::default();
-                    let color = trace_pixel(scene, &cam, view.lights, (x, y), opts, (&mut rays, &mut c), &mut ());
-                    *px = pixel_value(opts, color, &c);
-                    total += c.total();
-                }
+                trace_rows::<C>(scene, &cam, view.lights, opts, (first_y, rows), (&mut rays, &mut total));
             }
             if let Some(p) = progress {
-                p((rows.len() / width) as u32);
+                p(n_rows as u32);
             }
             (rays, total)
         })
@@ -180,6 +174,29 @@ pub fn trace_pixel_observed(
         (&mut rays, &mut NoCounters),
         observer,
     )
+}
+
+/// Traces the pixels of a band of rows (frame rows `first_y..`, `rows` holding them) one by
+/// one, adding what it traced to `rays` and its work to `total`. A function of its own, kept
+/// apart from `trace_blocks`: with both inlined into the band's closure the BVH's renders were
+/// 8-11% slower (docs/benchmarks.md "Packets of eight").
+#[inline(never)]
+fn trace_rows<C: Collect>(
+    scene: &PreparedScene,
+    cam: &CameraFrame,
+    lights: &[PointLight],
+    opts: &RenderOptions,
+    (first_y, rows): (u32, &mut [Vec3]),
+    (rays, total): (&mut RayCounts, &mut TraversalCounters),
+) {
+    let width = opts.width as usize;
+    for (i, px) in rows.iter_mut().enumerate() {
+        let (x, y) = ((i % width) as u32, first_y + (i / width) as u32);
+        let mut c = C::default();
+        let color = trace_pixel(scene, cam, lights, (x, y), opts, (rays, &mut c), &mut ());
+        *px = pixel_value(opts, color, &c);
+        *total += c.total();
+    }
 }
 
 /// One pixel's path (`Path`) ray by ray: the eye ray, shading with a shadow ray per light,
@@ -261,7 +278,7 @@ mod tests {
     use crate::render::Ablation;
     use crate::scene::builtin;
 
-    /// The irregular grid's renders trace every ray in 2x2 packets (`blocks.rs`: eye, shadow
+    /// The irregular grid's renders trace every ray in 4x2 packets (`blocks.rs`: eye, shadow
     /// and mirror rays); every pixel equals, bit for bit, what the pixel-by-pixel walk
     /// (`trace_pixel`, one ray at a time) gives, with the same rays, and heat images count
     /// each eye ray's own cells and tests: odd sizes (blocks cut at the right edge and the

@@ -1,5 +1,7 @@
-//! Packets: up to four coherent rays (a 2x2 block of pixels' eye, shadow or mirror rays)
-//! walked together, a ray per SIMD lane.
+//! Packets: up to eight coherent rays (a 4x2 block of pixels' eye, shadow or mirror rays)
+//! walked together, a ray per SIMD lane: one AVX register of eight lanes where the CPU has
+//! AVX2, two packets of four in SSE registers elsewhere (`lanes.rs`: the walk is written once
+//! for both).
 //!
 //! Why: a single ray's step is one long chain of dependent operations (voxel -> top cell ->
 //! voxel map -> cell -> exit distances -> exit point -> next voxel), about a hundred cycles of
@@ -8,8 +10,10 @@
 //! round gained 6-10%; stepping them in four-lane arithmetic made packets 1.2-1.35x the single
 //! rays (docs/benchmarks.md "Packets"): neighbouring camera rays cross the same large cells one
 //! after another (3.5 of 4 rays take part in a round on the paper's scenes), so one chain of
-//! four-lane operations advances them all, and one `TriAccel4` test (the triangle in every
-//! lane, a ray per lane) tests a triangle against all of them.
+//! four-lane operations advances them all, and one lane-parallel triangle test (the triangle
+//! in every lane, a ray per lane) tests a triangle against all of them. Eight lanes in AVX
+//! registers made camera rays another 1.1-1.4x faster than four (docs/benchmarks.md "Packets
+//! of eight"): the same chain advances twice the rays, at about the same cost per instruction.
 //!
 //! Each ray still goes through exactly the cells its single-ray walk (`walk.rs`) visits: a
 //! round takes the cell of the first ray still walking, the rays whose current cell it is
@@ -20,39 +24,34 @@
 //! which gives what the scalar saturating cast and clamp give. So the hits and the counts
 //! (cells, triangle tests) are bit for bit those of `intersect`, ray by ray (tested).
 
-use glam::{BVec4A, Vec4};
-
 use super::IrregularGrid;
-use crate::accel::{Counters, Hit, NoCounters, Ray, TriAccel, TriAccel4};
+use glam::Vec4;
+
+use crate::accel::lanes::{Lanes, Mask, load3, splat3};
+use crate::accel::{Counters, Hit, NoCounters, Ray, TriAccel, intersect_lanes};
 use crate::util::set_bits as bits;
 
-/// Rays in a packet: the four lanes of `TriAccel4`.
-pub const PACKET: usize = 4;
+/// Rays in a packet: the lanes of an AVX register.
+pub const PACKET: usize = 8;
 
 /// The rays of a packet and where they are, a ray per lane.
-struct Lanes {
-    origin: [Vec4; 3],
-    dir: [Vec4; 3],
-    inv: [Vec4; 3],
+struct Walkers<const N: usize, L: Lanes<N>> {
+    origin: [L; 3],
+    dir: [L; 3],
+    inv: [L; 3],
     /// Lanes whose ray moves up / down along each axis (neither: it does not move on it).
-    up: [BVec4A; 3],
-    down: [BVec4A; 3],
+    up: [L::Mask; 3],
+    down: [L::Mask; 3],
     /// The voxel each ray is in, as exact integers.
-    v: [Vec4; 3],
-    t_leave: Vec4,
-    budget: [u32; PACKET],
+    v: [L; 3],
+    t_leave: L,
+    budget: [u32; N],
 }
 
 /// `f32::min` lane by lane: a NaN gives way to the other operand, as there.
 #[inline(always)]
-fn min_lanes(a: Vec4, b: Vec4) -> Vec4 {
-    Vec4::select(a.is_nan_mask(), b, Vec4::select(b.is_nan_mask() | !b.cmplt(a), a, b))
-}
-
-/// Lane `i` true where bit `i` of `mask` is set.
-#[inline(always)]
-fn mask_lanes(mask: u32) -> BVec4A {
-    BVec4A::new(mask & 1 != 0, mask & 2 != 0, mask & 4 != 0, mask & 8 != 0)
+fn min_lanes<const N: usize, L: Lanes<N>>(a: L, b: L) -> L {
+    L::select(a.is_nan(), b, L::select(b.is_nan() | !b.lt(a), a, b))
 }
 
 impl IrregularGrid {
@@ -67,7 +66,7 @@ impl IrregularGrid {
         t_max: f32,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
-        self.walk_packet::<false, C>(tris, rays, t_min, [t_max; PACKET], counters)
+        self.walk_packet::<false, C>(tris, rays, t_min, [t_max; PACKET], counters, false)
     }
 
     /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (shadow
@@ -81,13 +80,30 @@ impl IrregularGrid {
         t_max: [f32; PACKET],
         counters: &mut [C],
     ) -> [bool; PACKET] {
-        self.walk_packet::<true, C>(tris, rays, t_min, t_max, counters)
+        self.walk_packet::<true, C>(tris, rays, t_min, t_max, counters, false)
             .map(|h| h.is_hit())
     }
 
-    /// The packet walk compiled for AVX2 where the CPU has it (three-operand instructions, no
-    /// register copies; the same bits, as the BVH's `interleaved` explains), else the baseline
-    /// build.
+    /// A packet walked as two packets of four (what CPUs without AVX2 run), whatever the CPU:
+    /// closest hits, or (`ANY`) any hits (as `Hit::is_hit`), each ray up to its `t_max`. For
+    /// tests, and for measuring the widths against each other (`--example irregular_packets`).
+    #[doc(hidden)]
+    pub fn packet_in_fours<const ANY: bool, C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        self.walk_packet::<ANY, C>(tris, rays, t_min, t_max, counters, true)
+    }
+
+    /// The packet walk: eight rays in AVX registers where the CPU has AVX2 (compiled for it:
+    /// three-operand instructions, the same bits, as the BVH's `interleaved` explains), else
+    /// (or with `fours`) as two packets of four in SSE registers. Hits and counts are the
+    /// single-ray walk's either way.
+    #[allow(clippy::too_many_arguments)]
     fn walk_packet<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
@@ -95,17 +111,19 @@ impl IrregularGrid {
         t_min: f32,
         t_max: [f32; PACKET],
         counters: &mut [C],
+        fours: bool,
     ) -> [Hit; PACKET] {
         #[cfg(target_arch = "x86_64")]
         if crate::accel::bvh::has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.walk_packet_avx2::<ANY, C>(tris, rays, t_min, t_max, counters) };
+            return unsafe { self.walk_packet_avx2::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
         }
-        self.walk_packet_body::<ANY, C>(tris, rays, t_min, t_max, counters)
+        self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
     fn walk_packet_avx2<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
@@ -113,14 +131,18 @@ impl IrregularGrid {
         t_min: f32,
         t_max: [f32; PACKET],
         counters: &mut [C],
+        fours: bool,
     ) -> [Hit; PACKET] {
-        self.walk_packet_body::<ANY, C>(tris, rays, t_min, t_max, counters)
+        if fours {
+            return self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters);
+        }
+        // `F8` is for AVX2 code only: this function is.
+        self.walk_lanes::<PACKET, crate::accel::lanes::F8, ANY, C>(tris, rays, t_min, t_max, counters)
     }
 
-    /// The packet walk: closest hits, or (`ANY`) any hit per ray, which ends that ray's walk
-    /// and its tests at once, as `any_in` does.
+    /// A packet as two packets of four (`Vec4` lanes).
     #[inline(always)]
-    fn walk_packet_body<const ANY: bool, C: Counters>(
+    fn walk_fours<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
@@ -128,50 +150,82 @@ impl IrregularGrid {
         t_max: [f32; PACKET],
         counters: &mut [C],
     ) -> [Hit; PACKET] {
+        let mut hits = [Hit::MISS; PACKET];
+        for (h, (rays, counters)) in rays.chunks(4).zip(counters.chunks_mut(4)).enumerate() {
+            let limits = [t_max[4 * h], t_max[4 * h + 1], t_max[4 * h + 2], t_max[4 * h + 3]];
+            let got = self.walk_lanes::<4, Vec4, ANY, C>(tris, rays, t_min, limits, counters);
+            hits[4 * h..4 * h + 4].copy_from_slice(&got);
+        }
+        hits
+    }
+
+    /// The packet walk: closest hits, or (`ANY`) any hit per ray, which ends that ray's walk
+    /// and its tests at once, as `any_in` does.
+    #[inline(always)]
+    fn walk_lanes<const N: usize, L: Lanes<N>, const ANY: bool, C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; N],
+        counters: &mut [C],
+    ) -> [Hit; N] {
         assert!(
-            rays.len() <= PACKET && counters.len() == rays.len(),
-            "a packet is up to four rays, a counter each"
+            rays.len() <= N && counters.len() == rays.len(),
+            "a packet is up to {N} rays, a counter each"
         );
-        let mut best: [Hit; PACKET] = std::array::from_fn(|i| Hit {
+        let mut best: [Hit; N] = std::array::from_fn(|i| Hit {
             t: t_max[i],
             ..Hit::MISS
         });
         // Unused lanes hold a ray along +x at the origin and never walk.
-        let mut l = Lanes {
-            origin: [Vec4::ZERO; 3],
-            dir: [Vec4::X, Vec4::ZERO, Vec4::ZERO],
-            inv: [Vec4::ONE; 3],
-            up: [BVec4A::default(); 3],
-            down: [BVec4A::default(); 3],
-            v: [Vec4::ZERO; 3],
-            t_leave: Vec4::ZERO,
-            budget: [0; PACKET],
-        };
+        let (mut origin, mut dir, mut inv, mut v) = ([[0.0; N]; 3], [[0.0; N]; 3], [[1.0; N]; 3], [[0.0; N]; 3]);
+        dir[0] = [1.0; N];
+        let (mut up, mut down, mut t_leave, mut budget) = ([0u32; 3], [0u32; 3], [0.0; N], [0u32; N]);
         // Each walking ray's current cell, and the rays still walking (bit i for rays[i]).
-        let mut cell_of = [u32::MAX; PACKET];
+        let mut cell_of = [u32::MAX; N];
         let mut walking = 0u32;
         for (i, ray) in rays.iter().enumerate() {
             for a in 0..3 {
-                l.origin[a][i] = ray.origin[a];
-                l.dir[a][i] = ray.dir[a];
+                origin[a][i] = ray.origin[a];
+                dir[a][i] = ray.dir[a];
             }
             if let Some(c) = self.cursor(ray, t_min, t_max[i]) {
                 for a in 0..3 {
-                    l.inv[a][i] = c.inv[a];
-                    l.up[a].set(i, c.step[a] > 0);
-                    l.down[a].set(i, c.step[a] < 0);
-                    l.v[a][i] = c.v[a] as f32;
+                    inv[a][i] = c.inv[a];
+                    up[a] |= ((c.step[a] > 0) as u32) << i;
+                    down[a] |= ((c.step[a] < 0) as u32) << i;
+                    v[a][i] = c.v[a] as f32;
                 }
-                l.t_leave[i] = c.t_leave;
-                l.budget[i] = c.budget;
+                t_leave[i] = c.t_leave;
+                budget[i] = c.budget;
                 cell_of[i] = self.voxel_map[self.slot(c.v)];
                 walking |= 1 << i;
             }
         }
-        let bounds_min = self.bounds.min.to_array().map(Vec4::splat);
-        let voxel_size = self.voxel_size.to_array().map(Vec4::splat);
-        let inv_voxel_size = self.inv_voxel_size.to_array().map(Vec4::splat);
-        let dims = self.voxel_dims().as_vec3().to_array().map(Vec4::splat);
+        let mut l = Walkers::<N, L> {
+            origin: load3(origin),
+            dir: load3(dir),
+            inv: load3(inv),
+            // Not `map` with a closure: closures do not inherit `#[target_feature]` (`splat3`).
+            up: [
+                L::Mask::from_bits(up[0]),
+                L::Mask::from_bits(up[1]),
+                L::Mask::from_bits(up[2]),
+            ],
+            down: [
+                L::Mask::from_bits(down[0]),
+                L::Mask::from_bits(down[1]),
+                L::Mask::from_bits(down[2]),
+            ],
+            v: load3(v),
+            t_leave: L::from_array(t_leave),
+            budget,
+        };
+        let bounds_min = splat3(self.bounds.min.to_array());
+        let voxel_size = splat3(self.voxel_size.to_array());
+        let inv_voxel_size = splat3(self.inv_voxel_size.to_array());
+        let dims = splat3(self.voxel_dims().as_vec3().to_array());
         while walking != 0 {
             let id = cell_of[walking.trailing_zeros() as usize];
             let mut round = 0u32;
@@ -184,14 +238,15 @@ impl IrregularGrid {
                 counters[i].cell();
             }
             let cell = self.cell(id);
-            let lo = cell.min.map(|c| Vec4::splat(c as f32));
-            let hi = cell.max.map(|c| Vec4::splat(c as f32));
+            let lo: [L; 3] = splat3([cell.min[0] as f32, cell.min[1] as f32, cell.min[2] as f32]);
+            let hi: [L; 3] = splat3([cell.max[0] as f32, cell.max[1] as f32, cell.max[2] as f32]);
             // `face_t`: the parameter of the grown box's face ahead on each axis.
-            let t_faces: [Vec4; 3] = std::array::from_fn(|a| {
-                let k = Vec4::select(l.up[a], hi[a], lo[a]);
+            let mut t_faces = [L::INFINITY; 3];
+            for a in 0..3 {
+                let k = L::select(l.up[a], hi[a], lo[a]);
                 let t = (bounds_min[a] + k * voxel_size[a] - l.origin[a]) * l.inv[a];
-                Vec4::select(l.up[a] | l.down[a], t, Vec4::INFINITY)
-            });
+                t_faces[a] = L::select(l.up[a] | l.down[a], t, L::INFINITY);
+            }
             let t_exit = min_lanes(min_lanes(t_faces[0], t_faces[1]), t_faces[2]);
             let mut finished = 0u32;
             if cell.count > 0 {
@@ -200,24 +255,31 @@ impl IrregularGrid {
                 // `t_min`, which no hit passes (`t > t_min` and `t < t_min` cannot both hold),
                 // so they keep their hits.
                 let mut testing = round;
-                let mut limit = Vec4::select(mask_lanes(round), t_of(&best), Vec4::splat(t_min));
+                let mut limit = L::select(L::Mask::from_bits(round), t_of(&best), L::splat(t_min));
                 for &tri in &self.refs[cell.start as usize..(cell.start + cell.count) as usize] {
                     for i in bits(testing) {
                         counters[i].tri_test();
                     }
-                    let h = TriAccel4::splat(&tris[tri as usize]).intersect_upto(&l.origin, &l.dir, t_min, limit);
-                    for k in bits(h.mask() & testing) {
-                        best[k] = h.lane(k).on(tri);
-                        if ANY {
-                            // As `any_in`: the first hit ends this ray's tests and its walk.
-                            testing &= !(1 << k);
-                            limit[k] = t_min;
-                        } else {
-                            // The test passed `t < limit[k]`, this ray's closest hit so far:
-                            // as in `closest_in`, a later triangle replaces an earlier one
-                            // only if nearer.
-                            limit[k] = best[k].t;
+                    let t = &tris[tri as usize];
+                    let corners = (&splat3(t.v0), &splat3(t.e1), &splat3(t.e2));
+                    let h = intersect_lanes(corners, &l.origin, &l.dir, t_min, limit);
+                    let hits = h.mask() & testing;
+                    if hits != 0 {
+                        let mut limits = limit.to_array();
+                        for k in bits(hits) {
+                            best[k] = h.lane(k).on(tri);
+                            if ANY {
+                                // As `any_in`: the first hit ends this ray's tests and its walk.
+                                testing &= !(1 << k);
+                                limits[k] = t_min;
+                            } else {
+                                // The test passed `t < limit[k]`, this ray's closest hit so far:
+                                // as in `closest_in`, a later triangle replaces an earlier one
+                                // only if nearer.
+                                limits[k] = best[k].t;
+                            }
                         }
+                        limit = L::from_array(limits);
                     }
                     if testing == 0 {
                         break;
@@ -228,43 +290,45 @@ impl IrregularGrid {
                 finished |= if ANY {
                     round & !testing
                 } else {
-                    bits_hit(&best) & t_of(&best).cmple(min_lanes(t_exit, l.t_leave)).bitmask()
+                    bits_hit(&best) & t_of::<N, L>(&best).le(min_lanes(t_exit, l.t_leave)).bits()
                 };
             }
-            finished |= t_exit.cmpge(l.t_leave).bitmask();
+            finished |= t_exit.ge(l.t_leave).bits();
             // `advance`: into the voxel just past the exit face (`walk.rs` says why so).
-            let past1 = t_faces[1].cmplt(t_faces[0]);
-            let nearer = Vec4::select(past1, t_faces[1], t_faces[0]);
-            let past2 = t_faces[2].cmplt(nearer);
+            let past1 = t_faces[1].lt(t_faces[0]);
+            let nearer = L::select(past1, t_faces[1], t_faces[0]);
+            let past2 = t_faces[2].lt(nearer);
             let on_axis = [!(past1 | past2), past1 & !past2, past2];
             let mut next = l.v;
-            let mut leaves = BVec4A::default();
+            let mut leaves = L::Mask::from_bits(0);
             for a in 0..3 {
                 let p = l.origin[a] + l.dir[a] * t_exit;
                 // The exit point's voxel clamped into the box: clamping before truncating gives
                 // what truncating (saturating, NaN to 0) then clamping does, NaN to `lo`.
                 let x = (p - bounds_min[a]) * inv_voxel_size[a];
-                let x = Vec4::select(x.is_nan_mask(), lo[a], x);
-                let inside = Vec4::select(x.cmplt(lo[a]), lo[a], x);
-                let inside = Vec4::select(inside.cmpgt(hi[a] - Vec4::ONE), hi[a] - Vec4::ONE, inside).trunc();
-                let ahead = Vec4::select(l.up[a], inside.max(l.v[a]), inside.min(l.v[a]));
-                let across = Vec4::select(l.up[a], hi[a], lo[a] - Vec4::ONE);
-                next[a] = Vec4::select(on_axis[a], across, Vec4::select(l.up[a] | l.down[a], ahead, l.v[a]));
-                leaves |= on_axis[a] & (across.cmplt(Vec4::ZERO) | across.cmpge(dims[a]));
+                let x = L::select(x.is_nan(), lo[a], x);
+                let inside = L::select(x.lt(lo[a]), lo[a], x);
+                let top = hi[a] - L::ONE;
+                let inside = L::select(inside.gt(top), top, inside).trunc_small();
+                let ahead = L::select(l.up[a], inside.max(l.v[a]), inside.min(l.v[a]));
+                let across = L::select(l.up[a], hi[a], lo[a] - L::ONE);
+                next[a] = L::select(on_axis[a], across, L::select(l.up[a] | l.down[a], ahead, l.v[a]));
+                leaves = leaves | (on_axis[a] & (across.lt(L::ZERO) | across.ge(dims[a])));
             }
-            finished |= leaves.bitmask();
+            finished |= leaves.bits();
             let moving = round & !finished;
-            let move_lanes = mask_lanes(moving);
+            let move_lanes = L::Mask::from_bits(moving);
             for (v, next) in l.v.iter_mut().zip(next) {
-                *v = Vec4::select(move_lanes, next, *v);
+                *v = L::select(move_lanes, next, *v);
             }
             walking &= !(round & finished);
+            let voxels = [l.v[0].to_array(), l.v[1].to_array(), l.v[2].to_array()];
             for i in bits(moving) {
                 l.budget[i] -= 1;
                 if l.budget[i] == 0 {
                     walking &= !(1 << i);
                 } else {
-                    let v = [l.v[0][i] as i32, l.v[1][i] as i32, l.v[2][i] as i32];
+                    let v = [voxels[0][i] as i32, voxels[1][i] as i32, voxels[2][i] as i32];
                     cell_of[i] = self.voxel_map[self.slot(v)];
                 }
             }
@@ -275,39 +339,43 @@ impl IrregularGrid {
 
 /// The hits' `t`, a lane each.
 #[inline(always)]
-fn t_of(best: &[Hit; PACKET]) -> Vec4 {
-    Vec4::from_array(best.map(|h| h.t))
+fn t_of<const N: usize, L: Lanes<N>>(best: &[Hit; N]) -> L {
+    let mut t = [0.0; N];
+    for (t, h) in t.iter_mut().zip(best) {
+        *t = h.t;
+    }
+    L::from_array(t)
 }
 
 /// Bit `i` set where `best[i]` is a hit.
 #[inline(always)]
-fn bits_hit(best: &[Hit; PACKET]) -> u32 {
+fn bits_hit<const N: usize>(best: &[Hit; N]) -> u32 {
     best.iter()
         .enumerate()
         .fold(0, |m, (i, h)| m | (h.is_hit() as u32) << i)
 }
 
 /// Directions closer than this (cosine of about 1.1 degrees) count as coherent: neighbouring
-/// pixels of a camera are a tenth of a degree apart at 512 pixels over 60 degrees, so four in
+/// pixels of a camera are a tenth of a degree apart at 512 pixels over 60 degrees, so eight in
 /// a row pass, and rays that merely share an origin (from a point in all directions) do not.
 const COHERENT_COS: f32 = 0.9998;
 
 impl IrregularGrid {
-    /// Whether four rays will walk together: origins within one virtual voxel of the first's
-    /// on every axis (one point for a camera's rays, neighbouring hit points for their shadow
-    /// or mirror rays) and directions within about a degree. Such a packet mostly shares its
-    /// cells; any other quad would walk apart and pay for the packet's bookkeeping. (The
+    /// Whether a packet's rays will walk together: origins within one virtual voxel of the
+    /// first's on every axis (one point for a camera's rays, neighbouring hit points for their
+    /// shadow or mirror rays) and directions within about a degree. Such a packet mostly
+    /// shares its cells; any other would walk apart and pay for the packet's bookkeeping. (The
     /// answers do not depend on it.)
-    fn coherent(&self, quad: &[Ray]) -> bool {
-        let (o, d) = (quad[0].origin, quad[0].dir);
-        quad[1..].iter().all(|r| {
+    fn coherent(&self, packet: &[Ray]) -> bool {
+        let (o, d) = (packet[0].origin, packet[0].dir);
+        packet[1..].iter().all(|r| {
             (r.origin - o).abs().cmple(self.voxel_size).all()
                 && r.dir.dot(d) >= COHERENT_COS * (r.dir.length() * d.length())
         })
     }
 
     /// Closest hits (`ANY = false`) or any hits of a batch, handed to `finish(i, hit)` for each
-    /// `rays[i]` in no particular order, as `interleaved` does: runs of quads that walk
+    /// `rays[i]` in no particular order, as `interleaved` does: runs of packets that walk
     /// together (`coherent`: an image's rays in row order from Python, their shadow rays
     /// towards a light) go as packets, the rest through the interleaved single-ray walk. The
     /// same answers either way.
@@ -319,19 +387,20 @@ impl IrregularGrid {
         t_max: f32,
         mut finish: impl FnMut(usize, Hit),
     ) {
-        let quad_at = |i: usize| i + PACKET <= rays.len() && self.coherent(&rays[i..i + PACKET]);
+        let packet_at = |i: usize| i + PACKET <= rays.len() && self.coherent(&rays[i..i + PACKET]);
         let mut i = 0;
         while i < rays.len() {
-            while quad_at(i) {
+            while packet_at(i) {
                 let mut c = [NoCounters; PACKET];
-                let hits = self.walk_packet::<ANY, _>(tris, &rays[i..i + PACKET], t_min, [t_max; PACKET], &mut c);
+                let hits =
+                    self.walk_packet::<ANY, _>(tris, &rays[i..i + PACKET], t_min, [t_max; PACKET], &mut c, false);
                 for (k, hit) in hits.into_iter().enumerate() {
                     finish(i + k, hit);
                 }
                 i += PACKET;
             }
             let start = i;
-            while i < rays.len() && !quad_at(i) {
+            while i < rays.len() && !packet_at(i) {
                 i += 1;
             }
             self.interleaved::<ANY>(tris, &rays[start..i], t_min, t_max, |j, hit| finish(start + j, hit));

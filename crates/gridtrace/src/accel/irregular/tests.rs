@@ -188,9 +188,10 @@ fn traversal_equals_brute_force() {
 }
 
 /// Packets give each ray exactly what its single-ray walk gives (the same closest hit, bit for
-/// bit, or the same any-hit answer, and the same cells and triangle tests): coherent 2x2
+/// bit, or the same any-hit answer, and the same cells and triangle tests): coherent 4x2
 /// blocks of camera rays from inside and outside the grid, with t limits; incoherent packets;
-/// axis-aligned and zero components; rays that miss the grid; packets of one to four rays.
+/// axis-aligned and zero components; rays that miss the grid; packets of one to eight rays;
+/// eight lanes (AVX2, where the CPU has it) and two packets of four (the fallback) alike.
 #[test]
 fn packets_equal_single_rays() {
     use crate::accel::{PACKET, TraversalCounters};
@@ -209,8 +210,8 @@ fn packets_equal_single_rays() {
                     let mut d = match i % 4 {
                         // Incoherent: each ray its own origin and direction.
                         3 => Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)),
-                        // A 2x2 block of a camera: the same eye, directions a pixel apart.
-                        _ => (target - eye).normalize() + Vec3::new((k % 2) as f32, (k / 2) as f32, 0.0) * pixel,
+                        // A 4x2 block of a camera: the same eye, directions a pixel apart.
+                        _ => (target - eye).normalize() + Vec3::new((k % 4) as f32, (k / 4) as f32, 0.0) * pixel,
                     };
                     if (i + k) % 7 == 0 {
                         d.x = 0.0;
@@ -230,6 +231,13 @@ fn packets_equal_single_rays() {
             let (t_min, t_max) = [(0.0, f32::INFINITY), (0.5, 6.0), (0.0, 1.0)][i % 3];
             let mut counted = vec![TraversalCounters::default(); n];
             let got = g.intersect_packet(&tris, &rays, t_min, t_max, &mut counted);
+            let mut counted_fours = vec![TraversalCounters::default(); n];
+            let fours = g.packet_in_fours::<false, _>(&tris, &rays, t_min, [t_max; PACKET], &mut counted_fours);
+            assert_eq!(
+                (fours.map(|h| (h.t.to_bits(), h.tri)), &counted_fours),
+                (got.map(|h| (h.t.to_bits(), h.tri)), &counted),
+                "two packets of four differ from eight lanes: {rays:?}"
+            );
             for (k, r) in rays.iter().enumerate() {
                 let mut alone = TraversalCounters::default();
                 let want = g.intersect(&tris, r, t_min, t_max, &mut alone);
@@ -247,6 +255,13 @@ fn packets_equal_single_rays() {
             let limits: [f32; PACKET] = std::array::from_fn(|k| [t_max, 3.0, 0.7, 12.0][(i + k) % 4]);
             let mut counted = vec![TraversalCounters::default(); n];
             let got = g.occluded_packet(&tris, &rays, t_min, limits, &mut counted);
+            let mut counted_fours = vec![TraversalCounters::default(); n];
+            let fours = g.packet_in_fours::<true, _>(&tris, &rays, t_min, limits, &mut counted_fours);
+            assert_eq!(
+                (fours.map(|h| h.is_hit()), &counted_fours),
+                (got, &counted),
+                "two packets of four differ from eight lanes: {rays:?} up to {limits:?}"
+            );
             for (k, r) in rays.iter().enumerate() {
                 let mut alone = TraversalCounters::default();
                 let want = g.occluded(&tris, r, t_min, limits[k], &mut alone);

@@ -1,0 +1,365 @@
+//! Lanes of `f32`: the SIMD vocabulary that the packet triangle test (`triangle.rs`) and the
+//! irregular grid's packet walk (`irregular/packet.rs`) are written in, once, for four lanes
+//! (glam's `Vec4`, SSE) and for eight (`F8`, one AVX register where the code is compiled for
+//! AVX2, two SSE registers elsewhere).
+//!
+//! Every operation is IEEE arithmetic lane by lane, so a lane rounds exactly as the scalar code
+//! does (Rust never fuses multiply-adds on its own): the packet code's bit-for-bit agreement
+//! with the single-ray code rests on that. Comparisons and `min` follow the SSE rules that the
+//! callers rely on: an ordered comparison is false when either side is NaN, and `min(a, b)` is
+//! `a < b ? a : b` (NaN in either gives `b`).
+
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
+
+use glam::{BVec4A, Vec4};
+
+/// A lane mask: all bits set (true) or clear (false) per lane.
+pub trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> + Not<Output = Self> {
+    /// Lane `i` true where bit `i` of `bits` is set.
+    fn from_bits(bits: u32) -> Self;
+    /// Bit `i` set where lane `i` is true.
+    fn bits(self) -> u32;
+}
+
+/// `N` lanes of `f32`.
+pub trait Lanes<const N: usize>:
+    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self>
+{
+    type Mask: Mask;
+    const ZERO: Self;
+    const ONE: Self;
+    const INFINITY: Self;
+    fn splat(x: f32) -> Self;
+    fn from_array(a: [f32; N]) -> Self;
+    fn to_array(self) -> [f32; N];
+    /// Lane by lane `mask ? a : b`.
+    fn select(mask: Self::Mask, a: Self, b: Self) -> Self;
+    fn lt(self, b: Self) -> Self::Mask;
+    fn le(self, b: Self) -> Self::Mask;
+    fn gt(self, b: Self) -> Self::Mask;
+    fn ge(self, b: Self) -> Self::Mask;
+    fn ne(self, b: Self) -> Self::Mask;
+    fn is_nan(self) -> Self::Mask;
+    /// `self < b ? self : b`, as SSE's `min` (NaN in either: `b`).
+    fn min(self, b: Self) -> Self;
+    /// `self > b ? self : b`, as SSE's `max` (NaN in either: `b`).
+    fn max(self, b: Self) -> Self;
+    fn abs(self) -> Self;
+    /// Truncation of values in `0..2^24` (voxel coordinates): exact through `i32`.
+    fn trunc_small(self) -> Self;
+}
+
+/// `[x, y, z]` each in every lane. (A function, not a closure passed to `map`: closures do not
+/// inherit `#[target_feature]`, so there an AVX intrinsic would become a call.)
+#[inline(always)]
+pub fn splat3<const N: usize, L: Lanes<N>>(a: [f32; 3]) -> [L; 3] {
+    [L::splat(a[0]), L::splat(a[1]), L::splat(a[2])]
+}
+
+/// Three arrays of lanes (`[x, y, z]`, a lane each) as lanes.
+#[inline(always)]
+pub fn load3<const N: usize, L: Lanes<N>>(a: [[f32; N]; 3]) -> [L; 3] {
+    [L::from_array(a[0]), L::from_array(a[1]), L::from_array(a[2])]
+}
+
+impl Mask for BVec4A {
+    #[inline(always)]
+    fn from_bits(bits: u32) -> Self {
+        BVec4A::new(bits & 1 != 0, bits & 2 != 0, bits & 4 != 0, bits & 8 != 0)
+    }
+    #[inline(always)]
+    fn bits(self) -> u32 {
+        self.bitmask()
+    }
+}
+
+impl Lanes<4> for Vec4 {
+    type Mask = BVec4A;
+    const ZERO: Self = Vec4::ZERO;
+    const ONE: Self = Vec4::ONE;
+    const INFINITY: Self = Vec4::INFINITY;
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        Vec4::splat(x)
+    }
+    #[inline(always)]
+    fn from_array(a: [f32; 4]) -> Self {
+        Vec4::from_array(a)
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f32; 4] {
+        Vec4::to_array(&self)
+    }
+    #[inline(always)]
+    fn select(mask: BVec4A, a: Self, b: Self) -> Self {
+        Vec4::select(mask, a, b)
+    }
+    #[inline(always)]
+    fn lt(self, b: Self) -> BVec4A {
+        self.cmplt(b)
+    }
+    #[inline(always)]
+    fn le(self, b: Self) -> BVec4A {
+        self.cmple(b)
+    }
+    #[inline(always)]
+    fn gt(self, b: Self) -> BVec4A {
+        self.cmpgt(b)
+    }
+    #[inline(always)]
+    fn ge(self, b: Self) -> BVec4A {
+        self.cmpge(b)
+    }
+    #[inline(always)]
+    fn ne(self, b: Self) -> BVec4A {
+        self.cmpne(b)
+    }
+    #[inline(always)]
+    fn is_nan(self) -> BVec4A {
+        self.is_nan_mask()
+    }
+    #[inline(always)]
+    fn min(self, b: Self) -> Self {
+        // glam's `Vec4::min` is SSE's `minps(self, b)`: `self < b ? self : b`.
+        Vec4::min(self, b)
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        Vec4::max(self, b)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        Vec4::abs(self)
+    }
+    #[inline(always)]
+    fn trunc_small(self) -> Self {
+        Vec4::trunc(self)
+    }
+}
+
+/// Eight lanes of `f32` in one AVX register.
+///
+/// Only for code compiled with AVX2 enabled and entered after `bvh::has_avx2()` said the CPU
+/// has it (the irregular grid's `walk_packet` is the one user): the operations are AVX
+/// intrinsics, inlined into that code.
+#[cfg(target_arch = "x86_64")]
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct F8(__m256);
+
+/// A mask of eight lanes: all bits set or clear per lane, so that `select` is a blend.
+#[cfg(target_arch = "x86_64")]
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct M8(__m256);
+
+// SAFETY (every `unsafe` block from here to the tests): each is one AVX or AVX2 intrinsic on
+// values in registers (loads and stores go through arrays of the right size). `F8` and `M8`
+// exist only inside functions compiled with `#[target_feature(enable = "avx2")]` that run
+// after `has_avx2()` (see `F8`), so the CPU has the instructions.
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::*;
+    use std::arch::x86_64::*;
+
+    macro_rules! lanewise {
+        ($t:ident, $trait:ident, $f:ident, $intr:ident) => {
+            impl $trait for $t {
+                type Output = $t;
+                #[inline(always)]
+                fn $f(self, b: $t) -> $t {
+                    $t(unsafe { $intr(self.0, b.0) })
+                }
+            }
+        };
+    }
+    lanewise!(F8, Add, add, _mm256_add_ps);
+    lanewise!(F8, Sub, sub, _mm256_sub_ps);
+    lanewise!(F8, Mul, mul, _mm256_mul_ps);
+    lanewise!(F8, Div, div, _mm256_div_ps);
+    lanewise!(M8, BitAnd, bitand, _mm256_and_ps);
+    lanewise!(M8, BitOr, bitor, _mm256_or_ps);
+
+    #[inline(always)]
+    fn all_ones() -> __m256 {
+        unsafe { _mm256_castsi256_ps(_mm256_set1_epi32(-1)) }
+    }
+
+    impl Not for M8 {
+        type Output = M8;
+        #[inline(always)]
+        fn not(self) -> M8 {
+            M8(unsafe { _mm256_xor_ps(self.0, all_ones()) })
+        }
+    }
+
+    impl Mask for M8 {
+        #[inline(always)]
+        fn from_bits(bits: u32) -> Self {
+            unsafe {
+                let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+                let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bit);
+                M8(_mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bit)))
+            }
+        }
+        #[inline(always)]
+        fn bits(self) -> u32 {
+            unsafe { _mm256_movemask_ps(self.0) as u32 }
+        }
+    }
+
+    macro_rules! cmp {
+        ($f:ident, $pred:ident) => {
+            #[inline(always)]
+            fn $f(self, b: Self) -> M8 {
+                M8(unsafe { _mm256_cmp_ps::<$pred>(self.0, b.0) })
+            }
+        };
+    }
+
+    /// Lanes from an array: a const-friendly transmute (same size, any bits are valid).
+    const fn from_f32s(a: [f32; 8]) -> F8 {
+        // SAFETY: `[f32; 8]` and `__m256` are both 32 bytes of plain floats.
+        F8(unsafe { std::mem::transmute::<[f32; 8], __m256>(a) })
+    }
+
+    impl Lanes<8> for F8 {
+        type Mask = M8;
+        const ZERO: Self = from_f32s([0.0; 8]);
+        const ONE: Self = from_f32s([1.0; 8]);
+        const INFINITY: Self = from_f32s([f32::INFINITY; 8]);
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            F8(unsafe { _mm256_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn from_array(a: [f32; 8]) -> Self {
+            F8(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; 8] {
+            let mut a = [0.0; 8];
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        fn select(mask: M8, a: Self, b: Self) -> Self {
+            // `blendv` takes the second operand where the mask's sign bit is set.
+            F8(unsafe { _mm256_blendv_ps(b.0, a.0, mask.0) })
+        }
+        // Ordered comparisons (false with a NaN) as SSE's `cmplt` & co.; `ne` unordered, as
+        // SSE's `cmpneq` and Rust's `!=`.
+        cmp!(lt, _CMP_LT_OQ);
+        cmp!(le, _CMP_LE_OQ);
+        cmp!(gt, _CMP_GT_OQ);
+        cmp!(ge, _CMP_GE_OQ);
+        cmp!(ne, _CMP_NEQ_UQ);
+        #[inline(always)]
+        fn is_nan(self) -> M8 {
+            M8(unsafe { _mm256_cmp_ps::<_CMP_UNORD_Q>(self.0, self.0) })
+        }
+        #[inline(always)]
+        fn min(self, b: Self) -> Self {
+            F8(unsafe { _mm256_min_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn max(self, b: Self) -> Self {
+            F8(unsafe { _mm256_max_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            F8(unsafe { _mm256_and_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX))) })
+        }
+        #[inline(always)]
+        fn trunc_small(self) -> Self {
+            F8(unsafe { _mm256_round_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(self.0) })
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::__m256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The four lanes' (and where the CPU has AVX2, the eight lanes') operations agree with the
+    /// scalar rules lane by lane, NaN, infinities, signed zeros and subnormals included.
+    #[test]
+    fn lanes_follow_the_scalar_rules() {
+        check::<4, Vec4>();
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::bvh::has_avx2() {
+            // SAFETY: the CPU has AVX2, checked just above.
+            unsafe { check_f8() };
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn check_f8() {
+        check::<8, F8>();
+    }
+
+    #[inline(always)]
+    fn check<const N: usize, L: Lanes<N>>() {
+        let vals = [0.0, -0.0, 1.5, -2.25, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 3e-39];
+        let all = (1u32 << N) - 1;
+        for (i, &a) in vals.iter().enumerate() {
+            for &b in &vals {
+                let (x, y) = (L::splat(a), L::splat(b));
+                let lane = i % N;
+                let min = if a < b { a } else { b };
+                let max = if a > b { a } else { b };
+                for (got, want) in [
+                    (x.min(y), min),
+                    (x.max(y), max),
+                    (x / y, a / b),
+                    (x - y, a - b),
+                    (x + y, a + b),
+                    (x * y, a * b),
+                    (x.abs(), a.abs()),
+                ] {
+                    assert_eq!(got.to_array()[lane].to_bits(), want.to_bits(), "{N} lanes: {a} {b}");
+                }
+                let whole = |want: bool| if want { all } else { 0 };
+                for (got, want) in [
+                    (x.lt(y), a < b),
+                    (x.le(y), a <= b),
+                    (x.gt(y), a > b),
+                    (x.ge(y), a >= b),
+                    (x.ne(y), a != b),
+                    (x.is_nan(), a.is_nan()),
+                ] {
+                    assert_eq!(got.bits(), whole(want), "{N} lanes: {a} {b}");
+                }
+            }
+        }
+        let mut ramp = [0.0; N];
+        for (k, r) in ramp.iter_mut().enumerate() {
+            *r = k as f32 + 0.75;
+        }
+        let ramp = L::from_array(ramp);
+        for bits in [0b1010_0110 & all, 1, all, 0] {
+            let picked = L::select(L::Mask::from_bits(bits), L::ONE, L::ZERO);
+            assert_eq!(
+                picked.lt(L::splat(0.5)).bits(),
+                !bits & all,
+                "{N} lanes: select {bits:b}"
+            );
+            assert_eq!((!L::Mask::from_bits(bits)).bits(), !bits & all);
+            assert_eq!(
+                (L::Mask::from_bits(bits) & L::Mask::from_bits(0b11)).bits(),
+                bits & 0b11
+            );
+            assert_eq!(
+                (L::Mask::from_bits(bits) | L::Mask::from_bits(0b11)).bits(),
+                (bits | 0b11) & all
+            );
+        }
+        let truncated = ramp.trunc_small().to_array();
+        for (k, t) in truncated.into_iter().enumerate() {
+            assert_eq!(t, k as f32, "{N} lanes: lane order or truncation");
+        }
+        assert_eq!(ramp.lt(L::splat(2.0)).bits(), 0b11, "{N} lanes: lane order");
+    }
+}
