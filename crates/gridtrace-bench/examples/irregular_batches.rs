@@ -1,0 +1,64 @@
+//! Batch queries of coherent rays (what Python's `Mesh.intersect` and `Mesh.occluded` run on
+//! each thread's chunk), one thread, best of 5, ms: each paper scene's 512 x 512 camera rays in
+//! row order through `Accel::intersect_batch`, then the shadow rays from their hits towards
+//! the scene's first light through `Accel::occluded_batch`; the BVH and the irregular grid,
+//! their answers checked to agree:
+//! `cargo run --release -p gridtrace-bench --example irregular_batches`
+//! (the mesh folder from `GRIDTRACE_DATA_DIR` or `../shared/data/meshes`).
+use gridtrace::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
+
+/// Best of five runs of `f`, in ms.
+fn best_ms(mut f: impl FnMut()) -> f64 {
+    (0..5)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            f();
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn main() -> gridtrace::Result<()> {
+    let data = std::env::var_os("GRIDTRACE_DATA_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| "../shared/data/meshes".into());
+    const SIZE: u32 = 512;
+    for name in ["bunny", "knight", "torus-knot", "stanford-bunny"] {
+        let scene = gridtrace_bench::scenes::build_paper_scene(name, Some(&data))?.scene;
+        let cam = scene.camera.frame(SIZE, SIZE);
+        let eye: Vec<Ray> = (0..SIZE * SIZE).map(|p| cam.ray(p % SIZE, p / SIZE)).collect();
+        let light = glam::Vec3::from(scene.lights[0].position);
+        let mut line = format!("{name:<15}");
+        let mut answers = Vec::new();
+        for kind in [AccelKind::Bvh, AccelKind::Irregular] {
+            let prepared = scene.prepare_with(kind, Resolution::default(), IrregularParams::default())?;
+            let accel = &prepared.accel;
+            let mut hits = vec![Hit::MISS; eye.len()];
+            let eye_ms = best_ms(|| accel.intersect_batch(&eye, 0.0, f32::INFINITY, kind, &mut hits));
+            // From just off each hit towards the light, in image order.
+            let shadow: Vec<Ray> = eye
+                .iter()
+                .zip(&hits)
+                .filter(|(_, h)| h.is_hit())
+                .map(|(r, h)| {
+                    let p = r.at(h.t * 0.999);
+                    Ray::new(p, (light - p).normalize())
+                })
+                .collect();
+            let mut occluded = vec![false; shadow.len()];
+            let shadow_ms = best_ms(|| accel.occluded_batch(&shadow, 0.0, 1e30, kind, &mut occluded));
+            line += &format!("  {:<9} camera {eye_ms:7.2} ms  shadow {shadow_ms:7.2} ms", kind.name());
+            answers.push((hits.iter().map(|h| h.t).collect::<Vec<_>>(), occluded));
+        }
+        let (bvh, irr) = (&answers[0], &answers[1]);
+        let far = bvh
+            .0
+            .iter()
+            .zip(&irr.0)
+            .filter(|(a, b)| (*a - *b).abs() > 1e-5 * a.abs())
+            .count();
+        assert_eq!(far, 0, "{name}: the structures' camera hits are at other distances");
+        println!("{line}");
+    }
+    Ok(())
+}
