@@ -7,17 +7,6 @@
 //! (the mesh folder from `GRIDTRACE_DATA_DIR` or `../shared/data/meshes`).
 use gridtrace::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
 
-/// Best of five runs of `f`, in ms.
-fn best_ms(mut f: impl FnMut()) -> f64 {
-    (0..5)
-        .map(|_| {
-            let t0 = std::time::Instant::now();
-            f();
-            t0.elapsed().as_secs_f64() * 1e3
-        })
-        .fold(f64::INFINITY, f64::min)
-}
-
 fn main() -> gridtrace::Result<()> {
     let data = std::env::var_os("GRIDTRACE_DATA_DIR")
         .map(std::path::PathBuf::from)
@@ -34,7 +23,8 @@ fn main() -> gridtrace::Result<()> {
             let prepared = scene.prepare_with(kind, Resolution::default(), IrregularParams::default())?;
             let accel = &prepared.accel;
             let mut hits = vec![Hit::MISS; eye.len()];
-            let eye_ms = best_ms(|| accel.intersect_batch(&eye, 0.0, f32::INFINITY, kind, &mut hits));
+            let eye_ms =
+                gridtrace_bench::best_of_ms(5, || accel.intersect_batch(&eye, 0.0, f32::INFINITY, kind, &mut hits));
             // From just off each hit towards the light, in image order.
             let shadow: Vec<Ray> = eye
                 .iter()
@@ -46,7 +36,8 @@ fn main() -> gridtrace::Result<()> {
                 })
                 .collect();
             let mut occluded = vec![false; shadow.len()];
-            let shadow_ms = best_ms(|| accel.occluded_batch(&shadow, 0.0, 1e30, kind, &mut occluded));
+            let shadow_ms =
+                gridtrace_bench::best_of_ms(5, || accel.occluded_batch(&shadow, 0.0, 1e30, kind, &mut occluded));
             line += &format!("  {:<9} camera {eye_ms:7.2} ms  shadow {shadow_ms:7.2} ms", kind.name());
             answers.push((hits.iter().map(|h| h.t).collect::<Vec<_>>(), occluded));
         }

@@ -23,17 +23,6 @@ fn blocks(cam: &CameraFrame, size: u32, (w, h): (u32, u32)) -> (Vec<Ray>, Vec<us
     (rays, pixel)
 }
 
-/// Best of five runs of `f`, in ms.
-fn best_ms(mut f: impl FnMut()) -> f64 {
-    (0..5)
-        .map(|_| {
-            let t0 = std::time::Instant::now();
-            f();
-            t0.elapsed().as_secs_f64() * 1e3
-        })
-        .fold(f64::INFINITY, f64::min)
-}
-
 /// The hits of packets, by pixel: eight rays in AVX registers, or (`fours`) as two packets of
 /// four.
 fn packets(
@@ -69,7 +58,7 @@ fn main() -> gridtrace::Result<()> {
         let n = eye.len();
         let bvh = scene.prepare_with(AccelKind::Bvh, Resolution::default(), IrregularParams::default())?;
         let mut want = vec![Hit::MISS; n];
-        let bvh_ms = best_ms(|| {
+        let bvh_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in want.iter_mut().zip(&eye) {
                 *h = bvh
                     .accel
@@ -82,14 +71,14 @@ fn main() -> gridtrace::Result<()> {
             unreachable!("an irregular grid was asked for")
         };
         let mut single = vec![Hit::MISS; n];
-        let single_ms = best_ms(|| {
+        let single_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in single.iter_mut().zip(&eye) {
                 *h = accel.intersect(r, 0.0, f32::INFINITY, AccelKind::Irregular, &mut NoCounters);
             }
         });
         let (mut four, mut eight) = (vec![Hit::MISS; n], vec![Hit::MISS; n]);
-        let four_ms = best_ms(|| packets(g, &accel.tris, &quads, &mut four, true));
-        let eight_ms = best_ms(|| packets(g, &accel.tris, &octs, &mut eight, false));
+        let four_ms = gridtrace_bench::best_of_ms(5, || packets(g, &accel.tris, &quads, &mut four, true));
+        let eight_ms = gridtrace_bench::best_of_ms(5, || packets(g, &accel.tris, &octs, &mut eight, false));
         assert_eq!(single, four, "{name}: packets of four differ from single rays");
         assert_eq!(single, eight, "{name}: packets of eight differ from single rays");
         println!(

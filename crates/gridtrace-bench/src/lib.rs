@@ -187,6 +187,17 @@ impl GridInfo {
     }
 }
 
+/// The best of `runs` runs of `f`, in ms (the examples' timer).
+pub fn best_of_ms(runs: usize, mut f: impl FnMut()) -> f64 {
+    (0..runs)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            f();
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 pub fn resolution_name(r: Resolution) -> String {
     match r {
         Resolution::Auto { lambda } => format!("auto:{lambda}"),
