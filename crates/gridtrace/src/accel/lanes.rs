@@ -1,7 +1,7 @@
 //! Lanes of `f32`: the SIMD vocabulary that the packet triangle test (`triangle.rs`) and the
 //! irregular grid's packet walk (`irregular/packet.rs`) are written in, once, for four lanes
-//! (glam's `Vec4`, SSE) and for eight (`F8`, one AVX register where the code is compiled for
-//! AVX2, two SSE registers elsewhere).
+//! (glam's `Vec4`, SSE) and for eight (`F8`, one AVX register, only in code compiled for AVX2;
+//! without AVX2 a packet of eight runs as two packets of four).
 //!
 //! Every operation is IEEE arithmetic lane by lane, so a lane rounds exactly as the scalar code
 //! does (Rust never fuses multiply-adds on its own): the packet code's bit-for-bit agreement

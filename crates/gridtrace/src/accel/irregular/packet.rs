@@ -113,6 +113,11 @@ impl IrregularGrid {
         counters: &mut [C],
         fours: bool,
     ) -> [Hit; PACKET] {
+        // Checked here for both paths (`walk_fours` would otherwise zip them silently).
+        assert!(
+            rays.len() <= PACKET && counters.len() == rays.len(),
+            "a packet is up to {PACKET} rays, a counter each"
+        );
         #[cfg(target_arch = "x86_64")]
         if crate::accel::bvh::has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
