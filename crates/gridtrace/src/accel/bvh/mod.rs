@@ -84,7 +84,6 @@ impl BvhAccel {
 
     /// Closest hit with `t_min < t < t_max`; `tri` indexes the triangles given to `build`.
     /// `counters.cell()` counts nodes visited.
-    #[inline]
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         let mut w = Walk::new(ray, t_min, t_max);
         self.walk::<false, C>(&mut w, counters);
@@ -92,7 +91,6 @@ impl BvhAccel {
     }
 
     /// Any hit with `t_min < t < t_max`.
-    #[inline]
     pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         let mut w = Walk::new(ray, t_min, t_max);
         self.walk::<true, C>(&mut w, counters);

@@ -205,7 +205,6 @@ impl Walk {
         };
     }
 
-    #[inline]
     pub(super) fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
         Walk {
             origin: ray.origin.to_array().map(Vec4::splat),
