@@ -4,16 +4,15 @@
 //! the scene's first light through `Accel::occluded_batch`; the BVH and the irregular grid,
 //! their answers checked to agree:
 //! `cargo run --release -p gridtrace-bench --example irregular_batches`
-//! (the mesh folder from `GRIDTRACE_DATA_DIR` or `../shared/data/meshes`).
+//! (the mesh folder found as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else
+//! `shared/data/meshes` beside the checkout).
 use gridtrace::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
 
 fn main() -> gridtrace::Result<()> {
-    let data = std::env::var_os("GRIDTRACE_DATA_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| "../shared/data/meshes".into());
+    let data = gridtrace_bench::scenes::find_data_dir(None);
     const SIZE: u32 = 512;
     for name in ["bunny", "knight", "torus-knot", "stanford-bunny"] {
-        let scene = gridtrace_bench::scenes::build_paper_scene(name, Some(&data))?.scene;
+        let scene = gridtrace_bench::scenes::build_paper_scene(name, data.as_deref())?.scene;
         let cam = scene.camera.frame(SIZE, SIZE);
         let eye: Vec<Ray> = (0..SIZE * SIZE).map(|p| cam.ray(p % SIZE, p / SIZE)).collect();
         let light = glam::Vec3::from(scene.lights[0].position);

@@ -2,8 +2,8 @@
 //! room: in the cell the ray starts in, in the cell of its hit, or in cells between, over every
 //! fourth pixel of a 512 x 512 frame:
 //! `cargo run --release -p gridtrace-bench --example irregular_camera_cells -- [PARAMS]`
-//! (`PARAMS` as `--irregular` spells them; the mesh folder from `GRIDTRACE_DATA_DIR` or
-//! `../shared/data/meshes`).
+//! (`PARAMS` as `--irregular` spells them; the mesh folder found as `gridtrace bench`
+//! finds it: `GRIDTRACE_DATA_DIR`, else `shared/data/meshes` beside the checkout).
 use gridtrace::accel::{AccelKind, Hit, IrregularParams, Resolution, TraversalCounters};
 
 fn main() -> gridtrace::Result<()> {
@@ -11,9 +11,8 @@ fn main() -> gridtrace::Result<()> {
         Some(p) => p.parse().map_err(gridtrace::Error::InvalidInput)?,
         None => IrregularParams::default(),
     };
-    let data = std::env::var_os("GRIDTRACE_DATA_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| "../shared/data/meshes".into());
+    let data = gridtrace_bench::scenes::find_data_dir(None)
+        .ok_or_else(|| gridtrace::Error::InvalidInput("no mesh data folder found: set GRIDTRACE_DATA_DIR".into()))?;
     let scene = gridtrace_bench::scenes::bunny_room(&data)?;
     let prepared = scene.prepare_with(AccelKind::Irregular, Resolution::default(), params)?;
     let grid = prepared.accel.irregular().expect("an irregular grid");

@@ -2,7 +2,8 @@
 //! one, and through the irregular grid one by one, in packets of four (2x2 pixels, SSE; a
 //! packet of eight as two of four, as CPUs without AVX2 run it) and of eight (4x2 pixels, AVX)
 //! on one thread (best of 5, ms); every packet's hits are checked to equal the single rays': `cargo run --release -p gridtrace-bench --example irregular_packets`
-//! (the mesh folder from `GRIDTRACE_DATA_DIR` or `../shared/data/meshes`).
+//! (the mesh folder found as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else
+//! `shared/data/meshes` beside the checkout).
 use gridtrace::accel::{AccelKind, Hit, IrregularParams, NoCounters, PACKET, Ray, Resolution, Structure};
 use gridtrace::scene::CameraFrame;
 
@@ -46,12 +47,10 @@ fn packets(
 }
 
 fn main() -> gridtrace::Result<()> {
-    let data = std::env::var_os("GRIDTRACE_DATA_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| "../shared/data/meshes".into());
+    let data = gridtrace_bench::scenes::find_data_dir(None);
     const SIZE: u32 = 512;
     for name in ["bunny", "knight", "torus-knot", "stanford-bunny"] {
-        let scene = gridtrace_bench::scenes::build_paper_scene(name, Some(&data))?.scene;
+        let scene = gridtrace_bench::scenes::build_paper_scene(name, data.as_deref())?.scene;
         let cam = scene.camera.frame(SIZE, SIZE);
         let eye = blocks(&cam, SIZE, (1, 1)).0;
         let (quads, octs) = (blocks(&cam, SIZE, (2, 2)), blocks(&cam, SIZE, (4, 2)));

@@ -2,15 +2,14 @@
 //! through the irregular grid with each parameter set given, beside the BVH, with the work per
 //! ray and the structure's bytes per triangle:
 //! `cargo run --release -p gridtrace-bench --example irregular_render_params -- [cast|shadow|trace] [PARAMS ...]`
-//! (each `PARAMS` as `--irregular` spells them, `""` for the defaults; the mesh folder from
-//! `GRIDTRACE_DATA_DIR` or `../shared/data/meshes`).
+//! (each `PARAMS` as `--irregular` spells them, `""` for the defaults; the mesh folder found
+//! as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else `shared/data/meshes` beside the
+//! checkout).
 use gridtrace::accel::{AccelKind, IrregularParams, Resolution};
 use gridtrace::render::{Mode, RenderOptions};
 
 fn main() -> gridtrace::Result<()> {
-    let data = std::env::var_os("GRIDTRACE_DATA_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| "../shared/data/meshes".into());
+    let data = gridtrace_bench::scenes::find_data_dir(None);
     let mode = match std::env::args().nth(1).as_deref() {
         Some("shadow") => Mode::Shadow,
         Some("trace") => Mode::Trace,
@@ -21,7 +20,7 @@ fn main() -> gridtrace::Result<()> {
         sets.push(String::new());
     }
     for name in ["bunny", "knight", "torus-knot", "stanford-bunny"] {
-        let scene = gridtrace_bench::scenes::build_paper_scene(name, Some(&data))?.scene;
+        let scene = gridtrace_bench::scenes::build_paper_scene(name, data.as_deref())?.scene;
         let runs = std::iter::once((AccelKind::Bvh, String::new()))
             .chain(sets.iter().map(|s| (AccelKind::Irregular, s.clone())));
         for (kind, set) in runs {
