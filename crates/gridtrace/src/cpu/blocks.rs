@@ -1,10 +1,12 @@
-//! The renderer's pixels in 4x2 blocks, for structures that walk packets of rays
-//! (`Accel::walks_packets`: the irregular grid). The eight pixels' paths (`path.rs`) go through
+//! The renderer's pixels in 4x2 blocks, for structures that trace packets of rays faster than
+//! single rays (`Accel::walks_packets`: the irregular grid walks them together, the BVH
+//! interleaves their walks to overlap each ray's chain of dependent steps). The eight pixels'
+//! paths (`path.rs`) go through
 //! the stages side by side: their rays' closest hits as one packet (`Accel::intersect_packet`),
 //! then per light the shadow rays from those hits as one packet (`Accel::occluded_packet`),
 //! then their mirror rays as the next packet, until every path has ended. Neighbouring pixels'
 //! rays are coherent at every bounce off a smooth surface, which is what a packet walk needs
-//! (docs/design.md "The irregular grid": packets). The same rays and stages as pixel by pixel
+//! (docs/design.md "The irregular grid": packets; the BVH gains even on incoherent ones). The same rays and stages as pixel by pixel
 //! (`trace_pixel`), so the same image, bit for bit.
 
 use glam::Vec3;

@@ -278,17 +278,21 @@ mod tests {
     use crate::render::Ablation;
     use crate::scene::builtin;
 
-    /// The irregular grid's renders trace every ray in 4x2 packets (`blocks.rs`: eye, shadow
-    /// and mirror rays); every pixel equals, bit for bit, what the pixel-by-pixel walk
+    /// The renders of the structures that walk packets (the irregular grid, rays together; the
+    /// BVH, rays interleaved) trace every ray in 4x2 packets (`blocks.rs`: eye, shadow and
+    /// mirror rays); every pixel equals, bit for bit, what the pixel-by-pixel walk
     /// (`trace_pixel`, one ray at a time) gives, with the same rays, and heat images count
     /// each eye ray's own cells and tests: odd sizes (blocks cut at the right edge and the
     /// band's last row), a band of rows starting on an odd row, every shading mode (two levels
     /// of mirrors in `mirror-spheres`), and the ablation that traces shadow rays one by one.
     #[test]
     fn packet_renders_equal_single_rays() {
-        for name in ["knot-box", "mirror-spheres", "sparse-room"] {
+        for (name, kind) in [AccelKind::Irregular, AccelKind::Bvh]
+            .into_iter()
+            .flat_map(|kind| ["knot-box", "mirror-spheres", "sparse-room"].map(|name| (name, kind)))
+        {
             let scene = builtin::scene(name).unwrap();
-            let prepared = scene.prepare_for(AccelKind::Irregular, Resolution::default()).unwrap();
+            let prepared = scene.prepare_for(kind, Resolution::default()).unwrap();
             assert!(prepared.accel.walks_packets());
             for (mode, ablation, rows) in [
                 (Mode::Cast, Ablation::default(), None),
@@ -301,7 +305,7 @@ mod tests {
                     width: 37,
                     height: 23,
                     mode,
-                    accel: AccelKind::Irregular,
+                    accel: kind,
                     ablation,
                     rows,
                 };
@@ -324,7 +328,7 @@ mod tests {
                     assert_eq!(
                         got.to_array().map(f32::to_bits),
                         want.to_array().map(f32::to_bits),
-                        "{name} {mode:?} pixel ({x}, {y}): packets {got}, alone {want}"
+                        "{name} {kind:?} {mode:?} pixel ({x}, {y}): packets {got}, alone {want}"
                     );
                 }
                 if mode != Mode::Heat {

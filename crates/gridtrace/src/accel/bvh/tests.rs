@@ -451,3 +451,74 @@ fn refit_traversal_equals_brute_force() {
         assert!(hits > 1000 && hits < 3900, "{name}: a varied ray set ({hits} hits)");
     }
 }
+
+/// Packets of 1-8 rays (`intersect_packet`, `occluded_packet`: the rays' walks interleaved)
+/// give each ray the hit and the counts of its own walk (`intersect`, `occluded`), bit for
+/// bit: coherent packets (rays from one point through neighbouring directions, as a block of
+/// pixels), incoherent ones, per-ray `t_max` for the any-hit queries, and rays parallel to
+/// slabs. With AVX2 the packets run its build, the single rays too; the lanes past a packet's
+/// length are misses.
+#[test]
+fn packets_equal_single_rays() {
+    use crate::accel::{PACKET, TraversalCounters};
+    let mut rng = crate::util::Rng::new(0xB7_9AC4);
+    let (positions, triangles) = random_mesh(&mut rng, 4000);
+    let accel = BvhAccel::build(&tris_of(&positions, &triangles));
+    let bits = |h: &Hit| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits());
+    let (mut hits, mut blocked) = (0, 0);
+    for round in 0..4000 {
+        let n = 1 + round % PACKET;
+        let rays: Vec<Ray> = if round % 2 == 0 {
+            let o = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), -3.0);
+            let d = Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), 1.0);
+            (0..n)
+                .map(|k| Ray::new(o, d + Vec3::new((k % 4) as f32, (k / 4) as f32, 0.0) * 0.002))
+                .collect()
+        } else {
+            (0..n)
+                .map(|_| {
+                    let o = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+                    let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                    if rng.below(6) == 0 {
+                        d[rng.below(3) as usize] = 0.0;
+                    }
+                    Ray::new(o, if d == Vec3::ZERO { Vec3::X } else { d })
+                })
+                .collect()
+        };
+        let t_max: [f32; PACKET] = std::array::from_fn(|_| rng.range(0.5, 6.0));
+        let mut counted = vec![TraversalCounters::default(); n];
+        let got = accel.intersect_packet(&rays, 0.0, f32::INFINITY, &mut counted);
+        for (k, ray) in rays.iter().enumerate() {
+            let mut c = TraversalCounters::default();
+            let want = accel.intersect(ray, 0.0, f32::INFINITY, &mut c);
+            assert_eq!(bits(&got[k]), bits(&want), "round {round}, ray {k}: closest hit");
+            assert_eq!(counted[k], c, "round {round}, ray {k}: closest-hit counts");
+            hits += want.is_hit() as usize;
+        }
+        assert!(
+            got[n..].iter().all(|h| !h.is_hit()),
+            "round {round}: lanes past the packet miss"
+        );
+        let mut counted = vec![TraversalCounters::default(); n];
+        let got = accel.occluded_packet(&rays, 0.0, t_max, &mut counted);
+        for (k, ray) in rays.iter().enumerate() {
+            let mut c = TraversalCounters::default();
+            let want = accel.occluded(ray, 0.0, t_max[k], &mut c);
+            assert_eq!(got[k], want, "round {round}, ray {k}: any hit before {}", t_max[k]);
+            assert_eq!(counted[k], c, "round {round}, ray {k}: any-hit counts");
+            blocked += want as usize;
+        }
+        assert!(
+            got[n..].iter().all(|&b| !b),
+            "round {round}: lanes past the packet are clear"
+        );
+    }
+    // Neither kind of answer is all one way: the comparison checks something.
+    let rays = (0..4000).map(|r| 1 + r % PACKET).sum::<usize>();
+    assert!(hits > rays / 10 && hits < rays * 9 / 10, "{hits} of {rays} rays hit");
+    assert!(
+        blocked > rays / 10 && blocked < rays * 9 / 10,
+        "{blocked} of {rays} rays blocked"
+    );
+}

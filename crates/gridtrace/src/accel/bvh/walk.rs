@@ -205,6 +205,33 @@ impl Walk {
         };
     }
 
+    /// Sets up a walk for `ray` in `slot` in place, every field but the (uninitialised) stack
+    /// written one by one: `slot.write(Walk::new(..))` would copy the whole walk, stack and all
+    /// (5.5 KiB), which the compiler does with a `memmove` (measured: a third of a render's time
+    /// when packets of eight rays were set up that way).
+    #[inline(always)]
+    pub(super) fn start_in<'w>(slot: &'w mut MaybeUninit<Walk>, ray: &Ray, t_min: f32, t_max: f32) -> &'w mut Walk {
+        let w = slot.as_mut_ptr();
+        // SAFETY: `w` points to memory of a `Walk`; every field is written (without reading or
+        // dropping the old contents: all are `Copy`) before the reference is made, except
+        // `stack`, an array of `MaybeUninit`, for which any contents are valid.
+        unsafe {
+            (&raw mut (*w).origin).write(ray.origin.to_array().map(Vec4::splat));
+            (&raw mut (*w).dir).write(ray.dir.to_array().map(Vec4::splat));
+            (&raw mut (*w).r).write(BoxRay::new(ray));
+            (&raw mut (*w).t_min).write(t_min);
+            (&raw mut (*w).t_far).write(t_max);
+            (&raw mut (*w).t_box).write(t_max * T_SLOP);
+            (&raw mut (*w).best).write(Hit { t: t_max, ..Hit::MISS });
+            (&raw mut (*w).sp).write(0);
+            (&raw mut (*w).current).write(Pending {
+                child: ChildRef::node(0),
+                t_enter: t_min,
+            });
+            slot.assume_init_mut()
+        }
+    }
+
     pub(super) fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
         Walk {
             origin: ray.origin.to_array().map(Vec4::splat),
