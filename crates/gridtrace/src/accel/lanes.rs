@@ -334,6 +334,41 @@ mod tests {
                 }
             }
         }
+        // A different pair in every lane (the values above, shifted against each other): each
+        // lane's result is its own pair's, so no lane reads a neighbour's operands.
+        for shift in 0..vals.len() {
+            let (mut a, mut b) = ([0.0; N], [0.0; N]);
+            for k in 0..N {
+                a[k] = vals[k % vals.len()];
+                b[k] = vals[(k + shift) % vals.len()];
+            }
+            let (x, y) = (L::from_array(a), L::from_array(b));
+            let sums = [x.min(y), x.max(y), x / y, x - y, x + y, x * y, x.abs()].map(L::to_array);
+            let masks = [x.lt(y), x.le(y), x.gt(y), x.ge(y), x.ne(y), x.is_nan()].map(Mask::bits);
+            for k in 0..N {
+                let (a, b) = (a[k], b[k]);
+                let want = [
+                    if a < b { a } else { b },
+                    if a > b { a } else { b },
+                    a / b,
+                    a - b,
+                    a + b,
+                    a * b,
+                    a.abs(),
+                ];
+                for (op, (got, want)) in sums.iter().zip(want).enumerate() {
+                    assert_eq!(
+                        got[k].to_bits(),
+                        want.to_bits(),
+                        "{N} lanes: op {op}, lane {k}: {a} {b}"
+                    );
+                }
+                let want = [a < b, a <= b, a > b, a >= b, a != b, a.is_nan()];
+                for (op, (got, want)) in masks.iter().zip(want).enumerate() {
+                    assert_eq!(got >> k & 1 == 1, want, "{N} lanes: comparison {op}, lane {k}: {a} {b}");
+                }
+            }
+        }
         let mut ramp = [0.0; N];
         for (k, r) in ramp.iter_mut().enumerate() {
             *r = k as f32 + 0.75;

@@ -207,7 +207,8 @@ fn packets_equal_single_rays() {
             let pixel = [0.0, 1e-3, 2e-2][i % 3];
             let rays: Vec<Ray> = (0..n)
                 .map(|k| {
-                    let mut d = match i % 4 {
+                    // By `i / PACKET`, not `i`: incoherent packets of every length, one to eight.
+                    let mut d = match (i / PACKET) % 4 {
                         // Incoherent: each ray its own origin and direction.
                         3 => Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)),
                         // A 4x2 block of a camera: the same eye, directions a pixel apart.
@@ -220,7 +221,7 @@ fn packets_equal_single_rays() {
                         d.y = 0.0;
                         d.z = 0.0;
                     }
-                    let o = if i % 4 == 3 {
+                    let o = if (i / PACKET) % 4 == 3 {
                         Vec3::new(rng.range(-3.0, 13.0), rng.range(-3.0, 13.0), rng.range(-3.0, 13.0))
                     } else {
                         eye
