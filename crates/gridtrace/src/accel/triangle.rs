@@ -419,6 +419,18 @@ mod tests {
     use crate::accel::lanes::{load3, splat3};
     use crate::util::Rng;
 
+    /// Whether a lane's answer is the scalar test's: both misses, or both hits with the same
+    /// bits of t, u and v.
+    fn same_bits(want: Option<TriHit>, lane: Option<TriHit>) -> bool {
+        match (want, lane) {
+            (Some(w), Some(l)) => {
+                w.t.to_bits() == l.t.to_bits() && w.u.to_bits() == l.u.to_bits() && w.v.to_bits() == l.v.to_bits()
+            }
+            (None, None) => true,
+            _ => false,
+        }
+    }
+
     /// The four-lane test gives bit for bit what the scalar one gives, lane by lane: random
     /// triangles (some slivers, some huge, some far away) and rays aimed at their edges, vertices
     /// and interiors, from near and far, including grazing ones and limits on t.
@@ -470,15 +482,7 @@ mod tests {
             for k in 0..4 {
                 let want = tris.get(k).and_then(|t| t.intersect(origin, dir, t_min, t_max));
                 let lane = (got.mask() >> k & 1 == 1).then(|| got.lane(k));
-                let same = match (want, lane) {
-                    (Some(w), Some(l)) => {
-                        w.t.to_bits() == l.t.to_bits()
-                            && w.u.to_bits() == l.u.to_bits()
-                            && w.v.to_bits() == l.v.to_bits()
-                    }
-                    (None, None) => true,
-                    _ => false,
-                };
+                let same = same_bits(want, lane);
                 assert!(same, "round {round} lane {k}: scalar {want:?}, four lanes {lane:?}");
                 hits += want.is_some() as u32;
                 edge_hits += (want.is_some() && wv == 0.0) as u32;
@@ -558,15 +562,7 @@ mod tests {
                 let d = Vec3::new(dir[0][k], dir[1][k], dir[2][k]);
                 let want = tri.intersect(o, d, 0.0, t_max[k]);
                 let lane = (got.mask() >> k & 1 == 1).then(|| got.lane(k));
-                let same = match (want, lane) {
-                    (Some(w), Some(l)) => {
-                        w.t.to_bits() == l.t.to_bits()
-                            && w.u.to_bits() == l.u.to_bits()
-                            && w.v.to_bits() == l.v.to_bits()
-                    }
-                    (None, None) => true,
-                    _ => false,
-                };
+                let same = same_bits(want, lane);
                 assert!(
                     same,
                     "{N} lanes, round {round} lane {k}: scalar {want:?}, lanes {lane:?}"
