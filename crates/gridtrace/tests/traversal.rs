@@ -1,10 +1,11 @@
 //! Traversal equals brute force: closest t and triangle id for 100,000 adversarial rays per
 //! scene, for the plain grid, proximity clouds and the BVH; any-hit agrees with closest hit, and
-//! the batch queries agree with the per-ray ones.
+//! the batch queries and packets of one to eight rays agree with the per-ray ones.
 
 use glam::Vec3;
 use gridtrace::accel::{
-    Accel, AccelKind, Grid, Hit, NoCounters, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
+    Accel, AccelKind, Grid, Hit, NoCounters, PACKET, Resolution, TraversalCounters, TriAccel, brute_force_intersect,
+    brute_force_occluded,
 };
 use gridtrace::scene::builtin;
 use gridtrace::testing::{AllAccels, flat_scene, ray_set, triangle_soup};
@@ -111,6 +112,48 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                 "{name} {} occluded batch {r:?}",
                 kind.name()
             );
+        }
+        // Packets of one to eight of these rays (what the renderer hands every structure, as
+        // 4x2 blocks; here incoherent ones): each ray's hit, any-hit answer up to its own
+        // limit, and counts are its single-ray walk's, bit for bit.
+        let accel = all.get(kind);
+        let (mut at, mut len) = (0, 1);
+        while at < rays.len() {
+            let packet = &rays[at..(at + len).min(rays.len())];
+            let n = packet.len();
+            let mut counted = vec![TraversalCounters::default(); n];
+            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, kind, &mut counted);
+            let limits: [f32; PACKET] = std::array::from_fn(|k| [f32::INFINITY, 1.0, 0.25][(at + k) % 3]);
+            let mut counted_any = vec![TraversalCounters::default(); n];
+            let blocked = accel.occluded_packet(packet, 0.0, limits, kind, &mut counted_any);
+            for (k, r) in packet.iter().enumerate() {
+                let mut c = TraversalCounters::default();
+                let want = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut c);
+                assert_eq!(
+                    (
+                        got[k].t.to_bits(),
+                        got[k].tri,
+                        got[k].u.to_bits(),
+                        got[k].v.to_bits(),
+                        counted[k]
+                    ),
+                    (want.t.to_bits(), want.tri, want.u.to_bits(), want.v.to_bits(), c),
+                    "{name} {}: ray {k} of a packet of {n}, {r:?}",
+                    kind.name()
+                );
+                let mut c = TraversalCounters::default();
+                let want = accel.occluded(r, 0.0, limits[k], kind, &mut c);
+                assert_eq!(
+                    (blocked[k], counted_any[k]),
+                    (want, c),
+                    "{name} {}: any hit of ray {k} of a packet of {n} before {}, {r:?}",
+                    kind.name(),
+                    limits[k]
+                );
+            }
+            assert!(got[n..].iter().all(|h| !h.is_hit()) && !blocked[n..].iter().any(|&b| b));
+            at += n;
+            len = len % PACKET + 1;
         }
         assert!(
             bad.is_empty(),

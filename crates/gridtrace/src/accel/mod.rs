@@ -239,20 +239,13 @@ impl Accel {
         }
     }
 
-    /// Whether this structure traces packets of rays faster than their rays one by one
-    /// (`intersect_packet`, `occluded_packet`), so that callers with coherent rays should hand
-    /// it 4x2 blocks (the CPU renderer does: `cpu/blocks.rs`). The irregular grid walks a
-    /// packet's rays together, the BVH interleaves their walks; the uniform grids trace them
-    /// one by one.
-    pub fn walks_packets(&self) -> bool {
-        matches!(self.structure, Structure::Irregular(_) | Structure::Bvh(_))
-    }
-
-    /// Closest hits of a packet of up to `PACKET` coherent rays (a 4x2 block of pixels' rays),
-    /// each counted into its own `counters[i]`: the same hits and counts as `intersect` ray by
-    /// ray. The irregular grid walks the packet together (`IrregularGrid::intersect_packet`),
-    /// the BVH interleaves the rays' walks (`BvhAccel::intersect_packet`); the uniform grids
-    /// trace its rays one by one. Hits past `rays.len()` are misses.
+    /// Closest hits of a packet of up to `PACKET` coherent rays (a 4x2 block of pixels' rays:
+    /// the CPU renderer's, `cpu/blocks.rs`), each counted into its own `counters[i]`: the same
+    /// hits and counts as `intersect` ray by ray. The irregular grid walks the packet's rays
+    /// together, a ray per SIMD lane (`IrregularGrid::intersect_packet`); the BVH and the
+    /// uniform grids interleave the rays' own walks, a step each in turn, so that one ray's
+    /// chain of dependent steps overlaps the others' (`BvhAccel::intersect_packet`,
+    /// `Grid::intersect_packet`). Hits past `rays.len()` are misses.
     #[inline]
     pub fn intersect_packet<C: Counters>(
         &self,
@@ -270,13 +263,7 @@ impl Accel {
         match &self.structure {
             Structure::Irregular(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, counters),
             Structure::Bvh(b) => b.intersect_packet(rays, t_min, t_max, counters),
-            _ => {
-                let mut hits = [Hit::MISS; PACKET];
-                for ((h, r), c) in hits.iter_mut().zip(rays).zip(counters) {
-                    *h = self.intersect(r, t_min, t_max, kind, c);
-                }
-                hits
-            }
+            Structure::Grid(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, stepping(kind), counters),
         }
     }
 
@@ -300,13 +287,7 @@ impl Accel {
         match &self.structure {
             Structure::Irregular(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, counters),
             Structure::Bvh(b) => b.occluded_packet(rays, t_min, t_max, counters),
-            _ => {
-                let mut hits = [false; PACKET];
-                for (i, (r, c)) in rays.iter().zip(counters).enumerate() {
-                    hits[i] = self.occluded(r, t_min, t_max[i], kind, c);
-                }
-                hits
-            }
+            Structure::Grid(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, stepping(kind), counters),
         }
     }
 

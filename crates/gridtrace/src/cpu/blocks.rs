@@ -1,13 +1,13 @@
-//! The renderer's pixels in 4x2 blocks, for structures that trace packets of rays faster than
-//! single rays (`Accel::walks_packets`: the irregular grid walks them together, the BVH
-//! interleaves their walks to overlap each ray's chain of dependent steps). The eight pixels'
-//! paths (`path.rs`) go through
-//! the stages side by side: their rays' closest hits as one packet (`Accel::intersect_packet`),
-//! then per light the shadow rays from those hits as one packet (`Accel::occluded_packet`),
-//! then their mirror rays as the next packet, until every path has ended. Neighbouring pixels'
-//! rays are coherent at every bounce off a smooth surface, which is what a packet walk needs
-//! (docs/design.md "The irregular grid": packets; the BVH gains even on incoherent ones). The same rays and stages as pixel by pixel
-//! (`trace_pixel`), so the same image, bit for bit.
+//! The renderer's pixels in 4x2 blocks: every structure traces a packet of rays faster than
+//! its rays one by one (the irregular grid walks them together; the BVH and the uniform grids
+//! interleave their walks, so that each ray's chain of dependent steps overlaps the others').
+//! The eight pixels' paths (`path.rs`) go through the stages side by side: their rays' closest
+//! hits as one packet (`Accel::intersect_packet`), then per light the shadow rays from those
+//! hits as one packet (`Accel::occluded_packet`), then their mirror rays as the next packet,
+//! until every path has ended. Neighbouring pixels' rays are coherent at every bounce off a
+//! smooth surface, which is what the irregular grid's packet walk needs (docs/design.md "The
+//! irregular grid": packets); interleaving needs no coherence. The same rays and stages as
+//! pixel by pixel (`trace_pixel`), so the same image, bit for bit.
 
 use glam::Vec3;
 

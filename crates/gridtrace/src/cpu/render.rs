@@ -1,7 +1,8 @@
 //! CPU renderer. Each pixel follows exactly the steps the GPU wavefront kernels take (eye ray,
-//! shading with shadow rays, up to two reflection rays: `path.rs`), so the two images agree;
-//! pixel by pixel here, or in 4x2 blocks whose rays are traced as packets (`blocks.rs`) for a
-//! structure that walks packets.
+//! shading with shadow rays, up to two reflection rays: `path.rs`), so the two images agree.
+//! Pixels go in 4x2 blocks whose rays are traced as packets (`blocks.rs`); `trace_pixel` is
+//! the same path one ray at a time (the reference the block renders are tested against, and
+//! what `rays` records).
 
 use std::time::Instant;
 
@@ -109,11 +110,7 @@ fn render_generic<C: Collect>(
             let mut total = TraversalCounters::default();
             let first_y = frame_rows.start + (band * BAND) as u32;
             let n_rows = rows.len() / width;
-            if scene.accel.walks_packets() {
-                trace_blocks::<C>(scene, &cam, view.lights, opts, (first_y, rows), (&mut rays, &mut total));
-            } else {
-                trace_rows::<C>(scene, &cam, view.lights, opts, (first_y, rows), (&mut rays, &mut total));
-            }
+            trace_blocks::<C>(scene, &cam, view.lights, opts, (first_y, rows), (&mut rays, &mut total));
             if let Some(p) = progress {
                 p(n_rows as u32);
             }
@@ -174,29 +171,6 @@ pub fn trace_pixel_observed(
         (&mut rays, &mut NoCounters),
         observer,
     )
-}
-
-/// Traces the pixels of a band of rows (frame rows `first_y..`, `rows` holding them) one by
-/// one, adding what it traced to `rays` and its work to `total`. A function of its own, kept
-/// apart from `trace_blocks`: with both inlined into the band's closure the BVH's renders were
-/// 8-11% slower (docs/benchmarks.md "Packets of eight").
-#[inline(never)]
-fn trace_rows<C: Collect>(
-    scene: &PreparedScene,
-    cam: &CameraFrame,
-    lights: &[PointLight],
-    opts: &RenderOptions,
-    (first_y, rows): (u32, &mut [Vec3]),
-    (rays, total): (&mut RayCounts, &mut TraversalCounters),
-) {
-    let width = opts.width as usize;
-    for (i, px) in rows.iter_mut().enumerate() {
-        let (x, y) = ((i % width) as u32, first_y + (i / width) as u32);
-        let mut c = C::default();
-        let color = trace_pixel(scene, cam, lights, (x, y), opts, (rays, &mut c), &mut ());
-        *px = pixel_value(opts, color, &c);
-        *total += c.total();
-    }
 }
 
 /// One pixel's path (`Path`) ray by ray: the eye ray, shading with a shadow ray per light,
@@ -278,22 +252,26 @@ mod tests {
     use crate::render::Ablation;
     use crate::scene::builtin;
 
-    /// The renders of the structures that walk packets (the irregular grid, rays together; the
-    /// BVH, rays interleaved) trace every ray in 4x2 packets (`blocks.rs`: eye, shadow and
-    /// mirror rays); every pixel equals, bit for bit, what the pixel-by-pixel walk
+    /// Renders trace every ray in 4x2 packets (`blocks.rs`: eye, shadow and mirror rays; the
+    /// irregular grid walks a packet's rays together, the other structures interleave their
+    /// walks); for every structure every pixel equals, bit for bit, what the pixel-by-pixel walk
     /// (`trace_pixel`, one ray at a time) gives, with the same rays, and heat images count
     /// each eye ray's own cells and tests: odd sizes (blocks cut at the right edge and the
     /// band's last row), a band of rows starting on an odd row, every shading mode (two levels
     /// of mirrors in `mirror-spheres`), and the ablation that traces shadow rays one by one.
     #[test]
     fn packet_renders_equal_single_rays() {
-        for (name, kind) in [AccelKind::Irregular, AccelKind::Bvh]
-            .into_iter()
-            .flat_map(|kind| ["knot-box", "mirror-spheres", "sparse-room"].map(|name| (name, kind)))
+        for (name, kind) in [
+            AccelKind::Irregular,
+            AccelKind::Bvh,
+            AccelKind::Grid,
+            AccelKind::ProximityCloud,
+        ]
+        .into_iter()
+        .flat_map(|kind| ["knot-box", "mirror-spheres", "sparse-room"].map(|name| (name, kind)))
         {
             let scene = builtin::scene(name).unwrap();
             let prepared = scene.prepare_for(kind, Resolution::default()).unwrap();
-            assert!(prepared.accel.walks_packets());
             for (mode, ablation, rows) in [
                 (Mode::Cast, Ablation::default(), None),
                 (Mode::Shadow, Ablation::default(), Some((5, 18))),

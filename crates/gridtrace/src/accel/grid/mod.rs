@@ -9,6 +9,7 @@ use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
 pub mod dda;
+mod packet;
 pub mod proximity;
 pub mod tri_box;
 
