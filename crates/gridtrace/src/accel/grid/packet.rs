@@ -3,7 +3,7 @@
 //! is a short chain of dependent operations (the cell's entry, its references, the next
 //! boundary), and the core overlaps eight such chains. Each ray keeps its own cursor
 //! (`dda.rs`, the single-ray walk's), so hits and counts are the single-ray walk's, bit for
-//! bit. Renders 1.3-1.6x faster with the plain grid, 1.07-1.19x with proximity jumps, whose
+//! bit. Renders 1.3-1.5x faster with the plain grid, 1.07-1.19x with proximity jumps, whose
 //! longer steps leave less to overlap (docs/benchmarks.md). Not for incoherent batches: there
 //! the eight rays' cells miss the cache together, and without prefetching (as the BVH's batch
 //! has) it measured from 10% faster to 10% slower.
