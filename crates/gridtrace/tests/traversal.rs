@@ -117,6 +117,17 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         // 4x2 blocks; here incoherent ones): each ray's hit, any-hit answer up to its own
         // limit, and counts are its single-ray walk's, bit for bit.
         let accel = all.get(kind);
+        // A few rays with NaN, infinite, zero and huge components among them.
+        let odd = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0, 1e30, 1e-40];
+        let mut rays = rays.clone();
+        for (i, r) in rays.iter_mut().enumerate().step_by(97) {
+            let v = odd[(i / 97) % odd.len()];
+            if i % 2 == 0 {
+                r.dir[(i / 194) % 3] = v;
+            } else {
+                r.origin[(i / 194) % 3] = v;
+            }
+        }
         let (mut at, mut len) = (0, 1);
         while at < rays.len() {
             let packet = &rays[at..(at + len).min(rays.len())];

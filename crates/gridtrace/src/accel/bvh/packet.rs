@@ -100,7 +100,9 @@ impl BvhAccel {
         for i in 0..n {
             Walk::start_in(&mut walks[i], &rays[i], t_min, t_max[i]);
         }
-        // SAFETY: the first `n` walks were written just above.
+        // SAFETY: the first `n` walks were written just above (`n <= PACKET`, asserted in
+        // `packet`; `walks[i]` would panic first anyway), and `MaybeUninit<Walk>` has the layout
+        // of `Walk`. Nothing needs dropping.
         let walks = unsafe { std::slice::from_raw_parts_mut(walks.as_mut_ptr() as *mut Walk, n) };
         let mut live = (1u32 << n) - 1;
         while live != 0 {

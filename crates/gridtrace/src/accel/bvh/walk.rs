@@ -212,9 +212,10 @@ impl Walk {
     #[inline(always)]
     pub(super) fn start_in<'w>(slot: &'w mut MaybeUninit<Walk>, ray: &Ray, t_min: f32, t_max: f32) -> &'w mut Walk {
         let w = slot.as_mut_ptr();
-        // SAFETY: `w` points to memory of a `Walk`; every field is written (without reading or
-        // dropping the old contents: all are `Copy`) before the reference is made, except
-        // `stack`, an array of `MaybeUninit`, for which any contents are valid.
+        // SAFETY: `w` points to memory of a `Walk`; every field is written through a raw
+        // pointer (`ptr::write`: the old contents are neither read nor dropped) before the
+        // reference is made, except `stack`, an array of `MaybeUninit`, for which any contents
+        // are valid.
         unsafe {
             (&raw mut (*w).origin).write(ray.origin.to_array().map(Vec4::splat));
             (&raw mut (*w).dir).write(ray.dir.to_array().map(Vec4::splat));

@@ -45,6 +45,7 @@ impl Grid {
 
     /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]`, each
     /// counted into its own `counters[i]`: the same answers and counts as `occluded` ray by ray.
+    /// False past `rays.len()`.
     #[allow(clippy::too_many_arguments)]
     pub fn occluded_packet<C: Counters>(
         &self,
