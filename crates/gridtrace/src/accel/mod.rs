@@ -256,10 +256,7 @@ impl Accel {
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        assert!(
-            rays.len() <= PACKET && counters.len() == rays.len(),
-            "a packet is up to {PACKET} rays, a counter each"
-        );
+        // Each structure checks the packet's length and counters itself.
         match &self.structure {
             Structure::Irregular(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, counters),
             Structure::Bvh(b) => b.intersect_packet(rays, t_min, t_max, counters),
@@ -280,10 +277,7 @@ impl Accel {
         counters: &mut [C],
     ) -> [bool; PACKET] {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        assert!(
-            rays.len() <= PACKET && counters.len() == rays.len(),
-            "a packet is up to {PACKET} rays, a counter each"
-        );
+        // Each structure checks the packet's length and counters itself.
         match &self.structure {
             Structure::Irregular(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, counters),
             Structure::Bvh(b) => b.occluded_packet(rays, t_min, t_max, counters),

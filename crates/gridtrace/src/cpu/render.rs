@@ -261,14 +261,9 @@ mod tests {
     /// of mirrors in `mirror-spheres`), and the ablation that traces shadow rays one by one.
     #[test]
     fn packet_renders_equal_single_rays() {
-        for (name, kind) in [
-            AccelKind::Irregular,
-            AccelKind::Bvh,
-            AccelKind::Grid,
-            AccelKind::ProximityCloud,
-        ]
-        .into_iter()
-        .flat_map(|kind| ["knot-box", "mirror-spheres", "sparse-room"].map(|name| (name, kind)))
+        for (name, kind) in AccelKind::ALL
+            .into_iter()
+            .flat_map(|kind| ["knot-box", "mirror-spheres", "sparse-room"].map(|name| (name, kind)))
         {
             let scene = builtin::scene(name).unwrap();
             let prepared = scene.prepare_for(kind, Resolution::default()).unwrap();
