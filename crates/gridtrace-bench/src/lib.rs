@@ -16,7 +16,7 @@ pub mod scenes;
 pub mod studies;
 mod timing;
 
-use gridtrace::accel::grid::dims_str;
+use gridtrace::accel::dims_str;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 

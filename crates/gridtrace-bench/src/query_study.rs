@@ -111,7 +111,7 @@ pub fn query_study(
     for (name, mesh) in meshes {
         for accel in AccelKind::ALL {
             let opts = QueryOptions {
-                accel,
+                accel: accel.into(),
                 backend: Backend::Cpu,
                 ..Default::default()
             };

@@ -1,7 +1,7 @@
 //! Writing a benchmark report: `bench.json` (everything), `bench.csv` (one line per matrix row)
 //! and `bench.md` (tables laid out like the paper's Tables 1-3, then the studies).
 
-use gridtrace::accel::grid::dims_str;
+use gridtrace::accel::dims_str;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

@@ -11,7 +11,7 @@ pub use super::query_study::{QueryStudyRow, incoherent_rays, query_study};
 use super::scenes::{self, BenchScene, ScalingMesh};
 use super::{GridInfo, Summary, loglog_fit, time_cpu, time_gpu};
 use gridtrace::Result;
-use gridtrace::accel::grid::DEFAULT_LAMBDA;
+use gridtrace::accel::DEFAULT_LAMBDA;
 use gridtrace::accel::{AccelKind, Resolution};
 use gridtrace::render::{Mode, RenderOptions};
 use gridtrace::scene::procedural::box_mesh;

@@ -9,7 +9,7 @@ use gridtrace::RenderOptions;
 use gridtrace::scene::animated::Animation;
 
 use crate::render::RenderArgs;
-use crate::tracer::Tracer;
+use gridtrace::Tracer;
 
 pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let name = a.scene.scene.as_deref().unwrap_or("animated");
@@ -30,7 +30,8 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             a.fps
         )));
     }
-    let accel = a.grid.accel;
+    let (ctx, mut notes) = a.backend.open_device()?;
+    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Animate, &mut notes);
     let t0 = Instant::now();
     let scene = crate::common::prepare(&anim.scene, name, accel, &a.grid)?;
     println!(
@@ -39,7 +40,6 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let (ctx, mut notes) = a.backend.open_device()?;
     match &ctx {
         Some(ctx) => {
             println!("backend gpu: {}", ctx.describe());

@@ -1,7 +1,7 @@
 //! `gridtrace bench`: the paper's benchmark matrix and studies; the work is in
 //! `gridtrace_bench`, this file parses, prints and writes.
 
-use gridtrace::accel::grid::dims_str;
+use gridtrace::accel::dims_str;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -137,23 +137,18 @@ fn open_gpu(b: BenchBackendArg) -> gridtrace::Result<Option<GpuContext>> {
             }
             Ok(Some(c))
         }
-        BenchBackendArg::Auto => match GpuContext::new() {
-            Ok(c) if c.is_software() => {
-                println!(
-                    "note: only a software adapter ({}); benchmarking the CPU only (--backend gpu forces it)",
-                    c.describe()
-                );
-                Ok(None)
+        // The library's rule (`Backend::open_device`): no adapter, or a software one alone,
+        // means the CPU only.
+        BenchBackendArg::Auto => {
+            let (ctx, notes) = gridtrace::Backend::Auto.open_device()?;
+            for n in notes {
+                println!("note: {n}");
             }
-            Ok(c) => {
+            Ok(ctx.map(|c| {
                 println!("GPU adapter: {}", c.describe());
-                Ok(Some(c))
-            }
-            Err(e) => {
-                println!("note: no usable GPU ({e}); benchmarking the CPU only");
-                Ok(None)
-            }
-        },
+                std::sync::Arc::try_unwrap(c).unwrap_or_else(|_| unreachable!("a fresh context has one owner"))
+            }))
+        }
     }
 }
 

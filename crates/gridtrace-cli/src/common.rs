@@ -1,6 +1,5 @@
 //! Options shared by several commands: choosing the scene and the grid.
 
-use gridtrace::accel::grid::dims_str;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -8,7 +7,7 @@ use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use glam::Vec3;
 use gridtrace::accel::IrregularParams;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
-use gridtrace::{AccelKind, Resolution};
+use gridtrace::{AccelChoice, AccelKind, Resolution, Work};
 
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
@@ -24,10 +23,10 @@ pub struct SceneArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct GridArgs {
-    /// Acceleration: grid (plain uniform grid), pc (grid with proximity clouds), bvh (a
-    /// bounding volume hierarchy) or irregular (an irregular grid: merged and expanded cells).
-    #[arg(long, default_value = "grid", value_parser = accel_parser())]
-    pub accel: AccelKind,
+    /// Acceleration structure: auto (the one measured fastest for the work on the backend that
+    /// traces it; it says which and why), or one by name.
+    #[arg(long, default_value = "auto", value_parser = accel_parser())]
+    pub accel: AccelChoice,
     /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.
     #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Resolution>())]
     pub grid: Resolution,
@@ -35,6 +34,16 @@ pub struct GridArgs {
     /// merge=PASSES,expand=PASSES, any subset (defaults: top=0.12,cell=2,alpha=1,merge=8,expand=3).
     #[arg(long, default_value = "", value_parser = |s: &str| s.parse::<IrregularParams>())]
     pub irregular: IrregularParams,
+}
+
+impl GridArgs {
+    /// The traversal `--accel` names, or `auto`'s pick for `work` on the GPU (`on_gpu`) or the
+    /// CPU, with its note pushed to `notes`.
+    pub fn accel_for(&self, on_gpu: bool, work: Work, notes: &mut Vec<String>) -> AccelKind {
+        let (kind, note) = self.accel.resolve(on_gpu, work);
+        notes.extend(note);
+        kind
+    }
 }
 
 impl SceneArgs {
@@ -74,15 +83,17 @@ fn builtin_names() -> String {
     builtin::SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
 }
 
-/// `--accel`: the values are listed in `--help` and in the error for a wrong one.
-pub fn accel_parser() -> impl TypedValueParser<Value = AccelKind> {
-    PossibleValuesParser::new([
-        PossibleValue::new("grid").alias("g"),
-        PossibleValue::new("pc").alias("proximity"),
-        PossibleValue::new("bvh"),
-        PossibleValue::new("irregular").alias("irr"),
-    ])
-    .map(|s| s.parse::<AccelKind>().expect("every listed accel parses"))
+/// `--accel`: the registry's names (with their aliases and one-line help) and `auto`; the
+/// values are listed in `--help` and in the error for a wrong one.
+pub fn accel_parser() -> impl TypedValueParser<Value = AccelChoice> {
+    let auto = PossibleValue::new("auto").help("the structure measured fastest for the work (says which and why)");
+    let kinds = gridtrace::accel::registry::ENTRIES.iter().map(|e| {
+        PossibleValue::new(e.name)
+            .aliases(e.aliases.iter().copied())
+            .help(e.about)
+    });
+    PossibleValuesParser::new(std::iter::once(auto).chain(kinds))
+        .map(|s| s.parse::<AccelChoice>().expect("every listed accel parses"))
 }
 
 /// `--mode`: the values are listed in `--help` and in the error for a wrong one.
@@ -116,15 +127,7 @@ pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
     }
 }
 
-pub fn fmt_bytes(b: usize) -> String {
-    if b >= 1 << 20 {
-        format!("{:.2} MiB", b as f64 / (1 << 20) as f64)
-    } else if b >= 1 << 10 {
-        format!("{:.1} KiB", b as f64 / 1024.0)
-    } else {
-        format!("{b} B")
-    }
-}
+pub use gridtrace::util::fmt_bytes;
 
 pub use gridtrace::query::Backend;
 
@@ -147,36 +150,7 @@ pub fn prepare(
 }
 
 /// The structure in a few words: a grid's dimensions and references per triangle, a BVH's
-/// nodes and memory. The one place the CLI formats it.
+/// nodes and memory (each structure's `AccelStructure::summary`).
 pub fn describe_structure(accel: &gridtrace::Accel) -> String {
-    use gridtrace::accel::Structure;
-    match &accel.structure {
-        Structure::Grid(g) => {
-            let s = &g.stats;
-            format!(
-                "grid {}, {:.2} refs/tri (built in {:.1} ms)",
-                dims_str(s.dims),
-                s.refs_per_triangle(),
-                s.build_ms
-            )
-        }
-        Structure::Bvh(b) => format!(
-            "bvh {} wide nodes, depth {}, {}",
-            b.nodes.len(),
-            b.bvh.depth,
-            fmt_bytes(b.memory())
-        ),
-        Structure::Irregular(g) => {
-            let s = &g.stats;
-            format!(
-                "irregular top {} x {} levels, {} cells, {:.2} refs/tri, {} (built in {:.1} ms)",
-                dims_str(s.top_dims),
-                s.max_level,
-                s.cells,
-                s.refs_per_triangle(),
-                fmt_bytes(g.bytes()),
-                s.build_ms()
-            )
-        }
-    }
+    accel.summary()
 }

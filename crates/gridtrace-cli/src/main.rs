@@ -7,7 +7,6 @@ mod common;
 mod info;
 mod rays;
 mod render;
-mod tracer;
 mod view;
 
 use clap::{Parser, Subcommand};

@@ -75,6 +75,10 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         mesh.triangle_count(),
         t_build.elapsed().as_secs_f64() * 1e3
     );
+    for n in mesh.notes() {
+        eprintln!("note: {n}");
+    }
+    println!("accel   {}", mesh.accel().name());
     println!("backend {}", mesh.device());
     let mut input = BufReader::new(File::open(&a.rays).map_err(|e| Error::io(&a.rays, e))?);
     let mut output = BufWriter::new(File::create(&a.hits_out).map_err(|e| Error::io(&a.hits_out, e))?);

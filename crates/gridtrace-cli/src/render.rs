@@ -110,8 +110,10 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
              tables to the scene file, or --light X,Y,Z)"
         );
     }
+    let (ctx, mut notes) = a.backend.open_device()?;
+    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
     let t_build = Instant::now();
-    let prepared = crate::common::prepare(&scene, &name, a.grid.accel, &a.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, accel, &a.grid)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
     println!(
         "scene {name}: {} triangles ({} degenerate dropped), {}",
@@ -121,8 +123,9 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     );
     println!("build   {build_ms:.1} ms");
 
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, a.grid.accel);
-    let (mut renderer, notes) = gridtrace::Renderer::open(a.backend, &prepared, a.grid.accel)?;
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel);
+    let mut renderer = gridtrace::Tracer::open(prepared, ctx.as_ref(), a.backend, &mut notes)?;
+    let (camera0, lights) = (renderer.scene.camera, renderer.scene.lights.clone());
     for n in notes {
         eprintln!("note: {n}");
     }
@@ -159,19 +162,19 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     let mut first = None;
     for i in 0..a.frames {
         let camera = if a.orbit {
-            orbit(&prepared.camera, i as f32 / a.frames as f32)
+            orbit(&camera0, i as f32 / a.frames as f32)
         } else {
-            prepared.camera
+            camera0
         };
         let frame = if a.stats && renderer.gpu().is_none() {
-            let (image, stats) = gridtrace::cpu::render_with_counters(&prepared, &camera, &prepared.lights, &opts)?;
+            let (image, stats) = gridtrace::cpu::render_with_counters(&renderer.scene, &camera, &lights, &opts)?;
             gridtrace::Frame {
                 image,
                 stats,
                 gpu: None,
             }
         } else {
-            renderer.render(&camera, &prepared.lights, &opts, Some(&tick))?
+            renderer.render_with_progress(&camera, &lights, &opts, Some(&tick))?
         };
         frames.push(frame.stats);
         if first.is_none() {
@@ -223,7 +226,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         r.reflection,
         stats.mrays_per_s(),
         a.mode.name(),
-        a.grid.accel.name(),
+        accel.name(),
         a.res.0,
         a.res.1
     );

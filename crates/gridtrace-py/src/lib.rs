@@ -10,7 +10,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
-use gridtrace::{AccelKind, Error, Mode, RenderOptions, Resolution};
+use gridtrace::{AccelChoice, Error, Mode, RenderOptions, Resolution};
 
 fn to_py(e: Error) -> PyErr {
     match e {
@@ -200,7 +200,7 @@ fn render<'py>(
     target: Option<[f32; 3]>,
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
     let mode: Mode = parse("mode", mode)?;
-    let accel: AccelKind = parse("accel", accel)?;
+    let accel: AccelChoice = parse("accel", accel)?;
     let grid: Resolution = parse("grid", grid)?;
     let backend = parse::<Backend>("backend", backend)?;
     let scene_name = scene.to_string();
@@ -232,10 +232,13 @@ fn render<'py>(
             if let Some(t) = target {
                 s.camera.target = t.into();
             }
+            let (ctx, mut notes) = backend.open_device()?;
+            let (accel, _why) = accel.resolve(ctx.is_some(), gridtrace::Work::Render);
             let prepared = s.prepare_for(accel, grid)?;
             let opts = RenderOptions::new(width, height, mode, accel);
-            let (mut renderer, _notes) = gridtrace::Renderer::open(backend, &prepared, accel)?;
-            let image = renderer.render(&prepared.camera, &prepared.lights, &opts, None)?.image;
+            let (camera, lights) = (prepared.camera, prepared.lights.clone());
+            let mut tracer = gridtrace::Tracer::open(prepared, ctx.as_ref(), backend, &mut notes)?;
+            let image = tracer.render(&camera, &lights, &opts)?.image;
             let image = if mode == Mode::Heat {
                 image.heat_to_color()
             } else {
@@ -252,5 +255,10 @@ fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeMesh>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The registry's names, with "auto" first: what `accel=` accepts (aliases aside).
+    let accels: Vec<&str> = std::iter::once("auto")
+        .chain(gridtrace::accel::registry::ENTRIES.iter().map(|e| e.name))
+        .collect();
+    m.add("ACCELS", accels)?;
     Ok(())
 }

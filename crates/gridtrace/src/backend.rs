@@ -1,28 +1,28 @@
 //! Where tracing runs: the one place that turns `--backend auto|gpu|cpu` and what the machine
-//! has (an adapter; room for the scene) into a CPU or a GPU renderer. Every structure runs on
-//! both.
-//! The CLI, Python and the ray queries come through here (the benchmarks time each backend on
-//! its own, so they open both explicitly).
+//! has (an adapter, whether it is a software one, room for the scene) into a CPU or a GPU
+//! tracer, with a note for the user on every choice that was not the one asked for. `Tracer`
+//! is the one type that owns a prepared scene with where it is traced; render, animate, the
+//! viewer and Python trace through it, and the ray queries (`query.rs`) and the benchmarks
+//! open their device here.
 //!
 //! ```
-//! use gridtrace::{scene::builtin, AccelKind, Backend, Mode, RenderOptions, Renderer, Resolution};
+//! use gridtrace::{scene::builtin, AccelKind, Backend, Mode, RenderOptions, Resolution, Tracer};
 //!
 //! let accel = AccelKind::ProximityCloud;
 //! let scene = builtin::knot_box().prepare_for(accel, Resolution::default())?;
-//! let (mut renderer, notes) = Renderer::open(Backend::Cpu, &scene, accel)?;
-//! assert!(notes.is_empty() && renderer.gpu().is_none());
+//! let (mut tracer, notes) = Tracer::open_with(Backend::Cpu, scene)?;
+//! assert!(notes.is_empty() && tracer.gpu().is_none());
 //! let opts = RenderOptions::new(32, 24, Mode::Shadow, accel);
-//! let frame = renderer.render(&scene.camera, &scene.lights, &opts, None)?;
+//! let frame = tracer.render(&tracer.scene.camera.clone(), &tracer.scene.lights.clone(), &opts)?;
 //! assert_eq!((frame.image.width, frame.stats.rays.eye), (32, 32 * 24));
 //! # Ok::<(), gridtrace::Error>(())
 //! ```
 
 use std::sync::Arc;
 
-use crate::accel::AccelKind;
 use crate::gpu::{GpuContext, GpuRenderStats, GpuRenderer};
 use crate::render::{Image, RenderOptions, RenderStats};
-use crate::scene::{Camera, PointLight, PreparedScene};
+use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
 use crate::{Error, Result};
 
 /// Where rays are traced.
@@ -50,13 +50,24 @@ impl std::str::FromStr for Backend {
 impl Backend {
     /// Opens the GPU device this backend asks for (`None`: trace on the CPU), with notes for
     /// the user on every choice that was not the one asked for. `gpu` without an adapter is an
-    /// error; `auto` falls back to the CPU.
+    /// error. `auto` falls back to the CPU without an adapter, and passes a software adapter
+    /// (lavapipe, SwiftShader, WARP) over: it runs the shaders on the same CPU cores, slower
+    /// than the CPU tracer (the knot-box scene at 512x512: 2,007 ms on lavapipe against 332 ms on
+    /// the CPU on a 2-core machine), so `--backend gpu` is the way to use one.
     pub fn open_device(self) -> Result<(Option<Arc<GpuContext>>, Vec<String>)> {
         let mut notes = Vec::new();
         let ctx = match self {
             Backend::Cpu => None,
             Backend::Gpu => Some(Arc::new(GpuContext::new()?)),
             Backend::Auto => match GpuContext::new() {
+                Ok(c) if c.is_software() => {
+                    notes.push(format!(
+                        "the only adapter is a software rasteriser ({}), slower than the CPU tracer on the same \
+                         cores: tracing on the CPU (--backend gpu to use it)",
+                        c.info.name
+                    ));
+                    None
+                }
                 Ok(c) => Some(Arc::new(c)),
                 Err(e) => {
                     notes.push(format!("no usable GPU ({e}); using the CPU"));
@@ -78,6 +89,22 @@ impl Backend {
         scene: &PreparedScene,
         notes: &mut Vec<String>,
     ) -> Result<Option<GpuRenderer>> {
+        let kind = scene.accel.structure_name();
+        if !crate::accel::registry::ENTRIES
+            .iter()
+            .any(|e| e.structure == kind && e.gpu)
+        {
+            let why = format!("'{kind}' has no GPU walk");
+            return match self {
+                Backend::Auto => {
+                    notes.push(format!("{why}; using the CPU"));
+                    Ok(None)
+                }
+                _ => Err(Error::Gpu(format!(
+                    "{why}; use --backend cpu (or auto) to trace it on the CPU"
+                ))),
+            };
+        }
         match GpuRenderer::new(ctx, scene) {
             Ok(gpu) => Ok(Some(gpu)),
             Err(e) if self == Backend::Auto => {
@@ -101,14 +128,18 @@ pub fn describe_tracer(gpu: Option<&GpuRenderer>) -> String {
     }
 }
 
-/// A scene ready to render frames on the CPU or a GPU. The scene stays where it is (on the GPU:
-/// uploaded once); each frame takes its own camera and lights.
-pub enum Renderer<'s> {
-    Cpu(&'s PreparedScene),
-    Gpu {
-        gpu: Box<GpuRenderer>,
-        scene: &'s PreparedScene,
-    },
+/// An adapter in a few words: "NAME (BACKEND)", with ", software" for a software rasteriser.
+pub fn adapter_words(info: &wgpu::AdapterInfo) -> String {
+    format!(
+        "{} ({:?}{})",
+        info.name,
+        info.backend,
+        if info.device_type == wgpu::DeviceType::Cpu {
+            ", software"
+        } else {
+            ""
+        }
+    )
 }
 
 /// One rendered frame.
@@ -120,67 +151,135 @@ pub struct Frame {
     pub gpu: Option<GpuRenderStats>,
 }
 
-impl<'s> Renderer<'s> {
-    /// Opens the renderer for `backend` and `accel` over `scene`, with notes for the user on
-    /// what was chosen instead of what was asked for. With `auto`, a scene the GPU cannot hold
-    /// (over its buffer limits) is traced on the CPU; with `gpu` that is an error that says so.
-    pub fn open(backend: Backend, scene: &'s PreparedScene, accel: AccelKind) -> Result<(Renderer<'s>, Vec<String>)> {
-        scene.accel.check_serves(accel)?;
-        let (ctx, mut notes) = backend.open_device()?;
+/// A prepared scene owned together with where it is traced (its GPU upload, or the CPU): what
+/// every program that renders holds, for one frame or many. It owns the scene, so it can be
+/// dropped and replaced (a file dropped on the viewer) and moved (`update_vertices`).
+pub struct Tracer {
+    pub scene: PreparedScene,
+    gpu: Option<GpuRenderer>,
+}
+
+/// What moving the vertices cost, and how the structure followed.
+#[derive(Debug, Clone)]
+pub struct Update {
+    /// Triangles, normals and bounds of the moved mesh (host).
+    pub geometry_ms: f64,
+    /// The structure's update: a CPU rebuild or refit, or the GPU build plus uploads.
+    pub build_ms: f64,
+    /// How the structure was updated, in words.
+    pub how: String,
+}
+
+impl Tracer {
+    /// The scene traced on `ctx` (a device `backend` opened with `Backend::open_device`;
+    /// `None`: the CPU). With `auto` a scene the device cannot hold (over its buffer limits, or
+    /// a structure without a GPU walk) goes to the CPU, with a note (`Backend::upload`).
+    pub fn open(
+        scene: PreparedScene,
+        ctx: Option<&Arc<GpuContext>>,
+        backend: Backend,
+        notes: &mut Vec<String>,
+    ) -> Result<Tracer> {
         let gpu = match ctx {
-            Some(ctx) => backend.upload(ctx, scene, &mut notes)?,
+            Some(ctx) => backend.upload(ctx.clone(), &scene, notes)?,
             None => None,
         };
-        Ok(match gpu {
-            Some(gpu) => (
-                Renderer::Gpu {
-                    gpu: Box::new(gpu),
-                    scene,
-                },
-                notes,
-            ),
-            None => (Renderer::Cpu(scene), notes),
-        })
+        Ok(Tracer { scene, gpu })
+    }
+
+    /// Opens the device `backend` asks for and the scene on it: `open_device`, then `open`.
+    pub fn open_with(backend: Backend, scene: PreparedScene) -> Result<(Tracer, Vec<String>)> {
+        let (ctx, mut notes) = backend.open_device()?;
+        let tracer = Tracer::open(scene, ctx.as_ref(), backend, &mut notes)?;
+        Ok((tracer, notes))
+    }
+
+    pub fn gpu(&self) -> Option<&GpuRenderer> {
+        self.gpu.as_ref()
     }
 
     /// "cpu (N threads)" or the GPU adapter's description.
     pub fn describe(&self) -> String {
-        describe_tracer(self.gpu())
+        describe_tracer(self.gpu.as_ref())
     }
 
-    pub fn gpu(&self) -> Option<&GpuRenderer> {
-        match self {
-            Renderer::Gpu { gpu, .. } => Some(gpu),
-            Renderer::Cpu(_) => None,
+    /// The same in a few words: "gpu: NAME (BACKEND)", "software" for a software adapter.
+    pub fn short(&self) -> String {
+        match &self.gpu {
+            Some(g) => format!("gpu: {}", adapter_words(&g.context().info)),
+            None => self.describe(),
         }
     }
 
-    /// One frame from `camera` with `lights`. `progress` (CPU only) is called with the number of
-    /// image rows finished.
-    pub fn render(
+    /// One frame (or band of rows, `opts.rows`) from `camera` with `lights`. `opts.accel` must
+    /// be a traversal the scene's structure serves.
+    pub fn render(&mut self, camera: &Camera, lights: &[PointLight], opts: &RenderOptions) -> Result<Frame> {
+        self.render_with_progress(camera, lights, opts, None)
+    }
+
+    /// `render`, with `progress` (CPU only) called with the number of image rows finished.
+    pub fn render_with_progress(
         &mut self,
         camera: &Camera,
         lights: &[PointLight],
         opts: &RenderOptions,
         progress: Option<&(dyn Fn(u32) + Sync)>,
     ) -> Result<Frame> {
-        match self {
-            Renderer::Cpu(scene) => {
-                let (image, stats) = crate::cpu::render_view(scene, camera, lights, opts, progress)?;
-                Ok(Frame {
-                    image,
-                    stats,
-                    gpu: None,
-                })
-            }
-            Renderer::Gpu { gpu, .. } => {
-                let (image, s) = gpu.render(camera, lights, opts)?;
+        self.scene.accel.check_serves(opts.accel)?;
+        match &mut self.gpu {
+            Some(g) => {
+                let (image, s) = g.render(camera, lights, opts)?;
                 Ok(Frame {
                     image,
                     stats: s.render,
                     gpu: Some(s),
                 })
             }
+            None => {
+                let (image, stats) = crate::cpu::render_view(&self.scene, camera, lights, opts, progress)?;
+                Ok(Frame {
+                    image,
+                    stats,
+                    gpu: None,
+                })
+            }
         }
+    }
+
+    /// Moves the mesh's vertices and updates the structure where the scene is traced: the
+    /// grids rebuilt on the GPU when there is one (else on the CPU), the BVH refitted. A wrong
+    /// length or a NaN is an error that leaves the mesh as it was.
+    pub fn update_vertices(&mut self, positions: &[glam::Vec3]) -> Result<Update> {
+        let on = if self.gpu.is_some() {
+            RebuildOn::Device
+        } else {
+            RebuildOn::Cpu
+        };
+        let up = self.scene.update_vertices(positions, on)?;
+        let mut build_ms = up.structure_ms;
+        let mut how = up.how.to_string();
+        if let Some(g) = &mut self.gpu {
+            let u = g.update_vertices(&self.scene)?;
+            build_ms += u.structure_upload_ms + u.upload_ms;
+            if let Some(b) = &u.build {
+                build_ms += b.timings.total_ms;
+                how = match &b.cpu_fallback {
+                    Some(why) => format!("rebuilt on the CPU ({why})"),
+                    None => format!(
+                        "rebuilt on the GPU ({})",
+                        if b.timings.from_timestamps {
+                            "timestamps"
+                        } else {
+                            "wall clock"
+                        }
+                    ),
+                };
+            }
+        }
+        Ok(Update {
+            geometry_ms: up.geometry_ms,
+            build_ms,
+            how,
+        })
     }
 }

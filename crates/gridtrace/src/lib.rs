@@ -15,8 +15,8 @@ pub mod scene;
 pub mod testing;
 pub mod util;
 
-pub use accel::{Accel, AccelKind, Hit, Ray, Resolution};
-pub use backend::{Backend, Frame, Renderer};
+pub use accel::{Accel, AccelChoice, AccelKind, Hit, Ray, Resolution, Work};
+pub use backend::{Backend, Frame, Tracer};
 pub use error::{Error, Location, Result};
 pub use mesh::{Material, Mesh};
 pub use render::{Image, Mode, RenderOptions, RenderStats};

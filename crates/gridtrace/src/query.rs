@@ -35,7 +35,7 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::huge::advise_huge_pages_within;
-use crate::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
+use crate::accel::{AccelChoice, AccelKind, Hit, IrregularParams, Ray, Resolution, Work};
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
@@ -45,7 +45,9 @@ pub use crate::backend::Backend;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QueryOptions {
-    pub accel: AccelKind,
+    /// The structure, or `auto` (the one measured fastest for ray batches; `TraceMesh::notes`
+    /// says which it picked).
+    pub accel: AccelChoice,
     pub grid: Resolution,
     /// The irregular grid's build (`accel = irregular` only).
     pub irregular: IrregularParams,
@@ -55,7 +57,7 @@ pub struct QueryOptions {
 impl Default for QueryOptions {
     fn default() -> Self {
         QueryOptions {
-            accel: AccelKind::Grid,
+            accel: AccelChoice::Auto,
             grid: Resolution::default(),
             irregular: IrregularParams::default(),
             backend: Backend::Auto,
@@ -145,6 +147,8 @@ pub struct TraceMesh {
     /// query).
     original: Option<Vec<u32>>,
     accel: AccelKind,
+    /// What was chosen for the caller (`auto`'s pick), in words.
+    notes: Vec<String>,
     backend: Backend,
     /// The GPU renderer, opened on first use (or the reason it could not be).
     gpu: OnceLock<std::result::Result<(Mutex<GpuRenderer>, String), String>>,
@@ -215,13 +219,15 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let prepared = scene.prepare_with(opts.accel, opts.grid, opts.irregular)?;
+        let (accel, note) = opts.accel.resolve(opts.backend == Backend::Gpu, Work::Rays);
+        let prepared = scene.prepare_with(accel, opts.grid, opts.irregular)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
         let mesh = TraceMesh {
             scene: prepared,
             original: (!all_kept).then_some(original),
-            accel: opts.accel,
+            accel,
+            notes: note.into_iter().collect(),
             backend: opts.backend,
             gpu: OnceLock::new(),
         };
@@ -230,6 +236,16 @@ impl TraceMesh {
             mesh.renderer(Backend::Gpu)?;
         }
         Ok(mesh)
+    }
+
+    /// The traversal the queries run (`auto` resolved).
+    pub fn accel(&self) -> AccelKind {
+        self.accel
+    }
+
+    /// What was chosen for the caller, in words (`auto`'s pick and why).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// Triangles kept (non-degenerate).
@@ -260,6 +276,8 @@ impl TraceMesh {
                 .map_err(|e| e.to_string())
         });
         match (opened, backend) {
+            // `auto` passes a software adapter over for the CPU tracer, as `Backend::open_device`.
+            (Ok((r, _)), Backend::Auto) if locked(r).context().is_software() => Ok(None),
             (Ok((r, _)), _) => Ok(Some(r)),
             (Err(e), Backend::Gpu) => Err(Error::Gpu(e.clone())),
             (Err(_), _) => Ok(None),
@@ -613,7 +631,7 @@ mod tests {
         for accel in AccelKind::ALL {
             for backend in [Backend::Cpu, Backend::Gpu] {
                 let opts = QueryOptions {
-                    accel,
+                    accel: accel.into(),
                     backend,
                     ..Default::default()
                 };
@@ -690,7 +708,7 @@ mod tests {
         for (degenerate, accel) in [false, true].into_iter().flat_map(|d| AccelKind::ALL.map(|a| (d, a))) {
             let (vertices, faces, origins, dirs) = soup(degenerate);
             let opts = QueryOptions {
-                accel,
+                accel: accel.into(),
                 backend: Backend::Cpu,
                 ..Default::default()
             };
@@ -735,7 +753,7 @@ mod tests {
         origins[4321][1] = f32::NAN;
         dirs[3210] = [0.0; 3];
         let opts = QueryOptions {
-            accel: AccelKind::Bvh,
+            accel: AccelKind::Bvh.into(),
             backend: Backend::Cpu,
             ..Default::default()
         };

@@ -552,7 +552,7 @@ pub fn long_strip(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 /// The mesh traced with `accel` on the GPU; panics, naming the fix, without an adapter.
 pub fn gpu_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]], accel: AccelKind) -> crate::query::TraceMesh {
     let opts = crate::query::QueryOptions {
-        accel,
+        accel: accel.into(),
         backend: crate::Backend::Gpu,
         ..Default::default()
     };

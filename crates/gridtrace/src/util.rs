@@ -43,3 +43,14 @@ pub(crate) fn set_bits(mut mask: u32) -> impl Iterator<Item = usize> {
         })
     })
 }
+
+/// Bytes as people read them: `B`, `KiB` with one decimal, `MiB` with two.
+pub fn fmt_bytes(b: usize) -> String {
+    if b >= 1 << 20 {
+        format!("{:.2} MiB", b as f64 / (1 << 20) as f64)
+    } else if b >= 1 << 10 {
+        format!("{:.1} KiB", b as f64 / 1024.0)
+    } else {
+        format!("{b} B")
+    }
+}

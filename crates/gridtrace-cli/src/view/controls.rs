@@ -188,13 +188,13 @@ impl Orbit {
     }
 }
 
-/// The structure after `a` in the viewer's cycle.
+/// The structure after `a` in the viewer's cycle: the registry's interactive kinds, in order,
+/// round and round (from a kind outside the cycle, its first).
 pub fn next_accel(a: AccelKind) -> AccelKind {
-    match a {
-        AccelKind::Grid => AccelKind::ProximityCloud,
-        AccelKind::ProximityCloud => AccelKind::Bvh,
-        AccelKind::Bvh => AccelKind::Irregular,
-        AccelKind::Irregular => AccelKind::Grid,
+    let cycle: Vec<AccelKind> = AccelKind::interactive().collect();
+    match cycle.iter().position(|&k| k == a) {
+        Some(i) => cycle[(i + 1) % cycle.len()],
+        None => cycle[0],
     }
 }
 
@@ -360,13 +360,15 @@ mod tests {
     fn keys() {
         assert_eq!(mode_key("2"), Some(Mode::Shadow));
         assert_eq!(mode_key("9"), None);
-        // G visits every structure once and comes back.
+        // G visits every interactive structure once and comes back.
         let mut seen = vec![AccelKind::Grid];
         while let a = next_accel(*seen.last().unwrap())
             && a != AccelKind::Grid
         {
             seen.push(a);
         }
-        assert_eq!(seen, AccelKind::ALL);
+        assert_eq!(seen, AccelKind::interactive().collect::<Vec<_>>());
+        assert_eq!(seen.len(), AccelKind::ALL.len() - 1, "all but brute force");
+        assert_eq!(next_accel(AccelKind::Brute), AccelKind::Grid);
     }
 }

@@ -12,7 +12,7 @@ use gridtrace::scene::{PointLight, Scene};
 
 use super::ViewArgs;
 use crate::render::orbit;
-use crate::tracer::Tracer;
+use gridtrace::Tracer;
 
 /// The lights `turn` of the way round the other way, about the camera's up axis through `centre`.
 fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Vec<PointLight> {
@@ -29,7 +29,8 @@ fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Ve
 }
 
 pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
-    let accel = a.grid.accel;
+    let (ctx, mut notes) = a.backend.open_device()?;
+    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
     let t0 = Instant::now();
     let scene = crate::common::prepare(&src, name, accel, &a.grid)?;
     println!(
@@ -38,7 +39,6 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let (ctx, mut notes) = super::open_device(a.backend)?;
     let mut tracer = Tracer::open(scene, ctx.as_ref(), a.backend, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");

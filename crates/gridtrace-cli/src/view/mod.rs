@@ -42,8 +42,8 @@ use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
 use crate::common::{GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
-use crate::tracer::Tracer;
 use controls::{Action, MAX_SCALE_STEPS, Orbit, key_action, next_accel, project, unproject};
+use gridtrace::Tracer;
 use overlay::{GIZMO_RADIUS_PT, HISTORY, Hud};
 use progressive::Refiner;
 
@@ -117,7 +117,8 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         Some(p) => Some(script::load(p)?),
         None => None,
     };
-    let (ctx, notes) = open_device(a.backend)?;
+    let (ctx, mut notes) = a.backend.open_device()?;
+    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
     for n in &notes {
         eprintln!("note: {n}");
     }
@@ -130,7 +131,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         ctx,
         notes,
         tracers: Vec::new(),
-        accel: a.grid.accel,
+        accel,
         mode: a.mode,
         orbit,
         lights: Vec::new(),
@@ -177,23 +178,6 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     match app.error {
         Some(e) => Err(e),
         None => Ok(()),
-    }
-}
-
-/// The device the viewer traces on. With `auto`, a software adapter alone (lavapipe) is passed
-/// over for the CPU tracer: on the same cores it is about 5x slower (Stanford Bunny, 1024x768,
-/// docs/benchmarks.md), and the viewer is about speed; `--backend gpu` still takes it.
-fn open_device(backend: Backend) -> gridtrace::Result<(Option<Arc<GpuContext>>, Vec<String>)> {
-    let (ctx, mut notes) = backend.open_device()?;
-    match ctx {
-        Some(c) if backend == Backend::Auto && c.is_software() => {
-            notes.push(format!(
-                "the only adapter is a software rasteriser ({}), slower than the CPU tracer on the same cores: tracing on the CPU (--backend gpu to use it)",
-                c.info.name
-            ));
-            Ok((None, notes))
-        }
-        ctx => Ok((ctx, notes)),
     }
 }
 

@@ -124,7 +124,7 @@ impl Presenter {
             egui,
             max_side,
             live: false,
-            adapter: crate::tracer::adapter_words(&info),
+            adapter: gridtrace::backend::adapter_words(&info),
         };
         p.resize(size.width, size.height);
         Ok(p)

@@ -51,10 +51,14 @@ def _ensure_runtime_dir() -> None:
 _ensure_runtime_dir()
 
 from ._gridtrace import NativeMesh as _NativeMesh  # noqa: E402
+from ._gridtrace import ACCELS as _ACCELS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
 
-__all__ = ["Mesh", "Hits", "render", "MISS", "__version__"]
+#: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
+ACCELS: tuple = tuple(_ACCELS)
+
+__all__ = ["Mesh", "Hits", "render", "MISS", "ACCELS", "__version__"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)
@@ -114,16 +118,18 @@ class Mesh:
     """An accelerated triangle mesh for ray queries.
 
     ``vertices`` is an (N, 3) float array, ``faces`` an (M, 3) integer array of vertex indices.
-    ``accel`` is ``"grid"``, ``"pc"`` (proximity clouds), ``"bvh"`` (a bounding volume hierarchy,
-    the fastest for incoherent rays) or ``"irregular"`` (an irregular grid, the grid that adapts to
-    the mesh), each on the CPU and the GPU; ``irregular`` tunes the irregular grid's build
+    ``accel`` is ``"auto"`` (the structure measured fastest for ray batches, today the BVH),
+    ``"grid"``, ``"pc"`` (proximity clouds), ``"bvh"`` (a bounding volume hierarchy, the fastest
+    for incoherent rays), ``"irregular"`` (an irregular grid, the grid that adapts to the mesh),
+    each on the CPU and the GPU, or ``"brute"`` (every triangle per ray, CPU only: a check for
+    small meshes); ``gridtrace.ACCELS`` lists them; ``irregular`` tunes the irregular grid's build
     (``"top=0.12,cell=2,alpha=1,merge=8,expand=3"``, any subset; ``""`` for the defaults);
     ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (GPU if present, else CPU), ``"gpu"`` or ``"cpu"``.
     Degenerate faces are kept in the numbering but can never be hit.
     """
 
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "grid", grid: str = "auto", backend: str = "auto", irregular: str = ""):
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = ""):
         v = _points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3:
@@ -136,7 +142,7 @@ class Mesh:
         self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, irregular, backend)
 
     @classmethod
-    def load(cls, path: Union[str, PathLike], accel: str = "grid", grid: str = "auto", backend: str = "auto", irregular: str = "") -> "Mesh":
+    def load(cls, path: Union[str, PathLike], accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "") -> "Mesh":
         """Loads an OBJ, PLY, glTF/GLB, STL or OFF file."""
         self = cls.__new__(cls)
         self._backend = backend
@@ -181,7 +187,7 @@ class Mesh:
         return self._native.occluded(o, d, t_min, t_max, backend or self._backend)
 
 
-def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "grid", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None) -> np.ndarray:
+def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None) -> np.ndarray:
     """Renders a built-in scene (``"knot-box"``, ``"mirror-spheres"``, ``"sparse-room"``), a TOML
     scene file or a mesh file; returns an (height, width, 3) uint8 sRGB image.
     ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``. An unknown scene name raises

@@ -139,7 +139,7 @@ impl Lanes<4> for Vec4 {
 
 /// Eight lanes of `f32` in one AVX register.
 ///
-/// Only for code compiled with AVX2 enabled and entered after `bvh::has_avx2()` said the CPU
+/// Only for code compiled with AVX2 enabled and entered after `simd::has_avx2()` said the CPU
 /// has it (the irregular grid's `walk_packet` is the one user): the operations are AVX
 /// intrinsics, inlined into that code.
 #[cfg(target_arch = "x86_64")]
@@ -288,7 +288,7 @@ mod tests {
     fn lanes_follow_the_scalar_rules() {
         check::<4, Vec4>();
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::bvh::has_avx2() {
+        if crate::accel::simd::has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
             unsafe { check_f8() };
         }

@@ -1,46 +1,100 @@
 //! The acceleration structures, one folder each, behind one front door (`Accel`): the paper's
-//! uniform grid with proximity clouds (`grid/`), a wide BVH to compare it with (`bvh/`), and
-//! the irregular grid that followed the paper (`irregular/`).
+//! uniform grid with proximity clouds (`grid/`), a wide BVH to compare it with (`bvh/`), the
+//! irregular grid that followed the paper (`irregular/`) and no structure at all (`brute/`).
 //!
-//! A structure is built over `TriAccel`s (`triangle.rs`, the one edge-safe triangle test every
-//! structure shares) and answers closest-hit and any-hit queries for single rays and batches.
-//! Adding a structure means a new folder and one arm of `Structure`; everything above this
-//! module (renderers, queries, benchmarks) goes through `Accel`.
+//! Every structure keeps one contract (`contract::AccelStructure`: build, update, bounds,
+//! memory, reports, closest and any hits for rays, packets and batches) over `TriAccel`s
+//! (`triangle.rs`, the one edge-safe triangle test all share), and has one row in the registry
+//! (`registry.rs`: names, aliases, parameters). What they share lives beside them, not in one of
+//! them: `binning` (bounds, candidate cells, counting sort), `resolution`, `tri_box`, `lattice`
+//! (DDA basics), `simd` (AVX2, prefetch, packet width), `lanes`. No structure imports another.
+//! Adding one: see "Adding a structure" in docs/design.md.
 
 pub mod aabb;
+pub mod binning;
+pub mod brute;
 pub mod brute_force;
 pub mod bvh;
+pub mod contract;
 pub mod grid;
 pub mod huge;
 pub mod irregular;
 pub mod lanes;
+pub mod lattice;
 pub mod ray;
+pub mod registry;
+pub mod resolution;
+pub mod simd;
+pub mod tri_box;
 pub mod triangle;
 
 use glam::Vec3;
 
 pub use aabb::Aabb;
+pub use binning::grid_bounds;
+pub use brute::Brute;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
-pub use grid::{Cell, Grid, GridLattice, GridStats, Resolution, Stepping};
-pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound, PACKET};
-pub use ray::{AccelKind, Counters, Hit, NoCounters, Ray, TraversalCounters};
+pub use contract::{AccelStructure, BuildParams};
+pub use grid::{Cell, Grid, GridLattice, GridStats, Stepping};
+pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
+pub use ray::{Counters, Hit, NoCounters, Ray, TraversalCounters};
+pub use registry::{AccelChoice, AccelEntry, AccelKind, Work};
+pub use resolution::{DEFAULT_LAMBDA, MAX_CELLS, Resolution, dims_str};
+pub use simd::PACKET;
 pub use triangle::{LaneHits, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};
 
 use crate::{Error, Result};
 
-/// The structure built over the triangles: only the one that was asked for.
+/// The structure built over the triangles: only the one that was asked for. One arm per
+/// structure (the registry's `structure` column); `dispatch!` below is the only match on it.
 #[derive(Debug, Clone)]
 pub enum Structure {
-    /// The uniform grid with its proximity cloud; serves `AccelKind::Grid` (cell by cell) and
-    /// `AccelKind::ProximityCloud` (jumps), which share it.
+    /// The uniform grid with its proximity cloud; serves `grid` (cell by cell) and `pc`
+    /// (jumps), which share it.
     Grid(Grid),
-    /// The eight-wide BVH (`AccelKind::Bvh`); it keeps its own copy of the triangles in leaf
-    /// order.
+    /// The eight-wide BVH; it keeps its own copy of the triangles in leaf order.
     Bvh(BvhAccel),
-    /// The irregular grid (`AccelKind::Irregular`), built with `IrregularParams::default()`
-    /// unless `Accel::build_irregular` says otherwise.
+    /// The irregular grid.
     Irregular(IrregularGrid),
+    /// No structure: every triangle per ray.
+    Brute(Brute),
+}
+
+/// Runs `$body` with `$s` bound to the structure inside `$structure`, whatever it is: the one
+/// place that lists the arms.
+macro_rules! dispatch {
+    ($structure:expr, $s:ident => $body:expr) => {
+        match $structure {
+            Structure::Grid($s) => $body,
+            Structure::Bvh($s) => $body,
+            Structure::Irregular($s) => $body,
+            Structure::Brute($s) => $body,
+        }
+    };
+}
+
+impl Structure {
+    /// Builds the structure `kind` walks.
+    pub fn build(kind: AccelKind, tris: &[TriAccel], params: &BuildParams) -> Result<Structure> {
+        Ok(match kind.structure_name() {
+            "grid" => Structure::Grid(AccelStructure::build(tris, params)?),
+            "bvh" => Structure::Bvh(AccelStructure::build(tris, params)?),
+            "irregular" => Structure::Irregular(AccelStructure::build(tris, params)?),
+            "brute" => Structure::Brute(AccelStructure::build(tris, params)?),
+            other => unreachable!("registry names structure '{other}', which Structure::build lacks"),
+        })
+    }
+
+    /// The structure's name, as the registry's `structure` column spells it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Structure::Grid(_) => "grid",
+            Structure::Bvh(_) => "bvh",
+            Structure::Irregular(_) => "irregular",
+            Structure::Brute(_) => "brute",
+        }
+    }
 }
 
 /// The triangles and the structure over them: everything a ray query needs.
@@ -60,8 +114,8 @@ pub struct Accel {
 }
 
 impl Accel {
-    /// Builds the structure that serves `kind` over `tris` (`resolution` sizes a grid; the BVH
-    /// ignores it; the irregular grid gets `IrregularParams::default()`).
+    /// Builds the structure that serves `kind` over `tris` (`resolution` sizes a grid; the other
+    /// structures ignore it; the irregular grid gets `IrregularParams::default()`).
     pub fn build(tris: Vec<TriAccel>, kind: AccelKind, resolution: Resolution) -> Result<Accel> {
         Self::build_with(tris, kind, resolution, IrregularParams::default())
     }
@@ -73,11 +127,8 @@ impl Accel {
         resolution: Resolution,
         irregular: IrregularParams,
     ) -> Result<Accel> {
-        let structure = match kind {
-            AccelKind::Grid | AccelKind::ProximityCloud => Structure::Grid(Grid::build(&tris, resolution)?),
-            AccelKind::Bvh => Structure::Bvh(BvhAccel::build(&tris)),
-            AccelKind::Irregular => Structure::Irregular(IrregularGrid::build(&tris, irregular)?),
-        };
+        let params = BuildParams { resolution, irregular };
+        let structure = Structure::build(kind, &tris, &params)?;
         Ok(Accel {
             tris,
             structure,
@@ -98,29 +149,24 @@ impl Accel {
         }
     }
 
-    /// New positions of the same triangles (same count and order): the grids are rebuilt as
-    /// they were built (a grid costs about what a refit would, and a refit grid would keep the
-    /// old bounds), the BVH is refitted (its tree kept, its boxes recomputed: much cheaper than a
-    /// rebuild, at a quality that degrades as the vertices move away from the build pose).
-    /// On an error nothing has changed. Returns what was done.
+    /// How the structure was built (`update` builds it the same way).
+    pub fn params(&self) -> BuildParams {
+        BuildParams {
+            resolution: self.resolution,
+            irregular: self.irregular,
+        }
+    }
+
+    /// New positions of the same triangles (same count and order): each structure updates as
+    /// its contract says (`AccelStructure::update`: the grids are rebuilt as they were built,
+    /// since a grid costs about what a refit would and a refit grid would keep the old bounds;
+    /// the BVH is refitted). On an error nothing has changed. Returns what was done.
     pub fn update(&mut self, tris: Vec<TriAccel>) -> Result<&'static str> {
         self.check_same_count(&tris)?;
-        // A build that fails returns before anything is assigned; a refit cannot fail (the
-        // count is checked), so the BVH is refitted in place, not copied first.
-        let how = match &mut self.structure {
-            Structure::Grid(g) => {
-                *g = Grid::build(&tris, self.resolution)?;
-                "rebuilt"
-            }
-            Structure::Bvh(b) => {
-                b.refit(&tris);
-                "refitted"
-            }
-            Structure::Irregular(g) => {
-                *g = IrregularGrid::build(&tris, self.irregular)?;
-                "rebuilt"
-            }
-        };
+        let params = self.params();
+        // A build that fails returns before anything is assigned (`update` builds into a new
+        // value and assigns it last); a refit cannot fail.
+        let how = dispatch!(&mut self.structure, s => AccelStructure::update(s, &tris, &params))?;
         self.tris = tris;
         self.structure_stale = false;
         Ok(how)
@@ -183,33 +229,30 @@ impl Accel {
     }
 
     /// The box every ray set over these triangles is drawn from: the grid's bounds, which any
-    /// structure over the same triangles shares (`grid::grid_bounds`).
+    /// structure over the same triangles shares (`binning::grid_bounds`).
     pub fn bounds(&self) -> Aabb {
-        match &self.structure {
-            Structure::Grid(g) => g.bounds,
-            Structure::Irregular(g) => g.bounds,
-            // The triangles were checked finite when the structure was built.
-            _ => grid::grid_bounds(&self.tris).unwrap_or(Aabb::EMPTY),
-        }
+        dispatch!(&self.structure, s => AccelStructure::bounds(s, &self.tris))
     }
 
-    /// The structure's name, as `--accel` spells the kinds it serves.
+    /// The structure's name, as the registry's `structure` column spells it.
     pub fn structure_name(&self) -> &'static str {
-        match self.structure {
-            Structure::Grid(_) => "grid",
-            Structure::Bvh(_) => "bvh",
-            Structure::Irregular(_) => "irregular",
-        }
+        self.structure.name()
+    }
+
+    /// The structure in a few words (`AccelStructure::summary`).
+    pub fn summary(&self) -> String {
+        dispatch!(&self.structure, s => AccelStructure::summary(s))
+    }
+
+    /// The structure's statistics for `gridtrace info`, a `(label, value)` each.
+    pub fn info_lines(&self) -> Result<Vec<(String, String)>> {
+        let params = self.params();
+        dispatch!(&self.structure, s => AccelStructure::info_lines(s, &self.tris, &params))
     }
 
     /// Whether this structure can run traversal `kind`.
     pub fn serves(&self, kind: AccelKind) -> bool {
-        matches!(
-            (&self.structure, kind),
-            (Structure::Grid(_), AccelKind::Grid | AccelKind::ProximityCloud)
-                | (Structure::Bvh(_), AccelKind::Bvh)
-                | (Structure::Irregular(_), AccelKind::Irregular)
-        )
+        kind.structure_name() == self.structure_name()
     }
 
     /// `serves`, as an error that says what to do.
@@ -232,20 +275,22 @@ impl Accel {
     #[inline]
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        match &self.structure {
-            Structure::Grid(g) => g.intersect(&self.tris, ray, t_min, t_max, stepping(kind), counters),
-            Structure::Bvh(b) => b.intersect(ray, t_min, t_max, counters),
-            Structure::Irregular(g) => g.intersect(&self.tris, ray, t_min, t_max, counters),
-        }
+        dispatch!(&self.structure, s => AccelStructure::intersect(s, &self.tris, ray, t_min, t_max, kind, counters))
+    }
+
+    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
+    #[inline]
+    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
+        dispatch!(&self.structure, s => AccelStructure::occluded(s, &self.tris, ray, t_min, t_max, kind, counters))
     }
 
     /// Closest hits of a packet of up to `PACKET` coherent rays (a 4x2 block of pixels' rays:
     /// the CPU renderer's, `cpu/blocks.rs`), each counted into its own `counters[i]`: the same
     /// hits and counts as `intersect` ray by ray. The irregular grid walks the packet's rays
-    /// together, a ray per SIMD lane (`IrregularGrid::intersect_packet`); the BVH and the
-    /// uniform grids interleave the rays' own walks, a step each in turn, so that one ray's
-    /// chain of dependent steps overlaps the others' (`BvhAccel::intersect_packet`,
-    /// `Grid::intersect_packet`). Hits past `rays.len()` are misses.
+    /// together, a ray per SIMD lane; the BVH and the uniform grids interleave the rays' own
+    /// walks, a step each in turn, so that one ray's chain of dependent steps overlaps the
+    /// others'. Hits past `rays.len()` are misses.
     #[inline]
     pub fn intersect_packet<C: Counters>(
         &self,
@@ -256,12 +301,7 @@ impl Accel {
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        // Each structure checks the packet's length and counters itself.
-        match &self.structure {
-            Structure::Irregular(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, counters),
-            Structure::Bvh(b) => b.intersect_packet(rays, t_min, t_max, counters),
-            Structure::Grid(g) => g.intersect_packet(&self.tris, rays, t_min, t_max, stepping(kind), counters),
-        }
+        dispatch!(&self.structure, s => AccelStructure::intersect_packet(s, &self.tris, rays, t_min, t_max, kind, counters))
     }
 
     /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (the
@@ -277,31 +317,15 @@ impl Accel {
         counters: &mut [C],
     ) -> [bool; PACKET] {
         debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        // Each structure checks the packet's length and counters itself.
-        match &self.structure {
-            Structure::Irregular(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, counters),
-            Structure::Bvh(b) => b.occluded_packet(rays, t_min, t_max, counters),
-            Structure::Grid(g) => g.occluded_packet(&self.tris, rays, t_min, t_max, stepping(kind), counters),
-        }
-    }
-
-    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
-    #[inline]
-    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        match &self.structure {
-            Structure::Grid(g) => g.occluded(&self.tris, ray, t_min, t_max, stepping(kind), counters),
-            Structure::Bvh(b) => b.occluded(ray, t_min, t_max, counters),
-            Structure::Irregular(g) => g.occluded(&self.tris, ray, t_min, t_max, counters),
-        }
+        dispatch!(&self.structure, s => AccelStructure::occluded_packet(s, &self.tris, rays, t_min, t_max, kind, counters))
     }
 
     /// The batch query: closest hits of `rays` handed to `f(i, hit, normal)` for each ray
     /// `rays[i]`, in no particular order, with the hit's geometric normal (`TriAccel::normal`,
     /// unnormalised; zero for a miss). On this thread: callers split large batches across
     /// threads. The BVH interleaves the rays to hide memory latency and takes the normal from
-    /// the hit's block while it is still in cache (`BvhAccel::intersect_batch_each`); looked up
-    /// afterwards, it is a cache miss per hit.
+    /// the hit's block while it is still in cache; the irregular grid takes runs of coherent
+    /// rays as packets.
     #[inline]
     pub fn intersect_batch_each(
         &self,
@@ -309,20 +333,9 @@ impl Accel {
         t_min: f32,
         t_max: f32,
         kind: AccelKind,
-        mut f: impl FnMut(usize, Hit, Vec3),
+        f: impl FnMut(usize, Hit, Vec3),
     ) {
-        match &self.structure {
-            Structure::Bvh(b) => b.intersect_batch_each(rays, t_min, t_max, f),
-            Structure::Irregular(g) => g.batch::<false>(&self.tris, rays, t_min, t_max, |i, hit| {
-                f(i, hit, self.hit_normal(&hit))
-            }),
-            Structure::Grid(_) => {
-                for (i, r) in rays.iter().enumerate() {
-                    let hit = self.intersect(r, t_min, t_max, kind, &mut NoCounters);
-                    f(i, hit, self.hit_normal(&hit));
-                }
-            }
-        }
+        dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, kind, f))
     }
 
     /// Closest hits of a batch into `out` (`out[i]` for `rays[i]`), like `intersect_batch_each`.
@@ -334,47 +347,19 @@ impl Accel {
     /// Any-hit results of a batch into `out` (`out[i]` for `rays[i]`).
     pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        match &self.structure {
-            Structure::Bvh(b) => b.occluded_batch(rays, t_min, t_max, out),
-            Structure::Irregular(g) => g.batch::<true>(&self.tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit()),
-            Structure::Grid(_) => {
-                for (r, o) in rays.iter().zip(out) {
-                    *o = self.occluded(r, t_min, t_max, kind, &mut NoCounters);
-                }
-            }
-        }
+        dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, kind, out))
     }
 
     /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a
     /// miss.
     pub fn hit_normal(&self, hit: &Hit) -> Vec3 {
-        if hit.is_hit() {
-            self.tris[hit.tri as usize].normal()
-        } else {
-            Vec3::ZERO
-        }
+        contract::hit_normal(&self.tris, hit)
     }
 
     /// Bytes of each array the structure traverses (the triangles included).
     pub fn memory(&self) -> Vec<(&'static str, usize)> {
-        let mut v = match &self.structure {
-            Structure::Grid(g) => vec![
-                ("cells", std::mem::size_of_val(g.cells.as_slice())),
-                ("refs", std::mem::size_of_val(g.refs.as_slice())),
-            ],
-            Structure::Bvh(b) => vec![("bvh", b.memory())],
-            Structure::Irregular(g) => g.memory(),
-        };
+        let mut v = dispatch!(&self.structure, s => AccelStructure::memory(s));
         v.push(("triangles", std::mem::size_of_val(self.tris.as_slice())));
         v
-    }
-}
-
-/// How the grid crosses empty space for a traversal kind.
-fn stepping(kind: AccelKind) -> Stepping {
-    if kind == AccelKind::ProximityCloud {
-        Stepping::ProximityJumps
-    } else {
-        Stepping::EveryCell
     }
 }

@@ -1,5 +1,4 @@
-//! What every structure's traversal shares: rays, hits, which structure to use, and the
-//! counters of traversal work.
+//! What every structure's traversal shares: rays, hits and the counters of traversal work.
 
 use glam::Vec3;
 
@@ -37,62 +36,6 @@ impl Hit {
     };
     pub fn is_hit(&self) -> bool {
         self.tri != u32::MAX
-    }
-}
-
-/// Which acceleration the traversal uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum AccelKind {
-    /// Plain uniform grid: one DDA step per cell.
-    Grid,
-    /// Uniform grid with proximity clouds: empty space is crossed in jumps.
-    ProximityCloud,
-    /// Bounding volume hierarchy (binned SAH), the comparison the paper left as future work.
-    Bvh,
-    /// Irregular grid (merged and expanded cells, no DDA), the grid that adapts.
-    Irregular,
-}
-
-impl std::str::FromStr for AccelKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "grid" | "g" => Ok(AccelKind::Grid),
-            "pc" | "proximity" => Ok(AccelKind::ProximityCloud),
-            "bvh" => Ok(AccelKind::Bvh),
-            "irregular" | "irr" => Ok(AccelKind::Irregular),
-            _ => Err(format!("accel must be 'grid', 'pc', 'bvh' or 'irregular', got '{s}'")),
-        }
-    }
-}
-
-impl AccelKind {
-    /// Every kind (the CPU and the GPU run them all).
-    pub const ALL: [AccelKind; 4] = [
-        AccelKind::Grid,
-        AccelKind::ProximityCloud,
-        AccelKind::Bvh,
-        AccelKind::Irregular,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            AccelKind::Grid => "grid",
-            AccelKind::ProximityCloud => "pc",
-            AccelKind::Bvh => "bvh",
-            AccelKind::Irregular => "irregular",
-        }
-    }
-
-    /// Whether this kind runs on the uniform grid (`grid` and `pc` share one); every other
-    /// kind has a structure of its own, built apart.
-    pub fn uses_grid(self) -> bool {
-        matches!(self, AccelKind::Grid | AccelKind::ProximityCloud)
-    }
-
-    /// The structure this kind traverses, as `Accel::structure_name` names it.
-    pub fn structure_name(self) -> &'static str {
-        if self.uses_grid() { "grid" } else { self.name() }
     }
 }
 

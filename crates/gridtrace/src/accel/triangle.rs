@@ -502,7 +502,7 @@ mod tests {
     fn a_ray_per_lane_equals_the_scalar_test() {
         rays_per_lane::<4, Vec4>();
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::bvh::has_avx2() {
+        if crate::accel::simd::has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
             unsafe { rays_per_lane_avx() };
         }

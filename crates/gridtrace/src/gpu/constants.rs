@@ -60,7 +60,7 @@ pub const fn mode_code(mode: Mode) -> u32 {
 }
 
 /// `PassUniform::accel`: 1 walks the proximity clouds (`ACCEL_PC`), 0 the plain grid, 2 the BVH
-/// and 3 the irregular grid (whose kernels are their own pipelines, `Kernel::walking`, and do
+/// 3 the irregular grid and 4 brute force (whose kernels are their own pipelines, `Kernel::walking`, and do
 /// not read it).
 pub const fn accel_code(accel: AccelKind) -> u32 {
     match accel {
@@ -68,6 +68,7 @@ pub const fn accel_code(accel: AccelKind) -> u32 {
         AccelKind::ProximityCloud => 1,
         AccelKind::Bvh => 2,
         AccelKind::Irregular => 3,
+        AccelKind::Brute => 4,
     }
 }
 

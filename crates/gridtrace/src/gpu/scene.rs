@@ -123,6 +123,9 @@ fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
                 shift: 0,
             })
         }
+        Structure::Brute(_) => Err(Error::Gpu(
+            "the 'brute' structure has no GPU walk yet: trace it on the CPU (--backend cpu)".into(),
+        )),
         Structure::Irregular(g) => Ok(AccelArrays {
             structure: GpuStructure::Irregular,
             cells: unused(),

@@ -23,6 +23,7 @@ mod box_test;
 mod build;
 mod packet;
 mod refit;
+mod structure;
 #[cfg(test)]
 mod tests;
 mod walk;
@@ -34,8 +35,6 @@ pub(crate) use build::STACK;
 pub use build::{Bvh, BvhNode, MAX_LEAF};
 use walk::Walk;
 #[cfg(target_arch = "x86_64")]
-pub(crate) use walk::has_avx2;
-pub(crate) use walk::prefetch;
 use wide::collapse;
 pub use wide::{ChildRef, WIDTH, WideNode};
 

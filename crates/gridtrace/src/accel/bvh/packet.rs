@@ -18,7 +18,7 @@ use crate::accel::{Counters, Hit, PACKET, Ray};
 use super::BvhAccel;
 use super::walk::Walk;
 #[cfg(target_arch = "x86_64")]
-use super::walk::has_avx2;
+use crate::accel::simd::has_avx2;
 
 impl BvhAccel {
     /// Closest hits of up to `PACKET` rays, each counted into its own `counters[i]`: the same

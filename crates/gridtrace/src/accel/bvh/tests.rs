@@ -6,9 +6,9 @@ use std::mem::MaybeUninit;
 use super::box_test::sort8_avx2;
 use super::box_test::{BoxRay, Pending};
 use super::build::{MAX_LEAF, STACK};
-#[cfg(target_arch = "x86_64")]
-use super::walk::has_avx2;
 use super::*;
+#[cfg(target_arch = "x86_64")]
+use crate::accel::simd::has_avx2;
 use crate::accel::{NoCounters, brute_force_intersect, brute_force_occluded};
 
 #[test]

@@ -5,6 +5,7 @@ use std::mem::MaybeUninit;
 
 use glam::{Vec3, Vec4};
 
+use crate::accel::simd::{has_avx2, prefetch};
 use crate::accel::{Counters, Hit, NoCounters, Ray};
 
 use super::BvhAccel;
@@ -137,29 +138,9 @@ impl BvhAccel {
     }
 }
 
-/// Whether this CPU runs the AVX2 build of the traversal (`walk_avx2`, `interleaved_avx2`,
-/// `BoxRay::enter_avx2`: the features those enable). The standard library caches the answer.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-pub(crate) fn has_avx2() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
-}
-
 /// Rays traced at once by the batch queries (enough in flight to cover memory latency; more
 /// only adds bookkeeping).
 pub(super) const LANES: usize = 8;
-
-/// Asks for the cache line at `p` (a hint: any address will do).
-#[inline(always)]
-pub(crate) fn prefetch(p: *const i8) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint; it never faults, whatever the address.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p)
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
-}
 
 pub(super) const STACK_LEN: usize = (WIDTH - 1) * STACK + WIDTH;
 

@@ -6,6 +6,7 @@ use std::ops::ControlFlow;
 use glam::{IVec3, Vec3};
 
 use super::{Cell, Grid};
+use crate::accel::lattice::{min_position, sign};
 use crate::accel::triangle::{any_in, closest_in};
 use crate::accel::{Counters, Hit, Ray, TriAccel};
 
@@ -257,31 +258,4 @@ pub(super) struct DdaCursor {
     t_next: [f32; 3],
     pub(super) t_leave: f32,
     budget: u32,
-}
-
-/// Index of the smallest element, the first on ties (glam's `min_position`; the WGSL
-/// `min_position` in common.wgsl is the same).
-#[inline(always)]
-pub(crate) fn min_position(v: [f32; 3]) -> usize {
-    let mut m = v[0];
-    let mut i = 0;
-    if v[1] < m {
-        m = v[1];
-        i = 1;
-    }
-    if v[2] < m {
-        i = 2;
-    }
-    i
-}
-
-#[inline(always)]
-pub(crate) fn sign(x: f32) -> i32 {
-    if x > 0.0 {
-        1
-    } else if x < 0.0 {
-        -1
-    } else {
-        0
-    }
 }

@@ -10,10 +10,10 @@ use rayon::prelude::*;
 
 use super::merge::{Cells, MergeRule, Refs, TopCells, find};
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
-use crate::accel::grid::{
-    auto_dims, candidate_cells, cell_margin, count_by_cell, grid_bounds, overlap_pairs, overlapping_cells,
-    place_by_cell,
+use crate::accel::binning::{
+    candidate_cells, cell_margin, count_by_cell, grid_bounds, overlap_pairs, overlapping_cells, place_by_cell,
 };
+use crate::accel::resolution::auto_dims;
 use crate::accel::{Aabb, TriAccel};
 use crate::{Error, Result};
 

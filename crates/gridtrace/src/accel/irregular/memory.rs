@@ -36,7 +36,7 @@ use super::merge::Refs;
 use super::{IrrCell, IrregularGrid, IrregularParams};
 use crate::Result;
 use crate::accel::TriAccel;
-use crate::accel::grid::{candidate_cells, cell_margin};
+use crate::accel::binning::{candidate_cells, cell_margin};
 
 /// Upper bounds on an irregular-grid build over given triangles and parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -29,12 +29,12 @@ mod build;
 mod memory;
 mod merge;
 mod packet;
+mod structure;
 #[cfg(test)]
 mod tests;
 mod walk;
 
 pub use memory::MemoryBound;
-pub use packet::PACKET;
 
 /// One cell as stored: its grown box in virtual voxels (`min` inclusive, `max` exclusive) as
 /// six 16-bit coordinates, and the first of its references in `IrregularGrid::refs`; they end

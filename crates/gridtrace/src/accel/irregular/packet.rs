@@ -28,11 +28,8 @@ use super::IrregularGrid;
 use glam::Vec4;
 
 use crate::accel::lanes::{Lanes, Mask, load3, splat3};
-use crate::accel::{Counters, Hit, NoCounters, Ray, TriAccel, intersect_lanes};
+use crate::accel::{Counters, Hit, NoCounters, PACKET, Ray, TriAccel, intersect_lanes};
 use crate::util::set_bits as bits;
-
-/// Rays in a packet: the lanes of an AVX register.
-pub const PACKET: usize = 8;
 
 /// The rays of a packet and where they are, a ray per lane.
 struct Walkers<const N: usize, L: Lanes<N>> {
@@ -119,7 +116,7 @@ impl IrregularGrid {
             "a packet is up to {PACKET} rays, a counter each"
         );
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::bvh::has_avx2() {
+        if crate::accel::simd::has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
             return unsafe { self.walk_packet_avx2::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
         }

@@ -4,7 +4,7 @@
 use glam::{UVec3, Vec3};
 
 use super::{IrregularGrid, IrregularParams};
-use crate::accel::grid::tri_box::triangle_overlaps_box;
+use crate::accel::tri_box::triangle_overlaps_box;
 use crate::accel::{Hit, NoCounters, Ray, TriAccel, brute_force_intersect, brute_force_occluded};
 use crate::util::Rng;
 

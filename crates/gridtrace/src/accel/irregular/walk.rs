@@ -20,8 +20,8 @@
 use glam::{Vec3, Vec4};
 
 use super::{CellView, IrregularGrid, LEVEL_BITS};
-use crate::accel::bvh::prefetch;
-use crate::accel::grid::dda::{min_position, sign};
+use crate::accel::lattice::{min_position, sign};
+use crate::accel::simd::prefetch;
 use crate::accel::{Counters, Hit, Ray, TriAccel, TriAccel4};
 
 /// Rays in flight in a batch: enough to cover the three dependent loads of a step (voxel map,

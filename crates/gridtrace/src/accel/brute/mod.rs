@@ -1,0 +1,69 @@
+//! `brute`: no structure at all, every triangle tested against every ray. The oracle the other
+//! structures are checked against, and a way to check a result on a small mesh
+//! (`--accel brute`): its cost per ray is the triangle count.
+//!
+//! It is also the proof of the structure contract: it was added as this file and one registry
+//! entry (`registry.rs`), one arm of `Structure`, and nothing else above `accel/`.
+
+use crate::Result;
+use crate::accel::contract::{AccelStructure, BuildParams};
+use crate::accel::{AccelKind, Counters, Hit, Ray, TriAccel};
+
+/// Nothing is built: the walk is the triangle list.
+#[derive(Debug, Clone, Default)]
+pub struct Brute {
+    /// Triangles when built, so `summary` can say what a ray costs.
+    pub triangles: usize,
+}
+
+impl AccelStructure for Brute {
+    fn build(tris: &[TriAccel], _params: &BuildParams) -> Result<Brute> {
+        Ok(Brute { triangles: tris.len() })
+    }
+
+    fn memory(&self) -> Vec<(&'static str, usize)> {
+        Vec::new()
+    }
+
+    fn summary(&self) -> String {
+        format!("brute force: {} triangle tests per ray", self.triangles)
+    }
+
+    /// The closest of every triangle's hit, the first in triangle order on equal `t` (as every
+    /// structure's walk, which tests a cell's references in ascending order).
+    #[inline]
+    fn intersect<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut C,
+    ) -> Hit {
+        let mut best = Hit { t: t_max, ..Hit::MISS };
+        for (i, tri) in tris.iter().enumerate() {
+            counters.tri_test();
+            if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
+                best = h.on(i as u32);
+            }
+        }
+        if best.is_hit() { best } else { Hit::MISS }
+    }
+
+    #[inline]
+    fn occluded<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut C,
+    ) -> bool {
+        tris.iter().any(|tri| {
+            counters.tri_test();
+            tri.intersect(ray.origin, ray.dir, t_min, t_max).is_some()
+        })
+    }
+}

@@ -1,0 +1,116 @@
+//! The eight-wide BVH under the structure contract. It keeps its own copy of the triangles in
+//! leaf blocks, so its walks ignore the ones `Accel` holds; moved triangles refit its boxes.
+
+use glam::Vec3;
+
+use super::BvhAccel;
+use crate::Result;
+use crate::accel::contract::{AccelStructure, BuildParams};
+use crate::accel::{AccelKind, Counters, Hit, PACKET, Ray, TriAccel};
+use crate::util::fmt_bytes;
+
+impl AccelStructure for BvhAccel {
+    fn build(tris: &[TriAccel], _params: &BuildParams) -> Result<BvhAccel> {
+        Ok(BvhAccel::build(tris))
+    }
+
+    /// The tree is kept and its boxes recomputed: much cheaper than a rebuild, at a quality
+    /// that degrades as the vertices move away from the build pose. Cannot fail (the count is
+    /// checked by `Accel::update`).
+    fn update(&mut self, tris: &[TriAccel], _params: &BuildParams) -> Result<&'static str> {
+        self.refit(tris);
+        Ok("refitted")
+    }
+
+    fn memory(&self) -> Vec<(&'static str, usize)> {
+        vec![("bvh", BvhAccel::memory(self))]
+    }
+
+    fn summary(&self) -> String {
+        format!(
+            "bvh {} wide nodes, depth {}, {}",
+            self.nodes.len(),
+            self.bvh.depth,
+            fmt_bytes(BvhAccel::memory(self))
+        )
+    }
+
+    #[inline]
+    fn intersect<C: Counters>(
+        &self,
+        _tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut C,
+    ) -> Hit {
+        BvhAccel::intersect(self, ray, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn occluded<C: Counters>(
+        &self,
+        _tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut C,
+    ) -> bool {
+        BvhAccel::occluded(self, ray, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn intersect_packet<C: Counters>(
+        &self,
+        _tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        BvhAccel::intersect_packet(self, rays, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn occluded_packet<C: Counters>(
+        &self,
+        _tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+        _kind: AccelKind,
+        counters: &mut [C],
+    ) -> [bool; PACKET] {
+        BvhAccel::occluded_packet(self, rays, t_min, t_max, counters)
+    }
+
+    /// The rays interleaved with prefetching; the normal taken from the hit's block while it
+    /// is still in cache (looked up afterwards it is a cache miss per hit).
+    #[inline]
+    fn intersect_batch_each(
+        &self,
+        _tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        f: impl FnMut(usize, Hit, Vec3),
+    ) {
+        BvhAccel::intersect_batch_each(self, rays, t_min, t_max, f)
+    }
+
+    fn occluded_batch(
+        &self,
+        _tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        out: &mut [bool],
+    ) {
+        BvhAccel::occluded_batch(self, rays, t_min, t_max, out)
+    }
+}

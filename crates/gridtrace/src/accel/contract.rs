@@ -1,0 +1,172 @@
+//! The contract every acceleration structure keeps: what `Accel` (and through it the renderers,
+//! the ray queries, the benchmarks and the tests) asks of a structure, and nothing more. A new
+//! structure is a folder that implements `AccelStructure`, one arm of `accel::Structure` (and of
+//! its `dispatch!`), and one entry of the registry (`registry.rs`): nothing above `accel/` names
+//! it.
+//!
+//! Walks take the triangles they were built over (`Accel::tris`, in the order hits name them):
+//! a structure that keeps its own copy (the BVH's leaf blocks) ignores them.
+
+use glam::Vec3;
+
+use super::binning::grid_bounds;
+use super::{Aabb, AccelKind, Counters, Hit, IrregularParams, NoCounters, PACKET, Ray, Resolution, TriAccel};
+use crate::Result;
+
+/// Everything a build may be parameterised by; each structure reads its own part (the uniform
+/// grids the resolution, the irregular grid its parameters) and ignores the rest.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BuildParams {
+    /// The uniform grid's cell count (`--grid`).
+    pub resolution: Resolution,
+    /// The irregular grid's build (`--irregular`).
+    pub irregular: IrregularParams,
+}
+
+/// One acceleration structure over triangles: its build, its update when the triangles move,
+/// what it reports, and its closest-hit and any-hit walks for single rays, packets and batches.
+///
+/// `kind` in the walks is the traversal asked for, one the structure serves (the registry's
+/// `structure` column): only the uniform grid serves two (`grid` steps every cell, `pc` jumps).
+/// The packet and batch defaults run the single-ray walk ray by ray; a structure overrides them
+/// when it has something faster that gives the same hits and counts bit for bit (the shared
+/// tests check it for every structure).
+pub trait AccelStructure: Sized {
+    /// Builds over `tris` (checked finite by the caller or refused by the build).
+    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<Self>;
+
+    /// The triangles moved (same count and order): rebuild by default; a structure that can do
+    /// better (the BVH's refit) says so. On an error nothing has changed. Returns what was done,
+    /// in a word.
+    fn update(&mut self, tris: &[TriAccel], params: &BuildParams) -> Result<&'static str> {
+        *self = Self::build(tris, params)?;
+        Ok("rebuilt")
+    }
+
+    /// The box every ray set over these triangles is drawn from (`binning::grid_bounds`, the
+    /// same for every structure over the same triangles).
+    fn bounds(&self, tris: &[TriAccel]) -> Aabb {
+        // The triangles were checked finite when the structure was built.
+        grid_bounds(tris).unwrap_or(Aabb::EMPTY)
+    }
+
+    /// Bytes of each array the structure traverses, the triangles not included.
+    fn memory(&self) -> Vec<(&'static str, usize)>;
+
+    /// The structure in a few words (one line: what `render` prints after the build).
+    fn summary(&self) -> String;
+
+    /// The structure's statistics, a line each (`gridtrace info`), as `label  value`.
+    fn info_lines(&self, _tris: &[TriAccel], _params: &BuildParams) -> Result<Vec<(String, String)>> {
+        Ok(vec![("structure".into(), self.summary())])
+    }
+
+    /// Closest hit with `t_min < t < t_max`, `Hit::MISS` for none.
+    fn intersect<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+    ) -> Hit;
+
+    /// Whether anything is hit with `t_min < t < t_max` (stops at the first hit found).
+    fn occluded<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+    ) -> bool;
+
+    /// Closest hits of up to `PACKET` coherent rays (a 4x2 block of pixels), each counted into
+    /// its own `counters[i]`; misses past `rays.len()`.
+    fn intersect_packet<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        check_packet(rays.len(), counters.len());
+        let mut out = [Hit::MISS; PACKET];
+        for ((o, r), c) in out.iter_mut().zip(rays).zip(counters.iter_mut()) {
+            *o = self.intersect(tris, r, t_min, t_max, kind, c);
+        }
+        out
+    }
+
+    /// Any hits of up to `PACKET` rays, each with its own `t_max[i]`; false past `rays.len()`.
+    fn occluded_packet<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+        kind: AccelKind,
+        counters: &mut [C],
+    ) -> [bool; PACKET] {
+        check_packet(rays.len(), counters.len());
+        let mut out = [false; PACKET];
+        for (i, (r, c)) in rays.iter().zip(counters.iter_mut()).enumerate() {
+            out[i] = self.occluded(tris, r, t_min, t_max[i], kind, c);
+        }
+        out
+    }
+
+    /// Closest hits of a batch handed to `f(i, hit, normal)` in any order, with the hit
+    /// triangle's unnormalised geometric normal (zero for a miss). On this thread.
+    fn intersect_batch_each(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        mut f: impl FnMut(usize, Hit, Vec3),
+    ) {
+        for (i, r) in rays.iter().enumerate() {
+            let hit = self.intersect(tris, r, t_min, t_max, kind, &mut NoCounters);
+            f(i, hit, hit_normal(tris, &hit));
+        }
+    }
+
+    /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.
+    fn occluded_batch(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        out: &mut [bool],
+    ) {
+        for (r, o) in rays.iter().zip(out) {
+            *o = self.occluded(tris, r, t_min, t_max, kind, &mut NoCounters);
+        }
+    }
+}
+
+/// The packet rules every packet walk checks: at most `PACKET` rays, a counter each.
+#[inline]
+pub(crate) fn check_packet(rays: usize, counters: usize) {
+    assert!(rays <= PACKET, "a packet holds at most {PACKET} rays, got {rays}");
+    assert_eq!(rays, counters, "one counter per ray");
+}
+
+/// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a
+/// miss.
+#[inline]
+pub fn hit_normal(tris: &[TriAccel], hit: &Hit) -> Vec3 {
+    if hit.is_hit() {
+        tris[hit.tri as usize].normal()
+    } else {
+        Vec3::ZERO
+    }
+}

@@ -1,0 +1,114 @@
+//! The uniform grid under the structure contract: one structure, two traversals (`grid` steps
+//! every cell, `pc` jumps over empty space with the proximity cloud).
+
+use super::{Grid, Stepping};
+use crate::Result;
+use crate::accel::contract::{AccelStructure, BuildParams};
+use crate::accel::{Aabb, AccelKind, Counters, Hit, PACKET, Ray, TriAccel, dims_str};
+
+/// How the grid crosses empty space for a traversal kind.
+#[inline(always)]
+pub(crate) fn stepping(kind: AccelKind) -> Stepping {
+    if kind == AccelKind::ProximityCloud {
+        Stepping::ProximityJumps
+    } else {
+        Stepping::EveryCell
+    }
+}
+
+impl AccelStructure for Grid {
+    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<Grid> {
+        Grid::build(tris, params.resolution)
+    }
+
+    fn bounds(&self, _tris: &[TriAccel]) -> Aabb {
+        self.bounds
+    }
+
+    fn memory(&self) -> Vec<(&'static str, usize)> {
+        vec![
+            ("cells", std::mem::size_of_val(self.cells.as_slice())),
+            ("refs", std::mem::size_of_val(self.refs.as_slice())),
+        ]
+    }
+
+    fn summary(&self) -> String {
+        let s = &self.stats;
+        format!(
+            "grid {}, {:.2} refs/tri (built in {:.1} ms)",
+            dims_str(s.dims),
+            s.refs_per_triangle(),
+            s.build_ms
+        )
+    }
+
+    fn info_lines(&self, _tris: &[TriAccel], _params: &BuildParams) -> Result<Vec<(String, String)>> {
+        let s = &self.stats;
+        Ok(vec![
+            ("grid".into(), format!("{} = {} cells", dims_str(s.dims), s.cells)),
+            ("empty cells".into(), format!("{:.1}%", s.empty_fraction() * 100.0)),
+            (
+                "references".into(),
+                format!(
+                    "{} ({:.2} per triangle, max {} in a cell)",
+                    s.references,
+                    s.refs_per_triangle(),
+                    s.max_refs_in_cell
+                ),
+            ),
+            ("build".into(), format!("{:.2} ms", s.build_ms)),
+        ])
+    }
+
+    #[inline]
+    fn intersect<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+    ) -> Hit {
+        Grid::intersect(self, tris, ray, t_min, t_max, stepping(kind), counters)
+    }
+
+    #[inline]
+    fn occluded<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut C,
+    ) -> bool {
+        Grid::occluded(self, tris, ray, t_min, t_max, stepping(kind), counters)
+    }
+
+    #[inline]
+    fn intersect_packet<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        Grid::intersect_packet(self, tris, rays, t_min, t_max, stepping(kind), counters)
+    }
+
+    #[inline]
+    fn occluded_packet<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+        kind: AccelKind,
+        counters: &mut [C],
+    ) -> [bool; PACKET] {
+        Grid::occluded_packet(self, tris, rays, t_min, t_max, stepping(kind), counters)
+    }
+}

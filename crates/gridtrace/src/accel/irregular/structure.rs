@@ -1,0 +1,162 @@
+//! The irregular grid under the structure contract: packets in SIMD lanes, batches that take
+//! runs of coherent rays as packets.
+
+use glam::Vec3;
+
+use super::{IrregularGrid, IrregularStats};
+use crate::Result;
+use crate::accel::contract::{AccelStructure, BuildParams, hit_normal};
+use crate::accel::{Aabb, AccelKind, Counters, Hit, PACKET, Ray, TriAccel, dims_str};
+use crate::util::fmt_bytes;
+
+impl AccelStructure for IrregularGrid {
+    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<IrregularGrid> {
+        IrregularGrid::build(tris, params.irregular)
+    }
+
+    fn bounds(&self, _tris: &[TriAccel]) -> Aabb {
+        self.bounds
+    }
+
+    fn memory(&self) -> Vec<(&'static str, usize)> {
+        IrregularGrid::memory(self)
+    }
+
+    fn summary(&self) -> String {
+        let s = &self.stats;
+        format!(
+            "irregular top {} x {} levels, {} cells, {:.2} refs/tri, {} (built in {:.1} ms)",
+            dims_str(s.top_dims),
+            s.max_level,
+            s.cells,
+            s.refs_per_triangle(),
+            fmt_bytes(self.bytes()),
+            s.build_ms()
+        )
+    }
+
+    fn info_lines(&self, tris: &[TriAccel], params: &BuildParams) -> Result<Vec<(String, String)>> {
+        let s = &self.stats;
+        let v = self.voxel_dims();
+        let mut lines = vec![
+            (
+                "irregular grid".to_string(),
+                format!(
+                    "top {} cells, up to {} levels below (virtual {}x{}x{} voxels)",
+                    dims_str(s.top_dims),
+                    s.max_level,
+                    v.x,
+                    v.y,
+                    v.z
+                ),
+            ),
+            (
+                "cells".into(),
+                format!(
+                    "{} ({} before merging), {:.1}% empty",
+                    s.cells,
+                    s.initial_cells,
+                    s.empty_cells as f64 * 100.0 / s.cells.max(1) as f64
+                ),
+            ),
+            (
+                "references".into(),
+                format!("{} ({:.2} per triangle)", s.references, s.refs_per_triangle()),
+            ),
+            ("build".into(), format!("{:.2} ms", s.build_ms())),
+        ];
+        for (phase, ms) in IrregularStats::PHASES.iter().zip(s.phase_ms) {
+            lines.push((format!("  {phase}"), format!("{ms:>9.2} ms")));
+        }
+        // What `memory_bound` says before a build, beside what this one made.
+        let m = IrregularGrid::memory_bound(tris, params.irregular)?;
+        lines.push((
+            "bound".into(),
+            format!(
+                "at most {} cells before merging, {} references, structure {}, build peak {}",
+                m.initial_cells,
+                m.references,
+                fmt_bytes(m.structure_bytes as usize),
+                fmt_bytes(m.build_peak_bytes as usize)
+            ),
+        ));
+        Ok(lines)
+    }
+
+    #[inline]
+    fn intersect<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut C,
+    ) -> Hit {
+        IrregularGrid::intersect(self, tris, ray, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn occluded<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut C,
+    ) -> bool {
+        IrregularGrid::occluded(self, tris, ray, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn intersect_packet<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        IrregularGrid::intersect_packet(self, tris, rays, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn occluded_packet<C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+        _kind: AccelKind,
+        counters: &mut [C],
+    ) -> [bool; PACKET] {
+        IrregularGrid::occluded_packet(self, tris, rays, t_min, t_max, counters)
+    }
+
+    #[inline]
+    fn intersect_batch_each(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        mut f: impl FnMut(usize, Hit, Vec3),
+    ) {
+        self.batch::<false>(tris, rays, t_min, t_max, |i, hit| f(i, hit, hit_normal(tris, &hit)))
+    }
+
+    fn occluded_batch(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        out: &mut [bool],
+    ) {
+        self.batch::<true>(tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
+    }
+}

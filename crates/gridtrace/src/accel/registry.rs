@@ -1,0 +1,293 @@
+//! The one list of structures: each traversal's name and aliases as users type them
+//! (`--accel`, Python's `accel=`), the structure it walks, what it is for, and which build
+//! parameters it reads. The CLI's values and help, Python's accepted names, the viewer's G
+//! cycle, the benchmarks' columns and the tests' "every structure" all come from here.
+//!
+//! Adding a structure: its folder (implementing `contract::AccelStructure`), one `AccelKind`
+//! variant and one `ENTRIES` row here, one arm of `Structure` in `mod.rs`.
+
+/// Which traversal (and so which structure) is used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AccelKind {
+    /// Plain uniform grid: one DDA step per cell.
+    Grid,
+    /// Uniform grid with proximity clouds: empty space is crossed in jumps.
+    ProximityCloud,
+    /// Bounding volume hierarchy (binned SAH), the comparison the paper left as future work.
+    Bvh,
+    /// Irregular grid (merged and expanded cells, no DDA), the grid that adapts.
+    Irregular,
+    /// No structure: every triangle tested against every ray (the oracle).
+    Brute,
+}
+
+/// The build parameters a structure reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Params {
+    None,
+    /// The uniform grid's resolution (`--grid`).
+    Resolution,
+    /// The irregular grid's build (`--irregular`).
+    Irregular,
+}
+
+/// One row of the registry.
+#[derive(Debug, Clone, Copy)]
+pub struct AccelEntry {
+    pub kind: AccelKind,
+    /// The name users type and every report prints.
+    pub name: &'static str,
+    /// Other accepted spellings.
+    pub aliases: &'static [&'static str],
+    /// The structure this traversal walks, as `Accel::structure_name` names it: traversals
+    /// with the same structure share one build (`grid` and `pc`).
+    pub structure: &'static str,
+    /// One line for help texts.
+    pub about: &'static str,
+    pub params: Params,
+    /// Whether the GPU backend has a walk for it (else `auto` traces it on the CPU, and
+    /// `--backend gpu` says so).
+    pub gpu: bool,
+    /// Whether interactive use (the viewer's G cycle) offers it: brute force costs the whole
+    /// triangle count per ray.
+    pub interactive: bool,
+}
+
+/// Every traversal, in the order help texts and reports list them.
+pub const ENTRIES: [AccelEntry; 5] = [
+    AccelEntry {
+        kind: AccelKind::Grid,
+        name: "grid",
+        aliases: &["g"],
+        structure: "grid",
+        about: "the paper's uniform grid, one DDA step per cell",
+        params: Params::Resolution,
+        gpu: true,
+        interactive: true,
+    },
+    AccelEntry {
+        kind: AccelKind::ProximityCloud,
+        name: "pc",
+        aliases: &["proximity"],
+        structure: "grid",
+        about: "the uniform grid with proximity clouds: jumps over empty cells",
+        params: Params::Resolution,
+        gpu: true,
+        interactive: true,
+    },
+    AccelEntry {
+        kind: AccelKind::Bvh,
+        name: "bvh",
+        aliases: &[],
+        structure: "bvh",
+        about: "an eight-wide SAH bounding volume hierarchy (fastest for incoherent rays)",
+        params: Params::None,
+        gpu: true,
+        interactive: true,
+    },
+    AccelEntry {
+        kind: AccelKind::Irregular,
+        name: "irregular",
+        aliases: &["irr"],
+        structure: "irregular",
+        about: "an irregular grid: merged and expanded cells, point lookups instead of a DDA",
+        params: Params::Irregular,
+        gpu: true,
+        interactive: true,
+    },
+    AccelEntry {
+        kind: AccelKind::Brute,
+        name: "brute",
+        aliases: &["brute-force"],
+        structure: "brute",
+        about: "no structure: every triangle per ray (the oracle; tiny meshes and checks)",
+        params: Params::None,
+        gpu: false,
+        interactive: false,
+    },
+];
+
+impl AccelKind {
+    /// Every kind, in registry order (the CPU and the GPU run them all).
+    pub const ALL: [AccelKind; ENTRIES.len()] = {
+        let mut all = [AccelKind::Grid; ENTRIES.len()];
+        let mut i = 0;
+        while i < ENTRIES.len() {
+            all[i] = ENTRIES[i].kind;
+            i += 1;
+        }
+        all
+    };
+
+    /// The kinds interactive use cycles through, in registry order.
+    pub fn interactive() -> impl Iterator<Item = AccelKind> {
+        ENTRIES.iter().filter(|e| e.interactive).map(|e| e.kind)
+    }
+
+    /// This kind's registry row.
+    pub fn entry(self) -> &'static AccelEntry {
+        ENTRIES
+            .iter()
+            .find(|e| e.kind == self)
+            .expect("every AccelKind has a registry entry")
+    }
+
+    pub fn name(self) -> &'static str {
+        self.entry().name
+    }
+
+    /// Whether this kind runs on the uniform grid (`grid` and `pc` share one).
+    pub fn uses_grid(self) -> bool {
+        self.structure_name() == "grid"
+    }
+
+    /// The structure this kind traverses, as `Accel::structure_name` names it.
+    pub fn structure_name(self) -> &'static str {
+        self.entry().structure
+    }
+
+    /// Every accepted spelling with its kind: names first, then aliases.
+    pub fn spellings() -> impl Iterator<Item = (&'static str, AccelKind)> {
+        let names = ENTRIES.iter().map(|e| (e.name, e.kind));
+        names.chain(ENTRIES.iter().flat_map(|e| e.aliases.iter().map(move |a| (*a, e.kind))))
+    }
+
+    /// The names, quoted and joined for messages: `'grid', 'pc', ... or 'brute'`.
+    pub fn names_list() -> String {
+        let names: Vec<String> = ENTRIES.iter().map(|e| format!("'{}'", e.name)).collect();
+        match names.split_last() {
+            Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+            _ => names.join(""),
+        }
+    }
+}
+
+impl std::str::FromStr for AccelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        AccelKind::spellings()
+            .find(|(n, _)| *n == s)
+            .map(|(_, k)| k)
+            .ok_or_else(|| format!("accel must be {}, got '{s}'", AccelKind::names_list()))
+    }
+}
+
+/// What a structure is asked to do, as `auto` weighs it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Work {
+    /// Frames of an image: camera, shadow and mirror rays (`render`, `view`).
+    Render,
+    /// Frames of a mesh that moves: a structure update per frame (`render --animate`).
+    Animate,
+    /// Batches of rays from a program (`rays`, Python), coherent or not.
+    Rays,
+}
+
+/// What `--accel` (Python's `accel=`) asks for: one traversal by name, or `auto`, the one
+/// measured fastest for the work on the backend that traces it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AccelChoice {
+    #[default]
+    Auto,
+    Kind(AccelKind),
+}
+
+impl From<AccelKind> for AccelChoice {
+    fn from(k: AccelKind) -> Self {
+        AccelChoice::Kind(k)
+    }
+}
+
+impl std::str::FromStr for AccelChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(AccelChoice::Auto);
+        }
+        s.parse::<AccelKind>()
+            .map(AccelChoice::Kind)
+            .map_err(|_| format!("accel must be 'auto', {}, got '{s}'", AccelKind::names_list()))
+    }
+}
+
+impl AccelChoice {
+    /// The traversal to use for `work` traced on the GPU (`on_gpu`) or the CPU, with a note
+    /// saying what `auto` picked and why (`None` when a kind was named).
+    ///
+    /// The rule, from the measurements in docs/benchmarks.md (2 CPU cores): on the CPU the
+    /// BVH is the fastest structure for ray batches (1M incoherent rays at the Stanford Bunny:
+    /// 1.05x Embree's speed, the uniform grid 0.19x; camera rays from Python 28.8 Mrays/s
+    /// against 19.5 for the irregular grid and 7.4 for the plain grid), the fastest or within
+    /// 15% in renders except on scenes of large empty spaces (the irregular grid 0.73-1.21x
+    /// it), and for moving meshes its refit beats every rebuild. On a GPU nothing has been
+    /// measured on hardware yet (the software adapter runs on the CPU's cores and would
+    /// choose wrongly): the BVH, the literature's default for GPU ray queries, until the
+    /// hardware suite (`gridtrace bench --suite hardware`) says otherwise.
+    pub fn resolve(self, on_gpu: bool, work: Work) -> (AccelKind, Option<String>) {
+        let kind = match self {
+            AccelChoice::Kind(k) => return (k, None),
+            AccelChoice::Auto => AccelKind::Bvh,
+        };
+        let why = match (on_gpu, work) {
+            (false, Work::Rays) => "the fastest for ray batches on the CPU (1.05x Embree on incoherent rays)",
+            (false, Work::Render) => "the fastest renders on the CPU on most scenes measured",
+            (_, Work::Animate) => "a refit per frame beats every rebuild",
+            (true, _) => "the literature's GPU default; no GPU hardware measured yet",
+        };
+        (
+            kind,
+            Some(format!("accel auto: {} ({why}; --accel NAME to choose)", kind.name())),
+        )
+    }
+
+    /// The named kind, `None` for `auto`.
+    pub fn kind(self) -> Option<AccelKind> {
+        match self {
+            AccelChoice::Kind(k) => Some(k),
+            AccelChoice::Auto => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `auto` always names a structure and says why; a named kind is kept as it is.
+    #[test]
+    fn auto_names_its_pick() {
+        for on_gpu in [false, true] {
+            for work in [Work::Render, Work::Animate, Work::Rays] {
+                let (k, note) = AccelChoice::Auto.resolve(on_gpu, work);
+                let note = note.expect("auto explains itself");
+                assert!(note.contains(k.name()) && note.contains('('), "{note}");
+                assert!(!on_gpu || k.entry().gpu, "auto picked {k:?}, which has no GPU walk");
+                assert_eq!(
+                    AccelChoice::Kind(AccelKind::Grid).resolve(on_gpu, work),
+                    (AccelKind::Grid, None)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn every_kind_has_one_entry_and_every_spelling_parses_to_it() {
+        for k in AccelKind::ALL {
+            assert_eq!(ENTRIES.iter().filter(|e| e.kind == k).count(), 1, "{k:?}");
+            assert_eq!(k.name().parse::<AccelKind>(), Ok(k));
+            for a in k.entry().aliases {
+                assert_eq!(a.parse::<AccelKind>(), Ok(k));
+            }
+        }
+        let mut seen = std::collections::HashSet::new();
+        assert!(AccelKind::spellings().all(|(n, _)| seen.insert(n)), "a spelling twice");
+        assert_eq!("auto".parse::<AccelChoice>(), Ok(AccelChoice::Auto));
+        assert_eq!(
+            "irr".parse::<AccelChoice>(),
+            Ok(AccelChoice::Kind(AccelKind::Irregular))
+        );
+        assert!("auto".parse::<AccelKind>().is_err());
+        let e = "nope".parse::<AccelKind>().unwrap_err();
+        assert!(e.contains("'grid'") && e.contains("or 'brute'"), "{e}");
+    }
+}
