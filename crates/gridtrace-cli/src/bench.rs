@@ -10,7 +10,7 @@ use gridtrace::gpu::GpuContext;
 use gridtrace::{AccelKind, Mode, RenderOptions, Resolution};
 use gridtrace_bench::{self as bench, BenchBackend, BenchConfig, BenchReport, Machine, scenes, studies};
 
-use crate::common::{accel_parser, mode_parser, parse_res};
+use crate::common::{kind_parser, mode_parser, parse_res};
 
 /// Where the benchmark runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -38,7 +38,7 @@ pub struct BenchArgs {
     #[arg(long, value_name = "WxH|N", value_delimiter = ',', value_parser = parse_res, allow_hyphen_values = true)]
     res: Vec<(u32, u32)>,
     /// Accelerations, comma separated: grid, pc, bvh (default: grid and pc, the paper's).
-    #[arg(long, value_delimiter = ',', value_parser = accel_parser())]
+    #[arg(long, value_delimiter = ',', value_parser = kind_parser())]
     accel: Vec<AccelKind>,
     /// Modes, comma separated: cast, shadow, trace (default: all three).
     #[arg(long, value_delimiter = ',', value_parser = mode_parser())]

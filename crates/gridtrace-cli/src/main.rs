@@ -76,6 +76,8 @@ fn main() {
     ensure_runtime_dir();
     let cli = Cli::parse();
     let result = match cli.command {
+        // `render --animate` is its own loop (a structure update per frame), on the same options.
+        Command::Render(a) if a.animate => animate::run(&a),
         Command::Render(a) => render::run(a),
         Command::Info(a) => info::run(a),
         Command::Rays(a) => rays::run(a),

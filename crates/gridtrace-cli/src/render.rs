@@ -78,9 +78,6 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
-    if a.animate {
-        return crate::animate::run(&a);
-    }
     let (mut scene, name) = a.scene.load(!a.no_floor)?;
     if let Some(e) = a.eye {
         scene.camera.eye = e;

@@ -157,11 +157,14 @@ fn mismatch_is_detected() {
     assert!(r.is_err());
 }
 
-/// Every kernel compiles and validates as its own module (common + kernel).
+/// Every kernel compiles and validates as its own module (common + kernel; the walking kernels
+/// once per structure, with its walk).
 #[test]
 fn kernels_validate() {
-    for (name, src) in shaders::KERNELS {
-        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let modules = shaders::all_modules();
+    assert_eq!(modules.len(), 4 + 2 * gridtrace::gpu::walks::WALKS.len());
+    for (name, src) in modules {
+        let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
             .validate(&m)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
@@ -201,8 +204,8 @@ fn constant_mismatches(m: &naga::Module) -> Vec<String> {
 fn wgsl_constants_match_rust() {
     let problems = constant_mismatches(&module());
     assert!(problems.is_empty(), "{problems:#?}");
-    for (name, src) in shaders::KERNELS {
-        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    for (name, src) in shaders::all_modules() {
+        let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         let problems = constant_mismatches(&m);
         assert!(problems.is_empty(), "{name}: {problems:#?}");
     }
@@ -247,10 +250,7 @@ fn altered_constant_is_reported() {
 #[test]
 fn redeclared_constant_fails() {
     for (name, _) in WGSL_CONSTANTS {
-        let src = format!(
-            "{}\nconst {name}: u32 = 1u;\n",
-            shaders::module_source(shaders::TRAVERSE)
-        );
+        let src = format!("{}\nconst {name}: u32 = 1u;\n", shaders::module_source(shaders::SHADE));
         let e = naga::front::wgsl::parse_str(&src).expect_err(name);
         assert!(
             e.emit_to_string(&src).contains("redefinition"),
@@ -261,12 +261,12 @@ fn redeclared_constant_fails() {
 }
 
 /// The bind group tables are what the WGSL declares: same (group, binding, name, access), no
-/// binding missing from either side.
+/// binding missing from either side; each structure's group 1 is its `WalkSpec::arrays`.
 #[test]
 fn bindings_match_wgsl() {
     let mut declared = std::collections::BTreeSet::new();
-    for (name, src) in shaders::KERNELS {
-        let m = naga::front::wgsl::parse_str(&shaders::module_source(src)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    for (name, src) in shaders::all_modules() {
+        let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         for (_, g) in m.global_variables.iter() {
             let Some(b) = &g.binding else { continue };
             let access = match g.space {
@@ -288,6 +288,12 @@ fn bindings_match_wgsl() {
             };
             (group, index, name.to_string(), access)
         })
+        .chain(gridtrace::gpu::walks::WALKS.iter().flat_map(|w| {
+            w.arrays
+                .iter()
+                .enumerate()
+                .map(|(i, (_, name))| (bindings::STRUCTURE_GROUP, i as u32, name.to_string(), "read"))
+        }))
         .collect();
     assert_eq!(declared, table);
 }

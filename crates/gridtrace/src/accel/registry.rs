@@ -100,9 +100,9 @@ pub const ENTRIES: [AccelEntry; 5] = [
         name: "brute",
         aliases: &["brute-force"],
         structure: "brute",
-        about: "no structure: every triangle per ray (the oracle; tiny meshes and checks)",
+        about: "no structure: every triangle per ray (the oracle; small meshes and checks)",
         params: Params::None,
-        gpu: false,
+        gpu: true,
         interactive: false,
     },
 ];

@@ -16,8 +16,7 @@ use crate::render::{RayCounts, RenderOptions};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
 use crate::util::set_bits;
 
-use super::path::{Path, Shading};
-use super::render::{Collect, pixel_value, shadow_query};
+use super::path::{Collect, Path, Shading, pixel_value, shadow_query};
 
 /// A block's width and height in pixels: a packet's rays. Four wide and two high rather than
 /// eight by one: the rays stay closer together, so more of them share each cell (measured:

@@ -4,5 +4,5 @@ mod blocks;
 mod path;
 mod render;
 
-pub use path::{Surface, surface_at};
-pub use render::{RayKind, RayObserver, render, render_view, render_with_counters, trace_pixel_observed};
+pub use path::{RayKind, Surface, surface_at};
+pub use render::{RayObserver, render, render_view, render_with_counters, trace_pixel_observed};

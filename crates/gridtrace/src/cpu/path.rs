@@ -6,11 +6,9 @@
 
 use glam::Vec3;
 
-use crate::accel::{Hit, Ray};
+use crate::accel::{Counters, Hit, NoCounters, Ray, TraversalCounters};
 use crate::render::{Mode, RenderOptions};
 use crate::scene::{PointLight, PreparedScene};
-
-use super::render::RayKind;
 
 /// Shading geometry at a hit, both normals facing the incoming ray.
 #[derive(Debug, Clone, Copy)]
@@ -160,5 +158,65 @@ impl Shading {
             return None;
         }
         Some((Vec3::from(light.intensity) * (ndl / d2), Ray::new(self.origin, l), dist))
+    }
+}
+
+/// Which kind of ray the renderer traced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RayKind {
+    Eye,
+    Shadow,
+    Reflection,
+}
+
+/// Counters a render collects per pixel (or none: `NoCounters` compiles away).
+pub(super) trait Collect: Counters + Default + Send {
+    fn total(&self) -> TraversalCounters;
+    /// Adds `other`'s counts to these.
+    fn absorb(&mut self, other: Self);
+    fn cost(&self) -> u64 {
+        let t = self.total();
+        t.cells + t.tri_tests
+    }
+}
+impl Collect for NoCounters {
+    fn total(&self) -> TraversalCounters {
+        TraversalCounters::default()
+    }
+    fn absorb(&mut self, _: Self) {}
+}
+impl Collect for TraversalCounters {
+    fn total(&self) -> TraversalCounters {
+        *self
+    }
+    fn absorb(&mut self, other: Self) {
+        *self += other;
+    }
+}
+
+/// What a pixel shows: its colour, or in heat mode the work its eye ray cost (`counters`).
+#[inline]
+pub(super) fn pixel_value<C: Collect>(opts: &RenderOptions, color: Vec3, counters: &C) -> Vec3 {
+    if opts.mode == Mode::Heat {
+        Vec3::splat(counters.cost() as f32)
+    } else {
+        color
+    }
+}
+
+/// Whether a shadow ray is occluded before `dist`: an any-hit query, or a closest-hit one
+/// under the ablation that measures what any-hit queries save.
+#[inline]
+pub(super) fn shadow_query<C: Counters>(
+    scene: &PreparedScene,
+    opts: &RenderOptions,
+    ray: &Ray,
+    dist: f32,
+    c: &mut C,
+) -> bool {
+    if opts.ablation.shadow_closest_hit {
+        scene.accel.intersect(ray, 0.0, dist, opts.accel, c).is_hit()
+    } else {
+        scene.accel.occluded(ray, 0.0, dist, opts.accel, c)
     }
 }

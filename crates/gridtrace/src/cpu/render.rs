@@ -15,7 +15,7 @@ use crate::render::{Image, Mode, RayCounts, RenderOptions, RenderStats};
 use crate::scene::{Camera, CameraFrame, PointLight, PreparedScene};
 
 use super::blocks::trace_blocks;
-use super::path::Path;
+use super::path::{Collect, Path, RayKind, shadow_query};
 
 /// Renders the scene with its own camera and lights. `progress` is called with the number of
 /// image rows finished, as bands of rows finish (from any thread).
@@ -62,30 +62,6 @@ struct View<'a> {
     lights: &'a [PointLight],
 }
 
-pub(super) trait Collect: Counters + Default + Send {
-    fn total(&self) -> TraversalCounters;
-    /// Adds `other`'s counts to these.
-    fn absorb(&mut self, other: Self);
-    fn cost(&self) -> u64 {
-        let t = self.total();
-        t.cells + t.tri_tests
-    }
-}
-impl Collect for NoCounters {
-    fn total(&self) -> TraversalCounters {
-        TraversalCounters::default()
-    }
-    fn absorb(&mut self, _: Self) {}
-}
-impl Collect for TraversalCounters {
-    fn total(&self) -> TraversalCounters {
-        *self
-    }
-    fn absorb(&mut self, other: Self) {
-        *self += other;
-    }
-}
-
 fn render_generic<C: Collect>(
     scene: &PreparedScene,
     view: &View,
@@ -130,14 +106,6 @@ fn render_generic<C: Collect>(
         render_ms: t0.elapsed().as_secs_f64() * 1e3,
     };
     Ok((img, stats))
-}
-
-/// Which kind of ray the renderer traced.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RayKind {
-    Eye,
-    Shadow,
-    Reflection,
 }
 
 /// Sees every ray a pixel's walk traces, in order, with its result: how the ray export of the
@@ -216,33 +184,6 @@ fn trace_pixel<C: Counters, O: RayObserver>(
         rays.reflection += 1;
     }
     path.color
-}
-
-/// What a pixel shows: its colour, or in heat mode the work its eye ray cost (`counters`).
-#[inline]
-pub(super) fn pixel_value<C: Collect>(opts: &RenderOptions, color: Vec3, counters: &C) -> Vec3 {
-    if opts.mode == Mode::Heat {
-        Vec3::splat(counters.cost() as f32)
-    } else {
-        color
-    }
-}
-
-/// Whether a shadow ray is occluded before `dist`: an any-hit query, or a closest-hit one
-/// under the ablation that measures what any-hit queries save.
-#[inline]
-pub(super) fn shadow_query<C: Counters>(
-    scene: &PreparedScene,
-    opts: &RenderOptions,
-    ray: &Ray,
-    dist: f32,
-    c: &mut C,
-) -> bool {
-    if opts.ablation.shadow_closest_hit {
-        scene.accel.intersect(ray, 0.0, dist, opts.accel, c).is_hit()
-    } else {
-        scene.accel.occluded(ray, 0.0, dist, opts.accel, c)
-    }
 }
 
 #[cfg(test)]

@@ -28,8 +28,6 @@ pub enum FrameSlot {
     CameraUniform,
     /// One bounce's `PassUniform` (a range of the pass uniform buffer).
     PassUniform,
-    Cells,
-    Refs,
     Tris,
     TriShade,
     Materials,
@@ -42,13 +40,6 @@ pub enum FrameSlot {
     Resolve,
     Accum,
     Counters,
-    /// The BVH's nodes (a grid scene binds one unused node).
-    BvhNodes,
-    /// The irregular grid's top-cell entries, voxel map and cells (other scenes bind one unused
-    /// element of each).
-    IrrEntries,
-    IrrVoxels,
-    IrrCells,
 }
 
 pub const FRAME_GROUP: u32 = 0;
@@ -65,12 +56,10 @@ const fn row<S>(index: u32, name: &'static str, access: Access, slot: S) -> Bind
 use Access::{StorageRead, StorageReadWrite, Uniform};
 
 /// Group 0, as declared in common.wgsl.
-pub const FRAME_BINDINGS: [Binding<FrameSlot>; 20] = [
+pub const FRAME_BINDINGS: [Binding<FrameSlot>; 14] = [
     row(0, "scene", Uniform, FrameSlot::SceneUniform),
     row(1, "camera", Uniform, FrameSlot::CameraUniform),
     row(2, "pass_", Uniform, FrameSlot::PassUniform),
-    row(3, "cells", StorageRead, FrameSlot::Cells),
-    row(4, "refs", StorageRead, FrameSlot::Refs),
     row(5, "tris", StorageRead, FrameSlot::Tris),
     row(6, "tri_shade", StorageRead, FrameSlot::TriShade),
     row(7, "materials", StorageRead, FrameSlot::Materials),
@@ -82,11 +71,13 @@ pub const FRAME_BINDINGS: [Binding<FrameSlot>; 20] = [
     row(13, "resolve", StorageReadWrite, FrameSlot::Resolve),
     row(14, "accum", StorageReadWrite, FrameSlot::Accum),
     row(15, "counters", StorageReadWrite, FrameSlot::Counters),
-    row(16, "bvh_nodes", StorageRead, FrameSlot::BvhNodes),
-    row(17, "irr_entries", StorageRead, FrameSlot::IrrEntries),
-    row(18, "irr_voxels", StorageRead, FrameSlot::IrrVoxels),
-    row(19, "irr_cells", StorageRead, FrameSlot::IrrCells),
 ];
+
+/// Group 1 of the walking kernels (traverse, occlusion): the scene's structure's own arrays, as
+/// its `gpu::walks::WalkSpec` lists them (binding `i` is `arrays[i]`; every one read-only
+/// storage). The indirect kernel's group 1 is its arguments (below): the two never share a
+/// pipeline.
+pub const STRUCTURE_GROUP: u32 = 1;
 
 /// What group 1 binds: the indirect arguments, written as storage by the one kernel that
 /// computes them. Apart from group 0 because a buffer bound as storage in the dispatch that
@@ -110,10 +101,13 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
     frame.chain(indirect).collect()
 }
 
-/// Storage buffers a kernel may bind at once: every storage row of every group (the device
-/// must allow this many per shader stage).
+/// Storage buffers a kernel may bind at once: group 0's storage rows and the most of group 1
+/// (a structure's arrays or the indirect arguments): the device must allow this many per
+/// shader stage.
 pub fn storage_buffers_needed() -> u32 {
-    all().iter().filter(|b| b.3 != Access::Uniform).count() as u32
+    let frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
+    let structure = super::walks::WALKS.iter().map(|w| w.arrays.len()).max().unwrap_or(0);
+    (frame + structure.max(INDIRECT_BINDINGS.len())) as u32
 }
 
 /// The layout entries of a table (every kernel is a compute kernel).
@@ -161,10 +155,10 @@ mod tests {
     #[test]
     fn tables_are_unique() {
         let rows = all();
-        // 17 in group 0 (13 before the GPU BVH, 14 before the irregular grid) and the indirect
-        // args: within what desktop and mobile Vulkan, Metal (31 buffers a stage, uniforms
-        // included) and D3D12 allow.
-        assert_eq!(storage_buffers_needed(), 18);
+        // 11 in group 0 and at most 4 of a structure's (the irregular grid's) in group 1:
+        // within what desktop and mobile Vulkan, Metal (31 buffers a stage, uniforms included)
+        // and D3D12 allow.
+        assert_eq!(storage_buffers_needed(), 15);
         for (i, a) in rows.iter().enumerate() {
             for b in &rows[i + 1..] {
                 assert!(!(a.0 == b.0 && a.1 == b.1), "binding {}/{} twice", a.0, a.1);

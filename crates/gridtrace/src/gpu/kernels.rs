@@ -3,15 +3,21 @@
 //! (`GpuContext::kernels`) and shared by every renderer on it. Also the one helper that records
 //! a kernel's compute pass, for the tile loop and the ray queries alike.
 
-use super::bindings::{self, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use super::bindings::{
+    self, Access, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP, STRUCTURE_GROUP,
+};
 use super::constants::{MAX_GROUPS_X, WORKGROUP};
 use super::layout::IndirectArgs;
-use super::scene::GpuStructure;
 use super::shaders;
 use super::timing::StageTimer;
+use super::walks::WalkSpec;
 use crate::{Error, Result};
 
-/// A pipeline: a kernel, or a kernel compiled with other override constants.
+/// A pipeline: a kernel, or a kernel compiled with other override constants. The walking
+/// kernels (traverse, occlusion) are compiled once per structure (`WalkPipelines`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Kernel {
     Raygen,
@@ -22,37 +28,8 @@ pub(crate) enum Kernel {
     Shade,
     Resolve,
     Indirect,
-    /// `traverse` compiled to walk the BVH (and the same three for heat and occlusion).
-    TraverseBvh,
-    TraverseBvhHeat,
-    OcclusionBvh,
-    /// `occlusion` finding closest hits: the `shadow_closest_hit` ablation, for each walk.
+    /// `occlusion` finding closest hits: the `shadow_closest_hit` ablation.
     OcclusionClosest,
-    OcclusionBvhClosest,
-    /// `traverse` and `occlusion` compiled to walk the irregular grid, as the BVH's four.
-    TraverseIrregular,
-    TraverseIrregularHeat,
-    OcclusionIrregular,
-    OcclusionIrregularClosest,
-}
-
-impl Kernel {
-    /// The pipeline that runs this kernel on a scene walked as `structure`: the traversal
-    /// kernels have one per walk, specialised by the `BVH` and `IRREGULAR` overrides so that
-    /// none carries another's code and registers.
-    pub fn walking(self, structure: GpuStructure) -> Kernel {
-        match (self, structure) {
-            (Kernel::Traverse, GpuStructure::Bvh) => Kernel::TraverseBvh,
-            (Kernel::TraverseHeat, GpuStructure::Bvh) => Kernel::TraverseBvhHeat,
-            (Kernel::Occlusion, GpuStructure::Bvh) => Kernel::OcclusionBvh,
-            (Kernel::OcclusionClosest, GpuStructure::Bvh) => Kernel::OcclusionBvhClosest,
-            (Kernel::Traverse, GpuStructure::Irregular) => Kernel::TraverseIrregular,
-            (Kernel::TraverseHeat, GpuStructure::Irregular) => Kernel::TraverseIrregularHeat,
-            (Kernel::Occlusion, GpuStructure::Irregular) => Kernel::OcclusionIrregular,
-            (Kernel::OcclusionClosest, GpuStructure::Irregular) => Kernel::OcclusionIrregularClosest,
-            (k, _) => k,
-        }
-    }
 }
 
 /// How many invocations a kernel's dispatch has.
@@ -69,6 +46,8 @@ enum Launch {
 
 struct KernelSpec {
     kernel: Kernel,
+    /// Compiled with the scene's structure's walk (group 1 is its arrays).
+    walks: bool,
     /// Pipeline label.
     label: &'static str,
     /// Stage name in `GpuTimings` (the heat pipeline counts as `traverse`).
@@ -91,6 +70,7 @@ const SHADOW_QUEUE: Launch = Launch::Indirect {
 const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: &'static str) -> KernelSpec {
     KernelSpec {
         kernel,
+        walks: false,
         label,
         stage,
         source,
@@ -101,17 +81,22 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 16] = [
+const SPECS: [KernelSpec; 8] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
     },
-    spec(Kernel::Traverse, "traverse", "traverse", shaders::TRAVERSE),
     KernelSpec {
+        walks: true,
+        ..spec(Kernel::Traverse, "traverse", "traverse", shaders::TRAVERSE)
+    },
+    KernelSpec {
+        walks: true,
         overrides: &[("COUNT_WORK", 1.0)],
         ..spec(Kernel::TraverseHeat, "traverse (heat)", "traverse", shaders::TRAVERSE)
     },
     KernelSpec {
+        walks: true,
         launch: SHADOW_QUEUE,
         ..spec(Kernel::Occlusion, "occlusion", "occlusion", shaders::OCCLUSION)
     },
@@ -123,77 +108,12 @@ const SPECS: [KernelSpec; 16] = [
         ..spec(Kernel::Indirect, "indirect", "indirect", shaders::INDIRECT)
     },
     KernelSpec {
-        overrides: &[("BVH", 1.0)],
-        ..spec(Kernel::TraverseBvh, "traverse (bvh)", "traverse", shaders::TRAVERSE)
-    },
-    KernelSpec {
-        overrides: &[("BVH", 1.0), ("COUNT_WORK", 1.0)],
-        ..spec(
-            Kernel::TraverseBvhHeat,
-            "traverse (bvh, heat)",
-            "traverse",
-            shaders::TRAVERSE,
-        )
-    },
-    KernelSpec {
-        launch: SHADOW_QUEUE,
-        overrides: &[("BVH", 1.0)],
-        ..spec(Kernel::OcclusionBvh, "occlusion (bvh)", "occlusion", shaders::OCCLUSION)
-    },
-    KernelSpec {
+        walks: true,
         launch: SHADOW_QUEUE,
         overrides: &[("SHADOW_CLOSEST", 1.0)],
         ..spec(
             Kernel::OcclusionClosest,
             "occlusion (closest hit)",
-            "occlusion",
-            shaders::OCCLUSION,
-        )
-    },
-    KernelSpec {
-        launch: SHADOW_QUEUE,
-        overrides: &[("BVH", 1.0), ("SHADOW_CLOSEST", 1.0)],
-        ..spec(
-            Kernel::OcclusionBvhClosest,
-            "occlusion (bvh, closest hit)",
-            "occlusion",
-            shaders::OCCLUSION,
-        )
-    },
-    KernelSpec {
-        overrides: &[("IRREGULAR", 1.0)],
-        ..spec(
-            Kernel::TraverseIrregular,
-            "traverse (irregular)",
-            "traverse",
-            shaders::TRAVERSE,
-        )
-    },
-    KernelSpec {
-        overrides: &[("IRREGULAR", 1.0), ("COUNT_WORK", 1.0)],
-        ..spec(
-            Kernel::TraverseIrregularHeat,
-            "traverse (irregular, heat)",
-            "traverse",
-            shaders::TRAVERSE,
-        )
-    },
-    KernelSpec {
-        launch: SHADOW_QUEUE,
-        overrides: &[("IRREGULAR", 1.0)],
-        ..spec(
-            Kernel::OcclusionIrregular,
-            "occlusion (irregular)",
-            "occlusion",
-            shaders::OCCLUSION,
-        )
-    },
-    KernelSpec {
-        launch: SHADOW_QUEUE,
-        overrides: &[("IRREGULAR", 1.0), ("SHADOW_CLOSEST", 1.0)],
-        ..spec(
-            Kernel::OcclusionIrregularClosest,
-            "occlusion (irregular, closest hit)",
             "occlusion",
             shaders::OCCLUSION,
         )
@@ -220,52 +140,48 @@ pub(super) fn dispatch_groups(n: u32, per_group: u32) -> (u32, u32) {
     (x, if x == 0 { 0 } else { g.div_ceil(x) })
 }
 
+/// One structure's walking pipelines (traverse, its heat variant, occlusion and its closest-hit
+/// ablation) and the layout of its group 1.
+pub(crate) struct WalkPipelines {
+    pub spec: &'static WalkSpec,
+    /// Layout of group 1: the structure's arrays, in `spec.arrays` order.
+    pub layout: wgpu::BindGroupLayout,
+    /// Indexed by `kernel as usize` (`None` for the kernels that do not walk).
+    pipelines: Vec<Option<wgpu::ComputePipeline>>,
+}
+
 /// The compiled kernels of one device.
 pub(crate) struct Kernels {
     /// Layout of group 0 (`FRAME_BINDINGS`).
     pub frame_layout: wgpu::BindGroupLayout,
-    /// Layout of group 1 (`INDIRECT_BINDINGS`).
+    /// Layout of group 1 of the indirect kernel (`INDIRECT_BINDINGS`).
     pub indirect_layout: wgpu::BindGroupLayout,
-    /// In `SPECS` order.
-    pipelines: Vec<wgpu::ComputePipeline>,
+    /// The kernels that walk no structure, in `SPECS` order (`None` for those that walk).
+    pipelines: Vec<Option<wgpu::ComputePipeline>>,
+    /// Each structure's walking pipelines, compiled when a scene of it is first uploaded.
+    walks: Mutex<HashMap<&'static str, Arc<WalkPipelines>>>,
 }
 
-impl Kernels {
-    /// Compiles every kernel; a validation error is returned, not raised on the device.
-    pub fn new(dev: &wgpu::Device) -> Result<Kernels> {
-        let frame_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gridtrace"),
-            entries: &bindings::layout_entries(&FRAME_BINDINGS),
-        });
-        let indirect_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("indirect args"),
-            entries: &bindings::layout_entries(&INDIRECT_BINDINGS),
-        });
-        let frame_only = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("gridtrace"),
-            bind_group_layouts: &[Some(&frame_layout)],
-            immediate_size: 0,
-        });
-        let with_indirect = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("indirect"),
-            bind_group_layouts: &[Some(&frame_layout), Some(&indirect_layout)],
-            immediate_size: 0,
-        });
-        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipelines = SPECS
-            .iter()
-            .map(|s| {
+/// Compiles `specs` (those `walking` selects) into pipelines with `layout`; `source` gives each
+/// kernel's module. Validation errors are returned, not raised on the device.
+fn compile(
+    dev: &wgpu::Device,
+    layout_of: impl Fn(&KernelSpec) -> wgpu::PipelineLayout,
+    source: impl Fn(&KernelSpec) -> String,
+    walking: bool,
+) -> Result<Vec<Option<wgpu::ComputePipeline>>> {
+    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+    let pipelines = SPECS
+        .iter()
+        .map(|s| {
+            (s.walks == walking).then(|| {
                 let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some(s.label),
-                    source: wgpu::ShaderSource::Wgsl(shaders::module_source(s.source).into()),
+                    source: wgpu::ShaderSource::Wgsl(source(s).into()),
                 });
                 dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some(s.label),
-                    layout: Some(if s.writes_indirect_args {
-                        &with_indirect
-                    } else {
-                        &frame_only
-                    }),
+                    layout: Some(&layout_of(s)),
                     module: &module,
                     entry_point: Some("main"),
                     compilation_options: wgpu::PipelineCompilationOptions {
@@ -275,15 +191,91 @@ impl Kernels {
                     cache: None,
                 })
             })
-            .collect();
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(Error::Gpu(format!("creating the kernels failed: {e}")));
-        }
+        })
+        .collect();
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(Error::Gpu(format!("creating the kernels failed: {e}")));
+    }
+    Ok(pipelines)
+}
+
+impl Kernels {
+    /// Compiles every kernel that walks no structure.
+    pub fn new(dev: &wgpu::Device) -> Result<Kernels> {
+        let frame_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gridtrace"),
+            entries: &bindings::layout_entries(&FRAME_BINDINGS),
+        });
+        let indirect_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("indirect args"),
+            entries: &bindings::layout_entries(&INDIRECT_BINDINGS),
+        });
+        let layout = |groups: &[Option<&wgpu::BindGroupLayout>]| {
+            dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("gridtrace"),
+                bind_group_layouts: groups,
+                immediate_size: 0,
+            })
+        };
+        let pipelines = compile(
+            dev,
+            |s| {
+                if s.writes_indirect_args {
+                    layout(&[Some(&frame_layout), Some(&indirect_layout)])
+                } else {
+                    layout(&[Some(&frame_layout)])
+                }
+            },
+            |s| shaders::module_source(s.source),
+            false,
+        )?;
         Ok(Kernels {
             frame_layout,
             indirect_layout,
             pipelines,
+            walks: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The walking pipelines of the structure `spec` describes, compiled on first use.
+    pub fn walk(&self, dev: &wgpu::Device, spec: &'static WalkSpec) -> Result<Arc<WalkPipelines>> {
+        let mut walks = self.walks.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(w) = walks.get(spec.structure) {
+            return Ok(w.clone());
+        }
+        let rows: Vec<Binding<usize>> = spec
+            .arrays
+            .iter()
+            .enumerate()
+            .map(|(i, (_, name))| Binding {
+                index: i as u32,
+                name,
+                access: Access::StorageRead,
+                slot: i,
+            })
+            .collect();
+        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(spec.structure),
+            entries: &bindings::layout_entries(&rows),
+        });
+        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(spec.structure),
+            bind_group_layouts: &[Some(&self.frame_layout), Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipelines = compile(
+            dev,
+            |_| pipeline_layout.clone(),
+            |s| shaders::walk_module_source(s.source, spec),
+            true,
+        )?;
+        let w = Arc::new(WalkPipelines {
+            spec,
+            layout,
+            pipelines,
+        });
+        walks.insert(spec.structure, w.clone());
+        Ok(w)
     }
 }
 
@@ -294,8 +286,9 @@ pub(crate) struct PassRecorder<'a> {
     /// The indirect-args buffer and its group-1 bind group.
     pub indirect_args: &'a wgpu::Buffer,
     pub indirect_group: &'a wgpu::BindGroup,
-    /// The scene's walk: picks the traversal kernels' pipelines (`Kernel::walking`).
-    pub structure: GpuStructure,
+    /// The scene's structure's walking pipelines and its group 1.
+    pub walk: &'a WalkPipelines,
+    pub structure_group: &'a wgpu::BindGroup,
     /// The `shadow_closest_hit` ablation: occlusion runs its closest-hit pipeline.
     pub shadow_closest_hit: bool,
     /// Pixels of the tile (sizes `Launch::PerPixel` kernels).
@@ -309,16 +302,27 @@ impl PassRecorder<'_> {
         let kernel = match (kernel, self.shadow_closest_hit) {
             (Kernel::Occlusion, true) => Kernel::OcclusionClosest,
             (k, _) => k,
-        }
-        .walking(self.structure);
+        };
         let spec = spec_of(kernel);
         let timestamp_writes = self.timer.pass_writes(spec.stage);
         let mut cp = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(spec.stage),
             timestamp_writes,
         });
-        cp.set_pipeline(&self.kernels.pipelines[kernel as usize]);
+        let pipelines = if spec.walks {
+            &self.walk.pipelines
+        } else {
+            &self.kernels.pipelines
+        };
+        cp.set_pipeline(
+            pipelines[kernel as usize]
+                .as_ref()
+                .expect("every kernel is compiled for its set"),
+        );
         cp.set_bind_group(FRAME_GROUP, frame, &[]);
+        if spec.walks {
+            cp.set_bind_group(STRUCTURE_GROUP, self.structure_group, &[]);
+        }
         if spec.writes_indirect_args {
             cp.set_bind_group(INDIRECT_GROUP, self.indirect_group, &[]);
         }
@@ -344,39 +348,18 @@ mod tests {
         }
     }
 
-    /// Every traversal kernel on every structure runs the pipeline compiled for that walk (its
-    /// override set, the others' not), and the other kernels are the same for all.
+    /// The walking kernels are exactly traverse and occlusion (with their heat and closest-hit
+    /// forms), whose modules include a walk file; their overrides survive.
     #[test]
-    fn walking_picks_each_structures_pipeline() {
-        let overrides = |k: Kernel| spec_of(k).overrides.iter().map(|o| o.0).collect::<Vec<_>>();
-        for structure in GpuStructure::ALL {
-            let want = match structure {
-                GpuStructure::Grid => None,
-                GpuStructure::Bvh => Some("BVH"),
-                GpuStructure::Irregular => Some("IRREGULAR"),
-            };
-            for k in [
-                Kernel::Traverse,
-                Kernel::TraverseHeat,
-                Kernel::Occlusion,
-                Kernel::OcclusionClosest,
-            ] {
-                let got = overrides(k.walking(structure));
-                for walk in ["BVH", "IRREGULAR"] {
-                    assert_eq!(
-                        got.contains(&walk),
-                        want == Some(walk),
-                        "{k:?} on {structure:?}: {got:?}"
-                    );
-                }
-                // Heat and the closest-hit ablation survive the specialisation.
-                assert_eq!(got.contains(&"COUNT_WORK"), k == Kernel::TraverseHeat);
-                assert_eq!(got.contains(&"SHADOW_CLOSEST"), k == Kernel::OcclusionClosest);
-                assert_eq!(spec_of(k.walking(structure)).stage, spec_of(k).stage);
-            }
-            for k in [Kernel::Raygen, Kernel::Shade, Kernel::Resolve, Kernel::Indirect] {
-                assert_eq!(k.walking(structure), k);
-            }
+    fn walking_kernels_are_traverse_and_occlusion() {
+        for s in &SPECS {
+            assert_eq!(s.walks, shaders::walks(s.stage), "{}", s.label);
+            let overrides: Vec<_> = s.overrides.iter().map(|o| o.0).collect();
+            assert_eq!(overrides.contains(&"COUNT_WORK"), s.kernel == Kernel::TraverseHeat);
+            assert_eq!(
+                overrides.contains(&"SHADOW_CLOSEST"),
+                s.kernel == Kernel::OcclusionClosest
+            );
         }
     }
 

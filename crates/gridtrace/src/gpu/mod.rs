@@ -37,6 +37,7 @@ mod renderer;
 mod scene;
 pub mod shaders;
 mod timing;
+pub mod walks;
 mod wavefront;
 
 pub use context::GpuContext;

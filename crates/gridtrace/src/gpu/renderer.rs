@@ -12,7 +12,7 @@ use super::context::GpuContext;
 use super::grid_build::{GpuBuildStats, GpuGrid};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
-use super::scene::{GpuStructure, SceneBuffers, tri_shade};
+use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{StageTimer, Timestamps};
 use crate::accel::{AccelKind, GridLattice};
 use crate::render::{Ablation, Mode};
@@ -149,7 +149,7 @@ impl GpuRenderer {
             )));
         }
         let mut stats = GpuUpdateStats::default();
-        if self.scene.structure != GpuStructure::Grid {
+        if !self.scene.spec().device_build {
             let t0 = Instant::now();
             self.scene = SceneBuffers::upload(&self.ctx, scene)?;
             self.work = None;
@@ -168,12 +168,10 @@ impl GpuRenderer {
             None => self.device_grid.insert(GpuGrid::new(self.ctx.clone())?),
         };
         let build = grid.build(&self.scene.tris, tris, &lattice)?;
-        if self.scene.cells != grid.cells || self.scene.refs != grid.refs {
-            self.scene.cells = grid.cells.clone();
-            self.scene.refs = grid.refs.clone();
-            // The bind groups name the old buffers.
-            self.work = None;
-        }
+        // The structure's bind group names the old buffers when the build made new ones.
+        let dev = &self.ctx.device;
+        self.scene.replace_array(dev, "cells", &grid.cells);
+        self.scene.replace_array(dev, "refs", &grid.refs);
         let c = &mut self.scene.consts;
         c.bounds_min = lattice.bounds.min.to_array();
         c.bounds_max = lattice.bounds.max.to_array();
@@ -198,20 +196,15 @@ impl GpuRenderer {
         &self.ctx
     }
 
-    /// Whether this scene's upload serves `accel`: a grid scene walks `grid` and `pc`, a BVH
-    /// scene `bvh`, an irregular-grid scene `irregular`. An error that says what to do
-    /// otherwise.
+    /// Whether this scene's upload serves `accel` (as `Accel::serves`: the grid serves `grid`
+    /// and `pc`, every other structure its own kind). An error that says what to do otherwise.
     pub(super) fn check_serves(&self, accel: AccelKind) -> Result<()> {
-        if self.scene.structure.serves(accel) {
+        let uploaded = self.scene.spec().structure;
+        if accel.structure_name() == uploaded {
             return Ok(());
         }
-        let uploaded = match self.scene.structure {
-            GpuStructure::Grid => "a grid",
-            GpuStructure::Bvh => "a bvh",
-            GpuStructure::Irregular => "an irregular grid",
-        };
         Err(Error::InvalidInput(format!(
-            "accel '{}' asked of a GPU scene uploaded with {uploaded}: prepare the scene for '{}'",
+            "accel '{}' asked of a GPU scene uploaded with a {uploaded}: prepare the scene for '{}'",
             accel.name(),
             accel.name()
         )))
@@ -242,7 +235,8 @@ impl GpuRenderer {
             kernels: &self.kernels,
             indirect_args: &self.indirect_args,
             indirect_group: &self.indirect_group,
-            structure: self.scene.structure,
+            walk: &self.scene.walk,
+            structure_group: &self.scene.structure_group,
             shadow_closest_hit: ablation.shadow_closest_hit,
             tile_pixels,
             timer: StageTimer::new(self.timestamps.as_ref().filter(|_| timed)),
@@ -302,8 +296,6 @@ impl GpuRenderer {
                         offset: d as u64 * PASS_UNIFORM_STRIDE_BYTES,
                         size: wgpu::BufferSize::new(size_of::<PassUniform>() as u64),
                     }),
-                    FrameSlot::Cells => self.scene.cells.as_entire_binding(),
-                    FrameSlot::Refs => self.scene.refs.as_entire_binding(),
                     FrameSlot::Tris => self.scene.tris.as_entire_binding(),
                     FrameSlot::TriShade => self.scene.tri_shade.as_entire_binding(),
                     FrameSlot::Materials => self.scene.materials.as_entire_binding(),
@@ -315,10 +307,6 @@ impl GpuRenderer {
                     FrameSlot::Resolve => resolve.as_entire_binding(),
                     FrameSlot::Accum => accum.as_entire_binding(),
                     FrameSlot::Counters => self.counters.as_entire_binding(),
-                    FrameSlot::BvhNodes => self.scene.bvh_nodes.as_entire_binding(),
-                    FrameSlot::IrrEntries => self.scene.irr_entries.as_entire_binding(),
-                    FrameSlot::IrrVoxels => self.scene.irr_voxels.as_entire_binding(),
-                    FrameSlot::IrrCells => self.scene.irr_cells.as_entire_binding(),
                 });
                 dev.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("gridtrace"),

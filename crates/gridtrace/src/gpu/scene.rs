@@ -1,149 +1,17 @@
-//! The scene on the GPU: grid cells, BVH nodes or the irregular grid's arrays, references, triangles, per-triangle shading data,
-//! materials and the scene constants, uploaded once per renderer. Camera and lights are not
-//! here; they change per frame.
+//! The scene on the GPU: the triangles, per-triangle shading data, materials and the scene
+//! constants, and the structure's own arrays with their bind group (`walks`: each structure's
+//! GPU side), uploaded once per renderer. Camera and lights are not here; they change per frame.
 
-use std::borrow::Cow;
+use std::sync::Arc;
 
-use glam::{UVec3, Vec3};
 use wgpu::util::DeviceExt;
 
-use super::bvh::gpu_nodes;
-use super::constants::BVH_STACK;
 use super::context::GpuContext;
-use super::layout::{GpuBvhNode, GpuMaterial, SceneUniform, TriShade};
-use crate::accel::{Aabb, AccelKind, Cell, IrrCell, Structure, TriAccel};
+use super::kernels::WalkPipelines;
+use super::layout::{GpuMaterial, SceneUniform, TriShade};
+use super::walks::{WalkSpec, upload_of};
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
-
-/// Which walk the scene's kernels take.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum GpuStructure {
-    /// The 3D-DDA over `cells`, with or without proximity-cloud jumps.
-    Grid,
-    /// The BVH walk over `bvh_nodes`.
-    Bvh,
-    /// The irregular grid's walk over `irr_entries`, `irr_voxels` and `irr_cells`.
-    Irregular,
-}
-
-impl GpuStructure {
-    pub const ALL: [GpuStructure; 3] = [GpuStructure::Grid, GpuStructure::Bvh, GpuStructure::Irregular];
-
-    /// Whether a scene uploaded with this structure can run traversal `accel` (as
-    /// `Accel::serves`: the grid serves `grid` and `pc`, every other structure its own kind).
-    pub fn serves(self, accel: AccelKind) -> bool {
-        match self {
-            GpuStructure::Grid => accel.uses_grid(),
-            GpuStructure::Bvh => accel == AccelKind::Bvh,
-            GpuStructure::Irregular => accel == AccelKind::Irregular,
-        }
-    }
-
-    /// The scene arrays only this structure reads: another structure's scene binds one unused
-    /// element in their place, which is not the scene's memory.
-    fn own_arrays(self) -> &'static [&'static str] {
-        match self {
-            GpuStructure::Grid => &["cells"],
-            GpuStructure::Bvh => &["bvh_nodes"],
-            GpuStructure::Irregular => &["irr_entries", "irr_voxels", "irr_cells"],
-        }
-    }
-}
-
-/// What the kernels read of the prepared scene's acceleration structure. The structures a scene
-/// was not prepared with get one unused element each (bindings cannot be empty).
-struct AccelArrays<'a> {
-    structure: GpuStructure,
-    cells: Cow<'a, [Cell]>,
-    /// Grid and irregular grid: the cells' triangle lists. BVH: triangle indices in leaf order.
-    refs: &'a [u32],
-    bvh_nodes: Vec<GpuBvhNode>,
-    irr_entries: Cow<'a, [u32]>,
-    irr_voxels: Cow<'a, [u32]>,
-    irr_cells: Cow<'a, [IrrCell]>,
-    tris: &'a [TriAccel],
-    bounds: Aabb,
-    /// The lattice the walk counts planes on (`SceneUniform`): the grid's cells or the
-    /// irregular grid's virtual voxels; zero for a BVH.
-    dims: UVec3,
-    /// World-space size of one cell or voxel per axis, and its reciprocal.
-    cell_size: Vec3,
-    inv_cell_size: Vec3,
-    /// Irregular grid: `IrregularGrid::shift`.
-    shift: u32,
-}
-
-/// One unused element, for the bindings of a structure the scene was not prepared with.
-fn unused<T: Clone + bytemuck::Zeroable>() -> Cow<'static, [T]> {
-    Cow::Owned(vec![T::zeroed()])
-}
-
-/// The one place the GPU backend reads `scene.accel`: when its types change, only this function
-/// changes.
-fn accel_arrays(scene: &PreparedScene) -> Result<AccelArrays<'_>> {
-    let tris = &scene.accel.tris[..];
-    match &scene.accel.structure {
-        Structure::Grid(g) => Ok(AccelArrays {
-            structure: GpuStructure::Grid,
-            cells: Cow::Borrowed(&g.cells),
-            refs: &g.refs,
-            bvh_nodes: vec![bytemuck::Zeroable::zeroed()],
-            irr_entries: unused(),
-            irr_voxels: unused(),
-            irr_cells: unused(),
-            tris,
-            bounds: g.bounds,
-            dims: g.dims,
-            cell_size: g.cell_size,
-            inv_cell_size: g.inv_cell_size,
-            shift: 0,
-        }),
-        Structure::Bvh(b) => {
-            if b.bvh.depth >= BVH_STACK as usize {
-                // The builder bounds the depth below the stack (`STACK`); checked all the same,
-                // since an overflow would lose hits silently.
-                return Err(Error::InvalidInput(format!(
-                    "the BVH is {} levels deep; the GPU walk's stack holds {BVH_STACK}",
-                    b.bvh.depth
-                )));
-            }
-            Ok(AccelArrays {
-                structure: GpuStructure::Bvh,
-                cells: unused(),
-                refs: &b.bvh.prims,
-                bvh_nodes: gpu_nodes(&b.bvh)?,
-                irr_entries: unused(),
-                irr_voxels: unused(),
-                irr_cells: unused(),
-                tris,
-                bounds: scene.accel.bounds(),
-                dims: UVec3::ZERO,
-                cell_size: Vec3::ZERO,
-                inv_cell_size: Vec3::ZERO,
-                shift: 0,
-            })
-        }
-        Structure::Brute(_) => Err(Error::Gpu(
-            "the 'brute' structure has no GPU walk yet: trace it on the CPU (--backend cpu)".into(),
-        )),
-        Structure::Irregular(g) => Ok(AccelArrays {
-            structure: GpuStructure::Irregular,
-            cells: unused(),
-            refs: &g.refs,
-            bvh_nodes: vec![bytemuck::Zeroable::zeroed()],
-            irr_entries: Cow::Borrowed(&g.entries),
-            irr_voxels: Cow::Borrowed(&g.voxel_map),
-            irr_cells: Cow::Borrowed(&g.cells),
-            tris,
-            bounds: g.bounds,
-            dims: g.voxel_dims(),
-            cell_size: g.voxel_size,
-            // The CPU walk's own reciprocal, bit for bit.
-            inv_cell_size: g.inv_voxel_size,
-            shift: g.shift,
-        }),
-    }
-}
 
 /// Per-triangle shading data: the vertex normals and the material.
 pub(crate) fn tri_shade(scene: &PreparedScene) -> Vec<TriShade> {
@@ -179,14 +47,11 @@ pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, a
 
 /// The scene's buffers on the device.
 pub(crate) struct SceneBuffers {
-    /// The walk the kernels take.
-    pub structure: GpuStructure,
-    pub cells: wgpu::Buffer,
-    pub bvh_nodes: wgpu::Buffer,
-    pub irr_entries: wgpu::Buffer,
-    pub irr_voxels: wgpu::Buffer,
-    pub irr_cells: wgpu::Buffer,
-    pub refs: wgpu::Buffer,
+    /// The structure's walk: its spec, pipelines and group 1's layout.
+    pub walk: Arc<WalkPipelines>,
+    /// The structure's arrays, in `walk.spec.arrays` order, and their bind group (group 1).
+    pub structure: Vec<wgpu::Buffer>,
+    pub structure_group: wgpu::BindGroup,
     pub tris: wgpu::Buffer,
     pub tri_shade: wgpu::Buffer,
     pub materials: wgpu::Buffer,
@@ -198,11 +63,22 @@ pub(crate) struct SceneBuffers {
     pub bytes: Vec<(&'static str, u64)>,
 }
 
+/// A storage buffer holding `data` (an empty array gets 16 bytes of padding: zero-length
+/// bindings are invalid).
+fn storage(dev: &wgpu::Device, label: &str, data: &[u8]) -> wgpu::Buffer {
+    let contents: &[u8] = if data.is_empty() { &[0u8; 16] } else { data };
+    dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+    })
+}
+
 impl SceneBuffers {
     /// Checks the scene against the device's limits and uploads it.
     pub fn upload(ctx: &GpuContext, scene: &PreparedScene) -> Result<SceneBuffers> {
         let dev = &ctx.device;
-        let accel = accel_arrays(scene)?;
+        let walk = upload_of(scene)?;
         let tri_shade = tri_shade(scene);
         let materials: Vec<GpuMaterial> = scene
             .materials
@@ -212,59 +88,43 @@ impl SceneBuffers {
                 reflectivity: m.reflectivity,
             })
             .collect();
-        let arrays: [(&'static str, &[u8]); 9] = [
-            ("cells", bytemuck::cast_slice(&accel.cells)),
-            ("bvh_nodes", bytemuck::cast_slice(&accel.bvh_nodes)),
-            ("irr_entries", bytemuck::cast_slice(&accel.irr_entries)),
-            ("irr_voxels", bytemuck::cast_slice(&accel.irr_voxels)),
-            ("irr_cells", bytemuck::cast_slice(&accel.irr_cells)),
-            ("refs", bytemuck::cast_slice(accel.refs)),
-            ("triangles", bytemuck::cast_slice(accel.tris)),
+        let shared: [(&'static str, &[u8]); 3] = [
+            ("triangles", bytemuck::cast_slice(&scene.accel.tris)),
             ("tri_shade", bytemuck::cast_slice(&tri_shade)),
             ("materials", bytemuck::cast_slice(&materials)),
         ];
-        let mut bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
+        let own = walk
+            .spec
+            .arrays
+            .iter()
+            .map(|a| a.0)
+            .zip(walk.arrays.iter().map(|a| &a[..]));
+        let arrays: Vec<(&'static str, &[u8])> = own.chain(shared).collect();
+        let bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
         check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
-        // The other structures' placeholders are not the scene's memory.
-        let placeholders: Vec<&str> = GpuStructure::ALL
-            .into_iter()
-            .filter(|&st| st != accel.structure)
-            .flat_map(GpuStructure::own_arrays)
-            .copied()
+        let pipelines = ctx.kernels()?.walk(dev, walk.spec)?;
+        let structure: Vec<wgpu::Buffer> = walk
+            .spec
+            .arrays
+            .iter()
+            .zip(&walk.arrays)
+            .map(|((label, _), data)| storage(dev, label, data))
             .collect();
-        bytes.retain(|(n, _)| !placeholders.contains(n));
-        let storage = |label: &str, data: &[u8]| {
-            // Zero-length bindings are invalid; give empty arrays one element of padding.
-            let contents: &[u8] = if data.is_empty() { &[0u8; 16] } else { data };
-            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            })
-        };
-        let [
-            cells,
-            bvh_nodes,
-            irr_entries,
-            irr_voxels,
-            irr_cells,
-            refs,
-            tris,
-            tri_shade,
-            materials,
-        ] = arrays.map(|(n, d)| storage(n, d));
+        let structure_group = structure_group(dev, &pipelines, &structure);
+        let [tris, tri_shade, materials] = shared.map(|(n, d)| storage(dev, n, d));
 
+        let l = walk.lattice;
         let consts = SceneUniform {
-            bounds_min: accel.bounds.min.to_array(),
+            bounds_min: l.bounds.min.to_array(),
             ray_epsilon: scene.ray_epsilon,
-            bounds_max: accel.bounds.max.to_array(),
+            bounds_max: l.bounds.max.to_array(),
             n_lights: 0,
-            cell_size: accel.cell_size.to_array(),
-            n_tris: accel.tris.len() as u32,
-            inv_cell_size: accel.inv_cell_size.to_array(),
+            cell_size: l.cell_size.to_array(),
+            n_tris: scene.accel.tris.len() as u32,
+            inv_cell_size: l.inv_cell_size.to_array(),
             _pad0: 0,
-            dims: accel.dims.to_array(),
-            shift: accel.shift,
+            dims: l.dims.to_array(),
+            shift: l.shift,
             background: scene.background.to_array(),
             _pad2: 0,
             ambient: scene.ambient.to_array(),
@@ -278,13 +138,9 @@ impl SceneBuffers {
         });
         ctx.queue.write_buffer(&uniform, 0, bytemuck::bytes_of(&consts));
         Ok(SceneBuffers {
-            structure: accel.structure,
-            cells,
-            bvh_nodes,
-            irr_entries,
-            irr_voxels,
-            irr_cells,
-            refs,
+            walk: pipelines,
+            structure,
+            structure_group,
             tris,
             tri_shade,
             materials,
@@ -293,6 +149,42 @@ impl SceneBuffers {
             bytes,
         })
     }
+
+    /// The structure's walk.
+    pub fn spec(&self) -> &'static WalkSpec {
+        self.walk.spec
+    }
+
+    /// Replaces the structure's array `label` (the grid's GPU build writes new cells and
+    /// references) and rebinds group 1. Returns whether anything changed.
+    pub fn replace_array(&mut self, dev: &wgpu::Device, label: &str, buffer: &wgpu::Buffer) -> bool {
+        let Some(i) = self.spec().arrays.iter().position(|a| a.0 == label) else {
+            return false;
+        };
+        if self.structure[i] == *buffer {
+            return false;
+        }
+        self.structure[i] = buffer.clone();
+        self.structure_group = structure_group(dev, &self.walk, &self.structure);
+        true
+    }
+}
+
+/// Group 1 of the walking kernels: the structure's arrays in binding order.
+fn structure_group(dev: &wgpu::Device, walk: &WalkPipelines, arrays: &[wgpu::Buffer]) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = arrays
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    dev.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(walk.spec.structure),
+        layout: &walk.layout,
+        entries: &entries,
+    })
 }
 
 #[cfg(test)]

@@ -1,14 +1,12 @@
-//! WGSL sources: the shared file and one per kernel. WGSL has no includes, so a kernel's module
-//! is the generated constant prelude, then `common.wgsl`, `bvh.wgsl` and `irregular.wgsl`, then
-//! the kernel's own file.
+//! WGSL sources: the shared file, one per kernel and one per structure's walk (`walks/`, named
+//! by `gpu::walks`). WGSL has no includes, so a kernel's module is the generated constant
+//! prelude, then `common.wgsl`, then (for the walking kernels, traverse and occlusion) the
+//! scene's walk file with two generated lines naming its entry points `walk_closest` and
+//! `walk_any`, then the kernel's own file.
 
 use super::constants::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
-/// BVH traversal, shared like `COMMON` (the grid's DDA is in `COMMON`).
-pub const BVH: &str = include_str!("shaders/bvh.wgsl");
-/// The irregular grid's traversal, shared like `COMMON`.
-pub const IRREGULAR: &str = include_str!("shaders/irregular.wgsl");
 pub const RAYGEN: &str = include_str!("shaders/raygen.wgsl");
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
@@ -25,15 +23,54 @@ pub const KERNELS: [(&str, &str); 6] = [
     ("indirect", INDIRECT),
 ];
 
-/// The prelude, `common.wgsl`, `bvh.wgsl` and `irregular.wgsl`: every declaration the kernels
-/// share (layout tests parse this).
-pub fn common_source() -> String {
-    format!("{}\n{}\n{}\n{}", wgsl_prelude(), COMMON, BVH, IRREGULAR)
+/// The prelude and `common.wgsl`: every declaration all kernels share.
+pub fn shared_source() -> String {
+    format!("{}\n{}", wgsl_prelude(), COMMON)
 }
 
-/// The whole module of one kernel, as the device compiles it.
+/// The shared source and every structure's walk file (not a module a device compiles: the walks
+/// bind the same group, each for its own pipelines). The layout tests parse it to check every
+/// struct the host shares with the kernels.
+pub fn common_source() -> String {
+    let walks: Vec<&str> = super::walks::WALKS.iter().map(|w| w.wgsl).collect();
+    format!("{}\n{}", shared_source(), walks.join("\n"))
+}
+
+/// The whole module of a kernel that walks no structure, as the device compiles it.
 pub fn module_source(kernel: &str) -> String {
-    format!("{}\n{}", common_source(), kernel)
+    format!("{}\n{}", shared_source(), kernel)
+}
+
+/// The whole module of a walking kernel (traverse, occlusion) for the structure `walk` names.
+pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String {
+    format!(
+        "{}\n{}\n{}\n{}",
+        shared_source(),
+        walk.wgsl,
+        walk.entry_points(),
+        kernel
+    )
+}
+
+/// Whether kernel `name` walks the scene's structure (its module includes a walk file).
+pub fn walks(name: &str) -> bool {
+    matches!(name, "traverse" | "occlusion")
+}
+
+/// Every module the tracer compiles, named `kernel` or `kernel (structure)`, with its source:
+/// the walking kernels once per structure, the others once.
+pub fn all_modules() -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for (name, src) in KERNELS {
+        if walks(name) {
+            for w in super::walks::WALKS {
+                out.push((format!("{name} ({})", w.structure), walk_module_source(src, w)));
+            }
+        } else {
+            out.push((name.to_string(), module_source(src)));
+        }
+    }
+    out
 }
 
 /// The GPU grid build's shared file and kernels (`grid_build/`): their own bindings, so their

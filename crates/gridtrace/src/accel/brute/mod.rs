@@ -2,8 +2,9 @@
 //! structures are checked against, and a way to check a result on a small mesh
 //! (`--accel brute`): its cost per ray is the triangle count.
 //!
-//! It is also the proof of the structure contract: it was added as this file and one registry
-//! entry (`registry.rs`), one arm of `Structure`, and nothing else above `accel/`.
+//! It is also the proof of the structure contract: it was added as this file, one registry
+//! entry (`registry.rs`) and one arm of `Structure`; its GPU side is its walk file
+//! (`gpu/shaders/walks/brute.wgsl`) and `gpu/walks/brute.rs` with one entry of `WALKS`.
 
 use crate::Result;
 use crate::accel::contract::{AccelStructure, BuildParams};

@@ -8,6 +8,7 @@ use std::time::Instant;
 use glam::UVec3;
 use rayon::prelude::*;
 
+use super::boxes::{Box16, VoxBox};
 use super::merge::{Cells, MergeRule, Refs, TopCells, find};
 use super::{IrrCell, IrregularGrid, IrregularParams, IrregularStats, LEVEL_BITS, MAX_LEVEL};
 use crate::accel::binning::{
@@ -23,26 +24,6 @@ const MAX_TOP_PER_AXIS: u32 = 4096;
 /// large face next to many small cells gives up rather than spend the build's time there (the
 /// traversal is exact whatever the expansion).
 const MAX_PROBES: u32 = 256;
-
-/// A cell's box in voxels, `min` inclusive and `max` exclusive.
-pub(super) type VoxBox = [UVec3; 2];
-
-/// A cell's box as the build keeps it through merging (a task's cells, then the survivors):
-/// 16-bit coordinates (the virtual grid is under 2^16 voxels per axis, `TopGrid::new`), 12
-/// bytes where a `VoxBox` takes 24.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) struct Box16([[u16; 3]; 2]);
-
-impl Box16 {
-    #[inline(always)]
-    pub(super) fn pack(b: VoxBox) -> Box16 {
-        Box16(b.map(|c| c.to_array().map(|v| v as u16)))
-    }
-    #[inline(always)]
-    pub(super) fn unpack(self) -> VoxBox {
-        self.0.map(|c| UVec3::from(c.map(u32::from)))
-    }
-}
 
 pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<IrregularGrid> {
     let mut phase_ms = [0.0; 5];

@@ -31,7 +31,8 @@
 
 use glam::UVec3;
 
-use super::build::{Box16, TopGrid, level_for};
+use super::boxes::Box16;
+use super::build::{TopGrid, level_for};
 use super::merge::Refs;
 use super::{IrrCell, IrregularGrid, IrregularParams};
 use crate::Result;

@@ -5,7 +5,7 @@
 
 use glam::{UVec3, Vec3};
 
-use super::build::{Box16, VoxBox};
+use super::boxes::{Box16, VoxBox};
 
 /// Cost of stepping through a cell, in triangle tests, for the merge decision. A step is a
 /// top-cell entry, a voxel-map entry and a 16-byte cell, about what one triangle test costs.

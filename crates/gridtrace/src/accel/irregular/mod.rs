@@ -25,6 +25,7 @@ use super::triangle::{any_in, closest_in};
 use super::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
 
+mod boxes;
 mod build;
 mod memory;
 mod merge;

@@ -1,12 +1,12 @@
 // Shared declarations and functions of all gridtrace kernels. Every kernel's module is the
-// generated constant prelude, this file, then the kernel's own file (WGSL has no includes).
+// generated constant prelude, this file, then the kernel's own file (WGSL has no includes); the
+// walking kernels (traverse, occlusion) get the scene's structure's walk file between them.
 //
 // The structs below mirror #[repr(C)] Rust structs in src/gpu/layout.rs (and accel/scene); a
 // test (tests/gpu_layout.rs) parses this file with naga and checks every size and offset.
 // Storage structs use array<f32, 3> (4-byte aligned) rather than vec3<f32> (16-byte aligned)
 // so that they match the packed Rust layouts.
 
-struct Cell { start: u32, count: u32, dist: u32 }
 struct TriAccel { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
 struct TriShade { n0: array<f32, 3>, n1: array<f32, 3>, n2: array<f32, 3>, material: u32 }
 struct GpuMaterial { diffuse: array<f32, 3>, reflectivity: f32 }
@@ -15,14 +15,6 @@ struct PointLight { position: array<f32, 3>, _pad0: f32, intensity: array<f32, 3
 // `weight` is the path throughput (shadow rays: the contribution if unoccluded).
 struct RayRec { origin: array<f32, 3>, pixel: u32, dir: array<f32, 3>, t_max: f32, weight: array<f32, 3>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
-// A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
-struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
-// An irregular-grid cell as stored (IrrCell in accel/irregular/mod.rs): its grown box in virtual
-// voxels as six 16-bit coordinates (`min.x | min.y << 16, min.z | max.x << 16, max.y | max.z <<
-// 16`) and the first of its `refs`, which end where the next cell's start (the array ends with
-// a sentinel cell). A vec3<u32> in storage is 16-byte aligned with a 4-byte scalar after it, so
-// this is the Rust layout: 16 bytes, one load. `irr_cell` unpacks it.
-struct IrrCell { bounds: vec3<u32>, start: u32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,
@@ -53,10 +45,6 @@ struct IndirectArgs { rays: array<u32, 3>, shadow: array<u32, 3> }
 
 // Set per pipeline: the heat pipeline counts traversal work, the others compile it away.
 override COUNT_WORK: bool = false;
-// Set per pipeline: the BVH pipelines walk `bvh_nodes`, the irregular grid's its three arrays,
-// the others the grid. (At most one is set.)
-override BVH: bool = false;
-override IRREGULAR: bool = false;
 // Set per pipeline: the occlusion kernel of the `shadow closest hit` ablation finds the closest
 // hit of each shadow ray instead of stopping at the first (RenderOptions::ablation).
 override SHADOW_CLOSEST: bool = false;
@@ -64,8 +52,6 @@ override SHADOW_CLOSEST: bool = false;
 @group(0) @binding(0) var<uniform> scene: SceneUniform;
 @group(0) @binding(1) var<uniform> camera: CameraFrame;
 @group(0) @binding(2) var<uniform> pass_: PassUniform;
-@group(0) @binding(3) var<storage, read> cells: array<Cell>;
-@group(0) @binding(4) var<storage, read> refs: array<u32>;
 @group(0) @binding(5) var<storage, read> tris: array<TriAccel>;
 @group(0) @binding(6) var<storage, read> tri_shade: array<TriShade>;
 @group(0) @binding(7) var<storage, read> materials: array<GpuMaterial>;
@@ -77,15 +63,8 @@ override SHADOW_CLOSEST: bool = false;
 @group(0) @binding(13) var<storage, read_write> resolve: array<vec2<u32>>;
 @group(0) @binding(14) var<storage, read_write> accum: array<vec4<f32>>;
 @group(0) @binding(15) var<storage, read_write> counters: array<atomic<u32>, COUNTER_SLOTS>;
-// The BVH's nodes (a BVH scene's `refs` are its triangle indices in leaf order; a grid scene
-// binds one unused node here, a BVH scene one unused cell in `cells`).
-@group(0) @binding(16) var<storage, read> bvh_nodes: array<BvhNode>;
-// The irregular grid (its `refs` are its cells' triangle lists, as the grid's): one entry per
-// top cell (`begin << IRR_LEVEL_BITS | level`), the voxel map of every top cell, and the cells.
-// Other scenes bind one unused element of each.
-@group(0) @binding(17) var<storage, read> irr_entries: array<u32>;
-@group(0) @binding(18) var<storage, read> irr_voxels: array<u32>;
-@group(0) @binding(19) var<storage, read> irr_cells: array<IrrCell>;
+// The structure's own arrays are group 1 of the walking kernels (traverse, occlusion), declared
+// in its walk file (walks/*.wgsl) with its `*_closest` and `*_any`; see gpu/walks/mod.rs.
 
 // Queues. Compacted (the tracer's way): each kernel appends the rays it emits with an atomic
 // counter, finished rays are never queued, and the next kernel runs over the queue's length.
@@ -162,30 +141,12 @@ fn clip_box(o: vec3<f32>, inv_d: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32
     return vec3<f32>(t_enter, t_exit, select(0.0, 1.0, t_enter <= t_exit));
 }
 
-// 3D-DDA state; mirrors GridAccel::walk.
-struct Dda {
-    o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>,
-    cell: vec3<i32>, step: vec3<i32>, ahead: vec3<i32>,
-    t_next: vec3<f32>, t_leave: f32, budget: u32,
-    cells_visited: u32, jumps: u32,
-}
-
-fn boundary_t(s: ptr<function, Dda>, axis: i32, k: i32) -> f32 {
-    if ((*s).step[axis] == 0) { return inf(); }
-    return (scene.bounds_min[axis] + f32(k) * scene.cell_size[axis] - (*s).o[axis]) * (*s).inv_d[axis];
-}
-
+// Lattice basics every grid walk shares (the uniform grid's DDA, the irregular grid's lookups):
+// the cell of a point, and the axis of the smallest component (first on ties).
 fn world_to_grid(p: vec3<f32>) -> vec3<i32> {
     // Clamp before converting: f32 -> i32 of huge values is best kept away from.
     let g = clamp(floor((p - scene.bounds_min) * scene.inv_cell_size), vec3<f32>(-2.0), vec3<f32>(scene.dims) + 1.0);
     return vec3<i32>(g);
-}
-
-fn refresh_t_next(s: ptr<function, Dda>) {
-    (*s).t_next = vec3<f32>(
-        boundary_t(s, 0, (*s).cell.x + (*s).ahead.x),
-        boundary_t(s, 1, (*s).cell.y + (*s).ahead.y),
-        boundary_t(s, 2, (*s).cell.z + (*s).ahead.z));
 }
 
 fn min_position(v: vec3<f32>) -> i32 {
@@ -197,101 +158,3 @@ fn min_position(v: vec3<f32>) -> i32 {
 }
 
 fn min3(v: vec3<f32>) -> f32 { return min(v.x, min(v.y, v.z)); }
-
-// Starts the walk; returns false if the ray misses the grid within [t_min, t_max].
-fn dda_start(s: ptr<function, Dda>, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
-    (*s).o = o;
-    (*s).d = d;
-    (*s).inv_d = 1.0 / d;
-    let c = clip_box(o, (*s).inv_d, d, t_min, t_max);
-    if (c.z == 0.0) { return false; }
-    (*s).t_leave = c.y;
-    (*s).step = vec3<i32>(sign(d));
-    (*s).ahead = max((*s).step, vec3<i32>(0));
-    let dims = vec3<i32>(scene.dims);
-    (*s).cell = clamp(world_to_grid(o + d * c.x), vec3<i32>(0), dims - 1);
-    refresh_t_next(s);
-    (*s).budget = u32(dims.x + dims.y + dims.z) * 2u + 8u;
-    (*s).cells_visited = 0u;
-    (*s).jumps = 0u;
-    return true;
-}
-
-fn cell_index(c: vec3<i32>) -> u32 {
-    return u32(c.x) + scene.dims.x * (u32(c.y) + scene.dims.y * u32(c.z));
-}
-
-// Leaves the current cell (whose record is `cell`): a proximity-cloud jump over the empty cube
-// around an empty cell with dist >= 2, else one DDA step. Returns false when the walk is over.
-fn dda_advance(s: ptr<function, Dda>, cell: Cell, t_exit: f32, use_pc: bool) -> bool {
-    let dims = vec3<i32>(scene.dims);
-    if (use_pc && cell.count == 0u && cell.dist >= 2u) {
-        let k = i32(min(cell.dist - 1u, 1048576u));
-        let cur = (*s).cell;
-        let t_cube = vec3<f32>(
-            boundary_t(s, 0, cur.x + (*s).ahead.x + (*s).step.x * k),
-            boundary_t(s, 1, cur.y + (*s).ahead.y + (*s).step.y * k),
-            boundary_t(s, 2, cur.z + (*s).ahead.z + (*s).step.z * k));
-        let t_jump = min3(t_cube);
-        if (t_jump >= (*s).t_leave) { return false; }
-        (*s).jumps += 1u;
-        let axis = min_position(t_cube);
-        var next = clamp(world_to_grid((*s).o + (*s).d * t_jump), cur - k, cur + k);
-        next[axis] = cur[axis] + (*s).step[axis] * (k + 1);
-        (*s).cell = next;
-        if (any(next < vec3<i32>(0)) || any(next >= dims)) { return false; }
-        refresh_t_next(s);
-        if ((*s).budget <= 1u) { return false; }
-        (*s).budget -= 1u;
-        return true;
-    }
-    if (t_exit >= (*s).t_leave) { return false; }
-    let axis = min_position((*s).t_next);
-    (*s).cell[axis] += (*s).step[axis];
-    if ((*s).cell[axis] < 0 || (*s).cell[axis] >= dims[axis]) { return false; }
-    (*s).t_next[axis] = boundary_t(s, axis, (*s).cell[axis] + (*s).ahead[axis]);
-    if ((*s).budget <= 1u) { return false; }
-    (*s).budget -= 1u;
-    return true;
-}
-
-// Closest hit with t_min < t < t_max; mirrors GridAccel::intersect. `work` gets the cost
-// (cells visited + triangle tests) when COUNT_WORK is set.
-fn closest_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool, work: ptr<function, u32>) -> GpuHit {
-    var best = GpuHit(t_max, MISS, 0.0, 0.0);
-    var s: Dda;
-    if (!dda_start(&s, o, d, t_min, t_max)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
-    loop {
-        if (COUNT_WORK) { *work += 1u; }
-        let t_exit = min3(s.t_next);
-        let cell = cells[cell_index(s.cell)];
-        if (cell.count > 0u) {
-            for (var i = cell.start; i < cell.start + cell.count; i++) {
-                if (COUNT_WORK) { *work += 1u; }
-                let tri = refs[i];
-                let h = intersect_tri(tris[tri], o, d, t_min, best.t);
-                if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
-            }
-            if (best.tri != MISS && best.t <= min(t_exit, s.t_leave)) { break; }
-        }
-        if (!dda_advance(&s, cell, t_exit, use_pc)) { break; }
-    }
-    if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
-    return best;
-}
-
-// Any hit with t_min < t < t_max; mirrors GridAccel::occluded.
-fn any_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool) -> bool {
-    var s: Dda;
-    if (!dda_start(&s, o, d, t_min, t_max)) { return false; }
-    loop {
-        let t_exit = min3(s.t_next);
-        let cell = cells[cell_index(s.cell)];
-        for (var i = cell.start; i < cell.start + cell.count; i++) {
-            let h = intersect_tri(tris[refs[i]], o, d, t_min, t_max);
-            if (h.w != 0.0) { return true; }
-        }
-        if (!dda_advance(&s, cell, t_exit, use_pc)) { break; }
-    }
-    return false;
-}

@@ -1,7 +1,6 @@
 // Occlusion (any hit) for the shadow queue: an occluded shadow ray loses its contribution.
-// Compiled with BVH = true for BVH scenes and IRREGULAR = true for irregular-grid scenes (as
-// traverse.wgsl), and with SHADOW_CLOSEST = true for the ablation that finds closest hits
-// instead.
+// Compiled with each structure's walk (as traverse.wgsl), and with SHADOW_CLOSEST = true for the
+// ablation that finds closest hits instead.
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -15,19 +14,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var work = 0u;
     if (SHADOW_CLOSEST) {
         // The ablation: the closest hit before the light, as a closest-hit-only tracer would.
-        if (BVH) {
-            occluded = bvh_closest(o, d, r.t_min, r.t_max, &work).tri != MISS;
-        } else if (IRREGULAR) {
-            occluded = irr_closest(o, d, r.t_min, r.t_max, &work).tri != MISS;
-        } else {
-            occluded = closest_hit(o, d, r.t_min, r.t_max, pass_.accel == ACCEL_PC, &work).tri != MISS;
-        }
-    } else if (BVH) {
-        occluded = bvh_any(o, d, r.t_min, r.t_max);
-    } else if (IRREGULAR) {
-        occluded = irr_any(o, d, r.t_min, r.t_max);
+        occluded = walk_closest(o, d, r.t_min, r.t_max, &work).tri != MISS;
     } else {
-        occluded = any_hit(o, d, r.t_min, r.t_max, pass_.accel == ACCEL_PC);
+        occluded = walk_any(o, d, r.t_min, r.t_max);
     }
     if (occluded) {
         shadow_rays[i].weight = array<f32, 3>(0.0, 0.0, 0.0);

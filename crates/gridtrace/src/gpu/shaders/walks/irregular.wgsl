@@ -15,6 +15,20 @@
 // there all the same, as in the DDA. Where rounding puts the ray a voxel off near a face, the
 // build's `cell_margin` put the triangles that close to the face in both cells.
 
+// An irregular-grid cell as stored (IrrCell in accel/irregular/mod.rs): its grown box in virtual
+// voxels as six 16-bit coordinates (`min.x | min.y << 16, min.z | max.x << 16, max.y | max.z <<
+// 16`) and the first of its `refs`, which end where the next cell's start (the array ends with
+// a sentinel cell). A vec3<u32> in storage is 16-byte aligned with a 4-byte scalar after it, so
+// this is the Rust layout: 16 bytes, one load. `irr_cell` unpacks it.
+struct IrrCell { bounds: vec3<u32>, start: u32 }
+
+// Group 1 as gpu/walks/irregular.rs uploads it: one entry per top cell (`begin << IRR_LEVEL_BITS
+// | level`), the voxel map of every top cell, the cells, and their triangle lists.
+@group(1) @binding(0) var<storage, read> irr_entries: array<u32>;
+@group(1) @binding(1) var<storage, read> irr_voxels: array<u32>;
+@group(1) @binding(2) var<storage, read> irr_cells: array<IrrCell>;
+@group(1) @binding(3) var<storage, read> irr_refs: array<u32>;
+
 struct IrrWalk {
     o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>,
     // The voxel the walk is in, and the sign of the direction per axis (0: parallel).
@@ -118,7 +132,7 @@ fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
         if (cell.count > 0u) {
             for (var i = cell.start; i < cell.start + cell.count; i++) {
                 if (COUNT_WORK) { *work += 1u; }
-                let tri = refs[i];
+                let tri = irr_refs[i];
                 let h = intersect_tri(tris[tri], o, d, t_min, best.t);
                 if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
             }
@@ -139,7 +153,7 @@ fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     loop {
         let cell = irr_cell(irr_cell_at(vec3<u32>(w.v)));
         for (var i = cell.start; i < cell.start + cell.count; i++) {
-            if (intersect_tri(tris[refs[i]], o, d, t_min, t_max).w != 0.0) { return true; }
+            if (intersect_tri(tris[irr_refs[i]], o, d, t_min, t_max).w != 0.0) { return true; }
         }
         if (!irr_advance(&w, cell, irr_faces(&w, cell))) { break; }
     }

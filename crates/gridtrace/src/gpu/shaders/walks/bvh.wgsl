@@ -14,6 +14,14 @@
 // a walk touches only its top few entries. Workgroup memory (64 threads x 97 entries = 25 KiB)
 // would cap occupancy, and a short stack with restarts needs no guarantee this tree lacks.
 
+// A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
+struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
+
+// The nodes, and the triangle indices in leaf order (`Bvh::prims`); group 1 as gpu/walks/bvh.rs
+// uploads them.
+@group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
+@group(1) @binding(1) var<storage, read> bvh_prims: array<u32>;
+
 struct BoxPair { t0: f32, t1: f32, hit0: bool, hit1: bool }
 
 // 1 / d with zero components replaced by +-DIR_TINY first (BoxRay::new): the slabs never
@@ -95,7 +103,7 @@ fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
         for (var k = first; k < first + count; k++) {
             if (COUNT_WORK) { *work += 1u; }
-            let tri = refs[k];
+            let tri = bvh_prims[k];
             let h = intersect_tri(tris[tri], o, d, t_min, best.t);
             if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
         }
@@ -118,7 +126,7 @@ fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
         let first = entry & LEAF_FIRST_MAX;
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
         for (var k = first; k < first + count; k++) {
-            if (intersect_tri(tris[refs[k]], o, d, t_min, t_max).w != 0.0) { return true; }
+            if (intersect_tri(tris[bvh_prims[k]], o, d, t_min, t_max).w != 0.0) { return true; }
         }
         entry = bvh_pop(&stack, &sp);
     }

@@ -1,0 +1,21 @@
+//! Brute force on the GPU: no arrays of its own (it reads the shared triangles); the walk is
+//! `shaders/walks/brute.wgsl`.
+
+use super::{Lattice, WalkSpec, WalkUpload};
+use crate::accel::Aabb;
+
+pub const SPEC: WalkSpec = WalkSpec {
+    structure: "brute",
+    wgsl: include_str!("../shaders/walks/brute.wgsl"),
+    prefix: "brute",
+    arrays: &[],
+    device_build: false,
+};
+
+pub fn upload(bounds: Aabb) -> WalkUpload<'static> {
+    WalkUpload {
+        spec: &SPEC,
+        arrays: Vec::new(),
+        lattice: Lattice::bounds_only(bounds),
+    }
+}

@@ -1,0 +1,109 @@
+//! Each structure's GPU side: its arrays (group 1 of the walking kernels, in binding order), its
+//! lattice fields of the scene uniform, and its WGSL walk (`shaders/walks/NAME.wgsl`, which
+//! declares those arrays and defines `NAME_closest` and `NAME_any`). The kernels never name a
+//! structure: traverse and occlusion call `walk_closest` and `walk_any`, two lines generated per
+//! structure (`WalkSpec::entry_points`), and each structure gets its own pipelines of them,
+//! compiled when a scene of it is first uploaded (`Kernels::walk`).
+//!
+//! Adding a structure's GPU side: a walk file, a file here with its `WalkSpec` and its upload,
+//! one entry of `WALKS` and one arm of `upload_of`.
+
+mod brute;
+mod bvh;
+mod grid;
+mod irregular;
+
+use std::borrow::Cow;
+
+use glam::{UVec3, Vec3};
+
+use crate::Result;
+use crate::accel::{Aabb, Structure};
+use crate::scene::PreparedScene;
+
+/// What the GPU needs to know of a structure before any scene: its walk and its arrays' names.
+#[derive(Debug)]
+pub struct WalkSpec {
+    /// The structure, as the registry's `structure` column names it.
+    pub structure: &'static str,
+    /// The walk file's source.
+    pub wgsl: &'static str,
+    /// The walk's entry points are `{prefix}_closest` and `{prefix}_any`.
+    pub prefix: &'static str,
+    /// Group 1's arrays in binding order: the name reports use (`GpuRenderer::memory`) and the
+    /// WGSL variable's name.
+    pub arrays: &'static [(&'static str, &'static str)],
+    /// Whether a moved mesh's structure is rebuilt on the device (`gpu::grid_build`: the
+    /// uniform grid's); the others are updated on the CPU and uploaded again.
+    pub device_build: bool,
+}
+
+impl WalkSpec {
+    /// The two lines that make this walk the module's `walk_closest` and `walk_any`.
+    pub fn entry_points(&self) -> String {
+        let p = self.prefix;
+        format!(
+            "fn walk_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest(o, d, t_min, t_max, work); }}\n\
+             fn walk_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {{ return {p}_any(o, d, t_min, t_max); }}\n"
+        )
+    }
+}
+
+/// Every structure's GPU walk.
+pub const WALKS: [&WalkSpec; 4] = [&grid::SPEC, &bvh::SPEC, &irregular::SPEC, &brute::SPEC];
+
+/// The walk of the structure named `structure`, if the GPU has one.
+pub fn spec(structure: &str) -> Option<&'static WalkSpec> {
+    WALKS.iter().copied().find(|w| w.structure == structure)
+}
+
+/// The lattice fields of `SceneUniform` that a walk reads: the grid's cells, the irregular
+/// grid's virtual voxels, nothing (zeros) for the others.
+#[derive(Debug, Clone, Copy)]
+pub struct Lattice {
+    pub bounds: Aabb,
+    pub dims: UVec3,
+    /// World-space size of one cell or voxel per axis, and its reciprocal.
+    pub cell_size: Vec3,
+    pub inv_cell_size: Vec3,
+    /// Irregular grid: `IrregularGrid::shift`.
+    pub shift: u32,
+}
+
+impl Lattice {
+    /// Bounds only (the BVH and brute force: ray generation clips to them), no cells.
+    pub fn bounds_only(bounds: Aabb) -> Lattice {
+        Lattice {
+            bounds,
+            dims: UVec3::ZERO,
+            cell_size: Vec3::ZERO,
+            inv_cell_size: Vec3::ZERO,
+            shift: 0,
+        }
+    }
+}
+
+/// A scene's structure as the GPU takes it: which walk, its arrays (bytes, in `spec.arrays`
+/// order) and its lattice.
+pub struct WalkUpload<'a> {
+    pub spec: &'static WalkSpec,
+    pub arrays: Vec<Cow<'a, [u8]>>,
+    pub lattice: Lattice,
+}
+
+/// The one place the GPU backend reads `scene.accel.structure`.
+pub fn upload_of(scene: &PreparedScene) -> Result<WalkUpload<'_>> {
+    let upload = match &scene.accel.structure {
+        Structure::Grid(g) => grid::upload(g),
+        Structure::Bvh(b) => bvh::upload(b, scene.accel.bounds())?,
+        Structure::Irregular(g) => irregular::upload(g),
+        Structure::Brute(_) => brute::upload(scene.accel.bounds()),
+    };
+    debug_assert_eq!(upload.arrays.len(), upload.spec.arrays.len());
+    Ok(upload)
+}
+
+/// A slice's bytes, borrowed.
+fn bytes<T: bytemuck::Pod>(v: &[T]) -> Cow<'_, [u8]> {
+    Cow::Borrowed(bytemuck::cast_slice(v))
+}
