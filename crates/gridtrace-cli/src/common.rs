@@ -83,17 +83,26 @@ fn builtin_names() -> String {
     builtin::SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
 }
 
-/// `--accel`: the registry's names (with their aliases and one-line help) and `auto`; the
-/// values are listed in `--help` and in the error for a wrong one.
-pub fn accel_parser() -> impl TypedValueParser<Value = AccelChoice> {
-    let auto = PossibleValue::new("auto").help("the structure measured fastest for the work (says which and why)");
-    let kinds = gridtrace::accel::registry::ENTRIES.iter().map(|e| {
+/// The registry's traversals as clap values: names, aliases and one-line help.
+fn kind_values() -> impl Iterator<Item = PossibleValue> {
+    gridtrace::accel::registry::ENTRIES.iter().map(|e| {
         PossibleValue::new(e.name)
             .aliases(e.aliases.iter().copied())
             .help(e.about)
-    });
-    PossibleValuesParser::new(std::iter::once(auto).chain(kinds))
+    })
+}
+
+/// `--accel`: `auto` and the registry's names; the values are listed in `--help` and in the
+/// error for a wrong one.
+pub fn accel_parser() -> impl TypedValueParser<Value = AccelChoice> {
+    let auto = PossibleValue::new("auto").help("the structure measured fastest for the work (it says which and why)");
+    PossibleValuesParser::new(std::iter::once(auto).chain(kind_values()))
         .map(|s| s.parse::<AccelChoice>().expect("every listed accel parses"))
+}
+
+/// `bench --accel`: the registry's names (a benchmark names what it measures).
+pub fn kind_parser() -> impl TypedValueParser<Value = AccelKind> {
+    PossibleValuesParser::new(kind_values()).map(|s| s.parse::<AccelKind>().expect("every listed accel parses"))
 }
 
 /// `--mode`: the values are listed in `--help` and in the error for a wrong one.

@@ -401,3 +401,49 @@ fn bands_equal_rows_of_the_frame() {
         assert!(gridtrace::cpu::render(scene, &band, None).is_err());
     }
 }
+
+/// Where a scene is traced (`Backend`): `auto` sends a scene the device cannot hold (a grid
+/// whose cells exceed the binding limit of lavapipe's 128 MiB) to the CPU with a note naming
+/// the array, and `gpu` fails suggesting the CPU; a scene that fits goes to the device under
+/// both. (The CLI's `auto` passes a software adapter over before this check; here the device
+/// is given, as on a machine with a GPU.)
+#[test]
+fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
+    use gridtrace::Backend;
+    let _g = GPU_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    if std::env::var_os("GRIDTRACE_SKIP_GPU").is_some() {
+        return;
+    }
+    let ctx = std::sync::Arc::new(
+        GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")),
+    );
+    let small = builtin::knot_box()
+        .prepare_for(AccelKind::Grid, Resolution::Fixed([8; 3]))
+        .unwrap();
+    for backend in [Backend::Auto, Backend::Gpu] {
+        let mut notes = Vec::new();
+        let up = backend.upload(ctx.clone(), &small, &mut notes).unwrap();
+        assert!(up.is_some() && notes.is_empty(), "{backend:?}: {notes:?}");
+    }
+    let cells = 300 * 300 * 160 * 12;
+    if (cells as u64) <= ctx.limits().max_storage_buffer_binding_size as u64 {
+        eprintln!("this device holds a {cells}-byte binding: nothing to fall back from");
+        return;
+    }
+    let big = builtin::knot_box()
+        .prepare_for(AccelKind::Grid, Resolution::Fixed([300, 300, 160]))
+        .unwrap();
+    let mut notes = Vec::new();
+    let up = Backend::Auto.upload(ctx.clone(), &big, &mut notes).unwrap();
+    assert!(up.is_none(), "auto kept a scene over the limit on the device");
+    assert!(
+        notes.len() == 1 && notes[0].contains("'cells'") && notes[0].contains("using the CPU"),
+        "{notes:?}"
+    );
+    let e = Backend::Gpu
+        .upload(ctx, &big, &mut Vec::new())
+        .err()
+        .expect("gpu refuses it")
+        .to_string();
+    assert!(e.contains("'cells'") && e.contains("use --backend cpu"), "{e}");
+}

@@ -1,12 +1,12 @@
 //! Adapter and device: chosen once, described on every run (so a software adapter can never
 //! pass for a GPU), with errors captured instead of panicking and waits that cannot hang.
 
-use std::sync::{Arc, Mutex, OnceLock};
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use super::bindings::storage_buffers_needed;
-use super::grid_build::BuildKernels;
-use super::kernels::Kernels;
 use crate::{Error, Result};
 
 /// How long a submission may run before it is reported as a hang.
@@ -21,10 +21,9 @@ pub struct GpuContext {
     pub timestamps: bool,
     /// First uncaptured device error, if any (validation, out of memory, lost device).
     errors: Arc<Mutex<Option<String>>>,
-    /// The compiled kernels, built by the first renderer and shared by the later ones.
-    kernels: OnceLock<Arc<Kernels>>,
-    /// The grid build's kernels, compiled on the first GPU build.
-    build_kernels: OnceLock<Arc<BuildKernels>>,
+    /// What is compiled once per device and shared (the tracer's kernels, the grid build's),
+    /// by type: built by the first user (`cached`), so that this file names none of them.
+    cache: Mutex<HashMap<TypeId, Arc<dyn Any + Send + Sync>>>,
 }
 
 /// Adapter kinds in order of preference.
@@ -119,8 +118,7 @@ impl GpuContext {
             info,
             timestamps,
             errors,
-            kernels: OnceLock::new(),
-            build_kernels: OnceLock::new(),
+            cache: Mutex::new(HashMap::new()),
         })
     }
 
@@ -144,23 +142,18 @@ impl GpuContext {
         self.device.limits()
     }
 
-    /// The kernels of this device, compiled on first use.
-    pub(crate) fn kernels(&self) -> Result<Arc<Kernels>> {
-        if let Some(k) = self.kernels.get() {
-            return Ok(k.clone());
+    /// This device's `T`, made by `make` on first use and shared after (the compiled kernels:
+    /// `Kernels::of`, `BuildKernels::of`). An error is returned and nothing is kept.
+    pub(crate) fn cached<T: Any + Send + Sync>(&self, make: impl FnOnce(&wgpu::Device) -> Result<T>) -> Result<Arc<T>> {
+        // Held while `make` runs: a second thread waits for the first's kernels instead of
+        // compiling its own.
+        let mut cache = self.cache.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(v) = cache.get(&TypeId::of::<T>()) {
+            return Ok(v.clone().downcast::<T>().expect("the cache holds a T under T's id"));
         }
-        // Two threads may both compile; the first to finish is kept, the other's dropped.
-        let built = Arc::new(Kernels::new(&self.device)?);
-        Ok(self.kernels.get_or_init(|| built).clone())
-    }
-
-    /// The grid build's kernels of this device, compiled on first use.
-    pub(crate) fn build_kernels(&self) -> Result<Arc<BuildKernels>> {
-        if let Some(k) = self.build_kernels.get() {
-            return Ok(k.clone());
-        }
-        let built = Arc::new(BuildKernels::new(&self.device)?);
-        Ok(self.build_kernels.get_or_init(|| built).clone())
+        let v = Arc::new(make(&self.device)?);
+        cache.insert(TypeId::of::<T>(), v.clone());
+        Ok(v)
     }
 
     /// Returns the first device error since the last call, as an `Error`.

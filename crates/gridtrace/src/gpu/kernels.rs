@@ -10,6 +10,7 @@ use super::bindings::{
     self, Access, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP, STRUCTURE_GROUP,
 };
 use super::constants::{MAX_GROUPS_X, WORKGROUP};
+use super::context::GpuContext;
 use super::layout::IndirectArgs;
 use super::shaders;
 use super::timing::StageTimer;
@@ -200,6 +201,11 @@ fn compile(
 }
 
 impl Kernels {
+    /// The kernels of `ctx`'s device, compiled on first use and shared by every renderer on it.
+    pub fn of(ctx: &GpuContext) -> Result<Arc<Kernels>> {
+        ctx.cached(Kernels::new)
+    }
+
     /// Compiles every kernel that walks no structure.
     pub fn new(dev: &wgpu::Device) -> Result<Kernels> {
         let frame_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

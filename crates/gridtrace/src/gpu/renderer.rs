@@ -104,7 +104,7 @@ impl GpuRenderer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT,
             mapped_at_creation: false,
         });
-        let kernels = ctx.kernels()?;
+        let kernels = Kernels::of(&ctx)?;
         let indirect_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("indirect args"),
             layout: &kernels.indirect_layout,

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
 use super::context::GpuContext;
-use super::kernels::WalkPipelines;
+use super::kernels::{Kernels, WalkPipelines};
 use super::layout::{GpuMaterial, SceneUniform, TriShade};
 use super::walks::{WalkSpec, upload_of};
 use crate::scene::PreparedScene;
@@ -102,7 +102,7 @@ impl SceneBuffers {
         let arrays: Vec<(&'static str, &[u8])> = own.chain(shared).collect();
         let bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
         check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
-        let pipelines = ctx.kernels()?.walk(dev, walk.spec)?;
+        let pipelines = Kernels::of(ctx)?.walk(dev, walk.spec)?;
         let structure: Vec<wgpu::Buffer> = walk
             .spec
             .arrays

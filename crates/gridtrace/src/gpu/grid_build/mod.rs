@@ -121,7 +121,7 @@ fn scan_levels(n_cells: u32) -> Vec<(u32, u32)> {
 impl GpuGrid {
     /// An empty grid on `ctx`'s device (compiles the build kernels on first use).
     pub fn new(ctx: Arc<GpuContext>) -> Result<GpuGrid> {
-        let kernels = ctx.build_kernels()?;
+        let kernels = ctx.cached(BuildKernels::new)?;
         let dev = &ctx.device;
         let params = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("grid build params"),
