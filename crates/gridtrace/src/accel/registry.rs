@@ -214,22 +214,22 @@ impl AccelChoice {
     /// The traversal to use for `work` traced on the GPU (`on_gpu`) or the CPU, with a note
     /// saying what `auto` picked and why (`None` when a kind was named).
     ///
-    /// The rule, from the measurements in docs/benchmarks.md (2 CPU cores): on the CPU the
-    /// BVH is the fastest structure for ray batches (1M incoherent rays at the Stanford Bunny:
-    /// 1.05x Embree's speed, the uniform grid 0.19x; camera rays from Python 28.8 Mrays/s
-    /// against 19.5 for the irregular grid and 7.4 for the plain grid), the fastest or within
-    /// 15% in renders except on scenes of large empty spaces (the irregular grid 0.73-1.21x
-    /// it), and for moving meshes its refit beats every rebuild. On a GPU nothing has been
-    /// measured on hardware yet (the software adapter runs on the CPU's cores and would
-    /// choose wrongly): the BVH, the literature's default for GPU ray queries, until the
-    /// hardware suite (`gridtrace bench --suite hardware`) says otherwise.
+    /// The rule, from the measurements in docs/benchmarks.md ("Which structure for what", 2 CPU
+    /// cores): on the CPU the BVH is the fastest structure for ray batches (1M incoherent rays
+    /// at the Stanford Bunny: 10.34 Mrays/s against the irregular grid's 3.59, pc's 1.83 and the
+    /// grid's 1.46; 1.15x embreex's speed where the grid is at 0.18x), the fastest in renders
+    /// except on scenes of large empty spaces (the irregular grid 0.58-1.21x it), and for moving
+    /// meshes its refit beats every rebuild (3.6 ms refit + 12.6 ms trace a frame against the
+    /// irregular grid's 43.3 + 24.0). On a GPU nothing has been measured on hardware (the
+    /// software adapter runs on the CPU's cores and would choose wrongly): the BVH, the
+    /// literature's default for GPU ray queries, until the hardware suite says otherwise.
     pub fn resolve(self, on_gpu: bool, work: Work) -> (AccelKind, Option<String>) {
         let kind = match self {
             AccelChoice::Kind(k) => return (k, None),
             AccelChoice::Auto => AccelKind::Bvh,
         };
         let why = match (on_gpu, work) {
-            (false, Work::Rays) => "the fastest for ray batches on the CPU (1.05x Embree on incoherent rays)",
+            (false, Work::Rays) => "the fastest for ray batches on the CPU: 1.15x embreex on incoherent rays",
             (false, Work::Render) => "the fastest renders on the CPU on most scenes measured",
             (_, Work::Animate) => "a refit per frame beats every rebuild",
             (true, _) => "the literature's GPU default; no GPU hardware measured yet",

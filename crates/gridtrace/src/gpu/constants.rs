@@ -59,18 +59,18 @@ pub const fn mode_code(mode: Mode) -> u32 {
     }
 }
 
-/// `PassUniform::accel`: 1 walks the proximity clouds (`ACCEL_PC`), 0 the plain grid, 2 the BVH
-/// 3 the irregular grid and 4 brute force (whose kernels are their own pipelines, `Kernel::walking`, and do
-/// not read it).
+/// `PassUniform::accel`: `ACCEL_PC` (1) when the walk jumps over empty space with the
+/// proximity cloud, else 0. Only the uniform grid's walk reads it (`grid` and `pc` share one
+/// structure and one pipeline); every other structure's kernels are their own.
 pub const fn accel_code(accel: AccelKind) -> u32 {
-    match accel {
-        AccelKind::Grid => 0,
-        AccelKind::ProximityCloud => 1,
-        AccelKind::Bvh => 2,
-        AccelKind::Irregular => 3,
-        AccelKind::Brute => 4,
-    }
+    matches!(accel, AccelKind::ProximityCloud) as u32
 }
+
+/// Invocations per workgroup of the grid build's scan kernels (`build/scan.wgsl`'s `partial`
+/// array); the other kernels have `WORKGROUP`.
+pub const SCAN_GROUP: u32 = 256;
+// A scan block is four elements per invocation of a workgroup (`build/scan.wgsl`).
+const _: () = assert!(SCAN_BLOCK == 4 * SCAN_GROUP);
 
 /// Entries of the GPU BVH walk's stack: the CPU builder's bound on the tree's depth (`STACK`),
 /// so that no tree can overflow it.
@@ -85,7 +85,7 @@ pub enum WgslConst {
 
 /// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
 /// `TriAccel::intersect`'s own, so both backends accept the same hits.
-pub const WGSL_CONSTANTS: [(&str, WgslConst); 32] = [
+pub const WGSL_CONSTANTS: [(&str, WgslConst); 36] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -113,6 +113,10 @@ pub const WGSL_CONSTANTS: [(&str, WgslConst); 32] = [
     ("FAR_SCALE", WgslConst::F32(bvh::FAR_SCALE)),
     ("T_SLOP", WgslConst::F32(bvh::T_SLOP)),
     ("IRR_LEVEL_BITS", WgslConst::U32(irregular::LEVEL_BITS)),
+    ("IRR_COORD_BITS", WgslConst::U32(irregular::COORD_BITS)),
+    ("IRR_COORD_MASK", WgslConst::U32(irregular::COORD_MASK)),
+    ("JUMP_CAP", WgslConst::U32(crate::accel::grid::dda::JUMP_CAP)),
+    ("SCAN_GROUP", WgslConst::U32(SCAN_GROUP)),
     ("SLACK_PAD", WgslConst::F32(SLACK_PAD)),
     ("SCAN_BLOCK", WgslConst::U32(SCAN_BLOCK)),
     ("DIST_FAR", WgslConst::U32(proximity::FAR)),

@@ -10,6 +10,11 @@ use crate::accel::lattice::{min_position, sign};
 use crate::accel::triangle::{any_in, closest_in};
 use crate::accel::{Counters, Hit, Ray, TriAccel};
 
+/// Cells a proximity-cloud jump may cross at most, whatever the stored distance (far beyond any
+/// grid: 2^26 cells in all, `MAX_CELLS`); keeps `k` and the cell arithmetic in range of i32.
+/// The GPU walk takes it from the prelude.
+pub const JUMP_CAP: u32 = 1 << 20;
+
 /// How the DDA crosses empty cells.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stepping {
@@ -203,7 +208,7 @@ impl Lattice {
         // where whether a cell is empty is a coin toss.
         if stepping == Stepping::ProximityJumps && cell.count == 0 && cell.dist >= 2 {
             // The cube of cells within Chebyshev distance dist-1 is empty: leave it at once.
-            let k = (cell.dist - 1).min(1 << 20) as i32;
+            let k = (cell.dist - 1).min(JUMP_CAP) as i32;
             let t_cube: [f32; 3] =
                 std::array::from_fn(|a| self.boundary_t(c, a, c.cell[a] + c.ahead[a] + c.step[a] * k));
             let t_jump = t_cube[0].min(t_cube[1]).min(t_cube[2]);

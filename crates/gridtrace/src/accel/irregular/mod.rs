@@ -44,6 +44,11 @@ pub use memory::MemoryBound;
 /// coordinates and a count, which brought the structure from 71 to 54 bytes per triangle on the
 /// Stanford Bunny (docs/benchmarks.md). Virtual grids are under 2^16 voxels per axis: the build
 /// caps the top grid at 4,096 cells per axis and the levels below it to fit (`TopGrid::new`).
+/// Bits of one packed voxel coordinate of `IrrCell::bounds` (the GPU walk unpacks them with the
+/// prelude's `IRR_COORD_BITS` and `IRR_COORD_MASK`).
+pub const COORD_BITS: u32 = 16;
+pub const COORD_MASK: u32 = (1 << COORD_BITS) - 1;
+
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct IrrCell {
@@ -55,9 +60,10 @@ pub struct IrrCell {
 impl IrrCell {
     /// Packs a box (coordinates below 2^16, which the build checks) and a start.
     pub fn new(min: [u32; 3], max: [u32; 3], start: u32) -> IrrCell {
-        debug_assert!(min.iter().chain(&max).all(|&c| c <= 0xffff));
+        debug_assert!(min.iter().chain(&max).all(|&c| c <= COORD_MASK));
+        let s = COORD_BITS;
         IrrCell {
-            bounds: [min[0] | min[1] << 16, min[2] | max[0] << 16, max[1] | max[2] << 16],
+            bounds: [min[0] | min[1] << s, min[2] | max[0] << s, max[1] | max[2] << s],
             start,
         }
     }
@@ -65,13 +71,13 @@ impl IrrCell {
     #[inline(always)]
     pub fn min(&self) -> [u32; 3] {
         let b = self.bounds;
-        [b[0] & 0xffff, b[0] >> 16, b[1] & 0xffff]
+        [b[0] & COORD_MASK, b[0] >> COORD_BITS, b[1] & COORD_MASK]
     }
 
     #[inline(always)]
     pub fn max(&self) -> [u32; 3] {
         let b = self.bounds;
-        [b[1] >> 16, b[2] & 0xffff, b[2] >> 16]
+        [b[1] >> COORD_BITS, b[2] & COORD_MASK, b[2] >> COORD_BITS]
     }
 }
 

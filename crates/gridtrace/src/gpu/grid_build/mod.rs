@@ -37,7 +37,7 @@ mod pipelines;
 pub(crate) use pipelines::BuildKernels;
 use pipelines::{STAGES, Stage};
 
-use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK, WORKGROUP};
+use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK, SCAN_GROUP, WORKGROUP};
 use super::context::GpuContext;
 use super::kernels::dispatch_groups;
 use super::layout::BuildParams;
@@ -49,9 +49,6 @@ use crate::{Error, Result};
 /// Bytes between two dispatches' parameters (dynamic uniform offsets must be multiples of the
 /// device's alignment; 256 is WebGPU's largest).
 const PARAMS_STRIDE: u64 = 256;
-/// Invocations per workgroup of the scan's `add` (`scan.wgsl`'s `partial` array); the other
-/// kernels have `WORKGROUP`.
-const SCAN_GROUP: u32 = 256;
 /// Words at the start of the sums buffer before the scan levels: word 0 is the total.
 const STATUS_WORDS: u32 = 4;
 /// References a first build of an unknown mesh allows per triangle before it has to grow the

@@ -1,5 +1,5 @@
 // Exclusive prefix sums of the cells' reference counts, which become the cells' `start`s: a
-// block of SCAN_BLOCK elements per workgroup (256 invocations, 4 elements each), the blocks'
+// block of SCAN_BLOCK elements per workgroup (SCAN_GROUP invocations, 4 elements each), the blocks'
 // totals scanned the same way one level up, until one block remains; then each level adds its
 // block's offset back down. `sums` holds every level's block totals (`in_offset`, `out_offset`
 // say where) and, in word 0, the grand total: the number of references.
@@ -10,14 +10,14 @@
 @group(0) @binding(2) var<storage, read_write> cells: array<Cell>;
 @group(0) @binding(4) var<storage, read_write> sums: array<u32>;
 
-var<workgroup> partial: array<u32, 256>;
+var<workgroup> partial: array<u32, SCAN_GROUP>;
 
-// Exclusive scan of the workgroup's 256 per-invocation totals (Hillis-Steele); returns this
+// Exclusive scan of the workgroup's SCAN_GROUP per-invocation totals (Hillis-Steele); returns this
 // invocation's offset and leaves the block total in partial[255]. Call in uniform control flow.
 fn block_offset(lid: u32, total: u32) -> u32 {
     partial[lid] = total;
     workgroupBarrier();
-    for (var step = 1u; step < 256u; step <<= 1u) {
+    for (var step = 1u; step < SCAN_GROUP; step <<= 1u) {
         var add = 0u;
         if lid >= step {
             add = partial[lid - step];
@@ -62,7 +62,7 @@ fn store(i: u32, v: u32) {
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(SCAN_GROUP)
 fn scan(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
@@ -88,13 +88,13 @@ fn scan(
 
 // One invocation per element: element i of the level (level 0: the cells' starts) gets the
 // scanned total of its block, at `out_offset`.
-@compute @workgroup_size(256)
+@compute @workgroup_size(SCAN_GROUP)
 fn add(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = flat_id(wg, nwg, lid, 256u);
+    let i = flat_id(wg, nwg, lid, SCAN_GROUP);
     if i >= P.n {
         return;
     }

@@ -57,7 +57,7 @@ fn cell_index(c: vec3<i32>) -> u32 {
 fn dda_advance(s: ptr<function, Dda>, cell: Cell, t_exit: f32, use_pc: bool) -> bool {
     let dims = vec3<i32>(scene.dims);
     if (use_pc && cell.count == 0u && cell.dist >= 2u) {
-        let k = i32(min(cell.dist - 1u, 1048576u));
+        let k = i32(min(cell.dist - 1u, JUMP_CAP));
         let cur = (*s).cell;
         let t_cube = vec3<f32>(
             boundary_t(s, 0, cur.x + (*s).ahead.x + (*s).step.x * k),

@@ -42,8 +42,8 @@ struct IrrBox { min: vec3<u32>, max: vec3<u32>, start: u32, count: u32 }
 fn irr_cell(id: u32) -> IrrBox {
     let c = irr_cells[id];
     let end = irr_cells[id + 1u].start;
-    let lo = vec3<u32>(c.bounds.x & 0xffffu, c.bounds.x >> 16u, c.bounds.y & 0xffffu);
-    let hi = vec3<u32>(c.bounds.y >> 16u, c.bounds.z & 0xffffu, c.bounds.z >> 16u);
+    let lo = vec3<u32>(c.bounds.x & IRR_COORD_MASK, c.bounds.x >> IRR_COORD_BITS, c.bounds.y & IRR_COORD_MASK);
+    let hi = vec3<u32>(c.bounds.y >> IRR_COORD_BITS, c.bounds.z & IRR_COORD_MASK, c.bounds.z >> IRR_COORD_BITS);
     return IrrBox(lo, hi, c.start, end - c.start);
 }
 
