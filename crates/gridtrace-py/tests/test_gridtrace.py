@@ -15,6 +15,21 @@ import pytest
 
 import gridtrace
 
+# Every structure the library's registry lists ("auto" picks one of them).
+STRUCTURES = [a for a in gridtrace.ACCELS if a != "auto"]
+
+
+def test_accels_come_from_the_registry():
+    """`ACCELS` is "auto" and the registry's names; `auto` (the default) builds one of them."""
+    assert gridtrace.ACCELS[0] == "auto"
+    assert set(STRUCTURES) >= {"grid", "pc", "bvh", "irregular", "brute"}
+    mesh = gridtrace.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], backend="cpu")
+    hits = mesh.intersect([[0.2, 0.2, 1.0]], [[0.0, 0.0, -1.0]])
+    assert hits.tri[0] == 0 and hits.t[0] == 1.0
+    with pytest.raises(ValueError, match="'auto'"):
+        gridtrace.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], accel="kd-tree")
+
+
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 
 
@@ -76,7 +91,7 @@ def brute_force(vertices, faces, o, d):
     return best, tri, margin, gap
 
 
-@pytest.mark.parametrize("accel", ["grid", "pc", "bvh", "irregular"])
+@pytest.mark.parametrize("accel", STRUCTURES)
 def test_closest_hits_equal_brute_force(accel):
     vertices, faces = sphere_soup()
     mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
@@ -102,7 +117,7 @@ def test_closest_hits_equal_brute_force(accel):
     assert (hits.tri[miss] == gridtrace.MISS).all() and (hits.normal[miss] == 0).all()
 
 
-@pytest.mark.parametrize("accel", ["grid", "bvh", "irregular"])
+@pytest.mark.parametrize("accel", STRUCTURES)
 def test_occlusion_agrees_with_closest_hit(accel):
     vertices, faces = sphere_soup(seed=5)
     mesh = gridtrace.Mesh(vertices, faces, accel=accel, backend="cpu")
@@ -176,7 +191,7 @@ def test_broadcasting_and_dtypes():
     assert hits.t.dtype == np.float32 and hits.tri.dtype == np.uint32 and hits.normal.shape == (2, 3)
 
 
-@pytest.mark.parametrize("accel", ["grid", "pc", "bvh", "irregular"])
+@pytest.mark.parametrize("accel", STRUCTURES)
 def test_empty_batches(accel):
     """An empty batch, alone or against one broadcast ray, gives empty results on every
     backend (the GPU path used to index past the end of the empty side)."""
@@ -316,7 +331,7 @@ def test_irregular_parameters():
         gridtrace.Mesh(vertices, faces, accel="irregular", irregular="depth=3")
 
 
-@pytest.mark.parametrize("accel", ["grid", "pc", "bvh", "irregular"])
+@pytest.mark.parametrize("accel", STRUCTURES)
 @pytest.mark.parametrize("backend", ["cpu", "gpu"])
 def test_update_vertices_equals_brute_force(accel, backend):
     """Moved vertices: hits equal brute force on the moved mesh (grid rebuilt on the device the

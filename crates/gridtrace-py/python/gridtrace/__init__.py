@@ -125,7 +125,8 @@ class Mesh:
     small meshes); ``gridtrace.ACCELS`` lists them; ``irregular`` tunes the irregular grid's build
     (``"top=0.12,cell=2,alpha=1,merge=8,expand=3"``, any subset; ``""`` for the defaults);
     ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
-    or ``"AxBxC"``, ``backend`` is ``"auto"`` (GPU if present, else CPU), ``"gpu"`` or ``"cpu"``.
+    or ``"AxBxC"``, ``backend`` is ``"auto"`` (a hardware GPU if present, else the CPU: a software adapter such as
+    lavapipe is slower than the CPU tracer on the same cores), ``"gpu"`` or ``"cpu"``.
     Degenerate faces are kept in the numbering but can never be hit.
     """
 
