@@ -10,6 +10,7 @@
 pub mod aabb;
 pub mod brute_force;
 pub mod bvh;
+pub mod closest;
 pub mod grid;
 pub mod huge;
 pub mod irregular;

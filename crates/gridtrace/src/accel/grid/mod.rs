@@ -8,6 +8,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
+mod closest;
 pub mod dda;
 mod packet;
 pub mod proximity;

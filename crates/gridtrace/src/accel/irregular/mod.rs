@@ -26,6 +26,7 @@ use super::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
 
 mod build;
+mod closest;
 mod memory;
 mod merge;
 mod packet;
