@@ -17,6 +17,7 @@ pub mod irregular;
 pub mod lanes;
 pub mod ray;
 pub mod triangle;
+pub mod winding;
 
 use glam::Vec3;
 
