@@ -10,11 +10,12 @@
 //! `accel::closest`) decides as brute force does. The blocks hold the triangles in leaf order;
 //! `lane_prims` gives back each one's index in the input.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 use super::BvhAccel;
 use super::build::{LEAF_BLOCK, STACK};
 use super::wide::{ChildRef, WIDTH, WideNode};
+use crate::accel::TriAccel4;
 use crate::accel::closest::ClosestPoint;
 
 /// Entries the stack can hold: a node pops one entry and pushes at most `WIDTH`, and no path
@@ -69,13 +70,18 @@ impl BvhAccel {
         best
     }
 
-    /// Offers every triangle of leaf `child` to `best`.
+    /// Offers the triangles of leaf `child` to `best`: a block's four triangle boxes are
+    /// measured against the point at once, and only the triangles whose box is within the best
+    /// distance get the full test (most of a leaf near a ball's rim is not).
     #[inline(always)]
     fn closest_in_leaf(&self, child: ChildRef, p: Vec3, best: &mut ClosestPoint) {
         let first = child.index() as usize;
         for b in first..first + (child.count() as usize).div_ceil(LEAF_BLOCK) {
             let block = &self.blocks[b];
-            for k in 0..LEAF_BLOCK {
+            let mut near = tri_box_near_mask(block, p, best.dist_sq);
+            while near != 0 {
+                let k = near.trailing_zeros() as usize;
+                near &= near - 1;
                 let tri = self.lane_prims[b * LEAF_BLOCK + k];
                 if tri != u32::MAX {
                     best.offer(&block.lane(k), tri, p);
@@ -83,6 +89,31 @@ impl BvhAccel {
             }
         }
     }
+}
+
+/// The lanes of `block` whose triangle's box may hold a point within `dist_sq` of `p`, bit `k`
+/// for lane `k`. The box comes from vertices rebuilt as `v0 + e` (rounded), and the test must
+/// never drop a triangle whose *computed* distance is at most `dist_sq` (ties included), so
+/// it is widened: a lane is dropped only when its box is farther than the best distance by
+/// more than a rounding bound of the coordinates involved (16 ulps of the largest).
+#[inline(always)]
+fn tri_box_near_mask(block: &TriAccel4, p: Vec3, dist_sq: f32) -> u32 {
+    let mut d2 = Vec4::ZERO;
+    let mut scale = Vec4::ZERO;
+    for a in 0..3 {
+        let v0 = block.v0[a];
+        let (v1, v2) = (v0 + block.e1[a], v0 + block.e2[a]);
+        let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
+        let pa = Vec4::splat(p[a]);
+        let d = (lo - pa).max(pa - hi).max(Vec4::ZERO);
+        d2 += d * d;
+        scale = scale.max(lo.abs()).max(hi.abs()).max(pa.abs());
+    }
+    let slack = scale * (16.0 * f32::EPSILON);
+    // `!(far)`, so that NaN (never, for finite input) would keep the lane.
+    let reach = Vec4::splat(dist_sq.sqrt()) + slack;
+    let far = d2.cmpgt(reach * reach);
+    !far.bitmask() & 0xf
 }
 
 /// Squared distance from `p` to each child box of `node` (0 inside), lane by lane: eight

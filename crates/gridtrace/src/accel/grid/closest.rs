@@ -41,7 +41,12 @@ impl Grid {
         }
         // More than any row is long: a jump that far only ends the row.
         let jump_cap = self.dims.max_element().min(i32::MAX as u32);
-        search(&lat, p, start.dist, &mut best, |c, best| {
+        // Ring `start.dist` holds a non-empty cell: its triangles have a point in that cell's
+        // (grown) box, no farther than the point's distance outside the grid plus the ring's
+        // reach, `dist + 1` cells on every axis.
+        let outside = lat.outside(p).length();
+        let reach = outside + (start.dist as f32 + 1.0) * self.cell_size.length() + 2.0 * lat.margin.length();
+        search(&lat, p, start.dist, reach * reach, &mut best, |c, best| {
             let cell = self.cells[self.cell_index(UVec3::from_array(c.map(|x| x as u32)))];
             if cell.count == 0 {
                 return cell.dist.min(jump_cap) as i32;

@@ -1,8 +1,9 @@
 //! The irregular grid's nearest-point query, by its cells: its top grid is a uniform lattice,
 //! searched in Chebyshev shells as the uniform grid's cells are (`closest::shells`); a top
-//! cell is searched through its `8^level` voxel-map entries, each naming the (merged) cell that
-//! covers it. A cell is opened only if its box is within the best distance so far, and an entry
-//! naming the cell the previous entry named is skipped (merged cells repeat along x).
+//! cell is searched through its voxel-map entries (`2^level` per axis, each naming the merged
+//! cell that covers it), row by row, each row clipped to the ball of the best distance so far.
+//! A cell is opened only if its box is within that distance, and an entry naming the cell the
+//! previous entry named is skipped (merged cells repeat along x).
 //!
 //! A merged cell that spans several top cells is met once per top cell: its box test repeats,
 //! and its triangles are tested again where the box is near enough. That costs time, never
@@ -18,7 +19,7 @@ use glam::Vec3;
 
 use super::{IrregularGrid, LEVEL_BITS};
 use crate::accel::TriAccel;
-use crate::accel::closest::shells::{Lattice, search};
+use crate::accel::closest::shells::{Lattice, search, slab_dist};
 use crate::accel::closest::{ClosestPoint, box_dist_sq};
 use crate::accel::grid::cell_margin;
 
@@ -42,7 +43,7 @@ impl IrregularGrid {
             margin,
         };
         let t = self.top_dims;
-        search(&lat, p, 0, &mut best, |c, best| {
+        search(&lat, p, 0, f32::INFINITY, &mut best, |c, best| {
             let (lo, hi) = lat.cell_box(c);
             if box_dist_sq(p, lo, hi) > best.dist_sq {
                 return 1;
@@ -50,13 +51,36 @@ impl IrregularGrid {
             let entry = self.entries[(c[0] as u32 + t.x * (c[1] as u32 + t.y * c[2] as u32)) as usize];
             let level = entry & ((1 << LEVEL_BITS) - 1);
             let begin = (entry >> LEVEL_BITS) as usize;
-            let mut previous = u32::MAX;
-            for &cell in &self.voxel_map[begin..begin + (1usize << (3 * level))] {
-                if cell == previous {
-                    continue;
+            // The top cell's own lattice of 2^level cells per axis, walked row by row, each row
+            // clipped to the best point's ball as it is when the row starts.
+            let n = 1i32 << level;
+            let sub = Lattice {
+                min: lo + margin,
+                cell: top_cell / n as f32,
+                dims: [n; 3],
+                margin,
+            };
+            for z in 0..n {
+                let dz = slab_dist(&sub, p, 2, z);
+                for y in 0..n {
+                    let dy = slab_dist(&sub, p, 1, y);
+                    let rest = best.dist_sq - dz * dz - dy * dy;
+                    if !(rest >= 0.0) {
+                        continue;
+                    }
+                    let half = rest.sqrt() + margin.x;
+                    let x0 = sub.cell_of(Vec3::new(p.x - half, p.y, p.z))[0];
+                    let x1 = sub.cell_of(Vec3::new(p.x + half, p.y, p.z))[0];
+                    let row = begin + ((y << level) + (z << (2 * level))) as usize;
+                    let mut previous = u32::MAX;
+                    for &cell in &self.voxel_map[row + x0 as usize..=row + x1 as usize] {
+                        // Merged cells repeat along the row.
+                        if cell != previous {
+                            previous = cell;
+                            self.closest_offer_cell(tris, cell, p, margin, best);
+                        }
+                    }
                 }
-                previous = cell;
-                self.closest_offer_cell(tris, cell, p, margin, best);
             }
             1
         });
