@@ -54,7 +54,7 @@ impl BvhAccel {
             for (k, &d) in dist.iter().enumerate() {
                 // An unused slot has the empty box (low > high); its distance says nothing.
                 let used = node.planes[0][0][k] <= node.planes[1][0][k];
-                if used && !(d > best.dist_sq) {
+                if used && d <= best.dist_sq {
                     let mut at = n;
                     while at > 0 && open[at - 1].0 < d {
                         open[at] = open[at - 1];

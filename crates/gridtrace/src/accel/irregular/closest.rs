@@ -65,7 +65,7 @@ impl IrregularGrid {
                 for y in 0..n {
                     let dy = slab_dist(&sub, p, 1, y);
                     let rest = best.dist_sq - dz * dz - dy * dy;
-                    if !(rest >= 0.0) {
+                    if rest.is_nan() || rest < 0.0 {
                         continue;
                     }
                     let half = rest.sqrt() + margin.x;
