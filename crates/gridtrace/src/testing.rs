@@ -488,27 +488,35 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
 }
 
 /// One structure per traversal kind over the same triangles, for tests that compare them all:
-/// the grid (serving `grid` and `pc`), the BVH and the irregular grid.
+/// the grid (serving `grid` and `pc`) and every other structure of the registry.
 pub struct AllAccels {
+    /// The uniform grid (it serves `grid` and `pc`; ray sets are drawn from its bounds).
     pub grid: Accel,
-    pub bvh: Accel,
-    pub irregular: Accel,
+    /// Every other structure of the registry (`accel::registry::ENTRIES`), in its order, over
+    /// the same triangles.
+    pub others: Vec<Accel>,
 }
 
 impl AllAccels {
     pub fn build(tris: Vec<TriAccel>, resolution: Resolution) -> crate::Result<AllAccels> {
         let grid = Accel::from_grid(Grid::build(&tris, resolution)?, tris.clone());
-        let bvh = Accel::build(tris.clone(), AccelKind::Bvh, resolution)?;
-        let irregular = Accel::build(tris, AccelKind::Irregular, resolution)?;
-        Ok(AllAccels { grid, bvh, irregular })
+        let mut others: Vec<Accel> = Vec::new();
+        for kind in AccelKind::ALL {
+            if !grid.serves(kind) && !others.iter().any(|a| a.serves(kind)) {
+                others.push(Accel::build(tris.clone(), kind, resolution)?);
+            }
+        }
+        Ok(AllAccels { grid, others })
+    }
+
+    /// Every structure, the grid first.
+    pub fn all(&self) -> impl Iterator<Item = &Accel> {
+        std::iter::once(&self.grid).chain(&self.others)
     }
 
     /// The structure that serves `kind`.
     pub fn get(&self, kind: AccelKind) -> &Accel {
-        [&self.grid, &self.bvh, &self.irregular]
-            .into_iter()
-            .find(|a| a.serves(kind))
-            .expect("every kind has a structure")
+        self.all().find(|a| a.serves(kind)).expect("every kind has a structure")
     }
 }
 

@@ -10,6 +10,7 @@
 use glam::Vec3;
 
 use super::binning::grid_bounds;
+use super::closest::{ClosestPoint, closest_point_brute};
 use super::{Aabb, AccelKind, Counters, Hit, IrregularParams, NoCounters, PACKET, Ray, Resolution, TriAccel};
 use crate::Result;
 
@@ -135,6 +136,13 @@ pub trait AccelStructure: Sized {
             let hit = self.intersect(tris, r, t_min, t_max, kind, &mut NoCounters);
             f(i, hit, hit_normal(tris, &hit));
         }
+    }
+
+    /// The point of the mesh nearest to `p` (`closest.rs`: the nearest, then the smallest
+    /// triangle index; `ClosestPoint::INVALID` for a point that is not finite). Default: every
+    /// triangle (`closest_point_brute`); a structure overrides it with its own search.
+    fn closest_point(&self, tris: &[TriAccel], p: Vec3) -> ClosestPoint {
+        closest_point_brute(tris, p)
     }
 
     /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.

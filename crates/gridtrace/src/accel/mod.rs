@@ -15,6 +15,7 @@ pub mod binning;
 pub mod brute;
 pub mod brute_force;
 pub mod bvh;
+pub mod closest;
 pub mod contract;
 pub mod grid;
 pub mod huge;
@@ -27,6 +28,7 @@ pub mod resolution;
 pub mod simd;
 pub mod tri_box;
 pub mod triangle;
+pub mod winding;
 
 use glam::Vec3;
 
@@ -348,6 +350,12 @@ impl Accel {
     pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, kind, out))
+    }
+
+    /// The point of the mesh nearest to `p`, through the structure's own search
+    /// (`AccelStructure::closest_point`; brute force where it has none).
+    pub fn closest_point(&self, p: Vec3) -> closest::ClosestPoint {
+        dispatch!(&self.structure, s => AccelStructure::closest_point(s, &self.tris, p))
     }
 
     /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a

@@ -45,6 +45,9 @@ pub struct AccelEntry {
     /// One line for help texts.
     pub about: &'static str,
     pub params: Params,
+    /// Whether a ray tests every triangle (brute force): tests on large meshes give it a sample
+    /// of their rays.
+    pub every_triangle: bool,
     /// Whether the GPU backend has a walk for it (else `auto` traces it on the CPU, and
     /// `--backend gpu` says so).
     pub gpu: bool,
@@ -62,6 +65,7 @@ pub const ENTRIES: [AccelEntry; 5] = [
         structure: "grid",
         about: "the paper's uniform grid, one DDA step per cell",
         params: Params::Resolution,
+        every_triangle: false,
         gpu: true,
         interactive: true,
     },
@@ -72,6 +76,7 @@ pub const ENTRIES: [AccelEntry; 5] = [
         structure: "grid",
         about: "the uniform grid with proximity clouds: jumps over empty cells",
         params: Params::Resolution,
+        every_triangle: false,
         gpu: true,
         interactive: true,
     },
@@ -82,6 +87,7 @@ pub const ENTRIES: [AccelEntry; 5] = [
         structure: "bvh",
         about: "an eight-wide SAH bounding volume hierarchy (fastest for incoherent rays)",
         params: Params::None,
+        every_triangle: false,
         gpu: true,
         interactive: true,
     },
@@ -92,6 +98,7 @@ pub const ENTRIES: [AccelEntry; 5] = [
         structure: "irregular",
         about: "an irregular grid: merged and expanded cells, point lookups instead of a DDA",
         params: Params::Irregular,
+        every_triangle: false,
         gpu: true,
         interactive: true,
     },
@@ -102,6 +109,7 @@ pub const ENTRIES: [AccelEntry; 5] = [
         structure: "brute",
         about: "no structure: every triangle per ray (the oracle; small meshes and checks)",
         params: Params::None,
+        every_triangle: true,
         gpu: true,
         interactive: false,
     },

@@ -21,6 +21,7 @@ use super::{Aabb, Counters, Hit, Ray, TriAccel, TriAccel4};
 
 mod box_test;
 mod build;
+mod closest;
 mod packet;
 mod refit;
 mod structure;

@@ -113,4 +113,9 @@ impl AccelStructure for BvhAccel {
     ) {
         BvhAccel::occluded_batch(self, rays, t_min, t_max, out)
     }
+
+    /// Branch and bound over the structure's own cells or nodes (`closest.rs`).
+    fn closest_point(&self, _tris: &[TriAccel], p: glam::Vec3) -> crate::accel::closest::ClosestPoint {
+        BvhAccel::closest_point(self, p)
+    }
 }

@@ -7,6 +7,7 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use glam::{UVec3, Vec3};
 
+mod closest;
 pub mod dda;
 mod packet;
 pub mod proximity;

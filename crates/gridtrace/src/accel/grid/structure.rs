@@ -111,4 +111,9 @@ impl AccelStructure for Grid {
     ) -> [bool; PACKET] {
         Grid::occluded_packet(self, tris, rays, t_min, t_max, stepping(kind), counters)
     }
+
+    /// Branch and bound over the structure's own cells or nodes (`closest.rs`).
+    fn closest_point(&self, tris: &[TriAccel], p: glam::Vec3) -> crate::accel::closest::ClosestPoint {
+        Grid::closest_point(self, tris, p)
+    }
 }

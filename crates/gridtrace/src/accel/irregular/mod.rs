@@ -27,6 +27,7 @@ use crate::{Error, Result};
 
 mod boxes;
 mod build;
+mod closest;
 mod memory;
 mod merge;
 mod packet;

@@ -159,4 +159,9 @@ impl AccelStructure for IrregularGrid {
     ) {
         self.batch::<true>(tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
     }
+
+    /// Branch and bound over the structure's own cells or nodes (`closest.rs`).
+    fn closest_point(&self, tris: &[TriAccel], p: glam::Vec3) -> crate::accel::closest::ClosestPoint {
+        IrregularGrid::closest_point(self, tris, p)
+    }
 }

@@ -1,0 +1,132 @@
+//! The BVH's nearest-point query: branch and bound down the eight-wide tree. A node's eight
+//! child boxes are measured against the point at once (squared distance to each box, 0 inside),
+//! the children that may hold something nearer than the best so far are pushed nearest last,
+//! so the nearest is opened first and finds a good bound early; a popped entry farther than the
+//! (since improved) best is dropped unopened.
+//!
+//! The boxes are the triangles' boxes padded by the triangle test's slack (`padded_boxes`), so
+//! a box's distance is a true lower bound on its triangles' computed distances. Pruning is
+//! strict (`>`): an equally near triangle is still tested and the tie rule (smallest index,
+//! `accel::closest`) decides as brute force does. The blocks hold the triangles in leaf order;
+//! `lane_prims` gives back each one's index in the input.
+
+use glam::{Vec3, Vec4};
+
+use super::BvhAccel;
+use super::build::{LEAF_BLOCK, STACK};
+use super::wide::{ChildRef, WIDTH, WideNode};
+use crate::accel::TriAccel4;
+use crate::accel::closest::ClosestPoint;
+
+/// Entries the stack can hold: a node pops one entry and pushes at most `WIDTH`, and no path
+/// has more than `STACK` nodes.
+const CAPACITY: usize = STACK * (WIDTH - 1) + 1;
+
+impl BvhAccel {
+    /// The point of the triangles the BVH was built over nearest to `p`; `tri` indexes those
+    /// triangles (not the leaf order). The answer of `closest_point_brute`, tie rule included.
+    pub fn closest_point(&self, p: Vec3) -> ClosestPoint {
+        if !p.is_finite() {
+            return ClosestPoint::INVALID;
+        }
+        let mut best = ClosestPoint::NONE;
+        if self.blocks.is_empty() {
+            return best;
+        }
+        // (squared distance to the box, child); the root as a node at distance 0.
+        let mut stack = [(0.0f32, ChildRef(0)); CAPACITY];
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let (d2, child) = stack[len];
+            if d2 > best.dist_sq {
+                continue;
+            }
+            if child.count() > 0 {
+                self.closest_in_leaf(child, p, &mut best);
+                continue;
+            }
+            let node = &self.nodes[child.index() as usize];
+            let dist = child_box_dist_sq(node, p);
+            // The children worth opening, sorted far to near so the nearest is popped first.
+            let mut open = [(0.0f32, ChildRef(0)); WIDTH];
+            let mut n = 0;
+            for (k, &d) in dist.iter().enumerate() {
+                // An unused slot has the empty box (low > high); its distance says nothing.
+                let used = node.planes[0][0][k] <= node.planes[1][0][k];
+                if used && d <= best.dist_sq {
+                    let mut at = n;
+                    while at > 0 && open[at - 1].0 < d {
+                        open[at] = open[at - 1];
+                        at -= 1;
+                    }
+                    open[at] = (d, node.child[k]);
+                    n += 1;
+                }
+            }
+            stack[len..len + n].copy_from_slice(&open[..n]);
+            len += n;
+        }
+        best
+    }
+
+    /// Offers the triangles of leaf `child` to `best`: a block's four triangle boxes are
+    /// measured against the point at once, and only the triangles whose box is within the best
+    /// distance get the full test (most of a leaf near a ball's rim is not).
+    #[inline(always)]
+    fn closest_in_leaf(&self, child: ChildRef, p: Vec3, best: &mut ClosestPoint) {
+        let first = child.index() as usize;
+        for b in first..first + (child.count() as usize).div_ceil(LEAF_BLOCK) {
+            let block = &self.blocks[b];
+            let mut near = tri_box_near_mask(block, p, best.dist_sq);
+            while near != 0 {
+                let k = near.trailing_zeros() as usize;
+                near &= near - 1;
+                let tri = self.lane_prims[b * LEAF_BLOCK + k];
+                if tri != u32::MAX {
+                    best.offer(&block.lane(k), tri, p);
+                }
+            }
+        }
+    }
+}
+
+/// The lanes of `block` whose triangle's box may hold a point within `dist_sq` of `p`, bit `k`
+/// for lane `k`. The box comes from vertices rebuilt as `v0 + e` (rounded), and the test must
+/// never drop a triangle whose *computed* distance is at most `dist_sq` (ties included), so
+/// it is widened: a lane is dropped only when its box is farther than the best distance by
+/// more than a rounding bound of the coordinates involved (16 ulps of the largest).
+#[inline(always)]
+fn tri_box_near_mask(block: &TriAccel4, p: Vec3, dist_sq: f32) -> u32 {
+    let mut d2 = Vec4::ZERO;
+    let mut scale = Vec4::ZERO;
+    for a in 0..3 {
+        let v0 = block.v0[a];
+        let (v1, v2) = (v0 + block.e1[a], v0 + block.e2[a]);
+        let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
+        let pa = Vec4::splat(p[a]);
+        let d = (lo - pa).max(pa - hi).max(Vec4::ZERO);
+        d2 += d * d;
+        scale = scale.max(lo.abs()).max(hi.abs()).max(pa.abs());
+    }
+    let slack = scale * (16.0 * f32::EPSILON);
+    // `!(far)`, so that NaN (never, for finite input) would keep the lane.
+    let reach = Vec4::splat(dist_sq.sqrt()) + slack;
+    let far = d2.cmpgt(reach * reach);
+    !far.bitmask() & 0xf
+}
+
+/// Squared distance from `p` to each child box of `node` (0 inside), lane by lane: eight
+/// independent computations the compiler vectorises.
+#[inline(always)]
+fn child_box_dist_sq(node: &WideNode, p: Vec3) -> [f32; WIDTH] {
+    let mut out = [0.0f32; WIDTH];
+    for a in 0..3 {
+        let (lo, hi) = (&node.planes[0][a], &node.planes[1][a]);
+        for k in 0..WIDTH {
+            let d = (lo[k] - p[a]).max(p[a] - hi[k]).max(0.0);
+            out[k] += d * d;
+        }
+    }
+    out
+}
