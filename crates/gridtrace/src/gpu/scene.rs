@@ -102,6 +102,16 @@ impl SceneBuffers {
         let arrays: Vec<(&'static str, &[u8])> = own.chain(shared).collect();
         let bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
         check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
+        if let Some(max) = walk.spec.software_max_tris.filter(|_| ctx.is_software()) {
+            let n = scene.accel.tris.len();
+            if n > max as usize {
+                return Err(Error::Gpu(format!(
+                    "'{}' on a software adapter ('{}') takes at most {max} triangles (its shader loops end after \
+                     65,535 iterations); this scene has {n}",
+                    walk.spec.structure, ctx.info.name
+                )));
+            }
+        }
         let pipelines = Kernels::of(ctx)?.walk(dev, walk.spec)?;
         let structure: Vec<wgpu::Buffer> = walk
             .spec

@@ -10,6 +10,8 @@ pub const SPEC: WalkSpec = WalkSpec {
     prefix: "brute",
     arrays: &[],
     device_build: false,
+    // Four triangles a loop iteration (brute.wgsl) times llvmpipe's 65,535 iterations.
+    software_max_tris: Some(4 * 65_535),
 };
 
 pub fn upload(bounds: Aabb) -> WalkUpload<'static> {

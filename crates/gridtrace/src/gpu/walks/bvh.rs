@@ -15,6 +15,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     prefix: "bvh",
     arrays: &[("bvh_nodes", "bvh_nodes"), ("refs", "bvh_prims")],
     device_build: false,
+    software_max_tris: None,
 };
 
 pub fn upload(b: &BvhAccel, bounds: Aabb) -> Result<WalkUpload<'_>> {

@@ -10,6 +10,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     prefix: "grid",
     arrays: &[("cells", "cells"), ("refs", "grid_refs")],
     device_build: true,
+    software_max_tris: None,
 };
 
 pub fn upload(g: &Grid) -> WalkUpload<'_> {

@@ -15,6 +15,7 @@ pub const SPEC: WalkSpec = WalkSpec {
         ("refs", "irr_refs"),
     ],
     device_build: false,
+    software_max_tris: None,
 };
 
 pub fn upload(g: &IrregularGrid) -> WalkUpload<'_> {

@@ -36,6 +36,10 @@ pub struct WalkSpec {
     /// Whether a moved mesh's structure is rebuilt on the device (`gpu::grid_build`: the
     /// uniform grid's); the others are updated on the CPU and uploaded again.
     pub device_build: bool,
+    /// The most triangles the walk can take on a software adapter, whose shader loops end
+    /// after 65,535 iterations (`None`: no limit; every other walk's loops are bounded by
+    /// cells or nodes, far below it).
+    pub software_max_tris: Option<u32>,
 }
 
 impl WalkSpec {

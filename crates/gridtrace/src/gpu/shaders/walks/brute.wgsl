@@ -1,21 +1,43 @@
 // No structure: every triangle against every ray (accel/brute/). The oracle on the GPU, and the
 // proof that a structure's GPU side is its own walk file plus one Rust file (gpu/walks/brute.rs).
 // It binds nothing of its own.
+//
+// Four triangles per loop iteration, written out: Mesa's llvmpipe (lavapipe) ends a shader
+// invocation's loops after 65,535 iterations in all (a guard against endless loops), and a loop
+// of one triangle per iteration never tested the Stanford Bunny's last 3,915 triangles (the
+// edge-leak test caught it). Four a turn reach 262,140 triangles there; the upload refuses
+// more on a software adapter (`gpu/walks/brute.rs`). Hardware has no such cap.
+
+fn brute_test(i: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, best: ptr<function, GpuHit>) {
+    if (i < scene.n_tris) {
+        let h = intersect_tri(tris[i], o, d, t_min, (*best).t);
+        if (h.w != 0.0) { *best = GpuHit(h.x, i, h.y, h.z); }
+    }
+}
 
 fn brute_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
-    for (var i = 0u; i < scene.n_tris; i++) {
-        if (COUNT_WORK) { *work += 1u; }
-        let h = intersect_tri(tris[i], o, d, t_min, best.t);
-        if (h.w != 0.0) { best = GpuHit(h.x, i, h.y, h.z); }
+    for (var i = 0u; i < scene.n_tris; i += 4u) {
+        if (COUNT_WORK) { *work += min(4u, scene.n_tris - i); }
+        brute_test(i, o, d, t_min, &best);
+        brute_test(i + 1u, o, d, t_min, &best);
+        brute_test(i + 2u, o, d, t_min, &best);
+        brute_test(i + 3u, o, d, t_min, &best);
     }
     if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
     return best;
 }
 
+fn brute_hits(i: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    return i < scene.n_tris && intersect_tri(tris[i], o, d, t_min, t_max).w != 0.0;
+}
+
 fn brute_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
-    for (var i = 0u; i < scene.n_tris; i++) {
-        if (intersect_tri(tris[i], o, d, t_min, t_max).w != 0.0) { return true; }
+    for (var i = 0u; i < scene.n_tris; i += 4u) {
+        if (brute_hits(i, o, d, t_min, t_max) || brute_hits(i + 1u, o, d, t_min, t_max)
+            || brute_hits(i + 2u, o, d, t_min, t_max) || brute_hits(i + 3u, o, d, t_min, t_max)) {
+            return true;
+        }
     }
     return false;
 }
