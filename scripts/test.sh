@@ -27,3 +27,8 @@ fi
 .venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.7,<2" numpy pytest
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" maturin develop --release --locked -q -m crates/gridtrace-py/Cargo.toml
 GRIDTRACE_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/gridtrace" .venv/bin/python -m pytest -q crates/gridtrace-py/tests
+
+# The wheel as users get it: built with the dist profile (scripts/build-wheel.sh), installed into
+# a new environment without Rust, where a query, a render and its gridtrace tool (whose version
+# must be the release build's above) run.
+./scripts/test-wheel.sh "${CARGO_TARGET_DIR:-$PWD/target}/release/gridtrace"

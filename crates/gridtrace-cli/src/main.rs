@@ -14,7 +14,8 @@ use clap::{Parser, Subcommand};
 #[derive(Parser)]
 #[command(
     name = "gridtrace",
-    version,
+    version = VERSION,
+    long_version = long_version(),
     about = "Ray tracing on a uniform grid with proximity clouds, on the CPU and any GPU"
 )]
 struct Cli {
@@ -34,6 +35,21 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Fly around a scene in a window: drag to orbit, wheel to zoom, 1-4 modes, G structure.
     View(view::ViewArgs),
+}
+
+/// `gridtrace -V`: the version and the git commit it was built from ("unknown" without git).
+const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (commit ",
+    env!("GRIDTRACE_GIT_COMMIT"),
+    ")"
+);
+
+/// `gridtrace --version`: [`VERSION`], then what the library uses of this machine's CPU.
+fn long_version() -> &'static str {
+    let text = format!("{VERSION}\ncpu: {}", gridtrace::cpu_features());
+    // Parsed once per run; clap wants a string that lives as long as the program.
+    Box::leak(text.into_boxed_str())
 }
 
 /// Points `XDG_RUNTIME_DIR` at a private folder when it is unset or not a directory.

@@ -644,3 +644,31 @@ fn auto_falls_back_to_the_cpu_when_the_scene_does_not_fit() {
         assert!(text.contains("use --backend cpu"), "{text}");
     }
 }
+
+#[test]
+fn version_names_the_release_the_commit_and_the_cpu_path() {
+    // The commit the build script read: this checkout's HEAD, or "unknown" outside git.
+    let head = Command::new("git")
+        .args(["-C", env!("CARGO_MANIFEST_DIR"), "rev-parse", "--short", "HEAD"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    let commit = std::env::var("GRIDTRACE_GIT_COMMIT")
+        .ok()
+        .filter(|c| !c.trim().is_empty())
+        .or(head)
+        .unwrap_or_else(|| "unknown".into());
+    let first = format!("gridtrace {} (commit {commit})", env!("CARGO_PKG_VERSION"));
+
+    let (ok, text) = gridtrace(&["--version"]);
+    assert!(ok, "{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 2, "{text}");
+    assert_eq!(lines[0], first);
+    assert_eq!(lines[1], format!("cpu: {}", gridtrace::cpu_features()));
+
+    let (ok, text) = gridtrace(&["-V"]);
+    assert!(ok, "{text}");
+    assert_eq!(text.trim_end(), first);
+}

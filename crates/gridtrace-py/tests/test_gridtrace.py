@@ -370,3 +370,14 @@ def test_update_vertices_equals_brute_force(accel, backend):
     with pytest.raises(ValueError, match="vertex 5"):
         mesh.update_vertices(bad)
     np.testing.assert_array_equal(mesh.intersect(o, d).t, before)
+
+
+def test_version_is_the_crates_and_the_clis():
+    import re
+
+    text = (ROOT / "Cargo.toml").read_text()
+    package = text[text.index("[workspace.package]"):]
+    version = re.search(r'^version = "([^"]+)"', package, re.M).group(1)
+    assert gridtrace.__version__ == version
+    out = subprocess.run([cli_binary(), "--version"], capture_output=True, text=True, check=True).stdout
+    assert out.startswith(f"gridtrace {version} (commit "), out

@@ -3,6 +3,7 @@
 
 pub mod accel;
 pub mod backend;
+pub mod build_info;
 pub mod cpu;
 pub mod error;
 pub mod gpu;
@@ -17,6 +18,7 @@ pub mod util;
 
 pub use accel::{Accel, AccelChoice, AccelKind, Hit, Ray, Resolution, Work};
 pub use backend::{Backend, Frame, Tracer};
+pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};
 pub use mesh::{Material, Mesh};
 pub use render::{Image, Mode, RenderOptions, RenderStats};
