@@ -20,7 +20,7 @@ use super::path::{Collect, Path, Shading, pixel_value, shadow_query};
 
 /// A block's width and height in pixels: a packet's rays. Four wide and two high rather than
 /// eight by one: the rays stay closer together, so more of them share each cell (measured:
-/// docs/benchmarks.md "Packets of eight").
+/// docs/benchmarks-history.md "Packets of eight").
 const BLOCK_W: usize = 4;
 const BLOCK_H: usize = PACKET / BLOCK_W;
 

@@ -1,6 +1,6 @@
 //! The BVH as the GPU walks it: the CPU's binary SAH tree (`accel::bvh::Bvh`, the tree the
 //! eight-wide CPU nodes are collapsed from) re-laid as two-child nodes (`GpuBvhNode`), and its
-//! stack entries. The traversal is `shaders/bvh.wgsl`.
+//! stack entries. The traversal is `shaders/walks/bvh.wgsl`.
 //!
 //! Why a binary node and not the CPU's eight-wide one: a GPU thread tests its node's boxes one
 //! after another, so a wide node buys fewer fetches but not fewer box tests, and eight slots

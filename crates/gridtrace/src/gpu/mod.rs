@@ -1,8 +1,8 @@
 //! The GPU backend: the paper's streaming ray tracer (its Figure 1) as wgpu compute kernels.
 //!
 //! Every structure runs here: the grid and the proximity cloud (one DDA, `pass_.accel` says
-//! whether it jumps), the BVH and the irregular grid (each its own pipelines of `traverse` and
-//! `occlusion`, `Kernel::walking`).
+//! whether it jumps), the BVH, the irregular grid and brute force (each its own pipelines of `traverse` and
+//! `occlusion`, compiled per structure with its walk: `walks/`).
 //!
 //! Per image tile: `raygen` fills ray queue A with eye rays (rays that miss the scene are finished
 //! at once); then per bounce `traverse` finds closest hits, `shade` writes colour and emits
@@ -17,8 +17,8 @@
 //!   that records a kernel's pass;
 //! - `bindings`: the bind group tables; `layout`: the structs the kernels share with the host;
 //!   `constants`: the numbers they share, printed into every module as a WGSL prelude;
-//! - `scene`: the scene's upload; `bvh`: the BVH's GPU layout (its walk is `shaders/bvh.wgsl`;
-//!   the irregular grid is uploaded as the CPU builds it, its walk is `shaders/irregular.wgsl`);
+//! - `walks`: each structure's GPU side (its arrays, lattice and walk file, `shaders/walks/`);
+//!   `scene`: the scene's upload; `bvh`: the BVH's GPU layout and a CPU mirror of its walk;
 //!   `renderer`: `GpuRenderer` and its work buffers;
 //! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded;
 //! - `timing`: timestamp queries and per-stage milliseconds;

@@ -8,11 +8,11 @@
 //! latency that no other work fills, and the triangle tests are the smaller part of a ray's
 //! cost (docs/benchmarks.md). Sharing only the cell and its triangle tests among the rays of a
 //! round gained 6-10%; stepping them in four-lane arithmetic made packets 1.2-1.35x the single
-//! rays (docs/benchmarks.md "Packets"): neighbouring camera rays cross the same large cells one
+//! rays (docs/benchmarks-history.md "Packets"): neighbouring camera rays cross the same large cells one
 //! after another (3.5 of 4 rays take part in a round on the paper's scenes), so one chain of
 //! four-lane operations advances them all, and one lane-parallel triangle test (the triangle
 //! in every lane, a ray per lane) tests a triangle against all of them. Eight lanes in AVX
-//! registers made camera rays another 1.1-1.4x faster than four (docs/benchmarks.md "Packets
+//! registers made camera rays another 1.1-1.4x faster than four (docs/benchmarks-history.md "Packets
 //! of eight"): the same chain advances twice the rays, at about the same cost per instruction.
 //!
 //! Each ray still goes through exactly the cells its single-ray walk (`walk.rs`) visits: a
