@@ -135,7 +135,7 @@ fn scripted_session_equals_render() {
         let (d, text, shots) = run_script(
             "session",
             backend,
-            &["--scene", "knot-box", "--res", "96x72"],
+            &["--scene", "knot-box", "--res", "96x72", "--accel", "grid"],
             "key 2\ndrag 40 -20\nzoom 1\npan 6 -4\nscreenshot a.png\nkey g\nkey g\nkey 3\nlight 12 -6\nscreenshot b.png\n\
              resize 1 1\nresize 0 0\nresize 120 90\nkey g\nkey 1\ndrag -80 10\nkey f\nkey w\nkey d\nkey e\n\
              key l\nkey right\nkey pageup\nkey [\nscreenshot c.png\nkey ]\nkey 4\nscreenshot d.png\n",
