@@ -368,7 +368,9 @@ fn help_shows_formats_and_values() {
     }
     let (ok, help) = gridtrace(&["bench", "--help"]);
     assert!(
-        ok && help.contains("- irregular: ") && !help.contains("- auto:      the structure") && help.contains("--res <WxH|N>"),
+        ok && help.contains("- irregular: ")
+            && !help.contains("- auto:      the structure")
+            && help.contains("--res <WxH|N>"),
         "{help}"
     );
     let (ok, help) = gridtrace(&["info", "--help"]);
