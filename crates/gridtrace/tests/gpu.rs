@@ -426,7 +426,7 @@ fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
         assert!(up.is_some() && notes.is_empty(), "{backend:?}: {notes:?}");
     }
     let cells = 300 * 300 * 160 * 12;
-    if (cells as u64) <= ctx.limits().max_storage_buffer_binding_size as u64 {
+    if (cells as u64) <= ctx.limits().max_storage_buffer_binding_size {
         eprintln!("this device holds a {cells}-byte binding: nothing to fall back from");
         return;
     }
