@@ -332,7 +332,7 @@ def test_irregular_parameters():
 
 
 @pytest.mark.parametrize("accel", STRUCTURES)
-@pytest.mark.parametrize("backend", ["cpu", "gpu"])
+@pytest.mark.parametrize("backend", ["cpu", "gpu", "auto"])
 def test_update_vertices_equals_brute_force(accel, backend):
     """Moved vertices: hits equal brute force on the moved mesh (grid rebuilt on the device the
     mesh traces on, BVH refitted), and bad updates raise and keep the previous vertices."""

@@ -81,6 +81,16 @@ impl Backend {
 }
 
 impl Backend {
+    /// Whether this backend traces on a GPU when it can: `gpu` always, `cpu` never, `auto` when
+    /// the machine has a hardware adapter (`hardware_adapter_present`).
+    pub fn traces_on_gpu(self) -> bool {
+        match self {
+            Backend::Gpu => true,
+            Backend::Cpu => false,
+            Backend::Auto => hardware_adapter_present(),
+        }
+    }
+
     /// The scene uploaded to the device `ctx` that this backend opened (`open_device`), or
     /// `None` to trace it on the CPU: with `auto`, a scene the GPU cannot hold (over its buffer
     /// limits) is traced on the CPU, with a note; with `gpu` that is an error that says so.
@@ -118,6 +128,14 @@ impl Backend {
             Err(e) => Err(e),
         }
     }
+}
+
+/// Whether the machine has a hardware GPU adapter (not a software one such as lavapipe), as
+/// `Backend::Auto` would use it. Probed once per process by opening a device: callers that
+/// decide before they open one (the ray queries choose a structure and keep a mesh) ask here.
+pub fn hardware_adapter_present() -> bool {
+    static PRESENT: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *PRESENT.get_or_init(|| GpuContext::new().is_ok_and(|c| !c.is_software()))
 }
 
 /// Where frames are traced, in words: "cpu (N threads)" or "gpu: " and the adapter's

@@ -219,7 +219,7 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let (accel, note) = opts.accel.resolve(opts.backend == Backend::Gpu, Work::Rays);
+        let (accel, note) = opts.accel.resolve(opts.backend.traces_on_gpu(), Work::Rays);
         let prepared = scene.prepare_with(accel, opts.grid, opts.irregular)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
@@ -265,7 +265,9 @@ impl TraceMesh {
     }
 
     fn open_renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
-        if backend == Backend::Cpu {
+        // `auto` passes a software adapter over for the CPU tracer (`Backend::open_device`),
+        // before compiling or uploading anything to it.
+        if !backend.traces_on_gpu() {
             return Ok(None);
         }
         let opened = self.gpu.get_or_init(|| {
@@ -276,8 +278,6 @@ impl TraceMesh {
                 .map_err(|e| e.to_string())
         });
         match (opened, backend) {
-            // `auto` passes a software adapter over for the CPU tracer, as `Backend::open_device`.
-            (Ok((r, _)), Backend::Auto) if locked(r).context().is_software() => Ok(None),
             (Ok((r, _)), _) => Ok(Some(r)),
             (Err(e), Backend::Gpu) => Err(Error::Gpu(e.clone())),
             (Err(_), _) => Ok(None),
@@ -319,7 +319,10 @@ impl TraceMesh {
             Some(Ok((r, _))) => Some(r.get_mut().unwrap_or_else(|p| p.into_inner())),
             _ => None,
         };
-        let on = if gpu.is_some() {
+        // On the device only where this mesh's own queries trace there: a renderer opened for
+        // one `gpu` query of a CPU mesh (or a software adapter under `auto`) must leave the
+        // CPU's structure current. The renderer, if any, is brought up to date either way.
+        let on = if gpu.is_some() && self.backend.traces_on_gpu() {
             RebuildOn::Device
         } else {
             RebuildOn::Cpu

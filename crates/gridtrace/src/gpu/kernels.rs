@@ -1,6 +1,7 @@
 //! The compute kernels: shader modules, bind group layouts, pipeline layouts and pipelines. They
 //! depend on the device only, not on the scene, so they are built once per `GpuContext`
-//! (`GpuContext::kernels`) and shared by every renderer on it. Also the one helper that records
+//! (`Kernels::of`; the walking kernels once per structure, `Kernels::walk`) and shared by every
+//! renderer on it. Also the one helper that records
 //! a kernel's compute pass, for the tile loop and the ray queries alike.
 
 use std::collections::HashMap;

@@ -38,6 +38,11 @@ mod walk;
 
 pub use memory::MemoryBound;
 
+/// Bits of one packed voxel coordinate of `IrrCell::bounds` (the GPU walk unpacks them with the
+/// prelude's `IRR_COORD_BITS` and `IRR_COORD_MASK`).
+pub const COORD_BITS: u32 = 16;
+pub const COORD_MASK: u32 = (1 << COORD_BITS) - 1;
+
 /// One cell as stored: its grown box in virtual voxels (`min` inclusive, `max` exclusive) as
 /// six 16-bit coordinates, and the first of its references in `IrregularGrid::refs`; they end
 /// where the next cell's begin (the cells' arrays end with a sentinel cell whose `start` is the
@@ -45,11 +50,6 @@ pub use memory::MemoryBound;
 /// coordinates and a count, which brought the structure from 71 to 54 bytes per triangle on the
 /// Stanford Bunny (docs/benchmarks.md). Virtual grids are under 2^16 voxels per axis: the build
 /// caps the top grid at 4,096 cells per axis and the levels below it to fit (`TopGrid::new`).
-/// Bits of one packed voxel coordinate of `IrrCell::bounds` (the GPU walk unpacks them with the
-/// prelude's `IRR_COORD_BITS` and `IRR_COORD_MASK`).
-pub const COORD_BITS: u32 = 16;
-pub const COORD_MASK: u32 = (1 << COORD_BITS) - 1;
-
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct IrrCell {

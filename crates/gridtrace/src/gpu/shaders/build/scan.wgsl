@@ -13,7 +13,7 @@
 var<workgroup> partial: array<u32, SCAN_GROUP>;
 
 // Exclusive scan of the workgroup's SCAN_GROUP per-invocation totals (Hillis-Steele); returns this
-// invocation's offset and leaves the block total in partial[255]. Call in uniform control flow.
+// invocation's offset and leaves the block total in partial[SCAN_GROUP - 1]. Call in uniform control flow.
 fn block_offset(lid: u32, total: u32) -> u32 {
     partial[lid] = total;
     workgroupBarrier();
@@ -34,8 +34,8 @@ fn block_of(wg: vec3<u32>, nwg: vec3<u32>) -> u32 {
 }
 
 fn write_block_total(block: u32, lid: u32) {
-    if lid == 255u && block * SCAN_BLOCK < P.n {
-        let total = partial[255];
+    if lid == SCAN_GROUP - 1u && block * SCAN_BLOCK < P.n {
+        let total = partial[SCAN_GROUP - 1u];
         sums[P.out_offset + block] = total;
         if P.last != 0u {
             sums[0] = total;
