@@ -247,14 +247,6 @@ impl AccelChoice {
             Some(format!("accel auto: {} ({why}; --accel NAME to choose)", kind.name())),
         )
     }
-
-    /// The named kind, `None` for `auto`.
-    pub fn kind(self) -> Option<AccelKind> {
-        match self {
-            AccelChoice::Kind(k) => Some(k),
-            AccelChoice::Auto => None,
-        }
-    }
 }
 
 #[cfg(test)]

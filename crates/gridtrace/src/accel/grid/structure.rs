@@ -8,7 +8,7 @@ use crate::accel::{Aabb, AccelKind, Counters, Hit, PACKET, Ray, TriAccel, dims_s
 
 /// How the grid crosses empty space for a traversal kind.
 #[inline(always)]
-pub(crate) fn stepping(kind: AccelKind) -> Stepping {
+fn stepping(kind: AccelKind) -> Stepping {
     if kind == AccelKind::ProximityCloud {
         Stepping::ProximityJumps
     } else {
