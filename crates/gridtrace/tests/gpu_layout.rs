@@ -8,7 +8,7 @@ use gridtrace::accel::{Cell, IrrCell, TriAccel};
 use gridtrace::gpu::bindings::{self, Access};
 use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
 use gridtrace::gpu::layout::{
-    GpuBvhNode, GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
+    GpuBvh8Node, GpuBvhNode, GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
 };
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
@@ -94,6 +94,7 @@ fn wgsl_structs_match_rust() {
     check!(m, RayRec, "RayRec", [origin, pixel, dir, t_max, weight, t_min]);
     check!(m, GpuHit, "GpuHit", [t, tri, u, v]);
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
+    check!(m, GpuBvh8Node, "Bvh8Node", [p_e, info, q0, q1, q2]);
     check!(m, IrrCell, "IrrCell", [bounds, start]);
     check!(
         m,

@@ -5,13 +5,14 @@
 
 use std::fmt::Write as _;
 
-use super::bvh::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
+use super::walks::bvh::binary::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
 use crate::accel::bvh;
 use crate::accel::grid::proximity;
 use crate::accel::irregular;
 use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_PAD, SLACK_ULPS};
 use crate::render::Mode;
+use super::variants::SHORT_STACK_MAX;
 
 /// Counter slots of the `counters` array (atomic u32s). Slots 0 and 1 are the two ray queues'
 /// lengths, alternating as input and output per bounce (the pass uniform says which).
@@ -85,7 +86,7 @@ pub enum WgslConst {
 
 /// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
 /// `TriAccel::intersect`'s own, so both backends accept the same hits.
-pub const WGSL_CONSTANTS: [(&str, WgslConst); 36] = [
+pub const WGSL_CONSTANTS: [(&str, WgslConst); 37] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -105,6 +106,7 @@ pub const WGSL_CONSTANTS: [(&str, WgslConst); 36] = [
     ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),
     ("PARALLEL_COS2", WgslConst::F32(PARALLEL_COS2)),
     ("BVH_STACK", WgslConst::U32(BVH_STACK)),
+    ("SHORT_STACK_MAX", WgslConst::U32(SHORT_STACK_MAX as u32)),
     ("LEAF_BIT", WgslConst::U32(LEAF_BIT)),
     ("LEAF_COUNT_SHIFT", WgslConst::U32(LEAF_COUNT_SHIFT)),
     ("LEAF_FIRST_MAX", WgslConst::U32(LEAF_FIRST_MAX)),

@@ -1,7 +1,7 @@
 //! The compute kernels: shader modules, bind group layouts, pipeline layouts and pipelines. They
-//! depend on the device only, not on the scene, so they are built once per `GpuContext`
-//! (`Kernels::of`; the walking kernels once per structure, `Kernels::walk`) and shared by every
-//! renderer on it. Also the one helper that records
+//! depend on the device and the GPU variants only, not on the scene, so they are built once per
+//! `GpuContext` and `GpuVariants` (`Kernels::of`; the walking kernels once per walk,
+//! `Kernels::walk`) and shared by every renderer on it with those variants. Also the one helper that records
 //! a kernel's compute pass, for the tile loop and the ray queries alike.
 
 use std::collections::HashMap;
@@ -15,6 +15,7 @@ use super::context::GpuContext;
 use super::layout::IndirectArgs;
 use super::shaders;
 use super::timing::StageTimer;
+use super::variants::GpuVariants;
 use super::walks::WalkSpec;
 use crate::{Error, Result};
 
@@ -152,22 +153,30 @@ pub(crate) struct WalkPipelines {
     pipelines: Vec<Option<wgpu::ComputePipeline>>,
 }
 
-/// The compiled kernels of one device.
+/// The compiled kernels of one device and one choice of variants.
 pub(crate) struct Kernels {
+    /// The variants they were compiled with.
+    pub variants: GpuVariants,
     /// Layout of group 0 (`FRAME_BINDINGS`).
     pub frame_layout: wgpu::BindGroupLayout,
     /// Layout of group 1 of the indirect kernel (`INDIRECT_BINDINGS`).
     pub indirect_layout: wgpu::BindGroupLayout,
     /// The kernels that walk no structure, in `SPECS` order (`None` for those that walk).
     pipelines: Vec<Option<wgpu::ComputePipeline>>,
-    /// Each structure's walking pipelines, compiled when a scene of it is first uploaded.
+    /// Each walk's pipelines (by `WalkSpec::name`), compiled when a scene of it is first
+    /// uploaded.
     walks: Mutex<HashMap<&'static str, Arc<WalkPipelines>>>,
 }
+
+/// Every variant's kernels of one device (the context caches one of these).
+#[derive(Default)]
+struct KernelSets(Mutex<HashMap<GpuVariants, Arc<Kernels>>>);
 
 /// Compiles `specs` (those `walking` selects) into pipelines with `layout`; `source` gives each
 /// kernel's module. Validation errors are returned, not raised on the device.
 fn compile(
     dev: &wgpu::Device,
+    variants: &GpuVariants,
     layout_of: impl Fn(&KernelSpec) -> wgpu::PipelineLayout,
     source: impl Fn(&KernelSpec) -> String,
     walking: bool,
@@ -177,18 +186,59 @@ fn compile(
         .iter()
         .map(|s| {
             (s.walks == walking).then(|| {
-                let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+                let desc = wgpu::ShaderModuleDescriptor {
                     label: Some(s.label),
                     source: wgpu::ShaderSource::Wgsl(source(s).into()),
-                });
+                };
+                let module = if variants.checks {
+                    dev.create_shader_module(desc)
+                } else {
+                    // SAFETY: `checks=off` drops bounds checks and loop bounding (integer
+                    // division keeps its guards), which is sound because no kernel indexes out
+                    // of bounds or loops without end:
+                    // - every per-ray kernel returns (or, with appends, does nothing) for an
+                    //   invocation at or past its queue's length, and the queues, hits, resolve
+                    //   and accumulation buffers hold a whole tile (`ensure_work` sizes them by
+                    //   `tile_pixels`, the shadow queue by `tile_pixels * max_lights`; a tile's
+                    //   pixels and `tile_offset + i` are within the frame the camera uniform
+                    //   describes);
+                    // - the walks index their arrays with what the upload wrote: the grid's
+                    //   cells are clamped to its dims, a cell's and a leaf's references lie in
+                    //   `refs` and name triangles below `n_tris` (the builders' invariants,
+                    //   checked by the layout tests and the mirror walks), BVH children name
+                    //   nodes that exist, and the stacks' pushes are guarded by their depth
+                    //   (private: `sp < BVH_STACK`; short: a ring index `% SHORT_STACK`, at most
+                    //   SHORT_STACK_MAX, times WORKGROUP plus the lane);
+                    // - the counters are indexed by the prelude's slot constants, the materials
+                    //   by the scene's own material ids, the lights below `n_lights`;
+                    // - every loop is bounded: the DDA by the grid's cells, the BVH walks by
+                    //   their nodes (each entered at most once per ray), the light loops by
+                    //   `n_lights`, and no loop's exit depends on a value it never changes.
+                    // tests/gpu_variants.rs renders and queries every structure with
+                    // `checks=off` and compares the results with the checked kernels'.
+                    unsafe {
+                        dev.create_shader_module_trusted(
+                            desc,
+                            wgpu::ShaderRuntimeChecks {
+                                bounds_checks: false,
+                                force_loop_bounding: false,
+                                ..wgpu::ShaderRuntimeChecks::checked()
+                            },
+                        )
+                    }
+                };
+                let constants: Vec<(&str, f64)> =
+                    s.overrides.iter().copied().chain(variants.overrides()).collect();
                 dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some(s.label),
                     layout: Some(&layout_of(s)),
                     module: &module,
                     entry_point: Some("main"),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: s.overrides,
-                        ..Default::default()
+                        constants: &constants,
+                        // Every kernel that reads workgroup memory writes it first (`append`,
+                        // the short stacks), so `checks=off` skips zeroing it.
+                        zero_initialize_workgroup_memory: variants.checks,
                     },
                     cache: None,
                 })
@@ -196,19 +246,28 @@ fn compile(
         })
         .collect();
     if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(Error::Gpu(format!("creating the kernels failed: {e}")));
+        return Err(Error::Gpu(format!("creating the kernels failed ({variants}): {e}")));
     }
     Ok(pipelines)
 }
 
 impl Kernels {
-    /// The kernels of `ctx`'s device, compiled on first use and shared by every renderer on it.
-    pub fn of(ctx: &GpuContext) -> Result<Arc<Kernels>> {
-        ctx.cached(Kernels::new)
+    /// The kernels of `ctx`'s device for `variants`, compiled on first use and shared by every
+    /// renderer on it with the same variants.
+    pub fn of(ctx: &GpuContext, variants: &GpuVariants) -> Result<Arc<Kernels>> {
+        let sets = ctx.cached(|_| Ok(KernelSets::default()))?;
+        // Held while compiling: a second renderer with these variants waits for the first's.
+        let mut sets = sets.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = sets.get(variants) {
+            return Ok(k.clone());
+        }
+        let k = Arc::new(Kernels::new(&ctx.device, variants)?);
+        sets.insert(*variants, k.clone());
+        Ok(k)
     }
 
     /// Compiles every kernel that walks no structure.
-    pub fn new(dev: &wgpu::Device) -> Result<Kernels> {
+    pub fn new(dev: &wgpu::Device, variants: &GpuVariants) -> Result<Kernels> {
         let frame_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gridtrace"),
             entries: &bindings::layout_entries(&FRAME_BINDINGS),
@@ -226,6 +285,7 @@ impl Kernels {
         };
         let pipelines = compile(
             dev,
+            variants,
             |s| {
                 if s.writes_indirect_args {
                     layout(&[Some(&frame_layout), Some(&indirect_layout)])
@@ -237,6 +297,7 @@ impl Kernels {
             false,
         )?;
         Ok(Kernels {
+            variants: *variants,
             frame_layout,
             indirect_layout,
             pipelines,
@@ -244,10 +305,10 @@ impl Kernels {
         })
     }
 
-    /// The walking pipelines of the structure `spec` describes, compiled on first use.
+    /// The walking pipelines of the walk `spec` describes, compiled on first use.
     pub fn walk(&self, dev: &wgpu::Device, spec: &'static WalkSpec) -> Result<Arc<WalkPipelines>> {
         let mut walks = self.walks.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(w) = walks.get(spec.structure) {
+        if let Some(w) = walks.get(spec.name) {
             return Ok(w.clone());
         }
         let rows: Vec<Binding<usize>> = spec
@@ -272,6 +333,7 @@ impl Kernels {
         });
         let pipelines = compile(
             dev,
+            &self.variants,
             |_| pipeline_layout.clone(),
             |s| shaders::walk_module_source(s.source, spec),
             true,
@@ -281,7 +343,7 @@ impl Kernels {
             layout,
             pipelines,
         });
-        walks.insert(spec.structure, w.clone());
+        walks.insert(spec.name, w.clone());
         Ok(w)
     }
 }

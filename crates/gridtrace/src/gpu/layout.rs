@@ -129,8 +129,25 @@ pub struct GpuBvhNode {
     pub xy1: [f32; 4],
     /// lo.z, hi.z of child 0, then of child 1.
     pub z01: [f32; 4],
-    /// The children as stack entries; the last two words are unused.
+    /// The children as stack entries, then the node's position in its parent (`parent << 1 |
+    /// slot`, `STACK_DONE` at the root: only the short stack's climb reads it); the last word
+    /// is unused.
     pub child: [u32; 4],
+}
+
+/// An 8-wide compressed BVH node (`bvh=wide8`; `Bvh8Node` in shaders/walks/bvh8.wgsl, which
+/// says what each word holds; gpu/walks/bvh/wide8.rs builds them). 80 bytes.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+pub struct GpuBvh8Node {
+    /// The origin's bits (xyz) and the scale exponents and inner mask (w).
+    pub p_e: [u32; 4],
+    /// First child node, first triangle, leaf counts (a nibble per slot), parent position.
+    pub info: [u32; 4],
+    /// Quantized planes, a byte per slot: lo x, lo y | lo z, hi x | hi y, hi z.
+    pub q0: [u32; 4],
+    pub q1: [u32; 4],
+    pub q2: [u32; 4],
 }
 
 /// The GPU grid build's parameters (`shaders/build/common.wgsl`): the lattice, the sizes, and

@@ -18,15 +18,16 @@
 //! - `bindings`: the bind group tables; `layout`: the structs the kernels share with the host;
 //!   `constants`: the numbers they share, printed into every module as a WGSL prelude;
 //! - `walks`: each structure's GPU side (its arrays, lattice and walk file, `shaders/walks/`);
-//!   `scene`: the scene's upload; `bvh`: the BVH's GPU layout and a CPU mirror of its walk;
+//!   `scene`: the scene's upload (the BVH's two GPU layouts, each with a CPU mirror of its
+//!   walk, are in `walks/bvh/`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
 //! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded;
 //! - `timing`: timestamp queries and per-stage milliseconds;
+//! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results;
 //! - `grid_build`: the grid and its proximity cloud built on the GPU (`shaders/build/`), for
 //!   meshes that move.
 
 pub mod bindings;
-pub mod bvh;
 pub mod constants;
 mod context;
 mod grid_build;
@@ -37,6 +38,7 @@ mod renderer;
 mod scene;
 pub mod shaders;
 mod timing;
+pub mod variants;
 pub mod walks;
 mod wavefront;
 
@@ -45,4 +47,7 @@ pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
 pub use timing::GpuTimings;
+pub use variants::GpuVariants;
+/// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.
+pub use walks::bvh::binary as bvh;
 pub use wavefront::GpuRenderStats;

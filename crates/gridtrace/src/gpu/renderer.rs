@@ -14,6 +14,7 @@ use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
 use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{StageTimer, Timestamps};
+use super::variants::GpuVariants;
 use crate::accel::{AccelKind, GridLattice};
 use crate::render::{Ablation, Mode};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
@@ -78,10 +79,16 @@ pub struct GpuUpdateStats {
 
 impl GpuRenderer {
     /// Uploads the scene (grid, references, triangles, shading data, materials) once; compiles
-    /// the kernels unless an earlier renderer on `ctx` did.
+    /// the kernels unless an earlier renderer on `ctx` did. Today's kernels: the default
+    /// `GpuVariants`.
     pub fn new(ctx: Arc<GpuContext>, prepared: &PreparedScene) -> Result<GpuRenderer> {
+        GpuRenderer::with_variants(ctx, prepared, &GpuVariants::default())
+    }
+
+    /// `new` with the kernels and layouts `variants` choose (same images and hits, other speed).
+    pub fn with_variants(ctx: Arc<GpuContext>, prepared: &PreparedScene, variants: &GpuVariants) -> Result<GpuRenderer> {
         let dev = &ctx.device;
-        let scene = SceneBuffers::upload(&ctx, prepared)?;
+        let scene = SceneBuffers::upload(&ctx, prepared, variants)?;
         let uniform = |label: &str, size: u64| {
             dev.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -104,7 +111,7 @@ impl GpuRenderer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT,
             mapped_at_creation: false,
         });
-        let kernels = Kernels::of(&ctx)?;
+        let kernels = Kernels::of(&ctx, variants)?;
         let indirect_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("indirect args"),
             layout: &kernels.indirect_layout,
@@ -151,7 +158,7 @@ impl GpuRenderer {
         let mut stats = GpuUpdateStats::default();
         if !self.scene.spec().device_build {
             let t0 = Instant::now();
-            self.scene = SceneBuffers::upload(&self.ctx, scene)?;
+            self.scene = SceneBuffers::upload(&self.ctx, scene, &self.kernels.variants)?;
             self.work = None;
             self.ctx.wait()?;
             stats.structure_upload_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -194,6 +201,11 @@ impl GpuRenderer {
 
     pub fn context(&self) -> &GpuContext {
         &self.ctx
+    }
+
+    /// The GPU variants this renderer's kernels were compiled with.
+    pub fn variants(&self) -> GpuVariants {
+        self.kernels.variants
     }
 
     /// Whether this scene's upload serves `accel` (as `Accel::serves`: the grid serves `grid`

@@ -9,6 +9,7 @@ use wgpu::util::DeviceExt;
 use super::context::GpuContext;
 use super::kernels::{Kernels, WalkPipelines};
 use super::layout::{GpuMaterial, SceneUniform, TriShade};
+use super::variants::GpuVariants;
 use super::walks::{WalkSpec, upload_of};
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
@@ -75,10 +76,11 @@ fn storage(dev: &wgpu::Device, label: &str, data: &[u8]) -> wgpu::Buffer {
 }
 
 impl SceneBuffers {
-    /// Checks the scene against the device's limits and uploads it.
-    pub fn upload(ctx: &GpuContext, scene: &PreparedScene) -> Result<SceneBuffers> {
+    /// Checks the scene against the device's limits and uploads it, in the layout and with the
+    /// walk `variants` choose.
+    pub fn upload(ctx: &GpuContext, scene: &PreparedScene, variants: &GpuVariants) -> Result<SceneBuffers> {
         let dev = &ctx.device;
-        let walk = upload_of(scene)?;
+        let walk = upload_of(scene, variants)?;
         let tri_shade = tri_shade(scene);
         let materials: Vec<GpuMaterial> = scene
             .materials
@@ -112,7 +114,7 @@ impl SceneBuffers {
                 )));
             }
         }
-        let pipelines = Kernels::of(ctx)?.walk(dev, walk.spec)?;
+        let pipelines = Kernels::of(ctx, variants)?.walk(dev, walk.spec)?;
         let structure: Vec<wgpu::Buffer> = walk
             .spec
             .arrays

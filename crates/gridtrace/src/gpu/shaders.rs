@@ -7,10 +7,11 @@
 use super::constants::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
-pub const RAYGEN: &str = include_str!("shaders/raygen.wgsl");
+/// Ray generation and shading append to queues: their modules carry `append.wgsl`.
+pub const RAYGEN: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/raygen.wgsl"));
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
-pub const SHADE: &str = include_str!("shaders/shade.wgsl");
+pub const SHADE: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/shade.wgsl"));
 pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
 pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
 /// Every kernel with its name.
@@ -28,12 +29,20 @@ pub fn shared_source() -> String {
     format!("{}\n{}", wgsl_prelude(), COMMON)
 }
 
-/// The shared source and every structure's walk file (not a module a device compiles: the walks
-/// bind the same group, each for its own pipelines). The layout tests parse it to check every
-/// struct the host shares with the kernels.
+/// The shared source and every walk's files (not a module a device compiles: the walks bind
+/// the same group, each for its own pipelines), each file once; the short-stack files are left
+/// out (they define the same functions as the private stacks'). The layout tests parse it to
+/// check every struct the host shares with the kernels.
 pub fn common_source() -> String {
-    let walks: Vec<&str> = super::walks::WALKS.iter().map(|w| w.wgsl).collect();
-    format!("{}\n{}", shared_source(), walks.join("\n"))
+    let mut files: Vec<&str> = Vec::new();
+    for w in super::walks::WALKS.iter().filter(|w| !w.short_stack) {
+        for f in w.wgsl {
+            if !files.contains(f) {
+                files.push(f);
+            }
+        }
+    }
+    format!("{}\n{}", shared_source(), files.join("\n"))
 }
 
 /// The whole module of a kernel that walks no structure, as the device compiles it.
@@ -41,12 +50,12 @@ pub fn module_source(kernel: &str) -> String {
     format!("{}\n{}", shared_source(), kernel)
 }
 
-/// The whole module of a walking kernel (traverse, occlusion) for the structure `walk` names.
+/// The whole module of a walking kernel (traverse, occlusion) with the walk `walk` names.
 pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String {
     format!(
         "{}\n{}\n{}\n{}",
         shared_source(),
-        walk.wgsl,
+        walk.wgsl.join("\n"),
         walk.entry_points(),
         kernel
     )
@@ -57,14 +66,14 @@ pub fn walks(name: &str) -> bool {
     matches!(name, "traverse" | "occlusion")
 }
 
-/// Every module the tracer compiles, named `kernel` or `kernel (structure)`, with its source:
-/// the walking kernels once per structure, the others once.
+/// Every module the tracer compiles, named `kernel` or `kernel [walk]`, with its source: the
+/// walking kernels once per walk, the others once.
 pub fn all_modules() -> Vec<(String, String)> {
     let mut out = Vec::new();
     for (name, src) in KERNELS {
         if walks(name) {
             for w in super::walks::WALKS {
-                out.push((format!("{name} ({})", w.structure), walk_module_source(src, w)));
+                out.push((format!("{name} [{}]", w.name), walk_module_source(src, w)));
             }
         } else {
             out.push((name.to_string(), module_source(src)));

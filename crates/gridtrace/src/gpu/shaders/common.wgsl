@@ -48,6 +48,18 @@ override COUNT_WORK: bool = false;
 // Set per pipeline: the occlusion kernel of the `shadow closest hit` ablation finds the closest
 // hit of each shadow ray instead of stopping at the first (RenderOptions::ablation).
 override SHADOW_CLOSEST: bool = false;
+// GPU variants (gpu/variants.rs; every pipeline gets the same values, GpuVariants::overrides):
+// ray generation in 8x8 squares (`order=tiles`), queue appends aggregated per workgroup
+// (`appends=workgroup`), per-ray statistics atomics in shading (`stats=on`), and the entries of
+// the BVH walk's short stack (`stack=short`, read by the short-stack walks only).
+override TILE_ORDER: bool = false;
+override WG_APPENDS: bool = false;
+override RAY_STATS: bool = true;
+override SHORT_STACK: u32 = 8u;
+
+// The invocation's index in its workgroup, for walks that keep state in workgroup memory (the
+// short stack); set by the walking kernels' entry points before they walk.
+var<private> lane: u32;
 
 @group(0) @binding(0) var<uniform> scene: SceneUniform;
 @group(0) @binding(1) var<uniform> camera: CameraFrame;

@@ -15,4 +15,13 @@ fn groups(n: u32) -> array<u32, 3> {
 fn main() {
     indirect.rays = groups(queue_len(pass_.in_slot));
     indirect.shadow = groups(shadow_len());
+    // `stats=off`: the tile's shadow and reflection totals, read off the queue lengths instead
+    // of counted per ray in shading. Every bounce starts with its output and shadow queues
+    // empty, so the call before tracing adds nothing and the call after shading (before
+    // occlusion; Cast mode, which has no second call, emits neither) adds the bounce's rays.
+    // Without compaction the queues have no lengths and shading counts per ray as with `on`.
+    if (!RAY_STATS && compacted()) {
+        atomicAdd(&counters[SLOT_SHADOW_TOTAL], shadow_len());
+        atomicAdd(&counters[SLOT_REFLECT_TOTAL], queue_len(pass_.out_slot));
+    }
 }

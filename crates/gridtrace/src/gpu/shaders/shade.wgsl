@@ -31,10 +31,23 @@ fn light_term(s: Surface, origin: vec3<f32>, l: PointLight, dir_out: ptr<functio
     return vec4<f32>(v3(l.intensity) * (ndl / d2), dist);
 }
 
-@compute @workgroup_size(WORKGROUP)
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let i = flat_index(wg, nwg, lid);
-    if (i >= queue_len(pass_.in_slot)) { return; }
+// What shading one ray leaves to emit once its queue slots are known.
+struct Shaded {
+    // Shadow rays to emit (one per light in front of the surface), and a reflection ray?
+    n_shadow: u32,
+    reflect: bool,
+    pixel: u32,
+    s: Surface,
+    origin: vec3<f32>,
+    local: vec3<f32>,
+    // The reflection ray's direction and weight.
+    dir: vec3<f32>,
+    weight: vec3<f32>,
+}
+
+// Shades ray `i` of the input queue: its colour into the pixel, and what it will emit.
+fn shade_ray(i: u32) -> Shaded {
+    var out: Shaded;
     let r = rays_in[i];
     resolve[i] = vec2<u32>(0u, 0u);
     if (!compacted()) {
@@ -44,12 +57,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             for (var l = 0u; l < scene.n_lights; l++) { shadow_rays[i * scene.n_lights + l].pixel = MISS; }
         }
     }
-    if (r.pixel == MISS) { return; }
+    if (r.pixel == MISS) { return out; }
     let h = hits[i];
     let weight = v3(r.weight);
     if (h.tri == MISS) {
         accum[r.pixel] += vec4<f32>(weight * scene.background, 0.0);
-        return;
+        return out;
     }
     let d = v3(r.dir);
     let s = surface_at(v3(r.origin), d, h);
@@ -67,35 +80,60 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             if (lt.w >= 0.0) { color += local * lt.xyz; }
         }
     } else {
-        // Two passes over the lights: count, reserve contiguous slots, fill. Contiguous slots
-        // let the resolve kernel add the visible contributions in light order, as the CPU does.
-        var n = 0u;
+        // Two passes over the lights: count here, reserve contiguous slots, fill (`emit`).
+        // Contiguous slots let the resolve kernel add the visible contributions in light
+        // order, as the CPU does.
         for (var l = 0u; l < scene.n_lights; l++) {
             var dir: vec3<f32>;
-            if (light_term(s, origin, lights[l], &dir).w >= 0.0) { n += 1u; }
-        }
-        if (n > 0u) {
-            var base = i * scene.n_lights;
-            if (compacted()) { base = atomicAdd(&counters[SLOT_SHADOW], n); }
-            atomicAdd(&counters[SLOT_SHADOW_TOTAL], n);
-            var k = 0u;
-            for (var l = 0u; l < scene.n_lights; l++) {
-                var dir: vec3<f32>;
-                let lt = light_term(s, origin, lights[l], &dir);
-                if (lt.w >= 0.0) {
-                    shadow_rays[base + k] = RayRec(a3(origin), r.pixel, a3(dir), lt.w, a3(local * lt.xyz), 0.0);
-                    k += 1u;
-                }
-            }
-            resolve[i] = vec2<u32>(base, n);
+            if (light_term(s, origin, lights[l], &dir).w >= 0.0) { out.n_shadow += 1u; }
         }
     }
     accum[r.pixel] = vec4<f32>(color, 0.0);
+    out.pixel = r.pixel;
+    out.s = s;
+    out.origin = origin;
+    out.local = local;
     if (reflect > 0.0 && pass_.depth < pass_.max_depth) {
-        let rd = d - 2.0 * dot(d, s.ns) * s.ns;
-        var slot = i;
-        if (compacted()) { slot = atomicAdd(&counters[pass_.out_slot], 1u); }
-        atomicAdd(&counters[SLOT_REFLECT_TOTAL], 1u);
-        rays_out[slot] = RayRec(a3(origin), r.pixel, a3(normalize(rd)), inf(), a3(weight * reflect), 0.0);
+        out.reflect = true;
+        out.dir = normalize(d - 2.0 * dot(d, s.ns) * s.ns);
+        out.weight = weight * reflect;
     }
+    return out;
+}
+
+// Writes ray `i`'s shadow rays from slot `base` and its reflection ray into slot `slot`.
+fn emit(i: u32, sh: Shaded, base: u32, slot: u32) {
+    if (sh.n_shadow > 0u) {
+        if (RAY_STATS || !compacted()) { atomicAdd(&counters[SLOT_SHADOW_TOTAL], sh.n_shadow); }
+        var k = 0u;
+        for (var l = 0u; l < scene.n_lights; l++) {
+            var dir: vec3<f32>;
+            let lt = light_term(sh.s, sh.origin, lights[l], &dir);
+            if (lt.w >= 0.0) {
+                shadow_rays[base + k] = RayRec(a3(sh.origin), sh.pixel, a3(dir), lt.w, a3(sh.local * lt.xyz), 0.0);
+                k += 1u;
+            }
+        }
+        resolve[i] = vec2<u32>(base, sh.n_shadow);
+    }
+    if (sh.reflect) {
+        if (RAY_STATS || !compacted()) { atomicAdd(&counters[SLOT_REFLECT_TOTAL], 1u); }
+        rays_out[slot] = RayRec(a3(sh.origin), sh.pixel, a3(sh.dir), inf(), a3(sh.weight), 0.0);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wg, nwg, lid);
+    // No early return: every invocation reaches the appends (workgroup-uniform control flow).
+    var sh: Shaded;
+    let in_queue = i < queue_len(pass_.in_slot);
+    if (in_queue) { sh = shade_ray(i); }
+    var base = i * scene.n_lights;
+    var slot = i;
+    if (compacted()) {
+        base = append(SLOT_SHADOW, sh.n_shadow, lid);
+        slot = append(pass_.out_slot, u32(sh.reflect), lid);
+    }
+    if (in_queue) { emit(i, sh, base, slot); }
 }

@@ -5,6 +5,7 @@
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wg, nwg, lid);
+    lane = lid;
     if (i >= queue_len(pass_.in_slot)) { return; }
     let r = rays_in[i];
     if (r.pixel == MISS) { return; }

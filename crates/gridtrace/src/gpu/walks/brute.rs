@@ -6,11 +6,13 @@ use crate::accel::Aabb;
 
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "brute",
-    wgsl: include_str!("../shaders/walks/brute.wgsl"),
+    name: "brute",
+    wgsl: &[include_str!("../shaders/walks/brute.wgsl")],
     prefix: "brute",
     arrays: &[],
     device_build: false,
     // Four triangles a loop iteration (brute.wgsl) times llvmpipe's 65,535 iterations.
+    short_stack: false,
     software_max_tris: Some(4 * 65_535),
 };
 

@@ -6,10 +6,12 @@ use crate::accel::Grid;
 
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "grid",
-    wgsl: include_str!("../shaders/walks/grid.wgsl"),
+    name: "grid",
+    wgsl: &[include_str!("../shaders/walks/grid.wgsl")],
     prefix: "grid",
     arrays: &[("cells", "cells"), ("refs", "grid_refs")],
     device_build: true,
+    short_stack: false,
     software_max_tris: None,
 };
 

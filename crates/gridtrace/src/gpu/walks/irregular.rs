@@ -6,7 +6,8 @@ use crate::accel::IrregularGrid;
 
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "irregular",
-    wgsl: include_str!("../shaders/walks/irregular.wgsl"),
+    name: "irregular",
+    wgsl: &[include_str!("../shaders/walks/irregular.wgsl")],
     prefix: "irr",
     arrays: &[
         ("irr_entries", "irr_entries"),
@@ -15,6 +16,7 @@ pub const SPEC: WalkSpec = WalkSpec {
         ("refs", "irr_refs"),
     ],
     device_build: false,
+    short_stack: false,
     software_max_tris: None,
 };
 

@@ -9,7 +9,7 @@
 //! one entry of `WALKS` and one arm of `upload_of`.
 
 mod brute;
-mod bvh;
+pub mod bvh;
 mod grid;
 mod irregular;
 
@@ -19,6 +19,7 @@ use glam::{UVec3, Vec3};
 
 use crate::Result;
 use crate::accel::{Aabb, Structure};
+use crate::gpu::variants::GpuVariants;
 use crate::scene::PreparedScene;
 
 /// What the GPU needs to know of a structure before any scene: its walk and its arrays' names.
@@ -26,8 +27,11 @@ use crate::scene::PreparedScene;
 pub struct WalkSpec {
     /// The structure, as the registry's `structure` column names it.
     pub structure: &'static str,
-    /// The walk file's source.
-    pub wgsl: &'static str,
+    /// The walk's own name: the structure's, or the structure's with the variant that chose
+    /// it (`bvh (wide8)`); compiled pipelines are cached by it.
+    pub name: &'static str,
+    /// The walk's WGSL files, in order (a walk and the stack it uses).
+    pub wgsl: &'static [&'static str],
     /// The walk's entry points are `{prefix}_closest` and `{prefix}_any`.
     pub prefix: &'static str,
     /// Group 1's arrays in binding order: the name reports use (`GpuRenderer::memory`) and the
@@ -40,6 +44,9 @@ pub struct WalkSpec {
     /// after 65,535 iterations (`None`: no limit; every other walk's loops are bounded by
     /// cells or nodes, far below it).
     pub software_max_tris: Option<u32>,
+    /// Keeps its stack in workgroup memory (`stack=short`): its stack file defines the same
+    /// functions as the private stack's, so the two never share a module.
+    pub short_stack: bool,
 }
 
 impl WalkSpec {
@@ -53,10 +60,19 @@ impl WalkSpec {
     }
 }
 
-/// Every structure's GPU walk.
-pub const WALKS: [&WalkSpec; 4] = [&grid::SPEC, &bvh::SPEC, &irregular::SPEC, &brute::SPEC];
+/// Every GPU walk: each structure's default first, then the BVH's variants
+/// (`gpu::variants`).
+pub const WALKS: [&WalkSpec; 7] = [
+    &grid::SPEC,
+    &bvh::SPEC,
+    &irregular::SPEC,
+    &brute::SPEC,
+    &bvh::SPEC_SHORT,
+    &bvh::SPEC_WIDE8,
+    &bvh::SPEC_WIDE8_SHORT,
+];
 
-/// The walk of the structure named `structure`, if the GPU has one.
+/// The default walk of the structure named `structure`, if the GPU has one.
 pub fn spec(structure: &str) -> Option<&'static WalkSpec> {
     WALKS.iter().copied().find(|w| w.structure == structure)
 }
@@ -95,11 +111,12 @@ pub struct WalkUpload<'a> {
     pub lattice: Lattice,
 }
 
-/// The one place the GPU backend reads `scene.accel.structure`.
-pub fn upload_of(scene: &PreparedScene) -> Result<WalkUpload<'_>> {
+/// The one place the GPU backend reads `scene.accel.structure`; `variants` choose the BVH's
+/// layout and stack (the other structures have one walk each).
+pub fn upload_of<'a>(scene: &'a PreparedScene, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
     let upload = match &scene.accel.structure {
         Structure::Grid(g) => grid::upload(g),
-        Structure::Bvh(b) => bvh::upload(b, scene.accel.bounds())?,
+        Structure::Bvh(b) => bvh::upload(b, scene.accel.bounds(), variants)?,
         Structure::Irregular(g) => irregular::upload(g),
         Structure::Brute(_) => brute::upload(scene.accel.bounds()),
     };

@@ -7,12 +7,11 @@
 // in the same phase. Both child boxes come with the node; where the ray enters both, the
 // farther goes on the stack and the walk goes on in the nearer.
 //
-// The stack is a private array of BVH_STACK entries: the builder bounds the tree's depth below
-// it for any input (SAH splits to depth 64, median splits after), and the upload checks the
-// depth, so a push can never overflow; the guard below only keeps the index in bounds. A
-// private array indexed at run time lives in the thread's local memory on GPUs (cached in L1);
-// a walk touches only its top few entries. Workgroup memory (64 threads x 97 entries = 25 KiB)
-// would cap occupancy, and a short stack with restarts needs no guarantee this tree lacks.
+// The stack is one of two files after this one (gpu/walks/bvh/: the walk spec names them):
+// `bvh_stack_private.wgsl`, a private array of BVH_STACK entries (`stack=private`, the
+// default), or `bvh_stack_short.wgsl`, a short ring in workgroup memory with a climb by parent
+// links when it runs dry (`stack=short`). Both define `BvhStack`, `bvh_push`, `bvh_at` and
+// `bvh_pop`; the walk below is the same for both.
 
 // A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
 struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
@@ -50,18 +49,10 @@ fn bvh_enter(n: BvhNode, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -
 
 fn max3(v: vec3<f32>) -> f32 { return max(v.x, max(v.y, v.z)); }
 
-// The entry the walk goes on with after a node the ray left: the top of the stack, or
-// STACK_DONE when it is empty.
-fn bvh_pop(stack: ptr<function, array<u32, BVH_STACK>>, sp: ptr<function, u32>) -> u32 {
-    if (*sp == 0u) { return STACK_DONE; }
-    *sp -= 1u;
-    return (*stack)[*sp];
-}
-
 // Descends from `entry` through inner nodes (pushing the farther of two entered children)
 // until it holds a leaf or the walk is over; returns that entry. `t_box` bounds the boxes.
 fn bvh_descend(entry_in: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_box: f32,
-               stack: ptr<function, array<u32, BVH_STACK>>, sp: ptr<function, u32>, work: ptr<function, u32>) -> u32 {
+               st: ptr<function, BvhStack>, work: ptr<function, u32>) -> u32 {
     var entry = entry_in;
     // Leaf entries and STACK_DONE have LEAF_BIT set.
     while (entry < LEAF_BIT) {
@@ -70,17 +61,17 @@ fn bvh_descend(entry_in: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_box: f
         let h = bvh_enter(n, o, inv, t_min, t_box);
         if (h.hit0 && h.hit1) {
             let first0 = h.t0 <= h.t1;
-            if (*sp < BVH_STACK) {
-                (*stack)[*sp] = select(n.child.x, n.child.y, first0);
-                *sp += 1u;
-            }
+            bvh_push(st, entry, select(0u, 1u, first0), select(n.child.x, n.child.y, first0));
+            bvh_at(st, entry, select(1u, 0u, first0));
             entry = select(n.child.y, n.child.x, first0);
         } else if (h.hit0) {
+            bvh_at(st, entry, 0u);
             entry = n.child.x;
         } else if (h.hit1) {
+            bvh_at(st, entry, 1u);
             entry = n.child.y;
         } else {
-            entry = bvh_pop(stack, sp);
+            entry = bvh_pop(st, o, inv, t_min, t_box);
         }
     }
     return entry;
@@ -91,13 +82,12 @@ fn bvh_descend(entry_in: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_box: f
 fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
     let inv = bvh_inv_dir(d);
-    var stack: array<u32, BVH_STACK>;
-    var sp = 0u;
+    var st = bvh_stack_new();
     var entry = 0u;
     loop {
         // The box bound follows the closest hit so far, T_SLOP past it (see walk.rs: the
         // triangle test's t may be a little short of where the ray enters the triangle's box).
-        entry = bvh_descend(entry, o, inv, t_min, best.t * T_SLOP, &stack, &sp, work);
+        entry = bvh_descend(entry, o, inv, t_min, best.t * T_SLOP, &st, work);
         if (entry == STACK_DONE) { break; }
         let first = entry & LEAF_FIRST_MAX;
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
@@ -107,7 +97,7 @@ fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
             let h = intersect_tri(tris[tri], o, d, t_min, best.t);
             if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
         }
-        entry = bvh_pop(&stack, &sp);
+        entry = bvh_pop(&st, o, inv, t_min, best.t * T_SLOP);
     }
     if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
     return best;
@@ -116,19 +106,18 @@ fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
 // Any hit with t_min < t < t_max; mirrors BvhAccel::occluded.
 fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     let inv = bvh_inv_dir(d);
-    var stack: array<u32, BVH_STACK>;
-    var sp = 0u;
+    var st = bvh_stack_new();
     var entry = 0u;
     var work = 0u;
     loop {
-        entry = bvh_descend(entry, o, inv, t_min, t_max * T_SLOP, &stack, &sp, &work);
+        entry = bvh_descend(entry, o, inv, t_min, t_max * T_SLOP, &st, &work);
         if (entry == STACK_DONE) { break; }
         let first = entry & LEAF_FIRST_MAX;
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
         for (var k = first; k < first + count; k++) {
             if (intersect_tri(tris[bvh_prims[k]], o, d, t_min, t_max).w != 0.0) { return true; }
         }
-        entry = bvh_pop(&stack, &sp);
+        entry = bvh_pop(&st, o, inv, t_min, t_max * T_SLOP);
     }
     return false;
 }

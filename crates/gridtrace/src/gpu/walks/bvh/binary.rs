@@ -1,6 +1,7 @@
-//! The BVH as the GPU walks it: the CPU's binary SAH tree (`accel::bvh::Bvh`, the tree the
-//! eight-wide CPU nodes are collapsed from) re-laid as two-child nodes (`GpuBvhNode`), and its
-//! stack entries. The traversal is `shaders/walks/bvh.wgsl`.
+//! The BVH as the GPU walks it by default (`bvh=binary`): the CPU's binary SAH tree
+//! (`accel::bvh::Bvh`, the tree the eight-wide CPU nodes are collapsed from) re-laid as
+//! two-child nodes (`GpuBvhNode`), and its stack entries. The traversal is
+//! `shaders/walks/bvh.wgsl`; the 8-wide compressed layout is `wide8.rs`.
 //!
 //! Why a binary node and not the CPU's eight-wide one: a GPU thread tests its node's boxes one
 //! after another, so a wide node buys fewer fetches but not fewer box tests, and eight slots
@@ -11,7 +12,7 @@
 
 use glam::Vec3;
 
-use super::layout::GpuBvhNode;
+use crate::gpu::layout::GpuBvhNode;
 use crate::accel::bvh::{Bvh, BvhNode, DIR_TINY, FAR_SCALE, STACK, T_SLOP};
 use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
@@ -60,7 +61,7 @@ pub fn gpu_nodes(bvh: &Bvh) -> Result<Vec<GpuBvhNode>> {
         Error::InvalidInput(format!(
             "the GPU BVH addresses at most {} triangles and {} nodes; this mesh has {} triangles",
             LEAF_FIRST_MAX - LEAF_MAX,
-            LEAF_BIT,
+            LEAF_BIT / 2,
             bvh.prims.len()
         ))
     };
@@ -73,14 +74,14 @@ pub fn gpu_nodes(bvh: &Bvh) -> Result<Vec<GpuBvhNode>> {
         } else {
             (node_box(root), encode_leaf(root.first, root.count).ok_or_else(too_big)?)
         };
-        out.push(pack(child0, (NO_BOX, STACK_DONE)));
+        out.push(pack(child0, (NO_BOX, STACK_DONE), STACK_DONE));
         return Ok(out);
     }
     // (binary node, its GPU slot), depth first. Slots are taken when the parent is written, so
     // the two children of a node get adjacent slots.
     out.push(GpuBvhNode::zeroed_node());
-    let mut todo = vec![(0usize, 0usize)];
-    while let Some((b, slot)) = todo.pop() {
+    let mut todo = vec![(0usize, 0usize, STACK_DONE)];
+    while let Some((b, slot, parent)) = todo.pop() {
         let n = &bvh.nodes[b];
         let mut children = [(NO_BOX, STACK_DONE); 2];
         let mut inner = Vec::with_capacity(2);
@@ -90,16 +91,17 @@ pub fn gpu_nodes(bvh: &Bvh) -> Result<Vec<GpuBvhNode>> {
                 encode_leaf(cn.first, cn.count).ok_or_else(too_big)?
             } else {
                 let s = out.len();
-                if s as u64 >= LEAF_BIT as u64 {
+                if s as u64 >= (LEAF_BIT / 2) as u64 {
                     return Err(too_big());
                 }
                 out.push(GpuBvhNode::zeroed_node());
-                inner.push((c, s));
+                // `node << 1 | slot` must fit a u32 (the short stack's positions).
+                inner.push((c, s, ((slot as u32) << 1) | k as u32));
                 s as u32
             };
             children[k] = (node_box(cn), entry);
         }
-        out[slot] = pack(children[0], children[1]);
+        out[slot] = pack(children[0], children[1], parent);
         // The first child is taken next, so its subtree follows its parent.
         todo.extend(inner.into_iter().rev());
     }
@@ -113,12 +115,14 @@ fn node_box(n: &BvhNode) -> Aabb {
     }
 }
 
-fn pack((b0, c0): (Aabb, u32), (b1, c1): (Aabb, u32)) -> GpuBvhNode {
+/// A node of two children; `parent` is its position in its parent, `parent << 1 | slot`
+/// (`STACK_DONE` at the root), which only the short stack's climb reads.
+fn pack((b0, c0): (Aabb, u32), (b1, c1): (Aabb, u32), parent: u32) -> GpuBvhNode {
     GpuBvhNode {
         xy0: [b0.min.x, b0.max.x, b0.min.y, b0.max.y],
         xy1: [b1.min.x, b1.max.x, b1.min.y, b1.max.y],
         z01: [b0.min.z, b0.max.z, b1.min.z, b1.max.z],
-        child: [c0, c1, 0, 0],
+        child: [c0, c1, parent, 0],
     }
 }
 

@@ -1,0 +1,105 @@
+//! The BVH on the GPU, in either layout the variants choose (`bvh=`, `gpu::variants`): the
+//! binary nodes (`binary`: the CPU's binary SAH tree re-laid as two-child nodes, walked by
+//! `shaders/walks/bvh.wgsl`) or the 8-wide compressed nodes (`wide8`: the CPU's 8-wide tree
+//! quantized after Ylitie et al. 2017, walked by `shaders/walks/bvh8.wgsl`), each with either
+//! stack (`stack=`: a private array or a short ring in workgroup memory, its own WGSL file
+//! after the walk's). Four walk specs; `spec_for` picks one by the variants.
+
+pub mod binary;
+pub mod wide8;
+
+use std::borrow::Cow;
+
+use super::{Lattice, WalkSpec, WalkUpload, bytes};
+use crate::accel::{Aabb, BvhAccel};
+use crate::gpu::constants::BVH_STACK;
+use crate::gpu::variants::{BvhLayout, BvhStack, GpuVariants};
+use crate::{Error, Result};
+
+const BINARY: &str = include_str!("../../shaders/walks/bvh.wgsl");
+const BINARY_PRIVATE: &str = include_str!("../../shaders/walks/bvh_stack_private.wgsl");
+const BINARY_SHORT: &str = include_str!("../../shaders/walks/bvh_stack_short.wgsl");
+const WIDE8: &str = include_str!("../../shaders/walks/bvh8.wgsl");
+const WIDE8_PRIVATE: &str = include_str!("../../shaders/walks/bvh8_stack_private.wgsl");
+const WIDE8_SHORT: &str = include_str!("../../shaders/walks/bvh8_stack_short.wgsl");
+
+const BINARY_ARRAYS: &[(&str, &str)] = &[("bvh_nodes", "bvh_nodes"), ("refs", "bvh_prims")];
+const WIDE8_ARRAYS: &[(&str, &str)] = &[("bvh8_nodes", "bvh8_nodes"), ("refs", "bvh8_prims")];
+
+/// Binary nodes, private stack: today's walk, the default.
+pub const SPEC: WalkSpec = WalkSpec {
+    structure: "bvh",
+    name: "bvh",
+    wgsl: &[BINARY, BINARY_PRIVATE],
+    prefix: "bvh",
+    arrays: BINARY_ARRAYS,
+    device_build: false,
+    software_max_tris: None,
+    short_stack: false,
+};
+
+/// Binary nodes, short stack.
+pub const SPEC_SHORT: WalkSpec = WalkSpec {
+    name: "bvh (short stack)",
+    wgsl: &[BINARY, BINARY_SHORT],
+    short_stack: true,
+    ..SPEC
+};
+
+/// 8-wide compressed nodes, private stack.
+pub const SPEC_WIDE8: WalkSpec = WalkSpec {
+    name: "bvh (wide8)",
+    wgsl: &[WIDE8, WIDE8_PRIVATE],
+    prefix: "bvh8",
+    arrays: WIDE8_ARRAYS,
+    ..SPEC
+};
+
+/// 8-wide compressed nodes, short stack.
+pub const SPEC_WIDE8_SHORT: WalkSpec = WalkSpec {
+    name: "bvh (wide8, short stack)",
+    wgsl: &[WIDE8, WIDE8_SHORT],
+    short_stack: true,
+    ..SPEC_WIDE8
+};
+
+/// The BVH's walk for `variants`.
+pub fn spec_for(variants: &GpuVariants) -> &'static WalkSpec {
+    match (variants.bvh, variants.stack) {
+        (BvhLayout::Binary, BvhStack::Private) => &SPEC,
+        (BvhLayout::Binary, BvhStack::Short(_)) => &SPEC_SHORT,
+        (BvhLayout::Wide8, BvhStack::Private) => &SPEC_WIDE8,
+        (BvhLayout::Wide8, BvhStack::Short(_)) => &SPEC_WIDE8_SHORT,
+    }
+}
+
+pub fn upload<'a>(b: &'a BvhAccel, bounds: Aabb, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
+    if b.bvh.depth >= BVH_STACK as usize {
+        // The builder bounds the depth below the stack (`STACK`); checked all the same, since
+        // an overflow would lose hits silently.
+        return Err(Error::InvalidInput(format!(
+            "the BVH is {} levels deep; the GPU walk's stack holds {BVH_STACK}",
+            b.bvh.depth
+        )));
+    }
+    let spec = spec_for(variants);
+    let arrays = match variants.bvh {
+        BvhLayout::Binary => {
+            let nodes = binary::gpu_nodes(&b.bvh)?;
+            vec![Cow::Owned(bytemuck::cast_slice(&nodes).to_vec()), bytes(&b.bvh.prims)]
+        }
+        BvhLayout::Wide8 => {
+            let w = wide8::Wide8::build(b)?;
+            vec![
+                Cow::Owned(bytemuck::cast_slice(&w.nodes).to_vec()),
+                Cow::Owned(bytemuck::cast_slice(&w.prims).to_vec()),
+            ]
+        }
+    };
+    Ok(WalkUpload {
+        spec,
+        arrays,
+        // The walk reads only the bounds (ray generation clips to them).
+        lattice: Lattice::bounds_only(bounds),
+    })
+}
