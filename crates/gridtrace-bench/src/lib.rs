@@ -61,6 +61,8 @@ pub struct BenchConfig {
     pub paper_grids: bool,
     pub grid: Resolution,
     pub data_dir: Option<PathBuf>,
+    /// The GPU kernels' variants for the GPU rows (`--gpu-variant`).
+    pub gpu_variants: gridtrace::gpu::GpuVariants,
 }
 
 impl BenchConfig {
@@ -76,6 +78,7 @@ impl BenchConfig {
             paper_grids: false,
             grid: Resolution::default(),
             data_dir: None,
+            gpu_variants: gridtrace::gpu::GpuVariants::default(),
         }
     }
 
@@ -326,10 +329,10 @@ pub fn run_matrix(
         }
         if let Some(ctx) = &gpu {
             // One renderer per structure uploaded: the grid's (grid, pc) and each other one's.
-            let mut grid_gpu = GpuRenderer::new(ctx.clone(), &prepared)?;
+            let mut grid_gpu = GpuRenderer::with_variants(ctx.clone(), &prepared, &cfg.gpu_variants)?;
             let mut own_gpu: Vec<(AccelKind, GpuRenderer)> = Vec::new();
             for (k, s) in &own {
-                own_gpu.push((*k, GpuRenderer::new(ctx.clone(), s)?));
+                own_gpu.push((*k, GpuRenderer::with_variants(ctx.clone(), s, &cfg.gpu_variants)?));
             }
             let mut largest = 0u64;
             for &(w, h) in &cfg.resolutions {

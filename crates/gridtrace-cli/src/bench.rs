@@ -46,6 +46,8 @@ pub struct BenchArgs {
     /// auto (CPU, plus the GPU if found), cpu, gpu or both. Default: auto (cpu with --quick).
     #[arg(long, value_enum)]
     backend: Option<BenchBackendArg>,
+    #[command(flatten)]
+    gpu: crate::common::GpuVariantArgs,
     /// Untimed runs before the timed ones.
     // Hyphen values on numbers: a negative one then gets "invalid value", not clap's advice to
     // write "-- -1".
@@ -197,6 +199,7 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
     cfg.paper_grids = a.paper_grids;
     cfg.grid = a.grid;
     cfg.data_dir = a.data_dir.clone();
+    cfg.gpu_variants = a.gpu.gpu_variant;
     if let Some(d) = &cfg.data_dir
         && !d.is_dir()
     {

@@ -6,6 +6,7 @@ use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use glam::Vec3;
 use gridtrace::accel::IrregularParams;
+use gridtrace::gpu::GpuVariants;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
 use gridtrace::{AccelChoice, AccelKind, Resolution, Work};
 
@@ -109,6 +110,17 @@ pub fn kind_parser() -> impl TypedValueParser<Value = AccelKind> {
 pub fn mode_parser() -> impl TypedValueParser<Value = gridtrace::Mode> {
     PossibleValuesParser::new(["cast", "shadow", "trace", "heat"])
         .map(|s| s.parse::<gridtrace::Mode>().expect("every listed mode parses"))
+}
+
+/// `--gpu-variant`: the GPU kernels' variants (`gridtrace::gpu::variants`), flattened into the
+/// commands that trace on a GPU.
+#[derive(Args, Debug, Clone, Default)]
+pub struct GpuVariantArgs {
+    /// GPU variants, KEY=VALUE,... (any subset; the first value of each is the default):
+    /// bvh=binary|wide8, stack=private|short|shortN, order=rows|tiles, appends=per_ray|workgroup,
+    /// stats=on|off, checks=on|off. Same images and hits, other speed: for measuring on a GPU.
+    #[arg(long = "gpu-variant", default_value = "", value_parser = |s: &str| s.parse::<GpuVariants>())]
+    pub gpu_variant: GpuVariants,
 }
 
 /// `--backend`: the values are listed in `--help` and in the error for a wrong one.

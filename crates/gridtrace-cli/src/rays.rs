@@ -14,7 +14,7 @@ use clap::Args;
 use gridtrace::query::{CHUNK, QueryOptions, TraceMesh};
 use gridtrace::{Error, Ray};
 
-use crate::common::{Backend, GridArgs, backend_parser};
+use crate::common::{Backend, GpuVariantArgs, GridArgs, backend_parser};
 
 #[derive(Args)]
 pub struct RaysArgs {
@@ -36,6 +36,8 @@ pub struct RaysArgs {
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
     backend: Backend,
+    #[command(flatten)]
+    gpu: GpuVariantArgs,
     #[command(flatten)]
     grid: GridArgs,
     /// Output file.
@@ -66,6 +68,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         grid: a.grid.grid,
         irregular: a.grid.irregular,
         backend: a.backend,
+        gpu_variants: a.gpu.gpu_variant,
     };
     let t_build = Instant::now();
     let mesh = TraceMesh::load(&a.mesh, &opts)?;

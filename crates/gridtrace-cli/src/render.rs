@@ -10,7 +10,7 @@ use gridtrace::scene::PointLight;
 use gridtrace::{Mode, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::common::{Backend, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3};
+use crate::common::{Backend, GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3};
 
 // Every number and x,y,z option takes `allow_hyphen_values`: without it clap reads
 // `--target -0.0169,0.11,-0.0016` as a new flag "-0" and suggests "-- -1", which is wrong here.
@@ -49,6 +49,8 @@ pub struct RenderArgs {
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
     pub backend: Backend,
+    #[command(flatten)]
+    pub gpu: GpuVariantArgs,
     /// Count traversal work (cells, jumps, triangle tests) and print it.
     #[arg(long)]
     stats: bool,
@@ -121,7 +123,8 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     println!("build   {build_ms:.1} ms");
 
     let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel);
-    let mut renderer = gridtrace::Tracer::open(prepared, ctx.as_ref(), a.backend, &mut notes)?;
+    let mut renderer =
+        gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
     let (camera0, lights) = (renderer.scene.camera, renderer.scene.lights.clone());
     for n in notes {
         eprintln!("note: {n}");

@@ -25,12 +25,13 @@ fn parse<T: std::str::FromStr<Err = String>>(what: &str, s: &str) -> PyResult<T>
         .map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
 }
 
-fn options(accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<QueryOptions> {
+fn options(accel: &str, grid: &str, irregular: &str, backend: &str, gpu_variant: &str) -> PyResult<QueryOptions> {
     Ok(QueryOptions {
         accel: parse("accel", accel)?,
         grid: parse("grid", grid)?,
         irregular: parse("irregular", irregular)?,
         backend: parse("backend", backend)?,
+        gpu_variants: parse("gpu_variant", gpu_variant)?,
     })
 }
 
@@ -81,6 +82,8 @@ impl NativeMesh {
 #[pymethods]
 impl NativeMesh {
     #[new]
+    #[pyo3(signature = (vertices, faces, accel, grid, irregular, backend, gpu_variant = ""))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         vertices: PyReadonlyArray2<'_, f32>,
@@ -89,8 +92,9 @@ impl NativeMesh {
         grid: &str,
         irregular: &str,
         backend: &str,
+        gpu_variant: &str,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend)?;
+        let opts = options(accel, grid, irregular, backend, gpu_variant)?;
         let v = rows3(&vertices, "vertices")?.to_vec();
         let f = rows3(&faces, "faces")?.to_vec();
         let inner = py
@@ -102,8 +106,17 @@ impl NativeMesh {
     }
 
     #[staticmethod]
-    fn load(py: Python<'_>, path: PathBuf, accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend)?;
+    #[pyo3(signature = (path, accel, grid, irregular, backend, gpu_variant = ""))]
+    fn load(
+        py: Python<'_>,
+        path: PathBuf,
+        accel: &str,
+        grid: &str,
+        irregular: &str,
+        backend: &str,
+        gpu_variant: &str,
+    ) -> PyResult<Self> {
+        let opts = options(accel, grid, irregular, backend, gpu_variant)?;
         let inner = py.detach(move || TraceMesh::load(&path, &opts)).map_err(to_py)?;
         Ok(NativeMesh {
             inner: RwLock::new(inner),
@@ -186,6 +199,7 @@ impl NativeMesh {
 
 /// Renders a built-in scene, a scene file or a mesh file; returns (H, W, 3) uint8 sRGB.
 #[pyfunction]
+#[pyo3(signature = (scene, width, height, mode, accel, grid, backend, eye, target, gpu_variant = ""))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -198,7 +212,9 @@ fn render<'py>(
     backend: &str,
     eye: Option<[f32; 3]>,
     target: Option<[f32; 3]>,
+    gpu_variant: &str,
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let variants: gridtrace::gpu::GpuVariants = parse("gpu_variant", gpu_variant)?;
     let mode: Mode = parse("mode", mode)?;
     let accel: AccelChoice = parse("accel", accel)?;
     let grid: Resolution = parse("grid", grid)?;
@@ -237,7 +253,7 @@ fn render<'py>(
             let prepared = s.prepare_for(accel, grid)?;
             let opts = RenderOptions::new(width, height, mode, accel);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
-            let mut tracer = gridtrace::Tracer::open(prepared, ctx.as_ref(), backend, &mut notes)?;
+            let mut tracer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), backend, &variants, &mut notes)?;
             let image = tracer.render(&camera, &lights, &opts)?.image;
             let image = if mode == Mode::Heat {
                 image.heat_to_color()

@@ -20,7 +20,7 @@
 
 use std::sync::Arc;
 
-use crate::gpu::{GpuContext, GpuRenderStats, GpuRenderer};
+use crate::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
 use crate::render::{Image, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
 use crate::{Error, Result};
@@ -100,6 +100,17 @@ impl Backend {
         scene: &PreparedScene,
         notes: &mut Vec<String>,
     ) -> Result<Option<GpuRenderer>> {
+        self.upload_with(ctx, scene, &GpuVariants::default(), notes)
+    }
+
+    /// `upload` with the GPU kernels and layouts `variants` choose.
+    pub fn upload_with(
+        self,
+        ctx: Arc<GpuContext>,
+        scene: &PreparedScene,
+        variants: &GpuVariants,
+        notes: &mut Vec<String>,
+    ) -> Result<Option<GpuRenderer>> {
         let kind = scene.accel.structure_name();
         if !crate::accel::registry::ENTRIES
             .iter()
@@ -116,7 +127,7 @@ impl Backend {
                 ))),
             };
         }
-        match GpuRenderer::new(ctx, scene) {
+        match GpuRenderer::with_variants(ctx, scene, variants) {
             Ok(gpu) => Ok(Some(gpu)),
             Err(e) if self == Backend::Auto => {
                 notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
@@ -199,8 +210,19 @@ impl Tracer {
         backend: Backend,
         notes: &mut Vec<String>,
     ) -> Result<Tracer> {
+        Tracer::open_variants(scene, ctx, backend, &GpuVariants::default(), notes)
+    }
+
+    /// `open`, with the GPU variants `variants` (`--gpu-variant`) where it traces on a GPU.
+    pub fn open_variants(
+        scene: PreparedScene,
+        ctx: Option<&Arc<GpuContext>>,
+        backend: Backend,
+        variants: &GpuVariants,
+        notes: &mut Vec<String>,
+    ) -> Result<Tracer> {
         let gpu = match ctx {
-            Some(ctx) => backend.upload(ctx.clone(), &scene, notes)?,
+            Some(ctx) => backend.upload_with(ctx.clone(), &scene, variants, notes)?,
             None => None,
         };
         Ok(Tracer { scene, gpu })

@@ -36,7 +36,7 @@ use rayon::prelude::*;
 
 use crate::accel::huge::advise_huge_pages_within;
 use crate::accel::{AccelChoice, AccelKind, Hit, IrregularParams, Ray, Resolution, Work};
-use crate::gpu::{GpuContext, GpuRenderer};
+use crate::gpu::{GpuContext, GpuRenderer, GpuVariants};
 use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
 
@@ -52,6 +52,8 @@ pub struct QueryOptions {
     /// The irregular grid's build (`accel = irregular` only).
     pub irregular: IrregularParams,
     pub backend: Backend,
+    /// The GPU kernels and layouts, where the queries run on a GPU (`gpu::variants`).
+    pub gpu_variants: GpuVariants,
 }
 
 impl Default for QueryOptions {
@@ -61,6 +63,7 @@ impl Default for QueryOptions {
             grid: Resolution::default(),
             irregular: IrregularParams::default(),
             backend: Backend::Auto,
+            gpu_variants: GpuVariants::default(),
         }
     }
 }
@@ -150,6 +153,8 @@ pub struct TraceMesh {
     /// What was chosen for the caller (`auto`'s pick), in words.
     notes: Vec<String>,
     backend: Backend,
+    /// The GPU variants its GPU renderer is compiled with.
+    gpu_variants: GpuVariants,
     /// The GPU renderer, opened on first use (or the reason it could not be).
     gpu: OnceLock<std::result::Result<(Mutex<GpuRenderer>, String), String>>,
 }
@@ -229,6 +234,7 @@ impl TraceMesh {
             accel,
             notes: note.into_iter().collect(),
             backend: opts.backend,
+            gpu_variants: opts.gpu_variants,
             gpu: OnceLock::new(),
         };
         // Open the GPU now when it was asked for, so a missing adapter is reported at once.
@@ -273,7 +279,7 @@ impl TraceMesh {
         let opened = self.gpu.get_or_init(|| {
             let ctx = GpuContext::new().map_err(|e| e.to_string())?;
             let d = format!("gpu: {}", ctx.describe());
-            GpuRenderer::new(Arc::new(ctx), &self.scene)
+            GpuRenderer::with_variants(Arc::new(ctx), &self.scene, &self.gpu_variants)
                 .map(|r| (Mutex::new(r), d))
                 .map_err(|e| e.to_string())
         });

@@ -39,7 +39,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let mut tracer = Tracer::open(scene, ctx.as_ref(), a.backend, &mut notes)?;
+    let mut tracer = Tracer::open_variants(scene, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");
     }

@@ -41,7 +41,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::common::{GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
+use crate::common::{GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
 use controls::{Action, MAX_SCALE_STEPS, Orbit, key_action, next_accel, project, unproject};
 use gridtrace::Tracer;
 use overlay::{GIZMO_RADIUS_PT, HISTORY, Hud};
@@ -62,6 +62,8 @@ pub struct ViewArgs {
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
     backend: Backend,
+    #[command(flatten)]
+    gpu: GpuVariantArgs,
     /// Trace 1/2^N of the window's pixels a side (0-3; keys [ and ] change it): speed for
     /// sharpness.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=MAX_SCALE_STEPS as i64))]
@@ -128,6 +130,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         src,
         grid_args: a.grid.clone(),
         backend: a.backend,
+        gpu_variants: a.gpu.gpu_variant,
         ctx,
         notes,
         tracers: Vec::new(),
@@ -218,6 +221,8 @@ struct App {
     src: Scene,
     grid_args: GridArgs,
     backend: Backend,
+    /// `--gpu-variant`: the kernels of every tracer on the GPU.
+    gpu_variants: gridtrace::gpu::GpuVariants,
     /// The device every structure's tracer shares (`None`: the CPU).
     ctx: Option<Arc<GpuContext>>,
     notes: Vec<String>,

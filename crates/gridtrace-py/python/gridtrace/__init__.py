@@ -127,10 +127,13 @@ class Mesh:
     ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (a hardware GPU if present, else the CPU: a software adapter such as
     lavapipe is slower than the CPU tracer on the same cores), ``"gpu"`` or ``"cpu"``.
+    ``gpu_variant`` chooses the GPU kernels' variants where the mesh traces on a GPU
+    (``"bvh=wide8,stack=short"``: keys bvh, stack, order, appends, stats, checks; ``""`` for the
+    defaults): the same hits, other speed.
     Degenerate faces are kept in the numbering but can never be hit.
     """
 
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = ""):
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "", gpu_variant: str = ""):
         v = _points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3:
@@ -140,14 +143,14 @@ class Mesh:
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(f"faces index vertices out of range 0..{len(v) - 1}")
         self._backend = backend
-        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, irregular, backend)
+        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, irregular, backend, gpu_variant)
 
     @classmethod
-    def load(cls, path: Union[str, PathLike], accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "") -> "Mesh":
+    def load(cls, path: Union[str, PathLike], accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "", gpu_variant: str = "") -> "Mesh":
         """Loads an OBJ, PLY, glTF/GLB, STL or OFF file."""
         self = cls.__new__(cls)
         self._backend = backend
-        self._native = _NativeMesh.load(str(path), accel, grid, irregular, backend)
+        self._native = _NativeMesh.load(str(path), accel, grid, irregular, backend, gpu_variant)
         return self
 
     def update_vertices(self, vertices: ArrayLike) -> None:
@@ -188,13 +191,13 @@ class Mesh:
         return self._native.occluded(o, d, t_min, t_max, backend or self._backend)
 
 
-def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None) -> np.ndarray:
+def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "") -> np.ndarray:
     """Renders a built-in scene (``"knot-box"``, ``"mirror-spheres"``, ``"sparse-room"``), a TOML
     scene file or a mesh file; returns an (height, width, 3) uint8 sRGB image.
     ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``. An unknown scene name raises
-    ``ValueError`` listing the built-in scenes."""
+    ``ValueError`` listing the built-in scenes. ``gpu_variant`` as for ``Mesh``."""
     if width <= 0 or height <= 0:
         raise ValueError(f"image size must be positive, got {width}x{height}")
     e = None if eye is None else [float(x) for x in eye]
     t = None if target is None else [float(x) for x in target]
-    return _render(str(scene), int(width), int(height), mode, accel, grid, backend, e, t)
+    return _render(str(scene), int(width), int(height), mode, accel, grid, backend, e, t, gpu_variant)
