@@ -82,10 +82,19 @@ fn main() -> gridtrace::Result<()> {
     let frame = prepared.camera.frame(res, res);
     let camera: Vec<Ray> = (0..res * res).map(|i| frame.ray(i % res, i / res)).collect();
     let (o, d) = gridtrace_bench::query_study::incoherent_rays(prepared.accel.bounds(), n_incoherent, 7);
-    let incoherent: Vec<Ray> = o.iter().zip(&d).map(|(o, d)| Ray::new((*o).into(), (*d).into())).collect();
-    println!("\n| rays, layout | nodes tested / ray | node fetches / ray | triangle tests / ray | node bytes / ray | triangle bytes / ray | bytes / ray |");
+    let incoherent: Vec<Ray> = o
+        .iter()
+        .zip(&d)
+        .map(|(o, d)| Ray::new((*o).into(), (*d).into()))
+        .collect();
+    println!(
+        "\n| rays, layout | nodes tested / ray | node fetches / ray | triangle tests / ray | node bytes / ray | triangle bytes / ray | bytes / ray |"
+    );
     println!("|---|---:|---:|---:|---:|---:|---:|");
-    for (name, rays) in [(format!("camera {res}x{res}"), &camera), (format!("incoherent {n_incoherent}"), &incoherent)] {
+    for (name, rays) in [
+        (format!("camera {res}x{res}"), &camera),
+        (format!("incoherent {n_incoherent}"), &incoherent),
+    ] {
         let walk_binary = |r: &Ray, any: bool| {
             let mut c = TraversalCounters::default();
             let h = if any {
@@ -94,7 +103,13 @@ fn main() -> gridtrace::Result<()> {
                 gridtrace::gpu::bvh::walk::<false, _>(&binary, &b.bvh.prims, tris, r, 0.0, f32::INFINITY, &mut c)
             };
             // Every node the binary walk tests it fetches once (a pop hands over the child's entry).
-            (h, Work { counters: c, fetches: c.cells })
+            (
+                h,
+                Work {
+                    counters: c,
+                    fetches: c.cells,
+                },
+            )
         };
         let walk_wide = |r: &Ray, any: bool| {
             let (mut c, mut w) = (TraversalCounters::default(), Wide8Work::default());
@@ -103,20 +118,46 @@ fn main() -> gridtrace::Result<()> {
             } else {
                 wide8::walk::<false, _>(&wide, tris, r, 0.0, f32::INFINITY, &mut c, &mut w)
             };
-            (h, Work { counters: c, fetches: w.node_fetches })
+            (
+                h,
+                Work {
+                    counters: c,
+                    fetches: w.node_fetches,
+                },
+            )
         };
         for any in [false, true] {
-            let results: Vec<((Hit, Work), (Hit, Work))> =
-                rays.par_iter().map(|r| (walk_binary(r, any), walk_wide(r, any))).collect();
-            let differ = results.iter().filter(|(a, b)| a.0.is_hit() != b.0.is_hit() || a.0.t != b.0.t).count();
+            let results: Vec<((Hit, Work), (Hit, Work))> = rays
+                .par_iter()
+                .map(|r| (walk_binary(r, any), walk_wide(r, any)))
+                .collect();
+            let differ = results
+                .iter()
+                .filter(|(a, b)| a.0.is_hit() != b.0.is_hit() || a.0.t != b.0.t)
+                .count();
             let hits = results.iter().filter(|(a, _)| a.0.is_hit()).count();
             let (wb, ww) = results
                 .iter()
-                .fold((Work::default(), Work::default()), |(x, y), (a, b)| (sum(x, a.1), sum(y, b.1)));
+                .fold((Work::default(), Work::default()), |(x, y), (a, b)| {
+                    (sum(x, a.1), sum(y, b.1))
+                });
             let q = if any { "any hit" } else { "closest" };
-            row(&format!("{name} {q}, binary"), rays.len(), size_of::<GpuBvhNode>() as u64, wb);
-            row(&format!("{name} {q}, wide8"), rays.len(), size_of::<GpuBvh8Node>() as u64, ww);
-            eprintln!("{name} {q}: {hits} of {} rays hit; {differ} differ in hit or t between the layouts", rays.len());
+            row(
+                &format!("{name} {q}, binary"),
+                rays.len(),
+                size_of::<GpuBvhNode>() as u64,
+                wb,
+            );
+            row(
+                &format!("{name} {q}, wide8"),
+                rays.len(),
+                size_of::<GpuBvh8Node>() as u64,
+                ww,
+            );
+            eprintln!(
+                "{name} {q}: {hits} of {} rays hit; {differ} differ in hit or t between the layouts",
+                rays.len()
+            );
         }
     }
     Ok(())

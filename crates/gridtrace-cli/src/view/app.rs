@@ -218,7 +218,13 @@ impl App {
         match result {
             Ok(l) => {
                 let mut notes = Vec::new();
-                let tracer = match Tracer::open_variants(l.prepared, self.ctx.as_ref(), self.backend, &self.gpu_variants, &mut notes) {
+                let tracer = match Tracer::open_variants(
+                    l.prepared,
+                    self.ctx.as_ref(),
+                    self.backend,
+                    &self.gpu_variants,
+                    &mut notes,
+                ) {
                     Ok(t) => t,
                     Err(e) => return self.loaded(path, Err(e)),
                 };

@@ -5,6 +5,7 @@
 
 use std::fmt::Write as _;
 
+use super::variants::SHORT_STACK_MAX;
 use super::walks::bvh::binary::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
 use crate::accel::bvh;
@@ -12,7 +13,6 @@ use crate::accel::grid::proximity;
 use crate::accel::irregular;
 use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_PAD, SLACK_ULPS};
 use crate::render::Mode;
-use super::variants::SHORT_STACK_MAX;
 
 /// Counter slots of the `counters` array (atomic u32s). Slots 0 and 1 are the two ray queues'
 /// lengths, alternating as input and output per bounce (the pass uniform says which).

@@ -227,8 +227,7 @@ fn compile(
                         )
                     }
                 };
-                let constants: Vec<(&str, f64)> =
-                    s.overrides.iter().copied().chain(variants.overrides()).collect();
+                let constants: Vec<(&str, f64)> = s.overrides.iter().copied().chain(variants.overrides()).collect();
                 dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some(s.label),
                     layout: Some(&layout_of(s)),

@@ -86,7 +86,11 @@ impl GpuRenderer {
     }
 
     /// `new` with the kernels and layouts `variants` choose (same images and hits, other speed).
-    pub fn with_variants(ctx: Arc<GpuContext>, prepared: &PreparedScene, variants: &GpuVariants) -> Result<GpuRenderer> {
+    pub fn with_variants(
+        ctx: Arc<GpuContext>,
+        prepared: &PreparedScene,
+        variants: &GpuVariants,
+    ) -> Result<GpuRenderer> {
         let dev = &ctx.device;
         let scene = SceneBuffers::upload(&ctx, prepared, variants)?;
         let uniform = |label: &str, size: u64| {

@@ -10,9 +10,10 @@
 //!   bytes: both child boxes). `wide8` is the 8-wide compressed node of Ylitie, Karras and Laine
 //!   (HPG 2017), built from the CPU's 8-wide SAH tree: 80 bytes for eight children, boxes
 //!   quantized to 8 bits per plane against a per-node grid, children visited in the ray's
-//!   octant order. They report about 1.6-2x the binary BVH's incoherent-ray rate on NVIDIA,
-//!   from a third of the node fetches and about half the bytes per ray (`gridtrace-bench
-//!   --bin gpu_variant_work` counts both here).
+//!   octant order. The paper finds it clearly faster than binary BVHs for incoherent rays on
+//!   NVIDIA GPUs, from fewer node fetches and fewer bytes per ray (tray_racing's wgpu compute
+//!   shader reaches 1.2-1.5 Grays/s on an RTX 4070 Ti with it, as issue 32 cites); the
+//!   example `gpu_variant_work` (gridtrace-bench) counts both for our trees.
 //! - `stack=private|short|shortN`: where the BVH walk keeps its traversal stack. `private` is an
 //!   array of `BVH_STACK` (97) entries per thread: local memory on GPUs (cached in L1, but
 //!   naga zero-fills it per ray). `short` keeps the top 8 entries (`shortN`: N, 1..=16) in
@@ -161,7 +162,12 @@ impl GpuVariants {
     pub fn changes(&self) -> String {
         let d = GpuVariants::default().to_string();
         let own = self.to_string();
-        let diff: Vec<&str> = own.split(',').zip(d.split(',')).filter(|(a, b)| a != b).map(|p| p.0).collect();
+        let diff: Vec<&str> = own
+            .split(',')
+            .zip(d.split(','))
+            .filter(|(a, b)| a != b)
+            .map(|p| p.0)
+            .collect();
         if diff.is_empty() {
             "default".to_string()
         } else {
@@ -237,7 +243,12 @@ impl FromStr for GpuVariants {
         if s.is_empty() || s == "default" {
             return Ok(v);
         }
-        let keys = || KEYS.iter().map(|(k, vals)| format!("{k}={vals}")).collect::<Vec<_>>().join(", ");
+        let keys = || {
+            KEYS.iter()
+                .map(|(k, vals)| format!("{k}={vals}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         for pair in s.split(',').map(str::trim) {
             let Some((key, value)) = pair.split_once('=') else {
                 return Err(format!("GPU variant '{pair}' is not KEY=VALUE; valid: {}", keys()));

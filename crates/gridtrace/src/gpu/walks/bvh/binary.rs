@@ -12,9 +12,9 @@
 
 use glam::Vec3;
 
-use crate::gpu::layout::GpuBvhNode;
 use crate::accel::bvh::{Bvh, BvhNode, DIR_TINY, FAR_SCALE, STACK, T_SLOP};
 use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
+use crate::gpu::layout::GpuBvhNode;
 use crate::{Error, Result};
 
 /// A stack entry (and a node's child): an inner node's index, or, with `LEAF_BIT` set, a

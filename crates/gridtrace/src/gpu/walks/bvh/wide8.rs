@@ -16,7 +16,7 @@
 
 use glam::Vec3;
 
-use crate::accel::bvh::{BvhAccel, DIR_TINY, FAR_SCALE, STACK, T_SLOP, WIDTH};
+use crate::accel::bvh::{BvhAccel, DIR_TINY, FAR_SCALE, STACK, T_SLOP, WIDTH, WideNode};
 use crate::accel::triangle::TriAccel4;
 use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::gpu::layout::GpuBvh8Node;
@@ -112,34 +112,46 @@ fn assign_slots(children: &[Child], centre: Vec3) -> Vec<usize> {
     slot_of
 }
 
+/// The children of a CPU wide node, in its slot order (unused slots have inverted boxes).
+fn children_of(w: &WideNode) -> Vec<Child> {
+    (0..WIDTH)
+        .filter(|&k| w.planes[0][0][k] <= w.planes[1][0][k])
+        .map(|k| {
+            let r = w.child[k];
+            Child {
+                bounds: Aabb {
+                    min: Vec3::new(w.planes[0][0][k], w.planes[0][1][k], w.planes[0][2][k]),
+                    max: Vec3::new(w.planes[1][0][k], w.planes[1][1][k], w.planes[1][2][k]),
+                },
+                leaf: (r.count() > 0).then_some(r.count()),
+                first: if r.count() > 0 {
+                    r.index() as usize * TriAccel4::LANES
+                } else {
+                    r.index() as usize
+                },
+            }
+        })
+        .collect()
+}
+
+/// Stores the quantized planes (lo x, y, z, hi x, y, z; a byte per slot) as `q0..q2`.
+fn pack_planes(n: &mut GpuBvh8Node, planes: &[[u8; WIDTH]; 6]) {
+    let word = |row: &[u8; WIDTH], half: usize| u32::from_le_bytes(std::array::from_fn(|i| row[4 * half + i]));
+    let rows: [u32; 12] = std::array::from_fn(|i| word(&planes[i / 2], i % 2));
+    n.q0 = [rows[0], rows[1], rows[2], rows[3]];
+    n.q1 = [rows[4], rows[5], rows[6], rows[7]];
+    n.q2 = [rows[8], rows[9], rows[10], rows[11]];
+}
+
 impl Wide8 {
     /// The wide tree of `b`, quantized. Errors if it has more than `MAX_NODES` nodes.
     pub fn build(b: &BvhAccel) -> Result<Wide8> {
-        let lanes = TriAccel4::LANES;
         let mut nodes = vec![bytemuck::Zeroable::zeroed()];
         let mut prims = Vec::with_capacity(b.bvh.prims.len());
         // (CPU node, GPU node, position in the parent)
         let mut todo = vec![(0usize, 0usize, STACK_DONE)];
         while let Some((cpu, gpu, parent)) = todo.pop() {
-            let w = &b.nodes[cpu];
-            let children: Vec<Child> = (0..WIDTH)
-                .filter(|&k| w.planes[0][0][k] <= w.planes[1][0][k])
-                .map(|k| {
-                    let r = w.child[k];
-                    Child {
-                        bounds: Aabb {
-                            min: Vec3::new(w.planes[0][0][k], w.planes[0][1][k], w.planes[0][2][k]),
-                            max: Vec3::new(w.planes[1][0][k], w.planes[1][1][k], w.planes[1][2][k]),
-                        },
-                        leaf: (r.count() > 0).then_some(r.count()),
-                        first: if r.count() > 0 {
-                            r.index() as usize * lanes
-                        } else {
-                            r.index() as usize
-                        },
-                    }
-                })
-                .collect();
+            let children = children_of(&b.nodes[cpu]);
             let bounds = children.iter().fold(Aabb::EMPTY, |acc, c| acc.union(c.bounds));
             let slot_of = assign_slots(&children, bounds.center());
             let mut by_slot: [Option<Child>; WIDTH] = [None; WIDTH];
@@ -147,10 +159,14 @@ impl Wide8 {
                 by_slot[s] = Some(*c);
             }
             let p = if children.is_empty() { Vec3::ZERO } else { bounds.min };
-            let e: [u32; 3] =
-                std::array::from_fn(|a| exponent(p[a], bounds.max[a] - p[a], &children, a));
+            let e: [u32; 3] = std::array::from_fn(|a| exponent(p[a], bounds.max[a] - p[a], &children, a));
             let mut n = GpuBvh8Node {
-                p_e: [p.x.to_bits(), p.y.to_bits(), p.z.to_bits(), e[0] | e[1] << 8 | e[2] << 16],
+                p_e: [
+                    p.x.to_bits(),
+                    p.y.to_bits(),
+                    p.z.to_bits(),
+                    e[0] | e[1] << 8 | e[2] << 16,
+                ],
                 info: [nodes.len() as u32, prims.len() as u32, 0, parent],
                 ..bytemuck::Zeroable::zeroed()
             };
@@ -182,11 +198,7 @@ impl Wide8 {
                     }
                 }
             }
-            let word = |row: &[u8; WIDTH], half: usize| u32::from_le_bytes(row[4 * half..4 * half + 4].try_into().unwrap());
-            let rows: [u32; 12] = std::array::from_fn(|i| word(&planes[i / 2], i % 2));
-            n.q0 = rows[0..4].try_into().unwrap();
-            n.q1 = rows[4..8].try_into().unwrap();
-            n.q2 = rows[8..12].try_into().unwrap();
+            pack_planes(&mut n, &planes);
             nodes[gpu] = n;
         }
         Ok(Wide8 { nodes, prims })
@@ -354,7 +366,9 @@ mod tests {
         while let Some((cpu, gpu)) = todo.pop() {
             reached[gpu] += 1;
             let (cn, gn) = (&accel.nodes[cpu], &w.nodes[gpu]);
-            let cpu_children: Vec<usize> = (0..WIDTH).filter(|&k| cn.planes[0][0][k] <= cn.planes[1][0][k]).collect();
+            let cpu_children: Vec<usize> = (0..WIDTH)
+                .filter(|&k| cn.planes[0][0][k] <= cn.planes[1][0][k])
+                .collect();
             assert_eq!((0..WIDTH).filter(|&s| gn.used(s)).count(), cpu_children.len());
             let node_box = cpu_children.iter().fold(Aabb::EMPTY, |acc, &k| {
                 acc.union(Aabb {
