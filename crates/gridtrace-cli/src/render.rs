@@ -135,6 +135,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             if gpu.context().is_software() {
                 println!("        (a software adapter: CPU speed, not GPU speed)");
             }
+            println!("        gpu variants: {}", gpu.variants().changes());
         }
         None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
     }

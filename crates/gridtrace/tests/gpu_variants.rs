@@ -160,7 +160,7 @@ fn tiles_order_across_tile_boundaries() {
     let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
     let mut tiles = GpuRenderer::with_variants(ctx.clone(), &scene, &v("order=tiles,appends=workgroup")).unwrap();
     let opts = RenderOptions::new(1100, 960, Mode::Cast, AccelKind::Grid);
-    assert!(1100 * 960 > gridtrace::gpu::MAX_TILE_PIXELS && gridtrace::gpu::MAX_TILE_PIXELS % 1100 != 0);
+    const { assert!(1100 * 960 > gridtrace::gpu::MAX_TILE_PIXELS && !gridtrace::gpu::MAX_TILE_PIXELS.is_multiple_of(1100)) };
     let want = render(&mut base, &scene, &opts);
     let got = render(&mut tiles, &scene, &opts);
     compare_images("knot-box 1100x960 tiles", true, &want, &got);
