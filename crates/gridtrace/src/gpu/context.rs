@@ -176,7 +176,8 @@ impl GpuContext {
         self.check_errors()
     }
 
-    /// Copies `size` bytes of `src` (from offset 0) back to the CPU.
+    /// Copies `size` bytes of `src` (from offset 0) back to the CPU: one submission and one
+    /// wait (a host round trip).
     pub fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
         if size == 0 {
             return Ok(Vec::new());
@@ -190,8 +191,22 @@ impl GpuContext {
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(src, 0, &staging, 0, Some(size));
         self.queue.submit([enc.finish()]);
+        self.map_read(&staging, size)
+    }
+
+    /// The first `size` bytes of `staging` (a `MAP_READ` buffer that submitted work fills),
+    /// once that work is done: waits, maps, copies out and unmaps.
+    pub fn map_read(&self, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        self.map_read_with(staging, size, |raw| raw.to_vec())
+    }
+
+    /// `map_read`, handing the mapped bytes to `f` instead of copying them out.
+    pub fn map_read_with<R>(&self, staging: &wgpu::Buffer, size: u64, f: impl FnOnce(&[u8]) -> R) -> Result<R> {
         let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        staging.map_async(wgpu::MapMode::Read, ..size, move |r| {
             let _ = tx.send(r);
         });
         self.wait()?;
@@ -200,11 +215,13 @@ impl GpuContext {
             Ok(Err(e)) => return Err(Error::Gpu(format!("mapping a result buffer failed: {e}"))),
             Err(_) => return Err(Error::Gpu("mapping a result buffer did not complete".into())),
         }
-        let data = staging
-            .get_mapped_range(..)
-            .map_err(|e| Error::Gpu(format!("reading a result buffer failed: {e}")))?
-            .to_vec();
+        let out = {
+            let view = staging
+                .get_mapped_range(..size)
+                .map_err(|e| Error::Gpu(format!("reading a result buffer failed: {e}")))?;
+            f(&view)
+        };
         staging.unmap();
-        Ok(data)
+        Ok(out)
     }
 }
