@@ -29,7 +29,10 @@ pub fn write_reports(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(paths.to_vec())
 }
 
-pub const CSV_HEADER: &str = "scene,backend,mode,accel,width,height,grid,reps,best_ms,median_ms,mean_ms,eye_rays,shadow_rays,reflection_rays,total_rays,mrays_per_s,paper_ms,speedup,gpu_wall_ms";
+pub const CSV_HEADER: &str = "scene,backend,mode,accel,width,height,grid,reps,best_ms,median_ms,mean_ms,eye_rays,shadow_rays,reflection_rays,total_rays,mrays_per_s,paper_ms,speedup,gpu_wall_ms,gpu_ms,gpu_round_trips,gpu_bytes_up,gpu_bytes_down,raygen_ms,indirect_ms,traverse_ms,shade_ms,occlusion_ms,resolve_ms";
+
+/// The GPU stages that get a CSV column each (`*_ms`), in kernel order.
+const CSV_STAGES: [&str; 6] = ["raygen", "indirect", "traverse", "shade", "occlusion", "resolve"];
 
 pub fn csv(rows: &[Row]) -> String {
     let mut s = String::from(CSV_HEADER);
@@ -38,7 +41,7 @@ pub fn csv(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
             r.scene,
             r.backend.name(),
             r.mode,
@@ -57,7 +60,16 @@ pub fn csv(rows: &[Row]) -> String {
             r.mrays_per_s,
             opt(r.paper_ms),
             opt(r.speedup),
-            opt(r.gpu_wall_ms)
+            opt(r.gpu_wall_ms),
+            opt(r.gpu_ms),
+            r.gpu_round_trips.map_or(String::new(), |n| n.to_string()),
+            r.gpu_bytes_up.map_or(String::new(), |n| n.to_string()),
+            r.gpu_bytes_down.map_or(String::new(), |n| n.to_string()),
+            CSV_STAGES
+                .iter()
+                .map(|k| opt(r.gpu_stages_ms.as_ref().and_then(|m| m.get(*k).copied())))
+                .collect::<Vec<_>>()
+                .join(",")
         );
     }
     s
@@ -183,6 +195,7 @@ pub fn markdown(report: &BenchReport) -> String {
     paper_tables(&mut md, report);
 
     memory_section(&mut md, report);
+    gpu_frames_section(&mut md, report);
     grid_sweep_section(&mut md, report);
     scaling_section(&mut md, report);
     build_scaling_section(&mut md, report);
@@ -239,6 +252,32 @@ fn memory_section(md: &mut String, report: &BenchReport) {
             s.memory_gpu.as_ref().map_or("-".into(), list),
             s.memory_gpu_total.map_or("-".into(), bytes),
             bytes(s.memory_paper_model)
+        );
+    }
+}
+
+/// The GPU rows' best frames: wall time beside GPU time, round trips and bytes each way.
+fn gpu_frames_section(md: &mut String, report: &BenchReport) {
+    let rows: Vec<_> = report.matrix.rows.iter().filter(|r| r.gpu_wall_ms.is_some()).collect();
+    if rows.is_empty() {
+        return;
+    }
+    md.push_str("\n## GPU frames (best repetition)\n\nWall: the host's clock from the first upload to the image in host memory (the tables' times). GPU: the stages' timestamps summed. Their difference is submission, readback and host work.\n\n| scene | mode | accel | size | wall ms | GPU ms | round trips | bytes up | bytes down |\n|---|---|---|---|---:|---:|---:|---:|---:|\n");
+    let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {}x{} | {} | {} | {} | {} | {} |",
+            r.scene,
+            r.mode,
+            r.accel,
+            r.width,
+            r.height,
+            opt(r.gpu_wall_ms),
+            opt(r.gpu_ms),
+            r.gpu_round_trips.unwrap_or(0),
+            r.gpu_bytes_up.map_or("-".into(), bytes),
+            r.gpu_bytes_down.map_or("-".into(), bytes)
         );
     }
 }
