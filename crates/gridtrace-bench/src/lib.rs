@@ -8,6 +8,7 @@
 pub mod ablation;
 pub mod build_scaling;
 pub mod charts;
+pub mod hardware;
 pub mod irregular;
 pub mod query_study;
 pub mod rays;

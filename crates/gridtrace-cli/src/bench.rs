@@ -123,6 +123,49 @@ pub struct BenchArgs {
     /// Write the hit t of each exported ray as one little-endian f32 (inf for a miss).
     #[arg(long)]
     export_hits: Option<PathBuf>,
+    /// Run a prepared suite instead of the matrix. `hardware`: what a first run on GPU
+    /// hardware must answer, within 5 minutes on one GPU (every structure and GPU variant on
+    /// the Stanford Bunny, the Dragon and the paper's scenes at 1920x1080 and one 4096x4096
+    /// frame, GPU results checked against the CPU's; 1M camera and 1M incoherent rays per mesh;
+    /// GPU grid builds of 100k-10M triangles; the CPU cores for the ratios). Needs a GPU
+    /// adapter (a software one is used with a loud warning). With --quick: a small run (a
+    /// software adapter finishes it in under 3 minutes). Writes hardware.json and
+    /// hardware.md into --out (default: hardware-suite).
+    #[arg(long, value_enum, value_name = "SUITE")]
+    suite: Option<Suite>,
+}
+
+/// The prepared suites.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Suite {
+    Hardware,
+}
+
+/// `--suite hardware`.
+fn run_hardware_suite(a: &BenchArgs) -> gridtrace::Result<()> {
+    let t0 = Instant::now();
+    let plan = if a.quick {
+        bench::hardware::Plan::quick()
+    } else {
+        bench::hardware::Plan::full()
+    };
+    let gpu = std::sync::Arc::new(open_gpu(BenchBackendArg::Gpu)?.expect("the GPU backend opens a device or fails"));
+    let data_dir = scenes::find_data_dir(a.data_dir.as_deref());
+    let variants = vec!["default".to_string()];
+    let mut log = |s: &str| println!("{s}");
+    let report = bench::hardware::run(&plan, gpu, data_dir.as_deref(), &variants, &mut log)?;
+    let dir = a.out.clone().unwrap_or_else(|| PathBuf::from("hardware-suite"));
+    for f in bench::hardware::write(&report, &dir)? {
+        println!("wrote {}", f.display());
+    }
+    for m in &report.mismatches {
+        println!("MISMATCH: {m}");
+    }
+    for s in &report.skipped {
+        println!("skipped: {s}");
+    }
+    println!("hardware suite finished in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
 }
 
 /// Opens the GPU for the chosen backend; `Ok(None)` means CPU only. Prints the adapter.
@@ -153,6 +196,9 @@ fn open_gpu(b: BenchBackendArg) -> gridtrace::Result<Option<GpuContext>> {
 }
 
 pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
+    if a.suite == Some(Suite::Hardware) {
+        return run_hardware_suite(&a);
+    }
     let t0 = Instant::now();
     let cfg = config(&a)?;
     let backend = a.backend.unwrap_or(if a.quick {
@@ -573,8 +619,8 @@ impl Run<'_> {
     /// The reports, the charts, and one ray-traced picture per scene that ran.
     fn write_out(&self, dir: &std::path::Path, report: &BenchReport) -> gridtrace::Result<()> {
         let (cfg, data_dir, first_res) = (self.cfg, &self.data_dir, self.first_res());
-        let mut files = bench::report::write_reports(&report, dir)?;
-        files.extend(bench::charts::write_charts(&report, dir)?);
+        let mut files = bench::report::write_reports(report, dir)?;
+        files.extend(bench::charts::write_charts(report, dir)?);
         // One ray-traced picture per scene that ran, to see what was measured.
         for s in &report.matrix.scenes {
             let bs = scenes::build_paper_scene(&s.name, data_dir.as_deref())?;
