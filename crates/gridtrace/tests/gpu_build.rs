@@ -71,7 +71,10 @@ fn compare(cpu: &Grid, gpu: &GpuGrid, tris: &[TriAccel], what: &str) -> usize {
     let mut differing = 0;
     for (i, (g, c)) in cells.iter().zip(&cpu.cells).enumerate() {
         if g.count > 0 {
-            assert_eq!(g.start, start, "{what}: cell {i} start is not the prefix sum of the counts");
+            assert_eq!(
+                g.start, start,
+                "{what}: cell {i} start is not the prefix sum of the counts"
+            );
         }
         start += g.count;
         let mut got = refs[g.start as usize..][..g.count as usize].to_vec();
@@ -80,7 +83,10 @@ fn compare(cpu: &Grid, gpu: &GpuGrid, tris: &[TriAccel], what: &str) -> usize {
         if g.count > SORT_MAX_REFS {
             got.sort_unstable();
         } else {
-            assert!(got.windows(2).all(|w| w[0] < w[1]), "{what}: cell {i} not in triangle order");
+            assert!(
+                got.windows(2).all(|w| w[0] < w[1]),
+                "{what}: cell {i} not in triangle order"
+            );
         }
         if got == want {
             continue;
@@ -102,11 +108,17 @@ fn compare(cpu: &Grid, gpu: &GpuGrid, tris: &[TriAccel], what: &str) -> usize {
     }
     assert_eq!(start as usize, refs.len(), "{what}: counts and references");
     // Rounding may move a few boundary triangles, never a real share of them.
-    assert!(differing <= 8 + cpu.refs.len() / 1000, "{what}: {differing} boundary pairs differ");
+    assert!(
+        differing <= 8 + cpu.refs.len() / 1000,
+        "{what}: {differing} boundary pairs differ"
+    );
     let occupied: Vec<bool> = cells.iter().map(|c| c.count > 0).collect();
     let want_dist = chebyshev_distance_transform(dims.to_array(), &occupied);
     for (i, (g, d)) in cells.iter().zip(&want_dist).enumerate() {
-        assert_eq!(g.dist, *d, "{what}: cell {i} distance is not the transform of the GPU's occupancy");
+        assert_eq!(
+            g.dist, *d,
+            "{what}: cell {i} distance is not the transform of the GPU's occupancy"
+        );
     }
     if differing > 0 {
         eprintln!("{what}: {differing} boundary (cell, triangle) pairs differ from the CPU's");
