@@ -174,6 +174,9 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         } else {
             renderer.render_with_progress(&camera, &lights, &opts, Some(&tick))?
         };
+        for n in renderer.take_notes() {
+            println!("note: {n}");
+        }
         frames.push(frame.stats);
         if let Some(g) = &frame.gpu {
             last_gpu = Some(g.clone());

@@ -60,6 +60,9 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         let lights = circle_lights(&lights0, camera0.up, centre, turn);
         let t = Instant::now();
         let f = tracer.render(&camera, &lights, &opts)?;
+        for n in tracer.take_notes() {
+            println!("note: {n}");
+        }
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let gpu_ms = f
             .gpu
