@@ -153,7 +153,7 @@ fn run_hardware_suite(a: &BenchArgs) -> gridtrace::Result<()> {
     };
     let gpu = std::sync::Arc::new(open_gpu(BenchBackendArg::Gpu)?.expect("the GPU backend opens a device or fails"));
     let data_dir = scenes::find_data_dir(a.data_dir.as_deref());
-    let variants = vec!["default".to_string()];
+    let variants = gridtrace::gpu::GpuVariants::suite();
     let mut log = |s: &str| println!("{s}");
     let report = bench::hardware::run(&plan, gpu, data_dir.as_deref(), &variants, &mut log)?;
     let dir = a.out.clone().unwrap_or_else(|| PathBuf::from("hardware-suite"));

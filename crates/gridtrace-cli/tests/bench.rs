@@ -263,13 +263,27 @@ fn hardware_suite_quick_runs_every_part() {
             }
         }
     }
+    // Every GPU variant ran where it applies: the BVH's layout and stack on the BVH only.
+    let variants = json["variants"].as_array().unwrap();
+    assert!(variants.len() >= 7, "{variants:?}");
+    let of = |accel: &str| -> std::collections::BTreeSet<String> {
+        frames
+            .iter()
+            .filter(|r| r["backend"] == "gpu" && r["accel"] == accel)
+            .map(|r| r["variant"].as_str().unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(of("bvh").len(), variants.len(), "{:?}", of("bvh"));
+    assert!(of("bvh").iter().any(|v| v.contains("wide8")));
+    assert_eq!(of("grid").len(), variants.len() - 2, "{:?}", of("grid"));
     let big = json["big_frame"].as_array().unwrap();
     assert_eq!(big.len(), 2, "{md}");
     assert!(big.iter().all(|r| r["width"] == 512 && r["height"] == 512));
     let rays = json["rays"].as_array().unwrap();
     for set in ["camera", "incoherent"] {
+        // Four structures, the BVH with every variant, the others with those that apply.
         let gpu_rows = rays.iter().filter(|r| r["set"] == set && r["backend"] == "gpu").count();
-        assert_eq!(gpu_rows, 4, "{set}: {md}");
+        assert_eq!(gpu_rows, variants.len() + 3 * (variants.len() - 2), "{set}: {md}");
     }
     assert!(rays.iter().all(|r| r["differing_from_cpu"].as_f64().unwrap() <= 0.001));
     assert!(!json["builds"].as_array().unwrap().is_empty(), "{md}");

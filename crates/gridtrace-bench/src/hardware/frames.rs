@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer};
+use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
 use gridtrace::render::differing_pixels;
 use gridtrace::render::{Image, RenderOptions};
 use gridtrace::scene::PreparedScene;
@@ -81,14 +81,17 @@ pub fn frame_accels() -> Vec<AccelKind> {
         .collect()
 }
 
-/// A renderer of `prepared` with the GPU variant `variant` (`default`: today's kernels).
-pub fn open_gpu(ctx: &Arc<GpuContext>, prepared: &PreparedScene, variant: &str) -> Result<GpuRenderer> {
-    if variant != "default" {
-        return Err(gridtrace::Error::InvalidInput(format!(
-            "unknown GPU variant '{variant}'"
-        )));
-    }
-    GpuRenderer::new(ctx.clone(), prepared)
+/// A renderer of `prepared` with the GPU variants `variant`.
+pub fn open_gpu(ctx: &Arc<GpuContext>, prepared: &PreparedScene, variant: &GpuVariants) -> Result<GpuRenderer> {
+    GpuRenderer::with_variants(ctx.clone(), prepared, variant)
+}
+
+/// The variants that change anything for `accel`'s structure: the default, and each one that
+/// applies (the BVH's layout and stack change only the BVH's walk).
+pub fn variants_for(variants: &[GpuVariants], accel: AccelKind) -> impl Iterator<Item = &GpuVariants> {
+    variants
+        .iter()
+        .filter(move |v| **v == GpuVariants::default() || v.applies_to(accel.structure_name()))
 }
 
 /// Every scene x structure x variant x mode, as long as the budget lasts.
@@ -97,7 +100,7 @@ pub fn frame_matrix(
     plan: &Plan,
     gpu: &Arc<GpuContext>,
     scenes: &[BenchScene],
-    variants: &[String],
+    variants: &[GpuVariants],
     budget: &Budget,
     skipped: &mut Vec<String>,
     mismatches: &mut Vec<String>,
@@ -119,11 +122,12 @@ pub fn frame_matrix(
                 rows.push(row);
                 reference.push(image.to_rgb8());
             }
-            for variant in variants {
+            for variant in variants_for(variants, accel) {
                 let mut r = open_gpu(gpu, &prepared, variant)?;
+                let label = variant.changes();
                 for (k, &mode) in plan.modes.iter().enumerate() {
                     let opts = RenderOptions::new(w, h, mode, accel);
-                    let row = gpu_row(plan, bs, &prepared, &mut r, &opts, variant, &reference[k], mismatches)?;
+                    let row = gpu_row(plan, bs, &prepared, &mut r, &opts, &label, &reference[k], mismatches)?;
                     log(&row_line(&row));
                     rows.push(row);
                 }
@@ -155,7 +159,7 @@ pub fn big_frame(
     let opts = RenderOptions::new(w, h, Mode::Trace, AccelKind::Bvh);
     let (cpu, image) = cpu_row(bs, &prepared, &opts)?;
     log(&row_line(&cpu));
-    let mut r = open_gpu(gpu, &prepared, "default")?;
+    let mut r = open_gpu(gpu, &prepared, &GpuVariants::default())?;
     let one = Plan {
         reps: 1,
         warmup_ms: 0.0,

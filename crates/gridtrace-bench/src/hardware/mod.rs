@@ -24,7 +24,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use gridtrace::gpu::GpuContext;
+use gridtrace::gpu::{GpuContext, GpuVariants};
 use gridtrace::{Mode, Result};
 
 use crate::build_scaling::BuildPoint;
@@ -151,7 +151,8 @@ pub struct HardwareReport {
     pub machine: Machine,
     pub adapter: AdapterRecord,
     pub plan: Plan,
-    /// The GPU variants run (`default` first).
+    /// The GPU variants run (`--gpu-variant` syntax; the default first). Each row names its
+    /// variant by what differs from the default (`GpuVariants::changes`).
     pub variants: Vec<String>,
     pub frames: Vec<FrameRow>,
     pub big_frame: Vec<FrameRow>,
@@ -234,7 +235,7 @@ pub fn run(
     plan: &Plan,
     gpu: Arc<GpuContext>,
     data_dir: Option<&Path>,
-    variants: &[String],
+    variants: &[GpuVariants],
     log: &mut dyn FnMut(&str),
 ) -> Result<HardwareReport> {
     let mut budget = Budget {
@@ -315,7 +316,7 @@ pub fn run(
         machine: Machine::detect(Some(&gpu)),
         adapter,
         plan: plan.clone(),
-        variants: variants.to_vec(),
+        variants: variants.iter().map(|v| v.to_string()).collect(),
         frames,
         big_frame,
         rays,

@@ -8,11 +8,11 @@ use std::time::Instant;
 use serde::Serialize;
 
 use gridtrace::accel::{Hit, Ray};
-use gridtrace::gpu::GpuContext;
+use gridtrace::gpu::{GpuContext, GpuVariants};
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
 use gridtrace::{AccelKind, Mesh, Result};
 
-use super::frames::{frame_accels, open_gpu};
+use super::frames::{frame_accels, open_gpu, variants_for};
 use super::{Budget, Plan};
 use crate::query_study::incoherent_rays;
 use crate::timing::Summary;
@@ -54,7 +54,7 @@ pub fn ray_study(
     plan: &Plan,
     gpu: &Arc<GpuContext>,
     meshes: &[(String, Mesh)],
-    variants: &[String],
+    variants: &[GpuVariants],
     budget: &Budget,
     skipped: &mut Vec<String>,
     mismatches: &mut Vec<String>,
@@ -91,8 +91,9 @@ pub fn ray_study(
                 let row = head("cpu", "-").row(&rays, &cpu_times, &cpu_hits, 0.0);
                 log(&row_line(&row));
                 rows.push(row);
-                for variant in variants {
+                for variant in variants_for(variants, accel) {
                     let mut r = open_gpu(gpu, tm.prepared(), variant)?;
+                    let variant = variant.changes();
                     let (times, hits) = timed(plan.reps, || r.intersect(&rays, 0.0, f32::INFINITY, accel))?;
                     let differing = differing_hits(&hits, &cpu_hits);
                     if differing > MAX_DIFFERING_HITS {
@@ -102,7 +103,7 @@ pub fn ray_study(
                             100.0 * differing
                         ));
                     }
-                    let row = head("gpu", variant).row(&rays, &times, &hits, differing);
+                    let row = head("gpu", &variant).row(&rays, &times, &hits, differing);
                     log(&row_line(&row));
                     rows.push(row);
                 }
