@@ -13,8 +13,8 @@ use rayon::prelude::*;
 
 use super::rays::ray_of;
 use super::{QueryScene, merged::Merged};
-use crate::accel::Hit;
 use crate::Result;
+use crate::accel::Hit;
 
 /// Every hit of a batch of rays (Open3D's `list_intersections` keys): the hits of ray `i` are
 /// entries `ray_splits[i]..ray_splits[i + 1]`, nearest first (equal `t`: by geometry id, then

@@ -99,7 +99,12 @@ impl QueryScene {
     /// (identity when `None`); returns its id, 0 for the first and counting up (ids of removed
     /// geometries are not reused). Non-finite coordinates or transforms and faces out of range
     /// are errors naming the argument. Zero-area faces are kept in the numbering but never hit.
-    pub fn add_triangles(&mut self, vertices: Vec<[f32; 3]>, faces: Vec<[u32; 3]>, transform: Option<Mat4>) -> Result<u32> {
+    pub fn add_triangles(
+        &mut self,
+        vertices: Vec<[f32; 3]>,
+        faces: Vec<[u32; 3]>,
+        transform: Option<Mat4>,
+    ) -> Result<u32> {
         let g = Geometry::new(vertices, faces, transform)?;
         let id = self.next_id;
         self.next_id = id

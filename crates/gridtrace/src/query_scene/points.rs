@@ -19,9 +19,9 @@ use rayon::prelude::*;
 
 use super::merged::Merged;
 use super::{INVALID_ID, QueryScene};
+use crate::Result;
 use crate::accel::closest::ClosestPoint;
 use crate::accel::winding::is_inside;
-use crate::Result;
 
 /// Nearest points, one entry per query point (Open3D's `compute_closest_points` keys). A
 /// point with a non-finite coordinate, or any point of an empty scene: a NaN point, ids
