@@ -54,11 +54,12 @@ from ._gridtrace import NativeMesh as _NativeMesh  # noqa: E402
 from ._gridtrace import ACCELS as _ACCELS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
+from .scene import INVALID_ID, Scene  # noqa: E402
 
 #: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
 ACCELS: tuple = tuple(_ACCELS)
 
-__all__ = ["Mesh", "Hits", "render", "MISS", "ACCELS", "__version__"]
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "__version__"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)
