@@ -18,7 +18,9 @@ use gridtrace::query_scene::{Geometry, QueryScene};
 
 use crate::{options, to_py};
 
-/// An (N, K) C-contiguous float32 or uint32 array as a slice of rows, without copying.
+/// An (N, K) C-contiguous, aligned float32 or uint32 array as a slice of rows, without
+/// copying. The Python side makes arrays so (`np.require(..., requirements="CA")`): arrays
+/// that come back from a serialiser can be views into a byte buffer at any offset.
 fn rows<'a, T: numpy::Element + bytemuck::Pod, const K: usize>(
     a: &'a PyReadonlyArray2<'_, T>,
     what: &str,
@@ -29,7 +31,8 @@ fn rows<'a, T: numpy::Element + bytemuck::Pod, const K: usize>(
     }
     let flat = a
         .as_slice()
-        .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous")))?;
+        .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous and aligned")))?;
+    // The length is a multiple of K (checked above), so the cast cannot fail.
     Ok(bytemuck::cast_slice(flat))
 }
 

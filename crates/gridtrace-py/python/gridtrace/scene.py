@@ -39,7 +39,8 @@ def _batch(a, name: str, width: int):
 
 
 def _f32(a: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float32)
+    # C order and aligned: what the native side reads without a copy.
+    return np.require(a, dtype=np.float32, requirements="CA")
 
 
 def _chunked(flat: np.ndarray, call) -> Dict[str, np.ndarray]:
@@ -239,7 +240,12 @@ class Scene:
     def __setstate__(self, state):
         self._params = tuple(state["params"])
         accel, grid, irregular, backend = self._params
-        self._native = _NativeScene.from_parts(accel, grid, irregular, backend, state["next_id"], state["geometries"])
+        # Serialisers (Dask's among them) may hand arrays back as views of a buffer: make them
+        # the C-ordered arrays the native side reads.
+        geometries = [
+            (int(i), _f32(v), np.require(f, dtype=np.uint32, requirements="CA"), _f32(t)) for i, v, f, t in state["geometries"]
+        ]
+        self._native = _NativeScene.from_parts(accel, grid, irregular, backend, int(state["next_id"]), geometries)
 
     def __repr__(self) -> str:
         return f"gridtrace.Scene({len(self.geometry_ids)} geometries, {self.triangle_count} triangles, accel={self._params[0]!r}, backend={self._params[3]!r})"
