@@ -316,3 +316,33 @@ def test_large_batches_go_in_chunks(monkeypatch):
     got_list = s.list_intersections(rays)
     for k in want_list:
         assert np.array_equal(want_list[k], got_list[k]), k
+
+
+def test_geometry_and_the_lidar_example(tmp_path):
+    """`geometry` gives back what was added; the LiDAR example (built-in boxes) writes a PLY
+    whose points lie on the scene (distance ~0) and whose ranges match the points."""
+    import pathlib
+    import subprocess
+    import sys
+
+    s, _, _ = build()
+    v, f, t = s.geometry(0)
+    assert np.allclose(v, cube()[0]) and np.array_equal(f, cube()[1]) and np.allclose(t, TRANSFORM)
+    with pytest.raises(KeyError):
+        s.geometry(5)
+    example = pathlib.Path(__file__).resolve().parents[1] / "examples" / "lidar.py"
+    out = tmp_path / "scan.ply"
+    run = subprocess.run([sys.executable, str(example), str(out), "--meshes", str(tmp_path / "none")], capture_output=True, text=True, check=True)
+    assert "wrote" in run.stdout
+    data = out.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    n = int(data[:end].split(b"element vertex ")[1].split(b"\n")[0])
+    rec = np.frombuffer(data[end:], dtype=[("p", "<f4", 3), ("c", "u1", 3), ("r", "<f4")])
+    assert len(rec) == n > 10000
+    sys.path.insert(0, str(example.parent))
+    import lidar
+
+    scene, _ = lidar.build_scene(tmp_path / "none")
+    # Within rounding of t (grazing rays on the ground, up to ~30 m away, amplify it).
+    assert (scene.compute_distance(rec["p"]) <= 1e-4 * np.maximum(rec["r"], 1)).all()
+    assert np.allclose(np.linalg.norm(rec["p"] - [0, 0, 1.2], axis=1), rec["r"], rtol=1e-5)

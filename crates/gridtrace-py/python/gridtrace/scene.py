@@ -129,6 +129,15 @@ class Scene:
             raise ValueError(f"vertices must be a numeric (N, 3) array, got shape {v.shape} dtype {v.dtype}")
         self._native.update_vertices(_id(geometry_id), _f32(v))
 
+    def geometry(self, geometry_id: int):
+        """``(vertices, faces, transform)`` of a geometry as it was given (its own space);
+        ``KeyError`` for an unknown id."""
+        i = _id(geometry_id)
+        for gid, v, f, t in self._native.parts()[1]:
+            if gid == i:
+                return v, f, t
+        raise KeyError(f"unknown geometry id {geometry_id}")
+
     @property
     def geometry_ids(self) -> list:
         """The ids of the geometries in the scene, ascending."""
