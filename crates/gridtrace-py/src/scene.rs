@@ -27,7 +27,9 @@ fn rows<'a, T: numpy::Element + bytemuck::Pod, const K: usize>(
 ) -> PyResult<&'a [[T; K]]> {
     let shape = a.shape();
     if shape[1] != K {
-        return Err(PyValueError::new_err(format!("{what} must have shape (N, {K}), got {shape:?}")));
+        return Err(PyValueError::new_err(format!(
+            "{what} must have shape (N, {K}), got {shape:?}"
+        )));
     }
     let flat = a
         .as_slice()
@@ -41,7 +43,10 @@ fn transform(t: Option<PyReadonlyArray2<'_, f32>>) -> PyResult<Option<Mat4>> {
     let Some(t) = t else { return Ok(None) };
     let rows: &[[f32; 4]] = rows(&t, "transform")?;
     if rows.len() != 4 {
-        return Err(PyValueError::new_err(format!("transform must have shape (4, 4), got {:?}", t.shape())));
+        return Err(PyValueError::new_err(format!(
+            "transform must have shape (4, 4), got {:?}",
+            t.shape()
+        )));
     }
     let r: [[f32; 4]; 4] = [rows[0], rows[1], rows[2], rows[3]];
     Ok(Some(Mat4::from_cols_array_2d(&r).transpose()))
@@ -92,7 +97,12 @@ impl NativeScene {
         irregular: &str,
         backend: &str,
         next_id: u32,
-        geometries: Vec<(u32, PyReadonlyArray2<'_, f32>, PyReadonlyArray2<'_, u32>, PyReadonlyArray2<'_, f32>)>,
+        geometries: Vec<(
+            u32,
+            PyReadonlyArray2<'_, f32>,
+            PyReadonlyArray2<'_, u32>,
+            PyReadonlyArray2<'_, f32>,
+        )>,
     ) -> PyResult<Self> {
         let opts = options(accel, grid, irregular, backend)?;
         let mut parts = Vec::with_capacity(geometries.len());
@@ -106,7 +116,9 @@ impl NativeScene {
                 },
             ));
         }
-        let scene = py.detach(move || QueryScene::from_parts(opts, next_id, parts)).map_err(to_py)?;
+        let scene = py
+            .detach(move || QueryScene::from_parts(opts, next_id, parts))
+            .map_err(to_py)?;
         Ok(NativeScene {
             inner: RwLock::new(scene),
         })
@@ -155,7 +167,10 @@ impl NativeScene {
 
     /// (next_id, [(id, vertices, faces, transform)]): what pickling keeps.
     #[allow(clippy::type_complexity)]
-    fn parts<'py>(&self, py: Python<'py>) -> PyResult<(u32, Vec<(u32, Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)>)> {
+    fn parts<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(u32, Vec<(u32, Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)>)> {
         let s = self.read();
         let mut out = Vec::new();
         for id in s.ids() {
@@ -209,11 +224,17 @@ impl NativeScene {
         tfar: f32,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
-        let o = py.detach(|| self.read().test_occlusions(r, tnear, tfar)).map_err(to_py)?;
+        let o = py
+            .detach(|| self.read().test_occlusions(r, tnear, tfar))
+            .map_err(to_py)?;
         Ok(o.into_pyarray(py))
     }
 
-    fn count_intersections<'py>(&self, py: Python<'py>, rays: PyReadonlyArray2<'py, f32>) -> PyResult<Bound<'py, PyArray1<i32>>> {
+    fn count_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArray1<i32>>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
         let c = py.detach(|| self.read().count_intersections(r)).map_err(to_py)?;
         // Open3D's dtype (int32): a ray crossing two billion faces is not a case.
@@ -221,7 +242,11 @@ impl NativeScene {
         Ok(c.into_pyarray(py))
     }
 
-    fn list_intersections<'py>(&self, py: Python<'py>, rays: PyReadonlyArray2<'py, f32>) -> PyResult<Bound<'py, PyDict>> {
+    fn list_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
         let l = py.detach(|| self.read().list_intersections(r)).map_err(to_py)?;
         let d = PyDict::new(py);
@@ -234,7 +259,11 @@ impl NativeScene {
         Ok(d)
     }
 
-    fn compute_closest_points<'py>(&self, py: Python<'py>, points: PyReadonlyArray2<'py, f32>) -> PyResult<Bound<'py, PyDict>> {
+    fn compute_closest_points<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let p = rows::<f32, 3>(&points, "query_points")?;
         let c = py.detach(|| self.read().compute_closest_points(p)).map_err(to_py)?;
         let d = PyDict::new(py);
@@ -247,7 +276,12 @@ impl NativeScene {
     }
 
     /// `what`: "distance", "signed_distance", "occupancy" or "winding_number".
-    fn point_values<'py>(&self, py: Python<'py>, what: &str, points: PyReadonlyArray2<'py, f32>) -> PyResult<Bound<'py, PyArray1<f32>>> {
+    fn point_values<'py>(
+        &self,
+        py: Python<'py>,
+        what: &str,
+        points: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
         let p = rows::<f32, 3>(&points, "query_points")?;
         let v = py
             .detach(|| {

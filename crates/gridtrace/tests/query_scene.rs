@@ -28,6 +28,9 @@ struct Reference {
     closed_only: bool,
 }
 
+/// A geometry as `add_triangles` takes it: vertices, faces, transform.
+type Geom = (Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>);
+
 fn arrays(m: &Mesh) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (m.positions.iter().map(|p| p.to_array()).collect(), m.triangles.clone())
 }
@@ -35,7 +38,7 @@ fn arrays(m: &Mesh) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 /// Two closed meshes under transforms (an icosphere scaled, rotated and moved; a torus knot),
 /// with a zero-area face appended to the sphere; and, if `open`, a plane (open) under a
 /// rotation.
-fn geometries(open: bool) -> Vec<(Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>)> {
+fn geometries(open: bool) -> Vec<Geom> {
     let (mut v, mut f) = arrays(&procedural::icosphere(Vec3::ZERO, 0.6, 3));
     // A zero-area face (a repeated vertex): kept in the numbering, never hit.
     f.push([0, 0, 1]);
@@ -58,7 +61,7 @@ fn geometries(open: bool) -> Vec<(Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>)> {
     out
 }
 
-fn scene_of(geoms: &[(Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>)], opts: QueryOptions) -> QueryScene {
+fn scene_of(geoms: &[Geom], opts: QueryOptions) -> QueryScene {
     let mut s = QueryScene::new(opts);
     for (i, (v, f, t)) in geoms.iter().enumerate() {
         assert_eq!(s.add_triangles(v.clone(), f.clone(), *t).unwrap(), i as u32);
@@ -66,7 +69,7 @@ fn scene_of(geoms: &[(Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>)], opts: QueryO
     s
 }
 
-fn reference(geoms: &[(Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>)]) -> Reference {
+fn reference(geoms: &[Geom]) -> Reference {
     let mut tris = Vec::new();
     let mut names = Vec::new();
     for (id, (v, f, t)) in geoms.iter().enumerate() {
@@ -390,10 +393,11 @@ fn changes_equal_a_fresh_scene() {
         let mut scene = scene_of(&geoms, cpu(kind));
         scene.cast_rays(&rays[..1]).unwrap(); // built, so that the update is in place
         let mut moved = geoms.clone();
-        let wobble = |v: &[[f32; 3]]| -> Vec<[f32; 3]> {
-            v.iter().map(|p| [p[0] * 1.1, p[1] + 0.05 * p[0].sin(), p[2]]).collect()
-        };
-        moved[1].0 = wobble(&geoms[1].0);
+        moved[1].0 = geoms[1]
+            .0
+            .iter()
+            .map(|p| [p[0] * 1.1, p[1] + 0.05 * p[0].sin(), p[2]])
+            .collect();
         scene.update_vertices(1, moved[1].0.clone()).unwrap();
         scene.remove(2).unwrap();
         moved.pop();
@@ -461,7 +465,7 @@ fn gpu_rays_equal_cpu() {
         );
         let (c, g) = (on_cpu.cast_rays(&rays).unwrap(), on_gpu.cast_rays(&rays).unwrap());
         let mut odd = 0;
-        for i in 0..rays.len() {
+        for (i, q) in rays.iter().enumerate() {
             // GPU arithmetic may fuse multiply-adds: t within rounding; the face named may be
             // another of those at equal t (rays aimed at vertices and edges), but it must be one
             // the ray hits there.
@@ -481,7 +485,7 @@ fn gpu_rays_equal_cpu() {
                 .iter()
                 .position(|&n| n == (g.geometry_ids[i], g.primitive_ids[i]))
                 .unwrap();
-            let q = ray(&rays[i]).unwrap();
+            let q = ray(q).unwrap();
             match r.tris[k].intersect(q.origin, q.dir, 0.0, f32::INFINITY) {
                 Some(h) if close(h.t, g.t_hit[i]) => {}
                 // At the edge of the CPU test's slack the GPU's rounding may accept a face the

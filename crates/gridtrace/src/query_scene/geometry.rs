@@ -86,6 +86,8 @@ fn check_vertices(vertices: &[[f32; 3]], what: &str) -> Result<()> {
 /// Whether a world-space face has zero area: the faces the ray queries drop (`TraceMesh`).
 pub(crate) fn is_degenerate(world: &[[f32; 3]], f: [u32; 3]) -> bool {
     let [a, b, c] = f.map(|k| Vec3::from(world[k as usize]));
-    // The complement of `TraceMesh::from_mesh`'s test, NaN (an overflowing cross product) included.
-    !((b - a).cross(c - a).length_squared() > 0.0)
+    // The complement of `TraceMesh::from_mesh`'s test (`> 0.0`), NaN (an overflowing cross
+    // product) included.
+    let area2 = (b - a).cross(c - a).length_squared();
+    area2.is_nan() || area2 <= 0.0
 }
