@@ -53,6 +53,7 @@ use crate::query::QueryOptions;
 use crate::{Error, Result};
 
 mod all_hits;
+mod cpu_rays;
 mod geometry;
 mod merged;
 mod points;

@@ -1,10 +1,12 @@
-//! Closest hits and occlusion of ray batches (`cast_rays`, `test_occlusions`): rays checked
-//! and made `CHUNK` at a time (in parallel), traced by the merged mesh on its backend (the
-//! CPU's cores or the GPU), and the hits named by geometry and face.
+//! Closest hits and occlusion of ray batches (`cast_rays`, `test_occlusions`), the hits named
+//! by geometry and face. On the CPU the rays go straight to the structure's batch walks
+//! (`cpu_rays.rs`); where the backend traces on a GPU they are checked and made `CHUNK` at a
+//! time and traced by the merged mesh there (or on the CPU, if `auto` found no GPU).
 
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::cpu_rays;
 use super::merged::Merged;
 use super::{INVALID_ID, QueryScene};
 use crate::accel::{Hit, Ray};
@@ -56,7 +58,7 @@ pub(crate) fn ray_of(r: &[f32; 6]) -> Option<Ray> {
 
 /// A ray that stands in for one that cannot hit anything, so that the batch stays whole; its
 /// answer is replaced by a miss.
-const STAND_IN: Ray = Ray {
+pub(crate) const STAND_IN: Ray = Ray {
     origin: Vec3::ZERO,
     dir: Vec3::X,
 };
@@ -86,6 +88,11 @@ impl QueryScene {
         let Some(mesh) = m.mesh.as_ref() else {
             return Ok(out);
         };
+        if !self.opts.backend.traces_on_gpu() {
+            mesh.prepared().accel.check_current()?;
+            cpu_rays::cast(&m, mesh, rays, &mut out);
+            return Ok(out);
+        }
         for (c, chunk) in rays.chunks(CHUNK).enumerate() {
             let (made, good) = make(chunk);
             let hits = mesh.intersect_rays(&made, 0.0, f32::INFINITY)?;
@@ -119,6 +126,11 @@ impl QueryScene {
         let Some(mesh) = m.mesh.as_ref() else {
             return Ok(out);
         };
+        if !self.opts.backend.traces_on_gpu() {
+            mesh.prepared().accel.check_current()?;
+            cpu_rays::occluded(mesh, rays, t_near, t_far, &mut out);
+            return Ok(out);
+        }
         for (c, chunk) in rays.chunks(CHUNK).enumerate() {
             let (made, good) = make(chunk);
             let occluded = mesh.occluded_rays(&made, t_near, t_far)?;
