@@ -9,7 +9,9 @@ Workloads: 1M camera rays in image order (a 1000 x 1000 pinhole camera), 1M inco
 (from a sphere around the mesh towards random points of its box), 1M points uniform in the
 box. Rows: cast_rays, test_occlusions, count_intersections (incoherent rays),
 compute_closest_points, compute_signed_distance (points). Each figure is the best of --rounds
-calls of the whole query as a user makes it (array conversion included); peers use their own
+calls of the whole query as a user makes it (array conversion included), the contenders of a
+row timed in turn within each round, so that the load of a shared machine drifts over all of
+them alike; peers use their own
 threading (Open3D and fcpw all cores; embreex split over one Python thread per core, as it
 releases the GIL; Warp's CPU device runs a launch on one thread). Where a query is too slow for
 1M (trimesh's numpy engine and proximity queries, gridtrace's grids' nearest points) it runs
@@ -36,36 +38,51 @@ from bench_vs_embree import rays_at  # noqa: E402
 ROOT = HERE.parents[3]
 
 
-def best(f, rounds):
-    t, out = np.inf, None
-    for _ in range(rounds):
-        t0 = time.perf_counter()
-        out = f()
-        t = min(t, time.perf_counter() - t0)
-    return t, out
+class Bench:
+    """The contenders of each row, set up first and then timed in turn, round by round."""
 
-
-class Table:
     def __init__(self):
         self.rows = {}
 
-    def add(self, row, who, n, seconds, note=""):
-        rate = n / seconds / 1e6
-        self.rows.setdefault(row, []).append((who, rate, note))
-        print(f"  {row:<34} {who:<26} {rate:8.3f} M/s {note}", flush=True)
+    def add(self, row, who, n, fn, check=None, once=False, note=""):
+        """`fn()` answers `n` queries; `check(answer)` says how it agrees with gridtrace;
+        `once` runs it in the first round only (slow subsets)."""
+        self.rows.setdefault(row, []).append(dict(who=who, n=n, fn=fn, check=check, once=once, note=note, t=np.inf, out=None))
 
-    def report(self):
+    def run(self, rounds):
+        for r in range(rounds):
+            for row, entries in self.rows.items():
+                for e in entries:
+                    if e["once"] and r > 0:
+                        continue
+                    t0 = time.perf_counter()
+                    out = e["fn"]()
+                    e["t"] = min(e["t"], time.perf_counter() - t0)
+                    e["out"] = out
+                    print(f"  round {r + 1}: {row:<34} {e['who']:<22} {e['n'] / e['t'] / 1e6:8.3f} M/s", flush=True)
+
+    def report(self, truth):
         print("\n| query | gridtrace (M/s) | best peer (M/s) | gridtrace / best peer | all (M/s) |")
         print("|---|---|---|---|---|")
+        notes = []
         for row, entries in self.rows.items():
-            ours = max((e for e in entries if e[0].startswith("gridtrace")), key=lambda e: e[1])
-            peers = [e for e in entries if not e[0].startswith("gridtrace")]
-            all_ = ", ".join(f"{w} {r:.3g}" for w, r, _ in entries)
+            for e in entries:
+                e["rate"] = e["n"] / e["t"] / 1e6
+                if e["check"] is not None:
+                    notes.append(f"{row}, {e['who']}: agreement with gridtrace {e['check'](e['out']):.4f} {e['note']}")
+                elif e["note"]:
+                    notes.append(f"{row}, {e['who']}: {e['note']}")
+            ours = max((e for e in entries if e["who"].startswith("gridtrace")), key=lambda e: e["rate"])
+            peers = [e for e in entries if not e["who"].startswith("gridtrace")]
+            all_ = ", ".join(f"{e['who']} {e['rate']:.3g}" for e in entries)
             if peers:
-                bp = max(peers, key=lambda e: e[1])
-                print(f"| {row} | {ours[1]:.3g} ({ours[0]}) | {bp[1]:.3g} ({bp[0]}) | {ours[1] / bp[1]:.2f} | {all_} |")
+                bp = max(peers, key=lambda e: e["rate"])
+                print(f"| {row} | {ours['rate']:.3g} ({ours['who']}) | {bp['rate']:.3g} ({bp['who']}) | {ours['rate'] / bp['rate']:.2f} | {all_} |")
             else:
-                print(f"| {row} | {ours[1]:.3g} ({ours[0]}) | - | - | {all_} |")
+                print(f"| {row} | {ours['rate']:.3g} ({ours['who']}) | - | - | {all_} |")
+        print()
+        for n in notes:
+            print(n)
 
 
 def agree(a, b, tol=1e-4):
@@ -102,10 +119,8 @@ def main():
     load = os.getloadavg()
     print(f"mesh {a.mesh}: {len(f)} triangles; {a.n} rays/points; {threads} cores; load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     print(f"gridtrace {gridtrace.__version__}")
-    table = Table()
-    truth = {}
 
-    # gridtrace: auto (the BVH) for everything, and the other structures for closest points.
+    # gridtrace's answers, the reference every peer's agreement is measured against.
     scenes = {}
     for accel in ("auto", "grid", "pc", "irregular"):
         s = gridtrace.Scene(accel=accel, backend="cpu")
@@ -115,52 +130,54 @@ def main():
         scenes[accel] = s
         print(f"gridtrace {accel} ({s.accel()}, {s.device()}): built in {(time.perf_counter() - t0) * 1e3:.0f} ms")
     s = scenes["auto"]
+    truth = {
+        "camera": s.cast_rays(cam)["t_hit"],
+        "incoherent": s.cast_rays(inc)["t_hit"],
+        "camera occ": s.test_occlusions(cam),
+        "incoherent occ": s.test_occlusions(inc),
+        "count": s.count_intersections(inc),
+        "signed": s.compute_signed_distance(pts),
+    }
+    truth["closest"] = np.linalg.norm(s.compute_closest_points(pts)["points"] - pts, axis=1)
+
+    b = Bench()
     for name, rays in (("camera", cam), ("incoherent", inc)):
-        t, r = best(lambda: s.cast_rays(rays), a.rounds)
-        table.add(f"cast_rays, {name}", "gridtrace", len(rays), t)
-        truth[name] = r["t_hit"]
-        t, r = best(lambda: s.test_occlusions(rays), a.rounds)
-        table.add(f"test_occlusions, {name}", "gridtrace", len(rays), t)
-        truth[name + " occ"] = r
-    t, r = best(lambda: scenes["irregular"].cast_rays(cam), a.rounds)
-    table.add("cast_rays, camera", "gridtrace irregular", len(cam), t)
-    t, r = best(lambda: s.count_intersections(inc), a.rounds)
-    table.add("count_intersections, incoherent", "gridtrace", len(inc), t)
-    truth["count"] = r
-    t, r = best(lambda: s.compute_closest_points(pts), a.rounds)
-    table.add("compute_closest_points", "gridtrace", len(pts), t)
-    truth["closest"] = np.linalg.norm(r["points"] - pts, axis=1)
-    # The grids' nearest-point searches are far slower on this workload: a subset.
+        b.add(f"cast_rays, {name}", "gridtrace", len(rays), lambda rays=rays: s.cast_rays(rays))
+        b.add(f"test_occlusions, {name}", "gridtrace", len(rays), lambda rays=rays: s.test_occlusions(rays))
+    b.add("cast_rays, camera", "gridtrace irregular", len(cam), lambda: scenes["irregular"].cast_rays(cam))
+    b.add("count_intersections, incoherent", "gridtrace", len(inc), lambda: s.count_intersections(inc))
+    b.add("compute_closest_points", "gridtrace", len(pts), lambda: s.compute_closest_points(pts))
     n = min(a.grid_points, len(pts))
     for accel in ("grid", "pc", "irregular"):
-        t, r = best(lambda: scenes[accel].compute_closest_points(pts[:n]), 1)
-        same = agree(np.linalg.norm(r["points"] - pts[:n], axis=1), truth["closest"][:n])
-        table.add("compute_closest_points", f"gridtrace {accel}", n, t, f"({n} points; agree {same:.4f})")
-    t, r = best(lambda: s.compute_signed_distance(pts), a.rounds)
-    table.add("compute_signed_distance", "gridtrace", len(pts), t)
-    truth["signed"] = r
+        b.add("compute_closest_points", f"gridtrace {accel}", n, lambda accel=accel: scenes[accel].compute_closest_points(pts[:n]), once=True, note=f"({n} points)")
+    b.add("compute_signed_distance", "gridtrace", len(pts), lambda: s.compute_signed_distance(pts))
 
-    peers(a, table, truth, v, f, cam, inc, pts, threads)
-    table.report()
+    peers(a, b, truth, v, f, cam, inc, pts, threads)
+    b.run(a.rounds)
+    b.report(truth)
+    load = os.getloadavg()
+    print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
 
 
-def peers(a, table, truth, v, f, cam, inc, pts, threads):
+def peers(a, b, truth, v, f, cam, inc, pts, threads):
+    """Sets up each peer that is installed and adds its contenders to `b`."""
+    rows = (("camera", cam), ("incoherent", inc))
     try:
         import open3d as o3d
 
         sc = o3d.t.geometry.RaycastingScene()
         sc.add_triangles(o3d.core.Tensor(v.astype(np.float32)), o3d.core.Tensor(f.astype(np.uint32)))
-        for name, rays in (("camera", cam), ("incoherent", inc)):
-            t, r = best(lambda: sc.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy(), a.rounds)
-            table.add(f"cast_rays, {name}", "open3d", len(rays), t, f"(agree {agree(r, truth[name]):.4f})")
-            t, r = best(lambda: sc.test_occlusions(o3d.core.Tensor(rays)).numpy(), a.rounds)
-            table.add(f"test_occlusions, {name}", "open3d", len(rays), t, f"(agree {(r.astype(bool) == truth[name + ' occ']).mean():.4f})")
-        t, r = best(lambda: sc.count_intersections(o3d.core.Tensor(inc)).numpy(), a.rounds)
-        table.add("count_intersections, incoherent", "open3d", len(inc), t, f"(agree {(r == truth['count']).mean():.4f})")
-        t, r = best(lambda: sc.compute_closest_points(o3d.core.Tensor(pts))["points"].numpy(), a.rounds)
-        table.add("compute_closest_points", "open3d", len(pts), t, f"(agree {agree(np.linalg.norm(r - pts, axis=1), truth['closest']):.4f})")
-        t, r = best(lambda: sc.compute_signed_distance(o3d.core.Tensor(pts)).numpy(), a.rounds)
-        table.add("compute_signed_distance", "open3d", len(pts), t, f"(agree {agree(r, truth['signed']):.4f})")
+        for name, rays in rows:
+            b.add(f"cast_rays, {name}", "open3d", len(rays), lambda rays=rays: sc.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy(),
+                  lambda r, name=name: agree(r, truth[name]))
+            b.add(f"test_occlusions, {name}", "open3d", len(rays), lambda rays=rays: sc.test_occlusions(o3d.core.Tensor(rays)).numpy(),
+                  lambda r, name=name: (r.astype(bool) == truth[name + " occ"]).mean())
+        b.add("count_intersections, incoherent", "open3d", len(inc), lambda: sc.count_intersections(o3d.core.Tensor(inc)).numpy(),
+              lambda r: (r == truth["count"]).mean())
+        b.add("compute_closest_points", "open3d", len(pts), lambda: sc.compute_closest_points(o3d.core.Tensor(pts))["points"].numpy(),
+              lambda r: agree(np.linalg.norm(r - pts, axis=1), truth["closest"]))
+        b.add("compute_signed_distance", "open3d", len(pts), lambda: sc.compute_signed_distance(o3d.core.Tensor(pts)).numpy(),
+              lambda r: agree(r, truth["signed"]))
     except ImportError as e:
         print(f"open3d: not available ({e})")
 
@@ -170,15 +187,20 @@ def peers(a, table, truth, v, f, cam, inc, pts, threads):
 
         es = rtcs.EmbreeScene()
         TriangleMesh(es, v[f].astype(np.float32))
-        with ThreadPoolExecutor(threads) as pool:
-            for name, rays in (("camera", cam), ("incoherent", inc)):
-                parts = [(np.ascontiguousarray(p[:, :3]), np.ascontiguousarray(p[:, 3:])) for p in np.array_split(rays, threads)]
-                run = lambda: np.concatenate(list(pool.map(lambda od: np.asarray(es.run(od[0], od[1], output=1)["tfar"]), parts)))  # noqa: E731
-                t, r = best(run, a.rounds)
-                table.add(f"cast_rays, {name}", f"embreex {threads} threads", len(rays), t, f"(agree {agree(np.where(np.isfinite(r) & (r < 1e30), r, np.inf), truth[name]):.4f})")
-                occ = lambda: np.concatenate(list(pool.map(lambda od: np.asarray(es.run(od[0], od[1], query="OCCLUDED")) >= 0, parts)))  # noqa: E731
-                t, r = best(occ, a.rounds)
-                table.add(f"test_occlusions, {name}", f"embreex {threads} threads", len(rays), t, f"(agree {(r == truth[name + ' occ']).mean():.4f})")
+        pool = ThreadPoolExecutor(threads)
+        for name, rays in rows:
+            parts = [(np.ascontiguousarray(p[:, :3]), np.ascontiguousarray(p[:, 3:])) for p in np.array_split(rays, threads)]
+
+            def cast(parts=parts):
+                return np.concatenate(list(pool.map(lambda od: np.asarray(es.run(od[0], od[1], output=1)["tfar"]), parts)))
+
+            def occ(parts=parts):
+                return np.concatenate(list(pool.map(lambda od: np.asarray(es.run(od[0], od[1], query="OCCLUDED")) >= 0, parts)))
+
+            b.add(f"cast_rays, {name}", f"embreex {threads} threads", len(rays), cast,
+                  lambda r, name=name: agree(np.where(np.isfinite(r) & (r < 1e30), r, np.inf), truth[name]))
+            b.add(f"test_occlusions, {name}", f"embreex {threads} threads", len(rays), occ,
+                  lambda r, name=name: (r == truth[name + " occ"]).mean())
     except ImportError as e:
         print(f"embreex: not available ({e})")
 
@@ -190,25 +212,24 @@ def peers(a, table, truth, v, f, cam, inc, pts, threads):
             from trimesh.ray.ray_pyembree import RayMeshIntersector as EmbreeRMI
 
             rmi = EmbreeRMI(mesh)
-            for name, rays in (("camera", cam), ("incoherent", inc)):
+            for name, rays in rows:
                 o64, d64 = rays[:, :3].astype(np.float64), rays[:, 3:].astype(np.float64)
-                t, r = best(lambda: rmi.intersects_first(o64, d64), a.rounds)
-                table.add(f"cast_rays, {name}", "trimesh (embree)", len(rays), t, f"(hit/miss agree {((r >= 0) == np.isfinite(truth[name])).mean():.4f})")
-                t, r = best(lambda: rmi.intersects_any(o64, d64), a.rounds)
-                table.add(f"test_occlusions, {name}", "trimesh (embree)", len(rays), t)
+                b.add(f"cast_rays, {name}", "trimesh (embree)", len(rays), lambda o64=o64, d64=d64: rmi.intersects_first(o64, d64),
+                      lambda r, name=name: ((r >= 0) == np.isfinite(truth[name])).mean(), note="(hit/miss)")
+                b.add(f"test_occlusions, {name}", "trimesh (embree)", len(rays), lambda o64=o64, d64=d64: rmi.intersects_any(o64, d64),
+                      lambda r, name=name: (r == truth[name + " occ"]).mean())
         from trimesh.ray.ray_triangle import RayMeshIntersector
 
         n = a.subset
-        rmi = RayMeshIntersector(mesh)
+        slow = RayMeshIntersector(mesh)
         o64, d64 = inc[:n, :3].astype(np.float64), inc[:n, 3:].astype(np.float64)
-        rmi.intersects_first(o64[:10], d64[:10])  # builds its r-tree
-        t, r = best(lambda: rmi.intersects_first(o64, d64), 1)
-        table.add("cast_rays, incoherent", "trimesh (numpy)", n, t, f"({n} rays)")
-        t, r = best(lambda: trimesh.proximity.closest_point(mesh, pts[:n]), 1)
-        table.add("compute_closest_points", "trimesh", n, t, f"({n} points; agree {agree(r[1], truth['closest'][:n]):.4f})")
-        t, r = best(lambda: trimesh.proximity.signed_distance(mesh, pts[:n]), 1)
+        slow.intersects_first(o64[:10], d64[:10])  # builds its r-tree
+        b.add("cast_rays, incoherent", "trimesh (numpy)", n, lambda: slow.intersects_first(o64, d64), once=True, note=f"({n} rays)")
+        b.add("compute_closest_points", "trimesh", n, lambda: trimesh.proximity.closest_point(mesh, pts[:n])[1],
+              lambda r: agree(r, truth["closest"][:n]), once=True, note=f"({n} points)")
         # trimesh's sign is positive inside.
-        table.add("compute_signed_distance", "trimesh", n, t, f"({n} points; agree {agree(-r, truth['signed'][:n]):.4f})")
+        b.add("compute_signed_distance", "trimesh", n, lambda: -trimesh.proximity.signed_distance(mesh, pts[:n]),
+              lambda r: agree(r, truth["signed"][:n]), once=True, note=f"({n} points)")
     except ImportError as e:
         print(f"trimesh: not available ({e})")
 
@@ -217,18 +238,16 @@ def peers(a, table, truth, v, f, cam, inc, pts, threads):
 
         wm = WarpMesh(v, f)
         wm.cast(inc[:10, :3], inc[:10, 3:])  # compiles the kernels (cached after the first run)
-        wm.signed(pts[:10])
-        for name, rays in (("camera", cam), ("incoherent", inc)):
-            t, r = best(lambda: wm.cast(rays[:, :3], rays[:, 3:])[0], a.rounds)
-            table.add(f"cast_rays, {name}", "warp cpu", len(rays), t, f"(agree {agree(r, truth[name]):.4f})")
-            t, r = best(lambda: wm.occluded(rays[:, :3], rays[:, 3:]), a.rounds)
-            table.add(f"test_occlusions, {name}", "warp cpu", len(rays), t, f"(agree {(r == truth[name + ' occ']).mean():.4f})")
-        t, r = best(lambda: wm.count(inc[:, :3], inc[:, 3:]), a.rounds)
-        table.add("count_intersections, incoherent", "warp cpu", len(inc), t, f"(agree {(r == truth['count']).mean():.4f})")
-        t, r = best(lambda: wm.closest(pts), a.rounds)
-        table.add("compute_closest_points", "warp cpu", len(pts), t, f"(agree {agree(np.linalg.norm(r - pts, axis=1), truth['closest']):.4f})")
-        t, r = best(lambda: wm.signed(pts), a.rounds)
-        table.add("compute_signed_distance", "warp cpu", len(pts), t, f"(agree {agree(r, truth['signed']):.4f})")
+        for name, rays in rows:
+            b.add(f"cast_rays, {name}", "warp cpu", len(rays), lambda rays=rays: wm.cast(rays[:, :3], rays[:, 3:])[0],
+                  lambda r, name=name: agree(r, truth[name]))
+            b.add(f"test_occlusions, {name}", "warp cpu", len(rays), lambda rays=rays: wm.occluded(rays[:, :3], rays[:, 3:]),
+                  lambda r, name=name: (r == truth[name + " occ"]).mean())
+        b.add("count_intersections, incoherent", "warp cpu", len(inc), lambda: wm.count(inc[:, :3], inc[:, 3:]),
+              lambda r: (r == truth["count"]).mean())
+        b.add("compute_closest_points", "warp cpu", len(pts), lambda: wm.closest(pts),
+              lambda r: agree(np.linalg.norm(r - pts, axis=1), truth["closest"]))
+        b.add("compute_signed_distance", "warp cpu", len(pts), lambda: wm.signed(pts), lambda r: agree(r, truth["signed"]))
     except ImportError as e:
         print(f"warp: not available ({e})")
 
@@ -248,10 +267,9 @@ def peers(a, table, truth, v, f, cam, inc, pts, threads):
             fs.find_closest_points(q, radii, inter)
             return inter
 
-        t, r = best(closest, a.rounds)
-        k = min(len(r), 20_000)
-        dist = np.array([r[i].d for i in range(k)])
-        table.add("compute_closest_points", "fcpw", len(pts), t, f"(agree {agree(dist, truth['closest'][:k]):.4f} on {k})")
+        k = min(len(pts), 20_000)
+        b.add("compute_closest_points", "fcpw", len(pts), closest,
+              lambda r: agree(np.array([r[i].d for i in range(k)]), truth["closest"][:k]), note=f"(checked on {k})")
     except ImportError as e:
         print(f"fcpw: not available ({e})")
 
