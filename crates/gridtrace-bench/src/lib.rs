@@ -8,6 +8,7 @@
 pub mod ablation;
 pub mod build_scaling;
 pub mod charts;
+pub mod hardware;
 pub mod irregular;
 pub mod query_study;
 pub mod rays;
@@ -131,10 +132,16 @@ pub struct Row {
     pub paper_ms: Option<f64>,
     /// Paper ms / our best ms.
     pub speedup: Option<f64>,
-    /// GPU only: wall-clock time of the best repetition's frame and per-stage GPU times.
+    /// GPU only: the best repetition's wall-clock time (the row's time), its GPU time (the
+    /// stages' timestamps summed) and per-stage GPU times, its host round trips and bytes
+    /// written to and read from the device.
     pub gpu_wall_ms: Option<f64>,
+    pub gpu_ms: Option<f64>,
     pub gpu_stages_ms: Option<BTreeMap<String, f64>>,
     pub gpu_timestamps: Option<bool>,
+    pub gpu_round_trips: Option<u32>,
+    pub gpu_bytes_up: Option<u64>,
+    pub gpu_bytes_down: Option<u64>,
 }
 
 /// A scene as benchmarked: counts, grid and memory.
@@ -235,8 +242,12 @@ fn make_row(
         paper_ms: paper,
         speedup: paper.map(|p| p / summary.best_ms.max(1e-9)),
         gpu_wall_ms: None,
+        gpu_ms: None,
         gpu_stages_ms: None,
         gpu_timestamps: None,
+        gpu_round_trips: None,
+        gpu_bytes_up: None,
+        gpu_bytes_down: None,
     }
 }
 
@@ -250,9 +261,13 @@ fn gpu_row(
     let (times, summary, s) = time_gpu(gpu, prepared, opts, cfg.warmup, cfg.reps)?;
     let s = &s;
     let mut row = make_row(scene, BenchBackend::Gpu, prepared, opts, times, summary, s.render.rays);
-    row.gpu_wall_ms = Some(s.render.render_ms);
+    row.gpu_wall_ms = Some(s.wall_ms);
+    row.gpu_ms = s.gpu_ms();
     row.gpu_stages_ms = Some(s.timings.stages_ms.iter().map(|(k, v)| (k.to_string(), *v)).collect());
     row.gpu_timestamps = Some(s.timings.from_timestamps);
+    row.gpu_round_trips = Some(s.round_trips);
+    row.gpu_bytes_up = Some(s.uploaded_bytes);
+    row.gpu_bytes_down = Some(s.downloaded_bytes);
     Ok(row)
 }
 

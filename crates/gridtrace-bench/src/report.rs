@@ -29,7 +29,10 @@ pub fn write_reports(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(paths.to_vec())
 }
 
-pub const CSV_HEADER: &str = "scene,backend,mode,accel,width,height,grid,reps,best_ms,median_ms,mean_ms,eye_rays,shadow_rays,reflection_rays,total_rays,mrays_per_s,paper_ms,speedup,gpu_wall_ms";
+pub const CSV_HEADER: &str = "scene,backend,mode,accel,width,height,grid,reps,best_ms,median_ms,mean_ms,eye_rays,shadow_rays,reflection_rays,total_rays,mrays_per_s,paper_ms,speedup,gpu_wall_ms,gpu_ms,gpu_round_trips,gpu_bytes_up,gpu_bytes_down,raygen_ms,indirect_ms,traverse_ms,shade_ms,occlusion_ms,resolve_ms";
+
+/// The GPU stages that get a CSV column each (`*_ms`), in kernel order.
+const CSV_STAGES: [&str; 6] = ["raygen", "indirect", "traverse", "shade", "occlusion", "resolve"];
 
 pub fn csv(rows: &[Row]) -> String {
     let mut s = String::from(CSV_HEADER);
@@ -38,7 +41,7 @@ pub fn csv(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
             r.scene,
             r.backend.name(),
             r.mode,
@@ -57,7 +60,16 @@ pub fn csv(rows: &[Row]) -> String {
             r.mrays_per_s,
             opt(r.paper_ms),
             opt(r.speedup),
-            opt(r.gpu_wall_ms)
+            opt(r.gpu_wall_ms),
+            opt(r.gpu_ms),
+            r.gpu_round_trips.map_or(String::new(), |n| n.to_string()),
+            r.gpu_bytes_up.map_or(String::new(), |n| n.to_string()),
+            r.gpu_bytes_down.map_or(String::new(), |n| n.to_string()),
+            CSV_STAGES
+                .iter()
+                .map(|k| opt(r.gpu_stages_ms.as_ref().and_then(|m| m.get(*k).copied())))
+                .collect::<Vec<_>>()
+                .join(",")
         );
     }
     s
@@ -177,6 +189,26 @@ pub fn markdown(report: &BenchReport) -> String {
         let _ = writeln!(md, "- **{s}**");
     }
 
+    scenes_section(&mut md, report);
+    md.push_str("\n## Times like the paper's Tables 1-3\n\n");
+    md.push_str("Each cell: our best time / the paper's time in ms (speed-up = paper ms / our ms). The paper: GeForce 6800GT, best of several runs.\n\n");
+    paper_tables(&mut md, report);
+
+    memory_section(&mut md, report);
+    gpu_frames_section(&mut md, report);
+    grid_sweep_section(&mut md, report);
+    scaling_section(&mut md, report);
+    build_scaling_section(&mut md, report);
+    pc_study_section(&mut md, report);
+    query_study_section(&mut md, report);
+    irregular_sweep_section(&mut md, report);
+    ablation_section(&mut md, report);
+    ray_export_section(&mut md, report);
+    md
+}
+
+/// The scenes that ran: size, grid, build.
+fn scenes_section(md: &mut String, report: &BenchReport) {
     md.push_str("## Scenes\n\n| scene | triangles | traced | paper | grid | cells | empty | refs/tri | build ms | made of |\n|---|---:|---:|---:|---|---:|---:|---:|---:|---|\n");
     for s in &report.matrix.scenes {
         let g = &s.grid;
@@ -196,11 +228,10 @@ pub fn markdown(report: &BenchReport) -> String {
             s.description
         );
     }
+}
 
-    md.push_str("\n## Times like the paper's Tables 1-3\n\n");
-    md.push_str("Each cell: our best time / the paper's time in ms (speed-up = paper ms / our ms). The paper: GeForce 6800GT, best of several runs.\n\n");
-    paper_tables(&mut md, report);
-
+/// Every array's bytes beside the paper's memory model.
+fn memory_section(md: &mut String, report: &BenchReport) {
     md.push_str("## Memory\n\nBytes of every array, beside the paper's model M = n*96 + cells*16.\n\n");
     md.push_str(
         "| scene | CPU arrays | CPU total | GPU buffers | GPU total | paper model |\n|---|---|---:|---|---:|---:|\n",
@@ -223,7 +254,36 @@ pub fn markdown(report: &BenchReport) -> String {
             bytes(s.memory_paper_model)
         );
     }
+}
 
+/// The GPU rows' best frames: wall time beside GPU time, round trips and bytes each way.
+fn gpu_frames_section(md: &mut String, report: &BenchReport) {
+    let rows: Vec<_> = report.matrix.rows.iter().filter(|r| r.gpu_wall_ms.is_some()).collect();
+    if rows.is_empty() {
+        return;
+    }
+    md.push_str("\n## GPU frames (best repetition)\n\nWall: the host's clock from the first upload to the image in host memory (the tables' times). GPU: the stages' timestamps summed. Their difference is submission, readback and host work.\n\n| scene | mode | accel | size | wall ms | GPU ms | round trips | bytes up | bytes down |\n|---|---|---|---|---:|---:|---:|---:|---:|\n");
+    let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {}x{} | {} | {} | {} | {} | {} |",
+            r.scene,
+            r.mode,
+            r.accel,
+            r.width,
+            r.height,
+            opt(r.gpu_wall_ms),
+            opt(r.gpu_ms),
+            r.gpu_round_trips.unwrap_or(0),
+            r.gpu_bytes_up.map_or("-".into(), bytes),
+            r.gpu_bytes_down.map_or("-".into(), bytes)
+        );
+    }
+}
+
+/// `--sweep-grid`.
+fn grid_sweep_section(md: &mut String, report: &BenchReport) {
     if !report.grid_sweep.is_empty() {
         md.push_str("\n## Grid resolution sweep\n\n| scene | mode | accel | grid | dims | cells/tri | best ms | median ms |\n|---|---|---|---|---|---:|---:|---:|\n");
         for sw in &report.grid_sweep {
@@ -257,7 +317,10 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+}
 
+/// `--scaling`.
+fn scaling_section(md: &mut String, report: &BenchReport) {
     for sc in &report.scaling {
         let _ = writeln!(
             md,
@@ -283,7 +346,10 @@ pub fn markdown(report: &BenchReport) -> String {
             let _ = writeln!(md, "| {} | {:.3} | {} |", f.series, f.exponent, f.points);
         }
     }
+}
 
+/// `--build-scaling`.
+fn build_scaling_section(md: &mut String, report: &BenchReport) {
     if !report.build_scaling.is_empty() {
         md.push_str(
             "\n## Build time against triangle count (best, ms)\n\n| mesh | triangles | grid | refs | grid+pc cpu 1 thread | grid+pc cpu all threads | grid+pc gpu | bvh cpu | embree | grid cpu / embree |\n|---|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
@@ -308,7 +374,10 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+}
 
+/// `--pc-study`.
+fn pc_study_section(md: &mut String, report: &BenchReport) {
     if !report.pc_study.is_empty() {
         md.push_str("\n## Proximity-cloud study\n\n| scene | mode | accel | grid | empty | cells/ray | jumps/ray | tri tests/ray | best ms |\n|---|---|---|---|---:|---:|---:|---:|---:|\n");
         for r in &report.pc_study {
@@ -327,6 +396,10 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+}
+
+/// `--query-study`.
+fn query_study_section(md: &mut String, report: &BenchReport) {
     if !report.query_study.is_empty() {
         md.push_str("\n## Ray-query study (incoherent rays; CPU: `TraceMesh::intersect`, GPU: `GpuRenderer::intersect`)\n\n| scene | triangles | accel | backend | build ms | threads | hits | cells or nodes/ray | tri tests/ray | best ms | Mrays/s |\n|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
         for r in &report.query_study {
@@ -347,6 +420,10 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+}
+
+/// `--irregular-sweep`.
+fn irregular_sweep_section(md: &mut String, report: &BenchReport) {
     if !report.irregular_sweep.is_empty() {
         md.push_str("\n## Irregular grid parameters (incoherent rays, closest hit, all threads; pc and bvh on the same rays)\n\n| scene | accel | params | build ms | cells/nodes | refs/tri | bytes/tri | steps/ray | tri tests/ray | best ms | Mrays/s |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
         for r in &report.irregular_sweep {
@@ -367,6 +444,10 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+}
+
+/// `--ablate`.
+fn ablation_section(md: &mut String, report: &BenchReport) {
     if !report.ablation.is_empty() {
         md.push_str("\n## Ablations (median ms per frame with the optimisation and without it; the two alternate run by run)\n\n| scene | backend | accel | mode | without | size | with ms | without ms | slowdown | shadow rays |\n|---|---|---|---|---|---|---:|---:|---:|---:|\n");
         for r in &report.ablation {
@@ -387,6 +468,10 @@ pub fn markdown(report: &BenchReport) -> String {
             );
         }
     }
+}
+
+/// `--export-rays` / `--export-hits`.
+fn ray_export_section(md: &mut String, report: &BenchReport) {
     if let Some(e) = &report.ray_export {
         let _ = writeln!(
             md,
@@ -404,5 +489,4 @@ pub fn markdown(report: &BenchReport) -> String {
             e.hits_file.as_deref().unwrap_or("-")
         );
     }
-    md
 }

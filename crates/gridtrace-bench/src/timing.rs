@@ -36,10 +36,19 @@ impl Summary {
     }
 }
 
-/// Times `f` `warmup + reps` times, keeping the last `reps` results.
+/// With warm-ups asked for, they go on at least this long (ms): a GPU frame of a few
+/// milliseconds needs more than one run before clocks, caches and drivers settle, and a
+/// count that suits a 2-second frame on a software adapter is far too few on hardware.
+pub const WARMUP_MIN_MS: f64 = 500.0;
+
+/// Times `f` after `warmup` warm-up runs (and more until `WARMUP_MIN_MS` have passed, when
+/// `warmup` is not zero), then `reps` times, keeping the timed results.
 pub fn repeat<T>(warmup: u32, reps: u32, mut f: impl FnMut() -> Result<(f64, T)>) -> Result<(Vec<f64>, Vec<T>)> {
-    for _ in 0..warmup {
+    let started = std::time::Instant::now();
+    let mut done = 0;
+    while done < warmup || (warmup > 0 && started.elapsed().as_secs_f64() * 1e3 < WARMUP_MIN_MS) {
         f()?;
+        done += 1;
     }
     let mut times = Vec::new();
     let mut outs = Vec::new();
@@ -65,8 +74,9 @@ pub fn time_cpu(
     Ok((times.clone(), Summary::of(&times), outs[0]))
 }
 
-/// One GPU measurement: all times (the timestamps' sum where the adapter has them, else wall
-/// time), their summary, and the statistics of the fastest frame.
+/// One GPU measurement: all times (wall time, upload to image in host memory, as every report
+/// gives a GPU frame's time), their summary, and the statistics of the fastest frame (with its
+/// GPU time from timestamps where the adapter has them).
 pub fn time_gpu(
     gpu: &mut GpuRenderer,
     prepared: &PreparedScene,

@@ -68,6 +68,9 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         let up = tracer.update_vertices(&positions)?;
         let (camera, lights) = (tracer.scene.camera, tracer.scene.lights.clone());
         let frame = tracer.render(&camera, &lights, &opts)?;
+        for n in tracer.take_notes() {
+            println!("note: {n}");
+        }
         let (image, trace_ms, build_ms, how) = (
             frame.image,
             frame.gpu.as_ref().map_or(frame.stats.render_ms, |g| g.frame_ms()),

@@ -123,6 +123,49 @@ pub struct BenchArgs {
     /// Write the hit t of each exported ray as one little-endian f32 (inf for a miss).
     #[arg(long)]
     export_hits: Option<PathBuf>,
+    /// Run a prepared suite instead of the matrix. `hardware`: what a first run on GPU
+    /// hardware must answer, within 5 minutes on one GPU (every structure and GPU variant on
+    /// the Stanford Bunny, the Dragon and the paper's scenes at 1920x1080 and one 4096x4096
+    /// frame, GPU results checked against the CPU's; 1M camera and 1M incoherent rays per mesh;
+    /// GPU grid builds of 100k-10M triangles; the CPU cores for the ratios). Needs a GPU
+    /// adapter (a software one is used with a loud warning). With --quick: a small run (a
+    /// software adapter finishes it in under 3 minutes). Writes hardware.json and
+    /// hardware.md into --out (default: hardware-suite).
+    #[arg(long, value_enum, value_name = "SUITE")]
+    suite: Option<Suite>,
+}
+
+/// The prepared suites.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Suite {
+    Hardware,
+}
+
+/// `--suite hardware`.
+fn run_hardware_suite(a: &BenchArgs) -> gridtrace::Result<()> {
+    let t0 = Instant::now();
+    let plan = if a.quick {
+        bench::hardware::Plan::quick()
+    } else {
+        bench::hardware::Plan::full()
+    };
+    let gpu = std::sync::Arc::new(open_gpu(BenchBackendArg::Gpu)?.expect("the GPU backend opens a device or fails"));
+    let data_dir = scenes::find_data_dir(a.data_dir.as_deref());
+    let variants = vec!["default".to_string()];
+    let mut log = |s: &str| println!("{s}");
+    let report = bench::hardware::run(&plan, gpu, data_dir.as_deref(), &variants, &mut log)?;
+    let dir = a.out.clone().unwrap_or_else(|| PathBuf::from("hardware-suite"));
+    for f in bench::hardware::write(&report, &dir)? {
+        println!("wrote {}", f.display());
+    }
+    for m in &report.mismatches {
+        println!("MISMATCH: {m}");
+    }
+    for s in &report.skipped {
+        println!("skipped: {s}");
+    }
+    println!("hardware suite finished in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
 }
 
 /// Opens the GPU for the chosen backend; `Ok(None)` means CPU only. Prints the adapter.
@@ -153,7 +196,95 @@ fn open_gpu(b: BenchBackendArg) -> gridtrace::Result<Option<GpuContext>> {
 }
 
 pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
+    if a.suite == Some(Suite::Hardware) {
+        return run_hardware_suite(&a);
+    }
     let t0 = Instant::now();
+    let cfg = config(&a)?;
+    let backend = a.backend.unwrap_or(if a.quick {
+        BenchBackendArg::Cpu
+    } else {
+        BenchBackendArg::Auto
+    });
+    let gpu = open_gpu(backend)?.map(std::sync::Arc::new);
+    let run_cpu = backend != BenchBackendArg::Gpu;
+    let mut backends = Vec::new();
+    if run_cpu {
+        backends.push(BenchBackend::Cpu);
+    }
+    if gpu.is_some() {
+        backends.push(BenchBackend::Gpu);
+    }
+    let machine = Machine::detect(gpu.as_deref());
+    println!(
+        "CPU: {} ({} logical cores, {} threads); OS: {}",
+        machine.cpu_model, machine.logical_cores, machine.threads, machine.os
+    );
+    let data_dir = scenes::find_data_dir(cfg.data_dir.as_deref());
+    println!(
+        "mesh data: {}",
+        data_dir
+            .as_ref()
+            .map_or("not found (scenes that need files are skipped)".into(), |p| p
+                .display()
+                .to_string())
+    );
+    println!(
+        "matrix: {} scene(s) x {} resolution(s) x {} accel x {} mode(s) x backend {}; {} warm-up, {} reps",
+        cfg.scenes.len(),
+        cfg.resolutions.len(),
+        cfg.accels.len(),
+        cfg.modes.len(),
+        backends.iter().map(|b| b.name()).collect::<Vec<_>>().join("+"),
+        cfg.warmup,
+        cfg.reps
+    );
+    let mut log = |s: &str| println!("{s}");
+    let matrix = bench::run_matrix(&cfg, gpu.clone(), run_cpu, &mut log)?;
+    let mut report = BenchReport::new(&cfg, &backends, machine, matrix);
+    let run = Run {
+        a: &a,
+        cfg: &cfg,
+        data_dir,
+        gpu,
+        run_cpu,
+        backend,
+    };
+    // The studies, each only when asked for, in this order (each appends to the report).
+    if a.sweep_grid {
+        run.sweep_grid(&mut report)?;
+    }
+    if a.scaling {
+        run.scaling(&mut report)?;
+    }
+    if a.build_scaling {
+        run.build_scaling(&mut report)?;
+    }
+    if a.pc_study {
+        run.pc_study(&mut report)?;
+    }
+    if a.query_study {
+        run.query_study(&mut report)?;
+    }
+    if let Some(sets) = &a.irregular_sweep {
+        run.irregular_sweep(sets, &mut report)?;
+    }
+    if !a.ablate.is_empty() {
+        run.ablate(&mut report)?;
+    }
+    if a.export_rays.is_some() || a.export_hits.is_some() {
+        run.export_rays(&mut report)?;
+    }
+    if let Some(dir) = &a.out {
+        run.write_out(dir, &report)?;
+    }
+    println!("bench finished in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The matrix's configuration: `--quick` or the paper's, with the options given applied and
+/// checked.
+fn config(a: &BenchArgs) -> gridtrace::Result<BenchConfig> {
     let mut cfg = if a.quick {
         BenchConfig::quick()
     } else {
@@ -203,50 +334,27 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
         return Err(bench::invalid(format!("--data-dir {} is not a folder", d.display())));
     }
 
-    let backend = a.backend.unwrap_or(if a.quick {
-        BenchBackendArg::Cpu
-    } else {
-        BenchBackendArg::Auto
-    });
-    let gpu = open_gpu(backend)?.map(std::sync::Arc::new);
-    let run_cpu = backend != BenchBackendArg::Gpu;
-    let mut backends = Vec::new();
-    if run_cpu {
-        backends.push(BenchBackend::Cpu);
-    }
-    if gpu.is_some() {
-        backends.push(BenchBackend::Gpu);
-    }
-    let machine = Machine::detect(gpu.as_deref());
-    println!(
-        "CPU: {} ({} logical cores, {} threads); OS: {}",
-        machine.cpu_model, machine.logical_cores, machine.threads, machine.os
-    );
-    let data_dir = scenes::find_data_dir(cfg.data_dir.as_deref());
-    println!(
-        "mesh data: {}",
-        data_dir
-            .as_ref()
-            .map_or("not found (scenes that need files are skipped)".into(), |p| p
-                .display()
-                .to_string())
-    );
-    println!(
-        "matrix: {} scene(s) x {} resolution(s) x {} accel x {} mode(s) x backend {}; {} warm-up, {} reps",
-        cfg.scenes.len(),
-        cfg.resolutions.len(),
-        cfg.accels.len(),
-        cfg.modes.len(),
-        backends.iter().map(|b| b.name()).collect::<Vec<_>>().join("+"),
-        cfg.warmup,
-        cfg.reps
-    );
-    let mut log = |s: &str| println!("{s}");
-    let matrix = bench::run_matrix(&cfg, gpu.clone(), run_cpu, &mut log)?;
-    let mut report = BenchReport::new(&cfg, &backends, machine, matrix);
+    Ok(cfg)
+}
 
-    let first_res = cfg.resolutions[0];
-    if a.sweep_grid {
+/// What every study of one `bench` run shares.
+struct Run<'a> {
+    a: &'a BenchArgs,
+    cfg: &'a BenchConfig,
+    data_dir: Option<PathBuf>,
+    gpu: Option<std::sync::Arc<GpuContext>>,
+    run_cpu: bool,
+    backend: BenchBackendArg,
+}
+
+impl Run<'_> {
+    fn first_res(&self) -> (u32, u32) {
+        self.cfg.resolutions[0]
+    }
+
+    fn sweep_grid(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (cfg, data_dir, first_res) = (self.cfg, &self.data_dir, self.first_res());
+        let mut log = |s: &str| println!("{s}");
         println!(
             "grid sweep ({} {} {}x{}):",
             cfg.modes[0].name(),
@@ -273,8 +381,19 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
                 Err(e) => println!("  sweep: skipping {name}: {e}"),
             }
         }
+        Ok(())
     }
-    if a.scaling {
+
+    fn scaling(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (a, cfg, data_dir, first_res, gpu, run_cpu) = (
+            self.a,
+            self.cfg,
+            &self.data_dir,
+            self.first_res(),
+            &self.gpu,
+            self.run_cpu,
+        );
+        let mut log = |s: &str| println!("{s}");
         let (max_tris, sides): (usize, &[u32]) = if a.quick {
             (100_000, &[64, 128, 256])
         } else {
@@ -313,8 +432,12 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             }
             report.scaling.push(sc);
         }
+        Ok(())
     }
-    if a.build_scaling {
+
+    fn build_scaling(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (a, cfg, data_dir, gpu, backend) = (self.a, self.cfg, &self.data_dir, &self.gpu, self.backend);
+        let mut log = |s: &str| println!("{s}");
         let max = if a.quick {
             a.build_max_tris.min(100_000)
         } else {
@@ -336,8 +459,12 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             bench::build_scaling::with_embree(&mut points, e)?;
         }
         report.build_scaling = points;
+        Ok(())
     }
-    if a.pc_study {
+
+    fn pc_study(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (cfg, data_dir, first_res) = (self.cfg, &self.data_dir, self.first_res());
+        let mut log = |s: &str| println!("{s}");
         println!("proximity-cloud study ({}x{}):", first_res.0, first_res.1);
         let far_mesh = data_dir
             .as_ref()
@@ -356,8 +483,12 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             cfg.reps,
             &mut log,
         )?;
+        Ok(())
     }
-    if a.query_study {
+
+    fn query_study(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (a, cfg, data_dir, gpu, run_cpu) = (self.a, self.cfg, &self.data_dir, &self.gpu, self.run_cpu);
+        let mut log = |s: &str| println!("{s}");
         println!("ray-query study ({} incoherent rays per mesh):", a.query_rays);
         let mut meshes = vec![(
             "torus-knot-hi".to_string(),
@@ -383,8 +514,12 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             cfg.reps,
             &mut log,
         )?;
+        Ok(())
     }
-    if let Some(sets) = &a.irregular_sweep {
+
+    fn irregular_sweep(&self, sets: &str, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (a, cfg, data_dir) = (self.a, self.cfg, &self.data_dir);
+        let mut log = |s: &str| println!("{s}");
         let sweep = if sets.trim() == "default" {
             bench::irregular::default_sweep()
         } else {
@@ -400,8 +535,19 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
         }
         report.irregular_sweep =
             bench::irregular::irregular_sweep(&meshes, a.query_rays, &sweep, cfg.warmup, cfg.reps, &mut log)?;
+        Ok(())
     }
-    if !a.ablate.is_empty() {
+
+    fn ablate(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (a, cfg, data_dir, first_res, gpu, run_cpu) = (
+            self.a,
+            self.cfg,
+            &self.data_dir,
+            self.first_res(),
+            &self.gpu,
+            self.run_cpu,
+        );
+        let mut log = |s: &str| println!("{s}");
         println!("ablations ({}x{}):", first_res.0, first_res.1);
         let plan = bench::ablation::AblationPlan {
             scenes: &cfg.scenes,
@@ -418,8 +564,12 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             reps: cfg.reps,
         };
         report.ablation = bench::ablation::ablation_study(&plan, &mut log)?;
+        Ok(())
     }
-    if a.export_rays.is_some() || a.export_hits.is_some() {
+
+    /// Writes the rays (and hits) of one frame of the first scene, for other tracers to run.
+    fn export_rays(&self, report: &mut BenchReport) -> gridtrace::Result<()> {
+        let (a, cfg, data_dir, first_res) = (self.a, self.cfg, &self.data_dir, self.first_res());
         let mode = [Mode::Trace, Mode::Shadow, Mode::Cast]
             .into_iter()
             .find(|m| cfg.modes.contains(m))
@@ -463,10 +613,14 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
             reflection: c.reflection,
             hits,
         });
+        Ok(())
     }
-    if let Some(dir) = &a.out {
-        let mut files = bench::report::write_reports(&report, dir)?;
-        files.extend(bench::charts::write_charts(&report, dir)?);
+
+    /// The reports, the charts, and one ray-traced picture per scene that ran.
+    fn write_out(&self, dir: &std::path::Path, report: &BenchReport) -> gridtrace::Result<()> {
+        let (cfg, data_dir, first_res) = (self.cfg, &self.data_dir, self.first_res());
+        let mut files = bench::report::write_reports(report, dir)?;
+        files.extend(bench::charts::write_charts(report, dir)?);
         // One ray-traced picture per scene that ran, to see what was measured.
         for s in &report.matrix.scenes {
             let bs = scenes::build_paper_scene(&s.name, data_dir.as_deref())?;
@@ -480,7 +634,6 @@ pub fn run(a: BenchArgs) -> gridtrace::Result<()> {
         for f in files {
             println!("wrote {}", f.display());
         }
+        Ok(())
     }
-    println!("bench finished in {:.1} s", t0.elapsed().as_secs_f64());
-    Ok(())
 }

@@ -157,6 +157,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     };
     let mut frames = Vec::with_capacity(a.frames as usize);
     let mut first = None;
+    let mut last_gpu = None;
     for i in 0..a.frames {
         let camera = if a.orbit {
             orbit(&camera0, i as f32 / a.frames as f32)
@@ -173,7 +174,13 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         } else {
             renderer.render_with_progress(&camera, &lights, &opts, Some(&tick))?
         };
+        for n in renderer.take_notes() {
+            println!("note: {n}");
+        }
         frames.push(frame.stats);
+        if let Some(g) = &frame.gpu {
+            last_gpu = Some(g.clone());
+        }
         if first.is_none() {
             first = Some(frame);
         }
@@ -182,35 +189,10 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         b.finish_and_clear();
     }
     let gridtrace::Frame { image, stats, gpu } = first.expect("at least one frame (--frames is at least 1)");
-    if let Some(s) = &gpu {
-        let source = if s.timings.from_timestamps {
-            "GPU timestamps"
-        } else {
-            "wall clock, no timestamp queries"
-        };
-        let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
-        println!(
-            "stages  {} ms ({source}; {} tile{})",
-            stages.join(", "),
-            s.tiles,
-            if s.tiles == 1 { "" } else { "s" }
-        );
-        // Rays per second by kind, from the stage that traces them.
-        let rate = |rays: u64, stage: &str| {
-            s.timings
-                .stages_ms
-                .get(stage)
-                .filter(|ms| **ms > 0.0)
-                .map(|ms| rays as f64 / (ms * 1e3))
-        };
-        let r = s.render.rays;
-        if let Some(v) = rate(r.eye + r.reflection, "traverse") {
-            print!("rates   eye+reflection {v:.2} Mrays/s (traverse)");
-            if let Some(v) = rate(r.shadow, "occlusion") {
-                print!(", shadow {v:.2} Mrays/s (occlusion)");
-            }
-            println!();
-        }
+    // The stages of the last frame: with --frames above 1 a warm one (the first pays for
+    // pipeline and buffer creation).
+    if let Some(s) = last_gpu.as_ref().or(gpu.as_ref()) {
+        print_gpu_frame(s, if a.frames > 1 { "last frame" } else { "frame" });
     }
     let r = stats.rays;
     println!(
@@ -248,6 +230,45 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     out.save_png(&a.output)?;
     println!("wrote   {}", a.output.display());
     Ok(())
+}
+
+/// A GPU frame's times, round trips and bytes, and its stages with the rates of the two that
+/// trace.
+fn print_gpu_frame(s: &gridtrace::gpu::GpuRenderStats, which: &str) {
+    let gpu = s
+        .gpu_ms()
+        .map_or("no timestamp queries".to_string(), |ms| format!("GPU {ms:.2} ms"));
+    println!(
+        "gpu     {which}: wall {:.2} ms, {gpu}; {} tile{}, {} round trip{}, {} B up, {} B down",
+        s.wall_ms,
+        s.tiles,
+        if s.tiles == 1 { "" } else { "s" },
+        s.round_trips,
+        if s.round_trips == 1 { "" } else { "s" },
+        s.uploaded_bytes,
+        s.downloaded_bytes
+    );
+    if !s.timings.from_timestamps {
+        return;
+    }
+    let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
+    println!("stages  {} ms (GPU timestamps)", stages.join(", "));
+    // Rays per second by kind, from the stage that traces them.
+    let rate = |rays: u64, stage: &str| {
+        s.timings
+            .stages_ms
+            .get(stage)
+            .filter(|ms| **ms > 0.0)
+            .map(|ms| rays as f64 / (ms * 1e3))
+    };
+    let r = s.render.rays;
+    if let Some(v) = rate(r.eye + r.reflection, "traverse") {
+        print!("rates   eye+reflection {v:.2} Mrays/s (traverse)");
+        if let Some(v) = rate(r.shadow, "occlusion") {
+            print!(", shadow {v:.2} Mrays/s (occlusion)");
+        }
+        println!();
+    }
 }
 
 /// `--light`: X,Y,Z, or X,Y,Z:R,G,B with the intensity.

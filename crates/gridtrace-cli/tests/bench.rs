@@ -197,3 +197,81 @@ fn build_scaling_exports_and_joins_embree() {
     let (ok, text) = gridtrace(&a.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(!ok && text.contains("embree.json"), "{text}");
 }
+
+/// `bench --suite hardware --quick` on whatever adapter the machine has (lavapipe in CI): the
+/// report says what the adapter is (loudly when it is a software one), every structure with a
+/// GPU walk ran every mode on the GPU and the CPU, every GPU frame is one round trip and agrees
+/// with the CPU's image, the ray batches agree with the CPU's hits, and the builds ran. Without
+/// mesh data (an empty data folder here) the scanned meshes are listed as skipped.
+#[test]
+fn hardware_suite_quick_runs_every_part() {
+    let dir = std::env::temp_dir().join(format!("gridtrace-hw-{}", std::process::id()));
+    let data = dir.join("no-meshes");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&data).unwrap();
+    let (ok, text) = gridtrace(&[
+        "bench",
+        "--suite",
+        "hardware",
+        "--quick",
+        "--data-dir",
+        data.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("hardware.json")).unwrap()).unwrap();
+    let md = std::fs::read_to_string(dir.join("hardware.md")).unwrap();
+    let adapter = &json["adapter"];
+    assert!(adapter["name"].as_str().is_some_and(|s| !s.is_empty()));
+    if adapter["software"].as_bool().unwrap() {
+        assert!(
+            md.contains("WARNING: SOFTWARE ADAPTER") && text.contains("WARNING"),
+            "{md}"
+        );
+    }
+    assert!(json["mismatches"].as_array().unwrap().is_empty(), "{md}");
+    let skipped = json["skipped"].as_array().unwrap();
+    assert!(
+        skipped.iter().any(|s| s.as_str().unwrap().contains("stanford-bunny")),
+        "{skipped:?}"
+    );
+    assert!(
+        !skipped.iter().any(|s| s.as_str().unwrap().contains("time budget")),
+        "the quick run must fit its budget: {skipped:?}"
+    );
+    let frames = json["frames"].as_array().unwrap();
+    for accel in ["grid", "pc", "bvh", "irregular"] {
+        for mode in ["cast", "shadow", "trace"] {
+            for backend in ["cpu", "gpu"] {
+                let row = frames
+                    .iter()
+                    .find(|r| {
+                        r["accel"] == accel
+                            && r["mode"] == mode
+                            && r["backend"] == backend
+                            && r["scene"] == "torus-knot"
+                    })
+                    .unwrap_or_else(|| panic!("no {backend} {accel} {mode} frame: {md}"));
+                assert!(row["rays"].as_u64().unwrap() >= 96 * 54);
+                assert!(row["median_ms"].as_f64().unwrap() > 0.0);
+                if backend == "gpu" {
+                    assert_eq!(row["round_trips"], 1, "{row}");
+                    assert!(row["differing_from_cpu"].as_f64().unwrap() <= 0.002, "{row}");
+                }
+            }
+        }
+    }
+    let big = json["big_frame"].as_array().unwrap();
+    assert_eq!(big.len(), 2, "{md}");
+    assert!(big.iter().all(|r| r["width"] == 512 && r["height"] == 512));
+    let rays = json["rays"].as_array().unwrap();
+    for set in ["camera", "incoherent"] {
+        let gpu_rows = rays.iter().filter(|r| r["set"] == set && r["backend"] == "gpu").count();
+        assert_eq!(gpu_rows, 4, "{set}: {md}");
+    }
+    assert!(rays.iter().all(|r| r["differing_from_cpu"].as_f64().unwrap() <= 0.001));
+    assert!(!json["builds"].as_array().unwrap().is_empty(), "{md}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -176,6 +176,11 @@ pub struct Frame {
 pub struct Tracer {
     pub scene: PreparedScene,
     gpu: Option<GpuRenderer>,
+    /// The choice it was opened with: under `auto` a GPU that fails (a lost device, memory
+    /// gone) hands the work to the CPU for good, with a note, and the frame is still made.
+    backend: Backend,
+    /// What happened since the caller last asked (`take_notes`).
+    notes: Vec<String>,
 }
 
 /// What moving the vertices cost, and how the structure followed.
@@ -203,7 +208,12 @@ impl Tracer {
             Some(ctx) => backend.upload(ctx.clone(), &scene, notes)?,
             None => None,
         };
-        Ok(Tracer { scene, gpu })
+        Ok(Tracer {
+            scene,
+            gpu,
+            backend,
+            notes: Vec::new(),
+        })
     }
 
     /// Opens the device `backend` asks for and the scene on it: `open_device`, then `open`.
@@ -245,23 +255,47 @@ impl Tracer {
         progress: Option<&(dyn Fn(u32) + Sync)>,
     ) -> Result<Frame> {
         self.scene.accel.check_serves(opts.accel)?;
-        match &mut self.gpu {
-            Some(g) => {
-                let (image, s) = g.render(camera, lights, opts)?;
-                Ok(Frame {
-                    image,
-                    stats: s.render,
-                    gpu: Some(s),
-                })
+        if let Some(g) = &mut self.gpu {
+            match g.render(camera, lights, opts) {
+                Ok((image, s)) => {
+                    return Ok(Frame {
+                        image,
+                        stats: s.render,
+                        gpu: Some(s),
+                    });
+                }
+                Err(e) => self.gpu_failed(e)?,
             }
-            None => {
-                let (image, stats) = crate::cpu::render_view(&self.scene, camera, lights, opts, progress)?;
-                Ok(Frame {
-                    image,
-                    stats,
-                    gpu: None,
-                })
+        }
+        let (image, stats) = crate::cpu::render_view(&self.scene, camera, lights, opts, progress)?;
+        Ok(Frame {
+            image,
+            stats,
+            gpu: None,
+        })
+    }
+
+    /// The notes of what happened since the last call (the GPU given up for the CPU).
+    pub fn take_notes(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.notes)
+    }
+
+    /// The GPU failed with `e`: under `auto` a device error hands the scene to the CPU for
+    /// good (its structure brought up to date first, when the GPU was the one rebuilding it)
+    /// and says so; anything else, or any error under `gpu`, is the caller's.
+    fn gpu_failed(&mut self, e: Error) -> Result<()> {
+        match e {
+            Error::Gpu(why) if self.backend == Backend::Auto => {
+                self.gpu = None;
+                if self.scene.accel.structure_stale {
+                    let tris = self.scene.accel.tris.clone();
+                    self.scene.accel.update(tris)?;
+                }
+                self.notes
+                    .push(format!("the GPU failed ({why}); tracing on the CPU from now on"));
+                Ok(())
             }
+            e => Err(e),
         }
     }
 
@@ -277,8 +311,19 @@ impl Tracer {
         let up = self.scene.update_vertices(positions, on)?;
         let mut build_ms = up.structure_ms;
         let mut how = up.how.to_string();
-        if let Some(g) = &mut self.gpu {
-            let u = g.update_vertices(&self.scene)?;
+        let updated = match &mut self.gpu {
+            Some(g) => g.update_vertices(&self.scene).map(Some),
+            None => Ok(None),
+        };
+        let updated = match updated {
+            Ok(u) => u,
+            Err(e) => {
+                self.gpu_failed(e)?;
+                how = "rebuilt on the CPU (the GPU failed)".into();
+                None
+            }
+        };
+        if let Some(u) = updated {
             build_ms += u.structure_upload_ms + u.upload_ms;
             if let Some(b) = &u.build {
                 build_ms += b.timings.total_ms;

@@ -237,6 +237,18 @@ impl Image {
     }
 }
 
+/// Fraction of pixels (8-bit RGB, 3 bytes each) whose channels differ by more than `tol`
+/// levels: the image tests' and the hardware suite's tolerance
+/// measure.
+pub fn differing_pixels(a: &[u8], b: &[u8], tol: u8) -> f64 {
+    let n = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > tol))
+        .count();
+    n as f64 / (a.len() / 3).max(1) as f64
+}
+
 pub fn linear_to_srgb8(c: f32) -> u8 {
     let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
     let s = if c <= 0.003_130_8 {

@@ -568,13 +568,5 @@ pub fn gpu_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]], accel: AccelKind) -> 
         .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"))
 }
 
-/// Fraction of pixels (8-bit RGB, 3 bytes each) whose channels differ by more than `tol`
-/// levels: the image tests' tolerance measure.
-pub fn differing_pixels(a: &[u8], b: &[u8], tol: u8) -> f64 {
-    let n = a
-        .chunks(3)
-        .zip(b.chunks(3))
-        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > tol))
-        .count();
-    n as f64 / (a.len() / 3).max(1) as f64
-}
+/// The image tests' tolerance measure (`render::differing_pixels`).
+pub use crate::render::differing_pixels;

@@ -356,6 +356,37 @@ fn per_frame_uploads_are_uniforms_only() {
     }
 }
 
+/// A frame of many tiles (the largest tile lowered to 1,000 pixels: a 64x48 frame is 4 tiles, as
+/// a 4096x4096 frame is 16 on any device) is one submission and one wait, and equals the frame
+/// traced as one tile bit for bit, in every mode; the bytes read back are the image's 16 a
+/// pixel plus 64 of counters a tile (and the timestamps where the adapter has them).
+#[test]
+fn a_frame_of_many_tiles_is_one_round_trip() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let Some(mut whole) = renderer(&scene) else { return };
+    let Some(mut tiled) = renderer(&scene) else { return };
+    tiled.set_max_tile_pixels(1000);
+    for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
+        let opts = RenderOptions::new(64, 48, mode, AccelKind::ProximityCloud);
+        let (a, sa) = whole.render(&scene.camera, &scene.lights, &opts).unwrap();
+        let (b, sb) = tiled.render(&scene.camera, &scene.lights, &opts).unwrap();
+        assert_eq!((sa.tiles, sb.tiles), (1, 4), "{mode:?}");
+        assert_eq!((sa.round_trips, sb.round_trips), (1, 1), "{mode:?}");
+        assert_eq!(a.pixels, b.pixels, "{mode:?}: tiles changed the image");
+        assert_eq!(sa.render.rays, sb.render.rays, "{mode:?}");
+        if !sb.timings.from_timestamps {
+            assert_eq!(sb.downloaded_bytes, 64 * 48 * 16 + 4 * 64, "{mode:?}");
+        } else {
+            assert!(sb.downloaded_bytes > 64 * 48 * 16 + 4 * 64, "{mode:?}");
+        }
+        assert!(sb.wall_ms > 0.0 && sb.frame_ms() == sb.wall_ms);
+    }
+}
+
 /// A band of rows (`RenderOptions::rows`, how the viewer traces a frame within its time budget)
 /// equals the same rows of the whole frame, bit for bit, on the GPU and the CPU, in every mode
 /// and for every structure; the bands' rays add up to the frame's. Bands that do not start at

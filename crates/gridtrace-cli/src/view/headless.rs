@@ -60,6 +60,9 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         let lights = circle_lights(&lights0, camera0.up, centre, turn);
         let t = Instant::now();
         let f = tracer.render(&camera, &lights, &opts)?;
+        for n in tracer.take_notes() {
+            println!("note: {n}");
+        }
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let gpu_ms = f
             .gpu
@@ -68,8 +71,13 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
             .map(|g| g.timings.total_ms);
         uploaded = f.gpu.as_ref().map_or(0, |g| g.uploaded_bytes);
         let rate = f.stats.rays.total() as f64 / (ms * 1e3);
+        // Wall time first (what the viewer waits), then the device's, its round trips and
+        // the bytes read back: the same fields `render` and `bench` report.
+        let trips = f.gpu.as_ref().map_or(String::new(), |g| {
+            format!(", {} round trip(s), {} B down", g.round_trips, g.downloaded_bytes)
+        });
         println!(
-            "frame {i:4}  {ms:8.2} ms{}  {rate:8.2} Mrays/s  ({} rays)",
+            "frame {i:4}  {ms:8.2} ms{}  {rate:8.2} Mrays/s  ({} rays{trips})",
             gpu_ms.map_or(String::new(), |g| format!("  (gpu {g:.2} ms)")),
             f.stats.rays.total()
         );

@@ -28,6 +28,8 @@ impl App {
             } else {
                 self.refiner.step(budget, &mut trace)?;
             }
+            // A GPU given up for the CPU says so in the overlay's notes.
+            self.notes.extend(tracer.take_notes());
             if self.refiner.done() {
                 if self.history.len() == HISTORY {
                     self.history.pop_front();

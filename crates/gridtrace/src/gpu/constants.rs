@@ -4,6 +4,7 @@
 //! `tests/gpu_layout.rs` checks naga's values against [`WGSL_CONSTANTS`] bit for bit.
 
 use std::fmt::Write as _;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use super::bvh::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
@@ -30,6 +31,23 @@ pub const WORKGROUP: u32 = 64;
 /// Most workgroups in x of one dispatch; larger dispatches go 2-D (`flat_index` in common.wgsl),
 /// which keeps them under WebGPU's 65535 per dimension.
 pub const MAX_GROUPS_X: u32 = 32768;
+
+/// The limit in force: `MAX_GROUPS_X` unless a test lowered it (`set_max_groups_x`) to make
+/// small dispatches take the 2-D path, which a frame reaches only past 2M rays in one queue.
+static GROUPS_X_LIMIT: AtomicU32 = AtomicU32::new(MAX_GROUPS_X);
+
+/// The most workgroups in x of one dispatch, host and WGSL alike (see `GROUPS_X_LIMIT`).
+pub fn max_groups_x() -> u32 {
+    GROUPS_X_LIMIT.load(Ordering::Relaxed)
+}
+
+/// Lowers the 2-D dispatch threshold for the process (1..=`MAX_GROUPS_X`), for kernels
+/// compiled after the call. Correct at any value and even while other threads dispatch: the
+/// kernels index by the dispatch's own `num_workgroups`, and the limit only decides its shape.
+#[doc(hidden)]
+pub fn set_max_groups_x(n: u32) {
+    GROUPS_X_LIMIT.store(n.clamp(1, MAX_GROUPS_X), Ordering::Relaxed);
+}
 /// Elements one workgroup of the GPU grid build's scan sums (256 invocations, 4 each); the
 /// host sizes the scan's levels by it.
 pub const SCAN_BLOCK: u32 = 1024;
@@ -136,6 +154,10 @@ fn f32_literal(v: f32) -> String {
 pub fn wgsl_prelude() -> String {
     let mut s = String::from("// Generated from src/gpu/constants.rs: do not declare these names in WGSL.\n");
     for (name, value) in WGSL_CONSTANTS {
+        let value = match name {
+            "MAX_GROUPS_X" => WgslConst::U32(max_groups_x()),
+            _ => value,
+        };
         // Writing to a String cannot fail.
         let _ = match value {
             WgslConst::U32(v) => writeln!(s, "const {name}: u32 = {v}u;"),

@@ -12,6 +12,16 @@ use crate::{Error, Result};
 /// How long a submission may run before it is reported as a hang.
 pub const GPU_TIMEOUT: Duration = Duration::from_secs(120);
 
+/// A device fault a test can inject (`GpuContext::inject_fault`).
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// The device is gone for good (a driver reset, a removed card, a watchdog).
+    DeviceLost,
+    /// One allocation failed (reported once, as wgpu reports an uncaptured error).
+    OutOfMemory,
+}
+
 pub struct GpuContext {
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
@@ -21,6 +31,9 @@ pub struct GpuContext {
     pub timestamps: bool,
     /// First uncaptured device error, if any (validation, out of memory, lost device).
     errors: Arc<Mutex<Option<String>>>,
+    /// Why the device was lost, once it was: every later wait is an error (a lost device
+    /// stays lost; its work never completes).
+    lost: Arc<Mutex<Option<String>>>,
     /// What is compiled once per device and shared (the tracer's kernels, the grid build's),
     /// by type: built by the first user (`cached`), so that this file names none of them.
     cache: Mutex<HashMap<TypeId, Arc<dyn Any + Send + Sync>>>,
@@ -106,9 +119,10 @@ impl GpuContext {
             let mut slot = sink.lock().unwrap_or_else(|p| p.into_inner());
             slot.get_or_insert_with(|| e.to_string());
         }));
-        let lost = errors.clone();
+        let lost = Arc::new(Mutex::new(None::<String>));
+        let sink = lost.clone();
         device.set_device_lost_callback(move |reason, msg| {
-            let mut slot = lost.lock().unwrap_or_else(|p| p.into_inner());
+            let mut slot = sink.lock().unwrap_or_else(|p| p.into_inner());
             slot.get_or_insert_with(|| format!("device lost ({reason:?}): {msg}"));
         });
         Ok(GpuContext {
@@ -118,6 +132,7 @@ impl GpuContext {
             info,
             timestamps,
             errors,
+            lost,
             cache: Mutex::new(HashMap::new()),
         })
     }
@@ -158,10 +173,30 @@ impl GpuContext {
 
     /// Returns the first device error since the last call, as an `Error`.
     pub fn check_errors(&self) -> Result<()> {
+        if let Some(why) = self.lost.lock().unwrap_or_else(|p| p.into_inner()).as_ref() {
+            return Err(Error::Gpu(format!("the GPU device was lost: {why}")));
+        }
         let mut slot = self.errors.lock().unwrap_or_else(|p| p.into_inner());
         match slot.take() {
             Some(e) => Err(Error::Gpu(e)),
             None => Ok(()),
+        }
+    }
+
+    /// Makes the device behave as if `fault` had happened, through the same paths a real one
+    /// takes (the device-lost callback's record, the uncaptured-error record), so that tests can
+    /// check what callers do about faults that cannot be made to happen on demand.
+    #[doc(hidden)]
+    pub fn inject_fault(&self, fault: Fault) {
+        match fault {
+            Fault::DeviceLost => {
+                let mut slot = self.lost.lock().unwrap_or_else(|p| p.into_inner());
+                slot.get_or_insert_with(|| "device lost (Unknown): injected by a test".into());
+            }
+            Fault::OutOfMemory => {
+                let mut slot = self.errors.lock().unwrap_or_else(|p| p.into_inner());
+                slot.get_or_insert_with(|| "Out of Memory (injected by a test)".into());
+            }
         }
     }
 
@@ -176,7 +211,8 @@ impl GpuContext {
         self.check_errors()
     }
 
-    /// Copies `size` bytes of `src` (from offset 0) back to the CPU.
+    /// Copies `size` bytes of `src` (from offset 0) back to the CPU: one submission and one
+    /// wait (a host round trip).
     pub fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
         if size == 0 {
             return Ok(Vec::new());
@@ -190,21 +226,45 @@ impl GpuContext {
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(src, 0, &staging, 0, Some(size));
         self.queue.submit([enc.finish()]);
+        self.map_read(&staging, size)
+    }
+
+    /// The first `size` bytes of `staging` (a `MAP_READ` buffer that submitted work fills),
+    /// once that work is done: waits, maps, copies out and unmaps.
+    pub fn map_read(&self, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        self.map_read_with(staging, size, |raw| raw.to_vec())
+    }
+
+    /// `map_read`, handing the mapped bytes to `f` instead of copying them out.
+    pub fn map_read_with<R>(&self, staging: &wgpu::Buffer, size: u64, f: impl FnOnce(&[u8]) -> R) -> Result<R> {
         let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        staging.map_async(wgpu::MapMode::Read, ..size, move |r| {
             let _ = tx.send(r);
         });
-        self.wait()?;
+        // On any failure the buffer is unmapped again (a pending map is cancelled), so that it
+        // can be used by the next submission once the fault has passed.
+        let failed = |e: Error| {
+            staging.unmap();
+            Err(e)
+        };
+        if let Err(e) = self.wait() {
+            return failed(e);
+        }
         match rx.recv_timeout(Duration::from_secs(5)) {
             Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(Error::Gpu(format!("mapping a result buffer failed: {e}"))),
-            Err(_) => return Err(Error::Gpu("mapping a result buffer did not complete".into())),
+            Ok(Err(e)) => return failed(Error::Gpu(format!("mapping a result buffer failed: {e}"))),
+            Err(_) => return failed(Error::Gpu("mapping a result buffer did not complete".into())),
         }
-        let data = staging
-            .get_mapped_range(..)
-            .map_err(|e| Error::Gpu(format!("reading a result buffer failed: {e}")))?
-            .to_vec();
+        let out = {
+            let view = staging
+                .get_mapped_range(..size)
+                .map_err(|e| Error::Gpu(format!("reading a result buffer failed: {e}")))?;
+            f(&view)
+        };
         staging.unmap();
-        Ok(data)
+        Ok(out)
     }
 }

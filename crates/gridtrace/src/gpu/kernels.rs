@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 use super::bindings::{
     self, Access, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP, STRUCTURE_GROUP,
 };
-use super::constants::{MAX_GROUPS_X, WORKGROUP};
+use super::constants::{WORKGROUP, max_groups_x};
 use super::context::GpuContext;
 use super::layout::IndirectArgs;
 use super::shaders;
@@ -135,10 +135,10 @@ fn dispatch_size(n: u32) -> (u32, u32) {
 }
 
 /// Workgroups for `n` items, `per_group` to a workgroup, as a 2-D dispatch of at most
-/// `MAX_GROUPS_X` in x (so under WebGPU's 65535 per dimension).
+/// `MAX_GROUPS_X` (`max_groups_x()`) in x (so under WebGPU's 65535 per dimension).
 pub(super) fn dispatch_groups(n: u32, per_group: u32) -> (u32, u32) {
     let g = n.div_ceil(per_group);
-    let x = g.min(MAX_GROUPS_X);
+    let x = g.min(max_groups_x());
     (x, if x == 0 { 0 } else { g.div_ceil(x) })
 }
 

@@ -40,7 +40,7 @@ mod timing;
 pub mod walks;
 mod wavefront;
 
-pub use context::GpuContext;
+pub use context::{Fault, GpuContext};
 pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;

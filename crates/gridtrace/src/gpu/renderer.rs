@@ -26,6 +26,8 @@ pub const MAX_TILE_PIXELS: u32 = 1 << 20;
 const PASS_UNIFORM_STRIDE_BYTES: u64 = 256;
 /// Bounces per frame at most: eye + two reflection levels.
 const MAX_PASSES: usize = 3;
+/// Bytes of one tile's pass uniforms (every bounce's), as the frame's tile list holds them.
+pub(super) const TILE_UNIFORM_BYTES: u64 = PASS_UNIFORM_STRIDE_BYTES * MAX_PASSES as u64;
 /// Bytes per pixel of the accumulation buffer (`vec4<f32>`).
 pub(super) const ACCUM_TEXEL_BYTES: u64 = size_of::<[f32; 4]>() as u64;
 /// Bytes per ray of the resolve buffer (`vec2<u32>`: first shadow ray, count).
@@ -61,6 +63,15 @@ pub struct GpuRenderer {
     indirect_group: wgpu::BindGroup,
     timestamps: Option<Timestamps>,
     pub(super) work: Option<WorkBuffers>,
+    /// Every tile's pass uniforms for one frame (`TILE_UNIFORM_BYTES` each), copied into
+    /// `pass_uniform` in the command stream before the tile's passes: so all tiles of a frame
+    /// go in one submission. Grown as frames need.
+    pub(super) tile_uniforms: Option<wgpu::Buffer>,
+    /// The frame's results (image, counters, timestamps), mapped once per frame. Kept between
+    /// frames and grown as they need.
+    pub(super) readback: Option<wgpu::Buffer>,
+    /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).
+    max_tile_pixels: u32,
     /// The grid the GPU builds when the mesh moves (`update_vertices`), once it has.
     device_grid: Option<GpuGrid>,
 }
@@ -125,6 +136,9 @@ impl GpuRenderer {
             indirect_group,
             timestamps,
             work: None,
+            tile_uniforms: None,
+            readback: None,
+            max_tile_pixels: MAX_TILE_PIXELS,
             device_grid: None,
         };
         // A scene whose grid was left to the GPU: build it now.
@@ -250,7 +264,14 @@ impl GpuRenderer {
         let per_pixel_shadow = size_of::<RayRec>() as u64 * lights.max(1) as u64;
         let by_shadow = max_binding / per_pixel_shadow;
         let by_rays = max_binding / size_of::<RayRec>() as u64;
-        (MAX_TILE_PIXELS as u64).min(by_shadow).min(by_rays).max(1) as u32
+        (self.max_tile_pixels as u64).min(by_shadow).min(by_rays).max(1) as u32
+    }
+
+    /// Lowers the largest tile to `pixels` (at least 1): tests make a small frame of many
+    /// tiles with it, as a 4096x4096 frame is on any device.
+    #[doc(hidden)]
+    pub fn set_max_tile_pixels(&mut self, pixels: u32) {
+        self.max_tile_pixels = pixels.clamp(1, MAX_TILE_PIXELS);
     }
 
     /// Makes sure the work buffers hold `tile_pixels` and `lights`; recreates them if not.
@@ -339,6 +360,26 @@ impl GpuRenderer {
         accel: AccelKind,
         ablation: Ablation,
     ) -> u64 {
+        self.write_pass_uniforms_to(&self.pass_uniform, 0, tile_offset, tile_pixels, mode, accel, ablation)
+    }
+
+    /// The pass uniform buffer the kernels bind (a frame's tiles copy theirs into it).
+    pub(super) fn pass_uniform(&self) -> &wgpu::Buffer {
+        &self.pass_uniform
+    }
+
+    /// `write_pass_uniforms` into `dst` from byte `base` on (`TILE_UNIFORM_BYTES` of them).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn write_pass_uniforms_to(
+        &self,
+        dst: &wgpu::Buffer,
+        base: u64,
+        tile_offset: u32,
+        tile_pixels: u32,
+        mode: Mode,
+        accel: AccelKind,
+        ablation: Ablation,
+    ) -> u64 {
         let mut bytes = 0;
         for d in 0..MAX_PASSES as u32 {
             let p = PassUniform {
@@ -355,11 +396,9 @@ impl GpuRenderer {
                 _pad1: 0,
                 _pad2: 0,
             };
-            self.ctx.queue.write_buffer(
-                &self.pass_uniform,
-                d as u64 * PASS_UNIFORM_STRIDE_BYTES,
-                bytemuck::bytes_of(&p),
-            );
+            self.ctx
+                .queue
+                .write_buffer(dst, base + d as u64 * PASS_UNIFORM_STRIDE_BYTES, bytemuck::bytes_of(&p));
             bytes += size_of::<PassUniform>() as u64;
         }
         bytes

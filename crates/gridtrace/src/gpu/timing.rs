@@ -6,9 +6,11 @@ use std::collections::BTreeMap;
 use super::context::GpuContext;
 use crate::Result;
 
-/// Compute passes per submission that get timestamps; later passes run untimed. A tile records
-/// at most 1 + 6 per bounce passes (three bounces: 19), so this never binds in practice.
-pub const MAX_TIMED_PASSES: u32 = 64;
+/// Compute passes per submission that get timestamps; later passes run untimed (and the
+/// frame's GPU time says it is partial). A tile records at most 1 + 6 per bounce passes (three
+/// bounces: 19) and a frame submits all its tiles at once: a 4096x4096 frame is 16 tiles, 304
+/// passes. 2,048 queries stay within wgpu's 4,096 per query set.
+pub const MAX_TIMED_PASSES: u32 = 1024;
 /// Timestamps per submission: a begin and an end per timed pass.
 const QUERY_COUNT: u32 = 2 * MAX_TIMED_PASSES;
 /// One resolved timestamp, in bytes.
@@ -23,6 +25,9 @@ pub struct GpuTimings {
     pub total_ms: f64,
     /// Whether the figures come from timestamp queries.
     pub from_timestamps: bool,
+    /// Passes that ran untimed (more than `MAX_TIMED_PASSES` in one submission): the stage
+    /// sums leave them out.
+    pub untimed_passes: u32,
 }
 
 /// The query set and the buffer its timestamps are resolved into (a renderer's own).
@@ -54,6 +59,8 @@ impl Timestamps {
 pub(crate) struct StageTimer<'a> {
     timestamps: Option<&'a Timestamps>,
     stages: Vec<&'static str>,
+    /// Passes past `MAX_TIMED_PASSES`.
+    pub untimed: u32,
 }
 
 impl<'a> StageTimer<'a> {
@@ -62,6 +69,7 @@ impl<'a> StageTimer<'a> {
         StageTimer {
             timestamps,
             stages: Vec::new(),
+            untimed: 0,
         }
     }
 
@@ -69,6 +77,7 @@ impl<'a> StageTimer<'a> {
     pub fn pass_writes(&mut self, stage: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'a>> {
         let ts = self.timestamps?;
         if self.stages.len() as u32 >= MAX_TIMED_PASSES {
+            self.untimed += 1;
             return None;
         }
         let begin = self.stages.len() as u32 * 2;
@@ -89,20 +98,47 @@ impl<'a> StageTimer<'a> {
         }
     }
 
-    /// Milliseconds of each timed pass, in pass order (after the submission).
-    pub fn read(&self, ctx: &GpuContext) -> Result<Vec<(&'static str, f64)>> {
-        let mut times = Vec::new();
+    /// Bytes of this submission's resolved timestamps.
+    pub fn bytes(&self) -> u64 {
+        match self.timestamps {
+            Some(_) => self.stages.len() as u64 * 2 * TIMESTAMP_BYTES,
+            None => 0,
+        }
+    }
+
+    /// Records the resolve and the copy of the resolved timestamps to `dst` at `offset` (a
+    /// readback that carries the frame's other results too: one round trip for all).
+    pub fn resolve_into(&self, enc: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, offset: u64) {
         if let Some(ts) = self.timestamps
             && !self.stages.is_empty()
         {
-            let raw = ctx.read_buffer(&ts.resolved, self.stages.len() as u64 * 2 * TIMESTAMP_BYTES)?;
-            let ticks: &[u64] = bytemuck::cast_slice(&raw);
-            let period_ns = ctx.queue.get_timestamp_period() as f64;
-            for (i, name) in self.stages.iter().enumerate() {
-                let ms = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns * 1e-6;
-                times.push((*name, ms));
-            }
+            self.resolve(enc);
+            enc.copy_buffer_to_buffer(&ts.resolved, 0, dst, offset, Some(self.bytes()));
         }
-        Ok(times)
+    }
+
+    /// Milliseconds of each timed pass, in pass order, from the `bytes()` bytes that
+    /// `resolve_into` copied.
+    pub fn parse(&self, ctx: &GpuContext, raw: &[u8]) -> Vec<(&'static str, f64)> {
+        // Copied out: `raw` is a slice of a mapped buffer, with no promise of 8-byte alignment.
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(raw);
+        let period_ns = ctx.queue.get_timestamp_period() as f64;
+        self.stages
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let ms = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns * 1e-6;
+                (*name, ms)
+            })
+            .collect()
+    }
+
+    /// Milliseconds of each timed pass, in pass order (after the submission; its own round
+    /// trip).
+    pub fn read(&self, ctx: &GpuContext) -> Result<Vec<(&'static str, f64)>> {
+        match self.timestamps {
+            Some(ts) if !self.stages.is_empty() => Ok(self.parse(ctx, &ctx.read_buffer(&ts.resolved, self.bytes())?)),
+            _ => Ok(Vec::new()),
+        }
     }
 }

@@ -1,24 +1,32 @@
-//! The tile loop: a frame is rendered in tiles of at most `MAX_TILE_PIXELS`, each one
-//! submission of the kernel sequence in the module docs (raygen, then per bounce indirect,
-//! traverse, shade and, with shadows, indirect, occlusion, resolve).
+//! The frame: all tiles of at most `MAX_TILE_PIXELS` in one submission (each tile the kernel
+//! sequence in the module docs: raygen, then per bounce indirect, traverse, shade and, with
+//! shadows, indirect, occlusion, resolve), their results copied in the command stream into one
+//! readback buffer, and that buffer mapped once: one host round trip per frame. (Before, each
+//! tile ended with three blocking reads: a 4096x4096 frame waited 48 times.) A frame whose
+//! results exceed the device's largest buffer is cut into as few submissions as fit.
 
 use std::time::Instant;
 
 use glam::Vec3;
 
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
-use super::kernels::Kernel;
+use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
-use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer};
-use super::timing::GpuTimings;
+use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
+use super::timing::{GpuTimings, MAX_TIMED_PASSES};
 use crate::render::{Ablation, Image, Mode, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
 
 /// Bytes of one counter slot.
 const SLOT_BYTES: u64 = std::mem::size_of::<u32>() as u64;
+/// Bytes a submission's timestamps may take in its readback (a begin and an end per pass).
+const TIMESTAMPS_BYTES: u64 = MAX_TIMED_PASSES as u64 * 2 * std::mem::size_of::<u64>() as u64;
 
-/// Statistics of one GPU frame.
+/// Statistics of one GPU frame. Times have one meaning everywhere (`render`, `bench`, `view`,
+/// Python): `wall_ms` is the host's clock from the first upload to the image in host memory
+/// (what a program waits), `timings` the device's own per-stage times (timestamps, where the
+/// adapter has them): their difference is submission, readback and host work.
 #[derive(Debug, Default, Clone)]
 pub struct GpuRenderStats {
     pub render: RenderStats,
@@ -27,27 +35,42 @@ pub struct GpuRenderStats {
     /// Bytes written to the device for this frame: the camera, the scene constants (its light
     /// count), the lights and each tile's pass uniforms. The scene itself is uploaded once.
     pub uploaded_bytes: u64,
+    /// Bytes read back: the image (16 a pixel), each tile's counters, the timestamps.
+    pub downloaded_bytes: u64,
+    /// Times the host waited for the device (one per submission: 1 unless the frame's results
+    /// exceed the device's largest buffer).
+    pub round_trips: u32,
+    /// Host wall clock of the frame, uploads to image (ms).
+    pub wall_ms: f64,
 }
 
 impl GpuRenderStats {
-    /// The frame's milliseconds as benchmarks report them: the sum of the stages' timestamps
-    /// where the adapter has timestamp queries, else wall time around the submissions.
+    /// The frame's milliseconds as every report gives them: wall time (`wall_ms`).
     pub fn frame_ms(&self) -> f64 {
-        if self.timings.from_timestamps {
-            self.timings.total_ms
-        } else {
-            self.render.render_ms
-        }
+        self.wall_ms
+    }
+
+    /// The device's time for the frame (the stages' timestamps summed), where it has them.
+    pub fn gpu_ms(&self) -> Option<f64> {
+        self.timings.from_timestamps.then_some(self.timings.total_ms)
     }
 }
 
-/// What one tile's submission reads back.
-struct TileOutput {
-    /// RGBA per pixel of the tile.
-    accum: Vec<f32>,
-    counters: Vec<u32>,
+/// One tile of a frame: its first pixel (in the frame's numbering) and its pixel count.
+#[derive(Debug, Clone, Copy)]
+struct Tile {
+    offset: u32,
+    pixels: u32,
+}
+
+/// What one submission (a run of tiles) reads back, parsed.
+struct Readback {
+    /// Shadow and reflection rays per tile.
+    rays: Vec<(u64, u64)>,
     /// Milliseconds per timed pass.
     stage_ms: Vec<(&'static str, f64)>,
+    untimed: u32,
+    bytes: u64,
 }
 
 impl GpuRenderer {
@@ -77,41 +100,61 @@ impl GpuRenderer {
         };
         q.write_buffer(&self.scene.uniform, 0, bytemuck::bytes_of(&consts));
         let mut uploaded = (std::mem::size_of_val(&frame) + std::mem::size_of_val(&consts)) as u64;
-        {
+        if !lights.is_empty() {
             let w = self.work.as_ref().unwrap();
-            if !lights.is_empty() {
-                q.write_buffer(&w.lights, 0, bytemuck::cast_slice(lights));
-                uploaded += std::mem::size_of_val(lights) as u64;
-            }
+            q.write_buffer(&w.lights, 0, bytemuck::cast_slice(lights));
+            uploaded += std::mem::size_of_val(lights) as u64;
+        }
+        let tiles: Vec<Tile> = (first..pixels)
+            .step_by(tile as usize)
+            .map(|offset| Tile {
+                offset,
+                pixels: tile.min(pixels - offset),
+            })
+            .collect();
+        self.ensure_tile_uniforms(tiles.len());
+        let tile_uniforms = self.tile_uniforms.as_ref().unwrap();
+        for (k, t) in tiles.iter().enumerate() {
+            uploaded += self.write_pass_uniforms_to(
+                tile_uniforms,
+                k as u64 * TILE_UNIFORM_BYTES,
+                t.offset,
+                t.pixels,
+                opts.mode,
+                opts.accel,
+                opts.ablation,
+            );
         }
         let mut img = Image::new(opts.width, rows.len() as u32);
         let mut stats = GpuRenderStats::default();
-        let mut offset = first;
-        while offset < pixels {
-            let tp = tile.min(pixels - offset);
-            uploaded += self.write_pass_uniforms(offset, tp, opts.mode, opts.accel, opts.ablation);
-            let out = self.run_tile(tp, opts.mode, opts.ablation)?;
-            for (i, px) in out.accum.chunks_exact(4).enumerate() {
-                img.pixels[(offset - first) as usize + i] = Vec3::new(px[0], px[1], px[2]);
+        let max_bytes = self.ctx.limits().max_buffer_size;
+        let mut k = 0;
+        while k < tiles.len() {
+            let n = tiles_per_submission(&tiles[k..], max_bytes);
+            let out = self.run_tiles(k, &tiles[k..k + n], first, opts.mode, opts.ablation, &mut img)?;
+            for (r, t) in out.rays.iter().zip(&tiles[k..k + n]) {
+                stats.render.rays.eye += t.pixels as u64;
+                stats.render.rays.shadow += r.0;
+                stats.render.rays.reflection += r.1;
             }
-            stats.render.rays.eye += tp as u64;
-            stats.render.rays.shadow += out.counters[SLOT_SHADOW_TOTAL] as u64;
-            stats.render.rays.reflection += out.counters[SLOT_REFLECT_TOTAL] as u64;
-            for (k, v) in out.stage_ms {
-                *stats.timings.stages_ms.entry(k).or_default() += v;
+            for (name, ms) in out.stage_ms {
+                *stats.timings.stages_ms.entry(name).or_default() += ms;
             }
-            stats.tiles += 1;
-            offset += tp;
+            stats.timings.untimed_passes += out.untimed;
+            stats.downloaded_bytes += out.bytes;
+            stats.round_trips += 1;
+            k += n;
         }
+        stats.tiles = tiles.len() as u32;
         stats.uploaded_bytes = uploaded;
-        let wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+        stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.timings.from_timestamps = self.timed();
         stats.timings.total_ms = if self.timed() {
             stats.timings.stages_ms.values().sum()
         } else {
-            wall_ms
+            stats.wall_ms
         };
-        stats.render.render_ms = stats.timings.total_ms;
+        stats.render.render_ms = stats.wall_ms;
         if opts.mode == Mode::Heat {
             let cost: f64 = img.pixels.iter().map(|p| p.x as f64).sum();
             stats.render.counters.cells = cost as u64;
@@ -119,44 +162,151 @@ impl GpuRenderer {
         Ok((img, stats))
     }
 
-    /// Records and runs one tile's kernels (`tp` pixels; the pass uniforms are written).
-    fn run_tile(&self, tp: u32, mode: Mode, ablation: Ablation) -> Result<TileOutput> {
+    /// Makes sure the tile uniform buffer holds `tiles` tiles' pass uniforms.
+    fn ensure_tile_uniforms(&mut self, tiles: usize) {
+        let size = tiles as u64 * TILE_UNIFORM_BYTES;
+        if self.tile_uniforms.as_ref().is_some_and(|b| b.size() >= size) {
+            return;
+        }
+        self.tile_uniforms = Some(self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tile pass uniforms"),
+            size,
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        }));
+    }
+
+    /// Makes sure the readback buffer holds `size` bytes.
+    fn ensure_readback(&mut self, size: u64) {
+        if self.readback.as_ref().is_some_and(|b| b.size() >= size) {
+            return;
+        }
+        self.readback = Some(self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        }));
+    }
+
+    /// Records `tiles` (the frame's tiles from index `first_tile` on; their pass uniforms are
+    /// written) into one submission, runs it, waits once and writes their pixels into `img`
+    /// (whose first row starts at pixel `first`).
+    fn run_tiles(
+        &mut self,
+        first_tile: usize,
+        tiles: &[Tile],
+        first: u32,
+        mode: Mode,
+        ablation: Ablation,
+        img: &mut Image,
+    ) -> Result<Readback> {
+        // The readback: the tiles' pixels in order, then a counters block per tile, then the
+        // timestamps.
+        let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * ACCUM_TEXEL_BYTES).sum();
+        let counters_at = image_bytes;
+        let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
+        self.ensure_readback(stamps_at + if self.timed() { TIMESTAMPS_BYTES } else { 0 });
+        let readback = self.readback.as_ref().unwrap();
         let w = self.work.as_ref().unwrap();
         let mut enc = self
             .ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        let mut rec = self.recorder(tiles[0].pixels, true, ablation);
+        let mut image_at = 0;
+        for (k, t) in tiles.iter().enumerate() {
+            // Copies in the command stream run in order with the passes: this tile's passes
+            // read its own uniforms, and the next tile's raygen starts after this tile's
+            // results are copied out.
+            enc.copy_buffer_to_buffer(
+                self.tile_uniforms.as_ref().unwrap(),
+                (first_tile + k) as u64 * TILE_UNIFORM_BYTES,
+                self.pass_uniform(),
+                0,
+                Some(TILE_UNIFORM_BYTES),
+            );
+            rec.tile_pixels = t.pixels;
+            self.record_tile(&mut enc, &mut rec, mode);
+            let bytes = t.pixels as u64 * ACCUM_TEXEL_BYTES;
+            enc.copy_buffer_to_buffer(&w.accum, 0, readback, image_at, Some(bytes));
+            enc.copy_buffer_to_buffer(
+                &self.counters,
+                0,
+                readback,
+                counters_at + k as u64 * COUNTERS_BYTES,
+                Some(COUNTERS_BYTES),
+            );
+            image_at += bytes;
+        }
+        rec.timer.resolve_into(&mut enc, readback, stamps_at);
+        let total = stamps_at + rec.timer.bytes();
+        self.ctx.queue.submit([enc.finish()]);
+        let timer = rec.timer;
+        self.ctx.map_read_with(readback, total, |raw| {
+            let mut at = 0usize;
+            for t in tiles {
+                let n = t.pixels as usize;
+                let dst = &mut img.pixels[(t.offset - first) as usize..][..n];
+                for (px, texel) in dst.iter_mut().zip(raw[at..].chunks_exact(ACCUM_TEXEL_BYTES as usize)) {
+                    let f = |i: usize| f32::from_ne_bytes(texel[4 * i..4 * i + 4].try_into().unwrap());
+                    *px = Vec3::new(f(0), f(1), f(2));
+                }
+                at += n * ACCUM_TEXEL_BYTES as usize;
+            }
+            let counter = |k: usize, slot: usize| {
+                let i = (counters_at + k as u64 * COUNTERS_BYTES) as usize + slot * SLOT_BYTES as usize;
+                u32::from_ne_bytes(raw[i..i + 4].try_into().unwrap()) as u64
+            };
+            Readback {
+                rays: (0..tiles.len())
+                    .map(|k| (counter(k, SLOT_SHADOW_TOTAL), counter(k, SLOT_REFLECT_TOTAL)))
+                    .collect(),
+                stage_ms: timer.parse(&self.ctx, &raw[stamps_at as usize..total as usize]),
+                untimed: timer.untimed,
+                bytes: total,
+            }
+        })
+    }
+
+    /// Records one tile's kernels (its pass uniforms in place).
+    fn record_tile(&self, enc: &mut wgpu::CommandEncoder, rec: &mut PassRecorder, mode: Mode) {
+        let w = self.work.as_ref().unwrap();
         enc.clear_buffer(&self.counters, 0, None);
-        let mut rec = self.recorder(tp, true, ablation);
-        rec.pass(&mut enc, Kernel::Raygen, &w.bind_groups[0]);
+        rec.pass(enc, Kernel::Raygen, &w.bind_groups[0]);
         for d in 0..=mode.reflection_depth() as usize {
             let bg = &w.bind_groups[d];
-            rec.pass(&mut enc, Kernel::Indirect, bg);
+            rec.pass(enc, Kernel::Indirect, bg);
             if mode == Mode::Heat {
-                rec.pass(&mut enc, Kernel::TraverseHeat, bg);
+                rec.pass(enc, Kernel::TraverseHeat, bg);
                 break;
             }
-            rec.pass(&mut enc, Kernel::Traverse, bg);
-            rec.pass(&mut enc, Kernel::Shade, bg);
+            rec.pass(enc, Kernel::Traverse, bg);
+            rec.pass(enc, Kernel::Shade, bg);
             if mode.shadows() {
-                rec.pass(&mut enc, Kernel::Indirect, bg);
-                rec.pass(&mut enc, Kernel::Occlusion, bg);
-                rec.pass(&mut enc, Kernel::Resolve, bg);
+                rec.pass(enc, Kernel::Indirect, bg);
+                rec.pass(enc, Kernel::Occlusion, bg);
+                rec.pass(enc, Kernel::Resolve, bg);
             }
             // This bounce's input queue (slot d % 2) becomes the next one's output: empty it,
             // and the shadow queue.
             enc.clear_buffer(&self.counters, (d % 2) as u64 * SLOT_BYTES, Some(SLOT_BYTES));
             enc.clear_buffer(&self.counters, SLOT_SHADOW as u64 * SLOT_BYTES, Some(SLOT_BYTES));
         }
-        rec.timer.resolve(&mut enc);
-        self.ctx.queue.submit([enc.finish()]);
-        let accum = bytemuck::cast_slice(&self.ctx.read_buffer(&w.accum, tp as u64 * ACCUM_TEXEL_BYTES)?).to_vec();
-        let counters = bytemuck::cast_slice(&self.ctx.read_buffer(&self.counters, COUNTERS_BYTES)?).to_vec();
-        let stage_ms = rec.timer.read(&self.ctx)?;
-        Ok(TileOutput {
-            accum,
-            counters,
-            stage_ms,
-        })
     }
+}
+
+/// How many of `tiles` (from the first) one submission takes: as many as the device's largest
+/// buffer holds the results of, at least one.
+fn tiles_per_submission(tiles: &[Tile], max_buffer_bytes: u64) -> usize {
+    let mut bytes = TIMESTAMPS_BYTES;
+    let mut n = 0;
+    for t in tiles {
+        bytes += t.pixels as u64 * ACCUM_TEXEL_BYTES + COUNTERS_BYTES;
+        if n > 0 && bytes > max_buffer_bytes {
+            break;
+        }
+        n += 1;
+    }
+    n
 }

@@ -27,18 +27,24 @@
 //! # Ok::<(), gridtrace::Error>(())
 //! ```
 
-use std::ops::Range;
 use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
-use crate::accel::huge::advise_huge_pages_within;
 use crate::accel::{AccelChoice, AccelKind, Hit, IrregularParams, Ray, Resolution, Work};
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
+
+mod batch;
+mod hits;
+
+pub use batch::CHUNK;
+use batch::{CPU_BATCH, batch_len, check_interval, for_chunks, on_cpu_batches};
+pub use hits::Hits;
+use hits::HitsMut;
 
 /// Where ray queries run (the same choice as rendering's).
 pub use crate::backend::Backend;
@@ -64,80 +70,6 @@ impl Default for QueryOptions {
         }
     }
 }
-
-/// Closest hits, one entry per ray (structure of arrays). A miss has `t = inf`,
-/// `tri = u32::MAX`, `u = v = 0` and a zero normal.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Hits {
-    pub t: Vec<f32>,
-    /// Index of the hit triangle in the input faces.
-    pub tri: Vec<u32>,
-    /// Barycentric coordinates of the hit: weight of the face's second (`u`) and third (`v`)
-    /// vertex.
-    pub u: Vec<f32>,
-    pub v: Vec<f32>,
-    /// Unit geometric normal of the hit triangle, `normalize((v1 - v0) x (v2 - v0))` in input
-    /// winding order (not flipped towards the ray).
-    pub normal: Vec<[f32; 3]>,
-}
-
-/// A piece of a `Hits` being filled.
-struct HitsMut<'a> {
-    t: &'a mut [f32],
-    tri: &'a mut [u32],
-    u: &'a mut [f32],
-    v: &'a mut [f32],
-    normal: &'a mut [[f32; 3]],
-}
-
-impl Hits {
-    fn zeroed(n: usize) -> Hits {
-        let mut h = Hits {
-            t: vec![0.0; n],
-            tri: vec![0; n],
-            u: vec![0.0; n],
-            v: vec![0.0; n],
-            normal: vec![[0.0; 3]; n],
-        };
-        // 32 bytes a ray, in fresh pages: for a million rays, thousands of page faults fewer.
-        advise_huge_pages_within(&mut h.t);
-        advise_huge_pages_within(&mut h.tri);
-        advise_huge_pages_within(&mut h.u);
-        advise_huge_pages_within(&mut h.v);
-        advise_huge_pages_within(&mut h.normal);
-        h
-    }
-
-    /// Entries `range`, in pieces of `size`, to fill in parallel.
-    fn pieces(&mut self, range: Range<usize>, size: usize) -> impl IndexedParallelIterator<Item = HitsMut<'_>> {
-        (
-            self.t[range.clone()].par_chunks_mut(size),
-            self.tri[range.clone()].par_chunks_mut(size),
-            self.u[range.clone()].par_chunks_mut(size),
-            self.v[range.clone()].par_chunks_mut(size),
-            self.normal[range].par_chunks_mut(size),
-        )
-            .into_par_iter()
-            .map(|(t, tri, u, v, normal)| HitsMut { t, tri, u, v, normal })
-    }
-
-    pub fn len(&self) -> usize {
-        self.t.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.t.is_empty()
-    }
-}
-
-/// Rays are processed in chunks of this many, so temporary memory stays bounded however large
-/// the batch.
-pub const CHUNK: usize = 1 << 20;
-
-/// Rays per CPU work item: large enough to amortise scheduling, small enough to balance two
-/// to hundreds of threads over a chunk. The CPU validates and traces each work item's rays on
-/// its own and writes the results straight into the output: besides the output, a query
-/// allocates nothing of the batch's size (no array of rays, no array of hits).
-const CPU_BATCH: usize = 1024;
 
 /// An accelerated triangle mesh for ray queries.
 pub struct TraceMesh {
@@ -499,120 +431,6 @@ impl TraceMesh {
 /// is taken as it is.
 fn locked(gpu: &Mutex<GpuRenderer>) -> MutexGuard<'_, GpuRenderer> {
     gpu.lock().unwrap_or_else(|p| p.into_inner())
-}
-
-/// Hands a (possibly broadcast, checked) batch to `f` as rays, `CHUNK` at a time.
-/// Runs `f` on the rays of a batch of `n` (its broadcast length, `batch_len`), `CHUNK` at a
-/// time. `n` is not `max(origins, dirs)`: with one side empty and the other of length 1 the batch
-/// is empty, and there is no ray to make.
-fn for_chunks(
-    origins: &[[f32; 3]],
-    dirs: &[[f32; 3]],
-    n: usize,
-    mut f: impl FnMut(&[Ray]) -> Result<()>,
-) -> Result<()> {
-    for start in (0..n).step_by(CHUNK) {
-        f(&make_rays(origins, dirs, start, (start + CHUNK).min(n))?)?;
-    }
-    Ok(())
-}
-
-/// Runs `f` on the CPU for every `CPU_BATCH` rays of a (possibly broadcast, checked) batch of
-/// `n`, in parallel, each with its piece of the output (`pieces` yields one per `CPU_BATCH`
-/// rays).
-fn on_cpu_batches<P: Send>(
-    origins: &[[f32; 3]],
-    dirs: &[[f32; 3]],
-    n: usize,
-    pieces: impl IndexedParallelIterator<Item = P>,
-    f: impl Fn(&[Ray], P) + Sync + Send,
-) -> Result<()> {
-    let done = pieces.enumerate().try_for_each_init(
-        || Vec::with_capacity(CPU_BATCH),
-        |rays, (b, piece)| {
-            rays.clear();
-            // The same rule as `ray_at`, without a branch per ray: a bad ray is rare, and then
-            // `first_bad_ray` finds and names it.
-            let mut all_good = true;
-            for i in b * CPU_BATCH..((b + 1) * CPU_BATCH).min(n) {
-                let (o, d) = ray_parts(origins, dirs, i);
-                all_good &= is_valid_ray(o, d);
-                rays.push(Ray::new(o, d));
-            }
-            if !all_good {
-                return None;
-            }
-            f(rays, piece);
-            Some(())
-        },
-    );
-    done.ok_or_else(|| first_bad_ray(origins, dirs, 0, n))
-}
-
-fn batch_len(origins: &[[f32; 3]], dirs: &[[f32; 3]]) -> Result<usize> {
-    match (origins.len(), dirs.len()) {
-        (a, b) if a == b => Ok(a),
-        (1, b) => Ok(b),
-        (a, 1) => Ok(a),
-        (a, b) => Err(Error::InvalidInput(format!(
-            "{a} origins and {b} directions: lengths must match (or one be 1)"
-        ))),
-    }
-}
-
-fn check_interval(t_min: f32, t_max: f32) -> Result<()> {
-    if t_min.is_nan() || t_max.is_nan() || t_min < 0.0 || t_min > t_max {
-        return Err(Error::InvalidInput(format!(
-            "need 0 <= t_min <= t_max, got t_min = {t_min}, t_max = {t_max}"
-        )));
-    }
-    Ok(())
-}
-
-/// Origin and direction of ray `i` of a (possibly broadcast) batch, unchecked.
-#[inline(always)]
-fn ray_parts(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> (Vec3, Vec3) {
-    let o = Vec3::from(origins[if origins.len() == 1 { 0 } else { i }]);
-    let d = Vec3::from(dirs[if dirs.len() == 1 { 0 } else { i }]);
-    (o, d)
-}
-
-/// The rule for a ray: finite origin and direction, and a direction that is not zero.
-#[inline(always)]
-fn is_valid_ray(o: Vec3, d: Vec3) -> bool {
-    o.is_finite() & d.is_finite() & (d != Vec3::ZERO)
-}
-
-/// Ray `i` of a (possibly broadcast) batch; a ray that breaks `is_valid_ray` is an error naming
-/// the ray and what is wrong with it.
-fn ray_at(origins: &[[f32; 3]], dirs: &[[f32; 3]], i: usize) -> Result<Ray> {
-    let (o, d) = ray_parts(origins, dirs, i);
-    if is_valid_ray(o, d) {
-        return Ok(Ray::new(o, d));
-    }
-    if !o.is_finite() || !d.is_finite() {
-        return Err(Error::InvalidInput(format!(
-            "ray {i} has a non-finite origin {o} or direction {d}"
-        )));
-    }
-    Err(Error::InvalidInput(format!("ray {i} has a zero direction")))
-}
-
-/// The error of the first bad ray among `start..end` (whichever thread saw one).
-fn first_bad_ray(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Error {
-    (start..end)
-        .find_map(|i| ray_at(origins, dirs, i).err())
-        .unwrap_or_else(|| Error::InvalidInput("a ray failed validation".into()))
-}
-
-/// Rays `start..end` of a (possibly broadcast) batch, validated (`ray_at`).
-fn make_rays(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Result<Vec<Ray>> {
-    let rays: Option<Vec<Ray>> = (start..end)
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| ray_at(origins, dirs, i).ok())
-        .collect();
-    rays.ok_or_else(|| first_bad_ray(origins, dirs, start, end))
 }
 
 #[cfg(test)]

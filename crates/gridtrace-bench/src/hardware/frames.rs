@@ -1,0 +1,289 @@
+//! The suite's frames: every structure with a GPU walk (brute force left out: a ray tests every
+//! triangle) and every GPU variant, each frame's image checked against the CPU's before its
+//! time counts, and the CPU's own time on the same frame for the ratio.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer};
+use gridtrace::render::differing_pixels;
+use gridtrace::render::{Image, RenderOptions};
+use gridtrace::scene::PreparedScene;
+use gridtrace::{AccelKind, Mesh, Mode, Resolution, Result};
+
+use super::{Budget, Plan};
+use crate::scenes::BenchScene;
+use crate::timing::Summary;
+
+/// Channel levels (of 255) a GPU pixel may differ from the CPU's by: float results rounded
+/// differently (a GPU may fuse multiply-adds) move a shade by a level or two.
+pub const PIXEL_TOLERANCE: u8 = 2;
+/// Pixels that may differ beyond `PIXEL_TOLERANCE` (a fraction): a ray grazing an edge may
+/// hit the neighbouring triangle on one side and not the other. More is a mismatch.
+pub const MAX_DIFFERING: f64 = 0.002;
+/// Timed CPU frames per measurement (the CPU is the ratio's anchor, not the question).
+const CPU_REPS: u32 = 2;
+
+/// One frame measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameRow {
+    pub scene: String,
+    pub triangles: usize,
+    pub accel: String,
+    /// `gpu` or `cpu`.
+    pub backend: String,
+    /// The GPU variant (`-` on the CPU).
+    pub variant: String,
+    pub mode: String,
+    pub width: u32,
+    pub height: u32,
+    /// Rays of one frame (eye, shadow, reflection).
+    pub rays: u64,
+    /// Wall time (host clock, uploads to image in host memory), ms.
+    #[serde(flatten)]
+    pub wall: Summary,
+    /// GPU time (timestamps summed) of the timed frames: median, where the adapter has them.
+    pub gpu_median_ms: Option<f64>,
+    /// Rays per microsecond at the median wall time, and at the median GPU time.
+    pub mrays_per_s: f64,
+    pub gpu_mrays_per_s: Option<f64>,
+    pub round_trips: u32,
+    pub bytes_up: u64,
+    pub bytes_down: u64,
+    /// The last timed frame's stages (GPU timestamps), ms.
+    pub stages_ms: BTreeMap<String, f64>,
+    /// Pixels differing from the CPU's image beyond `PIXEL_TOLERANCE` (fraction; 0 on the CPU).
+    pub differing_from_cpu: f64,
+}
+
+/// A mesh alone in an auto-framed scene with a floor, for the frames.
+pub fn mesh_bench_scene(name: &str, mesh: Mesh) -> BenchScene {
+    let triangles = mesh.triangles.len();
+    BenchScene {
+        name: name.into(),
+        title: name.into(),
+        scene: gridtrace::scene::builtin::mesh_scene(mesh, true),
+        triangles,
+        paper_tris: None,
+        paper_grid: None,
+        description: format!("{name} on a floor, one light"),
+    }
+}
+
+/// The structures the frames run: those with a GPU walk, brute force left out.
+pub fn frame_accels() -> Vec<AccelKind> {
+    AccelKind::ALL
+        .into_iter()
+        .filter(|k| k.entry().gpu && !k.entry().every_triangle)
+        .collect()
+}
+
+/// A renderer of `prepared` with the GPU variant `variant` (`default`: today's kernels).
+pub fn open_gpu(ctx: &Arc<GpuContext>, prepared: &PreparedScene, variant: &str) -> Result<GpuRenderer> {
+    if variant != "default" {
+        return Err(gridtrace::Error::InvalidInput(format!(
+            "unknown GPU variant '{variant}'"
+        )));
+    }
+    GpuRenderer::new(ctx.clone(), prepared)
+}
+
+/// Every scene x structure x variant x mode, as long as the budget lasts.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_matrix(
+    plan: &Plan,
+    gpu: &Arc<GpuContext>,
+    scenes: &[BenchScene],
+    variants: &[String],
+    budget: &Budget,
+    skipped: &mut Vec<String>,
+    mismatches: &mut Vec<String>,
+    log: &mut dyn FnMut(&str),
+) -> Result<Vec<FrameRow>> {
+    let mut rows = Vec::new();
+    let (w, h) = plan.frame_size;
+    for bs in scenes {
+        for accel in frame_accels() {
+            if !budget.allows(&format!("frames of {} with {}", bs.name, accel.name()), skipped) {
+                continue;
+            }
+            let prepared = bs.scene.prepare_for(accel, Resolution::default())?;
+            let mut reference = Vec::new();
+            for &mode in &plan.modes {
+                let opts = RenderOptions::new(w, h, mode, accel);
+                let (row, image) = cpu_row(bs, &prepared, &opts)?;
+                log(&row_line(&row));
+                rows.push(row);
+                reference.push(image.to_rgb8());
+            }
+            for variant in variants {
+                let mut r = open_gpu(gpu, &prepared, variant)?;
+                for (k, &mode) in plan.modes.iter().enumerate() {
+                    let opts = RenderOptions::new(w, h, mode, accel);
+                    let row = gpu_row(plan, bs, &prepared, &mut r, &opts, variant, &reference[k], mismatches)?;
+                    log(&row_line(&row));
+                    rows.push(row);
+                }
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// One large frame (trace, the BVH, default variant) on the GPU and the CPU: the case where
+/// tiling and readback matter most.
+pub fn big_frame(
+    plan: &Plan,
+    gpu: &Arc<GpuContext>,
+    scenes: &[BenchScene],
+    budget: &Budget,
+    skipped: &mut Vec<String>,
+    mismatches: &mut Vec<String>,
+    log: &mut dyn FnMut(&str),
+) -> Result<Vec<FrameRow>> {
+    let Some(bs) = scenes.first() else {
+        return Ok(Vec::new());
+    };
+    if !budget.allows("the big frame", skipped) {
+        return Ok(Vec::new());
+    }
+    let (w, h) = plan.big_frame;
+    let prepared = bs.scene.prepare_for(AccelKind::Bvh, Resolution::default())?;
+    let opts = RenderOptions::new(w, h, Mode::Trace, AccelKind::Bvh);
+    let (cpu, image) = cpu_row(bs, &prepared, &opts)?;
+    log(&row_line(&cpu));
+    let mut r = open_gpu(gpu, &prepared, "default")?;
+    let one = Plan {
+        reps: 1,
+        warmup_ms: 0.0,
+        ..plan.clone()
+    };
+    let row = gpu_row(
+        &one,
+        bs,
+        &prepared,
+        &mut r,
+        &opts,
+        "default",
+        &image.to_rgb8(),
+        mismatches,
+    )?;
+    log(&row_line(&row));
+    Ok(vec![cpu, row])
+}
+
+fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> Result<(FrameRow, Image)> {
+    // The first render is the reference image and the warm-up.
+    let (image, stats) = gridtrace::cpu::render(prepared, opts, None)?;
+    let mut times = Vec::new();
+    for _ in 0..CPU_REPS {
+        times.push(gridtrace::cpu::render(prepared, opts, None)?.1.render_ms);
+    }
+    let wall = Summary::of(&times);
+    let rays = stats.rays.total();
+    Ok((
+        FrameRow {
+            scene: bs.name.clone(),
+            triangles: bs.triangles,
+            accel: opts.accel.name().into(),
+            backend: "cpu".into(),
+            variant: "-".into(),
+            mode: opts.mode.name().into(),
+            width: opts.width,
+            height: opts.height,
+            rays,
+            wall,
+            gpu_median_ms: None,
+            mrays_per_s: rays as f64 / (wall.median_ms * 1e3).max(1e-9),
+            gpu_mrays_per_s: None,
+            round_trips: 0,
+            bytes_up: 0,
+            bytes_down: 0,
+            stages_ms: BTreeMap::new(),
+            differing_from_cpu: 0.0,
+        },
+        image,
+    ))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn gpu_row(
+    plan: &Plan,
+    bs: &BenchScene,
+    prepared: &PreparedScene,
+    r: &mut GpuRenderer,
+    opts: &RenderOptions,
+    variant: &str,
+    reference: &[u8],
+    mismatches: &mut Vec<String>,
+) -> Result<FrameRow> {
+    // Warm-up: at least one frame (pipelines, buffers), then until `warmup_ms` have passed.
+    let started = Instant::now();
+    let (mut image, _) = r.render(&prepared.camera, &prepared.lights, opts)?;
+    while started.elapsed().as_secs_f64() * 1e3 < plan.warmup_ms {
+        r.render(&prepared.camera, &prepared.lights, opts)?;
+    }
+    let mut frames: Vec<GpuRenderStats> = Vec::new();
+    for _ in 0..plan.reps.max(1) {
+        let (img, s) = r.render(&prepared.camera, &prepared.lights, opts)?;
+        image = img;
+        frames.push(s);
+    }
+    let wall = Summary::of(&frames.iter().map(|s| s.wall_ms).collect::<Vec<_>>());
+    let gpu_times: Vec<f64> = frames.iter().filter_map(|s| s.gpu_ms()).collect();
+    let gpu_median_ms = (!gpu_times.is_empty()).then(|| Summary::of(&gpu_times).median_ms);
+    let last = frames.last().expect("at least one timed frame");
+    let rays = last.render.rays.total();
+    let differing = differing_pixels(&image.to_rgb8(), reference, PIXEL_TOLERANCE);
+    if differing > MAX_DIFFERING {
+        mismatches.push(format!(
+            "{} {} {} {} {}x{}: {:.3}% of pixels differ from the CPU's",
+            bs.name,
+            opts.accel.name(),
+            variant,
+            opts.mode.name(),
+            opts.width,
+            opts.height,
+            100.0 * differing
+        ));
+    }
+    Ok(FrameRow {
+        scene: bs.name.clone(),
+        triangles: bs.triangles,
+        accel: opts.accel.name().into(),
+        backend: "gpu".into(),
+        variant: variant.into(),
+        mode: opts.mode.name().into(),
+        width: opts.width,
+        height: opts.height,
+        rays,
+        wall,
+        gpu_median_ms,
+        mrays_per_s: rays as f64 / (wall.median_ms * 1e3).max(1e-9),
+        gpu_mrays_per_s: gpu_median_ms.map(|ms| rays as f64 / (ms * 1e3).max(1e-9)),
+        round_trips: last.round_trips,
+        bytes_up: last.uploaded_bytes,
+        bytes_down: last.downloaded_bytes,
+        stages_ms: last
+            .timings
+            .stages_ms
+            .iter()
+            .map(|(k, v)| (k.to_string(), *v))
+            .collect(),
+        differing_from_cpu: differing,
+    })
+}
+
+/// One line of the log for a row.
+pub fn row_line(r: &FrameRow) -> String {
+    let gpu = r.gpu_median_ms.map_or(String::new(), |ms| {
+        format!(", GPU {ms:.2} ms ({:.1} Mrays/s)", r.gpu_mrays_per_s.unwrap_or(0.0))
+    });
+    format!(
+        "  {:<15} {:<9} {:<3} {:<12} {:<6} {}x{}: wall {:.2} ms ({:.1} Mrays/s){gpu}",
+        r.scene, r.accel, r.backend, r.variant, r.mode, r.width, r.height, r.wall.median_ms, r.mrays_per_s
+    )
+}

@@ -1,0 +1,183 @@
+//! The suite's ray batches: camera rays in image order (coherent, as programs pass a camera's
+//! rays) and incoherent rays (`query_study::incoherent_rays`), per mesh and structure, on the
+//! GPU (every variant) and the CPU's cores, the GPU's hits checked against the CPU's.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use gridtrace::accel::{Hit, Ray};
+use gridtrace::gpu::GpuContext;
+use gridtrace::query::{Backend, QueryOptions, TraceMesh};
+use gridtrace::{AccelKind, Mesh, Result};
+
+use super::frames::{frame_accels, open_gpu};
+use super::{Budget, Plan};
+use crate::query_study::incoherent_rays;
+use crate::timing::Summary;
+
+/// Rays whose GPU hit may differ from the CPU's (a fraction): rays through an edge or a vertex
+/// may name either triangle, or a different t within rounding. More is a mismatch.
+pub const MAX_DIFFERING_HITS: f64 = 0.001;
+
+/// One batch measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct RayRow {
+    pub mesh: String,
+    pub triangles: usize,
+    /// `camera` (image order) or `incoherent`.
+    pub set: String,
+    pub accel: String,
+    pub backend: String,
+    pub variant: String,
+    pub rays: usize,
+    /// Wall time of the whole batch query (upload, trace, readback), ms.
+    #[serde(flatten)]
+    pub wall: Summary,
+    pub mrays_per_s: f64,
+    pub hit_fraction: f64,
+    /// Rays whose hit differs from the CPU's (fraction; 0 on the CPU).
+    pub differing_from_cpu: f64,
+}
+
+/// Camera rays of `mesh`'s auto-framed view, `n` of them in image order (row by row).
+pub fn camera_rays(mesh: &Mesh, n: usize) -> Vec<Ray> {
+    let scene = gridtrace::scene::builtin::mesh_scene(mesh.clone(), false);
+    let side = (n as f64).sqrt().ceil() as u32;
+    let frame = scene.camera.frame(side, side);
+    (0..n as u32).map(|i| frame.ray(i % side, i / side)).collect()
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn ray_study(
+    plan: &Plan,
+    gpu: &Arc<GpuContext>,
+    meshes: &[(String, Mesh)],
+    variants: &[String],
+    budget: &Budget,
+    skipped: &mut Vec<String>,
+    mismatches: &mut Vec<String>,
+    log: &mut dyn FnMut(&str),
+) -> Result<Vec<RayRow>> {
+    let mut rows = Vec::new();
+    for (name, mesh) in meshes {
+        for accel in frame_accels() {
+            if !budget.allows(&format!("rays of {name} with {}", accel.name()), skipped) {
+                continue;
+            }
+            let opts = QueryOptions {
+                accel: accel.into(),
+                backend: Backend::Cpu,
+                ..Default::default()
+            };
+            let tm = TraceMesh::from_mesh(mesh.clone(), &opts)?;
+            let (o, d) = incoherent_rays(tm.prepared().accel.bounds(), plan.rays, 7);
+            let incoherent: Vec<Ray> = o
+                .iter()
+                .zip(&d)
+                .map(|(a, b)| Ray::new((*a).into(), (*b).into()))
+                .collect();
+            for (set, rays) in [("camera", camera_rays(mesh, plan.rays)), ("incoherent", incoherent)] {
+                let head = |backend: &str, variant: &str| RowHead {
+                    mesh: name,
+                    triangles: tm.triangle_count(),
+                    set,
+                    accel,
+                    backend: backend.to_string(),
+                    variant: variant.to_string(),
+                };
+                let (cpu_times, cpu_hits) = timed(plan.reps, || tm.intersect_rays(&rays, 0.0, f32::INFINITY))?;
+                let row = head("cpu", "-").row(&rays, &cpu_times, &cpu_hits, 0.0);
+                log(&row_line(&row));
+                rows.push(row);
+                for variant in variants {
+                    let mut r = open_gpu(gpu, tm.prepared(), variant)?;
+                    let (times, hits) = timed(plan.reps, || r.intersect(&rays, 0.0, f32::INFINITY, accel))?;
+                    let differing = differing_hits(&hits, &cpu_hits);
+                    if differing > MAX_DIFFERING_HITS {
+                        mismatches.push(format!(
+                            "rays {name} {set} {} {variant}: {:.3}% of hits differ from the CPU's",
+                            accel.name(),
+                            100.0 * differing
+                        ));
+                    }
+                    let row = head("gpu", variant).row(&rays, &times, &hits, differing);
+                    log(&row_line(&row));
+                    rows.push(row);
+                }
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// A warm-up, then `reps` timed runs of `f`; the last run's result.
+fn timed(reps: u32, mut f: impl FnMut() -> Result<Vec<Hit>>) -> Result<(Vec<f64>, Vec<Hit>)> {
+    let mut out = f()?;
+    let mut times = Vec::new();
+    for _ in 0..reps.max(1) {
+        let t0 = Instant::now();
+        out = f()?;
+        times.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok((times, out))
+}
+
+/// Rays whose hits differ: one hits and the other misses, or the two t are more than 1e-4
+/// (relative) apart. A different triangle at the same t (an edge) is the same hit.
+fn differing_hits(a: &[Hit], b: &[Hit]) -> f64 {
+    let n = a
+        .iter()
+        .zip(b)
+        .filter(|(x, y)| match (x.is_hit(), y.is_hit()) {
+            (false, false) => false,
+            (true, true) => (x.t - y.t).abs() > 1e-4 * x.t.abs().max(1.0),
+            _ => true,
+        })
+        .count();
+    n as f64 / a.len().max(1) as f64
+}
+
+struct RowHead<'a> {
+    mesh: &'a str,
+    triangles: usize,
+    set: &'static str,
+    accel: AccelKind,
+    backend: String,
+    variant: String,
+}
+
+impl RowHead<'_> {
+    fn row(self, rays: &[Ray], times: &[f64], hits: &[Hit], differing: f64) -> RayRow {
+        let wall = Summary::of(times);
+        RayRow {
+            mesh: self.mesh.to_string(),
+            triangles: self.triangles,
+            set: self.set.into(),
+            accel: self.accel.name().into(),
+            backend: self.backend,
+            variant: self.variant,
+            rays: rays.len(),
+            wall,
+            mrays_per_s: rays.len() as f64 / (wall.median_ms * 1e3).max(1e-9),
+            hit_fraction: hits.iter().filter(|h| h.is_hit()).count() as f64 / rays.len().max(1) as f64,
+            differing_from_cpu: differing,
+        }
+    }
+}
+
+fn row_line(r: &RayRow) -> String {
+    format!(
+        "  rays {:<15} {:<10} {:<9} {:<3} {:<12} {} rays: {:.2} ms ({:.2} Mrays/s), {:.1}% hit",
+        r.mesh,
+        r.set,
+        r.accel,
+        r.backend,
+        r.variant,
+        r.rays,
+        r.wall.median_ms,
+        r.mrays_per_s,
+        100.0 * r.hit_fraction
+    )
+}
