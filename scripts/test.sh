@@ -24,7 +24,9 @@ cargo build --release --locked -p gridtrace-cli
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
-.venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.7,<2" numpy pytest
+# trimesh (with rtree and scipy for its own ray engine, the reference) and Dask are optional
+# dependencies of the package; their tests need them.
+.venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.7,<2" numpy pytest trimesh rtree scipy "dask[distributed]"
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" maturin develop --release --locked -q -m crates/gridtrace-py/Cargo.toml
 GRIDTRACE_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/gridtrace" .venv/bin/python -m pytest -q crates/gridtrace-py/tests
 

@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+mod scene;
+
 use std::sync::RwLock;
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -269,6 +271,7 @@ fn render<'py>(
 #[pymodule]
 fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeMesh>()?;
+    m.add_class::<scene::NativeScene>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The registry's names, with "auto" first: what `accel=` accepts (aliases aside).

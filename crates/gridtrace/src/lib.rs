@@ -10,6 +10,7 @@ pub mod gpu;
 pub mod io;
 pub mod mesh;
 pub mod query;
+pub mod query_scene;
 pub mod render;
 pub mod scene;
 #[cfg(any(test, feature = "testing"))]
@@ -21,5 +22,6 @@ pub use backend::{Backend, Frame, Tracer};
 pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};
 pub use mesh::{Material, Mesh};
+pub use query_scene::QueryScene;
 pub use render::{Image, Mode, RenderOptions, RenderStats};
 pub use scene::{PreparedScene, Scene};

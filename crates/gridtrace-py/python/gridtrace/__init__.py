@@ -8,6 +8,11 @@ Ray Tracer"). Example::
     origins = np.random.rand(1_000_000, 3).astype(np.float32) - 0.5
     hits = mesh.intersect(origins, [0.0, 0.0, -1.0])      # one direction for all rays
     print((hits.tri != gridtrace.MISS).sum(), "hits")
+
+Several meshes with ids and transforms, and Open3D's ``RaycastingScene`` queries (``cast_rays``,
+``test_occlusions``, ``count_intersections``, ``list_intersections``, ``compute_closest_points``,
+``compute_distance``, ``compute_signed_distance``, ``compute_occupancy``): :class:`Scene`. A ray
+intersector with trimesh's interface: ``gridtrace.trimesh.RayMeshIntersector``.
 """
 
 from __future__ import annotations
@@ -54,11 +59,12 @@ from ._gridtrace import NativeMesh as _NativeMesh  # noqa: E402
 from ._gridtrace import ACCELS as _ACCELS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
+from .scene import INVALID_ID, Scene  # noqa: E402
 
 #: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
 ACCELS: tuple = tuple(_ACCELS)
 
-__all__ = ["Mesh", "Hits", "render", "MISS", "ACCELS", "__version__"]
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "__version__"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)

@@ -145,6 +145,17 @@ pub trait AccelStructure: Sized {
         closest_point_brute(tris, p)
     }
 
+    /// Every hit with `t_min < t < t_max`, each triangle at most once, appended to `out` in no
+    /// particular order (count and list queries: `query_scene`). A ray through an edge or a
+    /// vertex shared by several triangles hits each of them that the triangle test accepts
+    /// (`TriAccel::intersect` widens its bounds so that at least one does). Default: every
+    /// triangle tested (`all_hits_brute`); a structure overrides it with its own walk, which
+    /// must report the very hits brute force reports (the same triangle test, so the same
+    /// bits).
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
+        all_hits_brute(tris, ray, t_min, t_max, out)
+    }
+
     /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.
     fn occluded_batch(
         &self,
@@ -177,4 +188,28 @@ pub fn hit_normal(tris: &[TriAccel], hit: &Hit) -> Vec3 {
     } else {
         Vec3::ZERO
     }
+}
+
+/// The oracle of `AccelStructure::all_hits`: every triangle tested, hits in triangle order.
+pub fn all_hits_brute(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+    for (i, t) in tris.iter().enumerate() {
+        if let Some(h) = t.intersect(ray.origin, ray.dir, t_min, t_max) {
+            out.push(h.on(i as u32));
+        }
+    }
+}
+
+/// Keeps one hit per triangle among `out[from..]`: for walks that meet a triangle in several
+/// cells. The same triangle test on the same ray gives the same bits wherever it runs, so the
+/// copies are identical and any one may stay. Sorted by triangle.
+pub(crate) fn dedup_hits(out: &mut Vec<Hit>, from: usize) {
+    out[from..].sort_unstable_by_key(|h| h.tri);
+    let mut keep = from;
+    for i in from..out.len() {
+        if keep == from || out[keep - 1].tri != out[i].tri {
+            out[keep] = out[i];
+            keep += 1;
+        }
+    }
+    out.truncate(keep);
 }

@@ -352,6 +352,14 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, kind, out))
     }
 
+    /// Every hit with `t_min < t < t_max`, each triangle once, appended to `out` in no
+    /// particular order (`AccelStructure::all_hits`).
+    #[inline]
+    pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, out: &mut Vec<Hit>) {
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
+        dispatch!(&self.structure, s => AccelStructure::all_hits(s, &self.tris, ray, t_min, t_max, kind, out))
+    }
+
     /// The point of the mesh nearest to `p`, through the structure's own search
     /// (`AccelStructure::closest_point`; brute force where it has none).
     pub fn closest_point(&self, p: Vec3) -> closest::ClosestPoint {

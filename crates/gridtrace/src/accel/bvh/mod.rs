@@ -19,6 +19,7 @@ use super::huge::HugePageArray;
 use super::triangle::slack_pad;
 use super::{Aabb, Counters, Hit, Ray, TriAccel, TriAccel4};
 
+mod all_hits;
 mod box_test;
 mod build;
 mod closest;

@@ -114,6 +114,11 @@ impl AccelStructure for BvhAccel {
         BvhAccel::occluded_batch(self, rays, t_min, t_max, out)
     }
 
+    /// The tree walked with no early exit (`all_hits.rs`); a triangle is in one leaf only.
+    fn all_hits(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
+        BvhAccel::all_hits(self, ray, t_min, t_max, out)
+    }
+
     /// Branch and bound over the structure's own cells or nodes (`closest.rs`).
     fn closest_point(&self, _tris: &[TriAccel], p: glam::Vec3) -> crate::accel::closest::ClosestPoint {
         BvhAccel::closest_point(self, p)

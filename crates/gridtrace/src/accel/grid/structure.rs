@@ -3,8 +3,8 @@
 
 use super::{Grid, Stepping};
 use crate::Result;
-use crate::accel::contract::{AccelStructure, BuildParams};
-use crate::accel::{Aabb, AccelKind, Counters, Hit, PACKET, Ray, TriAccel, dims_str};
+use crate::accel::contract::{AccelStructure, BuildParams, dedup_hits};
+use crate::accel::{Aabb, AccelKind, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
 
 /// How the grid crosses empty space for a traversal kind.
 #[inline(always)]
@@ -110,6 +110,22 @@ impl AccelStructure for Grid {
         counters: &mut [C],
     ) -> [bool; PACKET] {
         Grid::occluded_packet(self, tris, rays, t_min, t_max, stepping(kind), counters)
+    }
+
+    /// Every cell the ray crosses (no early exit), each triangle tested where it is met;
+    /// a triangle in several cells is kept once (`dedup_hits`). The grid finds every hit
+    /// brute force finds (enlarged cell boxes), so this is brute force's set.
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, out: &mut Vec<Hit>) {
+        let from = out.len();
+        self.walk(ray, t_min, t_max, stepping(kind), &mut NoCounters, |refs, _, _| {
+            for &r in refs {
+                if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, t_min, t_max) {
+                    out.push(h.on(r));
+                }
+            }
+            std::ops::ControlFlow::Continue(())
+        });
+        dedup_hits(out, from);
     }
 
     /// Branch and bound over the structure's own cells or nodes (`closest.rs`).

@@ -5,8 +5,8 @@ use glam::Vec3;
 
 use super::{IrregularGrid, IrregularStats};
 use crate::Result;
-use crate::accel::contract::{AccelStructure, BuildParams, hit_normal};
-use crate::accel::{Aabb, AccelKind, Counters, Hit, PACKET, Ray, TriAccel, dims_str};
+use crate::accel::contract::{AccelStructure, BuildParams, dedup_hits, hit_normal};
+use crate::accel::{Aabb, AccelKind, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for IrregularGrid {
@@ -158,6 +158,21 @@ impl AccelStructure for IrregularGrid {
         out: &mut [bool],
     ) {
         self.batch::<true>(tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
+    }
+
+    /// Every cell the ray crosses (no early exit), each triangle tested where it is met, kept
+    /// once (`dedup_hits`): brute force's set, as the closest-hit walk finds brute force's hit.
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
+        let from = out.len();
+        self.walk(ray, t_min, t_max, &mut NoCounters, |refs, _, _| {
+            for &r in refs {
+                if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, t_min, t_max) {
+                    out.push(h.on(r));
+                }
+            }
+            false
+        });
+        dedup_hits(out, from);
     }
 
     /// Branch and bound over the structure's own cells or nodes (`closest.rs`).

@@ -1,0 +1,88 @@
+//! The CPU path of `cast_rays` and `test_occlusions`: rays made and traced per work item of
+//! `BATCH` on all cores, each answer written straight into the output as its ray is done (no
+//! array of rays or hits of the batch's size, no second pass), as `TraceMesh`'s own CPU
+//! queries do. A ray that cannot hit anything (`ray_of`) is traced as a stand-in and its
+//! answer put back to a miss.
+
+use rayon::prelude::*;
+
+use super::INVALID_ID;
+use super::merged::Merged;
+use super::rays::{RayHits, STAND_IN, ray_of};
+use crate::accel::Ray;
+use crate::query::TraceMesh;
+
+/// Rays per work item: large enough to amortise scheduling and let the BVH interleave rays,
+/// small enough to balance the cores.
+const BATCH: usize = 1024;
+
+/// Rays `r` for the tracer into `made`; whether any was replaced by the stand-in.
+#[inline]
+fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
+    made.clear();
+    let mut bad = false;
+    for q in r {
+        made.push(ray_of(q).unwrap_or_else(|| {
+            bad = true;
+            STAND_IN
+        }));
+    }
+    bad
+}
+
+/// Closest hits of `rays` into `out` (filled with misses beforehand).
+pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut RayHits) {
+    let accel = &mesh.prepared().accel;
+    let kind = mesh.accel();
+    (
+        out.t_hit.par_chunks_mut(BATCH),
+        out.geometry_ids.par_chunks_mut(BATCH),
+        out.primitive_ids.par_chunks_mut(BATCH),
+        out.primitive_uvs.par_chunks_mut(BATCH),
+        out.primitive_normals.par_chunks_mut(BATCH),
+        rays.par_chunks(BATCH),
+    )
+        .into_par_iter()
+        .for_each_init(
+            || Vec::with_capacity(BATCH),
+            |made, (t, g, p, uv, n, r)| {
+                let bad = make_into(r, made);
+                accel.intersect_batch_each(made, 0.0, f32::INFINITY, kind, |i, hit, normal| {
+                    if hit.is_hit() {
+                        let (id, prim) = m.name(hit.tri);
+                        t[i] = hit.t;
+                        g[i] = id;
+                        p[i] = prim;
+                        uv[i] = [hit.u, hit.v];
+                        n[i] = normal.normalize().to_array();
+                    }
+                });
+                if bad {
+                    for (i, q) in r.iter().enumerate() {
+                        if ray_of(q).is_none() {
+                            (t[i], g[i], p[i], uv[i], n[i]) =
+                                (f32::INFINITY, INVALID_ID, INVALID_ID, [0.0; 2], [0.0; 3]);
+                        }
+                    }
+                }
+            },
+        );
+}
+
+/// Whether each ray hits anything with `t_near < t < t_far`, into `out`.
+pub(super) fn occluded(mesh: &TraceMesh, rays: &[[f32; 6]], t_near: f32, t_far: f32, out: &mut [bool]) {
+    let accel = &mesh.prepared().accel;
+    let kind = mesh.accel();
+    out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
+        || Vec::with_capacity(BATCH),
+        |made, (o, r)| {
+            let bad = make_into(r, made);
+            accel.occluded_batch(made, t_near, t_far, kind, o);
+            if bad {
+                for (o, q) in o.iter_mut().zip(r) {
+                    *o &= ray_of(q).is_some();
+                }
+            }
+        },
+    );
+}

@@ -1,0 +1,231 @@
+//! A scene of several triangle meshes for programs, with the queries (and the names) of
+//! Open3D's `RaycastingScene`: geometries added with an id and a 4x4 transform each, moved or
+//! removed; closest hits, occlusion, counts and lists of every hit along rays; closest points,
+//! distances, signed distances and occupancy at points. The structure (`AccelChoice`, `auto`
+//! by default) and the backend are chosen as for `TraceMesh`.
+//!
+//! ```
+//! use gridtrace::query_scene::{QueryScene, INVALID_ID};
+//! use gridtrace::query::{Backend, QueryOptions};
+//! use glam::Mat4;
+//!
+//! let opts = QueryOptions { backend: Backend::Cpu, ..Default::default() };
+//! let mut scene = QueryScene::new(opts);
+//! // A unit square in z = 0, and the same square lifted to z = 1.
+//! let v = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+//! let f = vec![[0, 1, 2], [0, 2, 3]];
+//! let low = scene.add_triangles(v.clone(), f.clone(), None)?;
+//! let high = scene.add_triangles(v, f, Some(Mat4::from_translation([0.0, 0.0, 1.0].into())))?;
+//!
+//! // A ray down from z = 3 hits the high square first, at t = 2.
+//! let rays = [[0.25, 0.75, 3.0, 0.0, 0.0, -1.0], [5.0, 5.0, 3.0, 0.0, 0.0, -1.0]];
+//! let hits = scene.cast_rays(&rays)?;
+//! assert_eq!((hits.t_hit[0], hits.geometry_ids[0], hits.primitive_ids[0]), (2.0, high, 1));
+//! assert_eq!((hits.t_hit[1], hits.geometry_ids[1]), (f32::INFINITY, INVALID_ID));
+//! assert_eq!(scene.count_intersections(&rays)?, vec![2, 0]);
+//!
+//! // The nearest point to (0.5, 0.5, 0.25) is on the low square.
+//! let near = scene.compute_closest_points(&[[0.5, 0.5, 0.25]])?;
+//! assert_eq!((near.geometry_ids[0], near.points[0]), (low, [0.5, 0.5, 0.0]));
+//! scene.remove(low)?;
+//! assert_eq!(scene.compute_distance(&[[0.5, 0.5, 0.25]])?, vec![0.75]);
+//! # Ok::<(), gridtrace::Error>(())
+//! ```
+//!
+//! **Conventions** (Open3D's): a ray is `[ox, oy, oz, dx, dy, dz]`, `t` in units of the
+//! direction's length; a miss has `t_hit = inf` and ids `INVALID_ID` (`u32::MAX`); uvs are the
+//! barycentric weights of a face's second and third vertex; normals are the unit geometric
+//! normal `(v1 - v0) x (v2 - v0)` of the face in world space (not flipped towards the ray).
+//! Rays with a non-finite component or a zero direction miss (they are no error here, unlike
+//! `TraceMesh`); points with a non-finite coordinate get NaN distances and `INVALID_ID`.
+//!
+//! **Changes** are cheap: they mark the merged mesh stale, and the next query rebuilds it
+//! (`merged.rs`), except `update_vertices` on a built scene, which moves the vertices of the
+//! built mesh (the BVH refits) when that gives what a rebuild would.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use glam::Mat4;
+
+use crate::query::QueryOptions;
+use crate::{Error, Result};
+
+mod all_hits;
+mod cpu_rays;
+mod geometry;
+mod merged;
+mod points;
+mod rays;
+
+pub use all_hits::Intersections;
+pub use geometry::Geometry;
+pub use points::ClosestPoints;
+pub use rays::RayHits;
+
+use merged::Merged;
+
+/// The id of no geometry and no primitive (a miss): Open3D's `INVALID_ID`.
+pub const INVALID_ID: u32 = u32::MAX;
+
+/// Several triangle meshes, each with an id and a transform, and the queries over them.
+/// Queries take `&self` and may run from several threads at once; changes take `&mut self`.
+pub struct QueryScene {
+    opts: QueryOptions,
+    geometries: BTreeMap<u32, Geometry>,
+    next_id: u32,
+    /// The merged mesh; `None` when a change made it stale (the next query rebuilds it).
+    merged: Mutex<Option<Arc<Merged>>>,
+}
+
+impl QueryScene {
+    /// An empty scene whose queries use `opts` (structure, grid and irregular parameters,
+    /// backend).
+    pub fn new(opts: QueryOptions) -> QueryScene {
+        QueryScene {
+            opts,
+            geometries: BTreeMap::new(),
+            next_id: 0,
+            merged: Mutex::new(None),
+        }
+    }
+
+    /// The options the scene was made with.
+    pub fn options(&self) -> &QueryOptions {
+        &self.opts
+    }
+
+    /// Adds a mesh (vertices in its own space, faces indexing them) placed by `transform`
+    /// (identity when `None`); returns its id, 0 for the first and counting up (ids of removed
+    /// geometries are not reused). Non-finite coordinates or transforms and faces out of range
+    /// are errors naming the argument. Zero-area faces are kept in the numbering but never hit.
+    pub fn add_triangles(
+        &mut self,
+        vertices: Vec<[f32; 3]>,
+        faces: Vec<[u32; 3]>,
+        transform: Option<Mat4>,
+    ) -> Result<u32> {
+        let g = Geometry::new(vertices, faces, transform)?;
+        let id = self.next_id;
+        self.next_id = id
+            .checked_add(1)
+            .filter(|&n| n != INVALID_ID)
+            .ok_or_else(|| Error::InvalidInput("no geometry ids left".into()))?;
+        self.insert(id, g);
+        Ok(id)
+    }
+
+    /// Adds a mesh file (OBJ, PLY, glTF/GLB, STL, OFF), as `add_triangles`.
+    pub fn add_file(&mut self, path: &Path, transform: Option<Mat4>) -> Result<u32> {
+        let mesh = crate::io::load_mesh(path)?;
+        let vertices = mesh.positions.iter().map(|p| p.to_array()).collect();
+        self.add_triangles(vertices, mesh.triangles, transform)
+    }
+
+    /// Rebuilds a scene from its parts, ids kept (for deserialising): `next_id` is the id the
+    /// next `add_triangles` returns. An id twice or not below `next_id` is an error.
+    pub fn from_parts(opts: QueryOptions, next_id: u32, geometries: Vec<(u32, Geometry)>) -> Result<QueryScene> {
+        let mut scene = QueryScene::new(opts);
+        scene.next_id = next_id;
+        for (id, g) in geometries {
+            if id >= next_id || scene.geometries.contains_key(&id) {
+                return Err(Error::InvalidInput(format!(
+                    "geometry id {id} is repeated or not below the next id {next_id}"
+                )));
+            }
+            let g = Geometry::new(g.vertices, g.faces, Some(g.transform))?;
+            scene.insert(id, g);
+        }
+        Ok(scene)
+    }
+
+    fn insert(&mut self, id: u32, g: Geometry) {
+        self.geometries.insert(id, g);
+        *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+
+    /// The id the next `add_triangles` returns.
+    pub fn next_id(&self) -> u32 {
+        self.next_id
+    }
+
+    /// The geometries' ids, ascending.
+    pub fn ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.geometries.keys().copied()
+    }
+
+    /// Geometry `id` as it was given (own-space vertices, faces, transform).
+    pub fn geometry(&self, id: u32) -> Option<&Geometry> {
+        self.geometries.get(&id)
+    }
+
+    /// Whether geometry `id` is in the scene.
+    pub fn contains(&self, id: u32) -> bool {
+        self.geometries.contains_key(&id)
+    }
+
+    /// Removes geometry `id`; an unknown id is an error naming it.
+    pub fn remove(&mut self, id: u32) -> Result<()> {
+        self.geometries.remove(&id).ok_or_else(|| unknown(id))?;
+        *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        Ok(())
+    }
+
+    /// Moves geometry `id`'s vertices (own space, as many as it has, same order; faces and
+    /// transform stay). On a built scene the structure is updated in place where that gives
+    /// the same answers as a rebuild (the BVH refits); else the next query rebuilds. An
+    /// unknown id, a wrong count or a non-finite coordinate is an error that changes nothing.
+    pub fn update_vertices(&mut self, id: u32, vertices: Vec<[f32; 3]>) -> Result<()> {
+        let g = self.geometries.get_mut(&id).ok_or_else(|| unknown(id))?;
+        g.set_vertices(vertices)?;
+        let world = g.world_vertices();
+        let slot = self.merged.get_mut().unwrap_or_else(|p| p.into_inner());
+        // In place only when no query holds the merged mesh (`Arc` unique).
+        let updated = match slot.as_mut().and_then(Arc::get_mut) {
+            Some(m) => m.update(id, &world).unwrap_or(false),
+            None => false,
+        };
+        if !updated {
+            *slot = None;
+        }
+        Ok(())
+    }
+
+    /// Triangles in the scene (all faces, zero-area ones included).
+    pub fn triangle_count(&self) -> usize {
+        self.geometries.values().map(|g| g.faces.len()).sum()
+    }
+
+    /// The merged mesh, built now if a change made it stale. Concurrent queries share it; the
+    /// first after a change builds it while the others wait.
+    fn merged(&self) -> Result<Arc<Merged>> {
+        let mut slot = self.merged.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(m) = slot.as_ref() {
+            return Ok(m.clone());
+        }
+        let m = Arc::new(Merged::build(&self.geometries, &self.opts)?);
+        *slot = Some(m.clone());
+        Ok(m)
+    }
+
+    /// Where the ray queries run: "cpu (N threads)" or the GPU adapter (builds the scene).
+    pub fn device(&self) -> Result<String> {
+        let m = self.merged()?;
+        Ok(m.mesh.as_ref().map_or_else(
+            || format!("cpu ({} threads)", rayon::current_num_threads()),
+            |mesh| mesh.device(),
+        ))
+    }
+
+    /// The structure the queries walk (`auto` resolved), in a word; "none" for a scene with
+    /// no triangle to hit (builds the scene).
+    pub fn accel_name(&self) -> Result<&'static str> {
+        let m = self.merged()?;
+        Ok(m.mesh.as_ref().map_or("none", |mesh| mesh.accel().name()))
+    }
+}
+
+fn unknown(id: u32) -> Error {
+    Error::InvalidInput(format!("unknown geometry id {id}"))
+}
