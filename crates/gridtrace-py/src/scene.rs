@@ -83,7 +83,7 @@ impl NativeScene {
     #[new]
     fn new(accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<Self> {
         Ok(NativeScene {
-            inner: RwLock::new(QueryScene::new(options(accel, grid, irregular, backend)?)),
+            inner: RwLock::new(QueryScene::new(options(accel, grid, irregular, backend, "")?)),
         })
     }
 
@@ -104,7 +104,7 @@ impl NativeScene {
             PyReadonlyArray2<'_, f32>,
         )>,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend)?;
+        let opts = options(accel, grid, irregular, backend, "")?;
         let mut parts = Vec::with_capacity(geometries.len());
         for (id, v, f, t) in &geometries {
             parts.push((
