@@ -155,11 +155,9 @@ fn run_hardware_suite(a: &BenchArgs) -> gridtrace::Result<()> {
     let data_dir = scenes::find_data_dir(a.data_dir.as_deref());
     let variants = gridtrace::gpu::GpuVariants::suite();
     let mut log = |s: &str| println!("{s}");
-    let report = bench::hardware::run(&plan, gpu, data_dir.as_deref(), &variants, &mut log)?;
     let dir = a.out.clone().unwrap_or_else(|| PathBuf::from("hardware-suite"));
-    for f in bench::hardware::write(&report, &dir)? {
-        println!("wrote {}", f.display());
-    }
+    let report = bench::hardware::run(&plan, gpu, data_dir.as_deref(), &variants, &dir, &mut log)?;
+    println!("wrote {0}/hardware.json and {0}/hardware.md", dir.display());
     for m in &report.mismatches {
         println!("MISMATCH: {m}");
     }

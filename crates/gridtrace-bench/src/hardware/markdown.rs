@@ -142,21 +142,23 @@ fn builds(md: &mut String, r: &HardwareReport) {
     if r.builds.is_empty() {
         return;
     }
-    md.push_str("## Grid builds (grid + proximity cloud, best ms)\n\n| mesh | triangles | CPU all threads | GPU | GPU from | BVH CPU |\n|---|---:|---:|---:|---|---:|\n");
+    md.push_str("## Grid builds (grid + proximity cloud, best ms)\n\n| mesh | triangles | CPU all threads | GPU | GPU from | x CPU | references CPU / GPU |\n|---|---:|---:|---:|---|---:|---|\n");
     for b in &r.builds {
+        let from = b
+            .gpu_fallback
+            .clone()
+            .unwrap_or_else(|| if b.gpu_from_timestamps { "timestamps" } else { "wall" }.to_string());
         let _ = writeln!(
             md,
-            "| {} | {} | {:.1} | {} | {} | {:.1} |",
+            "| {} | {} | {:.1} | {} | {from} | {} | {} / {} |",
             b.mesh,
             b.triangles,
             b.cpu_ms,
             b.gpu_ms.map_or("-".into(), |v| format!("{v:.1}")),
-            b.gpu_fallback.clone().unwrap_or_else(|| if b.gpu_from_timestamps {
-                "timestamps".into()
-            } else {
-                "wall".into()
-            }),
-            b.bvh_ms
+            b.gpu_ms
+                .map_or("-".into(), |g| format!("{:.2}", b.cpu_ms / g.max(1e-9))),
+            b.cpu_references,
+            b.gpu_references.map_or("-".into(), |n| n.to_string())
         );
     }
     md.push('\n');

@@ -14,6 +14,7 @@
 //! skipped, so a run cut short still brings its report back. `--quick` is the same run, small
 //! enough for a software adapter (and a test).
 
+mod builds;
 mod frames;
 mod markdown;
 mod rays;
@@ -27,9 +28,9 @@ use serde::Serialize;
 use gridtrace::gpu::{GpuContext, GpuVariants};
 use gridtrace::{Mode, Result};
 
-use crate::build_scaling::BuildPoint;
 use crate::{Machine, scenes};
 
+pub use builds::BuildRow;
 pub use frames::FrameRow;
 pub use rays::RayRow;
 
@@ -50,7 +51,7 @@ pub struct Plan {
     pub modes: Vec<Mode>,
     /// Rays per batch of the ray study (1M; quick: 20k).
     pub rays: usize,
-    /// Largest mesh of the build study (10M triangles; quick: 30k).
+    /// Largest mesh of the grid builds (10M triangles; quick: 30k).
     pub build_max_tris: usize,
     /// Timed repetitions per measurement (median reported), after warm-ups of at least
     /// `warmup_ms`.
@@ -157,7 +158,7 @@ pub struct HardwareReport {
     pub frames: Vec<FrameRow>,
     pub big_frame: Vec<FrameRow>,
     pub rays: Vec<RayRow>,
-    pub builds: Vec<BuildPoint>,
+    pub builds: Vec<BuildRow>,
     /// Parts not run, and why (missing files, the time budget).
     pub skipped: Vec<String>,
     /// GPU results that differed from the CPU's beyond the stated tolerance: any entry here
@@ -230,12 +231,15 @@ fn procedural_mesh(name: &str) -> Result<gridtrace::Mesh> {
     }
 }
 
-/// Runs the suite on `gpu` (and the CPU's cores for the ratios) and returns its report.
+/// Runs the suite on `gpu` (and the CPU's cores for the ratios) and returns its report, which
+/// is also written into `out` after each part (`write`): a run stopped from outside keeps what
+/// it had measured.
 pub fn run(
     plan: &Plan,
     gpu: Arc<GpuContext>,
     data_dir: Option<&Path>,
     variants: &[GpuVariants],
+    out: &Path,
     log: &mut dyn FnMut(&str),
 ) -> Result<HardwareReport> {
     let mut budget = Budget {
@@ -251,7 +255,6 @@ pub fn run(
         ));
     }
     let mut skipped = Vec::new();
-    let mut mismatches = Vec::new();
     let mut frame_scenes: Vec<scenes::BenchScene> = Vec::new();
     for name in &plan.frame_scenes {
         // The paper's scenes as the matrix builds them; other meshes alone on a floor.
@@ -271,43 +274,7 @@ pub fn run(
             Err(e) => skipped.push(format!("rays of {name}: {e}")),
         }
     }
-    // The matrix first (the question the hardware run is for), then the big frame, rays,
-    // builds; each within its share of the budget.
-    let frames = frames::frame_matrix(
-        plan,
-        &gpu,
-        &frame_scenes,
-        variants,
-        budget.part(FRAMES_UNTIL),
-        &mut skipped,
-        &mut mismatches,
-        log,
-    )?;
-    let big_frame = frames::big_frame(
-        plan,
-        &gpu,
-        &frame_scenes,
-        budget.part(BIG_FRAME_UNTIL),
-        &mut skipped,
-        &mut mismatches,
-        log,
-    )?;
-    let rays = rays::ray_study(
-        plan,
-        &gpu,
-        &meshes,
-        variants,
-        budget.part(RAYS_UNTIL),
-        &mut skipped,
-        &mut mismatches,
-        log,
-    )?;
-    let mut builds = Vec::new();
-    if budget.part(BUILDS_UNTIL).allows("GPU grid builds", &mut skipped) {
-        let scaling = crate::studies::build_scaling_meshes(data_dir, plan.build_max_tris, log);
-        builds = crate::build_scaling::build_scaling(&scaling, Some(&gpu), plan.reps, log)?;
-    }
-    Ok(HardwareReport {
+    let mut report = HardwareReport {
         gridtrace_version: env!("CARGO_PKG_VERSION").to_string(),
         command_line: std::env::args().collect(),
         unix_time: std::time::SystemTime::now()
@@ -317,14 +284,58 @@ pub fn run(
         adapter,
         plan: plan.clone(),
         variants: variants.iter().map(|v| v.to_string()).collect(),
-        frames,
-        big_frame,
-        rays,
-        builds,
+        frames: Vec::new(),
+        big_frame: Vec::new(),
+        rays: Vec::new(),
+        builds: Vec::new(),
         skipped,
-        mismatches,
-        elapsed_s: budget.elapsed_s(),
-    })
+        mismatches: Vec::new(),
+        elapsed_s: 0.0,
+    };
+    // The matrix first (the question the hardware run is for), then the big frame, rays,
+    // builds; each within its share of the budget, the report written after each.
+    let r = &mut report;
+    r.frames = frames::frame_matrix(
+        plan,
+        &gpu,
+        &frame_scenes,
+        variants,
+        budget.part(FRAMES_UNTIL),
+        &mut r.skipped,
+        &mut r.mismatches,
+        log,
+    )?;
+    checkpoint(r, &budget, out)?;
+    r.big_frame = frames::big_frame(
+        plan,
+        &gpu,
+        &frame_scenes,
+        budget.part(BIG_FRAME_UNTIL),
+        &mut r.skipped,
+        &mut r.mismatches,
+        log,
+    )?;
+    checkpoint(r, &budget, out)?;
+    r.rays = rays::ray_study(
+        plan,
+        &gpu,
+        &meshes,
+        variants,
+        budget.part(RAYS_UNTIL),
+        &mut r.skipped,
+        &mut r.mismatches,
+        log,
+    )?;
+    checkpoint(r, &budget, out)?;
+    r.builds = builds::grid_builds(plan, &gpu, budget.part(BUILDS_UNTIL), &mut r.skipped, log)?;
+    checkpoint(r, &budget, out)?;
+    Ok(report)
+}
+
+/// The report as far as it got, written.
+fn checkpoint(r: &mut HardwareReport, budget: &Budget, out: &Path) -> Result<()> {
+    r.elapsed_s = budget.elapsed_s();
+    write(r, out).map(|_| ())
 }
 
 /// Writes `hardware.json` and `hardware.md` into `dir`.
