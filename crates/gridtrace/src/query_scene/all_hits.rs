@@ -14,7 +14,7 @@
 
 use rayon::prelude::*;
 
-use super::rays::ray_of;
+use super::batch::ray_of;
 use super::{QueryScene, merged::Merged};
 use crate::Result;
 use crate::accel::Hit;

@@ -7,8 +7,8 @@
 use rayon::prelude::*;
 
 use super::INVALID_ID;
+use super::batch::{RayHits, STAND_IN, ray_of};
 use super::merged::Merged;
-use super::rays::{RayHits, STAND_IN, ray_of};
 use crate::accel::Ray;
 use crate::query::TraceMesh;
 

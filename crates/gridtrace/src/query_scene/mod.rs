@@ -53,6 +53,7 @@ use crate::query::QueryOptions;
 use crate::{Error, Result};
 
 mod all_hits;
+mod batch;
 mod cpu_rays;
 mod geometry;
 mod merged;
@@ -60,9 +61,9 @@ mod points;
 mod rays;
 
 pub use all_hits::Intersections;
+pub use batch::RayHits;
 pub use geometry::Geometry;
 pub use points::ClosestPoints;
-pub use rays::RayHits;
 
 use merged::Merged;
 

@@ -3,65 +3,15 @@
 //! (`cpu_rays.rs`); where the backend traces on a GPU they are checked and made `CHUNK` at a
 //! time and traced by the merged mesh there (or on the CPU, if `auto` found no GPU).
 
-use glam::Vec3;
 use rayon::prelude::*;
 
+use super::QueryScene;
+use super::batch::{RayHits, STAND_IN, ray_of};
 use super::cpu_rays;
 use super::merged::Merged;
-use super::{INVALID_ID, QueryScene};
 use crate::accel::{Hit, Ray};
 use crate::query::CHUNK;
 use crate::{Error, Result};
-
-/// Closest hits, one entry per ray (Open3D's `cast_rays` keys). A miss: `t_hit = inf`, ids
-/// `INVALID_ID`, uv and normal zero.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct RayHits {
-    pub t_hit: Vec<f32>,
-    pub geometry_ids: Vec<u32>,
-    /// The face's index in its geometry's faces.
-    pub primitive_ids: Vec<u32>,
-    /// Barycentric weights of the face's second and third vertex at the hit.
-    pub primitive_uvs: Vec<[f32; 2]>,
-    /// Unit geometric normal of the face in world space (input winding).
-    pub primitive_normals: Vec<[f32; 3]>,
-}
-
-impl RayHits {
-    fn misses(n: usize) -> RayHits {
-        RayHits {
-            t_hit: vec![f32::INFINITY; n],
-            geometry_ids: vec![INVALID_ID; n],
-            primitive_ids: vec![INVALID_ID; n],
-            primitive_uvs: vec![[0.0; 2]; n],
-            primitive_normals: vec![[0.0; 3]; n],
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.t_hit.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.t_hit.is_empty()
-    }
-}
-
-/// A ray's origin and direction, `None` when it cannot hit anything: a non-finite component
-/// or a zero direction.
-#[inline(always)]
-pub(crate) fn ray_of(r: &[f32; 6]) -> Option<Ray> {
-    let o = Vec3::new(r[0], r[1], r[2]);
-    let d = Vec3::new(r[3], r[4], r[5]);
-    (o.is_finite() && d.is_finite() && d != Vec3::ZERO).then(|| Ray::new(o, d))
-}
-
-/// A ray that stands in for one that cannot hit anything, so that the batch stays whole; its
-/// answer is replaced by a miss.
-pub(crate) const STAND_IN: Ray = Ray {
-    origin: Vec3::ZERO,
-    dir: Vec3::X,
-};
 
 /// Rays `rays`, made for the tracer: bad ones replaced by `STAND_IN` and marked false.
 fn make(rays: &[[f32; 6]]) -> (Vec<Ray>, Vec<bool>) {
