@@ -226,19 +226,11 @@ impl GpuContext {
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(src, 0, &staging, 0, Some(size));
         self.queue.submit([enc.finish()]);
-        self.map_read(&staging, size)
+        self.map_read_with(&staging, size, |raw| raw.to_vec())
     }
 
-    /// The first `size` bytes of `staging` (a `MAP_READ` buffer that submitted work fills),
-    /// once that work is done: waits, maps, copies out and unmaps.
-    pub fn map_read(&self, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
-        if size == 0 {
-            return Ok(Vec::new());
-        }
-        self.map_read_with(staging, size, |raw| raw.to_vec())
-    }
-
-    /// `map_read`, handing the mapped bytes to `f` instead of copying them out.
+    /// The first `size` bytes (not zero) of `staging`, a `MAP_READ` buffer that submitted work
+    /// fills, once that work is done: waits, maps, hands them to `f` and unmaps.
     pub fn map_read_with<R>(&self, staging: &wgpu::Buffer, size: u64, f: impl FnOnce(&[u8]) -> R) -> Result<R> {
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, ..size, move |r| {

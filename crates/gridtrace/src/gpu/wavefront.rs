@@ -112,7 +112,13 @@ impl GpuRenderer {
                 pixels: tile.min(pixels - offset),
             })
             .collect();
-        self.ensure_tile_uniforms(tiles.len());
+        grow(
+            &self.ctx.device,
+            &mut self.tile_uniforms,
+            tiles.len() as u64 * TILE_UNIFORM_BYTES,
+            "tile pass uniforms",
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        );
         let tile_uniforms = self.tile_uniforms.as_ref().unwrap();
         for (k, t) in tiles.iter().enumerate() {
             uploaded += self.write_pass_uniforms_to(
@@ -162,33 +168,6 @@ impl GpuRenderer {
         Ok((img, stats))
     }
 
-    /// Makes sure the tile uniform buffer holds `tiles` tiles' pass uniforms.
-    fn ensure_tile_uniforms(&mut self, tiles: usize) {
-        let size = tiles as u64 * TILE_UNIFORM_BYTES;
-        if self.tile_uniforms.as_ref().is_some_and(|b| b.size() >= size) {
-            return;
-        }
-        self.tile_uniforms = Some(self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("tile pass uniforms"),
-            size,
-            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        }));
-    }
-
-    /// Makes sure the readback buffer holds `size` bytes.
-    fn ensure_readback(&mut self, size: u64) {
-        if self.readback.as_ref().is_some_and(|b| b.size() >= size) {
-            return;
-        }
-        self.readback = Some(self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("frame readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        }));
-    }
-
     /// Records `tiles` (the frame's tiles from index `first_tile` on; their pass uniforms are
     /// written) into one submission, runs it, waits once and writes their pixels into `img`
     /// (whose first row starts at pixel `first`).
@@ -206,7 +185,14 @@ impl GpuRenderer {
         let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * ACCUM_TEXEL_BYTES).sum();
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
-        self.ensure_readback(stamps_at + if self.timed() { TIMESTAMPS_BYTES } else { 0 });
+        let stamps_bytes = if self.timed() { TIMESTAMPS_BYTES } else { 0 };
+        grow(
+            &self.ctx.device,
+            &mut self.readback,
+            stamps_at + stamps_bytes,
+            "frame readback",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
         let readback = self.readback.as_ref().unwrap();
         let w = self.work.as_ref().unwrap();
         let mut enc = self
@@ -294,6 +280,20 @@ impl GpuRenderer {
             enc.clear_buffer(&self.counters, SLOT_SHADOW as u64 * SLOT_BYTES, Some(SLOT_BYTES));
         }
     }
+}
+
+/// Makes sure `slot` holds a buffer of at least `size` bytes: kept between frames, replaced by
+/// one of exactly `size` when a frame needs more.
+fn grow(device: &wgpu::Device, slot: &mut Option<wgpu::Buffer>, size: u64, label: &str, usage: wgpu::BufferUsages) {
+    if slot.as_ref().is_some_and(|b| b.size() >= size) {
+        return;
+    }
+    *slot = Some(device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage,
+        mapped_at_creation: false,
+    }));
 }
 
 /// How many of `tiles` (from the first) one submission takes: as many as the device's largest
