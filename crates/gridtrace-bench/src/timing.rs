@@ -43,10 +43,20 @@ pub const WARMUP_MIN_MS: f64 = 500.0;
 
 /// Times `f` after `warmup` warm-up runs (and more until `WARMUP_MIN_MS` have passed, when
 /// `warmup` is not zero), then `reps` times, keeping the timed results.
-pub fn repeat<T>(warmup: u32, reps: u32, mut f: impl FnMut() -> Result<(f64, T)>) -> Result<(Vec<f64>, Vec<T>)> {
+pub fn repeat<T>(warmup: u32, reps: u32, f: impl FnMut() -> Result<(f64, T)>) -> Result<(Vec<f64>, Vec<T>)> {
+    repeat_warm(warmup, WARMUP_MIN_MS, reps, f)
+}
+
+/// `repeat` with its own least warm-up time, `warmup_ms` (the hardware suite's plan sets it).
+pub fn repeat_warm<T>(
+    warmup: u32,
+    warmup_ms: f64,
+    reps: u32,
+    mut f: impl FnMut() -> Result<(f64, T)>,
+) -> Result<(Vec<f64>, Vec<T>)> {
     let started = std::time::Instant::now();
     let mut done = 0;
-    while done < warmup || (warmup > 0 && started.elapsed().as_secs_f64() * 1e3 < WARMUP_MIN_MS) {
+    while done < warmup || (warmup > 0 && started.elapsed().as_secs_f64() * 1e3 < warmup_ms) {
         f()?;
         done += 1;
     }

@@ -4,7 +4,6 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Instant;
 
 use serde::Serialize;
 
@@ -16,7 +15,7 @@ use gridtrace::{AccelKind, Mesh, Mode, Resolution, Result};
 
 use super::{Budget, Plan};
 use crate::scenes::BenchScene;
-use crate::timing::Summary;
+use crate::timing::{Summary, repeat_warm};
 
 /// Channel levels (of 255) a GPU pixel may differ from the CPU's by: float results rounded
 /// differently (a GPU may fuse multiply-adds) move a shade by a level or two.
@@ -225,18 +224,13 @@ fn gpu_row(
     mismatches: &mut Vec<String>,
 ) -> Result<FrameRow> {
     // Warm-up: at least one frame (pipelines, buffers), then until `warmup_ms` have passed.
-    let started = Instant::now();
-    let (mut image, _) = r.render(&prepared.camera, &prepared.lights, opts)?;
-    while started.elapsed().as_secs_f64() * 1e3 < plan.warmup_ms {
-        r.render(&prepared.camera, &prepared.lights, opts)?;
-    }
-    let mut frames: Vec<GpuRenderStats> = Vec::new();
-    for _ in 0..plan.reps.max(1) {
-        let (img, s) = r.render(&prepared.camera, &prepared.lights, opts)?;
-        image = img;
-        frames.push(s);
-    }
-    let wall = Summary::of(&frames.iter().map(|s| s.wall_ms).collect::<Vec<_>>());
+    let (walls, frames) = repeat_warm(1, plan.warmup_ms, plan.reps, || {
+        let (image, s) = r.render(&prepared.camera, &prepared.lights, opts)?;
+        Ok((s.wall_ms, (image, s)))
+    })?;
+    let (mut images, frames): (Vec<Image>, Vec<GpuRenderStats>) = frames.into_iter().unzip();
+    let image = images.pop().expect("at least one timed frame");
+    let wall = Summary::of(&walls);
     let gpu_times: Vec<f64> = frames.iter().filter_map(|s| s.gpu_ms()).collect();
     let gpu_median_ms = (!gpu_times.is_empty()).then(|| Summary::of(&gpu_times).median_ms);
     let last = frames.last().expect("at least one timed frame");

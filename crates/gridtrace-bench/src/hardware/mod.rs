@@ -255,23 +255,30 @@ pub fn run(
         ));
     }
     let mut skipped = Vec::new();
-    let mut frame_scenes: Vec<scenes::BenchScene> = Vec::new();
-    for name in &plan.frame_scenes {
-        // The paper's scenes as the matrix builds them; other meshes alone on a floor.
-        let scene = match (scenes::paper_scene(name), study_mesh(name, data_dir)) {
-            (Some(_), _) | (None, None) => scenes::build_paper_scene(name, data_dir),
-            (None, Some(mesh)) => mesh.map(|m| frames::mesh_bench_scene(name, m)),
-        };
-        match scene {
-            Ok(s) => frame_scenes.push(s),
-            Err(e) => skipped.push(format!("frames of {name}: {e}")),
-        }
-    }
     let mut meshes = Vec::new();
     for name in &plan.ray_meshes {
         match study_mesh(name, data_dir).unwrap_or_else(|| procedural_mesh(name)) {
             Ok(m) => meshes.push((name.clone(), m)),
             Err(e) => skipped.push(format!("rays of {name}: {e}")),
+        }
+    }
+    let mut frame_scenes: Vec<scenes::BenchScene> = Vec::new();
+    for name in &plan.frame_scenes {
+        // The paper's scenes as the matrix builds them; other meshes (read once, shared with
+        // the ray batches) alone on a floor.
+        let scene = if scenes::paper_scene(name).is_some() {
+            scenes::build_paper_scene(name, data_dir)
+        } else if let Some((_, m)) = meshes.iter().find(|(n, _)| n == name) {
+            Ok(frames::mesh_bench_scene(name, m.clone()))
+        } else {
+            match study_mesh(name, data_dir) {
+                Some(mesh) => mesh.map(|m| frames::mesh_bench_scene(name, m)),
+                None => scenes::build_paper_scene(name, data_dir),
+            }
+        };
+        match scene {
+            Ok(s) => frame_scenes.push(s),
+            Err(e) => skipped.push(format!("frames of {name}: {e}")),
         }
     }
     let mut report = HardwareReport {

@@ -15,7 +15,7 @@ use gridtrace::{AccelKind, Mesh, Result};
 use super::frames::{frame_accels, open_gpu, variants_for};
 use super::{Budget, Plan};
 use crate::query_study::incoherent_rays;
-use crate::timing::Summary;
+use crate::timing::{Summary, repeat_warm};
 
 /// Rays whose GPU hit may differ from the CPU's (a fraction): rays through an edge or a vertex
 /// may name either triangle, or a different t within rounding. More is a mismatch.
@@ -113,16 +113,14 @@ pub fn ray_study(
     Ok(rows)
 }
 
-/// A warm-up, then `reps` timed runs of `f`; the last run's result.
+/// One warm-up, then `reps` timed runs of `f` (wall ms); the last run's hits.
 fn timed(reps: u32, mut f: impl FnMut() -> Result<Vec<Hit>>) -> Result<(Vec<f64>, Vec<Hit>)> {
-    let mut out = f()?;
-    let mut times = Vec::new();
-    for _ in 0..reps.max(1) {
+    let (times, mut outs) = repeat_warm(1, 0.0, reps, || {
         let t0 = Instant::now();
-        out = f()?;
-        times.push(t0.elapsed().as_secs_f64() * 1e3);
-    }
-    Ok((times, out))
+        let hits = f()?;
+        Ok((t0.elapsed().as_secs_f64() * 1e3, hits))
+    })?;
+    Ok((times, outs.pop().expect("at least one timed run")))
 }
 
 /// Rays whose hits differ: one hits and the other misses, or the two t are more than 1e-4
