@@ -33,6 +33,7 @@ fn main() -> gridtrace::Result<()> {
                 accel: kind,
                 ablation: Default::default(),
                 rows: None,
+                pixels: Default::default(),
             };
             let (_, stats) = gridtrace::cpu::render_with_counters(&prepared, &scene.camera, &scene.lights, &opts)?;
             let rays = stats.rays.total() as f64;

@@ -25,7 +25,7 @@ use serde::Serialize;
 
 use gridtrace::accel::{AccelKind, Resolution};
 use gridtrace::gpu::{GpuContext, GpuRenderer};
-use gridtrace::render::{Mode, RayCounts, RenderOptions};
+use gridtrace::render::{Mode, PixelFormat, RayCounts, RenderOptions};
 use gridtrace::scene::PreparedScene;
 use gridtrace::{Error, Result};
 
@@ -353,7 +353,8 @@ pub fn run_matrix(
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
                     for &accel in &cfg.accels {
-                        let opts = RenderOptions::new(w, h, mode, accel);
+                        // As `render` asks: 8-bit pixels, packed on the device.
+                        let opts = RenderOptions::new(w, h, mode, accel).with_pixels(PixelFormat::Srgb8);
                         let r = match own_gpu.iter_mut().find(|(k, _)| *k == accel) {
                             Some((_, r)) => r,
                             None => &mut grid_gpu,

@@ -5,8 +5,8 @@
 
 use std::time::Instant;
 
-use gridtrace::RenderOptions;
 use gridtrace::scene::animated::Animation;
+use gridtrace::{PixelFormat, RenderOptions};
 
 use crate::render::RenderArgs;
 use gridtrace::Tracer;
@@ -56,7 +56,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     if let Some(dir) = &a.sequence {
         std::fs::create_dir_all(dir).map_err(|e| gridtrace::Error::io(dir, e))?;
     }
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel);
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel).with_pixels(PixelFormat::Srgb8);
     println!("frame  time_s  move_ms  geometry_ms  build_ms  trace_ms  total_ms  structure");
     let mut rows = Vec::with_capacity(a.frames as usize);
     for i in 0..a.frames {

@@ -7,7 +7,7 @@ use std::time::Instant;
 use clap::Args;
 use glam::Vec3;
 use gridtrace::scene::PointLight;
-use gridtrace::{Mode, RenderOptions};
+use gridtrace::{Mode, PixelFormat, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::common::{Backend, GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3};
@@ -122,7 +122,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     );
     println!("build   {build_ms:.1} ms");
 
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel);
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel).with_pixels(PixelFormat::Srgb8);
     let mut renderer =
         gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
     let (camera0, lights) = (renderer.scene.camera, renderer.scene.lights.clone());

@@ -12,7 +12,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
-use gridtrace::{AccelChoice, Error, Mode, RenderOptions, Resolution};
+use gridtrace::{AccelChoice, Error, Mode, PixelFormat, RenderOptions, Resolution};
 
 fn to_py(e: Error) -> PyErr {
     match e {
@@ -253,7 +253,7 @@ fn render<'py>(
             let (ctx, mut notes) = backend.open_device()?;
             let (accel, _why) = accel.resolve(ctx.is_some(), gridtrace::Work::Render);
             let prepared = s.prepare_for(accel, grid)?;
-            let opts = RenderOptions::new(width, height, mode, accel);
+            let opts = RenderOptions::new(width, height, mode, accel).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
             let mut tracer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), backend, &variants, &mut notes)?;
             let image = tracer.render(&camera, &lights, &opts)?.image;

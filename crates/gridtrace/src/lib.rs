@@ -23,5 +23,5 @@ pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};
 pub use mesh::{Material, Mesh};
 pub use query_scene::QueryScene;
-pub use render::{Image, Mode, RenderOptions, RenderStats};
+pub use render::{Image, Mode, PixelFormat, RenderOptions, RenderStats};
 pub use scene::{PreparedScene, Scene};

@@ -66,6 +66,24 @@ pub struct RenderOptions {
     /// row. The interactive viewer traces a frame band by band within a time budget, so a slow
     /// frame never holds up input; a band's pixels equal the same rows of the whole frame.
     pub rows: Option<(u32, u32)>,
+    /// What the caller will do with the pixels (`PixelFormat`): `Linear` keeps every float bit,
+    /// `Srgb8` lets the GPU convert on the device and read back 4 bytes a pixel instead of 16.
+    pub pixels: PixelFormat,
+}
+
+/// How much of a frame's pixels the caller needs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum PixelFormat {
+    /// Linear floats, every bit (tests, heat maps, further computation).
+    #[default]
+    Linear,
+    /// Only their 8-bit sRGB levels (a PNG, a window). The GPU converts on the device, with the
+    /// host's rounding (`linear_to_srgb8`), and reads back 4 bytes a pixel; the image it returns
+    /// holds each level's linear value (`srgb8_to_linear`), so `to_rgb8` gives exactly the
+    /// device's bytes. The CPU's image is already in host memory and is left as it is (the
+    /// same `to_rgb8`, up to the device's `pow`: within one level). Heat frames stay linear
+    /// (their raw costs are normalised by the frame's maximum afterwards).
+    Srgb8,
 }
 
 /// Switches that each turn off one optimisation the paper credits (its any-hit shadow rays, its
@@ -109,7 +127,13 @@ impl RenderOptions {
             accel,
             ablation: Ablation::default(),
             rows: None,
+            pixels: PixelFormat::Linear,
         }
+    }
+
+    /// These options with the pixels wanted as `pixels`.
+    pub fn with_pixels(self, pixels: PixelFormat) -> Self {
+        RenderOptions { pixels, ..self }
     }
 
     /// These options for rows `first..end` only (see `rows`).
@@ -249,6 +273,24 @@ pub fn differing_pixels(a: &[u8], b: &[u8], tol: u8) -> f64 {
     n as f64 / (a.len() / 3).max(1) as f64
 }
 
+/// The linear value of the 8-bit sRGB level `v`: the level's own value, so that
+/// `linear_to_srgb8(srgb8_to_linear(v)) == v` for every level (a test checks all 256: the
+/// level's centre is half a level from either rounding boundary, far beyond float error).
+pub fn srgb8_to_linear(v: u8) -> f32 {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|i| {
+            let s = i as f64 / 255.0;
+            let c = if s <= 0.040_45 {
+                s / 12.92
+            } else {
+                ((s + 0.055) / 1.055).powf(2.4)
+            };
+            c as f32
+        })
+    })[v as usize]
+}
+
 pub fn linear_to_srgb8(c: f32) -> u8 {
     let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
     let s = if c <= 0.003_130_8 {
@@ -271,5 +313,20 @@ pub struct RenderStats {
 impl RenderStats {
     pub fn mrays_per_s(&self) -> f64 {
         self.rays.total() as f64 / (self.render_ms * 1e3).max(1e-9)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every 8-bit level survives the trip to linear and back: what lets a GPU frame read back
+    /// as `Srgb8` give the same PNG as its linear pixels.
+    #[test]
+    fn srgb8_levels_round_trip() {
+        for v in 0..=255u8 {
+            assert_eq!(linear_to_srgb8(srgb8_to_linear(v)), v, "level {v}");
+        }
+        assert!((0..255u8).all(|v| srgb8_to_linear(v) < srgb8_to_linear(v + 1)));
     }
 }

@@ -387,6 +387,58 @@ fn a_frame_of_many_tiles_is_one_round_trip() {
     }
 }
 
+/// `PixelFormat::Srgb8`: the device packs the pixels to 8-bit sRGB and the frame reads back 4
+/// bytes a pixel instead of 16; its PNG bytes equal the linear frame's within one level (the
+/// device's `pow` against the host's, on a rounding boundary) and the other pixels exactly; on
+/// many tiles too. Heat frames keep their raw costs (16 bytes, the same floats).
+#[test]
+fn srgb8_frames_read_back_four_bytes_a_pixel() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let Some(mut gpu) = renderer(&scene) else { return };
+    gpu.set_max_tile_pixels(1000);
+    for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
+        let linear = RenderOptions::new(64, 48, mode, AccelKind::ProximityCloud);
+        let srgb8 = linear.with_pixels(gridtrace::PixelFormat::Srgb8);
+        let (a, sa) = gpu.render(&scene.camera, &scene.lights, &linear).unwrap();
+        let (b, sb) = gpu.render(&scene.camera, &scene.lights, &srgb8).unwrap();
+        assert_eq!((sb.tiles, sb.round_trips), (4, 1), "{mode:?}");
+        assert_eq!(sa.render.rays, sb.render.rays, "{mode:?}");
+        if mode == Mode::Heat {
+            assert_eq!(a.pixels, b.pixels, "heat keeps its raw costs");
+            assert_eq!(sa.downloaded_bytes, sb.downloaded_bytes);
+            continue;
+        }
+        let (ra, rb) = (a.to_rgb8(), b.to_rgb8());
+        assert_eq!(
+            differing_pixels(&ra, &rb, 1),
+            0.0,
+            "{mode:?}: more than one level apart"
+        );
+        let exact = ra.iter().zip(&rb).filter(|(x, y)| x == y).count();
+        assert!(
+            exact * 100 >= ra.len() * 99,
+            "{mode:?}: {exact} of {} channels equal",
+            ra.len()
+        );
+        assert!(
+            rb.iter().any(|&c| c > 0) && rb.iter().any(|&c| c < 255),
+            "{mode:?}: a blank frame"
+        );
+        // The counters are the same in both; the image is 12 bytes a pixel less, and where the
+        // adapter has timestamps each tile's pack pass adds a begin and an end (16 bytes).
+        let stamps = if sb.timings.from_timestamps { 4 * 16 } else { 0 };
+        assert_eq!(
+            sa.downloaded_bytes - sb.downloaded_bytes,
+            64 * 48 * 12 - stamps,
+            "{mode:?}"
+        );
+    }
+}
+
 /// A band of rows (`RenderOptions::rows`, how the viewer traces a frame within its time budget)
 /// equals the same rows of the whole frame, bit for bit, on the GPU and the CPU, in every mode
 /// and for every structure; the bands' rays add up to the frame's. Bands that do not start at

@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
 use gridtrace::render::differing_pixels;
-use gridtrace::render::{Image, RenderOptions};
+use gridtrace::render::{Image, PixelFormat, RenderOptions};
 use gridtrace::scene::PreparedScene;
 use gridtrace::{AccelKind, Mesh, Mode, Resolution, Result};
 
@@ -125,7 +125,8 @@ pub fn frame_matrix(
                 let mut r = open_gpu(gpu, &prepared, variant)?;
                 let label = variant.changes();
                 for (k, &mode) in plan.modes.iter().enumerate() {
-                    let opts = RenderOptions::new(w, h, mode, accel);
+                    // As `render` and the viewer ask: 8-bit pixels, packed on the device.
+                    let opts = RenderOptions::new(w, h, mode, accel).with_pixels(PixelFormat::Srgb8);
                     let row = gpu_row(plan, bs, &prepared, &mut r, &opts, &label, &reference[k], mismatches)?;
                     log(&row_line(&row));
                     rows.push(row);
@@ -158,6 +159,7 @@ pub fn big_frame(
     let opts = RenderOptions::new(w, h, Mode::Trace, AccelKind::Bvh);
     let (cpu, image) = cpu_row(bs, &prepared, &opts)?;
     log(&row_line(&cpu));
+    let opts = opts.with_pixels(PixelFormat::Srgb8);
     let mut r = open_gpu(gpu, &prepared, &GpuVariants::default())?;
     let one = Plan {
         reps: 1,

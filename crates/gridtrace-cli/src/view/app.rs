@@ -71,7 +71,7 @@ impl App {
     /// The options of the frame for the current view.
     pub(super) fn frame_opts(&self) -> RenderOptions {
         let (w, h) = self.traced_size();
-        RenderOptions::new(w, h, self.mode, self.accel)
+        RenderOptions::new(w, h, self.mode, self.accel).with_pixels(PixelFormat::Srgb8)
     }
 
     pub(super) fn apply(&mut self, action: Action, el: &ActiveEventLoop) -> gridtrace::Result<()> {

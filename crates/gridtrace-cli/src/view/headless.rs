@@ -7,8 +7,8 @@
 use std::time::Instant;
 
 use glam::{Quat, Vec3};
-use gridtrace::RenderOptions;
 use gridtrace::scene::{PointLight, Scene};
+use gridtrace::{PixelFormat, RenderOptions};
 
 use super::ViewArgs;
 use crate::render::orbit;
@@ -48,7 +48,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         println!("       (a software adapter: CPU speed, not GPU speed)");
     }
     let (w, h) = a.res;
-    let opts = RenderOptions::new(w, h, a.mode, accel);
+    let opts = RenderOptions::new(w, h, a.mode, accel).with_pixels(PixelFormat::Srgb8);
     let centre = src.bounds().center();
     let (camera0, lights0) = (src.camera, src.lights.clone());
     // (wall ms, GPU ms where there are timestamps, Mrays/s by wall time)

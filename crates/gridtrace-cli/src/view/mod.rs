@@ -34,7 +34,7 @@ use glam::Vec3;
 use gridtrace::gpu::GpuContext;
 use gridtrace::scene::animated::Animation;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{AccelKind, Backend, Mode, RenderOptions};
+use gridtrace::{AccelKind, Backend, Mode, PixelFormat, RenderOptions};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};

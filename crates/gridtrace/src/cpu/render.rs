@@ -222,6 +222,7 @@ mod tests {
                     accel: kind,
                     ablation,
                     rows,
+                    pixels: Default::default(),
                 };
                 let (img, stats) = render_with_counters(&prepared, &scene.camera, &scene.lights, &opts).unwrap();
                 let cam = scene.camera.frame(opts.width, opts.height);

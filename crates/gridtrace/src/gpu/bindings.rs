@@ -92,22 +92,34 @@ pub const INDIRECT_GROUP: u32 = 1;
 /// Group 1, as declared in indirect.wgsl.
 pub const INDIRECT_BINDINGS: [Binding<IndirectSlot>; 1] = [row(0, "indirect", StorageReadWrite, IndirectSlot::Args)];
 
+/// What group 1 of the pack kernel binds: the tile's pixels as packed 8-bit sRGB.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PackSlot {
+    Packed,
+}
+
+pub const PACK_GROUP: u32 = 1;
+
+/// Group 1, as declared in pack.wgsl.
+pub const PACK_BINDINGS: [Binding<PackSlot>; 1] = [row(0, "packed", StorageReadWrite, PackSlot::Packed)];
+
 /// Every binding of every group as (group, index, WGSL name, access), for checks against WGSL.
 pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
     let frame = FRAME_BINDINGS.iter().map(|b| (FRAME_GROUP, b.index, b.name, b.access));
     let indirect = INDIRECT_BINDINGS
         .iter()
         .map(|b| (INDIRECT_GROUP, b.index, b.name, b.access));
-    frame.chain(indirect).collect()
+    let pack = PACK_BINDINGS.iter().map(|b| (PACK_GROUP, b.index, b.name, b.access));
+    frame.chain(indirect).chain(pack).collect()
 }
 
 /// Storage buffers a kernel may bind at once: group 0's storage rows and the most of group 1
-/// (a structure's arrays or the indirect arguments): the device must allow this many per
+/// (a structure's arrays, the indirect arguments or the packed pixels): the device must allow this many per
 /// shader stage.
 pub fn storage_buffers_needed() -> u32 {
     let frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
     let structure = super::walks::WALKS.iter().map(|w| w.arrays.len()).max().unwrap_or(0);
-    (frame + structure.max(INDIRECT_BINDINGS.len())) as u32
+    (frame + structure.max(INDIRECT_BINDINGS.len()).max(PACK_BINDINGS.len())) as u32
 }
 
 /// The layout entries of a table (every kernel is a compute kernel).

@@ -8,7 +8,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use super::bindings::{
-    self, Access, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP, STRUCTURE_GROUP,
+    self, Access, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP, PACK_BINDINGS, PACK_GROUP,
+    STRUCTURE_GROUP,
 };
 use super::constants::{WORKGROUP, max_groups_x};
 use super::context::GpuContext;
@@ -33,6 +34,19 @@ pub(crate) enum Kernel {
     Indirect,
     /// `occlusion` finding closest hits: the `shadow_closest_hit` ablation.
     OcclusionClosest,
+    /// The tile's pixels to 8-bit sRGB (`PixelFormat::Srgb8`).
+    Pack,
+}
+
+/// What a kernel that walks no structure binds as group 1 (a walking kernel binds its
+/// structure's arrays there).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Group1 {
+    None,
+    /// The indirect arguments, written as storage by the one kernel that computes them.
+    IndirectArgs,
+    /// The packed pixels the pack kernel writes.
+    Packed,
 }
 
 /// How many invocations a kernel's dispatch has.
@@ -59,8 +73,8 @@ struct KernelSpec {
     /// Pipeline-overridable constants (`override` in WGSL).
     overrides: &'static [(&'static str, f64)],
     launch: Launch,
-    /// Writes the indirect arguments, so binds them as group 1 (its pipeline layout has it).
-    writes_indirect_args: bool,
+    /// Its group 1 when it walks no structure (its pipeline layout has it).
+    group1: Group1,
 }
 
 const RAY_QUEUE: Launch = Launch::Indirect {
@@ -79,12 +93,12 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
         source,
         overrides: &[],
         launch: RAY_QUEUE,
-        writes_indirect_args: false,
+        group1: Group1::None,
     }
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 8] = [
+const SPECS: [KernelSpec; 9] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -107,7 +121,7 @@ const SPECS: [KernelSpec; 8] = [
     spec(Kernel::Resolve, "resolve", "resolve", shaders::RESOLVE),
     KernelSpec {
         launch: Launch::Once,
-        writes_indirect_args: true,
+        group1: Group1::IndirectArgs,
         ..spec(Kernel::Indirect, "indirect", "indirect", shaders::INDIRECT)
     },
     KernelSpec {
@@ -120,6 +134,11 @@ const SPECS: [KernelSpec; 8] = [
             "occlusion",
             shaders::OCCLUSION,
         )
+    },
+    KernelSpec {
+        launch: Launch::PerPixel,
+        group1: Group1::Packed,
+        ..spec(Kernel::Pack, "pack", "pack", shaders::PACK)
     },
 ];
 
@@ -161,6 +180,8 @@ pub(crate) struct Kernels {
     pub frame_layout: wgpu::BindGroupLayout,
     /// Layout of group 1 of the indirect kernel (`INDIRECT_BINDINGS`).
     pub indirect_layout: wgpu::BindGroupLayout,
+    /// Layout of group 1 of the pack kernel (`PACK_BINDINGS`).
+    pub pack_layout: wgpu::BindGroupLayout,
     /// The kernels that walk no structure, in `SPECS` order (`None` for those that walk).
     pipelines: Vec<Option<wgpu::ComputePipeline>>,
     /// Each walk's pipelines (by `WalkSpec::name`), compiled when a scene of it is first
@@ -275,6 +296,10 @@ impl Kernels {
             label: Some("indirect args"),
             entries: &bindings::layout_entries(&INDIRECT_BINDINGS),
         });
+        let pack_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("packed pixels"),
+            entries: &bindings::layout_entries(&PACK_BINDINGS),
+        });
         let layout = |groups: &[Option<&wgpu::BindGroupLayout>]| {
             dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("gridtrace"),
@@ -285,12 +310,10 @@ impl Kernels {
         let pipelines = compile(
             dev,
             variants,
-            |s| {
-                if s.writes_indirect_args {
-                    layout(&[Some(&frame_layout), Some(&indirect_layout)])
-                } else {
-                    layout(&[Some(&frame_layout)])
-                }
+            |s| match s.group1 {
+                Group1::None => layout(&[Some(&frame_layout)]),
+                Group1::IndirectArgs => layout(&[Some(&frame_layout), Some(&indirect_layout)]),
+                Group1::Packed => layout(&[Some(&frame_layout), Some(&pack_layout)]),
             },
             |s| shaders::module_source(s.source),
             false,
@@ -299,6 +322,7 @@ impl Kernels {
             variants: *variants,
             frame_layout,
             indirect_layout,
+            pack_layout,
             pipelines,
             walks: Mutex::new(HashMap::new()),
         })
@@ -354,6 +378,8 @@ pub(crate) struct PassRecorder<'a> {
     /// The indirect-args buffer and its group-1 bind group.
     pub indirect_args: &'a wgpu::Buffer,
     pub indirect_group: &'a wgpu::BindGroup,
+    /// The packed-pixels group of the pack kernel (the frame's work buffers hold it).
+    pub packed_group: Option<&'a wgpu::BindGroup>,
     /// The scene's structure's walking pipelines and its group 1.
     pub walk: &'a WalkPipelines,
     pub structure_group: &'a wgpu::BindGroup,
@@ -391,8 +417,15 @@ impl PassRecorder<'_> {
         if spec.walks {
             cp.set_bind_group(STRUCTURE_GROUP, self.structure_group, &[]);
         }
-        if spec.writes_indirect_args {
-            cp.set_bind_group(INDIRECT_GROUP, self.indirect_group, &[]);
+        match spec.group1 {
+            Group1::None => {}
+            Group1::IndirectArgs => cp.set_bind_group(INDIRECT_GROUP, self.indirect_group, &[]),
+            Group1::Packed => cp.set_bind_group(
+                PACK_GROUP,
+                self.packed_group
+                    .expect("the pack kernel runs with the frame's packed pixels"),
+                &[],
+            ),
         }
         match spec.launch {
             Launch::PerPixel => {

@@ -6,7 +6,7 @@ use std::mem::size_of;
 use std::sync::Arc;
 use std::time::Instant;
 
-use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot};
+use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
 use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
 use super::context::GpuContext;
 use super::grid_build::{GpuBuildStats, GpuGrid};
@@ -31,6 +31,8 @@ const MAX_PASSES: usize = 3;
 pub(super) const TILE_UNIFORM_BYTES: u64 = PASS_UNIFORM_STRIDE_BYTES * MAX_PASSES as u64;
 /// Bytes per pixel of the accumulation buffer (`vec4<f32>`).
 pub(super) const ACCUM_TEXEL_BYTES: u64 = size_of::<[f32; 4]>() as u64;
+/// Bytes per pixel of the packed 8-bit sRGB pixels (pack.wgsl).
+pub(super) const PACKED_TEXEL_BYTES: u64 = size_of::<u32>() as u64;
 /// Bytes per ray of the resolve buffer (`vec2<u32>`: first shadow ray, count).
 const RESOLVE_SPAN_BYTES: u64 = size_of::<[u32; 2]>() as u64;
 pub(super) const COUNTERS_BYTES: u64 = (COUNTER_SLOTS * size_of::<u32>()) as u64;
@@ -45,6 +47,9 @@ pub(super) struct WorkBuffers {
     pub shadow: wgpu::Buffer,
     pub resolve: wgpu::Buffer,
     pub accum: wgpu::Buffer,
+    /// The tile's pixels as 8-bit sRGB (the pack kernel's output), and its group 1.
+    pub packed: wgpu::Buffer,
+    pub packed_group: wgpu::BindGroup,
     pub lights: wgpu::Buffer,
     /// One bind group per bounce (queues A/B swap roles every bounce).
     pub bind_groups: Vec<wgpu::BindGroup>,
@@ -249,6 +254,7 @@ impl GpuRenderer {
             v.push(("shadow queue", w.shadow.size()));
             v.push(("resolve", w.resolve.size()));
             v.push(("accum", w.accum.size()));
+            v.push(("packed pixels", w.packed.size()));
         }
         v
     }
@@ -265,6 +271,7 @@ impl GpuRenderer {
             kernels: &self.kernels,
             indirect_args: &self.indirect_args,
             indirect_group: &self.indirect_group,
+            packed_group: self.work.as_ref().map(|w| &w.packed_group),
             walk: &self.scene.walk,
             structure_group: &self.scene.structure_group,
             shadow_closest_hit: ablation.shadow_closest_hit,
@@ -317,6 +324,14 @@ impl GpuRenderer {
         let shadow = buf("shadow queue", n * rec * max_lights as u64);
         let resolve = buf("resolve", n * RESOLVE_SPAN_BYTES);
         let accum = buf("accum", n * ACCUM_TEXEL_BYTES);
+        let packed = buf("packed pixels", n * PACKED_TEXEL_BYTES);
+        let packed_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("packed pixels"),
+            layout: &self.kernels.pack_layout,
+            entries: &bindings::group_entries(&PACK_BINDINGS, |slot| match slot {
+                PackSlot::Packed => packed.as_entire_binding(),
+            }),
+        });
         let lights_buf = buf("lights", size_of::<PointLight>() as u64 * max_lights as u64);
         let bind_groups = (0..MAX_PASSES)
             .map(|d| {
@@ -361,6 +376,8 @@ impl GpuRenderer {
             shadow,
             resolve,
             accum,
+            packed,
+            packed_group,
             lights: lights_buf,
             bind_groups,
         });

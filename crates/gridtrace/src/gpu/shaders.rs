@@ -14,14 +14,16 @@ pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
 pub const SHADE: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/shade.wgsl"));
 pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
 pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
+pub const PACK: &str = include_str!("shaders/pack.wgsl");
 /// Every kernel with its name.
-pub const KERNELS: [(&str, &str); 6] = [
+pub const KERNELS: [(&str, &str); 7] = [
     ("raygen", RAYGEN),
     ("traverse", TRAVERSE),
     ("occlusion", OCCLUSION),
     ("shade", SHADE),
     ("resolve", RESOLVE),
     ("indirect", INDIRECT),
+    ("pack", PACK),
 ];
 
 /// The prelude and `common.wgsl`: every declaration all kernels share.

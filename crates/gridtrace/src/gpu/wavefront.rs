@@ -12,9 +12,9 @@ use glam::Vec3;
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
-use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
+use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES};
 use super::timing::{GpuTimings, MAX_TIMED_PASSES};
-use crate::render::{Ablation, Image, Mode, RenderOptions, RenderStats};
+use crate::render::{Image, Mode, PixelFormat, RenderOptions, RenderStats, srgb8_to_linear};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
 
@@ -35,7 +35,8 @@ pub struct GpuRenderStats {
     /// Bytes written to the device for this frame: the camera, the scene constants (its light
     /// count), the lights and each tile's pass uniforms. The scene itself is uploaded once.
     pub uploaded_bytes: u64,
-    /// Bytes read back: the image (16 a pixel), each tile's counters, the timestamps.
+    /// Bytes read back: the image (16 a pixel, 4 as `PixelFormat::Srgb8`), each tile's
+    /// counters, the timestamps.
     pub downloaded_bytes: u64,
     /// Times the host waited for the device (one per submission: 1 unless the frame's results
     /// exceed the device's largest buffer).
@@ -136,8 +137,8 @@ impl GpuRenderer {
         let max_bytes = self.ctx.limits().max_buffer_size;
         let mut k = 0;
         while k < tiles.len() {
-            let n = tiles_per_submission(&tiles[k..], max_bytes);
-            let out = self.run_tiles(k, &tiles[k..k + n], first, opts.mode, opts.ablation, &mut img)?;
+            let n = tiles_per_submission(&tiles[k..], texel_bytes(opts), max_bytes);
+            let out = self.run_tiles(k, &tiles[k..k + n], first, opts, &mut img)?;
             for (r, t) in out.rays.iter().zip(&tiles[k..k + n]) {
                 stats.render.rays.eye += t.pixels as u64;
                 stats.render.rays.shadow += r.0;
@@ -176,13 +177,14 @@ impl GpuRenderer {
         first_tile: usize,
         tiles: &[Tile],
         first: u32,
-        mode: Mode,
-        ablation: Ablation,
+        opts: &RenderOptions,
         img: &mut Image,
     ) -> Result<Readback> {
+        let texel = texel_bytes(opts);
+        let packed = texel == PACKED_TEXEL_BYTES;
         // The readback: the tiles' pixels in order, then a counters block per tile, then the
         // timestamps.
-        let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * ACCUM_TEXEL_BYTES).sum();
+        let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * texel).sum();
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
         let stamps_bytes = if self.timed() { TIMESTAMPS_BYTES } else { 0 };
@@ -199,7 +201,7 @@ impl GpuRenderer {
             .ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
-        let mut rec = self.recorder(tiles[0].pixels, true, ablation);
+        let mut rec = self.recorder(tiles[0].pixels, true, opts.ablation);
         let mut image_at = 0;
         for (k, t) in tiles.iter().enumerate() {
             // Copies in the command stream run in order with the passes: this tile's passes
@@ -213,9 +215,14 @@ impl GpuRenderer {
                 Some(TILE_UNIFORM_BYTES),
             );
             rec.tile_pixels = t.pixels;
-            self.record_tile(&mut enc, &mut rec, mode);
-            let bytes = t.pixels as u64 * ACCUM_TEXEL_BYTES;
-            enc.copy_buffer_to_buffer(&w.accum, 0, readback, image_at, Some(bytes));
+            self.record_tile(&mut enc, &mut rec, opts.mode);
+            let bytes = t.pixels as u64 * texel;
+            if packed {
+                rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
+                enc.copy_buffer_to_buffer(&w.packed, 0, readback, image_at, Some(bytes));
+            } else {
+                enc.copy_buffer_to_buffer(&w.accum, 0, readback, image_at, Some(bytes));
+            }
             enc.copy_buffer_to_buffer(
                 &self.counters,
                 0,
@@ -234,11 +241,23 @@ impl GpuRenderer {
             for t in tiles {
                 let n = t.pixels as usize;
                 let dst = &mut img.pixels[(t.offset - first) as usize..][..n];
-                for (px, texel) in dst.iter_mut().zip(raw[at..].chunks_exact(ACCUM_TEXEL_BYTES as usize)) {
-                    let f = |i: usize| f32::from_ne_bytes(texel[4 * i..4 * i + 4].try_into().unwrap());
-                    *px = Vec3::new(f(0), f(1), f(2));
+                let texels = raw[at..].chunks_exact(texel as usize);
+                if packed {
+                    // Red in the low byte of a little-endian u32: bytes r, g, b, a.
+                    for (px, rgba) in dst.iter_mut().zip(texels) {
+                        *px = Vec3::new(
+                            srgb8_to_linear(rgba[0]),
+                            srgb8_to_linear(rgba[1]),
+                            srgb8_to_linear(rgba[2]),
+                        );
+                    }
+                } else {
+                    for (px, texel) in dst.iter_mut().zip(texels) {
+                        let f = |i: usize| f32::from_ne_bytes(texel[4 * i..4 * i + 4].try_into().unwrap());
+                        *px = Vec3::new(f(0), f(1), f(2));
+                    }
                 }
-                at += n * ACCUM_TEXEL_BYTES as usize;
+                at += n * texel as usize;
             }
             let counter = |k: usize, slot: usize| {
                 let i = (counters_at + k as u64 * COUNTERS_BYTES) as usize + slot * SLOT_BYTES as usize;
@@ -296,13 +315,23 @@ fn grow(device: &wgpu::Device, slot: &mut Option<wgpu::Buffer>, size: u64, label
     }));
 }
 
+/// Bytes a pixel takes in the frame's readback: 4 when the caller wants 8-bit sRGB (packed on
+/// the device), else the accumulation's 16. Heat frames keep their raw costs.
+fn texel_bytes(opts: &RenderOptions) -> u64 {
+    if opts.pixels == PixelFormat::Srgb8 && opts.mode != Mode::Heat {
+        PACKED_TEXEL_BYTES
+    } else {
+        ACCUM_TEXEL_BYTES
+    }
+}
+
 /// How many of `tiles` (from the first) one submission takes: as many as the device's largest
 /// buffer holds the results of, at least one.
-fn tiles_per_submission(tiles: &[Tile], max_buffer_bytes: u64) -> usize {
+fn tiles_per_submission(tiles: &[Tile], texel_bytes: u64, max_buffer_bytes: u64) -> usize {
     let mut bytes = TIMESTAMPS_BYTES;
     let mut n = 0;
     for t in tiles {
-        bytes += t.pixels as u64 * ACCUM_TEXEL_BYTES + COUNTERS_BYTES;
+        bytes += t.pixels as u64 * texel_bytes + COUNTERS_BYTES;
         if n > 0 && bytes > max_buffer_bytes {
             break;
         }
