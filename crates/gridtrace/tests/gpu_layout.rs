@@ -158,12 +158,12 @@ fn mismatch_is_detected() {
     assert!(r.is_err());
 }
 
-/// Every kernel compiles and validates as its own module (common + kernel; the walking kernels
-/// once per structure, with its walk).
+/// Every kernel compiles and validates as its own module (common + kernel): raygen, shade,
+/// resolve, indirect and pack once, traverse and occlusion once per structure, with its walk.
 #[test]
 fn kernels_validate() {
     let modules = shaders::all_modules();
-    assert_eq!(modules.len(), 4 + 2 * gridtrace::gpu::walks::WALKS.len());
+    assert_eq!(modules.len(), 5 + 2 * gridtrace::gpu::walks::WALKS.len());
     for (name, src) in modules {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())

@@ -9,11 +9,14 @@
 
 struct TriAccel { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
 struct TriShade { n0: array<f32, 3>, n1: array<f32, 3>, n2: array<f32, 3>, material: u32 }
-struct GpuMaterial { diffuse: array<f32, 3>, reflectivity: f32 }
-struct PointLight { position: array<f32, 3>, _pad0: f32, intensity: array<f32, 3>, _pad1: f32 }
+struct GpuMaterial { diffuse: vec3<f32>, reflectivity: f32 }
+struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1: f32 }
 // A queued ray: eye, reflection or shadow. `pixel` indexes the tile's accumulation buffer;
-// `weight` is the path throughput (shadow rays: the contribution if unoccluded).
-struct RayRec { origin: array<f32, 3>, pixel: u32, dir: array<f32, 3>, t_max: f32, weight: array<f32, 3>, t_min: f32 }
+// `weight` is the path throughput (shadow rays: the contribution if unoccluded). Three 16-byte
+// groups, each a vec3 and a scalar in its fourth word: the host's bytes (`layout::RayRec`), with
+// the alignment that lets a GPU load each group in one 16-byte access (an array<f32, 3> is
+// 4-byte aligned and is read as three scalars).
+struct RayRec { origin: vec3<f32>, pixel: u32, dir: vec3<f32>, t_max: f32, weight: vec3<f32>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
 
 struct SceneUniform {

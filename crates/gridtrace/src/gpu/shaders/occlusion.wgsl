@@ -9,8 +9,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if (i >= shadow_len()) { return; }
     let r = shadow_rays[i];
     if (r.pixel == MISS) { return; }
-    let o = v3(r.origin);
-    let d = v3(r.dir);
+    let o = r.origin;
+    let d = r.dir;
     var occluded: bool;
     var work = 0u;
     if (SHADOW_CLOSEST) {
@@ -20,6 +20,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         occluded = walk_any(o, d, r.t_min, r.t_max);
     }
     if (occluded) {
-        shadow_rays[i].weight = array<f32, 3>(0.0, 0.0, 0.0);
+        shadow_rays[i].weight = vec3<f32>(0.0);
     }
 }

@@ -46,7 +46,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         } else {
             accum[i] = vec4<f32>(0.0);
             queued = true;
-            rec = RayRec(a3(camera.eye), i, a3(d), inf(), array<f32, 3>(1.0, 1.0, 1.0), 0.0);
+            rec = RayRec(camera.eye, i, d, inf(), vec3<f32>(1.0), 0.0);
         }
     }
     var slot = j;

@@ -9,7 +9,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let p = rays_in[i].pixel;
     var c = accum[p].xyz;
     for (var k = 0u; k < span.y; k++) {
-        c += v3(shadow_rays[span.x + k].weight);
+        c += shadow_rays[span.x + k].weight;
     }
     accum[p] = vec4<f32>(c, 0.0);
 }

@@ -20,7 +20,7 @@ fn surface_at(o: vec3<f32>, d: vec3<f32>, h: GpuHit) -> Surface {
 // Light contribution factor (intensity * N.L / d^2) in xyz and the distance in w; w = -1 when
 // the light is behind the surface (no shadow ray spent).
 fn light_term(s: Surface, origin: vec3<f32>, l: PointLight, dir_out: ptr<function, vec3<f32>>) -> vec4<f32> {
-    let to = v3(l.position) - origin;
+    let to = l.position - origin;
     let d2 = dot(to, to);
     if (d2 == 0.0) { return vec4<f32>(0.0, 0.0, 0.0, -1.0); }
     let dist = sqrt(d2);
@@ -28,7 +28,7 @@ fn light_term(s: Surface, origin: vec3<f32>, l: PointLight, dir_out: ptr<functio
     let ndl = dot(s.ns, dir);
     if (ndl <= 0.0 || dot(s.ng, dir) <= 0.0) { return vec4<f32>(0.0, 0.0, 0.0, -1.0); }
     *dir_out = dir;
-    return vec4<f32>(v3(l.intensity) * (ndl / d2), dist);
+    return vec4<f32>(l.intensity * (ndl / d2), dist);
 }
 
 // What shading one ray leaves to emit once its queue slots are known.
@@ -59,17 +59,17 @@ fn shade_ray(i: u32) -> Shaded {
     }
     if (r.pixel == MISS) { return out; }
     let h = hits[i];
-    let weight = v3(r.weight);
+    let weight = r.weight;
     if (h.tri == MISS) {
         accum[r.pixel] += vec4<f32>(weight * scene.background, 0.0);
         return out;
     }
-    let d = v3(r.dir);
-    let s = surface_at(v3(r.origin), d, h);
+    let d = r.dir;
+    let s = surface_at(r.origin, d, h);
     let mat = materials[tri_shade[h.tri].material];
     var reflect = 0.0;
     if (pass_.mode == MODE_TRACE) { reflect = mat.reflectivity; }
-    let local = weight * (1.0 - reflect) * v3(mat.diffuse);
+    let local = weight * (1.0 - reflect) * mat.diffuse;
     // Summed term by term into the pixel, in the CPU's order, so both round alike.
     var color = accum[r.pixel].xyz + local * scene.ambient;
     let origin = s.p + s.ng * scene.ray_epsilon;
@@ -110,7 +110,7 @@ fn emit(i: u32, sh: Shaded, base: u32, slot: u32) {
             var dir: vec3<f32>;
             let lt = light_term(sh.s, sh.origin, lights[l], &dir);
             if (lt.w >= 0.0) {
-                shadow_rays[base + k] = RayRec(a3(sh.origin), sh.pixel, a3(dir), lt.w, a3(sh.local * lt.xyz), 0.0);
+                shadow_rays[base + k] = RayRec(sh.origin, sh.pixel, dir, lt.w, sh.local * lt.xyz, 0.0);
                 k += 1u;
             }
         }
@@ -118,7 +118,7 @@ fn emit(i: u32, sh: Shaded, base: u32, slot: u32) {
     }
     if (sh.reflect) {
         if (RAY_STATS || !compacted()) { atomicAdd(&counters[SLOT_REFLECT_TOTAL], 1u); }
-        rays_out[slot] = RayRec(a3(sh.origin), sh.pixel, a3(sh.dir), inf(), a3(sh.weight), 0.0);
+        rays_out[slot] = RayRec(sh.origin, sh.pixel, sh.dir, inf(), sh.weight, 0.0);
     }
 }
 
