@@ -89,6 +89,8 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let mut buf = vec![0u8; CHUNK * 24];
     let (mut done, mut hits) = (0u64, 0u64);
     let mut trace_s = 0.0;
+    // The GPU batches' own figures, summed over the file's chunks.
+    let mut gpu = gridtrace::gpu::GpuQueryStats::default();
     while done < n {
         let count = (n - done).min(CHUNK as u64) as usize;
         let bytes = &mut buf[..count * 24];
@@ -135,6 +137,9 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
             }
             output.write_all(&out).map_err(write_err)?;
         }
+        if let Some(s) = mesh.last_gpu_batch() {
+            gpu.add(&s);
+        }
         done += count as u64;
     }
     output.flush().map_err(write_err)?;
@@ -144,6 +149,35 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         trace_s * 1e3,
         n as f64 / trace_s.max(1e-9) / 1e6
     );
+    if gpu.round_trips > 0 {
+        print_gpu_batches(&gpu);
+    }
     println!("wrote   {}", a.hits_out.display());
     Ok(())
+}
+
+/// The GPU's figures for the batches, with the frame's meanings (`render`'s `gpu` line): wall
+/// time (upload to answers in host memory) beside the device's own, round trips and bytes.
+fn print_gpu_batches(s: &gridtrace::gpu::GpuQueryStats) {
+    let gpu = s
+        .gpu_ms()
+        .map_or("no timestamp queries".to_string(), |ms| format!("GPU {ms:.2} ms"));
+    println!(
+        "gpu     wall {:.2} ms, {gpu}; {} chunk{}, {} round trip{}, {} B up, {} B down",
+        s.wall_ms,
+        s.chunks,
+        if s.chunks == 1 { "" } else { "s" },
+        s.round_trips,
+        if s.round_trips == 1 { "" } else { "s" },
+        s.uploaded_bytes,
+        s.downloaded_bytes
+    );
+    if let Some(ms) = s.gpu_ms().filter(|ms| *ms > 0.0) {
+        let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
+        println!(
+            "stages  {} ms (GPU timestamps); {:.2} Mrays/s on the device",
+            stages.join(", "),
+            s.rays as f64 / (ms * 1e3)
+        );
+    }
 }

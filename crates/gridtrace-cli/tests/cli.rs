@@ -674,3 +674,75 @@ fn version_names_the_release_the_commit_and_the_cpu_path() {
     assert!(ok, "{text}");
     assert_eq!(text.trim_end(), first);
 }
+
+/// `rays` on the GPU answers as on the CPU (closest hits: the same triangle, t within 1e-5;
+/// occlusion: the same bits) and reports the batch as `render` reports a frame: wall and GPU
+/// time, one round trip, the bytes each way (16 down a ray for closest hits).
+#[test]
+fn rays_on_the_gpu_answer_as_on_the_cpu_and_report_the_batch() {
+    let dir = scratch("rays-gpu");
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, TET_OBJ).unwrap();
+    // 400 rays from a ring around the tetrahedron towards points near it: hits and misses.
+    let mut bytes = Vec::new();
+    for i in 0..400 {
+        let a = i as f32 * 0.137;
+        let o = [2.0 * a.cos(), 2.0 * a.sin(), 0.3 + (i % 7) as f32 * 0.1];
+        let target = [0.3 * (i % 5) as f32 - 0.2, 0.25 * (i % 3) as f32, 0.2];
+        let d = [target[0] - o[0], target[1] - o[1], target[2] - o[2]];
+        for f in o.iter().chain(&d) {
+            bytes.extend_from_slice(&f.to_le_bytes());
+        }
+    }
+    let rays = dir.join("ring.rays");
+    std::fs::write(&rays, bytes).unwrap();
+    let (obj, rays) = (obj.to_str().unwrap(), rays.to_str().unwrap());
+    let run = |backend: &str, occluded: bool| {
+        let out = dir.join(format!("{backend}-{occluded}.bin"));
+        let mut args = vec!["rays", obj, "--rays", rays, "--backend", backend, "--hits-out"];
+        args.push(out.to_str().unwrap());
+        if occluded {
+            args.extend_from_slice(&["--occluded", "--tmax", "2.0"]);
+        }
+        let (ok, text) = gridtrace(&args);
+        assert!(ok, "rays --backend {backend}:\n{text}");
+        (std::fs::read(&out).unwrap(), text)
+    };
+    let (cpu, _) = run("cpu", false);
+    let (gpu, text) = run("gpu", false);
+    assert_eq!(cpu.len(), 400 * 16);
+    let mut hit = 0;
+    for (c, g) in cpu.chunks(16).zip(gpu.chunks(16)) {
+        let t = |b: &[u8]| f32::from_le_bytes(b[0..4].try_into().unwrap());
+        assert_eq!(c[4..8], g[4..8], "triangle");
+        if t(c).is_finite() {
+            hit += 1;
+            assert!(
+                (t(c) - t(g)).abs() <= 1e-5 * t(c).abs().max(1.0),
+                "t {} vs {}",
+                t(c),
+                t(g)
+            );
+        }
+    }
+    assert!(hit > 0 && hit < 400, "{hit} of 400 rays hit");
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("gpu "))
+        .unwrap_or_else(|| panic!("no gpu line:\n{text}"));
+    assert!(line.contains("wall ") && line.contains("1 round trip,"), "{line}");
+    let down: u64 = line
+        .split(" B down")
+        .next()
+        .unwrap()
+        .rsplit(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(down >= 400 * 16, "{line}");
+    let (cpu, _) = run("cpu", true);
+    let (gpu, _) = run("gpu", true);
+    assert_eq!(cpu, gpu, "occlusion");
+    assert!(cpu.contains(&0) && cpu.contains(&1));
+}

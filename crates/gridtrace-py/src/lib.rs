@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 mod scene;
+mod stats;
 
 use std::sync::RwLock;
 
@@ -143,6 +144,14 @@ impl NativeMesh {
         self.mesh().triangle_count()
     }
 
+    /// What the last ray batch on the GPU took (a dict), or None while none has run there.
+    fn last_gpu_batch<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        match py.detach(|| self.mesh().last_gpu_batch()) {
+            Some(s) => Ok(Some(stats::batch(py, &s)?)),
+            None => Ok(None),
+        }
+    }
+
     fn device(&self, py: Python<'_>, backend: &str) -> PyResult<String> {
         let b: Backend = parse("backend", backend)?;
         Ok(py.detach(|| self.mesh().device_for(b)))
@@ -215,15 +224,15 @@ fn render<'py>(
     eye: Option<[f32; 3]>,
     target: Option<[f32; 3]>,
     gpu_variant: &str,
-) -> PyResult<Bound<'py, PyArray3<u8>>> {
+) -> PyResult<(Bound<'py, PyArray3<u8>>, Bound<'py, pyo3::types::PyDict>)> {
     let variants: gridtrace::gpu::GpuVariants = parse("gpu_variant", gpu_variant)?;
     let mode: Mode = parse("mode", mode)?;
     let accel: AccelChoice = parse("accel", accel)?;
     let grid: Resolution = parse("grid", grid)?;
     let backend = parse::<Backend>("backend", backend)?;
     let scene_name = scene.to_string();
-    let rgb = py
-        .detach(move || -> gridtrace::Result<Vec<u8>> {
+    let (rgb, frame) = py
+        .detach(move || -> gridtrace::Result<(Vec<u8>, gridtrace::Frame)> {
             let mut s = match gridtrace::scene::builtin::scene(&scene_name) {
                 Some(s) => s,
                 None => {
@@ -256,16 +265,22 @@ fn render<'py>(
             let opts = RenderOptions::new(width, height, mode, accel).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
             let mut tracer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), backend, &variants, &mut notes)?;
-            let image = tracer.render(&camera, &lights, &opts)?.image;
+            let mut frame = tracer.render(&camera, &lights, &opts)?;
+            // The image goes to Python as bytes; the figures stay.
+            let image = std::mem::replace(&mut frame.image, gridtrace::Image::new(1, 1));
             let image = if mode == Mode::Heat {
                 image.heat_to_color()
             } else {
                 image
             };
-            Ok(image.to_rgb8())
+            Ok((image.to_rgb8(), frame))
         })
         .map_err(to_py)?;
-    rgb.into_pyarray(py).reshape([height as usize, width as usize, 3])
+    let stats = stats::frame(py, &frame)?;
+    Ok((
+        rgb.into_pyarray(py).reshape([height as usize, width as usize, 3])?,
+        stats,
+    ))
 }
 
 #[pymodule]

@@ -176,6 +176,26 @@ def test_gpu_agrees_with_cpu():
     assert same.mean() > 0.9999
     np.testing.assert_allclose(g.t[np.isfinite(c.t)], c.t[np.isfinite(c.t)], rtol=1e-4)
     assert (mesh.occluded(o, d, backend="gpu") == mesh.occluded(o, d)).mean() > 0.9999
+    # The last GPU batch's figures: the occlusion batch just run, in one round trip.
+    s = mesh.last_gpu_batch()
+    assert s["rays"] == 20000 and s["round_trips"] == 1 and s["wall_ms"] > 0
+    assert s["uploaded_bytes"] >= 20000 * 48 and s["downloaded_bytes"] >= 20000 * 48
+    assert gridtrace.Mesh(vertices, faces, backend="cpu").last_gpu_batch() is None
+
+
+def test_render_reports_its_frame():
+    img, s = gridtrace.render("knot-box", 64, 48, mode="shadow", backend="cpu", stats=True)
+    assert img.shape == (48, 64, 3)
+    assert s["backend"] == "cpu" and s["gpu_ms"] is None and s["round_trips"] == 0
+    assert s["rays"][0] == 64 * 48 and s["rays"][1] > 0 and s["wall_ms"] > 0
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        return
+    gimg, g = gridtrace.render("knot-box", 64, 48, mode="shadow", backend="gpu", stats=True)
+    assert g["backend"] == "gpu" and g["round_trips"] == 1 and g["tiles"] == 1
+    # 8-bit pixels packed on the device: 4 bytes a pixel, plus counters and timestamps.
+    assert 64 * 48 * 4 <= g["downloaded_bytes"] < 64 * 48 * 16
+    assert g["rays"] == s["rays"]
+    assert (np.abs(gimg.astype(int) - img.astype(int)) > 2).any(axis=2).mean() < 0.01
 
 
 def test_broadcasting_and_dtypes():

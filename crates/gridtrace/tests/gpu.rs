@@ -439,6 +439,42 @@ fn srgb8_frames_read_back_four_bytes_a_pixel() {
     }
 }
 
+/// A ray batch of many chunks (the chunk size lowered as a batch of millions is cut on any
+/// device) is one submission and one wait, and gives the one-chunk batch's answers exactly;
+/// its statistics count the rays, chunks and bytes.
+#[test]
+fn a_ray_batch_of_many_chunks_is_one_round_trip() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let Some(mut whole) = renderer(&scene) else { return };
+    let Some(mut chunked) = renderer(&scene) else { return };
+    chunked.set_max_tile_pixels(700);
+    let rays = ray_set(&scene.accel, 2500, 11);
+    let kind = AccelKind::ProximityCloud;
+    let want = whole.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+    let got = chunked.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+    assert!(
+        want.iter()
+            .zip(&got)
+            .all(|(a, b)| a.tri == b.tri && a.t.to_bits() == b.t.to_bits())
+    );
+    assert!(want.iter().any(|h| h.is_hit()) && want.iter().any(|h| !h.is_hit()));
+    let s = chunked.last_query_stats().clone();
+    assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 1));
+    let stamps = if s.timings.from_timestamps { 4 * 2 * 16 } else { 0 };
+    assert_eq!(s.downloaded_bytes, 2500 * 16 + stamps);
+    assert!(s.uploaded_bytes >= 2500 * 48 && s.wall_ms > 0.0);
+    let want = whole.occluded(&rays, 0.0, 10.0, kind).unwrap();
+    let got = chunked.occluded(&rays, 0.0, 10.0, kind).unwrap();
+    assert_eq!(want, got);
+    assert!(want.iter().any(|&o| o) && want.iter().any(|&o| !o));
+    let s = chunked.last_query_stats();
+    assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 1));
+}
+
 /// A band of rows (`RenderOptions::rows`, how the viewer traces a frame within its time budget)
 /// equals the same rows of the whole frame, bit for bit, on the GPU and the CPU, in every mode
 /// and for every structure; the bands' rays add up to the frame's. Bands that do not start at

@@ -172,6 +172,14 @@ class Mesh:
         """Faces with non-zero area (the ones rays can hit)."""
         return self._native.triangle_count
 
+    def last_gpu_batch(self) -> Optional[dict]:
+        """What the last ray batch on the GPU took, or ``None`` while none has run there: a dict
+        with ``wall_ms`` (upload to answers in host memory), ``gpu_ms`` (the device's
+        timestamps; ``None`` without them), ``round_trips``, ``uploaded_bytes``,
+        ``downloaded_bytes``, ``stages_ms``, ``rays`` and ``chunks`` — the meanings of
+        ``render(..., stats=True)`` and of the CLI."""
+        return self._native.last_gpu_batch()
+
     def device(self, backend: Optional[str] = None) -> str:
         """Where queries run: ``"cpu (N threads)"`` or the GPU adapter's name and driver."""
         return self._native.device(backend or self._backend)
@@ -197,13 +205,20 @@ class Mesh:
         return self._native.occluded(o, d, t_min, t_max, backend or self._backend)
 
 
-def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "") -> np.ndarray:
+def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "", stats: bool = False):
     """Renders a built-in scene (``"knot-box"``, ``"mirror-spheres"``, ``"sparse-room"``), a TOML
     scene file or a mesh file; returns an (height, width, 3) uint8 sRGB image.
     ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``. An unknown scene name raises
-    ``ValueError`` listing the built-in scenes. ``gpu_variant`` as for ``Mesh``."""
+    ``ValueError`` listing the built-in scenes. ``gpu_variant`` as for ``Mesh``.
+
+    With ``stats=True`` returns ``(image, stats)``: a dict with the CLI's meanings —
+    ``backend`` (``"gpu"`` or ``"cpu"``), ``wall_ms`` (upload to image in host memory),
+    ``gpu_ms`` (the device's timestamps; ``None`` without them and on the CPU),
+    ``round_trips``, ``uploaded_bytes``, ``downloaded_bytes``, ``tiles``, ``stages_ms``,
+    ``rays`` (eye, shadow, reflection) and ``mrays_per_s``."""
     if width <= 0 or height <= 0:
         raise ValueError(f"image size must be positive, got {width}x{height}")
     e = None if eye is None else [float(x) for x in eye]
     t = None if target is None else [float(x) for x in target]
-    return _render(str(scene), int(width), int(height), mode, accel, grid, backend, e, t, gpu_variant)
+    image, figures = _render(str(scene), int(width), int(height), mode, accel, grid, backend, e, t, gpu_variant)
+    return (image, figures) if stats else image

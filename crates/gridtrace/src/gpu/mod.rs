@@ -44,6 +44,7 @@ mod wavefront;
 
 pub use context::{Fault, GpuContext};
 pub use grid_build::{GpuBuildStats, GpuGrid};
+pub use queries::GpuQueryStats;
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
 pub use timing::GpuTimings;

@@ -1,16 +1,26 @@
 //! Ray-batch queries: closest hit (`traverse`) or any hit (`occlusion`) for rays given by the
-//! caller, in chunks that fit the work buffers. The rays go straight into the queue the kernel
-//! reads; the indirect kernel sizes the dispatch as in the tile loop.
+//! caller, in chunks that fit the work buffers, as the frame does its tiles: every chunk of a
+//! batch in one submission (its rays, counters and pass uniforms copied into place in the
+//! command stream), its results copied into one readback buffer with the timestamps, and that
+//! buffer mapped once: one host round trip per batch. (Before, each chunk of a million rays was
+//! its own submission and blocking read.) The indirect kernel sizes each dispatch as in the
+//! tile loop.
 
 use std::mem::size_of;
+use std::time::Instant;
 
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
 use super::kernels::Kernel;
 use super::layout::{GpuHit, RayRec};
-use super::renderer::GpuRenderer;
+use super::renderer::{COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
+use super::timing::{GpuTimings, MAX_TIMED_PASSES};
+use super::wavefront::grow;
 use crate::Result;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
+
+/// Bytes a submission's timestamps may take in its readback (a begin and an end per pass).
+const TIMESTAMPS_BYTES: u64 = MAX_TIMED_PASSES as u64 * 2 * size_of::<u64>() as u64;
 
 /// What a batch asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -19,17 +29,99 @@ enum Query {
     AnyHit,
 }
 
+impl Query {
+    /// Bytes read back a ray: a closest hit's `GpuHit`, or the shadow queue's record whose
+    /// weight the occlusion kernel zeroes when the ray is occluded.
+    fn result_bytes(self) -> u64 {
+        match self {
+            Query::ClosestHit => size_of::<GpuHit>() as u64,
+            Query::AnyHit => size_of::<RayRec>() as u64,
+        }
+    }
+}
+
+/// Statistics of one GPU ray batch, with the frame's meanings (`GpuRenderStats`): `wall_ms`
+/// from the first upload to the answers in host memory, `timings` the device's own.
+#[derive(Debug, Default, Clone)]
+pub struct GpuQueryStats {
+    pub rays: u64,
+    pub timings: GpuTimings,
+    /// Chunks of at most a tile's rays each (the work buffers' size).
+    pub chunks: u32,
+    /// Times the host waited for the device (1 unless the batch exceeds the largest buffer).
+    pub round_trips: u32,
+    /// Bytes written to the device: the rays (48 a ray), counters and pass uniforms.
+    pub uploaded_bytes: u64,
+    /// Bytes read back: the answers (16 a ray for closest hits, 48 for occlusion), the
+    /// timestamps.
+    pub downloaded_bytes: u64,
+    pub wall_ms: f64,
+}
+
+impl GpuQueryStats {
+    /// The device's time for the batch (the stages' timestamps summed), where it has them.
+    pub fn gpu_ms(&self) -> Option<f64> {
+        self.timings.from_timestamps.then_some(self.timings.total_ms)
+    }
+
+    /// Adds `other` (a later batch) to these: how a caller that queries in parts reports the
+    /// whole.
+    pub fn add(&mut self, other: &GpuQueryStats) {
+        self.rays += other.rays;
+        for (name, ms) in &other.timings.stages_ms {
+            *self.timings.stages_ms.entry(name).or_default() += ms;
+        }
+        self.timings.total_ms += other.timings.total_ms;
+        self.timings.from_timestamps = other.timings.from_timestamps;
+        self.timings.untimed_passes += other.timings.untimed_passes;
+        self.chunks += other.chunks;
+        self.round_trips += other.round_trips;
+        self.uploaded_bytes += other.uploaded_bytes;
+        self.downloaded_bytes += other.downloaded_bytes;
+        self.wall_ms += other.wall_ms;
+    }
+}
+
 impl GpuRenderer {
     /// Closest hits for a batch of rays (processed in bounded chunks).
     pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<Hit>> {
-        self.batch(rays, t_min, t_max, kind, Query::ClosestHit).map(|(h, _)| h)
+        let mut hits = Vec::with_capacity(rays.len());
+        self.batch(rays, t_min, t_max, kind, Query::ClosestHit, |raw| {
+            let out: &[GpuHit] = bytemuck::cast_slice(raw);
+            hits.extend(out.iter().map(|h| {
+                if h.tri == MISS {
+                    Hit::MISS
+                } else {
+                    Hit {
+                        t: h.t,
+                        tri: h.tri,
+                        u: h.u,
+                        v: h.v,
+                    }
+                }
+            }));
+        })?;
+        Ok(hits)
     }
 
     /// Any-hit occlusion for a batch of rays.
     pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<bool>> {
-        self.batch(rays, t_min, t_max, kind, Query::AnyHit).map(|(_, o)| o)
+        let mut occ = Vec::with_capacity(rays.len());
+        self.batch(rays, t_min, t_max, kind, Query::AnyHit, |raw| {
+            let out: &[RayRec] = bytemuck::cast_slice(raw);
+            // The occlusion kernel zeroes an occluded ray's contribution.
+            occ.extend(out.iter().map(|r| r.weight[0] == 0.0));
+        })?;
+        Ok(occ)
     }
 
+    /// The statistics of the last batch (`intersect`, `occluded`).
+    pub fn last_query_stats(&self) -> &GpuQueryStats {
+        &self.last_query
+    }
+
+    /// Runs `query` over `rays` in submissions of as many chunks as the device's largest buffer
+    /// holds; `take` gets each chunk's raw results in order.
     fn batch(
         &mut self,
         rays: &[Ray],
@@ -37,21 +129,59 @@ impl GpuRenderer {
         t_max: f32,
         kind: AccelKind,
         query: Query,
-    ) -> Result<(Vec<Hit>, Vec<bool>)> {
+        mut take: impl FnMut(&[u8]),
+    ) -> Result<()> {
         self.check_serves(kind)?;
+        let t0 = Instant::now();
         let chunk = self.tile_capacity(1) as usize;
         self.ensure_work(
             chunk.min(rays.len().max(1)) as u32,
             self.work.as_ref().map_or(1, |w| w.max_lights),
         );
-        let cap = self.work.as_ref().unwrap().tile_pixels as usize;
-        let mut hits = Vec::new();
-        let mut occ = Vec::new();
-        for part in rays.chunks(cap.max(1)) {
-            let recs: Vec<RayRec> = part
-                .iter()
-                .enumerate()
-                .map(|(i, r)| RayRec {
+        let cap = (self.work.as_ref().unwrap().tile_pixels as usize).max(1);
+        let per_chunk = cap as u64 * (size_of::<RayRec>() as u64).max(query.result_bytes()) + COUNTERS_BYTES;
+        let max = self.ctx.limits().max_buffer_size.saturating_sub(TIMESTAMPS_BYTES);
+        let chunks_per_submission = (max / per_chunk).clamp(1, (MAX_TIMED_PASSES / 2) as u64) as usize;
+        let mut stats = GpuQueryStats {
+            rays: rays.len() as u64,
+            timings: GpuTimings {
+                from_timestamps: self.timed(),
+                ..GpuTimings::default()
+            },
+            ..GpuQueryStats::default()
+        };
+        let chunks: Vec<&[Ray]> = rays.chunks(cap).collect();
+        for group in chunks.chunks(chunks_per_submission) {
+            self.submit_chunks(group, t_min, t_max, kind, query, &mut stats, &mut take)?;
+        }
+        stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+        stats.timings.total_ms = if self.timed() {
+            stats.timings.stages_ms.values().sum()
+        } else {
+            stats.wall_ms
+        };
+        self.last_query = stats;
+        Ok(())
+    }
+
+    /// One submission over `chunks` and its one wait.
+    #[allow(clippy::too_many_arguments)]
+    fn submit_chunks(
+        &mut self,
+        chunks: &[&[Ray]],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        query: Query,
+        stats: &mut GpuQueryStats,
+        take: &mut impl FnMut(&[u8]),
+    ) -> Result<()> {
+        let rec_bytes = size_of::<RayRec>() as u64;
+        // The upload: every chunk's rays, then a counters block per chunk.
+        let rays: Vec<RayRec> = chunks
+            .iter()
+            .flat_map(|part| {
+                part.iter().enumerate().map(move |(i, r)| RayRec {
                     origin: r.origin.to_array(),
                     pixel: i as u32,
                     dir: r.dir.to_array(),
@@ -59,51 +189,112 @@ impl GpuRenderer {
                     weight: [1.0; 3],
                     t_min,
                 })
-                .collect();
-            let n = recs.len() as u32;
-            self.write_pass_uniforms(0, n, Mode::Cast, kind, Ablation::default());
-            let w = self.work.as_ref().unwrap();
-            let q = &self.ctx.queue;
-            // The queue the kernel reads holds the rays; its counter says how many.
-            let (queue, slot, kernel) = match query {
-                Query::ClosestHit => (&w.queue_a, SLOT_QUEUE_A, Kernel::Traverse),
-                Query::AnyHit => (&w.shadow, SLOT_SHADOW, Kernel::Occlusion),
-            };
-            let mut counts = [0u32; COUNTER_SLOTS];
-            counts[slot] = n;
-            q.write_buffer(queue, 0, bytemuck::cast_slice(&recs));
-            q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counts));
-            let mut enc = self.ctx.device.create_command_encoder(&Default::default());
-            // Untimed: queries report no stage times.
-            let mut rec = self.recorder(n, false, Ablation::default());
+            })
+            .collect();
+        let (slot, kernel) = match query {
+            Query::ClosestHit => (SLOT_QUEUE_A, Kernel::Traverse),
+            Query::AnyHit => (SLOT_SHADOW, Kernel::Occlusion),
+        };
+        let counts: Vec<u32> = chunks
+            .iter()
+            .flat_map(|part| {
+                let mut c = [0u32; COUNTER_SLOTS];
+                c[slot] = part.len() as u32;
+                c
+            })
+            .collect();
+        let rays_bytes = rays.len() as u64 * rec_bytes;
+        let upload_bytes = rays_bytes + counts.len() as u64 * size_of::<u32>() as u64;
+        let dev = &self.ctx.device;
+        let copy = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        grow(dev, &mut self.batch_upload, upload_bytes, "batch upload", copy);
+        grow(
+            dev,
+            &mut self.tile_uniforms,
+            chunks.len() as u64 * TILE_UNIFORM_BYTES,
+            "tile pass uniforms",
+            copy,
+        );
+        let results_bytes = rays.len() as u64 * query.result_bytes();
+        let stamps_bytes = if self.timed() { TIMESTAMPS_BYTES } else { 0 };
+        grow(
+            dev,
+            &mut self.readback,
+            results_bytes + stamps_bytes,
+            "frame readback",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let upload = self.batch_upload.as_ref().unwrap();
+        let q = &self.ctx.queue;
+        q.write_buffer(upload, 0, bytemuck::cast_slice(&rays));
+        q.write_buffer(upload, rays_bytes, bytemuck::cast_slice(&counts));
+        stats.uploaded_bytes += upload_bytes;
+        for (k, part) in chunks.iter().enumerate() {
+            stats.uploaded_bytes += self.write_pass_uniforms_to(
+                self.tile_uniforms.as_ref().unwrap(),
+                k as u64 * TILE_UNIFORM_BYTES,
+                0,
+                part.len() as u32,
+                Mode::Cast,
+                kind,
+                Ablation::default(),
+            );
+        }
+        let (upload, readback) = (self.batch_upload.as_ref().unwrap(), self.readback.as_ref().unwrap());
+        let w = self.work.as_ref().unwrap();
+        let (queue, output) = match query {
+            Query::ClosestHit => (&w.queue_a, &w.hits),
+            Query::AnyHit => (&w.shadow, &w.shadow),
+        };
+        let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("ray batch"),
+        });
+        let mut rec = self.recorder(chunks[0].len() as u32, true, Ablation::default());
+        let (mut ray_at, mut out_at) = (0, 0);
+        for (k, part) in chunks.iter().enumerate() {
+            let n = part.len() as u64;
+            // In stream order: this chunk's uniforms, counters and rays into place, its two
+            // passes, its answers out; the next chunk's copies start after those.
+            enc.copy_buffer_to_buffer(
+                self.tile_uniforms.as_ref().unwrap(),
+                k as u64 * TILE_UNIFORM_BYTES,
+                self.pass_uniform(),
+                0,
+                Some(TILE_UNIFORM_BYTES),
+            );
+            enc.copy_buffer_to_buffer(
+                upload,
+                rays_bytes + k as u64 * COUNTERS_BYTES,
+                &self.counters,
+                0,
+                Some(COUNTERS_BYTES),
+            );
+            enc.copy_buffer_to_buffer(upload, ray_at, queue, 0, Some(n * rec_bytes));
+            rec.tile_pixels = n as u32;
             rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
             rec.pass(&mut enc, kernel, &w.bind_groups[0]);
-            q.submit([enc.finish()]);
-            match query {
-                Query::AnyHit => {
-                    let raw = self.ctx.read_buffer(&w.shadow, n as u64 * size_of::<RayRec>() as u64)?;
-                    let out: &[RayRec] = bytemuck::cast_slice(&raw);
-                    // The occlusion kernel zeroes an occluded ray's contribution.
-                    occ.extend(out.iter().map(|r| r.weight[0] == 0.0));
-                }
-                Query::ClosestHit => {
-                    let raw = self.ctx.read_buffer(&w.hits, n as u64 * size_of::<GpuHit>() as u64)?;
-                    let out: &[GpuHit] = bytemuck::cast_slice(&raw);
-                    hits.extend(out.iter().map(|h| {
-                        if h.tri == MISS {
-                            Hit::MISS
-                        } else {
-                            Hit {
-                                t: h.t,
-                                tri: h.tri,
-                                u: h.u,
-                                v: h.v,
-                            }
-                        }
-                    }));
-                }
-            }
+            enc.copy_buffer_to_buffer(output, 0, readback, out_at, Some(n * query.result_bytes()));
+            ray_at += n * rec_bytes;
+            out_at += n * query.result_bytes();
         }
-        Ok((hits, occ))
+        rec.timer.resolve_into(&mut enc, readback, results_bytes);
+        let total = results_bytes + rec.timer.bytes();
+        self.ctx.queue.submit([enc.finish()]);
+        let timer = rec.timer;
+        let stages = self.ctx.map_read_with(readback, total, |raw| {
+            take(&raw[..results_bytes as usize]);
+            (
+                timer.parse(&self.ctx, &raw[results_bytes as usize..total as usize]),
+                timer.untimed,
+            )
+        })?;
+        for (name, ms) in stages.0 {
+            *stats.timings.stages_ms.entry(name).or_default() += ms;
+        }
+        stats.timings.untimed_passes += stages.1;
+        stats.chunks += chunks.len() as u32;
+        stats.round_trips += 1;
+        stats.downloaded_bytes += total;
+        Ok(())
     }
 }

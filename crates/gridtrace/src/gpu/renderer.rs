@@ -12,6 +12,7 @@ use super::context::GpuContext;
 use super::grid_build::{GpuBuildStats, GpuGrid};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
+use super::queries::GpuQueryStats;
 use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{StageTimer, Timestamps};
 use super::variants::GpuVariants;
@@ -76,6 +77,11 @@ pub struct GpuRenderer {
     /// The frame's results (image, counters, timestamps), mapped once per frame. Kept between
     /// frames and grown as they need.
     pub(super) readback: Option<wgpu::Buffer>,
+    /// A ray batch's rays and counters, copied into place chunk by chunk in the command stream
+    /// (`queries.rs`). Grown as batches need.
+    pub(super) batch_upload: Option<wgpu::Buffer>,
+    /// What the last ray batch took (`last_query_stats`).
+    pub(super) last_query: GpuQueryStats,
     /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).
     max_tile_pixels: u32,
     /// The grid the GPU builds when the mesh moves (`update_vertices`), once it has.
@@ -154,6 +160,8 @@ impl GpuRenderer {
             work: None,
             tile_uniforms: None,
             readback: None,
+            batch_upload: None,
+            last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
             device_grid: None,
         };
@@ -381,19 +389,6 @@ impl GpuRenderer {
             lights: lights_buf,
             bind_groups,
         });
-    }
-
-    /// Writes every bounce's pass uniform for a tile of `tile_pixels` starting at pixel
-    /// `tile_offset`; returns the bytes written.
-    pub(super) fn write_pass_uniforms(
-        &self,
-        tile_offset: u32,
-        tile_pixels: u32,
-        mode: Mode,
-        accel: AccelKind,
-        ablation: Ablation,
-    ) -> u64 {
-        self.write_pass_uniforms_to(&self.pass_uniform, 0, tile_offset, tile_pixels, mode, accel, ablation)
     }
 
     /// The pass uniform buffer the kernels bind (a frame's tiles copy theirs into it).

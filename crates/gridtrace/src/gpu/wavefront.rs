@@ -303,7 +303,13 @@ impl GpuRenderer {
 
 /// Makes sure `slot` holds a buffer of at least `size` bytes: kept between frames, replaced by
 /// one of exactly `size` when a frame needs more.
-fn grow(device: &wgpu::Device, slot: &mut Option<wgpu::Buffer>, size: u64, label: &str, usage: wgpu::BufferUsages) {
+pub(super) fn grow(
+    device: &wgpu::Device,
+    slot: &mut Option<wgpu::Buffer>,
+    size: u64,
+    label: &str,
+    usage: wgpu::BufferUsages,
+) {
     if slot.as_ref().is_some_and(|b| b.size() >= size) {
         return;
     }

@@ -425,6 +425,15 @@ impl TraceMesh {
         }
     }
 
+    /// What the last batch on the GPU took (wall and GPU time, round trips, bytes), with the
+    /// frame's meanings; `None` while no batch has run on the GPU.
+    pub fn last_gpu_batch(&self) -> Option<crate::gpu::GpuQueryStats> {
+        match self.gpu.get() {
+            Some(Ok((g, _))) => Some(locked(g).last_query_stats().clone()).filter(|s| s.round_trips > 0),
+            _ => None,
+        }
+    }
+
     /// Input face index of a kept triangle index.
     #[inline]
     pub fn original_index(&self, kept: u32) -> u32 {
