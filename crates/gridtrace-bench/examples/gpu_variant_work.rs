@@ -12,13 +12,13 @@
 
 use std::path::PathBuf;
 
-use gridtrace::accel::{AccelKind, Hit, Ray, Resolution, Structure, TraversalCounters, TriAccel};
-use gridtrace::gpu::layout::{GpuBvh8Node, GpuBvhNode};
+use gridtrace::accel::{AccelKind, Hit, Ray, Resolution, Structure, TraversalCounters};
+use gridtrace::gpu::layout::{GpuBvh8Node, GpuBvhNode, GpuTri};
 use gridtrace::gpu::walks::bvh::wide8::{self, Wide8, Wide8Work};
 use rayon::prelude::*;
 
-/// Bytes a triangle test reads: its index in leaf order and its 36-byte record.
-const TRI_BYTES: u64 = 4 + std::mem::size_of::<TriAccel>() as u64;
+/// Bytes a triangle test reads: its index in leaf order and its 48-byte record (`GpuTri`).
+const TRI_BYTES: u64 = 4 + std::mem::size_of::<GpuTri>() as u64;
 
 #[derive(Default, Clone, Copy)]
 struct Work {

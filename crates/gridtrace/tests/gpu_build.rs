@@ -220,7 +220,7 @@ fn rebuild_after_the_mesh_moves() {
             &ctx.device,
             &wgpu::util::BufferInitDescriptor {
                 label: None,
-                contents: bytemuck::cast_slice(&tris),
+                contents: bytemuck::cast_slice(&gridtrace::gpu::layout::GpuTri::all(&tris)),
                 usage: wgpu::BufferUsages::STORAGE,
             },
         );

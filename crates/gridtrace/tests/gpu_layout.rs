@@ -4,11 +4,11 @@
 
 use std::mem::{offset_of, size_of};
 
-use gridtrace::accel::{Cell, IrrCell, TriAccel};
+use gridtrace::accel::{Cell, IrrCell};
 use gridtrace::gpu::bindings::{self, Access};
 use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
 use gridtrace::gpu::layout::{
-    GpuBvh8Node, GpuBvhNode, GpuHit, GpuMaterial, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
+    GpuBvh8Node, GpuBvhNode, GpuHit, GpuMaterial, GpuTri, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
 };
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
@@ -58,7 +58,7 @@ fn grid_build_structs_match_rust() {
     ] {
         let m = naga::front::wgsl::parse_str(&shaders::build_module_source(kernel)).expect("build kernel parses");
         check!(m, Cell, "Cell", [start, count, dist]);
-        check!(m, TriAccel, "TriAccel", [v0, e1, e2]);
+        check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
         check!(
             m,
             BuildParams,
@@ -87,7 +87,7 @@ fn grid_build_structs_match_rust() {
 fn wgsl_structs_match_rust() {
     let m = module();
     check!(m, Cell, "Cell", [start, count, dist]);
-    check!(m, TriAccel, "TriAccel", [v0, e1, e2]);
+    check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
     check!(m, TriShade, "TriShade", [n0, n1, n2, material]);
     check!(m, GpuMaterial, "GpuMaterial", [diffuse, reflectivity]);
     check!(m, PointLight, "PointLight", [position, _pad0, intensity, _pad1]);

@@ -22,6 +22,39 @@ pub struct GpuMaterial {
     pub reflectivity: f32,
 }
 
+/// A triangle as the GPU reads it: `TriAccel`'s vertex and two edges, each padded to 16 bytes
+/// (48 bytes, where `TriAccel` packs 36). A GPU loads an aligned 16-byte group in one access; a
+/// 36-byte record is nine 4-byte loads through its index, and every third triangle straddles
+/// a 32-byte sector more. The pads are zero.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GpuTri {
+    pub v0: [f32; 3],
+    pub _pad0: u32,
+    pub e1: [f32; 3],
+    pub _pad1: u32,
+    pub e2: [f32; 3],
+    pub _pad2: u32,
+}
+
+impl GpuTri {
+    pub fn new(t: &crate::accel::TriAccel) -> GpuTri {
+        GpuTri {
+            v0: t.v0,
+            _pad0: 0,
+            e1: t.e1,
+            _pad1: 0,
+            e2: t.e2,
+            _pad2: 0,
+        }
+    }
+
+    /// The triangles as the kernels read them (`tris` in common.wgsl and build/common.wgsl).
+    pub fn all(tris: &[crate::accel::TriAccel]) -> Vec<GpuTri> {
+        tris.iter().map(GpuTri::new).collect()
+    }
+}
+
 /// A queued ray (eye, reflection or shadow), 48 bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]

@@ -11,7 +11,7 @@ use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
 use super::context::GpuContext;
 use super::grid_build::{GpuBuildStats, GpuGrid};
 use super::kernels::{Kernels, PassRecorder};
-use super::layout::{GpuHit, IndirectArgs, PassUniform, RayRec};
+use super::layout::{GpuHit, GpuTri, IndirectArgs, PassUniform, RayRec};
 use super::queries::GpuQueryStats;
 use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{StageTimer, Timestamps};
@@ -197,7 +197,7 @@ impl GpuRenderer {
         }
         let t0 = Instant::now();
         let q = &self.ctx.queue;
-        q.write_buffer(&self.scene.tris, 0, bytemuck::cast_slice(tris));
+        q.write_buffer(&self.scene.tris, 0, bytemuck::cast_slice(&GpuTri::all(tris)));
         q.write_buffer(&self.scene.tri_shade, 0, bytemuck::cast_slice(&tri_shade(scene)));
         stats.upload_ms = t0.elapsed().as_secs_f64() * 1e3;
         let lattice = GridLattice::new(tris, scene.accel.resolution)?;

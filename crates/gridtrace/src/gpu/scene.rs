@@ -8,7 +8,7 @@ use wgpu::util::DeviceExt;
 
 use super::context::GpuContext;
 use super::kernels::{Kernels, WalkPipelines};
-use super::layout::{GpuMaterial, SceneUniform, TriShade};
+use super::layout::{GpuMaterial, GpuTri, SceneUniform, TriShade};
 use super::variants::GpuVariants;
 use super::walks::{WalkSpec, upload_of};
 use crate::scene::PreparedScene;
@@ -90,8 +90,9 @@ impl SceneBuffers {
                 reflectivity: m.reflectivity,
             })
             .collect();
+        let gpu_tris = GpuTri::all(&scene.accel.tris);
         let shared: [(&'static str, &[u8]); 3] = [
-            ("triangles", bytemuck::cast_slice(&scene.accel.tris)),
+            ("triangles", bytemuck::cast_slice(&gpu_tris)),
             ("tri_shade", bytemuck::cast_slice(&tri_shade)),
             ("materials", bytemuck::cast_slice(&materials)),
         ];

@@ -40,7 +40,7 @@ use pipelines::{STAGES, Stage};
 use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK, SCAN_GROUP, WORKGROUP};
 use super::context::GpuContext;
 use super::kernels::dispatch_groups;
-use super::layout::BuildParams;
+use super::layout::{BuildParams, GpuTri};
 use super::scene::check_scene_fits;
 use super::timing::{GpuTimings, StageTimer, Timestamps};
 use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
@@ -151,18 +151,20 @@ impl GpuGrid {
         resolution: Resolution,
     ) -> Result<(GpuGrid, GpuBuildStats)> {
         let lattice = GridLattice::new(tris, resolution)?;
+        // Zero-length buffers cannot be bound: an empty scene uploads one zero triangle.
+        let gpu_tris = if tris.is_empty() {
+            vec![<GpuTri as bytemuck::Zeroable>::zeroed()]
+        } else {
+            GpuTri::all(tris)
+        };
         check_scene_fits(
-            &[("triangles", std::mem::size_of_val(tris) as u64)],
+            &[("triangles", std::mem::size_of_val(&gpu_tris[..]) as u64)],
             &ctx.limits(),
             &ctx.info.name,
         )?;
         let buf = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("triangles"),
-            contents: if tris.is_empty() {
-                &[0u8; 36]
-            } else {
-                bytemuck::cast_slice(tris)
-            },
+            contents: bytemuck::cast_slice(&gpu_tris),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let mut grid = GpuGrid::new(ctx)?;
@@ -215,10 +217,10 @@ impl GpuGrid {
                 ),
             );
         }
-        if (tris.size() / size_of::<TriAccel>() as u64) < n_tris as u64 {
+        if (tris.size() / size_of::<GpuTri>() as u64) < n_tris as u64 {
             return Err(Error::InvalidInput(format!(
                 "the triangle buffer holds {} triangles, the build was asked for {n_tris}",
-                tris.size() / size_of::<TriAccel>() as u64
+                tris.size() / size_of::<GpuTri>() as u64
             )));
         }
         let mut stats = GpuBuildStats {

@@ -7,7 +7,8 @@
 // Storage structs use array<f32, 3> (4-byte aligned) rather than vec3<f32> (16-byte aligned)
 // so that they match the packed Rust layouts.
 
-struct TriAccel { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
+// `layout::GpuTri`: `TriAccel`'s vertex and edges in 16-byte groups (one load each).
+struct GpuTri { v0: vec3<f32>, _pad0: u32, e1: vec3<f32>, _pad1: u32, e2: vec3<f32>, _pad2: u32 }
 struct TriShade { n0: array<f32, 3>, n1: array<f32, 3>, n2: array<f32, 3>, material: u32 }
 struct GpuMaterial { diffuse: vec3<f32>, reflectivity: f32 }
 struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1: f32 }
@@ -67,7 +68,7 @@ var<private> lane: u32;
 @group(0) @binding(0) var<uniform> scene: SceneUniform;
 @group(0) @binding(1) var<uniform> camera: CameraFrame;
 @group(0) @binding(2) var<uniform> pass_: PassUniform;
-@group(0) @binding(5) var<storage, read> tris: array<TriAccel>;
+@group(0) @binding(5) var<storage, read> tris: array<GpuTri>;
 @group(0) @binding(6) var<storage, read> tri_shade: array<TriShade>;
 @group(0) @binding(7) var<storage, read> materials: array<GpuMaterial>;
 @group(0) @binding(8) var<storage, read> lights: array<PointLight>;
@@ -108,14 +109,14 @@ fn flat_index(wg: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
 
 // Two-sided Möller-Trumbore on stored edges; mirrors TriAccel::intersect. Returns t, u, v in
 // xyz and w = 1 for a hit with t_min < t < t_max.
-fn intersect_tri(tri: TriAccel, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec4<f32> {
-    let e1 = v3(tri.e1);
-    let e2 = v3(tri.e2);
+fn intersect_tri(tri: GpuTri, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec4<f32> {
+    let e1 = tri.e1;
+    let e2 = tri.e2;
     let p = cross(d, e2);
     let det = dot(e1, p);
     if (det == 0.0) { return vec4<f32>(0.0); }
     let inv_det = 1.0 / det;
-    let s = o - v3(tri.v0);
+    let s = o - tri.v0;
     // Widest slack first, then the rounding-error bound near edges (TriAccel::intersect).
     let loose = BARY_EPS + MAX_SLACK;
     let u = dot(s, p) * inv_det;

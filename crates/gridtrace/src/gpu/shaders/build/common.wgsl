@@ -17,10 +17,11 @@ struct BuildParams {
     in_offset: u32, out_offset: u32, last: u32, _pad0: u32,
 }
 struct Cell { start: u32, count: u32, dist: u32 }
-struct TriAccel { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
+// `layout::GpuTri`, as the tracer reads it.
+struct GpuTri { v0: vec3<f32>, _pad0: u32, e1: vec3<f32>, _pad1: u32, e2: vec3<f32>, _pad2: u32 }
 
 @group(0) @binding(0) var<uniform> P: BuildParams;
-@group(0) @binding(1) var<storage, read> tris: array<TriAccel>;
+@group(0) @binding(1) var<storage, read> tris: array<GpuTri>;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> {
     return vec3<f32>(a[0], a[1], a[2]);
@@ -39,8 +40,7 @@ fn max3(v: vec3<f32>) -> f32 {
 struct Verts { a: vec3<f32>, b: vec3<f32>, c: vec3<f32> }
 fn tri_vertices(i: u32) -> Verts {
     let t = tris[i];
-    let v0 = v3(t.v0);
-    return Verts(v0, v0 + v3(t.e1), v0 + v3(t.e2));
+    return Verts(t.v0, t.v0 + t.e1, t.v0 + t.e2);
 }
 
 // The triangle's cell range (inclusive) and its grown margin, as `overlap_pairs` computes them.
