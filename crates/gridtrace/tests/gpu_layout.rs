@@ -172,6 +172,32 @@ fn kernels_validate() {
     }
 }
 
+/// The kernels that append, as `appends=subgroup` builds them (append_subgroup.wgsl), validate
+/// with naga's subgroup capabilities: what an adapter with subgroups compiles, checked here
+/// where lavapipe may have none.
+#[test]
+fn subgroup_append_modules_validate() {
+    let variants: gridtrace::gpu::GpuVariants = "appends=subgroup".parse().unwrap();
+    let mut swapped = 0;
+    for (name, src) in shaders::KERNELS {
+        let module = shaders::module_source_for(src, &variants);
+        if module.contains("subgroupExclusiveAdd") {
+            swapped += 1;
+            assert!(!module.contains("wg_count"), "{name}: both appends");
+        } else {
+            assert_eq!(module, shaders::module_source(src), "{name}");
+        }
+        if shaders::walks(name) {
+            continue;
+        }
+        let m = naga::front::wgsl::parse_str(&module).unwrap_or_else(|e| panic!("{name}: {e}"));
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+            .validate(&m)
+            .unwrap_or_else(|e| panic!("{name} (appends=subgroup): {e:?}"));
+    }
+    assert_eq!(swapped, 2, "raygen and shade append");
+}
+
 /// Every named constant of `m` that is in the Rust table, checked against it bit for bit:
 /// one line per constant whose WGSL value differs (or is not a plain literal), and one per Rust
 /// constant the module lacks.

@@ -15,7 +15,7 @@
 use std::sync::{Arc, Mutex};
 
 use gridtrace::accel::{Accel, AccelKind, Hit, Resolution};
-use gridtrace::gpu::variants::{BvhLayout, GpuVariants};
+use gridtrace::gpu::variants::{Appends, BvhLayout, GpuVariants};
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::render::Ablation;
 use gridtrace::scene::{PreparedScene, builtin};
@@ -36,8 +36,9 @@ fn v(s: &str) -> GpuVariants {
 
 /// The variants checked: the hardware suite's, the short stacks at one and two entries (so
 /// that nearly every walk overflows and climbs), the wide BVH with each stack, and every
-/// change at once.
-fn variants() -> Vec<GpuVariants> {
+/// change at once. Subgroup appends only where the adapter has subgroup operations (elsewhere
+/// `subgroup_appends_need_the_adapters_subgroups` checks they are refused).
+fn variants(ctx: &GpuContext) -> Vec<GpuVariants> {
     let mut all = GpuVariants::suite()[1..].to_vec();
     for s in [
         "stack=short1",
@@ -48,7 +49,42 @@ fn variants() -> Vec<GpuVariants> {
     ] {
         all.push(v(s));
     }
+    if !ctx.subgroups {
+        eprintln!(
+            "{}: no subgroup operations, appends=subgroup not compared",
+            ctx.info.name
+        );
+        all.retain(|v| v.appends != Appends::Subgroup);
+    }
     all
+}
+
+/// `appends=subgroup` on an adapter without subgroup operations is an error naming the variant,
+/// the adapter and the alternative, not a failed shader compile; where the adapter has them the
+/// variant is among those compared with the default above.
+#[test]
+fn subgroup_appends_need_the_adapters_subgroups() {
+    if skip_gpu() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let ctx = context();
+    assert!(variants(&ctx).iter().any(|v| v.appends == Appends::Subgroup) == ctx.subgroups);
+    if ctx.subgroups {
+        return;
+    }
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let e = GpuRenderer::with_variants(ctx.clone(), &scene, &v("appends=subgroup"))
+        .err()
+        .expect("refused");
+    let e = e.to_string();
+    assert!(
+        e.contains("appends=subgroup") && e.contains(&ctx.info.name) && e.contains("appends=workgroup"),
+        "{e}"
+    );
 }
 
 /// Whether `v`'s results may differ from the default's at ties (the wide BVH's visiting order).
@@ -110,7 +146,7 @@ fn variants_render_the_default_images() {
             }
             let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
             let mut checked = 0;
-            for var in variants().into_iter().filter(|v| v.applies_to(structure)) {
+            for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
                 let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
                 assert_eq!(gpu.variants(), var);
                 let walk_changed = structure == "bvh"
@@ -188,7 +224,7 @@ fn variants_give_the_default_hits() {
         let want_any = base.occluded(&rays, 0.0, f32::INFINITY, kind).unwrap();
         let hits = want.iter().filter(|h| h.is_hit()).count();
         assert!(hits > rays.len() / 10, "{structure}: the rays must hit");
-        for var in variants().into_iter().filter(|v| v.applies_to(structure)) {
+        for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
             let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
             let got = gpu.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
             let got_any = gpu.occluded(&rays, 0.0, f32::INFINITY, kind).unwrap();

@@ -23,8 +23,8 @@ pub fn markdown(r: &HardwareReport) -> String {
     );
     let _ = writeln!(
         md,
-        "- adapter: {} ({}, {}, vendor {:#x} device {:#x}), driver {} {}; timestamps: {}",
-        a.name, a.device_type, a.backend, a.vendor, a.device, a.driver, a.driver_info, a.timestamps
+        "- adapter: {} ({}, {}, vendor {:#x} device {:#x}), driver {} {}; timestamps: {}; subgroups: {}",
+        a.name, a.device_type, a.backend, a.vendor, a.device, a.driver, a.driver_info, a.timestamps, a.subgroups
     );
     if let Some(s) = &a.nvidia_smi {
         let _ = writeln!(md, "- nvidia-smi: `{}`", s.replace('\n', " / "));

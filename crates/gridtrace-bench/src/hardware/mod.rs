@@ -112,6 +112,8 @@ pub struct AdapterRecord {
     pub backend: String,
     pub software: bool,
     pub timestamps: bool,
+    /// Subgroup operations (the `appends=subgroup` variant runs only with them).
+    pub subgroups: bool,
     /// `nvidia-smi`'s name, driver, clocks and memory, where the tool exists.
     pub nvidia_smi: Option<String>,
 }
@@ -138,6 +140,7 @@ impl AdapterRecord {
             backend: format!("{:?}", i.backend),
             software: ctx.is_software(),
             timestamps: ctx.timestamps,
+            subgroups: ctx.subgroups,
             nvidia_smi: smi,
         }
     }
@@ -255,6 +258,19 @@ pub fn run(
         ));
     }
     let mut skipped = Vec::new();
+    // A variant the adapter cannot run (subgroup appends without subgroups) is left out, said.
+    let variants: Vec<GpuVariants> = variants
+        .iter()
+        .filter(|v| match v.supported_on(&gpu) {
+            Ok(()) => true,
+            Err(why) => {
+                skipped.push(format!("variant {}: {why}", v.changes()));
+                false
+            }
+        })
+        .copied()
+        .collect();
+    let variants = &variants[..];
     let mut meshes = Vec::new();
     for name in &plan.ray_meshes {
         match study_mesh(name, data_dir).unwrap_or_else(|| procedural_mesh(name)) {

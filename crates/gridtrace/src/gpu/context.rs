@@ -29,6 +29,8 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     /// Timestamp queries are available (per-stage GPU times).
     pub timestamps: bool,
+    /// Subgroup operations are available (the `appends=subgroup` variant).
+    pub subgroups: bool,
     /// First uncaptured device error, if any (validation, out of memory, lost device).
     errors: Arc<Mutex<Option<String>>>,
     /// Why the device was lost, once it was: every later wait is an error (a lost device
@@ -86,11 +88,14 @@ impl GpuContext {
         let info = adapter.get_info();
         let features = adapter.features();
         let timestamps = features.contains(wgpu::Features::TIMESTAMP_QUERY);
-        let required_features = if timestamps {
-            wgpu::Features::TIMESTAMP_QUERY
-        } else {
-            wgpu::Features::empty()
-        };
+        let subgroups = features.contains(wgpu::Features::SUBGROUP);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        if subgroups {
+            required_features |= wgpu::Features::SUBGROUP;
+        }
         // Ask for what the adapter really has, not the conservative defaults (8 storage buffers,
         // 128 MiB bindings): large scenes need the real limits.
         let limits = adapter.limits();
@@ -131,6 +136,7 @@ impl GpuContext {
             queue,
             info,
             timestamps,
+            subgroups,
             errors,
             lost,
             cache: Mutex::new(HashMap::new()),

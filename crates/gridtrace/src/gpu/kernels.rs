@@ -281,6 +281,7 @@ impl Kernels {
         if let Some(k) = sets.get(variants) {
             return Ok(k.clone());
         }
+        variants.supported_on(ctx).map_err(Error::Gpu)?;
         let k = Arc::new(Kernels::new(&ctx.device, variants)?);
         sets.insert(*variants, k.clone());
         Ok(k)
@@ -315,7 +316,7 @@ impl Kernels {
                 Group1::IndirectArgs => layout(&[Some(&frame_layout), Some(&indirect_layout)]),
                 Group1::Packed => layout(&[Some(&frame_layout), Some(&pack_layout)]),
             },
-            |s| shaders::module_source(s.source),
+            |s| shaders::module_source_for(s.source, variants),
             false,
         )?;
         Ok(Kernels {

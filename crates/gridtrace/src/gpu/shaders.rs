@@ -7,6 +7,10 @@
 use super::constants::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
+/// The queue appends of ray generation and shading (`appends=per_ray|workgroup`).
+pub const APPEND: &str = include_str!("shaders/append.wgsl");
+/// The same with subgroup operations (`appends=subgroup`), swapped in by `module_source_for`.
+pub const APPEND_SUBGROUP: &str = include_str!("shaders/append_subgroup.wgsl");
 /// Ray generation and shading append to queues: their modules carry `append.wgsl`.
 pub const RAYGEN: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/raygen.wgsl"));
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
@@ -50,6 +54,19 @@ pub fn common_source() -> String {
 /// The whole module of a kernel that walks no structure, as the device compiles it.
 pub fn module_source(kernel: &str) -> String {
     format!("{}\n{}", shared_source(), kernel)
+}
+
+/// The whole module of a kernel that walks no structure, for `variants`: with
+/// `appends=subgroup` a kernel that appends gets `append_subgroup.wgsl` in place of
+/// `append.wgsl`. (No `enable subgroups;`: naga 30 rejects the directive and offers the
+/// subgroup built-ins to devices opened with the `SUBGROUP` feature.)
+pub fn module_source_for(kernel: &str, variants: &super::variants::GpuVariants) -> String {
+    match kernel.strip_prefix(APPEND) {
+        Some(body) if variants.appends == super::variants::Appends::Subgroup => {
+            format!("{}\n{APPEND_SUBGROUP}{body}", shared_source())
+        }
+        _ => module_source(kernel),
+    }
 }
 
 /// The whole module of a walking kernel (traverse, occlusion) with the walk `walk` names.

@@ -26,11 +26,15 @@
 //!   strip; `tiles` an 8x8 square (inside each tile's whole-row part), so a warp's rays are
 //!   coherent in two directions and share more nodes and cells (Aila and Laine 2009 trace
 //!   primary rays in such tiles).
-//! - `appends=per_ray|workgroup`: how kernels append to the compacted queues. `per_ray` is one
-//!   global `atomicAdd` per emitted ray; `workgroup` sums the workgroup's appends in workgroup
-//!   memory and makes one global `atomicAdd` per workgroup and queue (the aggregation that
-//!   CUDA compilers do for warps automatically and wavefront renderers do by hand), so
-//!   contention on the counter drops 64-fold.
+//! - `appends=per_ray|workgroup|subgroup`: how kernels append to the compacted queues.
+//!   `per_ray` is one global `atomicAdd` per emitted ray; `workgroup` sums the workgroup's
+//!   appends in workgroup memory and makes one global `atomicAdd` per workgroup and queue (the
+//!   aggregation that CUDA compilers do for warps automatically and wavefront renderers do by
+//!   hand), so contention on the counter drops 64-fold; `subgroup` does the same per subgroup
+//!   (warp, wave) with subgroup operations (an exclusive prefix sum, one elected atomic, a
+//!   broadcast), no workgroup memory and no barriers. It needs the adapter's subgroup
+//!   operations (wgpu's `SUBGROUP` feature, which the context asks for where the adapter has
+//!   it); on an adapter without them the variant is refused with an error naming it.
 //! - `stats=on|off`: `on` counts shadow and reflection rays with two more per-ray atomics in
 //!   shading; `off` lets the one-invocation `indirect` kernel read the same totals off the
 //!   queue lengths once per bounce (with compaction; without it the per-ray counts stay), so
@@ -39,9 +43,6 @@
 //!   (no bounds checks, no loop bounding; integer-division guards kept) and without zeroing
 //!   workgroup memory: every index the kernels make is in bounds by construction (the SAFETY
 //!   note in `kernels.rs`). Bounds checks cost a compare and select per storage access.
-//!
-//! Not here yet: subgroup operations for the appends (wgpu's `SUBGROUP` feature; the device
-//! is opened without it).
 
 use std::fmt;
 use std::str::FromStr;
@@ -89,6 +90,8 @@ pub enum Appends {
     PerRay,
     /// One global atomic per workgroup and queue, offsets handed out in workgroup memory.
     Workgroup,
+    /// One global atomic per subgroup and queue, offsets from a subgroup prefix sum.
+    Subgroup,
 }
 
 /// One choice of every GPU variant. `Default` is today's kernels.
@@ -122,7 +125,7 @@ const KEYS: [(&str, &str); 6] = [
     ("bvh", "binary|wide8"),
     ("stack", "private|short|shortN (N = 1..16)"),
     ("order", "rows|tiles"),
-    ("appends", "per_ray|workgroup"),
+    ("appends", "per_ray|workgroup|subgroup"),
     ("stats", "on|off"),
     ("checks", "on|off"),
 ];
@@ -153,9 +156,26 @@ impl GpuVariants {
                 appends: Appends::Workgroup,
                 ..d
             },
+            GpuVariants {
+                appends: Appends::Subgroup,
+                ..d
+            },
             GpuVariants { stats: false, ..d },
             GpuVariants { checks: false, ..d },
         ]
+    }
+
+    /// Whether the device of `ctx` can run these variants: `appends=subgroup` needs its
+    /// subgroup operations. The error says which variant, which adapter and what to use.
+    pub fn supported_on(&self, ctx: &super::GpuContext) -> Result<(), String> {
+        if self.appends == Appends::Subgroup && !ctx.subgroups {
+            return Err(format!(
+                "the GPU variant appends=subgroup needs subgroup operations, which adapter '{}' does not offer \
+                 (wgpu's SUBGROUP feature); use appends=workgroup",
+                ctx.info.name
+            ));
+        }
+        Ok(())
     }
 
     /// Only the keys that differ from the default (`default` when none): a short label.
@@ -222,6 +242,7 @@ impl fmt::Display for GpuVariants {
         let appends = match self.appends {
             Appends::PerRay => "per_ray",
             Appends::Workgroup => "workgroup",
+            Appends::Subgroup => "subgroup",
         };
         write!(
             f,
@@ -292,6 +313,7 @@ impl FromStr for GpuVariants {
                     v.appends = match value {
                         "per_ray" => Appends::PerRay,
                         "workgroup" => Appends::Workgroup,
+                        "subgroup" => Appends::Subgroup,
                         _ => return Err(bad()),
                     }
                 }
