@@ -117,7 +117,7 @@ pub fn mode_parser() -> impl TypedValueParser<Value = gridtrace::Mode> {
 #[derive(Args, Debug, Clone, Default)]
 pub struct GpuVariantArgs {
     /// GPU variants, KEY=VALUE,... (any subset; the first value of each is the default):
-    /// bvh=binary|wide8, stack=private|short|shortN, order=rows|tiles, appends=per_ray|workgroup,
+    /// bvh=binary|wide8, stack=private|short|shortN, order=rows|tiles, appends=per_ray|workgroup|subgroup,
     /// stats=on|off, checks=on|off. Same images and hits, other speed: for measuring on a GPU.
     #[arg(long = "gpu-variant", default_value = "", value_parser = |s: &str| s.parse::<GpuVariants>())]
     pub gpu_variant: GpuVariants,
