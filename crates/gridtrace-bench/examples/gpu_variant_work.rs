@@ -1,8 +1,8 @@
 //! Work per ray of the BVH's two GPU layouts (`--gpu-variant bvh=binary|wide8`), counted by the
 //! CPU copies of their GPU walks (`gpu::bvh::walk`, `gpu::walks::bvh::wide8::walk`), which take
-//! the same steps as the WGSL: nodes whose boxes are tested, node fetches (the wide walk reads a
-//! node again when it pops a group of it), triangle tests, and the bytes those read from each
-//! layout. What a hardware run's timings can be read against; no timing here.
+//! the same steps as the WGSL: nodes whose boxes are tested, whole-node fetches, group reads
+//! (the wide walk reads 20 bytes of a node again when it pops a group of it), triangle tests,
+//! and the bytes those read from each layout. What a hardware run's timings can be read against; no timing here.
 //!
 //!     cargo run --release -p gridtrace-bench --example gpu_variant_work -- [MESH] [RES] [RAYS]
 //!
@@ -23,7 +23,10 @@ const TRI_BYTES: u64 = 4 + std::mem::size_of::<GpuTri>() as u64;
 #[derive(Default, Clone, Copy)]
 struct Work {
     counters: TraversalCounters,
+    /// Whole-node reads.
     fetches: u64,
+    /// Popped groups' partial reads (wide8: `GROUP_READ_BYTES` each; the binary walk has none).
+    group_reads: u64,
 }
 
 fn sum(a: Work, b: Work) -> Work {
@@ -34,17 +37,19 @@ fn sum(a: Work, b: Work) -> Work {
             tri_tests: a.counters.tri_tests + b.counters.tri_tests,
         },
         fetches: a.fetches + b.fetches,
+        group_reads: a.group_reads + b.group_reads,
     }
 }
 
 fn row(label: &str, rays: usize, node_bytes: u64, w: Work) {
     let per = |x: u64| x as f64 / rays as f64;
-    let node_b = per(w.fetches * node_bytes);
+    let node_b = per(w.fetches * node_bytes + w.group_reads * wide8::GROUP_READ_BYTES);
     let tri_b = per(w.counters.tri_tests * TRI_BYTES);
     println!(
-        "| {label} | {:.1} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} |",
+        "| {label} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} |",
         per(w.counters.cells),
         per(w.fetches),
+        per(w.group_reads),
         per(w.counters.tri_tests),
         node_b,
         tri_b,
@@ -88,9 +93,9 @@ fn main() -> gridtrace::Result<()> {
         .map(|(o, d)| Ray::new((*o).into(), (*d).into()))
         .collect();
     println!(
-        "\n| rays, layout | nodes tested / ray | node fetches / ray | triangle tests / ray | node bytes / ray | triangle bytes / ray | bytes / ray |"
+        "\n| rays, layout | nodes tested / ray | node fetches / ray | group reads / ray | triangle tests / ray | node bytes / ray | triangle bytes / ray | bytes / ray |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     for (name, rays) in [
         (format!("camera {res}x{res}"), &camera),
         (format!("incoherent {n_incoherent}"), &incoherent),
@@ -108,6 +113,7 @@ fn main() -> gridtrace::Result<()> {
                 Work {
                     counters: c,
                     fetches: c.cells,
+                    group_reads: 0,
                 },
             )
         };
@@ -123,6 +129,7 @@ fn main() -> gridtrace::Result<()> {
                 Work {
                     counters: c,
                     fetches: w.node_fetches,
+                    group_reads: w.group_reads,
                 },
             )
         };

@@ -259,12 +259,17 @@ impl GpuBvh8Node {
     }
 }
 
-/// What `walk` counts besides `Counters`: node fetches (a node is read whole when the walk
-/// enters it and again when a stack group of it is popped), for the bytes a ray reads.
+/// What `walk` counts besides `Counters`, for the bytes a ray reads: node fetches (a node is
+/// read whole, 80 bytes, when the walk enters it) and group reads (a popped group reads only
+/// its node's `info` and inner-child mask, `GROUP_READ_BYTES`).
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct Wide8Work {
     pub node_fetches: u64,
+    pub group_reads: u64,
 }
+
+/// Bytes a popped group reads of its node: `info` (16) and the word holding the inner mask.
+pub const GROUP_READ_BYTES: u64 = 20;
 
 /// The children of `n` the ray enters within [t_min, t_box], bit `slot ^ oct` per child: the
 /// box test of `bvh8_hits`.
@@ -312,7 +317,7 @@ pub fn walk<const ANY: bool, C: Counters>(
             node = (g >> 8) as usize;
             mask = g & 0xff;
             n = &w.nodes[node];
-            work.node_fetches += 1;
+            work.group_reads += 1;
             continue;
         }
         let k = mask.trailing_zeros() as usize;
