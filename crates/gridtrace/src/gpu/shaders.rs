@@ -1,8 +1,9 @@
 //! WGSL sources: the shared file, one per kernel and one per structure's walk (`walks/`, named
 //! by `gpu::walks`). WGSL has no includes, so a kernel's module is the generated constant
-//! prelude, then `common.wgsl`, then (for the walking kernels, traverse and occlusion) the
-//! scene's walk file with two generated lines naming its entry points `walk_closest` and
-//! `walk_any`, then the kernel's own file.
+//! prelude, then `common.wgsl`, then (for the walking kernels, traverse, occlusion and closest
+//! point) `closest_tri.wgsl` (the nearest point of a triangle, which every walk's closest-point
+//! search uses) and the scene's walk file with three generated lines naming its entry points
+//! `walk_closest`, `walk_any` and `walk_closest_point`, then the kernel's own file.
 
 use super::constants::wgsl_prelude;
 
@@ -11,14 +12,18 @@ pub const COMMON: &str = include_str!("shaders/common.wgsl");
 pub const RAYGEN: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/raygen.wgsl"));
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
+pub const CLOSEST_POINT: &str = include_str!("shaders/closest_point.wgsl");
+/// The nearest point of a triangle (Ericson), in every walking kernel's module before the walk.
+pub const CLOSEST_TRI: &str = include_str!("shaders/closest_tri.wgsl");
 pub const SHADE: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/shade.wgsl"));
 pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
 pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
 /// Every kernel with its name.
-pub const KERNELS: [(&str, &str); 6] = [
+pub const KERNELS: [(&str, &str); 7] = [
     ("raygen", RAYGEN),
     ("traverse", TRAVERSE),
     ("occlusion", OCCLUSION),
+    ("closest point", CLOSEST_POINT),
     ("shade", SHADE),
     ("resolve", RESOLVE),
     ("indirect", INDIRECT),
@@ -42,7 +47,7 @@ pub fn common_source() -> String {
             }
         }
     }
-    format!("{}\n{}", shared_source(), files.join("\n"))
+    format!("{}\n{}\n{}", shared_source(), CLOSEST_TRI, files.join("\n"))
 }
 
 /// The whole module of a kernel that walks no structure, as the device compiles it.
@@ -50,11 +55,13 @@ pub fn module_source(kernel: &str) -> String {
     format!("{}\n{}", shared_source(), kernel)
 }
 
-/// The whole module of a walking kernel (traverse, occlusion) with the walk `walk` names.
+/// The whole module of a walking kernel (traverse, occlusion, closest point) with the walk
+/// `walk` names.
 pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String {
     format!(
-        "{}\n{}\n{}\n{}",
+        "{}\n{}\n{}\n{}\n{}",
         shared_source(),
+        CLOSEST_TRI,
         walk.wgsl.join("\n"),
         walk.entry_points(),
         kernel
@@ -63,7 +70,7 @@ pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String
 
 /// Whether kernel `name` walks the scene's structure (its module includes a walk file).
 pub fn walks(name: &str) -> bool {
-    matches!(name, "traverse" | "occlusion")
+    matches!(name, "traverse" | "occlusion" | "closest point")
 }
 
 /// Every module the tracer compiles, named `kernel` or `kernel [walk]`, with its source: the

@@ -159,3 +159,34 @@ fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     }
     return false;
 }
+
+// ---- Closest points ----
+//
+// The simple search, not the CPU's (accel/irregular/closest.rs searches the top cells in shells
+// and each top cell's voxel map): every cell of `irr_cells` in order, its triangles measured
+// only where its grown box, widened by the top cells' fill margin doubled (`point_cell_margin`,
+// at least the margin the cells were filled with), may hold something nearer than the best so
+// far. Correct by construction (a cell is skipped only when every point of it is strictly
+// farther), with the tie rule deciding as on the CPU; the work is a box test per cell for every
+// point, so it suits the modest meshes a software adapter takes, and a shell search is the
+// next step where it matters.
+
+fn irr_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(inf(), MISS, 0.0, 0.0);
+    let margin = point_cell_margin(scene.cell_size * f32(1u << scene.shift));
+    // The last cell is the sentinel that closes the reference ranges.
+    let n_cells = arrayLength(&irr_cells) - 1u;
+    for (var id = 0u; id < n_cells; id++) {
+        *work += 1u;
+        let cell = irr_cell(id);
+        if (cell.count == 0u) { continue; }
+        let lo = scene.bounds_min + vec3<f32>(cell.min) * scene.cell_size - margin;
+        let hi = scene.bounds_min + vec3<f32>(cell.max) * scene.cell_size + margin;
+        if (point_box_dist_sq(p, lo, hi) > best.t) { continue; }
+        for (var i = cell.start; i < cell.start + cell.count; i++) {
+            *work += 1u;
+            point_offer(&best, irr_refs[i], p);
+        }
+    }
+    return best;
+}
