@@ -168,6 +168,10 @@ fn compare(what: &str, scene: &PreparedScene, gpu: &mut GpuRenderer, kind: Accel
                     "point {i} {p}: GPU {g:?} (distance {gd}), brute force {brute:?} ({bd}); tolerance {tol}"
                 ));
             }
+            // The barycentrics name a point of the triangle (the host's distance is to it).
+            if !(g.u >= 0.0 && g.v >= 0.0 && g.u + g.v <= 1.0 + 1e-6) {
+                return Err(format!("point {i} {p}: GPU {g:?}: barycentrics off the triangle"));
+            }
             // Ties: within a tenth of the distance tolerance, still ten times the rounding
             // (a few ulps of the coordinates) that can reorder two triangles' distances.
             let is_tied = tied(tris, p, brute.tri, bd, tol * 0.1);
@@ -270,6 +274,47 @@ fn box_of_ties_every_walk() {
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     check_mesh("box", &boxed(), &context(), 900, 3);
+}
+
+/// The tie rule on the GPU: two coincident copies of a mesh make every point a tie between a
+/// triangle of the first copy and its twin (exactly equal distances, whatever the rounding);
+/// every walk must name the first copy's, the smaller index, as the CPU does.
+#[test]
+fn coincident_copies_keep_the_smaller_index() {
+    if skip_gpu() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let ctx = context();
+    let mut mesh = knot();
+    let (n_vertices, n_faces) = (mesh.positions.len() as u32, mesh.triangles.len() as u32);
+    mesh.positions.extend_from_within(..);
+    mesh.triangles.extend_from_within(..);
+    for t in &mut mesh.triangles[n_faces as usize..] {
+        *t = t.map(|i| i + n_vertices);
+    }
+    let (vertices, faces) = arrays(&mesh);
+    let cpu = QueryOptions {
+        backend: Backend::Cpu,
+        ..Default::default()
+    };
+    let base = TraceMesh::from_arrays(&vertices, &faces, &cpu).unwrap();
+    for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().gpu) {
+        let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
+        let pts = points(&scene.accel.tris, None, 600, 4);
+        let mut variants = vec![GpuVariants::default()];
+        if kind == AccelKind::Bvh {
+            variants.push("bvh=wide8".parse().unwrap());
+        }
+        for var in variants {
+            let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
+            let what = format!("two knots, {} ({var})", kind.name());
+            compare(&what, &scene, &mut gpu, kind, &pts);
+            let got = gpu.closest_points(&scene.accel.tris, &pts, kind).unwrap();
+            let second = got.iter().filter(|c| c.is_found() && c.tri >= n_faces).count();
+            assert_eq!(second, 0, "{what}: {second} points named the second copy's triangle");
+        }
+    }
 }
 
 /// `QueryScene` with `backend = gpu` answers its point queries on the GPU: closest points,
