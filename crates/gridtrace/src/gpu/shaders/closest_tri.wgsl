@@ -1,4 +1,4 @@
-// The nearest point of a triangle to a point, shared by every structure's closest-point walk
+// Closest points: the nearest point of a triangle to a point, shared by every structure's walk
 // (`NAME_closest_point` in walks/*.wgsl); mirrors accel/closest.rs (`closest_on_triangle`,
 // `ClosestPoint::offer`) operation for operation, so the GPU and the CPU measure the same
 // distance up to the compilers' contractions (a GPU may fuse a multiply-add the CPU rounds
@@ -101,4 +101,63 @@ fn point_box_dist_sq(p: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
 fn point_cell_margin(cell: vec3<f32>) -> vec3<f32> {
     let big = max(abs(scene.bounds_min), abs(scene.bounds_max));
     return 2.0 * (cell * 1e-3 + vec3<f32>(1e-6 * max(big.x, max(big.y, big.z))));
+}
+
+// ---- Lattices searched in rings (accel/closest/shells.rs) ----
+//
+// The uniform grid searches its cells, the irregular grid its top cells, in growing Chebyshev
+// rings around the point's cell. Each walk enumerates a ring itself (its visit is its own);
+// the distances and the bound that ends the search are these.
+
+// `dims` cells of size `cell` from `min`; their contents lie within `margin` of their boxes.
+struct PointLattice { min: vec3<f32>, cell: vec3<f32>, dims: vec3<i32>, margin: vec3<f32> }
+
+// The cell of `l` nearest to `p` (holding it, clamped into the lattice; clamped in floats
+// first, so that an infinite coordinate converts safely).
+fn lattice_cell_of(l: PointLattice, p: vec3<f32>) -> vec3<i32> {
+    let g = clamp(floor((p - l.min) / l.cell), vec3<f32>(0.0), vec3<f32>(l.dims - 1));
+    return vec3<i32>(g);
+}
+
+// Distance along `axis` from `p` to the slab of cells `k`, grown by the margin (0 inside).
+fn lattice_slab_dist(l: PointLattice, p: vec3<f32>, axis: i32, k: i32) -> f32 {
+    let lo = l.min[axis] + f32(k) * l.cell[axis] - l.margin[axis];
+    let hi = l.min[axis] + f32(k + 1) * l.cell[axis] + l.margin[axis];
+    return max(max(lo - p[axis], p[axis] - hi), 0.0);
+}
+
+// How far outside the lattice (less the margin) `p` is, per axis, squared.
+fn lattice_out2(l: PointLattice, p: vec3<f32>) -> vec3<f32> {
+    let hi = l.min + vec3<f32>(l.dims) * l.cell;
+    let out = max(max(l.min - l.margin - p, p - hi - l.margin), vec3<f32>(0.0));
+    return out * out;
+}
+
+// The last ring around cell `c` that has cells.
+fn lattice_last_ring(l: PointLattice, c: vec3<i32>) -> i32 {
+    let last = max(max(c, l.dims - 1 - c), vec3<i32>(0));
+    return max(last.x, max(last.y, last.z));
+}
+
+// A lower bound on the squared distance from `p` to any cell of ring `r` or beyond around cell
+// `c` (`shells::lower_bound`): on each side that still has cells, the distance to the face of
+// the block of rings below `r`, plus how far outside the lattice the point is on the other
+// axes (`out2`). Infinite when no side has cells left.
+fn lattice_ring_bound(l: PointLattice, p: vec3<f32>, c: vec3<i32>, r: i32, out2: vec3<f32>) -> f32 {
+    if (r == 0) { return out2.x + out2.y + out2.z; }
+    var lower = inf();
+    for (var a = 0; a < 3; a++) {
+        let rest = out2[(a + 1) % 3] + out2[(a + 2) % 3];
+        if (c[a] - r >= 0) {
+            let face = l.min[a] + f32(c[a] - r + 1) * l.cell[a];
+            let d = max(p[a] - face - l.margin[a], 0.0);
+            lower = min(lower, d * d + rest);
+        }
+        if (c[a] + r < l.dims[a]) {
+            let face = l.min[a] + f32(c[a] + r) * l.cell[a];
+            let d = max(face - p[a] - l.margin[a], 0.0);
+            lower = min(lower, d * d + rest);
+        }
+    }
+    return lower;
 }

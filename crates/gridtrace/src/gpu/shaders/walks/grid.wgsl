@@ -139,48 +139,17 @@ fn grid_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
 //
 // The cells in growing Chebyshev rings around the point's cell (clamped into the grid), each
 // ring's rows along x clipped to the ball of the best distance so far, until no cell of the next
-// ring can hold anything nearer (`grid_point_bound`). With the proximity cloud (`pc`) the search
-// starts at the ring the point's cell's distance names (the rings inside it are empty) and a row
-// jumps over the empty cells an empty cell's distance vouches for; the plain grid visits every
-// cell of every ring. Bounds and cell boxes are grown by the fill margin (`point_cell_margin`),
-// and pruning is strict, so every triangle as near as the best is measured and the tie rule
-// decides as on the CPU.
-
-// Distance along `axis` from `p` to the slab of cells `k`, grown by `margin` (0 inside).
-fn grid_slab_dist(p: vec3<f32>, axis: i32, k: i32, margin: vec3<f32>) -> f32 {
-    let lo = scene.bounds_min[axis] + f32(k) * scene.cell_size[axis] - margin[axis];
-    let hi = scene.bounds_min[axis] + f32(k + 1) * scene.cell_size[axis] + margin[axis];
-    return max(max(lo - p[axis], p[axis] - hi), 0.0);
-}
-
-// A lower bound on the squared distance from `p` to any cell of ring `r` or beyond around cell
-// `c` (`shells::lower_bound`): on each side that still has cells, the distance to the face of
-// the block of rings below `r`, plus how far outside the grid the point is on the other axes
-// (`out2`). Infinite when no side has cells left.
-fn grid_point_bound(p: vec3<f32>, c: vec3<i32>, r: i32, out2: vec3<f32>, margin: vec3<f32>) -> f32 {
-    if (r == 0) { return out2.x + out2.y + out2.z; }
-    let dims = vec3<i32>(scene.dims);
-    var lower = inf();
-    for (var a = 0; a < 3; a++) {
-        let rest = out2[(a + 1) % 3] + out2[(a + 2) % 3];
-        if (c[a] - r >= 0) {
-            let face = scene.bounds_min[a] + f32(c[a] - r + 1) * scene.cell_size[a];
-            let d = max(p[a] - face - margin[a], 0.0);
-            lower = min(lower, d * d + rest);
-        }
-        if (c[a] + r < dims[a]) {
-            let face = scene.bounds_min[a] + f32(c[a] + r) * scene.cell_size[a];
-            let d = max(face - p[a] - margin[a], 0.0);
-            lower = min(lower, d * d + rest);
-        }
-    }
-    return lower;
-}
+// ring can hold anything nearer (`lattice_ring_bound`, closest_tri.wgsl). With the proximity
+// cloud (`pc`) the search starts at the ring the point's cell's distance names (the rings
+// inside it are empty) and a row jumps over the empty cells an empty cell's distance vouches
+// for; the plain grid visits every cell of every ring. Bounds and cell boxes are grown by the
+// fill margin (`point_cell_margin`), and pruning is strict, so every triangle as near as the
+// best is measured and the tie rule decides as on the CPU.
 
 // Measures the triangles of cell `cc` if its grown box may hold something nearer than `best`.
 // Returns how many cells a row may advance: an empty cell's proximity distance with `pc` (the
 // cells that close are empty too), else 1.
-fn grid_point_cell(p: vec3<f32>, cc: vec3<i32>, margin: vec3<f32>, use_pc: bool,
+fn grid_point_cell(l: PointLattice, p: vec3<f32>, cc: vec3<i32>, use_pc: bool,
                    best: ptr<function, GpuHit>, work: ptr<function, u32>) -> i32 {
     *work += 1u;
     let cell = cells[cell_index(cc)];
@@ -188,8 +157,8 @@ fn grid_point_cell(p: vec3<f32>, cc: vec3<i32>, margin: vec3<f32>, use_pc: bool,
         if (use_pc) { return i32(clamp(cell.dist, 1u, scene.dims.x)); }
         return 1;
     }
-    let lo = scene.bounds_min + vec3<f32>(cc) * scene.cell_size;
-    if (point_box_dist_sq(p, lo - margin, lo + scene.cell_size + margin) > (*best).t) { return 1; }
+    let lo = l.min + vec3<f32>(cc) * l.cell;
+    if (point_box_dist_sq(p, lo - l.margin, lo + l.cell + l.margin) > (*best).t) { return 1; }
     for (var i = cell.start; i < cell.start + cell.count; i++) {
         *work += 1u;
         point_offer(best, grid_refs[i], p);
@@ -200,33 +169,32 @@ fn grid_point_cell(p: vec3<f32>, cc: vec3<i32>, margin: vec3<f32>, use_pc: bool,
 // Ring `r` around cell `c`, clipped to the grid: the rows of its two z faces and two y faces
 // along x (clipped to the ball of the best distance), and the two cells of its x faces in the
 // other rows.
-fn grid_point_ring(p: vec3<f32>, c: vec3<i32>, r: i32, margin: vec3<f32>, use_pc: bool,
+fn grid_point_ring(l: PointLattice, p: vec3<f32>, c: vec3<i32>, r: i32, use_pc: bool,
                    best: ptr<function, GpuHit>, work: ptr<function, u32>) {
-    let dims = vec3<i32>(scene.dims);
     let lo = max(c - r, vec3<i32>(0));
-    let hi = min(c + r, dims - 1);
+    let hi = min(c + r, l.dims - 1);
     for (var z = lo.z; z <= hi.z; z++) {
-        let dz = grid_slab_dist(p, 2, z, margin);
+        let dz = lattice_slab_dist(l, p, 2, z);
         if (dz * dz > (*best).t) { continue; }
         for (var y = lo.y; y <= hi.y; y++) {
-            let dy = grid_slab_dist(p, 1, y, margin);
+            let dy = lattice_slab_dist(l, p, 1, y);
             let yz = dz * dz + dy * dy;
             if (yz > (*best).t) { continue; }
             if (abs(z - c.z) == r || abs(y - c.y) == r) {
                 var x = lo.x;
                 while (x <= hi.x) {
-                    let dx = grid_slab_dist(p, 0, x, margin);
+                    let dx = lattice_slab_dist(l, p, 0, x);
                     if (dx * dx + yz > (*best).t) {
                         // Past the point, every later cell of the row is farther still.
-                        if (scene.bounds_min.x + f32(x) * scene.cell_size.x > p.x) { break; }
+                        if (l.min.x + f32(x) * l.cell.x > p.x) { break; }
                         x += 1;
                         continue;
                     }
-                    x += grid_point_cell(p, vec3<i32>(x, y, z), margin, use_pc, best, work);
+                    x += grid_point_cell(l, p, vec3<i32>(x, y, z), use_pc, best, work);
                 }
             } else {
-                if (c.x - r >= 0) { grid_point_cell(p, vec3<i32>(c.x - r, y, z), margin, use_pc, best, work); }
-                if (c.x + r < dims.x) { grid_point_cell(p, vec3<i32>(c.x + r, y, z), margin, use_pc, best, work); }
+                if (c.x - r >= 0) { grid_point_cell(l, p, vec3<i32>(c.x - r, y, z), use_pc, best, work); }
+                if (c.x + r < l.dims.x) { grid_point_cell(l, p, vec3<i32>(c.x + r, y, z), use_pc, best, work); }
             }
         }
     }
@@ -236,7 +204,7 @@ fn grid_point_ring(p: vec3<f32>, c: vec3<i32>, r: i32, margin: vec3<f32>, use_pc
 fn grid_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(inf(), MISS, 0.0, 0.0);
     let dims = vec3<i32>(scene.dims);
-    let margin = point_cell_margin(scene.cell_size);
+    let l = PointLattice(scene.bounds_min, scene.cell_size, dims, point_cell_margin(scene.cell_size));
     let c = clamp(world_to_grid(p), vec3<i32>(0), dims - 1);
     let use_pc = pass_.accel == ACCEL_PC;
     var r = 0;
@@ -246,16 +214,13 @@ fn grid_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
         if (d == MISS) { return best; }
         r = i32(min(d, u32(dims.x + dims.y + dims.z)));
     }
-    let grid_max = scene.bounds_min + vec3<f32>(dims) * scene.cell_size;
-    let out = max(max(scene.bounds_min - margin - p, p - grid_max - margin), vec3<f32>(0.0));
-    let out2 = out * out;
-    let last = max(max(c, dims - 1 - c), vec3<i32>(0));
-    let last_ring = max(last.x, max(last.y, last.z));
+    let out2 = lattice_out2(l, p);
+    let last_ring = lattice_last_ring(l, c);
     loop {
         if (r > last_ring) { break; }
         // Strict: a ring that may hold something as near as the best is still searched.
-        if (grid_point_bound(p, c, r, out2, margin) > best.t) { break; }
-        grid_point_ring(p, c, r, margin, use_pc, &best, work);
+        if (lattice_ring_bound(l, p, c, r, out2) > best.t) { break; }
+        grid_point_ring(l, p, c, r, use_pc, &best, work);
         r += 1;
     }
     return best;
