@@ -317,6 +317,42 @@ fn coincident_copies_keep_the_smaller_index() {
     }
 }
 
+/// Batches larger than the work buffers go in chunks (here of 1,000 points) with the same
+/// answers, bit for bit, and the same work as in one chunk; an empty batch gives nothing.
+#[test]
+fn chunked_and_empty_batches() {
+    if skip_gpu() {
+        return;
+    }
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let ctx = context();
+    let (vertices, faces) = arrays(&knot());
+    let cpu = QueryOptions {
+        backend: Backend::Cpu,
+        ..Default::default()
+    };
+    let base = TraceMesh::from_arrays(&vertices, &faces, &cpu).unwrap();
+    for kind in [AccelKind::ProximityCloud, AccelKind::Bvh] {
+        let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
+        let pts = points(&scene.accel.tris, None, 2500, 8);
+        assert!(pts.len() > 2000);
+        let tris = &scene.accel.tris;
+        let mut whole = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let mut chunked = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        chunked.set_max_tile_pixels(1000);
+        let (a, b) = (
+            whole.closest_points_counted(tris, &pts, kind).unwrap(),
+            chunked.closest_points_counted(tris, &pts, kind).unwrap(),
+        );
+        assert_eq!(a.work, b.work, "{}", kind.name());
+        for (i, (x, y)) in a.closest.iter().zip(&b.closest).enumerate() {
+            let same = x.tri == y.tri && x.dist_sq.to_bits() == y.dist_sq.to_bits() && (x.u, x.v) == (y.u, y.v);
+            assert!(same, "{} point {i}: {x:?} vs {y:?}", kind.name());
+        }
+        assert!(chunked.closest_points(tris, &[], kind).unwrap().is_empty());
+    }
+}
+
 /// `QueryScene` with `backend = gpu` answers its point queries on the GPU: closest points,
 /// distances and signed distances equal the CPU scene's within the tolerance, NaN for points
 /// that are not finite; and `TraceMesh::closest_points` on the GPU equals the CPU's.
