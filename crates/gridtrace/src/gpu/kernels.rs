@@ -228,10 +228,12 @@ fn compile(
                     //   `n_lights`, the closest-point searches by the grid's rings (clamped
                     //   into its dims, every step at least one cell), the tree's nodes (each
                     //   entered at most once; their stacks guarded by `sp < BVH_STACK`) or the
-                    //   irregular grid's cells, and no loop's exit depends on a value it never
-                    //   changes.
+                    //   irregular grid's rings of top cells and voxel-map rows (clamped into
+                    //   its top dims and `2^level`), and no loop's exit depends on a value it
+                    //   never changes.
                     // tests/gpu_variants.rs renders and queries every structure with
-                    // `checks=off` and compares the results with the checked kernels'.
+                    // `checks=off` and compares the results with the checked kernels';
+                    // tests/gpu_closest.rs does so for the closest points.
                     unsafe {
                         dev.create_shader_module_trusted(
                             desc,

@@ -13,7 +13,8 @@ pub const RAYGEN: &str = concat!(include_str!("shaders/append.wgsl"), include_st
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
 pub const CLOSEST_POINT: &str = include_str!("shaders/closest_point.wgsl");
-/// The nearest point of a triangle (Ericson), in every walking kernel's module before the walk.
+/// The nearest point of a triangle (Ericson), the tie rule and the ring searches' lattice
+/// distances, in every walking kernel's module before the walk.
 pub const CLOSEST_TRI: &str = include_str!("shaders/closest_tri.wgsl");
 pub const SHADE: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/shade.wgsl"));
 pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
