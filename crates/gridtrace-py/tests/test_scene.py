@@ -4,6 +4,7 @@ angles), Open3D's shapes and dtypes for any leading shape, float64 input, bad in
 and points, wrong shapes and dtypes, unknown ids), concurrent calls from threads, pickling."""
 
 import math
+import os
 import pickle
 import threading
 
@@ -150,6 +151,30 @@ def test_points_against_numpy_brute_force(accel):
     dist = s.compute_distance(pts)
     assert dist.dtype == np.float32
     for i, p in enumerate(pts):
+        d = closest_brute(tris, p)
+        assert dist[i] == pytest.approx(d.min(), rel=1e-4, abs=1e-5), f"point {i}"
+        k = names.index((ans["geometry_ids"][i], ans["primitive_ids"][i]))
+        assert d[k] == pytest.approx(d.min(), rel=1e-4, abs=1e-5)
+        assert np.linalg.norm(ans["points"][i] - p) == pytest.approx(dist[i], rel=1e-4, abs=1e-5)
+
+
+@pytest.mark.parametrize("accel", STRUCTURES)
+def test_points_on_the_gpu(accel):
+    """backend="gpu": closest points and distances come from the GPU's search (the sign from the
+    CPU's winding numbers), equal to numpy's brute force and to the CPU scene's within float32
+    rounding; NaN points give NaN. Fails, not skips, without an adapter (lavapipe will do)."""
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        pytest.skip("GRIDTRACE_SKIP_GPU is set")
+    s, tris, names = build(accel, backend="gpu")
+    assert s.device().startswith("gpu"), s.device()
+    cpu, _, _ = build(accel, backend="cpu")
+    rng = np.random.default_rng(5)
+    pts = np.concatenate([rng.uniform(-3, 3, (300, 3)), tris[::5, 0], tris[::7].mean(axis=1), [[np.nan, 0, 0]]])
+    ans, dist, sdf = s.compute_closest_points(pts), s.compute_distance(pts), s.compute_signed_distance(pts)
+    assert np.isnan(dist[-1]) and np.isnan(sdf[-1]) and ans["geometry_ids"][-1] == Scene.INVALID_ID
+    np.testing.assert_allclose(dist[:-1], cpu.compute_distance(pts[:-1]), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(sdf[:-1], cpu.compute_signed_distance(pts[:-1]), rtol=1e-5, atol=1e-5)
+    for i, p in enumerate(pts[:-1]):
         d = closest_brute(tris, p)
         assert dist[i] == pytest.approx(d.min(), rel=1e-4, abs=1e-5), f"point {i}"
         k = names.index((ans["geometry_ids"][i], ans["primitive_ids"][i]))

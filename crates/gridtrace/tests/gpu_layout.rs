@@ -163,7 +163,7 @@ fn mismatch_is_detected() {
 #[test]
 fn kernels_validate() {
     let modules = shaders::all_modules();
-    assert_eq!(modules.len(), 5 + 2 * gridtrace::gpu::walks::WALKS.len());
+    assert_eq!(modules.len(), 5 + 3 * gridtrace::gpu::walks::WALKS.len());
     for (name, src) in modules {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())

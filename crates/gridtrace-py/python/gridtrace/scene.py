@@ -1,6 +1,6 @@
 """``gridtrace.Scene``: several meshes with ids and transforms, queried with the names, argument
 shapes and result keys of Open3D's ``RaycastingScene`` (so that switching is an import), on the
-CPU's cores or (rays) the GPU.
+CPU's cores or (rays, closest points and distances) the GPU.
 
 Conventions (Open3D's): a ray is ``[ox, oy, oz, dx, dy, dz]`` and ``t`` is in units of the
 direction's length; a miss has ``t_hit = inf`` and ids ``INVALID_ID`` (``2**32 - 1``); uvs are the
@@ -76,8 +76,11 @@ class Scene:
 
     ``accel``, ``grid``, ``irregular`` and ``backend`` are as for :class:`gridtrace.Mesh`
     (``"auto"``: the BVH, on a hardware GPU if there is one, else on the CPU). Ray queries
-    (``cast_rays``, ``test_occlusions``) run on the GPU when the backend traces there; the
-    others on the CPU's cores. Changes (``add_triangles``, ``remove``, ``update_vertices``) are
+    (``cast_rays``, ``test_occlusions``) and the nearest-point search of the point queries
+    (``compute_closest_points``, ``compute_distance``, the distance of
+    ``compute_signed_distance``) run on the GPU when the backend traces there, with the CPU's
+    answers within float32 rounding (where two faces are equally near either may be named); the
+    others, and the inside/outside sign (winding numbers), on the CPU's cores. Changes (``add_triangles``, ``remove``, ``update_vertices``) are
     cheap: the next query rebuilds what they touched. Queries release the GIL and may be called
     from several threads at once on one scene. Scenes pickle (meshes, transforms, ids and
     parameters; the structure is rebuilt on first use after loading).

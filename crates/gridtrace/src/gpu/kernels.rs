@@ -21,7 +21,8 @@ use super::walks::WalkSpec;
 use crate::{Error, Result};
 
 /// A pipeline: a kernel, or a kernel compiled with other override constants. The walking
-/// kernels (traverse, occlusion) are compiled once per structure (`WalkPipelines`).
+/// kernels (traverse, occlusion, closest point) are compiled once per structure
+/// (`WalkPipelines`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Kernel {
     Raygen,
@@ -36,6 +37,8 @@ pub(crate) enum Kernel {
     OcclusionClosest,
     /// The tile's pixels to 8-bit sRGB (`PixelFormat::Srgb8`).
     Pack,
+    /// The nearest point of the mesh to each point of the input queue (`gpu::points`).
+    ClosestPoint,
 }
 
 /// What a kernel that walks no structure binds as group 1 (a walking kernel binds its
@@ -98,7 +101,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 9] = [
+const SPECS: [KernelSpec; 10] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -140,6 +143,15 @@ const SPECS: [KernelSpec; 9] = [
         group1: Group1::Packed,
         ..spec(Kernel::Pack, "pack", "pack", shaders::PACK)
     },
+    KernelSpec {
+        walks: true,
+        ..spec(
+            Kernel::ClosestPoint,
+            "closest point",
+            "closest point",
+            shaders::CLOSEST_POINT,
+        )
+    },
 ];
 
 fn spec_of(kernel: Kernel) -> &'static KernelSpec {
@@ -163,7 +175,7 @@ pub(super) fn dispatch_groups(n: u32, per_group: u32) -> (u32, u32) {
 }
 
 /// One structure's walking pipelines (traverse, its heat variant, occlusion and its closest-hit
-/// ablation) and the layout of its group 1.
+/// ablation, closest point) and the layout of its group 1.
 pub(crate) struct WalkPipelines {
     pub spec: &'static WalkSpec,
     /// Layout of group 1: the structure's arrays, in `spec.arrays` order.
@@ -234,9 +246,15 @@ fn compile(
                     //   by the scene's own material ids, the lights below `n_lights`;
                     // - every loop is bounded: the DDA by the grid's cells, the BVH walks by
                     //   their nodes (each entered at most once per ray), the light loops by
-                    //   `n_lights`, and no loop's exit depends on a value it never changes.
+                    //   `n_lights`, the closest-point searches by the grid's rings (clamped
+                    //   into its dims, every step at least one cell), the tree's nodes (each
+                    //   entered at most once; their stacks guarded by `sp < BVH_STACK`) or the
+                    //   irregular grid's rings of top cells and voxel-map rows (clamped into
+                    //   its top dims and `2^level`), and no loop's exit depends on a value it
+                    //   never changes.
                     // tests/gpu_variants.rs renders and queries every structure with
-                    // `checks=off` and compares the results with the checked kernels'.
+                    // `checks=off` and compares the results with the checked kernels';
+                    // tests/gpu_closest.rs does so for the closest points.
                     unsafe {
                         dev.create_shader_module_trusted(
                             desc,
@@ -450,10 +468,10 @@ mod tests {
         }
     }
 
-    /// The walking kernels are exactly traverse and occlusion (with their heat and closest-hit
-    /// forms), whose modules include a walk file; their overrides survive.
+    /// The walking kernels are exactly traverse, occlusion (with their heat and closest-hit
+    /// forms) and closest point, whose modules include a walk file; their overrides survive.
     #[test]
-    fn walking_kernels_are_traverse_and_occlusion() {
+    fn walking_kernels_are_traverse_occlusion_and_closest_point() {
         for s in &SPECS {
             assert_eq!(s.walks, shaders::walks(s.stage), "{}", s.label);
             let overrides: Vec<_> = s.overrides.iter().map(|o| o.0).collect();

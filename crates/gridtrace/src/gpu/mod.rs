@@ -21,7 +21,8 @@
 //!   `scene`: the scene's upload (the BVH's two GPU layouts, each with a CPU mirror of its
 //!   walk, are in `walks/bvh/`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
-//! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded;
+//! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded; `points`:
+//!   closest-point batches (each structure's `NAME_closest_point` search);
 //! - `timing`: timestamp queries and per-stage milliseconds;
 //! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results;
 //! - `grid_build`: the grid and its proximity cloud built on the GPU (`shaders/build/`), for
@@ -33,6 +34,7 @@ mod context;
 mod grid_build;
 mod kernels;
 pub mod layout;
+mod points;
 mod queries;
 mod renderer;
 mod scene;
@@ -44,6 +46,7 @@ mod wavefront;
 
 pub use context::{Fault, GpuContext};
 pub use grid_build::{GpuBuildStats, GpuGrid};
+pub use points::GpuClosestPoints;
 pub use queries::GpuQueryStats;
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;

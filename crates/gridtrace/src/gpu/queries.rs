@@ -1,6 +1,6 @@
-//! Ray-batch queries: closest hit (`traverse`) or any hit (`occlusion`) for rays given by the
-//! caller, in chunks that fit the work buffers, as the frame does its tiles: every chunk of a
-//! batch in one submission (its rays, counters and pass uniforms copied into place in the
+//! Batch queries: closest hit (`traverse`) or any hit (`occlusion`) for rays given by the
+//! caller, or the nearest point (`closest point`, `points.rs`) for points, in chunks that fit
+//! the work buffers, as the frame does its tiles: every chunk of a batch in one submission (its rays, counters and pass uniforms copied into place in the
 //! command stream), its results copied into one readback buffer with the timestamps, and that
 //! buffer mapped once: one host round trip per batch. (Before, each chunk of a million rays was
 //! its own submission and blocking read.) The indirect kernel sizes each dispatch as in the
@@ -12,7 +12,7 @@ use std::time::Instant;
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
 use super::kernels::Kernel;
 use super::layout::{GpuHit, RayRec};
-use super::renderer::{COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
+use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
 use super::timing::{GpuTimings, MAX_TIMED_PASSES};
 use super::wavefront::grow;
 use crate::Result;
@@ -24,19 +24,47 @@ const TIMESTAMPS_BYTES: u64 = MAX_TIMED_PASSES as u64 * 2 * size_of::<u64>() as 
 
 /// What a batch asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Query {
+pub(super) enum Query {
     ClosestHit,
     AnyHit,
+    /// The nearest point to each item (its ray's origin), with the search's work.
+    ClosestPoint,
+}
+
+/// A buffer a query's answers are copied from, per item.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Output {
+    /// `GpuHit`s (closest hits; closest points' triangle, squared distance and barycentrics).
+    Hits,
+    /// The shadow queue's records, whose weight the occlusion kernel zeroes when occluded.
+    Shadow,
+    /// The accumulation texels, whose x the closest-point kernel sets to its work.
+    Accum,
+}
+
+impl Output {
+    fn bytes(self) -> u64 {
+        match self {
+            Output::Hits => size_of::<GpuHit>() as u64,
+            Output::Shadow => size_of::<RayRec>() as u64,
+            Output::Accum => ACCUM_TEXEL_BYTES,
+        }
+    }
 }
 
 impl Query {
-    /// Bytes read back a ray: a closest hit's `GpuHit`, or the shadow queue's record whose
-    /// weight the occlusion kernel zeroes when the ray is occluded.
-    fn result_bytes(self) -> u64 {
+    /// What is read back, in order: one region per output in the readback.
+    fn outputs(self) -> &'static [Output] {
         match self {
-            Query::ClosestHit => size_of::<GpuHit>() as u64,
-            Query::AnyHit => size_of::<RayRec>() as u64,
+            Query::ClosestHit => &[Output::Hits],
+            Query::AnyHit => &[Output::Shadow],
+            Query::ClosestPoint => &[Output::Hits, Output::Accum],
         }
+    }
+
+    /// Bytes read back an item, every output together.
+    fn result_bytes(self) -> u64 {
+        self.outputs().iter().map(|o| o.bytes()).sum()
     }
 }
 
@@ -52,8 +80,8 @@ pub struct GpuQueryStats {
     pub round_trips: u32,
     /// Bytes written to the device: the rays (48 a ray), counters and pass uniforms.
     pub uploaded_bytes: u64,
-    /// Bytes read back: the answers (16 a ray for closest hits, 48 for occlusion), the
-    /// timestamps.
+    /// Bytes read back: the answers (16 a ray for closest hits, 48 for occlusion, 32 a point
+    /// for closest points), the timestamps.
     pub downloaded_bytes: u64,
     pub wall_ms: f64,
 }
@@ -86,8 +114,9 @@ impl GpuRenderer {
     /// Closest hits for a batch of rays (processed in bounded chunks).
     pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<Hit>> {
         let mut hits = Vec::with_capacity(rays.len());
-        self.batch(rays, t_min, t_max, kind, Query::ClosestHit, |raw| {
-            let out: &[GpuHit] = bytemuck::cast_slice(raw);
+        let rec = |i: usize| ray_rec(&rays[i], t_min, t_max);
+        self.batch(rays.len(), rec, kind, Query::ClosestHit, |raw| {
+            let out: &[GpuHit] = bytemuck::cast_slice(raw[0]);
             hits.extend(out.iter().map(|h| {
                 if h.tri == MISS {
                     Hit::MISS
@@ -107,8 +136,9 @@ impl GpuRenderer {
     /// Any-hit occlusion for a batch of rays.
     pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<bool>> {
         let mut occ = Vec::with_capacity(rays.len());
-        self.batch(rays, t_min, t_max, kind, Query::AnyHit, |raw| {
-            let out: &[RayRec] = bytemuck::cast_slice(raw);
+        let rec = |i: usize| ray_rec(&rays[i], t_min, t_max);
+        self.batch(rays.len(), rec, kind, Query::AnyHit, |raw| {
+            let out: &[RayRec] = bytemuck::cast_slice(raw[0]);
             // The occlusion kernel zeroes an occluded ray's contribution.
             occ.extend(out.iter().map(|r| r.weight[0] == 0.0));
         })?;
@@ -120,22 +150,22 @@ impl GpuRenderer {
         &self.last_query
     }
 
-    /// Runs `query` over `rays` in submissions of as many chunks as the device's largest buffer
-    /// holds; `take` gets each chunk's raw results in order.
-    fn batch(
+    /// Runs `query` over `n` items (item `i`'s queue record is `rec_of(i)`) in submissions of
+    /// as many chunks as the device's largest buffer holds; `take` gets each submission's raw
+    /// results, one slice per output of the query, its items in order.
+    pub(super) fn batch(
         &mut self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
+        n: usize,
+        rec_of: impl Fn(usize) -> RayRec,
         kind: AccelKind,
         query: Query,
-        mut take: impl FnMut(&[u8]),
+        mut take: impl FnMut(&[&[u8]]),
     ) -> Result<()> {
         self.check_serves(kind)?;
         let t0 = Instant::now();
         let chunk = self.tile_capacity(1) as usize;
         self.ensure_work(
-            chunk.min(rays.len().max(1)) as u32,
+            chunk.min(n.max(1)) as u32,
             self.work.as_ref().map_or(1, |w| w.max_lights),
         );
         let cap = (self.work.as_ref().unwrap().tile_pixels as usize).max(1);
@@ -143,16 +173,16 @@ impl GpuRenderer {
         let max = self.ctx.limits().max_buffer_size.saturating_sub(TIMESTAMPS_BYTES);
         let chunks_per_submission = (max / per_chunk).clamp(1, (MAX_TIMED_PASSES / 2) as u64) as usize;
         let mut stats = GpuQueryStats {
-            rays: rays.len() as u64,
+            rays: n as u64,
             timings: GpuTimings {
                 from_timestamps: self.timed(),
                 ..GpuTimings::default()
             },
             ..GpuQueryStats::default()
         };
-        let chunks: Vec<&[Ray]> = rays.chunks(cap).collect();
+        let chunks: Vec<std::ops::Range<usize>> = (0..n).step_by(cap).map(|a| a..(a + cap).min(n)).collect();
         for group in chunks.chunks(chunks_per_submission) {
-            self.submit_chunks(group, t_min, t_max, kind, query, &mut stats, &mut take)?;
+            self.submit_chunks(group, &rec_of, kind, query, &mut stats, &mut take)?;
         }
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.timings.total_ms = if self.timed() {
@@ -164,36 +194,32 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// One submission over `chunks` and its one wait.
-    #[allow(clippy::too_many_arguments)]
+    /// One submission over `chunks` (item ranges) and its one wait.
     fn submit_chunks(
         &mut self,
-        chunks: &[&[Ray]],
-        t_min: f32,
-        t_max: f32,
+        chunks: &[std::ops::Range<usize>],
+        rec_of: &impl Fn(usize) -> RayRec,
         kind: AccelKind,
         query: Query,
         stats: &mut GpuQueryStats,
-        take: &mut impl FnMut(&[u8]),
+        take: &mut impl FnMut(&[&[u8]]),
     ) -> Result<()> {
         let rec_bytes = size_of::<RayRec>() as u64;
-        // The upload: every chunk's rays, then a counters block per chunk.
+        // The upload: every chunk's records (`pixel` numbers an item within its chunk), then a
+        // counters block per chunk.
         let rays: Vec<RayRec> = chunks
             .iter()
             .flat_map(|part| {
-                part.iter().enumerate().map(move |(i, r)| RayRec {
-                    origin: r.origin.to_array(),
-                    pixel: i as u32,
-                    dir: r.dir.to_array(),
-                    t_max,
-                    weight: [1.0; 3],
-                    t_min,
+                part.clone().map(move |i| RayRec {
+                    pixel: (i - part.start) as u32,
+                    ..rec_of(i)
                 })
             })
             .collect();
         let (slot, kernel) = match query {
             Query::ClosestHit => (SLOT_QUEUE_A, Kernel::Traverse),
             Query::AnyHit => (SLOT_SHADOW, Kernel::Occlusion),
+            Query::ClosestPoint => (SLOT_QUEUE_A, Kernel::ClosestPoint),
         };
         let counts: Vec<u32> = chunks
             .iter()
@@ -242,15 +268,25 @@ impl GpuRenderer {
         }
         let (upload, readback) = (self.batch_upload.as_ref().unwrap(), self.readback.as_ref().unwrap());
         let w = self.work.as_ref().unwrap();
-        let (queue, output) = match query {
-            Query::ClosestHit => (&w.queue_a, &w.hits),
-            Query::AnyHit => (&w.shadow, &w.shadow),
+        let queue = if slot == SLOT_SHADOW { &w.shadow } else { &w.queue_a };
+        let buffer = |o: Output| match o {
+            Output::Hits => &w.hits,
+            Output::Shadow => &w.shadow,
+            Output::Accum => &w.accum,
         };
+        // The readback: one region per output, each the submission's items in order.
+        let items = rays.len() as u64;
+        let mut region_at = Vec::new();
+        let mut at = 0;
+        for o in query.outputs() {
+            region_at.push(at);
+            at += items * o.bytes();
+        }
         let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("ray batch"),
         });
         let mut rec = self.recorder(chunks[0].len() as u32, true, Ablation::default());
-        let (mut ray_at, mut out_at) = (0, 0);
+        let (mut ray_at, mut item_at) = (0, 0);
         for (k, part) in chunks.iter().enumerate() {
             let n = part.len() as u64;
             // In stream order: this chunk's uniforms, counters and rays into place, its two
@@ -273,16 +309,25 @@ impl GpuRenderer {
             rec.tile_pixels = n as u32;
             rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
             rec.pass(&mut enc, kernel, &w.bind_groups[0]);
-            enc.copy_buffer_to_buffer(output, 0, readback, out_at, Some(n * query.result_bytes()));
+            for (o, region) in query.outputs().iter().zip(&region_at) {
+                let at = region + item_at * o.bytes();
+                enc.copy_buffer_to_buffer(buffer(*o), 0, readback, at, Some(n * o.bytes()));
+            }
             ray_at += n * rec_bytes;
-            out_at += n * query.result_bytes();
+            item_at += n;
         }
         rec.timer.resolve_into(&mut enc, readback, results_bytes);
         let total = results_bytes + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
         let timer = rec.timer;
         let stages = self.ctx.map_read_with(readback, total, |raw| {
-            take(&raw[..results_bytes as usize]);
+            let regions: Vec<&[u8]> = query
+                .outputs()
+                .iter()
+                .zip(&region_at)
+                .map(|(o, &r)| &raw[r as usize..(r + items * o.bytes()) as usize])
+                .collect();
+            take(&regions);
             (
                 timer.parse(&self.ctx, &raw[results_bytes as usize..total as usize]),
                 timer.untimed,
@@ -296,5 +341,17 @@ impl GpuRenderer {
         stats.round_trips += 1;
         stats.downloaded_bytes += total;
         Ok(())
+    }
+}
+
+/// The queue record of a ray of a batch (`pixel` is set per chunk).
+fn ray_rec(r: &Ray, t_min: f32, t_max: f32) -> RayRec {
+    RayRec {
+        origin: r.origin.to_array(),
+        pixel: 0,
+        dir: r.dir.to_array(),
+        t_max,
+        weight: [1.0; 3],
+        t_min,
     }
 }

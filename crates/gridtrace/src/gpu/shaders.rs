@@ -1,8 +1,9 @@
 //! WGSL sources: the shared file, one per kernel and one per structure's walk (`walks/`, named
 //! by `gpu::walks`). WGSL has no includes, so a kernel's module is the generated constant
-//! prelude, then `common.wgsl`, then (for the walking kernels, traverse and occlusion) the
-//! scene's walk file with two generated lines naming its entry points `walk_closest` and
-//! `walk_any`, then the kernel's own file.
+//! prelude, then `common.wgsl`, then (for the walking kernels, traverse, occlusion and closest
+//! point) `closest_tri.wgsl` (the nearest point of a triangle, which every walk's closest-point
+//! search uses) and the scene's walk file with three generated lines naming its entry points
+//! `walk_closest`, `walk_any` and `walk_closest_point`, then the kernel's own file.
 
 use super::constants::wgsl_prelude;
 
@@ -15,15 +16,20 @@ pub const APPEND_SUBGROUP: &str = include_str!("shaders/append_subgroup.wgsl");
 pub const RAYGEN: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/raygen.wgsl"));
 pub const TRAVERSE: &str = include_str!("shaders/traverse.wgsl");
 pub const OCCLUSION: &str = include_str!("shaders/occlusion.wgsl");
+pub const CLOSEST_POINT: &str = include_str!("shaders/closest_point.wgsl");
+/// The nearest point of a triangle (Ericson), the tie rule and the ring searches' lattice
+/// distances, in every walking kernel's module before the walk.
+pub const CLOSEST_TRI: &str = include_str!("shaders/closest_tri.wgsl");
 pub const SHADE: &str = concat!(include_str!("shaders/append.wgsl"), include_str!("shaders/shade.wgsl"));
 pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
 pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
 pub const PACK: &str = include_str!("shaders/pack.wgsl");
 /// Every kernel with its name.
-pub const KERNELS: [(&str, &str); 7] = [
+pub const KERNELS: [(&str, &str); 8] = [
     ("raygen", RAYGEN),
     ("traverse", TRAVERSE),
     ("occlusion", OCCLUSION),
+    ("closest point", CLOSEST_POINT),
     ("shade", SHADE),
     ("resolve", RESOLVE),
     ("indirect", INDIRECT),
@@ -48,7 +54,7 @@ pub fn common_source() -> String {
             }
         }
     }
-    format!("{}\n{}", shared_source(), files.join("\n"))
+    format!("{}\n{}\n{}", shared_source(), CLOSEST_TRI, files.join("\n"))
 }
 
 /// The whole module of a kernel that walks no structure, as the device compiles it.
@@ -69,11 +75,13 @@ pub fn module_source_for(kernel: &str, variants: &super::variants::GpuVariants) 
     }
 }
 
-/// The whole module of a walking kernel (traverse, occlusion) with the walk `walk` names.
+/// The whole module of a walking kernel (traverse, occlusion, closest point) with the walk
+/// `walk` names.
 pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String {
     format!(
-        "{}\n{}\n{}\n{}",
+        "{}\n{}\n{}\n{}\n{}",
         shared_source(),
+        CLOSEST_TRI,
         walk.wgsl.join("\n"),
         walk.entry_points(),
         kernel
@@ -82,7 +90,7 @@ pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String
 
 /// Whether kernel `name` walks the scene's structure (its module includes a walk file).
 pub fn walks(name: &str) -> bool {
-    matches!(name, "traverse" | "occlusion")
+    matches!(name, "traverse" | "occlusion" | "closest point")
 }
 
 /// Every module the tracer compiles, named `kernel` or `kernel [walk]`, with its source: the

@@ -40,6 +40,7 @@ use crate::{Error, Result};
 
 mod batch;
 mod hits;
+mod points;
 
 pub use batch::CHUNK;
 use batch::{CPU_BATCH, batch_len, check_interval, for_chunks, on_cpu_batches};

@@ -1,7 +1,9 @@
 //! Point queries (`compute_closest_points`, `compute_distance`, `compute_signed_distance`,
-//! `compute_occupancy`) on the CPU's cores: nearest points through the structure's own search
+//! `compute_occupancy`): nearest points through the structure's own search, on the CPU's cores
 //! (`AccelStructure::closest_point`: shells of cells on the grids, branch and bound on the
-//! BVH; the brute-force answer, tie rule included, `accel::closest`).
+//! BVH; the brute-force answer, tie rule included, `accel::closest`) or, where the backend
+//! traces on a GPU, there (`GpuRenderer::closest_points`: the same searches in WGSL, the same
+//! answers within rounding). The inside/outside decision (winding numbers) stays on the CPU.
 //!
 //! **Inside or outside** is decided by the generalised winding number of all the scene's
 //! faces together (`accel::winding`, fast far-field sums): inside when it exceeds 0.5. For
@@ -129,7 +131,12 @@ impl QueryScene {
                 })
                 .collect());
         };
-        crate::accel::closest::closest_points(accel, points)
+        match m.mesh.as_ref() {
+            // Where the backend traces on a GPU (as `cast_rays`), the GPU's search (or the
+            // CPU's, if `auto` found no GPU).
+            Some(mesh) if self.opts.backend.traces_on_gpu() => mesh.closest_points(points),
+            _ => crate::accel::closest::closest_points(accel, points),
+        }
     }
 }
 

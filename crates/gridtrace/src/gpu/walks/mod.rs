@@ -1,8 +1,9 @@
 //! Each structure's GPU side: its arrays (group 1 of the walking kernels, in binding order), its
 //! lattice fields of the scene uniform, and its WGSL walk (`shaders/walks/NAME.wgsl`, which
-//! declares those arrays and defines `NAME_closest` and `NAME_any`). The kernels never name a
-//! structure: traverse and occlusion call `walk_closest` and `walk_any`, two lines generated per
-//! structure (`WalkSpec::entry_points`), and each structure gets its own pipelines of them,
+//! declares those arrays and defines `NAME_closest`, `NAME_any` and `NAME_closest_point`). The
+//! kernels never name a structure: traverse, occlusion and closest point call `walk_closest`,
+//! `walk_any` and `walk_closest_point`, three lines generated per structure
+//! (`WalkSpec::entry_points`), and each structure gets its own pipelines of them,
 //! compiled when a scene of it is first uploaded (`Kernels::walk`).
 //!
 //! Adding a structure's GPU side: a walk file, a file here with its `WalkSpec` and its upload,
@@ -32,7 +33,8 @@ pub struct WalkSpec {
     pub name: &'static str,
     /// The walk's WGSL files, in order (a walk and the stack it uses).
     pub wgsl: &'static [&'static str],
-    /// The walk's entry points are `{prefix}_closest` and `{prefix}_any`.
+    /// The walk's entry points are `{prefix}_closest`, `{prefix}_any` and
+    /// `{prefix}_closest_point`.
     pub prefix: &'static str,
     /// Group 1's arrays in binding order: the name reports use (`GpuRenderer::memory`) and the
     /// WGSL variable's name.
@@ -50,12 +52,14 @@ pub struct WalkSpec {
 }
 
 impl WalkSpec {
-    /// The two lines that make this walk the module's `walk_closest` and `walk_any`.
+    /// The three lines that make this walk the module's `walk_closest`, `walk_any` and
+    /// `walk_closest_point` (the nearest point of the mesh: squared distance, triangle, u, v).
     pub fn entry_points(&self) -> String {
         let p = self.prefix;
         format!(
             "fn walk_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest(o, d, t_min, t_max, work); }}\n\
-             fn walk_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {{ return {p}_any(o, d, t_min, t_max); }}\n"
+             fn walk_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {{ return {p}_any(o, d, t_min, t_max); }}\n\
+             fn walk_closest_point(point: vec3<f32>, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest_point(point, work); }}\n"
         )
     }
 }

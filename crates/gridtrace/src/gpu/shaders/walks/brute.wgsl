@@ -41,3 +41,21 @@ fn brute_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     }
     return false;
 }
+
+// The nearest point to `p`: every triangle measured, four a loop iteration (llvmpipe's cap, as
+// above). `work` gets the triangles measured.
+fn brute_point(i: u32, p: vec3<f32>, best: ptr<function, GpuHit>) {
+    if (i < scene.n_tris) { point_offer(best, i, p); }
+}
+
+fn brute_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(inf(), MISS, 0.0, 0.0);
+    for (var i = 0u; i < scene.n_tris; i += 4u) {
+        *work += min(4u, scene.n_tris - i);
+        brute_point(i, p, &best);
+        brute_point(i + 1u, p, &best);
+        brute_point(i + 2u, p, &best);
+        brute_point(i + 3u, p, &best);
+    }
+    return best;
+}

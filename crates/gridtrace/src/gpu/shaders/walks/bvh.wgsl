@@ -121,3 +121,83 @@ fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     }
     return false;
 }
+
+// ---- Closest points (accel/bvh/closest.rs) ----
+//
+// Branch and bound over the binary nodes: at a node both child boxes are measured against the
+// point (squared distance, 0 inside); the nearer child that may hold something nearer than the
+// best so far is entered, the farther pushed with its distance, and a popped entry whose
+// distance the best has since beaten is dropped unopened. The boxes are the triangles' boxes
+// padded by the triangle test's slack, so a box's distance is a lower bound on its triangles'
+// computed distances; pruning is strict, so ties are all measured and the tie rule decides.
+//
+// Its own stack, a private array of BVH_STACK (entry, distance) pairs, whichever stack the ray
+// walks use (`stack=short` changes the ray walks only): a pop never climbs, so it needs no
+// parent links, and one push per level bounds it by the tree's depth, below BVH_STACK.
+
+// Squared distance from `p` to child `k` of node `n` (an unused child's empty box: huge).
+fn bvh_child_dist_sq(n: BvhNode, k: u32, p: vec3<f32>) -> f32 {
+    var lo: vec3<f32>;
+    var hi: vec3<f32>;
+    if (k == 0u) {
+        lo = vec3<f32>(n.xy0.x, n.xy0.z, n.z01.x);
+        hi = vec3<f32>(n.xy0.y, n.xy0.w, n.z01.y);
+    } else {
+        lo = vec3<f32>(n.xy1.x, n.xy1.z, n.z01.z);
+        hi = vec3<f32>(n.xy1.y, n.xy1.w, n.z01.w);
+    }
+    return point_box_dist_sq(p, lo, hi);
+}
+
+// The nearest point to `p`; the answer of BvhAccel::closest_point, tie rule included. `work`
+// gets the nodes visited plus the triangles measured.
+fn bvh_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(inf(), MISS, 0.0, 0.0);
+    var stack_entry: array<u32, BVH_STACK>;
+    var stack_dist: array<f32, BVH_STACK>;
+    var sp = 0u;
+    var entry = 0u;
+    loop {
+        if (entry == STACK_DONE) {
+            // Pop the nearest pending subtree that can still beat the best.
+            if (sp == 0u) { break; }
+            sp -= 1u;
+            if (stack_dist[sp] > best.t) { continue; }
+            entry = stack_entry[sp];
+            continue;
+        }
+        *work += 1u;
+        if (entry >= LEAF_BIT) {
+            let first = entry & LEAF_FIRST_MAX;
+            let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
+            for (var k = first; k < first + count; k++) {
+                *work += 1u;
+                point_offer(&best, bvh_prims[k], p);
+            }
+            entry = STACK_DONE;
+            continue;
+        }
+        let n = bvh_nodes[entry];
+        // An unused child (STACK_DONE) is never entered, whatever its box's distance.
+        let d0 = select(inf(), bvh_child_dist_sq(n, 0u, p), n.child.x != STACK_DONE);
+        let d1 = select(inf(), bvh_child_dist_sq(n, 1u, p), n.child.y != STACK_DONE);
+        let open0 = n.child.x != STACK_DONE && d0 <= best.t;
+        let open1 = n.child.y != STACK_DONE && d1 <= best.t;
+        if (open0 && open1) {
+            let near0 = d0 <= d1;
+            if (sp < BVH_STACK) {
+                stack_entry[sp] = select(n.child.x, n.child.y, near0);
+                stack_dist[sp] = select(d0, d1, near0);
+                sp += 1u;
+            }
+            entry = select(n.child.y, n.child.x, near0);
+        } else if (open0) {
+            entry = n.child.x;
+        } else if (open1) {
+            entry = n.child.y;
+        } else {
+            entry = STACK_DONE;
+        }
+    }
+    return best;
+}

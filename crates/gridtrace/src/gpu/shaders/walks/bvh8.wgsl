@@ -143,3 +143,102 @@ fn bvh8_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     var work = 0u;
     return bvh8_walk(o, d, t_min, t_max, true, &work).tri != MISS;
 }
+
+// ---- Closest points (accel/bvh/closest.rs) ----
+//
+// Branch and bound over the 8-wide nodes. At a node every used child's decoded box (which
+// contains the child's exact box, so its distance is a lower bound) is measured against the
+// point; the leaves that may hold something nearer than the best so far are measured at once,
+// the inner children that may are a mask, of which the nearest is entered and the rest wait on
+// the stack as a group (`node << 8 | mask`, slot bits), one group per level at most. A popped
+// group is measured again against the (since improved) best, so a subtree the best has beaten
+// is dropped unopened. Pruning is strict: ties are all measured, and the tie rule decides.
+// Its own private stack of BVH_STACK groups, whichever stack the ray walks use.
+
+// Squared distance from `p` to the decoded box of slot `s` of `n`.
+fn bvh8_child_dist_sq(n: Bvh8Node, s: u32, p: vec3<f32>) -> f32 {
+    let base = bitcast<vec3<f32>>(n.p_e.xyz);
+    let e = n.p_e.w;
+    let scale = vec3<f32>(bitcast<f32>((e & 0xffu) << 23u), bitcast<f32>(((e >> 8u) & 0xffu) << 23u),
+                          bitcast<f32>(((e >> 16u) & 0xffu) << 23u));
+    let qlo = vec3<u32>(bvh8_byte(n.q0.x, n.q0.y, s), bvh8_byte(n.q0.z, n.q0.w, s), bvh8_byte(n.q1.x, n.q1.y, s));
+    let qhi = vec3<u32>(bvh8_byte(n.q1.z, n.q1.w, s), bvh8_byte(n.q2.x, n.q2.y, s), bvh8_byte(n.q2.z, n.q2.w, s));
+    return point_box_dist_sq(p, base + vec3<f32>(qlo) * scale, base + vec3<f32>(qhi) * scale);
+}
+
+// Of the inner children in `mask` (slot bits) of `n`, those still within `best_d2`: the nearest
+// (x, 8 for none) and the others (y, a mask).
+fn bvh8_point_pick(n: Bvh8Node, mask: u32, p: vec3<f32>, best_d2: f32) -> vec2<u32> {
+    var nearest = 8u;
+    var nearest_d = inf();
+    var rest = 0u;
+    var m = mask;
+    while (m != 0u) {
+        let s = firstTrailingBit(m);
+        m &= m - 1u;
+        let d = bvh8_child_dist_sq(n, s, p);
+        if (d > best_d2) { continue; }
+        if (nearest == 8u || d < nearest_d) {
+            if (nearest != 8u) { rest |= 1u << nearest; }
+            nearest = s;
+            nearest_d = d;
+        } else {
+            rest |= 1u << s;
+        }
+    }
+    return vec2<u32>(nearest, rest);
+}
+
+// The nearest point to `p`; the answer of BvhAccel::closest_point, tie rule included. `work`
+// gets the nodes visited plus the triangles measured.
+fn bvh8_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(inf(), MISS, 0.0, 0.0);
+    var stack: array<u32, BVH_STACK>;
+    var sp = 0u;
+    var node = 0u;
+    var n = bvh8_nodes[0];
+    var fresh = true;
+    var mask = 0u;
+    loop {
+        if (fresh) {
+            // A node entered for the first time: its leaves now, its inner children as a mask.
+            *work += 1u;
+            let inner = n.p_e.w >> 24u;
+            mask = 0u;
+            for (var s = 0u; s < 8u; s++) {
+                let count = (n.info.z >> (4u * s)) & 0xfu;
+                let is_inner = ((inner >> s) & 1u) != 0u;
+                if (!is_inner && count == 0u) { continue; }
+                if (bvh8_child_dist_sq(n, s, p) > best.t) { continue; }
+                if (is_inner) {
+                    mask |= 1u << s;
+                    continue;
+                }
+                let first = n.info.y + bvh8_tris_below(n.info.z, s);
+                for (var i = first; i < first + count; i++) {
+                    *work += 1u;
+                    point_offer(&best, bvh8_prims[i], p);
+                }
+            }
+        }
+        let pick = bvh8_point_pick(n, mask, p, best.t);
+        if (pick.x == 8u) {
+            if (sp == 0u) { break; }
+            sp -= 1u;
+            node = stack[sp] >> 8u;
+            mask = stack[sp] & 0xffu;
+            n = bvh8_nodes[node];
+            fresh = false;
+            continue;
+        }
+        if (pick.y != 0u && sp < BVH_STACK) {
+            stack[sp] = (node << 8u) | pick.y;
+            sp += 1u;
+        }
+        let inner = n.p_e.w >> 24u;
+        node = n.info.x + countOneBits(inner & ((1u << pick.x) - 1u));
+        n = bvh8_nodes[node];
+        fresh = true;
+    }
+    return best;
+}

@@ -159,3 +159,120 @@ fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     }
     return false;
 }
+
+// ---- Closest points (accel/irregular/closest.rs) ----
+//
+// By its cells, as the CPU searches them: the top cells (a uniform lattice, `dims >> shift`)
+// in growing Chebyshev rings around the point's top cell, each ring's rows along x clipped to
+// the ball of the best distance so far, until the next ring's lower bound exceeds it
+// (`lattice_ring_bound`, closest_tri.wgsl). A top cell whose box is near enough is searched
+// through its voxel map (`2^level` entries per axis, each naming the merged cell covering it),
+// row by row, each row clipped to the ball; an entry naming the cell the previous entry named
+// is skipped (merged cells repeat along x), and a cell's triangles are measured only if its
+// grown box may hold something nearer. A merged cell spanning several top cells is met once
+// per top cell: its box test repeats, never an answer. Boxes and bounds are grown by twice the
+// top cells' fill margin (`point_cell_margin`: at least the voxels' margin the cells were
+// filled with); pruning is strict, so ties are all measured and the tie rule decides.
+
+// Measures the triangles of cell `id` if its grown box, widened by `margin`, may hold
+// something nearer than `best`.
+fn irr_point_cell(id: u32, p: vec3<f32>, margin: vec3<f32>, best: ptr<function, GpuHit>, work: ptr<function, u32>) {
+    *work += 1u;
+    let cell = irr_cell(id);
+    if (cell.count == 0u) { return; }
+    let lo = scene.bounds_min + vec3<f32>(cell.min) * scene.cell_size - margin;
+    let hi = scene.bounds_min + vec3<f32>(cell.max) * scene.cell_size + margin;
+    if (point_box_dist_sq(p, lo, hi) > (*best).t) { return; }
+    for (var i = cell.start; i < cell.start + cell.count; i++) {
+        *work += 1u;
+        point_offer(best, irr_refs[i], p);
+    }
+}
+
+// Top cell `tc` of the top lattice `l`, if its box may hold something nearer than `best`: its
+// voxel map's rows, each clipped to the ball of the best distance as the row starts.
+fn irr_point_top(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<function, GpuHit>, work: ptr<function, u32>) {
+    *work += 1u;
+    let lo = l.min + vec3<f32>(tc) * l.cell;
+    if (point_box_dist_sq(p, lo - l.margin, lo + l.cell + l.margin) > (*best).t) { return; }
+    let t = vec3<u32>(l.dims);
+    let tcu = vec3<u32>(tc);
+    let entry = irr_entries[tcu.x + t.x * (tcu.y + t.y * tcu.z)];
+    let level = entry & ((1u << IRR_LEVEL_BITS) - 1u);
+    let begin = entry >> IRR_LEVEL_BITS;
+    let n = i32(1u << level);
+    let sub = PointLattice(lo, l.cell / f32(n), vec3<i32>(n), l.margin);
+    for (var z = 0; z < n; z++) {
+        let dz = lattice_slab_dist(sub, p, 2, z);
+        for (var y = 0; y < n; y++) {
+            let dy = lattice_slab_dist(sub, p, 1, y);
+            let rest = (*best).t - dz * dz - dy * dy;
+            if (!(rest >= 0.0)) { continue; }
+            let half = sqrt(rest) + l.margin.x;
+            let x0 = lattice_cell_of(sub, vec3<f32>(p.x - half, p.y, p.z)).x;
+            let x1 = lattice_cell_of(sub, vec3<f32>(p.x + half, p.y, p.z)).x;
+            let row = begin + (u32(y) << level) + (u32(z) << (2u * level));
+            var previous = MISS;
+            for (var x = x0; x <= x1; x++) {
+                let id = irr_voxels[row + u32(x)];
+                // Merged cells repeat along the row.
+                if (id != previous) {
+                    previous = id;
+                    irr_point_cell(id, p, l.margin, best, work);
+                }
+            }
+        }
+    }
+}
+
+// Ring `r` of top cells around top cell `c`, clipped to the lattice: the rows of its z and y
+// faces along x (clipped to the ball of the best distance), the two cells of its x faces in
+// the other rows.
+fn irr_point_ring(l: PointLattice, p: vec3<f32>, c: vec3<i32>, r: i32, best: ptr<function, GpuHit>, work: ptr<function, u32>) {
+    let lo = max(c - r, vec3<i32>(0));
+    let hi = min(c + r, l.dims - 1);
+    for (var z = lo.z; z <= hi.z; z++) {
+        let dz = lattice_slab_dist(l, p, 2, z);
+        if (dz * dz > (*best).t) { continue; }
+        for (var y = lo.y; y <= hi.y; y++) {
+            let dy = lattice_slab_dist(l, p, 1, y);
+            let yz = dz * dz + dy * dy;
+            if (yz > (*best).t) { continue; }
+            if (abs(z - c.z) == r || abs(y - c.y) == r) {
+                for (var x = lo.x; x <= hi.x; x++) {
+                    let dx = lattice_slab_dist(l, p, 0, x);
+                    if (dx * dx + yz > (*best).t) {
+                        // Past the point, every later cell of the row is farther still.
+                        if (l.min.x + f32(x) * l.cell.x > p.x) { break; }
+                        continue;
+                    }
+                    irr_point_top(l, p, vec3<i32>(x, y, z), best, work);
+                }
+            } else {
+                if (c.x - r >= 0) { irr_point_top(l, p, vec3<i32>(c.x - r, y, z), best, work); }
+                if (c.x + r < l.dims.x) { irr_point_top(l, p, vec3<i32>(c.x + r, y, z), best, work); }
+            }
+        }
+    }
+}
+
+// The nearest point to `p`; the answer of IrregularGrid::closest_point, tie rule included.
+// `work` gets the top cells and cells visited plus the triangles measured.
+fn irr_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
+    var best = GpuHit(inf(), MISS, 0.0, 0.0);
+    let s = scene.shift;
+    let top_cell = scene.cell_size * f32(1u << s);
+    let top_dims = vec3<i32>(scene.dims >> vec3<u32>(s));
+    let l = PointLattice(scene.bounds_min, top_cell, top_dims, point_cell_margin(top_cell));
+    // The point's voxel (as the ray walks map a point), then its top cell.
+    let voxel = clamp(world_to_grid(p), vec3<i32>(0), vec3<i32>(scene.dims) - 1);
+    let c = min(voxel >> vec3<u32>(s), top_dims - 1);
+    let out2 = lattice_out2(l, p);
+    let last_ring = lattice_last_ring(l, c);
+    for (var r = 0; r <= last_ring; r++) {
+        // Strict: a ring that may hold something as near as the best is still searched.
+        if (lattice_ring_bound(l, p, c, r, out2) > best.t) { break; }
+        irr_point_ring(l, p, c, r, &best, work);
+    }
+    return best;
+}
