@@ -81,15 +81,17 @@ impl NativeScene {
 #[pymethods]
 impl NativeScene {
     #[new]
-    fn new(accel: &str, grid: &str, irregular: &str, backend: &str) -> PyResult<Self> {
+    #[pyo3(signature = (accel, grid, irregular, backend, gpu_variant = ""))]
+    fn new(accel: &str, grid: &str, irregular: &str, backend: &str, gpu_variant: &str) -> PyResult<Self> {
         Ok(NativeScene {
-            inner: RwLock::new(QueryScene::new(options(accel, grid, irregular, backend, "")?)),
+            inner: RwLock::new(QueryScene::new(options(accel, grid, irregular, backend, gpu_variant)?)),
         })
     }
 
     /// Rebuilds a scene from `parts()` (unpickling).
     #[staticmethod]
-    #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (accel, grid, irregular, backend, next_id, geometries, gpu_variant = ""))]
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
     fn from_parts(
         py: Python<'_>,
         accel: &str,
@@ -103,8 +105,9 @@ impl NativeScene {
             PyReadonlyArray2<'_, u32>,
             PyReadonlyArray2<'_, f32>,
         )>,
+        gpu_variant: &str,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend, "")?;
+        let opts = options(accel, grid, irregular, backend, gpu_variant)?;
         let mut parts = Vec::with_capacity(geometries.len());
         for (id, v, f, t) in &geometries {
             parts.push((

@@ -35,8 +35,8 @@ def soup(n=200, seed=1):
 TRANSFORM = np.array([[0.0, -1.2, 0.0, 0.3], [1.2, 0.0, 0.0, -0.2], [0.0, 0.0, 1.2, 0.1], [0, 0, 0, 1]])
 
 
-def build(accel="auto", backend="cpu"):
-    s = Scene(accel=accel, backend=backend)
+def build(accel="auto", backend="cpu", gpu_variant=""):
+    s = Scene(accel=accel, backend=backend, gpu_variant=gpu_variant)
     cv, cf = cube()
     sv, sf = soup()
     assert s.add_triangles(cv, cf, TRANSFORM) == 0
@@ -180,6 +180,28 @@ def test_points_on_the_gpu(accel):
         k = names.index((ans["geometry_ids"][i], ans["primitive_ids"][i]))
         assert d[k] == pytest.approx(d.min(), rel=1e-4, abs=1e-5)
         assert np.linalg.norm(ans["points"][i] - p) == pytest.approx(dist[i], rel=1e-4, abs=1e-5)
+
+
+def test_gpu_variants_reach_the_scene():
+    """``gpu_variant`` picks the GPU kernels (here the 8-wide BVH): the same answers as the
+    default kernels, kept across pickling; a bad one is a ValueError naming the argument."""
+    with pytest.raises(ValueError, match="gpu_variant"):
+        Scene(gpu_variant="bvh=wide4")
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        pytest.skip("GRIDTRACE_SKIP_GPU is set")
+    wide, tris, _ = build("bvh", backend="gpu", gpu_variant="bvh=wide8")
+    default, _, _ = build("bvh", backend="gpu")
+    rng = np.random.default_rng(8)
+    o = rng.uniform(-3, 3, (500, 3))
+    rays = np.c_[o, rng.uniform(-1, 1, (500, 3)) - o * 0.3].astype(np.float32)
+    a, b = wide.cast_rays(rays), default.cast_rays(rays)
+    assert np.isfinite(a["t_hit"]).any() and np.isinf(a["t_hit"]).any()
+    np.testing.assert_allclose(a["t_hit"], b["t_hit"], rtol=1e-6)
+    pts = rng.uniform(-3, 3, (200, 3))
+    np.testing.assert_allclose(wide.compute_distance(pts), default.compute_distance(pts), rtol=1e-6, atol=1e-7)
+    again = pickle.loads(pickle.dumps(wide))
+    assert again._params[-1] == "bvh=wide8"
+    np.testing.assert_array_equal(again.cast_rays(rays)["t_hit"], a["t_hit"])
 
 
 def test_sign_and_occupancy_against_the_winding_number():

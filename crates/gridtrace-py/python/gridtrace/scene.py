@@ -74,7 +74,7 @@ def _mat4(transform) -> Optional[np.ndarray]:
 class Scene:
     """Several triangle meshes, each with an id and a 4x4 transform, for ray and point queries.
 
-    ``accel``, ``grid``, ``irregular`` and ``backend`` are as for :class:`gridtrace.Mesh`
+    ``accel``, ``grid``, ``irregular``, ``backend`` and ``gpu_variant`` are as for :class:`gridtrace.Mesh`
     (``"auto"``: the BVH, on a hardware GPU if there is one, else on the CPU). Ray queries
     (``cast_rays``, ``test_occlusions``) and the nearest-point search of the point queries
     (``compute_closest_points``, ``compute_distance``, the distance of
@@ -88,9 +88,9 @@ class Scene:
 
     INVALID_ID = INVALID_ID
 
-    def __init__(self, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = ""):
-        self._params = (accel, grid, irregular, backend)
-        self._native = _NativeScene(accel, grid, irregular, backend)
+    def __init__(self, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "", gpu_variant: str = ""):
+        self._params = (accel, grid, irregular, backend, gpu_variant)
+        self._native = _NativeScene(accel, grid, irregular, backend, gpu_variant)
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -251,13 +251,13 @@ class Scene:
 
     def __setstate__(self, state):
         self._params = tuple(state["params"])
-        accel, grid, irregular, backend = self._params
+        accel, grid, irregular, backend, gpu_variant = self._params
         # Serialisers (Dask's among them) may hand arrays back as views of a buffer: make them
         # the C-ordered arrays the native side reads.
         geometries = [
             (int(i), _f32(v), np.require(f, dtype=np.uint32, requirements="CA"), _f32(t)) for i, v, f, t in state["geometries"]
         ]
-        self._native = _NativeScene.from_parts(accel, grid, irregular, backend, int(state["next_id"]), geometries)
+        self._native = _NativeScene.from_parts(accel, grid, irregular, backend, int(state["next_id"]), geometries, gpu_variant)
 
     def __repr__(self) -> str:
         return f"gridtrace.Scene({len(self.geometry_ids)} geometries, {self.triangle_count} triangles, accel={self._params[0]!r}, backend={self._params[3]!r})"
