@@ -1,7 +1,8 @@
 //! Device faults that cannot be made on demand (a lost device, memory gone), injected through
 //! the paths real ones take (`GpuContext::inject_fault`): with `auto` the tracer hands the work
 //! to the CPU for good and says so, the frame is still made and equals the CPU's; with `gpu`
-//! the fault is an error that names it. A scene over the device's limits is
+//! the fault is an error that names it; the query meshes (`TraceMesh`) follow the same rule.
+//! A scene over the device's limits is
 //! `backend_sends_a_scene_the_device_cannot_hold_to_the_cpu` in gpu.rs.
 //!
 //! Fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1 skips knowingly.
@@ -116,4 +117,89 @@ fn auto_update_after_a_lost_device() {
     let got = tracer.render(&scene.camera, &scene.lights, &opts).unwrap();
     assert!(got.image.pixels == want.pixels);
     assert_eq!(tracer.take_notes().len(), 1);
+}
+
+/// The query meshes (`rays`, Python's `Mesh` and `Scene`) follow the tracer's rule: under
+/// `auto` a GPU fault hands the mesh to the CPU for good, the query that met it is answered
+/// there (the CPU's answers, exactly), and `gpu_failure` and `device` say so; under `gpu` the
+/// fault is the caller's error.
+#[test]
+fn query_meshes_hand_a_failed_gpu_to_the_cpu_under_auto() {
+    use gridtrace::query::{QueryOptions, TraceMesh};
+    if skip_gpu() {
+        return;
+    }
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let vertices: Vec<[f32; 3]> = scene
+        .accel
+        .tris
+        .iter()
+        .flat_map(|t| {
+            let v0 = glam::Vec3::from(t.v0);
+            [v0, v0 + glam::Vec3::from(t.e1), v0 + glam::Vec3::from(t.e2)].map(|v| v.to_array())
+        })
+        .collect();
+    let faces: Vec<[u32; 3]> = (0..scene.accel.tris.len() as u32)
+        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+        .collect();
+    let rays = gridtrace::testing::ray_set(&scene.accel, 3000, 7);
+    let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) =
+        rays.iter().map(|r| (r.origin.to_array(), r.dir.to_array())).unzip();
+    let points: Vec<[f32; 3]> = origins.iter().take(500).copied().collect();
+    for fault in [Fault::DeviceLost, Fault::OutOfMemory] {
+        let opts = QueryOptions {
+            accel: "bvh".parse().unwrap(),
+            backend: Backend::Auto,
+            ..QueryOptions::default()
+        };
+        let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts).unwrap();
+        let want = mesh
+            .intersect_with(Backend::Cpu, &origins, &dirs, 0.0, f32::INFINITY)
+            .unwrap();
+        let want_occ = mesh.occluded_with(Backend::Cpu, &origins, &dirs, 0.0, 1.0).unwrap();
+        let want_points = mesh.closest_points_with(Backend::Cpu, &points).unwrap();
+        let ctx = ctx();
+        mesh.adopt_device_for_auto(ctx.clone()).unwrap();
+        assert!(mesh.device().starts_with("gpu"), "{}", mesh.device());
+        mesh.intersect(&origins, &dirs, 0.0, f32::INFINITY).unwrap();
+        assert!(
+            mesh.last_gpu_batch().is_some(),
+            "{fault:?}: the first batch ran on the GPU"
+        );
+        ctx.inject_fault(fault);
+        let got = mesh.intersect(&origins, &dirs, 0.0, f32::INFINITY).unwrap();
+        assert!(
+            got.t == want.t && got.tri == want.tri,
+            "{fault:?}: the CPU's answers differ"
+        );
+        let why = mesh.gpu_failure().unwrap_or_else(|| panic!("{fault:?}: no note"));
+        assert!(why.contains("the GPU failed") && why.contains("CPU"), "{why}");
+        assert!(mesh.device().starts_with("cpu") && mesh.device().contains("the GPU failed"));
+        // For good, and for every query.
+        assert_eq!(mesh.occluded(&origins, &dirs, 0.0, 1.0).unwrap(), want_occ);
+        let got_points = mesh.closest_points(&points).unwrap();
+        assert!(
+            got_points
+                .iter()
+                .zip(&want_points)
+                .all(|(a, b)| a.tri == b.tri && a.dist_sq == b.dist_sq)
+        );
+    }
+    // Under `gpu` the fault is the caller's, and the mesh stays on the GPU.
+    let opts = QueryOptions {
+        accel: "bvh".parse().unwrap(),
+        ..QueryOptions::default()
+    };
+    let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts).unwrap();
+    let ctx = ctx();
+    mesh.adopt_device_for_auto(ctx.clone()).unwrap();
+    ctx.inject_fault(Fault::DeviceLost);
+    match mesh.intersect_with(Backend::Gpu, &origins, &dirs, 0.0, f32::INFINITY) {
+        Err(Error::Gpu(m)) => assert!(m.contains("lost"), "{m}"),
+        other => panic!("expected a device-lost error, got {:?}", other.map(|h| h.t.len())),
+    }
+    assert!(mesh.gpu_failure().is_none());
 }

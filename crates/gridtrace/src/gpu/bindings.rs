@@ -171,9 +171,20 @@ mod tests {
         // within what desktop and mobile Vulkan, Metal (31 buffers a stage, uniforms included)
         // and D3D12 allow.
         assert_eq!(storage_buffers_needed(), 15);
+        // Group 1 is a different table in each kernel that binds one (indirect, pack, a
+        // structure's arrays): indices are unique within a table, names across all of them.
+        let tables = [
+            FRAME_BINDINGS.iter().map(|b| b.index).collect::<Vec<_>>(),
+            INDIRECT_BINDINGS.iter().map(|b| b.index).collect(),
+            PACK_BINDINGS.iter().map(|b| b.index).collect(),
+        ];
+        for t in &tables {
+            for (i, a) in t.iter().enumerate() {
+                assert!(!t[i + 1..].contains(a), "binding {a} twice in a table");
+            }
+        }
         for (i, a) in rows.iter().enumerate() {
             for b in &rows[i + 1..] {
-                assert!(!(a.0 == b.0 && a.1 == b.1), "binding {}/{} twice", a.0, a.1);
                 assert_ne!(a.2, b.2, "name {} twice", a.2);
             }
         }

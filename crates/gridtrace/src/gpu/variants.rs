@@ -377,12 +377,13 @@ mod tests {
         }
     }
 
-    /// The suite is the default and one change of each key, each exactly one key off.
+    /// The suite is the default and one change of each key (both other appends), each
+    /// exactly one key off.
     #[test]
     fn suite_is_default_plus_single_changes() {
         let s = GpuVariants::suite();
         assert_eq!(s[0], GpuVariants::default());
-        assert_eq!(s.len(), 1 + KEYS.len());
+        assert_eq!(s.len(), 1 + KEYS.len() + 1);
         for v in &s[1..] {
             assert_eq!(v.changes().split(',').count(), 1, "{v}");
             assert_ne!(v.changes(), "default");

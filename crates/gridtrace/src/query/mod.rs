@@ -39,6 +39,7 @@ use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
 
 mod batch;
+mod fallback;
 mod hits;
 mod points;
 
@@ -90,6 +91,11 @@ pub struct TraceMesh {
     gpu_variants: GpuVariants,
     /// The GPU renderer, opened on first use (or the reason it could not be).
     gpu: OnceLock<std::result::Result<(Mutex<GpuRenderer>, String), String>>,
+    /// Why `auto` queries left the GPU for good, once a GPU fault sent them to the CPU
+    /// (`fallback.rs`).
+    gpu_failed: Mutex<Option<String>>,
+    /// `auto` traces on the renderer a test gave it (`adopt_device_for_auto`).
+    auto_on_adopted: std::sync::atomic::AtomicBool,
 }
 
 impl TraceMesh {
@@ -169,6 +175,8 @@ impl TraceMesh {
             backend: opts.backend,
             gpu_variants: opts.gpu_variants,
             gpu: OnceLock::new(),
+            gpu_failed: Mutex::new(None),
+            auto_on_adopted: Default::default(),
         };
         // Open the GPU now when it was asked for, so a missing adapter is reported at once.
         if opts.backend == Backend::Gpu {
@@ -205,8 +213,9 @@ impl TraceMesh {
 
     fn open_renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
         // `auto` passes a software adapter over for the CPU tracer (`Backend::open_device`),
-        // before compiling or uploading anything to it.
-        if !backend.traces_on_gpu() {
+        // before compiling or uploading anything to it; and leaves a GPU that failed.
+        let adopted = backend == Backend::Auto && self.auto_on_adopted.load(std::sync::atomic::Ordering::Relaxed);
+        if (!backend.traces_on_gpu() && !adopted) || (backend == Backend::Auto && self.failed_over()) {
             return Ok(None);
         }
         let opened = self.gpu.get_or_init(|| {
@@ -238,8 +247,9 @@ impl TraceMesh {
                 .and_then(|r| r.as_ref().ok())
                 .map(|(_, d)| d.clone())
                 .unwrap_or_else(cpu),
-            Ok(None) => match self.gpu.get() {
-                Some(Err(e)) => format!("{} (no GPU: {e})", cpu()),
+            Ok(None) => match (self.gpu.get(), self.gpu_failure()) {
+                (_, Some(why)) if backend == Backend::Auto => format!("{} ({why})", cpu()),
+                (Some(Err(e)), _) => format!("{} (no GPU: {e})", cpu()),
                 _ => cpu(),
             },
             Err(e) => format!("unavailable: {e}"),
@@ -294,32 +304,49 @@ impl TraceMesh {
     ) -> Result<Hits> {
         let n = batch_len(origins, dirs)?;
         check_interval(t_min, t_max)?;
-        let mut out = Hits::zeroed(n);
-        match self.renderer(backend)? {
-            Some(gpu) => {
-                let mut done = 0;
-                for_chunks(origins, dirs, n, |rays| {
-                    let hits = locked(gpu).intersect(rays, t_min, t_max, self.accel)?;
-                    let r = done..done + hits.len();
-                    done = r.end;
-                    out.pieces(r, CPU_BATCH)
-                        .zip(hits.par_chunks(CPU_BATCH))
-                        .for_each(|(mut piece, hits)| {
-                            for (i, &h) in hits.iter().enumerate() {
-                                self.write_hit(&mut piece, i, h, self.scene.accel.hit_normal(&h));
-                            }
-                        });
-                    Ok(())
+        self.on_backend(
+            backend,
+            |gpu| self.intersect_on_gpu(gpu, origins, dirs, n, t_min, t_max),
+            || {
+                let mut out = Hits::zeroed(n);
+                on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, mut piece| {
+                    // Each hit goes straight into the output as its ray is done.
+                    let accel = &self.scene.accel;
+                    accel.intersect_batch_each(rays, t_min, t_max, self.accel, |i, hit, normal| {
+                        self.write_hit(&mut piece, i, hit, normal)
+                    });
                 })?;
-            }
-            None => on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, mut piece| {
-                // Each hit goes straight into the output as its ray is done.
-                let accel = &self.scene.accel;
-                accel.intersect_batch_each(rays, t_min, t_max, self.accel, |i, hit, normal| {
-                    self.write_hit(&mut piece, i, hit, normal)
+                Ok(out)
+            },
+        )
+    }
+
+    /// `intersect_with`'s GPU side: the batch in chunks, each chunk's hits written out in
+    /// parallel.
+    fn intersect_on_gpu(
+        &self,
+        gpu: &Mutex<GpuRenderer>,
+        origins: &[[f32; 3]],
+        dirs: &[[f32; 3]],
+        n: usize,
+        t_min: f32,
+        t_max: f32,
+    ) -> Result<Hits> {
+        let mut out = Hits::zeroed(n);
+        let mut done = 0;
+        for_chunks(origins, dirs, n, |rays| {
+            let hits = locked(gpu).intersect(rays, t_min, t_max, self.accel)?;
+            let r = done..done + hits.len();
+            done = r.end;
+            out.pieces(r, CPU_BATCH)
+                .zip(hits.par_chunks(CPU_BATCH))
+                .for_each(|(mut piece, hits)| {
+                    for (i, &h) in hits.iter().enumerate() {
+                        self.write_hit(&mut piece, i, h, self.scene.accel.hit_normal(&h));
+                    }
                 });
-            })?,
-        }
+            Ok(())
+        })?;
         Ok(out)
     }
 
@@ -355,23 +382,24 @@ impl TraceMesh {
     ) -> Result<Vec<bool>> {
         let n = batch_len(origins, dirs)?;
         check_interval(t_min, t_max)?;
-        match self.renderer(backend)? {
-            Some(gpu) => {
+        self.on_backend(
+            backend,
+            |gpu| {
                 let mut out = Vec::with_capacity(n);
                 for_chunks(origins, dirs, n, |rays| {
                     out.extend(locked(gpu).occluded(rays, t_min, t_max, self.accel)?);
                     Ok(())
                 })?;
                 Ok(out)
-            }
-            None => {
+            },
+            || {
                 let mut out = vec![false; n];
                 on_cpu_batches(origins, dirs, n, out.par_chunks_mut(CPU_BATCH), |rays, piece| {
                     self.scene.accel.occluded_batch(rays, t_min, t_max, self.accel, piece)
                 })?;
                 Ok(out)
-            }
-        }
+            },
+        )
     }
 
     /// Closest hits for prepared rays; triangle indices are the kept triangles' (see
@@ -414,16 +442,17 @@ impl TraceMesh {
         on_cpu: impl Fn(&[Ray], &mut [T]) + Sync + Send,
         fill: T,
     ) -> Result<Vec<T>> {
-        match self.renderer(backend)? {
-            Some(g) => on_gpu(&mut locked(g)),
-            None => {
+        self.on_backend(
+            backend,
+            |g| on_gpu(&mut locked(g)),
+            || {
                 let mut out = vec![fill; rays.len()];
                 out.par_chunks_mut(CPU_BATCH)
                     .zip(rays.par_chunks(CPU_BATCH))
                     .for_each(|(o, r)| on_cpu(r, o));
                 Ok(out)
-            }
-        }
+            },
+        )
     }
 
     /// What the last batch on the GPU took (wall and GPU time, round trips, bytes), with the

@@ -17,9 +17,10 @@ impl TraceMesh {
 
     /// `closest_points` on a given backend.
     pub fn closest_points_with(&self, backend: Backend, points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
-        match self.renderer(backend)? {
-            Some(gpu) => locked(gpu).closest_points(&self.scene.accel.tris, points, self.accel),
-            None => closest_points(&self.scene.accel, points),
-        }
+        self.on_backend(
+            backend,
+            |gpu| locked(gpu).closest_points(&self.scene.accel.tris, points, self.accel),
+            || closest_points(&self.scene.accel, points),
+        )
     }
 }
