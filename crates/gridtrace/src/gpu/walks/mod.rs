@@ -120,7 +120,7 @@ pub struct WalkUpload<'a> {
 pub fn upload_of<'a>(scene: &'a PreparedScene, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
     let upload = match &scene.accel.structure {
         Structure::Grid(g) => grid::upload(g),
-        Structure::Bvh(b) => bvh::upload(b, scene.accel.bounds(), variants)?,
+        Structure::Bvh(b) => bvh::upload(b, &scene.accel.tris, scene.accel.bounds(), variants)?,
         Structure::Irregular(g) => irregular::upload(g),
         Structure::Brute(_) => brute::upload(scene.accel.bounds()),
     };

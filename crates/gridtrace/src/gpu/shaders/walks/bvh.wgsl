@@ -20,6 +20,10 @@ struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32
 // uploads them.
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(1) @binding(1) var<storage, read> bvh_prims: array<u32>;
+// The triangles in leaf order (`bvh_tris[k]` is `tris[bvh_prims[k]]`): a leaf's triangles are
+// read one after another, without a dependent load of each index; the index is read only for
+// a hit.
+@group(1) @binding(2) var<storage, read> bvh_tris: array<GpuTri>;
 
 struct BoxPair { t0: f32, t1: f32, hit0: bool, hit1: bool }
 
@@ -93,9 +97,8 @@ fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
         for (var k = first; k < first + count; k++) {
             if (COUNT_WORK) { *work += 1u; }
-            let tri = bvh_prims[k];
-            let h = intersect_tri(tris[tri], o, d, t_min, best.t);
-            if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
+            let h = intersect_tri(bvh_tris[k], o, d, t_min, best.t);
+            if (h.w != 0.0) { best = GpuHit(h.x, bvh_prims[k], h.y, h.z); }
         }
         entry = bvh_pop(&st, o, inv, t_min, best.t * T_SLOP);
     }
@@ -115,7 +118,7 @@ fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
         let first = entry & LEAF_FIRST_MAX;
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
         for (var k = first; k < first + count; k++) {
-            if (intersect_tri(tris[bvh_prims[k]], o, d, t_min, t_max).w != 0.0) { return true; }
+            if (intersect_tri(bvh_tris[k], o, d, t_min, t_max).w != 0.0) { return true; }
         }
         entry = bvh_pop(&st, o, inv, t_min, t_max * T_SLOP);
     }

@@ -27,6 +27,8 @@ struct Bvh8Node { p_e: vec4<u32>, info: vec4<u32>, q0: vec4<u32>, q1: vec4<u32>,
 
 @group(1) @binding(0) var<storage, read> bvh8_nodes: array<Bvh8Node>;
 @group(1) @binding(1) var<storage, read> bvh8_prims: array<u32>;
+// The triangles in leaf order (`bvh8_tris[i]` is `tris[bvh8_prims[i]]`), as bvh.wgsl's.
+@group(1) @binding(2) var<storage, read> bvh8_tris: array<GpuTri>;
 
 // As bvh_inv_dir (bvh.wgsl, not in this module): zero components replaced by +-DIR_TINY.
 fn bvh8_inv_dir(d: vec3<f32>) -> vec3<f32> {
@@ -123,10 +125,9 @@ fn bvh8_walk(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, any: bool, work
         let first = info.y + bvh8_tris_below(info.z, slot);
         for (var i = first; i < first + count; i++) {
             if (COUNT_WORK) { *work += 1u; }
-            let tri = bvh8_prims[i];
-            let h = intersect_tri(tris[tri], o, d, t_min, best.t);
+            let h = intersect_tri(bvh8_tris[i], o, d, t_min, best.t);
             if (h.w != 0.0) {
-                best = GpuHit(h.x, tri, h.y, h.z);
+                best = GpuHit(h.x, bvh8_prims[i], h.y, h.z);
                 if (any) { return best; }
             }
         }

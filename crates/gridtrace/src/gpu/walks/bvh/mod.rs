@@ -11,7 +11,8 @@ pub mod wide8;
 use std::borrow::Cow;
 
 use super::{Lattice, WalkSpec, WalkUpload, bytes};
-use crate::accel::{Aabb, BvhAccel};
+use crate::accel::{Aabb, BvhAccel, TriAccel};
+use crate::gpu::layout::GpuTri;
 use crate::gpu::constants::BVH_STACK;
 use crate::gpu::variants::{BvhLayout, BvhStack, GpuVariants};
 use crate::{Error, Result};
@@ -23,8 +24,16 @@ const WIDE8: &str = include_str!("../../shaders/walks/bvh8.wgsl");
 const WIDE8_PRIVATE: &str = include_str!("../../shaders/walks/bvh8_stack_private.wgsl");
 const WIDE8_SHORT: &str = include_str!("../../shaders/walks/bvh8_stack_short.wgsl");
 
-const BINARY_ARRAYS: &[(&str, &str)] = &[("bvh_nodes", "bvh_nodes"), ("refs", "bvh_prims")];
-const WIDE8_ARRAYS: &[(&str, &str)] = &[("bvh8_nodes", "bvh8_nodes"), ("refs", "bvh8_prims")];
+const BINARY_ARRAYS: &[(&str, &str)] = &[
+    ("bvh_nodes", "bvh_nodes"),
+    ("refs", "bvh_prims"),
+    ("leaf triangles", "bvh_tris"),
+];
+const WIDE8_ARRAYS: &[(&str, &str)] = &[
+    ("bvh8_nodes", "bvh8_nodes"),
+    ("refs", "bvh8_prims"),
+    ("leaf triangles", "bvh8_tris"),
+];
 
 /// Binary nodes, private stack: today's walk, the default.
 pub const SPEC: WalkSpec = WalkSpec {
@@ -73,7 +82,15 @@ pub fn spec_for(variants: &GpuVariants) -> &'static WalkSpec {
     }
 }
 
-pub fn upload<'a>(b: &'a BvhAccel, bounds: Aabb, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
+/// The BVH's arrays for `variants`: its nodes, its triangle references in leaf order, and the
+/// triangles themselves in that order (`GpuTri`, 48 bytes a reference), so that a leaf's
+/// triangles are read one after another and the reference only for a hit.
+pub fn upload<'a>(
+    b: &'a BvhAccel,
+    tris: &[TriAccel],
+    bounds: Aabb,
+    variants: &GpuVariants,
+) -> Result<WalkUpload<'a>> {
     if b.bvh.depth >= BVH_STACK as usize {
         // The builder bounds the depth below the stack (`STACK`); checked all the same, since
         // an overflow would lose hits silently.
@@ -86,13 +103,18 @@ pub fn upload<'a>(b: &'a BvhAccel, bounds: Aabb, variants: &GpuVariants) -> Resu
     let arrays = match variants.bvh {
         BvhLayout::Binary => {
             let nodes = binary::gpu_nodes(&b.bvh)?;
-            vec![Cow::Owned(bytemuck::cast_slice(&nodes).to_vec()), bytes(&b.bvh.prims)]
+            vec![
+                Cow::Owned(bytemuck::cast_slice(&nodes).to_vec()),
+                bytes(&b.bvh.prims),
+                leaf_tris(tris, &b.bvh.prims),
+            ]
         }
         BvhLayout::Wide8 => {
             let w = wide8::Wide8::build(b)?;
             vec![
                 Cow::Owned(bytemuck::cast_slice(&w.nodes).to_vec()),
                 Cow::Owned(bytemuck::cast_slice(&w.prims).to_vec()),
+                leaf_tris(tris, &w.prims),
             ]
         }
     };
@@ -102,4 +124,10 @@ pub fn upload<'a>(b: &'a BvhAccel, bounds: Aabb, variants: &GpuVariants) -> Resu
         // The walk reads only the bounds (ray generation clips to them).
         lattice: Lattice::bounds_only(bounds),
     })
+}
+
+/// The triangles `prims` names, in its order, as the GPU reads them.
+fn leaf_tris<'a>(tris: &[TriAccel], prims: &[u32]) -> Cow<'a, [u8]> {
+    let leaf: Vec<GpuTri> = prims.iter().map(|&p| GpuTri::new(&tris[p as usize])).collect();
+    Cow::Owned(bytemuck::cast_slice(&leaf).to_vec())
 }
