@@ -156,6 +156,26 @@ pub trait AccelStructure: Sized {
         all_hits_brute(tris, ray, t_min, t_max, out)
     }
 
+    /// How many triangles each ray of a batch hits with `t_min < t < t_max`, into `out`
+    /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists. On this thread. Default:
+    /// `all_hits` ray by ray; a structure overrides it with a walk that counts without listing.
+    fn count_hits_batch(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        out: &mut [u32],
+    ) {
+        let mut hits = Vec::new();
+        for (r, o) in rays.iter().zip(out) {
+            hits.clear();
+            self.all_hits(tris, r, t_min, t_max, kind, &mut hits);
+            *o = hits.len() as u32;
+        }
+    }
+
     /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.
     fn occluded_batch(
         &self,

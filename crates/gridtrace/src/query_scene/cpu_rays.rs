@@ -18,7 +18,7 @@ const BATCH: usize = 1024;
 
 /// Rays `r` for the tracer into `made`; whether any was replaced by the stand-in.
 #[inline]
-fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
+pub(super) fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
     made.clear();
     let mut bad = false;
     for q in r {
