@@ -246,15 +246,19 @@ pub fn closest_point(accel: &Accel, p: Vec3) -> ClosestPoint {
     accel.closest_point(p)
 }
 
+/// Points per work item: enough to keep a structure's interleaved searches busy, few enough to
+/// balance the cores.
+const BATCH: usize = 256;
+
 /// The nearest points of a batch, `out[i]` for `points[i]`, on all cores. An error (not a
 /// panic) when the structure is stale (`Accel::check_current`).
 pub fn closest_points(accel: &Accel, points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
     accel.check_current()?;
-    Ok(points
-        .par_iter()
-        .with_min_len(256)
-        .map(|p| closest_point(accel, Vec3::from(*p)))
-        .collect())
+    let mut out = vec![ClosestPoint::NONE; points.len()];
+    out.par_chunks_mut(BATCH)
+        .zip(points.par_chunks(BATCH))
+        .for_each(|(o, p)| accel.closest_points_batch(p, o));
+    Ok(out)
 }
 
 #[cfg(test)]

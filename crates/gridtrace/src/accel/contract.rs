@@ -145,6 +145,15 @@ pub trait AccelStructure: Sized {
         closest_point_brute(tris, p)
     }
 
+    /// The nearest points of a batch, `out[i]` for `points[i]`: `closest_point`'s answers. On
+    /// this thread. Default: point by point; a structure overrides it where it can interleave
+    /// the searches.
+    fn closest_points_batch(&self, tris: &[TriAccel], points: &[[f32; 3]], out: &mut [ClosestPoint]) {
+        for (o, p) in out.iter_mut().zip(points) {
+            *o = self.closest_point(tris, Vec3::from(*p));
+        }
+    }
+
     /// Every hit with `t_min < t < t_max`, each triangle at most once, appended to `out` in no
     /// particular order (count and list queries: `query_scene`). A ray through an edge or a
     /// vertex shared by several triangles hits each of them that the triangle test accepts

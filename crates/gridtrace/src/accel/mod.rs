@@ -374,6 +374,13 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::closest_point(s, &self.tris, p))
     }
 
+    /// The nearest points of a batch, `out[i]` for `points[i]`, on this thread
+    /// (`AccelStructure::closest_points_batch`): `closest_point`'s answers.
+    pub fn closest_points_batch(&self, points: &[[f32; 3]], out: &mut [closest::ClosestPoint]) {
+        assert_eq!(points.len(), out.len(), "one answer per point");
+        dispatch!(&self.structure, s => AccelStructure::closest_points_batch(s, &self.tris, points, out))
+    }
+
     /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a
     /// miss.
     pub fn hit_normal(&self, hit: &Hit) -> Vec3 {

@@ -132,6 +132,16 @@ impl AccelStructure for BvhAccel {
         BvhAccel::count_hits_batch(self, rays, t_min, t_max, out)
     }
 
+    /// The searches interleaved with prefetching (`closest.rs`).
+    fn closest_points_batch(
+        &self,
+        _tris: &[TriAccel],
+        points: &[[f32; 3]],
+        out: &mut [crate::accel::closest::ClosestPoint],
+    ) {
+        BvhAccel::closest_points_batch(self, points, out)
+    }
+
     /// Branch and bound over the structure's own cells or nodes (`closest.rs`).
     fn closest_point(&self, _tris: &[TriAccel], p: glam::Vec3) -> crate::accel::closest::ClosestPoint {
         BvhAccel::closest_point(self, p)

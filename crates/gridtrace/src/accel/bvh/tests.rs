@@ -566,3 +566,53 @@ fn counting_equals_listing_and_brute_force() {
     // An empty batch counts nothing and touches nothing.
     accel.count_hits_batch(&[], 0.0, f32::INFINITY, &mut []);
 }
+
+/// The interleaved nearest-point searches (`closest_points_batch`) give each point the answer
+/// of its own search (`closest_point`) and of brute force, bit for bit: points near and far,
+/// inside the mesh's box and outside, and points that are not finite (answered `INVALID` in
+/// place, the searches around them unaffected).
+#[test]
+fn closest_point_batches_equal_single_searches_and_brute_force() {
+    use crate::accel::closest::{ClosestPoint, closest_point_brute};
+    let mut rng = crate::util::Rng::new(0xC105E);
+    let (positions, triangles) = random_mesh(&mut rng, 2000);
+    let tris = tris_of(&positions, &triangles);
+    let accel = BvhAccel::build(&tris);
+    let mut points: Vec<[f32; 3]> = (0..1500)
+        .map(|i| {
+            let s = if i % 3 == 0 { 4.0 } else { 1.2 };
+            [rng.range(-s, s), rng.range(-s, s), rng.range(-s, s)]
+        })
+        .collect();
+    points[7] = [f32::NAN, 0.0, 0.0];
+    points[8] = [0.0, f32::INFINITY, 0.0];
+    let mut got = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_batch(&points, &mut got);
+    let bits = |c: &ClosestPoint| {
+        (
+            c.point.to_array().map(f32::to_bits),
+            c.dist_sq.to_bits(),
+            c.tri,
+            c.u.to_bits(),
+            c.v.to_bits(),
+        )
+    };
+    for (i, (p, g)) in points.iter().zip(&got).enumerate() {
+        let p = Vec3::from(*p);
+        assert_eq!(
+            bits(g),
+            bits(&accel.closest_point(p)),
+            "point {i}: batch against single"
+        );
+        let truth = closest_point_brute(&tris, p);
+        assert_eq!(
+            (g.tri, g.dist_sq.to_bits()),
+            (truth.tri, truth.dist_sq.to_bits()),
+            "point {i}: against brute force"
+        );
+    }
+    assert!(
+        got[7].dist_sq.is_nan() && got[8].tri == u32::MAX,
+        "non-finite points are INVALID"
+    );
+}
