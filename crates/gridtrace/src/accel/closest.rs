@@ -230,8 +230,9 @@ pub(crate) fn tri_box_within(t: &TriAccel, p: Vec3, dist_sq: f32) -> bool {
     let d = (lo - p).max(p - hi).max(Vec3::ZERO);
     let scale = lo.abs().max(hi.abs()).max(p.abs()).max_element();
     let reach = dist_sq.sqrt() + scale * (16.0 * f32::EPSILON);
-    // `!(far)`, so that NaN (never, for finite input) would keep the triangle.
-    !(d.length_squared() > reach * reach)
+    // Dropped only when certainly greater, so that NaN (never, for finite input) would keep
+    // the triangle.
+    d.length_squared().partial_cmp(&(reach * reach)) != Some(std::cmp::Ordering::Greater)
 }
 
 /// Squared distance from `p` to the box `[lo, hi]` (0 inside).
