@@ -1,7 +1,8 @@
 //! Point queries (`compute_closest_points`, `compute_distance`, `compute_signed_distance`,
 //! `compute_occupancy`) on the CPU's cores: nearest points through the structure's own search
-//! (`AccelStructure::closest_point`: shells of cells on the grids, branch and bound on the
-//! BVH; the brute-force answer, tie rule included, `accel::closest`).
+//! (`AccelStructure::closest_points_batch`: shells of cells on the grids, branch and bound on
+//! the BVH, eight searches interleaved; the brute-force answer, tie rule included,
+//! `accel::closest`).
 //!
 //! **Inside or outside** is decided by the generalised winding number of all the scene's
 //! faces together (`accel::winding`, fast far-field sums): inside when it exceeds 0.5. For
