@@ -17,8 +17,9 @@ use gridtrace::gpu::layout::{GpuBvh8Node, GpuBvhNode, GpuTri};
 use gridtrace::gpu::walks::bvh::wide8::{self, Wide8, Wide8Work};
 use rayon::prelude::*;
 
-/// Bytes a triangle test reads: its index in leaf order and its 48-byte record (`GpuTri`).
-const TRI_BYTES: u64 = 4 + std::mem::size_of::<GpuTri>() as u64;
+/// Bytes a triangle test reads: its 48-byte record (`GpuTri`), stored in leaf order (the
+/// 4-byte reference is read only for a hit, left out here).
+const TRI_BYTES: u64 = std::mem::size_of::<GpuTri>() as u64;
 
 #[derive(Default, Clone, Copy)]
 struct Work {

@@ -3,7 +3,7 @@ run on the same data: Open3D (open3d-cpu), embreex (Embree 4), trimesh (its Embr
 its numpy engine on a subset), NVIDIA Warp on its CPU device, fcpw (closest points).
 
     pip install open3d-cpu embreex trimesh rtree scipy warp-lang fcpw   # open3d needs libusb-1.0-0
-    python crates/gridtrace-py/bench/queries_vs_peers.py [mesh] [--n 1000000] [--rounds 2]
+    python crates/gridtrace-py/bench/queries_vs_peers.py [mesh ...] [--n 1000000] [--rounds 2]
 
 Workloads: 1M camera rays in image order (a 1000 x 1000 pinhole camera), 1M incoherent rays
 (from a sphere around the mesh towards random points of its box), 1M points uniform in the
@@ -96,17 +96,24 @@ def agree(a, b, tol=1e-4):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("mesh", nargs="?", default=str(ROOT.parent / "shared/data/meshes/bunny/bun_zipper.ply"))
+    ap.add_argument("mesh", nargs="*", default=[str(ROOT.parent / "shared/data/meshes/bunny/bun_zipper.ply")],
+                    help="one or more meshes, benchmarked one after another")
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--grid-points", type=int, default=20_000, help="points for the grids' nearest-point searches")
-    ap.add_argument("--subset", type=int, default=2_000, help="rays/points for the slow trimesh paths")
+    ap.add_argument("--subset", type=int, default=2_000, help="rays/points for the slow trimesh paths (fewer on meshes over 70k triangles)")
     a = ap.parse_args()
+    for path in a.mesh:
+        bench_mesh(a, path)
+
+
+def bench_mesh(a, path):
+    """Every row on one mesh, its table printed at the end."""
     threads = os.cpu_count() or 1
 
     import trimesh
 
-    tm = trimesh.load(a.mesh, process=False)
+    tm = trimesh.load(path, process=False)
     v = np.asarray(tm.vertices, np.float64)
     f = np.asarray(tm.faces, np.int64)
     lo, hi = v.min(0), v.max(0)
@@ -117,7 +124,7 @@ def main():
     inc = np.hstack([o, d]).astype(np.float32)
     pts = np.random.default_rng(3).uniform(lo, hi, (a.n, 3)).astype(np.float32)
     load = os.getloadavg()
-    print(f"mesh {a.mesh}: {len(f)} triangles; {a.n} rays/points; {threads} cores; load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+    print(f"\nmesh {path}: {len(f)} triangles; {a.n} rays/points; {threads} cores; load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     print(f"gridtrace {gridtrace.__version__}")
 
     # gridtrace's answers, the reference every peer's agreement is measured against.
@@ -220,7 +227,11 @@ def peers(a, b, truth, v, f, cam, inc, pts, threads):
                       lambda r, name=name: (r == truth[name + " occ"]).mean())
         from trimesh.ray.ray_triangle import RayMeshIntersector
 
-        n = a.subset
+        # The numpy engine's memory and time grow with the mesh: on the Dragon (871k
+        # triangles) 2,000 rays ran over 10 minutes, and the process grew to 23 GB before it
+        # was killed (2026-11-26). The subset shrinks in proportion to the triangles past the
+        # Bunny's 70k (at least 100).
+        n = max(100, min(a.subset, round(a.subset * 70_000 / len(f))))
         slow = RayMeshIntersector(mesh)
         o64, d64 = inc[:n, :3].astype(np.float64), inc[:n, 3:].astype(np.float64)
         slow.intersects_first(o64[:10], d64[:10])  # builds its r-tree

@@ -217,6 +217,24 @@ pub fn closest_point_brute(tris: &[TriAccel], p: Vec3) -> ClosestPoint {
     best
 }
 
+/// Whether triangle `t`'s box may hold a point within `dist_sq` of `p` (ties included): false
+/// only when it is certainly farther, so a triangle it drops could not beat a best at
+/// `dist_sq`. The box comes from vertices rebuilt as `v0 + e` (rounded) and is widened by a
+/// rounding bound of the coordinates involved (16 ulps of the largest), as the BVH's leaf test
+/// (`bvh/closest.rs`).
+#[inline(always)]
+pub(crate) fn tri_box_within(t: &TriAccel, p: Vec3, dist_sq: f32) -> bool {
+    let v0 = Vec3::from(t.v0);
+    let (v1, v2) = (v0 + Vec3::from(t.e1), v0 + Vec3::from(t.e2));
+    let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
+    let d = (lo - p).max(p - hi).max(Vec3::ZERO);
+    let scale = lo.abs().max(hi.abs()).max(p.abs()).max_element();
+    let reach = dist_sq.sqrt() + scale * (16.0 * f32::EPSILON);
+    // Dropped only when certainly greater, so that NaN (never, for finite input) would keep
+    // the triangle.
+    d.length_squared().partial_cmp(&(reach * reach)) != Some(std::cmp::Ordering::Greater)
+}
+
 /// Squared distance from `p` to the box `[lo, hi]` (0 inside).
 #[inline(always)]
 pub(crate) fn box_dist_sq(p: Vec3, lo: Vec3, hi: Vec3) -> f32 {
@@ -229,15 +247,19 @@ pub fn closest_point(accel: &Accel, p: Vec3) -> ClosestPoint {
     accel.closest_point(p)
 }
 
+/// Points per work item: enough to keep a structure's interleaved searches busy, few enough to
+/// balance the cores.
+const BATCH: usize = 256;
+
 /// The nearest points of a batch, `out[i]` for `points[i]`, on all cores. An error (not a
 /// panic) when the structure is stale (`Accel::check_current`).
 pub fn closest_points(accel: &Accel, points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
     accel.check_current()?;
-    Ok(points
-        .par_iter()
-        .with_min_len(256)
-        .map(|p| closest_point(accel, Vec3::from(*p)))
-        .collect())
+    let mut out = vec![ClosestPoint::NONE; points.len()];
+    out.par_chunks_mut(BATCH)
+        .zip(points.par_chunks(BATCH))
+        .for_each(|(o, p)| accel.closest_points_batch(p, o));
+    Ok(out)
 }
 
 #[cfg(test)]

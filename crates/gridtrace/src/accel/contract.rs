@@ -145,6 +145,15 @@ pub trait AccelStructure: Sized {
         closest_point_brute(tris, p)
     }
 
+    /// The nearest points of a batch, `out[i]` for `points[i]`: `closest_point`'s answers. On
+    /// this thread. Default: point by point; a structure overrides it where it can interleave
+    /// the searches.
+    fn closest_points_batch(&self, tris: &[TriAccel], points: &[[f32; 3]], out: &mut [ClosestPoint]) {
+        for (o, p) in out.iter_mut().zip(points) {
+            *o = self.closest_point(tris, Vec3::from(*p));
+        }
+    }
+
     /// Every hit with `t_min < t < t_max`, each triangle at most once, appended to `out` in no
     /// particular order (count and list queries: `query_scene`). A ray through an edge or a
     /// vertex shared by several triangles hits each of them that the triangle test accepts
@@ -154,6 +163,26 @@ pub trait AccelStructure: Sized {
     /// bits).
     fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
         all_hits_brute(tris, ray, t_min, t_max, out)
+    }
+
+    /// How many triangles each ray of a batch hits with `t_min < t < t_max`, into `out`
+    /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists. On this thread. Default:
+    /// `all_hits` ray by ray; a structure overrides it with a walk that counts without listing.
+    fn count_hits_batch(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        kind: AccelKind,
+        out: &mut [u32],
+    ) {
+        let mut hits = Vec::new();
+        for (r, o) in rays.iter().zip(out) {
+            hits.clear();
+            self.all_hits(tris, r, t_min, t_max, kind, &mut hits);
+            *o = hits.len() as u32;
+        }
     }
 
     /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.

@@ -360,10 +360,25 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::all_hits(s, &self.tris, ray, t_min, t_max, kind, out))
     }
 
+    /// How many triangles each ray of a batch hits with `t_min < t < t_max` (`out[i]` for
+    /// `rays[i]`; `AccelStructure::count_hits_batch`): the number of hits `all_hits` lists.
+    pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [u32]) {
+        assert_eq!(rays.len(), out.len(), "one count per ray");
+        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
+        dispatch!(&self.structure, s => AccelStructure::count_hits_batch(s, &self.tris, rays, t_min, t_max, kind, out))
+    }
+
     /// The point of the mesh nearest to `p`, through the structure's own search
     /// (`AccelStructure::closest_point`; brute force where it has none).
     pub fn closest_point(&self, p: Vec3) -> closest::ClosestPoint {
         dispatch!(&self.structure, s => AccelStructure::closest_point(s, &self.tris, p))
+    }
+
+    /// The nearest points of a batch, `out[i]` for `points[i]`, on this thread
+    /// (`AccelStructure::closest_points_batch`): `closest_point`'s answers.
+    pub fn closest_points_batch(&self, points: &[[f32; 3]], out: &mut [closest::ClosestPoint]) {
+        assert_eq!(points.len(), out.len(), "one answer per point");
+        dispatch!(&self.structure, s => AccelStructure::closest_points_batch(s, &self.tris, points, out))
     }
 
     /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a

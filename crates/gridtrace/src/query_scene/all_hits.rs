@@ -15,6 +15,7 @@
 use rayon::prelude::*;
 
 use super::batch::ray_of;
+use super::cpu_rays::make_into;
 use super::{QueryScene, merged::Merged};
 use crate::Result;
 use crate::accel::Hit;
@@ -33,8 +34,12 @@ pub struct Intersections {
     pub t_hit: Vec<f32>,
 }
 
-/// Rays a worker takes at a time.
+/// Rays a worker lists at a time.
 const BATCH: usize = 256;
+
+/// Rays a worker counts at a time (as the closest-hit batches, `cpu_rays.rs`: enough to keep
+/// the interleaved walk's lanes full, few enough to balance the cores).
+const COUNT_BATCH: usize = 1024;
 
 impl QueryScene {
     /// How many faces each ray hits with `t > 0` (Open3D's `count_intersections`; see the
@@ -42,19 +47,27 @@ impl QueryScene {
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
         let m = self.merged()?;
         let mut out = vec![0u32; rays.len()];
-        if m.mesh.is_none() {
+        let (Some(mesh), Some(accel)) = (m.mesh.as_ref(), m.accel()) else {
             return Ok(out);
-        }
-        m.accel().map_or(Ok(()), |a| a.check_current())?;
-        out.par_chunks_mut(BATCH)
-            .zip(rays.par_chunks(BATCH))
-            .for_each_init(Vec::new, |hits, (o, r)| {
-                for (o, r) in o.iter_mut().zip(r) {
-                    hits.clear();
-                    ray_hits(&m, r, hits);
-                    *o = hits.len() as u32;
-                }
-            });
+        };
+        accel.check_current()?;
+        let kind = mesh.accel();
+        out.par_chunks_mut(COUNT_BATCH)
+            .zip(rays.par_chunks(COUNT_BATCH))
+            .for_each_init(
+                || Vec::with_capacity(COUNT_BATCH),
+                |made, (o, r)| {
+                    let bad = make_into(r, made);
+                    accel.count_hits_batch(made, 0.0, f32::INFINITY, kind, o);
+                    if bad {
+                        for (o, q) in o.iter_mut().zip(r) {
+                            if ray_of(q).is_none() {
+                                *o = 0;
+                            }
+                        }
+                    }
+                },
+            );
         Ok(out)
     }
 

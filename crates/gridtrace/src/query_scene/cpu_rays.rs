@@ -18,7 +18,7 @@ const BATCH: usize = 1024;
 
 /// Rays `r` for the tracer into `made`; whether any was replaced by the stand-in.
 #[inline]
-fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
+pub(super) fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
     made.clear();
     let mut bad = false;
     for q in r {
@@ -30,7 +30,8 @@ fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
     bad
 }
 
-/// Closest hits of `rays` into `out` (filled with misses beforehand).
+/// Closest hits of `rays` into `out`: `t` and the ids written for every ray, uv and normal for
+/// hits only (a miss keeps the zeros of `RayHits::zeroed`).
 pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut RayHits) {
     let accel = &mesh.prepared().accel;
     let kind = mesh.accel();
@@ -55,6 +56,8 @@ pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut Ra
                         p[i] = prim;
                         uv[i] = [hit.u, hit.v];
                         n[i] = normal.normalize().to_array();
+                    } else {
+                        (t[i], g[i], p[i]) = (f32::INFINITY, INVALID_ID, INVALID_ID);
                     }
                 });
                 if bad {

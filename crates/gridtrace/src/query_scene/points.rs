@@ -1,9 +1,10 @@
 //! Point queries (`compute_closest_points`, `compute_distance`, `compute_signed_distance`,
 //! `compute_occupancy`): nearest points through the structure's own search, on the CPU's cores
-//! (`AccelStructure::closest_point`: shells of cells on the grids, branch and bound on the
-//! BVH; the brute-force answer, tie rule included, `accel::closest`) or, where the backend
-//! traces on a GPU, there (`GpuRenderer::closest_points`: the same searches in WGSL, the same
-//! answers within rounding). The inside/outside decision (winding numbers) stays on the CPU.
+//! (`AccelStructure::closest_points_batch`: shells of cells on the grids, branch and bound on
+//! the BVH, eight searches interleaved; the brute-force answer, tie rule included,
+//! `accel::closest`) or, where the backend traces on a GPU, there (`GpuRenderer::closest_points`:
+//! the same searches in WGSL, the same answers within rounding). The inside/outside decision
+//! (winding numbers) stays on the CPU.
 //!
 //! **Inside or outside** is decided by the generalised winding number of all the scene's
 //! faces together (`accel::winding`, fast far-field sums): inside when it exceeds 0.5. For

@@ -34,15 +34,16 @@ impl QueryScene {
     /// The closest hit of each ray with `t > 0` (Open3D's `cast_rays`).
     pub fn cast_rays(&self, rays: &[[f32; 6]]) -> Result<RayHits> {
         let m = self.merged()?;
-        let mut out = RayHits::misses(rays.len());
         let Some(mesh) = m.mesh.as_ref() else {
-            return Ok(out);
+            return Ok(RayHits::misses(rays.len()));
         };
         if !self.opts.backend.traces_on_gpu() {
             mesh.prepared().accel.check_current()?;
+            let mut out = RayHits::zeroed(rays.len());
             cpu_rays::cast(&m, mesh, rays, &mut out);
             return Ok(out);
         }
+        let mut out = RayHits::misses(rays.len());
         for (c, chunk) in rays.chunks(CHUNK).enumerate() {
             let (made, good) = make(chunk);
             let hits = mesh.intersect_rays(&made, 0.0, f32::INFINITY)?;

@@ -4,14 +4,20 @@
 //! leaf block tested four triangles at a time (`TriAccel4::intersect`, bit for bit the scalar
 //! test). A triangle lives in exactly one leaf (the builder splits objects, not space), so no
 //! hit is reported twice.
+//!
+//! Counting (`count_hits_batch`) walks the same nodes and leaves and adds up each block's hit
+//! lanes instead of listing them: no hit is built, no input index looked up, and the rays of a
+//! batch are interleaved with prefetching as the closest-hit batches are.
 
-use glam::Vec4;
+use glam::{Vec3, Vec4};
 
 use super::BvhAccel;
 use super::T_SLOP;
-use super::box_test::BoxRay;
+use super::box_test::{BoxRay, Pending};
 use super::build::{LEAF_BLOCK, STACK};
 use super::wide::{ChildRef, WIDTH};
+#[cfg(target_arch = "x86_64")]
+use crate::accel::simd::has_avx2;
 use crate::accel::{Hit, Ray};
 
 /// Entries the stack can hold: a node pops one entry and pushes at most `WIDTH`, and no path
@@ -57,5 +63,151 @@ impl BvhAccel {
                 }
             }
         }
+    }
+}
+
+impl BvhAccel {
+    /// How many triangles each ray of a batch hits with `t_min < t < t_max`, into `out`
+    /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists, by the same walk (the same
+    /// box test, so the same leaves; the same triangle test, so the same hits), without listing
+    /// them. `COUNT_LANES` rays are walked interleaved, each step prefetching what its ray
+    /// visits next (as `intersect_batch`), compiled for AVX2 where the CPU has it.
+    pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+        assert_eq!(rays.len(), out.len(), "one count per ray");
+        if self.blocks.is_empty() {
+            out.fill(0);
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2() {
+            // SAFETY: the CPU has AVX2, checked just above.
+            return unsafe { self.count_hits_avx2(rays, t_min, t_max, out) };
+        }
+        self.count_hits_body::<false>(rays, t_min, t_max, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn count_hits_avx2(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+        self.count_hits_body::<true>(rays, t_min, t_max, out)
+    }
+
+    #[inline(always)]
+    pub(super) fn count_hits_body<const AVX: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+        let idle = Ray::new(Vec3::ZERO, Vec3::X);
+        let mut walks: [CountWalk; COUNT_LANES] = std::array::from_fn(|_| {
+            let mut w = CountWalk {
+                r: BoxRay::new(&idle),
+                origin: [Vec4::ZERO; 3],
+                dir: [Vec4::ZERO; 3],
+                stack: [ChildRef(0); CAPACITY],
+                len: 0,
+                current: ChildRef(0),
+                count: 0,
+            };
+            w.reset(&idle);
+            w
+        });
+        let mut ray_of = [usize::MAX; COUNT_LANES];
+        let mut next = 0;
+        let mut active = 0;
+        for (w, i) in walks.iter_mut().zip(&mut ray_of) {
+            if next < rays.len() {
+                w.reset(&rays[next]);
+                *i = next;
+                next += 1;
+                active += 1;
+            }
+        }
+        while active > 0 {
+            for (w, i) in walks.iter_mut().zip(&mut ray_of) {
+                if *i == usize::MAX {
+                    continue;
+                }
+                if w.step::<AVX>(self, t_min, t_max) {
+                    out[*i] = w.count;
+                    if next < rays.len() {
+                        w.reset(&rays[next]);
+                        *i = next;
+                        next += 1;
+                    } else {
+                        *i = usize::MAX;
+                        active -= 1;
+                        continue;
+                    }
+                }
+                self.prefetch(&Pending {
+                    child: w.current,
+                    t_enter: 0.0,
+                });
+            }
+        }
+    }
+}
+
+/// Rays counted at once by `count_hits_batch` (as `walk::LANES`: enough in flight to cover
+/// memory latency).
+const COUNT_LANES: usize = 8;
+
+/// One ray's counting walk, resumable one node or leaf at a time so that several rays can be
+/// interleaved. Order does not matter for a count: children are pushed as entered, unsorted.
+struct CountWalk {
+    r: BoxRay,
+    origin: [Vec4; 3],
+    dir: [Vec4; 3],
+    /// Entries below `len` are written before they are read.
+    stack: [ChildRef; CAPACITY],
+    len: usize,
+    /// The node or leaf the next step visits.
+    current: ChildRef,
+    count: u32,
+}
+
+impl CountWalk {
+    #[inline(always)]
+    fn reset(&mut self, ray: &Ray) {
+        self.r = BoxRay::new(ray);
+        self.origin = ray.origin.to_array().map(Vec4::splat);
+        self.dir = ray.dir.to_array().map(Vec4::splat);
+        self.len = 0;
+        self.current = ChildRef(0);
+        self.count = 0;
+    }
+
+    /// Visits `current` and pops the next entry; true when the walk is over.
+    #[inline(always)]
+    fn step<const AVX: bool>(&mut self, accel: &BvhAccel, t_min: f32, t_max: f32) -> bool {
+        let child = self.current;
+        if child.count() == 0 {
+            let node = &accel.nodes[child.index() as usize];
+            #[cfg(target_arch = "x86_64")]
+            let mut entered = if AVX {
+                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
+                unsafe { self.r.entered_avx2(node, t_min, t_max * T_SLOP) }
+            } else {
+                self.r.enter(node, t_min, t_max * T_SLOP).1
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let mut entered = self.r.enter(node, t_min, t_max * T_SLOP).1;
+            while entered != 0 {
+                let k = entered.trailing_zeros() as usize;
+                entered &= entered - 1;
+                self.stack[self.len] = node.child[k];
+                self.len += 1;
+            }
+        } else {
+            let first = child.index() as usize;
+            for b in first..first + (child.count() as usize).div_ceil(LEAF_BLOCK) {
+                // An unused lane is all zeros: its determinant is 0, never a hit.
+                let h = accel.blocks[b].intersect(&self.origin, &self.dir, t_min, t_max);
+                self.count += h.mask().count_ones();
+            }
+        }
+        if self.len == 0 {
+            return true;
+        }
+        self.len -= 1;
+        self.current = self.stack[self.len];
+        false
     }
 }

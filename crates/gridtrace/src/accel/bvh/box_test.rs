@@ -165,6 +165,15 @@ impl BoxRay {
         _mm256_movemask_ps(entered).count_ones() as usize
     }
 
+    /// The mask of the boxes `enter` enters, in AVX instructions (the same bits: `enter_avx2_packed`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn entered_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> u32 {
+        let (_, entered) = self.enter_avx2_packed(n, t_min, t_max);
+        std::arch::x86_64::_mm256_movemask_ps(entered) as u32
+    }
+
     /// `enter` in AVX instructions, for the tests.
     #[cfg(all(test, target_arch = "x86_64"))]
     #[target_feature(enable = "avx2")]

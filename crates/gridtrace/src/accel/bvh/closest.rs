@@ -13,7 +13,9 @@
 use glam::{Vec3, Vec4};
 
 use super::BvhAccel;
+use super::box_test::Pending;
 use super::build::{LEAF_BLOCK, STACK};
+use super::walk::LANES;
 use super::wide::{ChildRef, WIDTH, WideNode};
 use crate::accel::TriAccel4;
 use crate::accel::closest::ClosestPoint;
@@ -29,45 +31,69 @@ impl BvhAccel {
         if !p.is_finite() {
             return ClosestPoint::INVALID;
         }
-        let mut best = ClosestPoint::NONE;
         if self.blocks.is_empty() {
-            return best;
+            return ClosestPoint::NONE;
         }
-        // (squared distance to the box, child); the root as a node at distance 0.
-        let mut stack = [(0.0f32, ChildRef(0)); CAPACITY];
-        let mut len = 1;
-        while len > 0 {
-            len -= 1;
-            let (d2, child) = stack[len];
-            if d2 > best.dist_sq {
-                continue;
+        let mut w = PointWalk::new(p);
+        while !w.step(self) {}
+        w.best
+    }
+
+    /// The nearest points of a batch, `out[i]` for `points[i]`: `closest_point`'s answers,
+    /// faster. Each search is a chain of dependent loads (a node, then the child it picks);
+    /// `LANES` searches run at once, one step each in turn, each step prefetching the node or
+    /// leaf its search visits next, so that one search's wait overlaps the others' work (as the
+    /// ray batches do, `walk.rs`). Each search keeps its own stack and order: the same answer,
+    /// bit for bit.
+    pub fn closest_points_batch(&self, points: &[[f32; 3]], out: &mut [ClosestPoint]) {
+        assert_eq!(points.len(), out.len(), "one answer per point");
+        if self.blocks.is_empty() {
+            for (o, p) in out.iter_mut().zip(points) {
+                *o = self.closest_point(Vec3::from(*p));
             }
-            if child.count() > 0 {
-                self.closest_in_leaf(child, p, &mut best);
-                continue;
-            }
-            let node = &self.nodes[child.index() as usize];
-            let dist = child_box_dist_sq(node, p);
-            // The children worth opening, sorted far to near so the nearest is popped first.
-            let mut open = [(0.0f32, ChildRef(0)); WIDTH];
-            let mut n = 0;
-            for (k, &d) in dist.iter().enumerate() {
-                // An unused slot has the empty box (low > high); its distance says nothing.
-                let used = node.planes[0][0][k] <= node.planes[1][0][k];
-                if used && d <= best.dist_sq {
-                    let mut at = n;
-                    while at > 0 && open[at - 1].0 < d {
-                        open[at] = open[at - 1];
-                        at -= 1;
-                    }
-                    open[at] = (d, node.child[k]);
-                    n += 1;
+            return;
+        }
+        let mut walks: [PointWalk; LANES] = std::array::from_fn(|_| PointWalk::new(Vec3::ZERO));
+        let mut point_of = [usize::MAX; LANES];
+        let mut next = 0;
+        // Starts the next finite point's search in `w` (answering non-finite ones on the way);
+        // false when none is left.
+        let mut start = |w: &mut PointWalk, i: &mut usize, out: &mut [ClosestPoint]| {
+            while next < points.len() {
+                let p = Vec3::from(points[next]);
+                next += 1;
+                if p.is_finite() {
+                    w.reset(p);
+                    *i = next - 1;
+                    return true;
                 }
+                out[next - 1] = ClosestPoint::INVALID;
             }
-            stack[len..len + n].copy_from_slice(&open[..n]);
-            len += n;
+            *i = usize::MAX;
+            false
+        };
+        let mut active = 0;
+        for (w, i) in walks.iter_mut().zip(&mut point_of) {
+            active += start(w, i, out) as usize;
         }
-        best
+        while active > 0 {
+            for (w, i) in walks.iter_mut().zip(&mut point_of) {
+                if *i == usize::MAX {
+                    continue;
+                }
+                if w.step(self) {
+                    out[*i] = w.best;
+                    if !start(w, i, out) {
+                        active -= 1;
+                        continue;
+                    }
+                }
+                self.prefetch(&Pending {
+                    child: w.current.1,
+                    t_enter: 0.0,
+                });
+            }
+        }
     }
 
     /// Offers the triangles of leaf `child` to `best`: a block's four triangle boxes are
@@ -114,6 +140,81 @@ fn tri_box_near_mask(block: &TriAccel4, p: Vec3, dist_sq: f32) -> u32 {
     let reach = Vec4::splat(dist_sq.sqrt()) + slack;
     let far = d2.cmpgt(reach * reach);
     !far.bitmask() & 0xf
+}
+
+/// One point's branch and bound, resumable one node or leaf at a time (so that a batch can
+/// interleave several).
+struct PointWalk {
+    p: Vec3,
+    best: ClosestPoint,
+    /// (squared distance to the box, child): the entries still to open. Entries below `len`
+    /// are written before they are read.
+    stack: [(f32, ChildRef); CAPACITY],
+    len: usize,
+    /// The entry the next step opens.
+    current: (f32, ChildRef),
+}
+
+impl PointWalk {
+    fn new(p: Vec3) -> PointWalk {
+        PointWalk {
+            p,
+            best: ClosestPoint::NONE,
+            stack: [(0.0, ChildRef(0)); CAPACITY],
+            len: 0,
+            // The root as a node at distance 0.
+            current: (0.0, ChildRef(0)),
+        }
+    }
+
+    /// Starts over at `p`, keeping the stack's memory where it is.
+    #[inline(always)]
+    fn reset(&mut self, p: Vec3) {
+        self.p = p;
+        self.best = ClosestPoint::NONE;
+        self.len = 0;
+        self.current = (0.0, ChildRef(0));
+    }
+
+    /// Opens `current` (a leaf's triangles, or a node's children worth opening, pushed far to
+    /// near so that the nearest is popped first), then pops the next entry that may still
+    /// hold something nearer than the best. True when none is left.
+    #[inline(always)]
+    fn step(&mut self, accel: &BvhAccel) -> bool {
+        let (_, child) = self.current;
+        if child.count() > 0 {
+            accel.closest_in_leaf(child, self.p, &mut self.best);
+        } else {
+            let node = &accel.nodes[child.index() as usize];
+            let dist = child_box_dist_sq(node, self.p);
+            let mut open = [(0.0f32, ChildRef(0)); WIDTH];
+            let mut n = 0;
+            for (k, &d) in dist.iter().enumerate() {
+                // An unused slot has the empty box (low > high); its distance says nothing.
+                let used = node.planes[0][0][k] <= node.planes[1][0][k];
+                if used && d <= self.best.dist_sq {
+                    let mut at = n;
+                    while at > 0 && open[at - 1].0 < d {
+                        open[at] = open[at - 1];
+                        at -= 1;
+                    }
+                    open[at] = (d, node.child[k]);
+                    n += 1;
+                }
+            }
+            self.stack[self.len..self.len + n].copy_from_slice(&open[..n]);
+            self.len += n;
+        }
+        while self.len > 0 {
+            self.len -= 1;
+            let entry = self.stack[self.len];
+            if entry.0 <= self.best.dist_sq {
+                self.current = entry;
+                return false;
+            }
+        }
+        true
+    }
 }
 
 /// Squared distance from `p` to each child box of `node` (0 inside), lane by lane: eight

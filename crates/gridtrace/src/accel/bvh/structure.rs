@@ -119,6 +119,29 @@ impl AccelStructure for BvhAccel {
         BvhAccel::all_hits(self, ray, t_min, t_max, out)
     }
 
+    /// The all-hits walk counting instead of listing, rays interleaved (`all_hits.rs`).
+    fn count_hits_batch(
+        &self,
+        _tris: &[TriAccel],
+        rays: &[Ray],
+        t_min: f32,
+        t_max: f32,
+        _kind: AccelKind,
+        out: &mut [u32],
+    ) {
+        BvhAccel::count_hits_batch(self, rays, t_min, t_max, out)
+    }
+
+    /// The searches interleaved with prefetching (`closest.rs`).
+    fn closest_points_batch(
+        &self,
+        _tris: &[TriAccel],
+        points: &[[f32; 3]],
+        out: &mut [crate::accel::closest::ClosestPoint],
+    ) {
+        BvhAccel::closest_points_batch(self, points, out)
+    }
+
     /// Branch and bound over the structure's own cells or nodes (`closest.rs`).
     fn closest_point(&self, _tris: &[TriAccel], p: glam::Vec3) -> crate::accel::closest::ClosestPoint {
         BvhAccel::closest_point(self, p)

@@ -44,13 +44,6 @@ impl Lattice {
         std::array::from_fn(|a| (((p[a] - self.min[a]) / self.cell[a]).floor() as i32).clamp(0, self.dims[a] - 1))
     }
 
-    /// How far outside the lattice `p` is, per axis (0 inside).
-    #[inline]
-    pub fn outside(&self, p: Vec3) -> Vec3 {
-        let max = self.min + Vec3::new(self.dims[0] as f32, self.dims[1] as f32, self.dims[2] as f32) * self.cell;
-        (self.min - p).max(p - max).max(Vec3::ZERO)
-    }
-
     /// Cell `c`'s box, grown by the margin.
     #[inline(always)]
     pub fn cell_box(&self, c: [i32; 3]) -> (Vec3, Vec3) {
@@ -64,23 +57,20 @@ impl Lattice {
 /// empty), `visit(cell, best)` for every cell that may hold something nearer. `visit` returns
 /// how many cells the enumeration may advance along the row or column it is walking (1, or
 /// more where it knows that many cells around this one are empty: a Chebyshev distance, which
-/// holds along every axis).
+/// holds along every axis). `prefetch(cell)` is told of cells a few rows ahead of their visit
+/// (it may ask for their memory; it must not change what `visit` finds).
 ///
-/// `upper` is a squared distance within which some triangle is known to lie (infinite if none
-/// is known): the uniform grid knows one from the proximity cloud (ring `first_ring` holds a
-/// non-empty cell), so it needs no rings at all.
-///
-/// Two phases. Rings, until one holds a triangle or `upper` is known: then a distance bounds
-/// the search. Then the cells of that ball outside the rings visited (or known empty), row by
-/// row along x, nearest rows first, each row clipped to the ball as the best distance is when
-/// it starts (rows the ball misses are skipped without reading a cell).
+/// Two phases. Rings, until one holds a triangle: then the best distance bounds the search.
+/// Then the cells of that ball outside the rings visited (or known empty), row by row along
+/// x, nearest rows first, each row clipped to the ball as the best distance is when it starts
+/// (rows the ball misses are skipped without reading a cell).
 #[inline]
 pub(crate) fn search(
     lat: &Lattice,
     p: Vec3,
     first_ring: u32,
-    upper: f32,
     best: &mut ClosestPoint,
+    prefetch: impl Fn([i32; 3]),
     mut visit: impl FnMut([i32; 3], &mut ClosestPoint) -> i32,
 ) {
     let dims = lat.dims;
@@ -92,12 +82,12 @@ pub(crate) fn search(
     // No ring is farther than the farthest lattice edge.
     let last_ring = (0..3).map(|a| c[a].max(dims[a] - 1 - c[a])).max().unwrap_or(0);
     let mut r = first_ring.min(i32::MAX as u32) as i32;
-    // Phase one: whole rings while nothing bounds the search.
-    while r <= last_ring && !best.dist_sq.min(upper).is_finite() {
+    // Phase one: whole rings until one holds a triangle.
+    while r <= last_ring && !best.dist_sq.is_finite() {
         ring(lat, c, r, best, &mut visit);
         r += 1;
     }
-    let bound = |best: &ClosestPoint| best.dist_sq.min(upper);
+    let bound = |best: &ClosestPoint| best.dist_sq;
     if r > last_ring || lower_bound(lat, p, c, r, out2) > bound(best) {
         return;
     }
@@ -114,7 +104,30 @@ pub(crate) fn search(
         if dz * dz > bound(best) {
             continue;
         }
-        for y in outward(c[1], y0, y1) {
+        // Where the walks of row (y, z) start: outward from the point's cell, or from the
+        // faces of the visited block for a row through it.
+        let starts = |y: i32| {
+            if (y - c[1]).abs() <= done && (z - c[2]).abs() <= done {
+                (c[0] + done + 1, c[0] - done - 1)
+            } else {
+                (c[0], c[0] - 1)
+            }
+        };
+        let ys = outward(c[1], y0, y1);
+        // Each row's first cells are a cache miss of their own (a row is a few cells): they
+        // are asked for `AHEAD` rows before their turn, so that several rows' misses overlap.
+        for y in ys.clone().take(AHEAD) {
+            let (right, left) = starts(y);
+            prefetch([right.clamp(0, dims[0] - 1), y, z]);
+            prefetch([left.clamp(0, dims[0] - 1), y, z]);
+        }
+        let mut ahead = ys.clone().skip(AHEAD);
+        for y in ys {
+            if let Some(y) = ahead.next() {
+                let (right, left) = starts(y);
+                prefetch([right.clamp(0, dims[0] - 1), y, z]);
+                prefetch([left.clamp(0, dims[0] - 1), y, z]);
+            }
             let dy = slab_dist(lat, p, 1, y);
             let yz = dz * dz + dy * dy;
             if yz > bound(best) {
@@ -123,12 +136,7 @@ pub(crate) fn search(
             // Outward from the point along x, each side stopping where the ball (as it is now)
             // ends.
             let (x0, x1) = (0, dims[0] - 1);
-            let inside_block = (y - c[1]).abs() <= done && (z - c[2]).abs() <= done;
-            let (right, left) = if inside_block {
-                (c[0] + done + 1, c[0] - done - 1)
-            } else {
-                (c[0], c[0] - 1)
-            };
+            let (right, left) = starts(y);
             let mut walk = |from: i32, step: i32, best: &mut ClosestPoint| {
                 let mut x = from;
                 while (x0..=x1).contains(&x) {
@@ -145,9 +153,12 @@ pub(crate) fn search(
     }
 }
 
+/// Rows of the ball whose first cells are asked for ahead of their walk.
+const AHEAD: usize = 4;
+
 /// `lo..=hi` from `c` outwards: `c, c + 1, c - 1, c + 2, ...` (those in range; `c` is
 /// clamped into it).
-fn outward(c: i32, lo: i32, hi: i32) -> impl Iterator<Item = i32> {
+fn outward(c: i32, lo: i32, hi: i32) -> impl Iterator<Item = i32> + Clone {
     let c = c.clamp(lo, hi);
     let span = (hi - c).max(c - lo);
     (0..=span)

@@ -43,47 +43,54 @@ impl IrregularGrid {
             margin,
         };
         let t = self.top_dims;
-        search(&lat, p, 0, f32::INFINITY, &mut best, |c, best| {
-            let (lo, hi) = lat.cell_box(c);
-            if box_dist_sq(p, lo, hi) > best.dist_sq {
-                return 1;
-            }
-            let entry = self.entries[(c[0] as u32 + t.x * (c[1] as u32 + t.y * c[2] as u32)) as usize];
-            let level = entry & ((1 << LEVEL_BITS) - 1);
-            let begin = (entry >> LEVEL_BITS) as usize;
-            // The top cell's own lattice of 2^level cells per axis, walked row by row, each row
-            // clipped to the best point's ball as it is when the row starts.
-            let n = 1i32 << level;
-            let sub = Lattice {
-                min: lo + margin,
-                cell: top_cell / n as f32,
-                dims: [n; 3],
-                margin,
-            };
-            for z in 0..n {
-                let dz = slab_dist(&sub, p, 2, z);
-                for y in 0..n {
-                    let dy = slab_dist(&sub, p, 1, y);
-                    let rest = best.dist_sq - dz * dz - dy * dy;
-                    if rest.is_nan() || rest < 0.0 {
-                        continue;
-                    }
-                    let half = rest.sqrt() + margin.x;
-                    let x0 = sub.cell_of(Vec3::new(p.x - half, p.y, p.z))[0];
-                    let x1 = sub.cell_of(Vec3::new(p.x + half, p.y, p.z))[0];
-                    let row = begin + ((y << level) + (z << (2 * level))) as usize;
-                    let mut previous = u32::MAX;
-                    for &cell in &self.voxel_map[row + x0 as usize..=row + x1 as usize] {
-                        // Merged cells repeat along the row.
-                        if cell != previous {
-                            previous = cell;
-                            self.closest_offer_cell(tris, cell, p, margin, best);
+        search(
+            &lat,
+            p,
+            0,
+            &mut best,
+            |_| {},
+            |c, best| {
+                let (lo, hi) = lat.cell_box(c);
+                if box_dist_sq(p, lo, hi) > best.dist_sq {
+                    return 1;
+                }
+                let entry = self.entries[(c[0] as u32 + t.x * (c[1] as u32 + t.y * c[2] as u32)) as usize];
+                let level = entry & ((1 << LEVEL_BITS) - 1);
+                let begin = (entry >> LEVEL_BITS) as usize;
+                // The top cell's own lattice of 2^level cells per axis, walked row by row, each row
+                // clipped to the best point's ball as it is when the row starts.
+                let n = 1i32 << level;
+                let sub = Lattice {
+                    min: lo + margin,
+                    cell: top_cell / n as f32,
+                    dims: [n; 3],
+                    margin,
+                };
+                for z in 0..n {
+                    let dz = slab_dist(&sub, p, 2, z);
+                    for y in 0..n {
+                        let dy = slab_dist(&sub, p, 1, y);
+                        let rest = best.dist_sq - dz * dz - dy * dy;
+                        if rest.is_nan() || rest < 0.0 {
+                            continue;
+                        }
+                        let half = rest.sqrt() + margin.x;
+                        let x0 = sub.cell_of(Vec3::new(p.x - half, p.y, p.z))[0];
+                        let x1 = sub.cell_of(Vec3::new(p.x + half, p.y, p.z))[0];
+                        let row = begin + ((y << level) + (z << (2 * level))) as usize;
+                        let mut previous = u32::MAX;
+                        for &cell in &self.voxel_map[row + x0 as usize..=row + x1 as usize] {
+                            // Merged cells repeat along the row.
+                            if cell != previous {
+                                previous = cell;
+                                self.closest_offer_cell(tris, cell, p, margin, best);
+                            }
                         }
                     }
                 }
-            }
-            1
-        });
+                1
+            },
+        );
         best
     }
 

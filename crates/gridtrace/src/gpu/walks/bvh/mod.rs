@@ -12,8 +12,8 @@ use std::borrow::Cow;
 
 use super::{Lattice, WalkSpec, WalkUpload, bytes};
 use crate::accel::{Aabb, BvhAccel, TriAccel};
-use crate::gpu::layout::GpuTri;
 use crate::gpu::constants::BVH_STACK;
+use crate::gpu::layout::GpuTri;
 use crate::gpu::variants::{BvhLayout, BvhStack, GpuVariants};
 use crate::{Error, Result};
 
@@ -85,12 +85,7 @@ pub fn spec_for(variants: &GpuVariants) -> &'static WalkSpec {
 /// The BVH's arrays for `variants`: its nodes, its triangle references in leaf order, and the
 /// triangles themselves in that order (`GpuTri`, 48 bytes a reference), so that a leaf's
 /// triangles are read one after another and the reference only for a hit.
-pub fn upload<'a>(
-    b: &'a BvhAccel,
-    tris: &[TriAccel],
-    bounds: Aabb,
-    variants: &GpuVariants,
-) -> Result<WalkUpload<'a>> {
+pub fn upload<'a>(b: &'a BvhAccel, tris: &[TriAccel], bounds: Aabb, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
     if b.bvh.depth >= BVH_STACK as usize {
         // The builder bounds the depth below the stack (`STACK`); checked all the same, since
         // an overflow would lose hits silently.
