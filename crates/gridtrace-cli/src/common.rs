@@ -175,3 +175,39 @@ pub fn prepare(
 pub fn describe_structure(accel: &gridtrace::Accel) -> String {
     accel.summary()
 }
+
+/// What `render` and `rays` print of GPU work, with one meaning: wall time (first upload to the
+/// result in host memory) beside the device's timestamps, the parts it was cut into, host
+/// round trips and bytes each way.
+pub struct GpuFigures<'a> {
+    pub wall_ms: f64,
+    pub timings: &'a gridtrace::gpu::GpuTimings,
+    /// How many parts and their name (tiles of a frame, chunks of a batch).
+    pub parts: (u32, &'static str),
+    pub round_trips: u32,
+    pub uploaded_bytes: u64,
+    pub downloaded_bytes: u64,
+}
+
+/// Prints the `gpu` line (after `which`, e.g. "last frame: ") and, where the adapter has
+/// timestamps, the `stages` line; returns the device's milliseconds then.
+pub fn print_gpu_figures(which: &str, f: &GpuFigures) -> Option<f64> {
+    let gpu_ms = f.timings.from_timestamps.then_some(f.timings.total_ms);
+    let gpu = gpu_ms.map_or("no timestamp queries".to_string(), |ms| format!("GPU {ms:.2} ms"));
+    let plural = |n: u32| if n == 1 { "" } else { "s" };
+    println!(
+        "gpu     {which}wall {:.2} ms, {gpu}; {} {}{}, {} round trip{}, {} B up, {} B down",
+        f.wall_ms,
+        f.parts.0,
+        f.parts.1,
+        plural(f.parts.0),
+        f.round_trips,
+        plural(f.round_trips),
+        f.uploaded_bytes,
+        f.downloaded_bytes
+    );
+    gpu_ms?;
+    let stages: Vec<String> = f.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
+    println!("stages  {} ms (GPU timestamps)", stages.join(", "));
+    gpu_ms
+}

@@ -14,7 +14,7 @@ use clap::Args;
 use gridtrace::query::{CHUNK, QueryOptions, TraceMesh};
 use gridtrace::{Error, Ray};
 
-use crate::common::{Backend, GpuVariantArgs, GridArgs, backend_parser};
+use crate::common::{Backend, GpuFigures, GpuVariantArgs, GridArgs, backend_parser, print_gpu_figures};
 
 #[derive(Args)]
 pub struct RaysArgs {
@@ -156,28 +156,18 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     Ok(())
 }
 
-/// The GPU's figures for the batches, with the frame's meanings (`render`'s `gpu` line): wall
-/// time (upload to answers in host memory) beside the device's own, round trips and bytes.
+/// The GPU's figures for the batches, with the frame's meanings (`render`'s `gpu` line), and
+/// the rays' rate on the device.
 fn print_gpu_batches(s: &gridtrace::gpu::GpuQueryStats) {
-    let gpu = s
-        .gpu_ms()
-        .map_or("no timestamp queries".to_string(), |ms| format!("GPU {ms:.2} ms"));
-    println!(
-        "gpu     wall {:.2} ms, {gpu}; {} chunk{}, {} round trip{}, {} B up, {} B down",
-        s.wall_ms,
-        s.chunks,
-        if s.chunks == 1 { "" } else { "s" },
-        s.round_trips,
-        if s.round_trips == 1 { "" } else { "s" },
-        s.uploaded_bytes,
-        s.downloaded_bytes
-    );
-    if let Some(ms) = s.gpu_ms().filter(|ms| *ms > 0.0) {
-        let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
-        println!(
-            "stages  {} ms (GPU timestamps); {:.2} Mrays/s on the device",
-            stages.join(", "),
-            s.rays as f64 / (ms * 1e3)
-        );
+    let figures = GpuFigures {
+        wall_ms: s.wall_ms,
+        timings: &s.timings,
+        parts: (s.chunks, "chunk"),
+        round_trips: s.round_trips,
+        uploaded_bytes: s.uploaded_bytes,
+        downloaded_bytes: s.downloaded_bytes,
+    };
+    if let Some(ms) = print_gpu_figures("", &figures).filter(|ms| *ms > 0.0) {
+        println!("rates   {:.2} Mrays/s on the device", s.rays as f64 / (ms * 1e3));
     }
 }

@@ -10,7 +10,10 @@ use gridtrace::scene::PointLight;
 use gridtrace::{Mode, PixelFormat, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::common::{Backend, GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3};
+use crate::common::{
+    Backend, GpuFigures, GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3,
+    print_gpu_figures,
+};
 
 // Every number and x,y,z option takes `allow_hyphen_values`: without it clap reads
 // `--target -0.0169,0.11,-0.0016` as a new flag "-0" and suggests "-- -1", which is wrong here.
@@ -239,24 +242,17 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
 /// A GPU frame's times, round trips and bytes, and its stages with the rates of the two that
 /// trace.
 fn print_gpu_frame(s: &gridtrace::gpu::GpuRenderStats, which: &str) {
-    let gpu = s
-        .gpu_ms()
-        .map_or("no timestamp queries".to_string(), |ms| format!("GPU {ms:.2} ms"));
-    println!(
-        "gpu     {which}: wall {:.2} ms, {gpu}; {} tile{}, {} round trip{}, {} B up, {} B down",
-        s.wall_ms,
-        s.tiles,
-        if s.tiles == 1 { "" } else { "s" },
-        s.round_trips,
-        if s.round_trips == 1 { "" } else { "s" },
-        s.uploaded_bytes,
-        s.downloaded_bytes
-    );
-    if !s.timings.from_timestamps {
+    let figures = GpuFigures {
+        wall_ms: s.wall_ms,
+        timings: &s.timings,
+        parts: (s.tiles, "tile"),
+        round_trips: s.round_trips,
+        uploaded_bytes: s.uploaded_bytes,
+        downloaded_bytes: s.downloaded_bytes,
+    };
+    if print_gpu_figures(&format!("{which}: "), &figures).is_none() {
         return;
     }
-    let stages: Vec<String> = s.timings.stages_ms.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
-    println!("stages  {} ms (GPU timestamps)", stages.join(", "));
     // Rays per second by kind, from the stage that traces them.
     let rate = |rays: u64, stage: &str| {
         s.timings
