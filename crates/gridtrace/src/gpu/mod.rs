@@ -47,10 +47,9 @@ mod wavefront;
 pub use context::{Fault, GpuContext};
 pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use points::GpuClosestPoints;
-pub use queries::GpuQueryStats;
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
-pub use timing::GpuTimings;
+pub use timing::{GpuQueryStats, GpuTimings};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.
 pub use walks::bvh::binary as bvh;

@@ -12,15 +12,12 @@ use std::time::Instant;
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
 use super::kernels::Kernel;
 use super::layout::{GpuHit, RayRec};
+use super::renderer::grow;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
-use super::timing::{GpuTimings, MAX_TIMED_PASSES};
-use super::wavefront::grow;
+use super::timing::{GpuQueryStats, GpuTimings, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
 use crate::Result;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
-
-/// Bytes a submission's timestamps may take in its readback (a begin and an end per pass).
-const TIMESTAMPS_BYTES: u64 = MAX_TIMED_PASSES as u64 * 2 * size_of::<u64>() as u64;
 
 /// What a batch asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,48 +62,6 @@ impl Query {
     /// Bytes read back an item, every output together.
     fn result_bytes(self) -> u64 {
         self.outputs().iter().map(|o| o.bytes()).sum()
-    }
-}
-
-/// Statistics of one GPU ray batch, with the frame's meanings (`GpuRenderStats`): `wall_ms`
-/// from the first upload to the answers in host memory, `timings` the device's own.
-#[derive(Debug, Default, Clone)]
-pub struct GpuQueryStats {
-    pub rays: u64,
-    pub timings: GpuTimings,
-    /// Chunks of at most a tile's rays each (the work buffers' size).
-    pub chunks: u32,
-    /// Times the host waited for the device (1 unless the batch exceeds the largest buffer).
-    pub round_trips: u32,
-    /// Bytes written to the device: the rays (48 a ray), counters and pass uniforms.
-    pub uploaded_bytes: u64,
-    /// Bytes read back: the answers (16 a ray for closest hits, 48 for occlusion, 32 a point
-    /// for closest points), the timestamps.
-    pub downloaded_bytes: u64,
-    pub wall_ms: f64,
-}
-
-impl GpuQueryStats {
-    /// The device's time for the batch (the stages' timestamps summed), where it has them.
-    pub fn gpu_ms(&self) -> Option<f64> {
-        self.timings.from_timestamps.then_some(self.timings.total_ms)
-    }
-
-    /// Adds `other` (a later batch) to these: how a caller that queries in parts reports the
-    /// whole.
-    pub fn add(&mut self, other: &GpuQueryStats) {
-        self.rays += other.rays;
-        for (name, ms) in &other.timings.stages_ms {
-            *self.timings.stages_ms.entry(name).or_default() += ms;
-        }
-        self.timings.total_ms += other.timings.total_ms;
-        self.timings.from_timestamps = other.timings.from_timestamps;
-        self.timings.untimed_passes += other.timings.untimed_passes;
-        self.chunks += other.chunks;
-        self.round_trips += other.round_trips;
-        self.uploaded_bytes += other.uploaded_bytes;
-        self.downloaded_bytes += other.downloaded_bytes;
-        self.wall_ms += other.wall_ms;
     }
 }
 
@@ -170,7 +125,7 @@ impl GpuRenderer {
         );
         let cap = (self.work.as_ref().unwrap().tile_pixels as usize).max(1);
         let per_chunk = cap as u64 * (size_of::<RayRec>() as u64).max(query.result_bytes()) + COUNTERS_BYTES;
-        let max = self.ctx.limits().max_buffer_size.saturating_sub(TIMESTAMPS_BYTES);
+        let max = self.ctx.limits().max_buffer_size.saturating_sub(MAX_TIMESTAMPS_BYTES);
         let chunks_per_submission = (max / per_chunk).clamp(1, (MAX_TIMED_PASSES / 2) as u64) as usize;
         let mut stats = GpuQueryStats {
             rays: n as u64,
@@ -242,7 +197,7 @@ impl GpuRenderer {
             copy,
         );
         let results_bytes = rays.len() as u64 * query.result_bytes();
-        let stamps_bytes = if self.timed() { TIMESTAMPS_BYTES } else { 0 };
+        let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
         grow(
             dev,
             &mut self.readback,

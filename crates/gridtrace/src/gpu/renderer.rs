@@ -12,9 +12,8 @@ use super::context::GpuContext;
 use super::grid_build::{GpuBuildStats, GpuGrid};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, GpuTri, IndirectArgs, PassUniform, RayRec};
-use super::queries::GpuQueryStats;
 use super::scene::{SceneBuffers, tri_shade};
-use super::timing::{StageTimer, Timestamps};
+use super::timing::{GpuQueryStats, StageTimer, Timestamps};
 use super::variants::GpuVariants;
 use crate::accel::{AccelKind, GridLattice};
 use crate::render::{Ablation, Mode};
@@ -431,6 +430,26 @@ impl GpuRenderer {
         }
         bytes
     }
+}
+
+/// Makes sure `slot` holds a buffer of at least `size` bytes: kept between frames, replaced by
+/// one of exactly `size` when a frame needs more.
+pub(super) fn grow(
+    device: &wgpu::Device,
+    slot: &mut Option<wgpu::Buffer>,
+    size: u64,
+    label: &str,
+    usage: wgpu::BufferUsages,
+) {
+    if slot.as_ref().is_some_and(|b| b.size() >= size) {
+        return;
+    }
+    *slot = Some(device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage,
+        mapped_at_creation: false,
+    }));
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! Per-stage GPU times from timestamp queries: one begin/end pair per compute pass, resolved
-//! at the end of the submission and read back with the results.
+//! at the end of the submission and read back with the results; and what a batch query took
+//! (`GpuQueryStats`; a frame's is `wavefront::GpuRenderStats`).
 
 use std::collections::BTreeMap;
 
@@ -15,6 +16,8 @@ pub const MAX_TIMED_PASSES: u32 = 1024;
 const QUERY_COUNT: u32 = 2 * MAX_TIMED_PASSES;
 /// One resolved timestamp, in bytes.
 const TIMESTAMP_BYTES: u64 = std::mem::size_of::<u64>() as u64;
+/// Bytes a submission's timestamps may take in a readback (a begin and an end per pass).
+pub const MAX_TIMESTAMPS_BYTES: u64 = QUERY_COUNT as u64 * TIMESTAMP_BYTES;
 
 /// GPU time per stage (from timestamp queries when the adapter has them).
 #[derive(Debug, Default, Clone)]
@@ -140,5 +143,48 @@ impl<'a> StageTimer<'a> {
             Some(ts) if !self.stages.is_empty() => Ok(self.parse(ctx, &ctx.read_buffer(&ts.resolved, self.bytes())?)),
             _ => Ok(Vec::new()),
         }
+    }
+}
+
+/// Statistics of one GPU batch (rays, or points: `queries.rs`), with the frame's meanings
+/// (`GpuRenderStats`): `wall_ms` from the first upload to the answers in host memory,
+/// `timings` the device's own.
+#[derive(Debug, Default, Clone)]
+pub struct GpuQueryStats {
+    pub rays: u64,
+    pub timings: GpuTimings,
+    /// Chunks of at most a tile's rays each (the work buffers' size).
+    pub chunks: u32,
+    /// Times the host waited for the device (1 unless the batch exceeds the largest buffer).
+    pub round_trips: u32,
+    /// Bytes written to the device: the rays (48 a ray), counters and pass uniforms.
+    pub uploaded_bytes: u64,
+    /// Bytes read back: the answers (16 a ray for closest hits, 48 for occlusion, 32 a point
+    /// for closest points), the timestamps.
+    pub downloaded_bytes: u64,
+    pub wall_ms: f64,
+}
+
+impl GpuQueryStats {
+    /// The device's time for the batch (the stages' timestamps summed), where it has them.
+    pub fn gpu_ms(&self) -> Option<f64> {
+        self.timings.from_timestamps.then_some(self.timings.total_ms)
+    }
+
+    /// Adds `other` (a later batch) to these: how a caller that queries in parts reports the
+    /// whole.
+    pub fn add(&mut self, other: &GpuQueryStats) {
+        self.rays += other.rays;
+        for (name, ms) in &other.timings.stages_ms {
+            *self.timings.stages_ms.entry(name).or_default() += ms;
+        }
+        self.timings.total_ms += other.timings.total_ms;
+        self.timings.from_timestamps = other.timings.from_timestamps;
+        self.timings.untimed_passes += other.timings.untimed_passes;
+        self.chunks += other.chunks;
+        self.round_trips += other.round_trips;
+        self.uploaded_bytes += other.uploaded_bytes;
+        self.downloaded_bytes += other.downloaded_bytes;
+        self.wall_ms += other.wall_ms;
     }
 }

@@ -12,16 +12,14 @@ use glam::Vec3;
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
-use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES};
-use super::timing::{GpuTimings, MAX_TIMED_PASSES};
+use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES, grow};
+use super::timing::{GpuTimings, MAX_TIMESTAMPS_BYTES};
 use crate::render::{Image, Mode, PixelFormat, RenderOptions, RenderStats, srgb8_to_linear};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
 
 /// Bytes of one counter slot.
 const SLOT_BYTES: u64 = std::mem::size_of::<u32>() as u64;
-/// Bytes a submission's timestamps may take in its readback (a begin and an end per pass).
-const TIMESTAMPS_BYTES: u64 = MAX_TIMED_PASSES as u64 * 2 * std::mem::size_of::<u64>() as u64;
 
 /// Statistics of one GPU frame. Times have one meaning everywhere (`render`, `bench`, `view`,
 /// Python): `wall_ms` is the host's clock from the first upload to the image in host memory
@@ -187,7 +185,7 @@ impl GpuRenderer {
         let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * texel).sum();
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
-        let stamps_bytes = if self.timed() { TIMESTAMPS_BYTES } else { 0 };
+        let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
         grow(
             &self.ctx.device,
             &mut self.readback,
@@ -301,26 +299,6 @@ impl GpuRenderer {
     }
 }
 
-/// Makes sure `slot` holds a buffer of at least `size` bytes: kept between frames, replaced by
-/// one of exactly `size` when a frame needs more.
-pub(super) fn grow(
-    device: &wgpu::Device,
-    slot: &mut Option<wgpu::Buffer>,
-    size: u64,
-    label: &str,
-    usage: wgpu::BufferUsages,
-) {
-    if slot.as_ref().is_some_and(|b| b.size() >= size) {
-        return;
-    }
-    *slot = Some(device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage,
-        mapped_at_creation: false,
-    }));
-}
-
 /// Bytes a pixel takes in the frame's readback: 4 when the caller wants 8-bit sRGB (packed on
 /// the device), else the accumulation's 16. Heat frames keep their raw costs.
 fn texel_bytes(opts: &RenderOptions) -> u64 {
@@ -334,7 +312,7 @@ fn texel_bytes(opts: &RenderOptions) -> u64 {
 /// How many of `tiles` (from the first) one submission takes: as many as the device's largest
 /// buffer holds the results of, at least one.
 fn tiles_per_submission(tiles: &[Tile], texel_bytes: u64, max_buffer_bytes: u64) -> usize {
-    let mut bytes = TIMESTAMPS_BYTES;
+    let mut bytes = MAX_TIMESTAMPS_BYTES;
     let mut n = 0;
     for t in tiles {
         bytes += t.pixels as u64 * texel_bytes + COUNTERS_BYTES;
