@@ -26,14 +26,6 @@ fn renderer(scene: &PreparedScene) -> Option<GpuRenderer> {
     Some(GpuRenderer::new(std::sync::Arc::new(ctx), scene).expect("upload scene"))
 }
 
-/// The knot box with the default grid, as the tiling tests trace it.
-fn knot_box() -> PreparedScene {
-    builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap()
-}
-
 /// Same hit or miss; t within a relative 1e-4 (the GPU compiler may fuse multiply-adds);
 /// same triangle except at ties, where the CPU's triangle is hit at the GPU's t.
 fn agree(accel: &Accel, r: &gridtrace::Ray, cpu: &Hit, gpu: &Hit) -> bool {
@@ -371,7 +363,7 @@ fn per_frame_uploads_are_uniforms_only() {
 #[test]
 fn a_frame_of_many_tiles_is_one_round_trip() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = knot_box();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let Some(mut whole) = renderer(&scene) else { return };
     let Some(mut tiled) = renderer(&scene) else { return };
     tiled.set_max_tile_pixels(1000);
@@ -399,7 +391,7 @@ fn a_frame_of_many_tiles_is_one_round_trip() {
 #[test]
 fn srgb8_frames_read_back_four_bytes_a_pixel() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = knot_box();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let Some(mut gpu) = renderer(&scene) else { return };
     gpu.set_max_tile_pixels(1000);
     for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
@@ -447,7 +439,7 @@ fn srgb8_frames_read_back_four_bytes_a_pixel() {
 #[test]
 fn a_ray_batch_of_many_chunks_is_one_round_trip() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = knot_box();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let Some(mut whole) = renderer(&scene) else { return };
     let Some(mut chunked) = renderer(&scene) else { return };
     chunked.set_max_tile_pixels(700);

@@ -25,10 +25,7 @@ fn auto_hands_a_lost_device_to_the_cpu() {
         return;
     }
     for fault in [Fault::DeviceLost, Fault::OutOfMemory] {
-        let scene = builtin::scene("knot-box")
-            .unwrap()
-            .prepare(Resolution::default())
-            .unwrap();
+        let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
         let opts = RenderOptions::new(48, 32, Mode::Shadow, AccelKind::Grid);
         let (want, _) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
         let ctx = ctx();
@@ -58,10 +55,7 @@ fn gpu_backend_reports_the_fault() {
     if skip_gpu() {
         return;
     }
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let opts = RenderOptions::new(48, 32, Mode::Cast, AccelKind::Grid);
     let ctx = ctx();
     let mut notes = Vec::new();
@@ -92,10 +86,7 @@ fn auto_update_after_a_lost_device() {
     if skip_gpu() {
         return;
     }
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let ctx = ctx();
     let mut notes = Vec::new();
     let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Auto, &mut notes).unwrap();
@@ -129,22 +120,8 @@ fn query_meshes_hand_a_failed_gpu_to_the_cpu_under_auto() {
     if skip_gpu() {
         return;
     }
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
-    let vertices: Vec<[f32; 3]> = scene
-        .accel
-        .tris
-        .iter()
-        .flat_map(|t| {
-            let v0 = glam::Vec3::from(t.v0);
-            [v0, v0 + glam::Vec3::from(t.e1), v0 + glam::Vec3::from(t.e2)].map(|v| v.to_array())
-        })
-        .collect();
-    let faces: Vec<[u32; 3]> = (0..scene.accel.tris.len() as u32)
-        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
-        .collect();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
+    let (vertices, faces) = gridtrace::testing::soup_arrays(&scene.accel.tris);
     let rays = gridtrace::testing::ray_set(&scene.accel, 3000, 7);
     let (origins, dirs): (Vec<[f32; 3]>, Vec<[f32; 3]>) =
         rays.iter().map(|r| (r.origin.to_array(), r.dir.to_array())).unzip();

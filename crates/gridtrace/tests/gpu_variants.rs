@@ -73,10 +73,7 @@ fn subgroup_appends_need_the_adapters_subgroups() {
     if ctx.subgroups {
         return;
     }
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let e = GpuRenderer::with_variants(ctx.clone(), &scene, &v("appends=subgroup"))
         .err()
         .expect("refused");
@@ -189,10 +186,7 @@ fn tiles_order_across_tile_boundaries() {
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let ctx = context();
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
     let mut tiles = GpuRenderer::with_variants(ctx.clone(), &scene, &v("order=tiles,appends=workgroup")).unwrap();
     let opts = RenderOptions::new(1100, 960, Mode::Cast, AccelKind::Grid);
@@ -211,10 +205,7 @@ fn variants_give_the_default_hits() {
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let ctx = context();
-    let scene = builtin::scene("knot-box")
-        .unwrap()
-        .prepare(Resolution::default())
-        .unwrap();
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let grid = Accel::build(scene.accel.tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
     let rays = ray_set(&grid, 40_000, 0x5EED);
     for (kind, scene) in per_structure(&scene) {
