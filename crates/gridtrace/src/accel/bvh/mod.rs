@@ -28,6 +28,8 @@ mod refit;
 mod structure;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_queries;
 mod walk;
 mod wide;
 

@@ -284,7 +284,7 @@ fn avx_and_baseline_traversals_agree() {
 
 /// A mesh of `n` small random triangles with their own vertices (`3 * n` positions) in
 /// [-1, 1]^3, as positions and triangles.
-fn random_mesh(rng: &mut crate::util::Rng, n: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+pub(super) fn random_mesh(rng: &mut crate::util::Rng, n: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let mut positions = Vec::with_capacity(3 * n);
     for _ in 0..n {
         let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
@@ -296,7 +296,7 @@ fn random_mesh(rng: &mut crate::util::Rng, n: usize) -> (Vec<Vec3>, Vec<[u32; 3]
     (positions, triangles)
 }
 
-fn tris_of(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<TriAccel> {
+pub(super) fn tris_of(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<TriAccel> {
     triangles
         .iter()
         .map(|t| {
@@ -520,99 +520,5 @@ fn packets_equal_single_rays() {
     assert!(
         blocked > rays / 10 && blocked < rays * 9 / 10,
         "{blocked} of {rays} rays blocked"
-    );
-}
-
-/// The counting walk (`count_hits_batch`, rays interleaved) gives each ray the number of hits
-/// brute force finds (`all_hits_brute`) and the listing walk lists, in its AVX2 build and its
-/// baseline build, for whole and clipped `t` intervals, on a mesh where rays cross many
-/// triangles (so that counts above one are common).
-#[test]
-fn counting_equals_listing_and_brute_force() {
-    use crate::accel::contract::all_hits_brute;
-    let mut rng = crate::util::Rng::new(0xC0_047);
-    let (positions, triangles) = random_mesh(&mut rng, 8000);
-    let tris = tris_of(&positions, &triangles);
-    let accel = BvhAccel::build(&tris);
-    let rays: Vec<Ray> = (0..3000)
-        .map(|_| {
-            let o = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
-            let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
-            if rng.below(6) == 0 {
-                d[rng.below(3) as usize] = 0.0;
-            }
-            Ray::new(o, if d == Vec3::ZERO { Vec3::Z } else { d })
-        })
-        .collect();
-    let (mut many, mut hits) = (0, Vec::new());
-    for (t_min, t_max) in [(0.0, f32::INFINITY), (0.5, 2.5)] {
-        let mut counted = vec![u32::MAX; rays.len()];
-        accel.count_hits_batch(&rays, t_min, t_max, &mut counted);
-        let mut baseline = vec![u32::MAX; rays.len()];
-        accel.count_hits_body::<false>(&rays, t_min, t_max, &mut baseline);
-        for (i, r) in rays.iter().enumerate() {
-            hits.clear();
-            all_hits_brute(&tris, r, t_min, t_max, &mut hits);
-            let want = hits.len() as u32;
-            hits.clear();
-            accel.all_hits(r, t_min, t_max, &mut hits);
-            assert_eq!(hits.len() as u32, want, "ray {i}: listed");
-            assert_eq!(counted[i], want, "ray {i} in ({t_min}, {t_max}): counted");
-            assert_eq!(baseline[i], want, "ray {i} in ({t_min}, {t_max}): counted (baseline)");
-            many += (want > 1) as usize;
-        }
-    }
-    assert!(many > 500, "only {many} rays cross more than one triangle");
-    // An empty batch counts nothing and touches nothing.
-    accel.count_hits_batch(&[], 0.0, f32::INFINITY, &mut []);
-}
-
-/// The interleaved nearest-point searches (`closest_points_batch`) give each point the answer
-/// of its own search (`closest_point`) and of brute force, bit for bit: points near and far,
-/// inside the mesh's box and outside, and points that are not finite (answered `INVALID` in
-/// place, the searches around them unaffected).
-#[test]
-fn closest_point_batches_equal_single_searches_and_brute_force() {
-    use crate::accel::closest::{ClosestPoint, closest_point_brute};
-    let mut rng = crate::util::Rng::new(0xC105E);
-    let (positions, triangles) = random_mesh(&mut rng, 2000);
-    let tris = tris_of(&positions, &triangles);
-    let accel = BvhAccel::build(&tris);
-    let mut points: Vec<[f32; 3]> = (0..1500)
-        .map(|i| {
-            let s = if i % 3 == 0 { 4.0 } else { 1.2 };
-            [rng.range(-s, s), rng.range(-s, s), rng.range(-s, s)]
-        })
-        .collect();
-    points[7] = [f32::NAN, 0.0, 0.0];
-    points[8] = [0.0, f32::INFINITY, 0.0];
-    let mut got = vec![ClosestPoint::NONE; points.len()];
-    accel.closest_points_batch(&points, &mut got);
-    let bits = |c: &ClosestPoint| {
-        (
-            c.point.to_array().map(f32::to_bits),
-            c.dist_sq.to_bits(),
-            c.tri,
-            c.u.to_bits(),
-            c.v.to_bits(),
-        )
-    };
-    for (i, (p, g)) in points.iter().zip(&got).enumerate() {
-        let p = Vec3::from(*p);
-        assert_eq!(
-            bits(g),
-            bits(&accel.closest_point(p)),
-            "point {i}: batch against single"
-        );
-        let truth = closest_point_brute(&tris, p);
-        assert_eq!(
-            (g.tri, g.dist_sq.to_bits()),
-            (truth.tri, truth.dist_sq.to_bits()),
-            "point {i}: against brute force"
-        );
-    }
-    assert!(
-        got[7].dist_sq.is_nan() && got[8].tri == u32::MAX,
-        "non-finite points are INVALID"
     );
 }
