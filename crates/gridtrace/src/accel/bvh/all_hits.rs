@@ -15,6 +15,7 @@ use super::BvhAccel;
 use super::T_SLOP;
 use super::box_test::{BoxRay, Pending};
 use super::build::{LEAF_BLOCK, STACK};
+use super::interleave::interleave;
 use super::wide::{ChildRef, WIDTH};
 #[cfg(target_arch = "x86_64")]
 use crate::accel::simd::has_avx2;
@@ -108,40 +109,25 @@ impl BvhAccel {
             w.reset(&idle);
             w
         });
-        let mut ray_of = [usize::MAX; COUNT_LANES];
-        let mut next = 0;
-        let mut active = 0;
-        for (w, i) in walks.iter_mut().zip(&mut ray_of) {
-            if next < rays.len() {
-                w.reset(&rays[next]);
-                *i = next;
-                next += 1;
-                active += 1;
-            }
-        }
-        while active > 0 {
-            for (w, i) in walks.iter_mut().zip(&mut ray_of) {
-                if *i == usize::MAX {
-                    continue;
+        let mut rays_left = rays.iter().enumerate();
+        interleave(
+            &mut walks,
+            |w, done| {
+                if let Some(i) = done {
+                    out[i] = w.count;
                 }
-                if w.step::<AVX>(self, t_min, t_max) {
-                    out[*i] = w.count;
-                    if next < rays.len() {
-                        w.reset(&rays[next]);
-                        *i = next;
-                        next += 1;
-                    } else {
-                        *i = usize::MAX;
-                        active -= 1;
-                        continue;
-                    }
-                }
+                let (i, r) = rays_left.next()?;
+                w.reset(r);
+                Some(i)
+            },
+            |w| w.step::<AVX>(self, t_min, t_max),
+            |w| {
                 self.prefetch(&Pending {
                     child: w.current,
                     t_enter: 0.0,
-                });
-            }
-        }
+                })
+            },
+        );
     }
 }
 

@@ -15,6 +15,7 @@ use glam::{Vec3, Vec4};
 use super::BvhAccel;
 use super::box_test::Pending;
 use super::build::{LEAF_BLOCK, STACK};
+use super::interleave::interleave;
 use super::walk::LANES;
 use super::wide::{ChildRef, WIDTH, WideNode};
 use crate::accel::TriAccel4;
@@ -54,46 +55,32 @@ impl BvhAccel {
             return;
         }
         let mut walks: [PointWalk; LANES] = std::array::from_fn(|_| PointWalk::new(Vec3::ZERO));
-        let mut point_of = [usize::MAX; LANES];
-        let mut next = 0;
-        // Starts the next finite point's search in `w` (answering non-finite ones on the way);
-        // false when none is left.
-        let mut start = |w: &mut PointWalk, i: &mut usize, out: &mut [ClosestPoint]| {
-            while next < points.len() {
-                let p = Vec3::from(points[next]);
-                next += 1;
-                if p.is_finite() {
-                    w.reset(p);
-                    *i = next - 1;
-                    return true;
+        let mut points_left = points.iter().enumerate();
+        interleave(
+            &mut walks,
+            |w, done| {
+                if let Some(i) = done {
+                    out[i] = w.best;
                 }
-                out[next - 1] = ClosestPoint::INVALID;
-            }
-            *i = usize::MAX;
-            false
-        };
-        let mut active = 0;
-        for (w, i) in walks.iter_mut().zip(&mut point_of) {
-            active += start(w, i, out) as usize;
-        }
-        while active > 0 {
-            for (w, i) in walks.iter_mut().zip(&mut point_of) {
-                if *i == usize::MAX {
-                    continue;
-                }
-                if w.step(self) {
-                    out[*i] = w.best;
-                    if !start(w, i, out) {
-                        active -= 1;
-                        continue;
+                // The next finite point's search; non-finite ones are answered on the way.
+                for (i, p) in points_left.by_ref() {
+                    let p = Vec3::from(*p);
+                    if p.is_finite() {
+                        w.reset(p);
+                        return Some(i);
                     }
+                    out[i] = ClosestPoint::INVALID;
                 }
+                None
+            },
+            |w| w.step(self),
+            |w| {
                 self.prefetch(&Pending {
                     child: w.current.1,
                     t_enter: 0.0,
-                });
-            }
-        }
+                })
+            },
+        );
     }
 
     /// Offers the triangles of leaf `child` to `best`: a block's four triangle boxes are

@@ -23,6 +23,7 @@ mod all_hits;
 mod box_test;
 mod build;
 mod closest;
+mod interleave;
 mod packet;
 mod refit;
 mod structure;

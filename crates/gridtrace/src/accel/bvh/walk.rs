@@ -11,6 +11,7 @@ use crate::accel::{Counters, Hit, NoCounters, Ray};
 use super::BvhAccel;
 use super::box_test::{BoxRay, Pending, T_SLOP};
 use super::build::{LEAF_BLOCK, STACK};
+use super::interleave::interleave;
 use super::wide::{ChildRef, WIDTH};
 
 impl BvhAccel {
@@ -73,37 +74,20 @@ impl BvhAccel {
         // is never copied.
         let idle = Ray::new(Vec3::ZERO, Vec3::X);
         let mut walks: [Walk; LANES] = std::array::from_fn(|_| Walk::new(&idle, t_min, t_max));
-        let mut ray_of = [usize::MAX; LANES];
-        let mut next = 0;
-        let mut active = 0;
-        for (w, i) in walks.iter_mut().zip(&mut ray_of) {
-            if next < rays.len() {
-                w.reset(&rays[next], t_min, t_max);
-                *i = next;
-                next += 1;
-                active += 1;
-            }
-        }
-        while active > 0 {
-            for (w, i) in walks.iter_mut().zip(&mut ray_of) {
-                if *i == usize::MAX {
-                    continue;
+        let mut rays_left = rays.iter().enumerate();
+        interleave(
+            &mut walks,
+            |w, done| {
+                if let Some(i) = done {
+                    finish(i, w);
                 }
-                if w.step::<ANY, AVX, _>(self, &mut NoCounters) {
-                    finish(*i, w);
-                    if next < rays.len() {
-                        w.reset(&rays[next], t_min, t_max);
-                        *i = next;
-                        next += 1;
-                    } else {
-                        *i = usize::MAX;
-                        active -= 1;
-                        continue;
-                    }
-                }
-                self.prefetch(&w.current);
-            }
-        }
+                let (i, r) = rays_left.next()?;
+                w.reset(r, t_min, t_max);
+                Some(i)
+            },
+            |w| w.step::<ANY, AVX, _>(self, &mut NoCounters),
+            |w| self.prefetch(&w.current),
+        );
     }
 
     /// Asks for the memory of a pending node or leaf ahead of its use.
