@@ -145,6 +145,11 @@ pub struct Row {
     pub gpu_round_trips: Option<u32>,
     pub gpu_bytes_up: Option<u64>,
     pub gpu_bytes_down: Option<u64>,
+    /// The wall time's parts on the host's clock: preparing and submitting, waiting for the
+    /// device (its work, the transfers, the driver), reading the results out.
+    pub gpu_host_prepare_ms: Option<f64>,
+    pub gpu_host_wait_ms: Option<f64>,
+    pub gpu_host_readout_ms: Option<f64>,
 }
 
 /// A scene as benchmarked: counts, grid and memory.
@@ -249,6 +254,9 @@ fn make_row(
         gpu_stages_ms: None,
         gpu_timestamps: None,
         gpu_round_trips: None,
+        gpu_host_prepare_ms: None,
+        gpu_host_wait_ms: None,
+        gpu_host_readout_ms: None,
         gpu_bytes_up: None,
         gpu_bytes_down: None,
     }
@@ -271,6 +279,9 @@ fn gpu_row(
     row.gpu_round_trips = Some(s.round_trips);
     row.gpu_bytes_up = Some(s.uploaded_bytes);
     row.gpu_bytes_down = Some(s.downloaded_bytes);
+    row.gpu_host_prepare_ms = Some(s.timings.host.prepare_ms);
+    row.gpu_host_wait_ms = Some(s.timings.host.wait_ms);
+    row.gpu_host_readout_ms = Some(s.timings.host.readout_ms);
     Ok(row)
 }
 

@@ -29,7 +29,7 @@ pub fn write_reports(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(paths.to_vec())
 }
 
-pub const CSV_HEADER: &str = "scene,backend,mode,accel,width,height,grid,reps,best_ms,median_ms,mean_ms,eye_rays,shadow_rays,reflection_rays,total_rays,mrays_per_s,paper_ms,speedup,gpu_wall_ms,gpu_ms,gpu_round_trips,gpu_bytes_up,gpu_bytes_down,raygen_ms,indirect_ms,traverse_ms,shade_ms,occlusion_ms,resolve_ms";
+pub const CSV_HEADER: &str = "scene,backend,mode,accel,width,height,grid,reps,best_ms,median_ms,mean_ms,eye_rays,shadow_rays,reflection_rays,total_rays,mrays_per_s,paper_ms,speedup,gpu_wall_ms,gpu_ms,gpu_round_trips,gpu_bytes_up,gpu_bytes_down,raygen_ms,indirect_ms,traverse_ms,shade_ms,occlusion_ms,resolve_ms,host_prepare_ms,host_wait_ms,host_readout_ms";
 
 /// The GPU stages that get a CSV column each (`*_ms`), in kernel order.
 const CSV_STAGES: [&str; 6] = ["raygen", "indirect", "traverse", "shade", "occlusion", "resolve"];
@@ -41,7 +41,7 @@ pub fn csv(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{}",
             r.scene,
             r.backend.name(),
             r.mode,
@@ -69,7 +69,10 @@ pub fn csv(rows: &[Row]) -> String {
                 .iter()
                 .map(|k| opt(r.gpu_stages_ms.as_ref().and_then(|m| m.get(*k).copied())))
                 .collect::<Vec<_>>()
-                .join(",")
+                .join(","),
+            opt(r.gpu_host_prepare_ms),
+            opt(r.gpu_host_wait_ms),
+            opt(r.gpu_host_readout_ms),
         );
     }
     s

@@ -107,3 +107,57 @@ pub fn time_gpu(
         .unwrap_or(0);
     Ok((times, summary, outs.swap_remove(best)))
 }
+
+/// Times `n` alternatives (GPU variants) in rounds: warm-up rounds (each alternative at least
+/// once, and rounds until `warmup_ms` have passed), then `reps` rounds in which each runs once
+/// in turn; per alternative, its times and results in order. A GPU's clocks follow its load:
+/// on the first hardware run (H200), whose frames kept the GPU busy a tenth of the time, one
+/// variant's GPU time drifted 3x over a block of runs, so variants timed in blocks one after
+/// another compared clock states more than code. In rounds every alternative meets the same
+/// drift.
+pub fn interleaved<T>(
+    n: usize,
+    warmup_ms: f64,
+    reps: u32,
+    mut f: impl FnMut(usize) -> Result<(f64, T)>,
+) -> Result<Vec<(Vec<f64>, Vec<T>)>> {
+    let started = std::time::Instant::now();
+    loop {
+        for k in 0..n {
+            f(k)?;
+        }
+        if started.elapsed().as_secs_f64() * 1e3 >= warmup_ms {
+            break;
+        }
+    }
+    let mut out: Vec<(Vec<f64>, Vec<T>)> = (0..n).map(|_| (Vec::new(), Vec::new())).collect();
+    for _ in 0..reps.max(1) {
+        for (k, o) in out.iter_mut().enumerate() {
+            let (t, r) = f(k)?;
+            o.0.push(t);
+            o.1.push(r);
+        }
+    }
+    Ok(out)
+}
+
+/// Medians of the host's phases of a GPU frame or batch (`gridtrace::gpu::HostPhases`), ms.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct HostMedians {
+    pub prepare_ms: f64,
+    pub wait_ms: f64,
+    pub readout_ms: f64,
+}
+
+impl HostMedians {
+    pub fn of(phases: &[gridtrace::gpu::HostPhases]) -> HostMedians {
+        let med = |f: fn(&gridtrace::gpu::HostPhases) -> f64| {
+            Summary::of(&phases.iter().map(f).collect::<Vec<_>>()).median_ms
+        };
+        HostMedians {
+            prepare_ms: med(|h| h.prepare_ms),
+            wait_ms: med(|h| h.wait_ms),
+            readout_ms: med(|h| h.readout_ms),
+        }
+    }
+}

@@ -1,7 +1,8 @@
 //! What a frame or a ray batch took, as Python dicts with the CLI's meanings (`render`'s and
 //! `rays`' `gpu` lines): `wall_ms` from the first upload to the result in host memory,
 //! `gpu_ms` the device's own time (`None` without timestamp queries, and on the CPU), host
-//! round trips and bytes each way, and the stages' milliseconds.
+//! round trips and bytes each way, the stages' milliseconds, and the host's share of the wall
+//! time (`host_ms`: prepare, wait, readout).
 
 use gridtrace::Frame;
 use gridtrace::gpu::{GpuQueryStats, GpuTimings};
@@ -29,6 +30,15 @@ fn common<'py>(
         }
     }
     d.set_item("stages_ms", stages)?;
+    // Where the wall time went on the host: preparing and submitting, waiting for the device,
+    // reading the results out (they add up to wall_ms; empty on the CPU).
+    let host = PyDict::new(py);
+    if let Some(t) = timings {
+        host.set_item("prepare", t.host.prepare_ms)?;
+        host.set_item("wait", t.host.wait_ms)?;
+        host.set_item("readout", t.host.readout_ms)?;
+    }
+    d.set_item("host_ms", host)?;
     Ok(d)
 }
 

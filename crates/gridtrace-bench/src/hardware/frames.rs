@@ -15,7 +15,7 @@ use gridtrace::{AccelKind, Mesh, Mode, Resolution, Result};
 
 use super::{Budget, Plan};
 use crate::scenes::BenchScene;
-use crate::timing::{Summary, repeat_warm};
+use crate::timing::{HostMedians, Summary, interleaved};
 
 /// Channel levels (of 255) a GPU pixel may differ from the CPU's by: float results rounded
 /// differently (a GPU may fuse multiply-adds) move a shade by a level or two.
@@ -54,6 +54,8 @@ pub struct FrameRow {
     pub bytes_down: u64,
     /// The last timed frame's stages (GPU timestamps), ms.
     pub stages_ms: BTreeMap<String, f64>,
+    /// Medians of the wall time's parts on the host (prepare, wait, readout); `None` on the CPU.
+    pub host_ms: Option<HostMedians>,
     /// Pixels differing from the CPU's image beyond `PIXEL_TOLERANCE` (fraction; 0 on the CPU).
     pub differing_from_cpu: f64,
 }
@@ -121,13 +123,15 @@ pub fn frame_matrix(
                 rows.push(row);
                 reference.push(image.to_rgb8());
             }
-            for variant in variants_for(variants, accel) {
-                let mut r = open_gpu(gpu, &prepared, variant)?;
-                let label = variant.changes();
-                for (k, &mode) in plan.modes.iter().enumerate() {
-                    // As `render` and the viewer ask: 8-bit pixels, packed on the device.
-                    let opts = RenderOptions::new(w, h, mode, accel).with_pixels(PixelFormat::Srgb8);
-                    let row = gpu_row(plan, bs, &prepared, &mut r, &opts, &label, &reference[k], mismatches)?;
+            // Every variant's renderer at once, so that each mode's frames are timed in
+            // rounds across the variants (`interleaved`).
+            let mut renderers = variants_for(variants, accel)
+                .map(|v| Ok((v.changes(), open_gpu(gpu, &prepared, v)?)))
+                .collect::<Result<Vec<(String, GpuRenderer)>>>()?;
+            for (k, &mode) in plan.modes.iter().enumerate() {
+                // As `render` and the viewer ask: 8-bit pixels, packed on the device.
+                let opts = RenderOptions::new(w, h, mode, accel).with_pixels(PixelFormat::Srgb8);
+                for row in gpu_rows(plan, bs, &prepared, &mut renderers, &opts, &reference[k], mismatches)? {
                     log(&row_line(&row));
                     rows.push(row);
                 }
@@ -160,22 +164,16 @@ pub fn big_frame(
     let (cpu, image) = cpu_row(bs, &prepared, &opts)?;
     log(&row_line(&cpu));
     let opts = opts.with_pixels(PixelFormat::Srgb8);
-    let mut r = open_gpu(gpu, &prepared, &GpuVariants::default())?;
+    let mut r = vec![(
+        "default".to_string(),
+        open_gpu(gpu, &prepared, &GpuVariants::default())?,
+    )];
     let one = Plan {
         reps: 1,
         warmup_ms: 0.0,
         ..plan.clone()
     };
-    let row = gpu_row(
-        &one,
-        bs,
-        &prepared,
-        &mut r,
-        &opts,
-        "default",
-        &image.to_rgb8(),
-        mismatches,
-    )?;
+    let row = gpu_rows(&one, bs, &prepared, &mut r, &opts, &image.to_rgb8(), mismatches)?.remove(0);
     log(&row_line(&row));
     Ok(vec![cpu, row])
 }
@@ -208,33 +206,55 @@ fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> R
             bytes_up: 0,
             bytes_down: 0,
             stages_ms: BTreeMap::new(),
+            host_ms: None,
             differing_from_cpu: 0.0,
         },
         image,
     ))
 }
 
-#[allow(clippy::too_many_arguments)]
-fn gpu_row(
+/// The frames of `opts` on every renderer (a variant each, with its label), timed in rounds
+/// across them; a row each, its last image checked against the CPU's `reference`.
+fn gpu_rows(
     plan: &Plan,
     bs: &BenchScene,
     prepared: &PreparedScene,
-    r: &mut GpuRenderer,
+    renderers: &mut [(String, GpuRenderer)],
     opts: &RenderOptions,
-    variant: &str,
     reference: &[u8],
     mismatches: &mut Vec<String>,
-) -> Result<FrameRow> {
-    // Warm-up: at least one frame (pipelines, buffers), then until `warmup_ms` have passed.
-    let (walls, frames) = repeat_warm(1, plan.warmup_ms, plan.reps, || {
-        let (image, s) = r.render(&prepared.camera, &prepared.lights, opts)?;
-        Ok((s.wall_ms, (image, s)))
+) -> Result<Vec<FrameRow>> {
+    let mut last: Vec<Option<Image>> = (0..renderers.len()).map(|_| None).collect();
+    // Warm-up: each variant at least once (pipelines, buffers), then until `warmup_ms` passed.
+    let runs = interleaved(renderers.len(), plan.warmup_ms, plan.reps, |k| {
+        let (image, s) = renderers[k].1.render(&prepared.camera, &prepared.lights, opts)?;
+        last[k] = Some(image);
+        Ok((s.wall_ms, s))
     })?;
-    let (mut images, frames): (Vec<Image>, Vec<GpuRenderStats>) = frames.into_iter().unzip();
-    let image = images.pop().expect("at least one timed frame");
-    let wall = Summary::of(&walls);
+    let mut rows = Vec::new();
+    for (((walls, frames), image), (label, _)) in runs.into_iter().zip(last).zip(renderers.iter()) {
+        let image = image.expect("at least one timed frame");
+        rows.push(gpu_row(bs, opts, label, &walls, &frames, &image, reference, mismatches));
+    }
+    Ok(rows)
+}
+
+/// One variant's row from its timed frames.
+#[allow(clippy::too_many_arguments)]
+fn gpu_row(
+    bs: &BenchScene,
+    opts: &RenderOptions,
+    variant: &str,
+    walls: &[f64],
+    frames: &[GpuRenderStats],
+    image: &Image,
+    reference: &[u8],
+    mismatches: &mut Vec<String>,
+) -> FrameRow {
+    let wall = Summary::of(walls);
     let gpu_times: Vec<f64> = frames.iter().filter_map(|s| s.gpu_ms()).collect();
     let gpu_median_ms = (!gpu_times.is_empty()).then(|| Summary::of(&gpu_times).median_ms);
+    let host = HostMedians::of(&frames.iter().map(|s| s.timings.host).collect::<Vec<_>>());
     let last = frames.last().expect("at least one timed frame");
     let rays = last.render.rays.total();
     let differing = differing_pixels(&image.to_rgb8(), reference, PIXEL_TOLERANCE);
@@ -250,7 +270,7 @@ fn gpu_row(
             100.0 * differing
         ));
     }
-    Ok(FrameRow {
+    FrameRow {
         scene: bs.name.clone(),
         triangles: bs.triangles,
         accel: opts.accel.name().into(),
@@ -273,8 +293,9 @@ fn gpu_row(
             .iter()
             .map(|(k, v)| (k.to_string(), *v))
             .collect(),
+        host_ms: Some(host),
         differing_from_cpu: differing,
-    })
+    }
 }
 
 /// One line of the log for a row.

@@ -3,6 +3,7 @@
 use std::fmt::Write as _;
 
 use super::{FrameRow, HardwareReport, RayRow};
+use crate::timing::HostMedians;
 
 pub fn markdown(r: &HardwareReport) -> String {
     let mut md = String::new();
@@ -77,7 +78,7 @@ fn frames(md: &mut String, title: &str, rows: &[FrameRow]) {
     }
     let _ = writeln!(
         md,
-        "## {title}\n\nWall: host clock, uploads to image in host memory (median). GPU: the stages' timestamps summed (median). x CPU: the CPU's median wall time over the GPU's.\n\n| scene | mode | accel | variant | size | rays | CPU ms | wall ms | GPU ms | Mrays/s (wall) | Mrays/s (GPU) | x CPU | round trips | bytes down | differing px |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "## {title}\n\nWall: host clock, uploads to image in host memory (median). GPU: the stages' timestamps summed (median). x CPU: the CPU's median wall time over the GPU's. Host: the wall time's parts on the host's clock (medians): preparing and submitting / waiting for the device / reading the image out. Variants were timed in rounds across them.\n\n| scene | mode | accel | variant | size | rays | CPU ms | wall ms | GPU ms | host ms | Mrays/s (wall) | Mrays/s (GPU) | x CPU | round trips | bytes down | differing px |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for g in rows.iter().filter(|g| g.backend == "gpu") {
         let cpu = rows.iter().find(|c| {
@@ -86,7 +87,7 @@ fn frames(md: &mut String, title: &str, rows: &[FrameRow]) {
         let cpu_ms = cpu.map(|c| c.wall.median_ms);
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {}x{} | {} | {} | {:.2} | {} | {:.1} | {} | {} | {} | {} | {:.3}% |",
+            "| {} | {} | {} | {} | {}x{} | {} | {} | {:.2} | {} | {} | {:.1} | {} | {} | {} | {} | {:.3}% |",
             g.scene,
             g.mode,
             g.accel,
@@ -97,6 +98,7 @@ fn frames(md: &mut String, title: &str, rows: &[FrameRow]) {
             cpu_ms.map_or("-".into(), |v| format!("{v:.2}")),
             g.wall.median_ms,
             g.gpu_median_ms.map_or("-".into(), |v| format!("{v:.2}")),
+            host_cell(g.host_ms.as_ref()),
             g.mrays_per_s,
             g.gpu_mrays_per_s.map_or("-".into(), |v| format!("{v:.1}")),
             cpu_ms.map_or("-".into(), |c| format!("{:.2}", c / g.wall.median_ms.max(1e-9))),
@@ -112,7 +114,7 @@ fn rays(md: &mut String, rows: &[RayRow]) {
     if rows.is_empty() {
         return;
     }
-    md.push_str("## Ray batches\n\nWall time of the whole query (upload, trace, readback; median).\n\n| mesh | set | accel | backend | variant | rays | ms | Mrays/s | x CPU | hit | differing hits |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("## Ray batches\n\nWall time of the whole query (upload, trace, readback; median); GPU: the stages' timestamps summed (median); host: the wall time's parts as in the frames. Variants were timed in rounds across them.\n\n| mesh | set | accel | backend | variant | rays | ms | GPU ms | host ms | Mrays/s | x CPU | hit | differing hits |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in rows {
         let cpu = rows.iter().find(|c| {
             r.backend == "gpu" && c.backend == "cpu" && c.mesh == r.mesh && c.set == r.set && c.accel == r.accel
@@ -122,7 +124,7 @@ fn rays(md: &mut String, rows: &[RayRow]) {
         });
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {ratio} | {:.1}% | {:.3}% |",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {:.2} | {ratio} | {:.1}% | {:.3}% |",
             r.mesh,
             r.set,
             r.accel,
@@ -130,12 +132,21 @@ fn rays(md: &mut String, rows: &[RayRow]) {
             r.variant,
             r.rays,
             r.wall.median_ms,
+            r.gpu_median_ms.map_or("-".into(), |v| format!("{v:.2}")),
+            host_cell(r.host_ms.as_ref()),
             r.mrays_per_s,
             100.0 * r.hit_fraction,
             100.0 * r.differing_from_cpu
         );
     }
     md.push('\n');
+}
+
+/// `prepare / wait / readout` ms, or `-` on the CPU.
+fn host_cell(h: Option<&HostMedians>) -> String {
+    h.map_or("-".into(), |h| {
+        format!("{:.1} / {:.1} / {:.1}", h.prepare_ms, h.wait_ms, h.readout_ms)
+    })
 }
 
 fn builds(md: &mut String, r: &HardwareReport) {

@@ -8,14 +8,14 @@ use std::time::Instant;
 use serde::Serialize;
 
 use gridtrace::accel::{Hit, Ray};
-use gridtrace::gpu::{GpuContext, GpuVariants};
+use gridtrace::gpu::{GpuContext, GpuQueryStats, GpuRenderer, GpuVariants};
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
 use gridtrace::{AccelKind, Mesh, Result};
 
 use super::frames::{frame_accels, open_gpu, variants_for};
 use super::{Budget, Plan};
 use crate::query_study::incoherent_rays;
-use crate::timing::{Summary, repeat_warm};
+use crate::timing::{HostMedians, Summary, interleaved, repeat_warm};
 
 /// Rays whose GPU hit may differ from the CPU's (a fraction): rays through an edge or a vertex
 /// may name either triangle, or a different t within rounding. More is a mismatch.
@@ -37,6 +37,10 @@ pub struct RayRow {
     pub wall: Summary,
     pub mrays_per_s: f64,
     pub hit_fraction: f64,
+    /// GPU time (timestamps summed) of the timed batches: median, where the adapter has them.
+    pub gpu_median_ms: Option<f64>,
+    /// Medians of the wall time's parts on the host (prepare, wait, readout); `None` on the CPU.
+    pub host_ms: Option<HostMedians>,
     /// Rays whose hit differs from the CPU's (fraction; 0 on the CPU).
     pub differing_from_cpu: f64,
 }
@@ -78,6 +82,9 @@ pub fn ray_study(
                 .zip(&d)
                 .map(|(a, b)| Ray::new((*a).into(), (*b).into()))
                 .collect();
+            let mut renderers = variants_for(variants, accel)
+                .map(|v| Ok((v.changes(), open_gpu(gpu, tm.prepared(), v)?)))
+                .collect::<Result<Vec<(String, GpuRenderer)>>>()?;
             for (set, rays) in [("camera", camera_rays(mesh, plan.rays)), ("incoherent", incoherent)] {
                 let head = |backend: &str, variant: &str| RowHead {
                     mesh: name,
@@ -91,10 +98,17 @@ pub fn ray_study(
                 let row = head("cpu", "-").row(&rays, &cpu_times, &cpu_hits, 0.0);
                 log(&row_line(&row));
                 rows.push(row);
-                for variant in variants_for(variants, accel) {
-                    let mut r = open_gpu(gpu, tm.prepared(), variant)?;
-                    let variant = variant.changes();
-                    let (times, hits) = timed(plan.reps, || r.intersect(&rays, 0.0, f32::INFINITY, accel))?;
+                // Every variant timed in rounds across them (`interleaved`).
+                let runs = interleaved(renderers.len(), 0.0, plan.reps, |k| {
+                    let r = &mut renderers[k].1;
+                    let t0 = Instant::now();
+                    let hits = r.intersect(&rays, 0.0, f32::INFINITY, accel)?;
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    Ok((ms, (hits, r.last_query_stats().clone())))
+                })?;
+                for ((times, mut outs), (variant, _)) in runs.into_iter().zip(renderers.iter()) {
+                    let stats: Vec<GpuQueryStats> = outs.iter().map(|o| o.1.clone()).collect();
+                    let hits = outs.pop().expect("at least one timed run").0;
                     let differing = differing_hits(&hits, &cpu_hits);
                     if differing > MAX_DIFFERING_HITS {
                         mismatches.push(format!(
@@ -103,7 +117,12 @@ pub fn ray_study(
                             100.0 * differing
                         ));
                     }
-                    let row = head("gpu", &variant).row(&rays, &times, &hits, differing);
+                    let mut row = head("gpu", variant).row(&rays, &times, &hits, differing);
+                    let gpu: Vec<f64> = stats.iter().filter_map(|s| s.gpu_ms()).collect();
+                    row.gpu_median_ms = (!gpu.is_empty()).then(|| Summary::of(&gpu).median_ms);
+                    row.host_ms = Some(HostMedians::of(
+                        &stats.iter().map(|s| s.timings.host).collect::<Vec<_>>(),
+                    ));
                     log(&row_line(&row));
                     rows.push(row);
                 }
@@ -161,6 +180,8 @@ impl RowHead<'_> {
             wall,
             mrays_per_s: rays.len() as f64 / (wall.median_ms * 1e3).max(1e-9),
             hit_fraction: hits.iter().filter(|h| h.is_hit()).count() as f64 / rays.len().max(1) as f64,
+            gpu_median_ms: None,
+            host_ms: None,
             differing_from_cpu: differing,
         }
     }
@@ -168,7 +189,7 @@ impl RowHead<'_> {
 
 fn row_line(r: &RayRow) -> String {
     format!(
-        "  rays {:<15} {:<10} {:<9} {:<3} {:<12} {} rays: {:.2} ms ({:.2} Mrays/s), {:.1}% hit",
+        "  rays {:<15} {:<10} {:<9} {:<3} {:<12} {} rays: {:.2} ms ({:.2} Mrays/s), {:.1}% hit{}",
         r.mesh,
         r.set,
         r.accel,
@@ -177,6 +198,7 @@ fn row_line(r: &RayRow) -> String {
         r.rays,
         r.wall.median_ms,
         r.mrays_per_s,
-        100.0 * r.hit_fraction
+        100.0 * r.hit_fraction,
+        r.gpu_median_ms.map_or(String::new(), |ms| format!(", GPU {ms:.2} ms"))
     )
 }

@@ -49,7 +49,7 @@ pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use points::GpuClosestPoints;
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
-pub use timing::{GpuQueryStats, GpuTimings};
+pub use timing::{GpuQueryStats, GpuTimings, HostPhases};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.
 pub use walks::bvh::binary as bvh;

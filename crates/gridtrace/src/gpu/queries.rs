@@ -9,12 +9,15 @@
 use std::mem::size_of;
 use std::time::Instant;
 
+use bytemuck::Zeroable;
+use rayon::prelude::*;
+
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
 use super::kernels::Kernel;
 use super::layout::{GpuHit, RayRec};
 use super::renderer::grow;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
-use super::timing::{GpuQueryStats, GpuTimings, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
+use super::timing::{GpuQueryStats, GpuTimings, HostPhases, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
 use crate::Result;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
@@ -72,7 +75,7 @@ impl GpuRenderer {
         let rec = |i: usize| ray_rec(&rays[i], t_min, t_max);
         self.batch(rays.len(), rec, kind, Query::ClosestHit, |raw| {
             let out: &[GpuHit] = bytemuck::cast_slice(raw[0]);
-            hits.extend(out.iter().map(|h| {
+            hits.par_extend(out.par_iter().map(|h| {
                 if h.tri == MISS {
                     Hit::MISS
                 } else {
@@ -95,7 +98,7 @@ impl GpuRenderer {
         self.batch(rays.len(), rec, kind, Query::AnyHit, |raw| {
             let out: &[RayRec] = bytemuck::cast_slice(raw[0]);
             // The occlusion kernel zeroes an occluded ray's contribution.
-            occ.extend(out.iter().map(|r| r.weight[0] == 0.0));
+            occ.par_extend(out.par_iter().map(|r| r.weight[0] == 0.0));
         })?;
         Ok(occ)
     }
@@ -111,7 +114,7 @@ impl GpuRenderer {
     pub(super) fn batch(
         &mut self,
         n: usize,
-        rec_of: impl Fn(usize) -> RayRec,
+        rec_of: impl Fn(usize) -> RayRec + Sync,
         kind: AccelKind,
         query: Query,
         mut take: impl FnMut(&[&[u8]]),
@@ -140,6 +143,9 @@ impl GpuRenderer {
             self.submit_chunks(group, &rec_of, kind, query, &mut stats, &mut take)?;
         }
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+        // What the submissions' phases leave out (the last readout's bookkeeping) is preparation.
+        let h = &mut stats.timings.host;
+        h.prepare_ms = stats.wall_ms - h.wait_ms - h.readout_ms;
         stats.timings.total_ms = if self.timed() {
             stats.timings.stages_ms.values().sum()
         } else {
@@ -153,24 +159,32 @@ impl GpuRenderer {
     fn submit_chunks(
         &mut self,
         chunks: &[std::ops::Range<usize>],
-        rec_of: &impl Fn(usize) -> RayRec,
+        rec_of: &(impl Fn(usize) -> RayRec + Sync),
         kind: AccelKind,
         query: Query,
         stats: &mut GpuQueryStats,
         take: &mut impl FnMut(&[&[u8]]),
     ) -> Result<()> {
+        let began = Instant::now();
         let rec_bytes = size_of::<RayRec>() as u64;
         // The upload: every chunk's records (`pixel` numbers an item within its chunk), then a
-        // counters block per chunk.
-        let rays: Vec<RayRec> = chunks
-            .iter()
-            .flat_map(|part| {
-                part.clone().map(move |i| RayRec {
-                    pixel: (i - part.start) as u32,
-                    ..rec_of(i)
-                })
-            })
-            .collect();
+        // counters block per chunk. The records are made on every core into a host buffer kept
+        // between batches (a million rays are 48 MB: made serially into a fresh vector, that
+        // was a third of the host's share of a batch on lavapipe).
+        let n_items: usize = chunks.iter().map(|c| c.len()).sum();
+        let mut rays = std::mem::take(&mut self.batch_records);
+        rays.resize(n_items, RayRec::zeroed());
+        let mut rest = &mut rays[..];
+        for part in chunks {
+            let (mine, tail) = rest.split_at_mut(part.len());
+            rest = tail;
+            mine.par_iter_mut().enumerate().for_each(|(k, r)| {
+                *r = RayRec {
+                    pixel: k as u32,
+                    ..rec_of(part.start + k)
+                };
+            });
+        }
         let (slot, kernel) = match query {
             Query::ClosestHit => (SLOT_QUEUE_A, Kernel::Traverse),
             Query::AnyHit => (SLOT_SHADOW, Kernel::Occlusion),
@@ -184,7 +198,8 @@ impl GpuRenderer {
                 c
             })
             .collect();
-        let rays_bytes = rays.len() as u64 * rec_bytes;
+        let items = rays.len() as u64;
+        let rays_bytes = items * rec_bytes;
         let upload_bytes = rays_bytes + counts.len() as u64 * size_of::<u32>() as u64;
         let dev = &self.ctx.device;
         let copy = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
@@ -196,7 +211,7 @@ impl GpuRenderer {
             "tile pass uniforms",
             copy,
         );
-        let results_bytes = rays.len() as u64 * query.result_bytes();
+        let results_bytes = items * query.result_bytes();
         let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
         grow(
             dev,
@@ -209,6 +224,7 @@ impl GpuRenderer {
         let q = &self.ctx.queue;
         q.write_buffer(upload, 0, bytemuck::cast_slice(&rays));
         q.write_buffer(upload, rays_bytes, bytemuck::cast_slice(&counts));
+        self.batch_records = rays;
         stats.uploaded_bytes += upload_bytes;
         for (k, part) in chunks.iter().enumerate() {
             stats.uploaded_bytes += self.write_pass_uniforms_to(
@@ -230,7 +246,6 @@ impl GpuRenderer {
             Output::Accum => &w.accum,
         };
         // The readback: one region per output, each the submission's items in order.
-        let items = rays.len() as u64;
         let mut region_at = Vec::new();
         let mut at = 0;
         for o in query.outputs() {
@@ -274,8 +289,10 @@ impl GpuRenderer {
         rec.timer.resolve_into(&mut enc, readback, results_bytes);
         let total = results_bytes + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
+        let submitted = Instant::now();
         let timer = rec.timer;
         let stages = self.ctx.map_read_with(readback, total, |raw| {
+            let mapped = Instant::now();
             let regions: Vec<&[u8]> = query
                 .outputs()
                 .iter()
@@ -286,8 +303,11 @@ impl GpuRenderer {
             (
                 timer.parse(&self.ctx, &raw[results_bytes as usize..total as usize]),
                 timer.untimed,
+                mapped,
             )
         })?;
+        let phases = HostPhases::of_submission(began, submitted, stages.2, Instant::now());
+        stats.timings.host.add(&phases);
         for (name, ms) in stages.0 {
             *stats.timings.stages_ms.entry(name).or_default() += ms;
         }

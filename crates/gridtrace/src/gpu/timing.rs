@@ -3,6 +3,7 @@
 //! (`GpuQueryStats`; a frame's is `wavefront::GpuRenderStats`).
 
 use std::collections::BTreeMap;
+use std::time::Instant;
 
 use super::context::GpuContext;
 use crate::Result;
@@ -19,7 +20,46 @@ const TIMESTAMP_BYTES: u64 = std::mem::size_of::<u64>() as u64;
 /// Bytes a submission's timestamps may take in a readback (a begin and an end per pass).
 pub const MAX_TIMESTAMPS_BYTES: u64 = QUERY_COUNT as u64 * TIMESTAMP_BYTES;
 
-/// GPU time per stage (from timestamp queries when the adapter has them).
+/// Where a frame's or a batch's wall time went, on the host's clock (ms); the three add up to
+/// the wall time. The first hardware run (H200, docs/benchmarks.md) found 1920x1080 frames
+/// taking 13-30 ms of wall time for 0.5-5 ms of device time, and 1M-ray batches 37-90 ms for
+/// 0.3-3 ms: this says which side of the submission the rest is on.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct HostPhases {
+    /// Before the submission: inputs written (rays, uniforms), outputs allocated, commands
+    /// recorded and submitted.
+    pub prepare_ms: f64,
+    /// From the submission until the results are mapped: the device's work, the transfers
+    /// both ways, and the driver's latency.
+    pub wait_ms: f64,
+    /// Copying and converting the mapped results into the caller's form.
+    pub readout_ms: f64,
+}
+
+impl HostPhases {
+    /// Adds a later submission's phases.
+    pub fn add(&mut self, other: &HostPhases) {
+        self.prepare_ms += other.prepare_ms;
+        self.wait_ms += other.wait_ms;
+        self.readout_ms += other.readout_ms;
+    }
+
+    /// The phases of one submission: its preparation began at `began`, it was submitted at
+    /// `submitted`, its results were mapped at `mapped` and read out by `done`. (The frame or
+    /// batch sets its preparation to what its wall time leaves, so work before the first
+    /// submission counts too.)
+    pub(crate) fn of_submission(began: Instant, submitted: Instant, mapped: Instant, done: Instant) -> HostPhases {
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        HostPhases {
+            prepare_ms: ms(submitted - began),
+            wait_ms: ms(mapped - submitted),
+            readout_ms: ms(done - mapped),
+        }
+    }
+}
+
+/// GPU time per stage (from timestamp queries when the adapter has them), and where the host's
+/// wall time went.
 #[derive(Debug, Default, Clone)]
 pub struct GpuTimings {
     /// Milliseconds per stage name, summed over bounces and tiles.
@@ -31,6 +71,8 @@ pub struct GpuTimings {
     /// Passes that ran untimed (more than `MAX_TIMED_PASSES` in one submission): the stage
     /// sums leave them out.
     pub untimed_passes: u32,
+    /// The wall time's phases on the host (whatever the adapter).
+    pub host: HostPhases,
 }
 
 /// The query set and the buffer its timestamps are resolved into (a renderer's own).
@@ -181,6 +223,7 @@ impl GpuQueryStats {
         self.timings.total_ms += other.timings.total_ms;
         self.timings.from_timestamps = other.timings.from_timestamps;
         self.timings.untimed_passes += other.timings.untimed_passes;
+        self.timings.host.add(&other.timings.host);
         self.chunks += other.chunks;
         self.round_trips += other.round_trips;
         self.uploaded_bytes += other.uploaded_bytes;

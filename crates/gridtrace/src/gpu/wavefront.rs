@@ -8,12 +8,13 @@
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES, grow};
-use super::timing::{GpuTimings, MAX_TIMESTAMPS_BYTES};
+use super::timing::{GpuTimings, HostPhases, MAX_TIMESTAMPS_BYTES};
 use crate::render::{Image, Mode, PixelFormat, RenderOptions, RenderStats, srgb8_to_linear};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
@@ -70,6 +71,12 @@ struct Readback {
     stage_ms: Vec<(&'static str, f64)>,
     untimed: u32,
     bytes: u64,
+    /// When the submission's recording began, it went, its results were mapped, and they were
+    /// read out.
+    began: Instant,
+    submitted: Instant,
+    mapped: Instant,
+    done: Instant,
 }
 
 impl GpuRenderer {
@@ -146,6 +153,8 @@ impl GpuRenderer {
                 *stats.timings.stages_ms.entry(name).or_default() += ms;
             }
             stats.timings.untimed_passes += out.untimed;
+            let phases = HostPhases::of_submission(out.began, out.submitted, out.mapped, out.done);
+            stats.timings.host.add(&phases);
             stats.downloaded_bytes += out.bytes;
             stats.round_trips += 1;
             k += n;
@@ -153,6 +162,8 @@ impl GpuRenderer {
         stats.tiles = tiles.len() as u32;
         stats.uploaded_bytes = uploaded;
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let h = &mut stats.timings.host;
+        h.prepare_ms = stats.wall_ms - h.wait_ms - h.readout_ms;
         stats.timings.from_timestamps = self.timed();
         stats.timings.total_ms = if self.timed() {
             stats.timings.stages_ms.values().sum()
@@ -178,6 +189,7 @@ impl GpuRenderer {
         opts: &RenderOptions,
         img: &mut Image,
     ) -> Result<Readback> {
+        let began = Instant::now();
         let texel = texel_bytes(opts);
         let packed = texel == PACKED_TEXEL_BYTES;
         // The readback: the tiles' pixels in order, then a counters block per tile, then the
@@ -233,27 +245,30 @@ impl GpuRenderer {
         rec.timer.resolve_into(&mut enc, readback, stamps_at);
         let total = stamps_at + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
+        let submitted = Instant::now();
         let timer = rec.timer;
-        self.ctx.map_read_with(readback, total, |raw| {
+        let mut out = self.ctx.map_read_with(readback, total, |raw| {
+            let mapped = Instant::now();
             let mut at = 0usize;
             for t in tiles {
                 let n = t.pixels as usize;
                 let dst = &mut img.pixels[(t.offset - first) as usize..][..n];
-                let texels = raw[at..].chunks_exact(texel as usize);
+                // On every core: a 1920x1080 frame is 2M pixels to convert.
+                let texels = raw[at..at + n * texel as usize].par_chunks_exact(texel as usize);
                 if packed {
                     // Red in the low byte of a little-endian u32: bytes r, g, b, a.
-                    for (px, rgba) in dst.iter_mut().zip(texels) {
+                    dst.par_iter_mut().zip(texels).for_each(|(px, rgba)| {
                         *px = Vec3::new(
                             srgb8_to_linear(rgba[0]),
                             srgb8_to_linear(rgba[1]),
                             srgb8_to_linear(rgba[2]),
                         );
-                    }
+                    });
                 } else {
-                    for (px, texel) in dst.iter_mut().zip(texels) {
+                    dst.par_iter_mut().zip(texels).for_each(|(px, texel)| {
                         let f = |i: usize| f32::from_ne_bytes(texel[4 * i..4 * i + 4].try_into().unwrap());
                         *px = Vec3::new(f(0), f(1), f(2));
-                    }
+                    });
                 }
                 at += n * texel as usize;
             }
@@ -268,8 +283,14 @@ impl GpuRenderer {
                 stage_ms: timer.parse(&self.ctx, &raw[stamps_at as usize..total as usize]),
                 untimed: timer.untimed,
                 bytes: total,
+                began,
+                submitted,
+                mapped,
+                done: mapped,
             }
-        })
+        })?;
+        out.done = Instant::now();
+        Ok(out)
     }
 
     /// Records one tile's kernels (its pass uniforms in place).
