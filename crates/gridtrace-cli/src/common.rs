@@ -117,8 +117,9 @@ pub fn mode_parser() -> impl TypedValueParser<Value = gridtrace::Mode> {
 #[derive(Args, Debug, Clone, Default)]
 pub struct GpuVariantArgs {
     /// GPU variants, KEY=VALUE,... (any subset; the first value of each is the default):
-    /// bvh=binary|wide8, stack=private|short|shortN, order=rows|tiles, appends=per_ray|workgroup|subgroup,
-    /// stats=on|off, checks=on|off. Same images and hits, other speed: for measuring on a GPU.
+    /// bvh=binary|wide8, stack=short|private|shortN, order=tiles|rows, appends=workgroup|per_ray|subgroup,
+    /// stats=off|on, checks=on|off. Same images and hits, other speed; the defaults are what the
+    /// hardware suite found fastest on an NVIDIA H200 (docs/benchmarks.md).
     #[arg(long = "gpu-variant", default_value = "", value_parser = |s: &str| s.parse::<GpuVariants>())]
     pub gpu_variant: GpuVariants,
 }

@@ -1,12 +1,18 @@
 //! GPU variants: the choices the GPU literature disagrees with today's kernels on, each
 //! switchable at run time (`--gpu-variant KEY=VALUE,...`, Python's `gpu_variant=`), so that one
-//! hardware run can measure them all. The default is today's behaviour; every other value gives
-//! the same images and hits (tests/gpu_variants.rs), so a variant is a speed choice only. None
-//! is chosen here: lavapipe runs the shaders on the CPU and would pick the wrong ones; the
-//! hardware suite (`bench --suite hardware`) runs `GpuVariants::suite()`.
+//! hardware run can measure them all. Every value gives the same images and hits
+//! (tests/gpu_variants.rs), so a variant is a speed choice only, and none is chosen on lavapipe
+//! (it runs the shaders on the CPU and would pick the wrong ones). The defaults were chosen by
+//! the hardware suite (`bench --suite hardware`, which runs `GpuVariants::suite()`) on an NVIDIA
+//! H200 on 2026-11-26 (docs/benchmarks.md, "GPU hardware"): of the single changes from the
+//! kernels as first written, a short stack, 8x8 tiles, workgroup appends and no statistics
+//! atomics each made frames faster in two runs, and together they took frames' GPU time to
+//! x0.74-0.86 (geomean per structure, never slower) with ray batches unchanged. The 8-wide BVH
+//! was 1.5x (frames) to 2.3x (ray batches) slower there and stays a variant; bounds checks
+//! (x0.79-0.96 off) stay on, since they are what keeps a kernel bug from reading other memory.
 //!
 //! The choices, what the literature expects of them and why:
-//! - `bvh=binary|wide8`: the BVH's GPU layout. `binary` is Aila and Laine's two-child node (64
+//! - `bvh=binary|wide8` (default `binary`): the BVH's GPU layout. `binary` is Aila and Laine's two-child node (64
 //!   bytes: both child boxes). `wide8` is the 8-wide compressed node of Ylitie, Karras and Laine
 //!   (HPG 2017), built from the CPU's 8-wide SAH tree: 80 bytes for eight children, boxes
 //!   quantized to 8 bits per plane against a per-node grid, children visited in the ray's
@@ -14,7 +20,7 @@
 //!   NVIDIA GPUs, from fewer node fetches and fewer bytes per ray (tray_racing's wgpu compute
 //!   shader reaches 1.2-1.5 Grays/s on an RTX 4070 Ti with it, as issue 32 cites); the
 //!   example `gpu_variant_work` (gridtrace-bench) counts both for our trees.
-//! - `stack=private|short|shortN`: where the BVH walk keeps its traversal stack. `private` is an
+//! - `stack=short|private|shortN` (default `short`): where the BVH walk keeps its traversal stack. `private` is an
 //!   array of `BVH_STACK` (97) entries per thread: local memory on GPUs (cached in L1, but
 //!   naga zero-fills it per ray). `short` keeps the top 8 entries (`shortN`: N, 1..=16) in
 //!   workgroup memory, a ring that drops its oldest entry when full; when it runs dry with
@@ -22,11 +28,11 @@
 //!   (the stackless fallback of Hapala et al. 2011), so no hit is lost. Short stacks in
 //!   on-chip memory are what Ylitie et al. and most GPU walkers use: the top few entries take
 //!   nearly every push and pop.
-//! - `order=rows|tiles`: which pixels a workgroup's 64 eye rays start from. `rows` is a 64x1
+//! - `order=tiles|rows` (default `tiles`): which pixels a workgroup's 64 eye rays start from. `rows` is a 64x1
 //!   strip; `tiles` an 8x8 square (inside each tile's whole-row part), so a warp's rays are
 //!   coherent in two directions and share more nodes and cells (Aila and Laine 2009 trace
 //!   primary rays in such tiles).
-//! - `appends=per_ray|workgroup|subgroup`: how kernels append to the compacted queues.
+//! - `appends=workgroup|per_ray|subgroup` (default `workgroup`, which every adapter runs): how kernels append to the compacted queues.
 //!   `per_ray` is one global `atomicAdd` per emitted ray; `workgroup` sums the workgroup's
 //!   appends in workgroup memory and makes one global `atomicAdd` per workgroup and queue (the
 //!   aggregation that CUDA compilers do for warps automatically and wavefront renderers do by
@@ -35,11 +41,11 @@
 //!   broadcast), no workgroup memory and no barriers. It needs the adapter's subgroup
 //!   operations (wgpu's `SUBGROUP` feature, which the context asks for where the adapter has
 //!   it); on an adapter without them the variant is refused with an error naming it.
-//! - `stats=on|off`: `on` counts shadow and reflection rays with two more per-ray atomics in
+//! - `stats=off|on` (default `off`): `on` counts shadow and reflection rays with two more per-ray atomics in
 //!   shading; `off` lets the one-invocation `indirect` kernel read the same totals off the
 //!   queue lengths once per bounce (with compaction; without it the per-ray counts stay), so
 //!   the ray counts are the same and the atomics are gone.
-//! - `checks=on|off`: `off` compiles the tracer's modules with `create_shader_module_trusted`
+//! - `checks=on|off` (default `on`): `off` compiles the tracer's modules with `create_shader_module_trusted`
 //!   (no bounds checks, no loop bounding; integer-division guards kept) and without zeroing
 //!   workgroup memory: every index the kernels make is in bounds by construction (the SAFETY
 //!   note in `kernels.rs`). Bounds checks cost a compare and select per storage access.
@@ -58,10 +64,9 @@ pub enum BvhLayout {
 }
 
 /// Where the BVH walk keeps its stack (`stack=`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum BvhStack {
     /// A private array of `BVH_STACK` entries.
-    #[default]
     Private,
     /// A ring of this many entries in workgroup memory, with the parent-link fallback.
     Short(u8),
@@ -73,20 +78,18 @@ pub const SHORT_STACK_DEFAULT: u8 = 8;
 pub const SHORT_STACK_MAX: u8 = 16;
 
 /// Which pixels a workgroup's eye rays start from (`order=`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RayOrder {
     /// Row by row: a workgroup is a strip of 64 pixels.
-    #[default]
     Rows,
     /// 8x8 squares.
     Tiles,
 }
 
 /// How queue appends reach the global counters (`appends=`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Appends {
     /// One global atomic per appended ray.
-    #[default]
     PerRay,
     /// One global atomic per workgroup and queue, offsets handed out in workgroup memory.
     Workgroup,
@@ -94,7 +97,8 @@ pub enum Appends {
     Subgroup,
 }
 
-/// One choice of every GPU variant. `Default` is today's kernels.
+/// One choice of every GPU variant. `Default` is what the H200 runs chose (module docs);
+/// `before_hardware` the kernels as first written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct GpuVariants {
     pub bvh: BvhLayout,
@@ -111,10 +115,10 @@ impl Default for GpuVariants {
     fn default() -> Self {
         GpuVariants {
             bvh: BvhLayout::Binary,
-            stack: BvhStack::Private,
-            order: RayOrder::Rows,
-            appends: Appends::PerRay,
-            stats: true,
+            stack: BvhStack::Short(SHORT_STACK_DEFAULT),
+            order: RayOrder::Tiles,
+            appends: Appends::Workgroup,
+            stats: false,
             checks: true,
         }
     }
@@ -123,10 +127,10 @@ impl Default for GpuVariants {
 /// Every key with its valid values, as errors list them.
 const KEYS: [(&str, &str); 6] = [
     ("bvh", "binary|wide8"),
-    ("stack", "private|short|shortN (N = 1..16)"),
-    ("order", "rows|tiles"),
-    ("appends", "per_ray|workgroup|subgroup"),
-    ("stats", "on|off"),
+    ("stack", "short|private|shortN (N = 1..16)"),
+    ("order", "tiles|rows"),
+    ("appends", "workgroup|per_ray|subgroup"),
+    ("stats", "off|on"),
     ("checks", "on|off"),
 ];
 
@@ -135,7 +139,9 @@ fn on_off(v: bool) -> &'static str {
 }
 
 impl GpuVariants {
-    /// What the hardware suite runs: the default, then each single change from it.
+    /// What the hardware suite runs: the default, then each single change from it, then the
+    /// kernels as first written (`before_hardware`), so that every run measures what the
+    /// defaults gained on its GPU.
     pub fn suite() -> Vec<GpuVariants> {
         let d = GpuVariants::default();
         vec![
@@ -145,24 +151,39 @@ impl GpuVariants {
                 ..d
             },
             GpuVariants {
-                stack: BvhStack::Short(SHORT_STACK_DEFAULT),
+                stack: BvhStack::Private,
                 ..d
             },
             GpuVariants {
-                order: RayOrder::Tiles,
+                order: RayOrder::Rows,
                 ..d
             },
             GpuVariants {
-                appends: Appends::Workgroup,
+                appends: Appends::PerRay,
                 ..d
             },
             GpuVariants {
                 appends: Appends::Subgroup,
                 ..d
             },
-            GpuVariants { stats: false, ..d },
+            GpuVariants { stats: true, ..d },
             GpuVariants { checks: false, ..d },
+            GpuVariants::before_hardware(),
         ]
+    }
+
+    /// The kernels as first written, before any ran on a GPU: a private stack, rows, an atomic
+    /// per appended ray, statistics atomics. The first H200 runs measured each of these against
+    /// the others (module docs).
+    pub fn before_hardware() -> GpuVariants {
+        GpuVariants {
+            bvh: BvhLayout::Binary,
+            stack: BvhStack::Private,
+            order: RayOrder::Rows,
+            appends: Appends::PerRay,
+            stats: true,
+            checks: true,
+        }
     }
 
     /// Whether the device of `ctx` can run these variants: `appends=subgroup` needs its
@@ -339,7 +360,7 @@ mod tests {
         assert_eq!("default".parse::<GpuVariants>().unwrap(), d);
         assert_eq!(
             d.to_string(),
-            "bvh=binary,stack=private,order=rows,appends=per_ray,stats=on,checks=on"
+            "bvh=binary,stack=short,order=tiles,appends=workgroup,stats=off,checks=on"
         );
         assert_eq!(d.changes(), "default");
         let v: GpuVariants = "bvh=wide8, stack=short3,order=tiles,appends=workgroup,stats=off,checks=off"
@@ -359,12 +380,17 @@ mod tests {
         assert_eq!(v.to_string().parse::<GpuVariants>().unwrap(), v);
         let text = "bvh=wide8,stack=short,order=tiles,appends=workgroup,stats=off,checks=off";
         assert_eq!(text.parse::<GpuVariants>().unwrap().to_string(), text);
-        let one: GpuVariants = "stack=short".parse().unwrap();
-        assert_eq!(one.stack, BvhStack::Short(SHORT_STACK_DEFAULT));
-        assert_eq!(one.changes(), "stack=short");
+        let one: GpuVariants = "stack=private".parse().unwrap();
+        assert_eq!(one.stack, BvhStack::Private);
+        assert_eq!(one.changes(), "stack=private");
+        assert_eq!("stack=short".parse::<GpuVariants>().unwrap().changes(), "default");
+        assert_eq!(
+            GpuVariants::before_hardware().changes(),
+            "stack=private,order=rows,appends=per_ray,stats=on"
+        );
         for (bad, names) in [
             ("bvh=wide4", ["bvh=wide4", "binary|wide8"]),
-            ("colour=red", ["'colour'", "appends=per_ray|workgroup"]),
+            ("colour=red", ["'colour'", "appends=workgroup|per_ray"]),
             ("stack=short17", ["short17", "shortN"]),
             ("stack=short0", ["short0", "shortN"]),
             ("stats", ["'stats'", "KEY=VALUE"]),
@@ -377,14 +403,15 @@ mod tests {
         }
     }
 
-    /// The suite is the default and one change of each key (both other appends), each
-    /// exactly one key off.
+    /// The suite is the default, one change of each key (both other appends), each exactly one
+    /// key off, and the kernels as first written.
     #[test]
     fn suite_is_default_plus_single_changes() {
         let s = GpuVariants::suite();
         assert_eq!(s[0], GpuVariants::default());
-        assert_eq!(s.len(), 1 + KEYS.len() + 1);
-        for v in &s[1..] {
+        assert_eq!(s.len(), 1 + KEYS.len() + 1 + 1);
+        assert_eq!(s.last(), Some(&GpuVariants::before_hardware()));
+        for v in &s[1..s.len() - 1] {
             assert_eq!(v.changes().split(',').count(), 1, "{v}");
             assert_ne!(v.changes(), "default");
         }

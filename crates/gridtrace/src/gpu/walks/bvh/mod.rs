@@ -35,7 +35,7 @@ const WIDE8_ARRAYS: &[(&str, &str)] = &[
     ("leaf triangles", "bvh8_tris"),
 ];
 
-/// Binary nodes, private stack: today's walk, the default.
+/// Binary nodes, private stack (`stack=private`; the default is `SPEC_SHORT` since the H200 runs).
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "bvh",
     name: "bvh",
