@@ -7,7 +7,8 @@
 //! H200 on 2026-11-26 (docs/benchmarks.md, "GPU hardware"): of the single changes from the
 //! kernels as first written, a short stack, 8x8 tiles, workgroup appends and no statistics
 //! atomics each made frames faster in two runs, and together they took frames' GPU time to
-//! x0.74-0.86 (geomean per structure, never slower) with ray batches unchanged. The 8-wide BVH
+//! x0.74-0.86 (geomean per structure, never slower), ray batches x0.90-1.15 (the worst from one
+//! sub-millisecond row). The 8-wide BVH
 //! was 1.5x (frames) to 2.3x (ray batches) slower there and stays a variant; bounds checks
 //! (x0.79-0.96 off) stay on, since they are what keeps a kernel bug from reading other memory.
 //!
