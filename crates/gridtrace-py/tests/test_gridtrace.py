@@ -180,6 +180,10 @@ def test_gpu_agrees_with_cpu():
     s = mesh.last_gpu_batch()
     assert s["rays"] == 20000 and s["round_trips"] == 1 and s["wall_ms"] > 0
     assert s["uploaded_bytes"] >= 20000 * 48 and s["downloaded_bytes"] >= 20000 * 48
+    # Where the wall time went on the host: three parts that add up to it.
+    h = s["host_ms"]
+    assert set(h) == {"prepare", "wait", "readout"} and min(h.values()) >= 0
+    assert abs(sum(h.values()) - s["wall_ms"]) <= 1e-6 * s["wall_ms"]
     assert gridtrace.Mesh(vertices, faces, backend="cpu").last_gpu_batch() is None
 
 

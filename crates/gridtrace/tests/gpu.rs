@@ -381,6 +381,20 @@ fn a_frame_of_many_tiles_is_one_round_trip() {
             assert!(sb.downloaded_bytes > 64 * 48 * 16 + 4 * 64, "{mode:?}");
         }
         assert!(sb.wall_ms > 0.0 && sb.frame_ms() == sb.wall_ms);
+        host_phases_account_for_the_wall(&sb.timings, sb.wall_ms);
+    }
+}
+
+/// The host's phases of a frame or batch are each positive, add up to its wall time, and the
+/// wait holds the device's work: the stages' timestamps fall between the submission and the
+/// mapped results (with 2% and 1 ms for the clocks' conversion).
+fn host_phases_account_for_the_wall(t: &gridtrace::gpu::GpuTimings, wall_ms: f64) {
+    let h = t.host;
+    assert!(h.prepare_ms >= 0.0 && h.wait_ms > 0.0 && h.readout_ms >= 0.0, "{h:?}");
+    let sum = h.prepare_ms + h.wait_ms + h.readout_ms;
+    assert!((sum - wall_ms).abs() <= 1e-6 * wall_ms.max(1.0), "{h:?} against wall {wall_ms}");
+    if t.from_timestamps {
+        assert!(t.total_ms <= 1.02 * h.wait_ms + 1.0, "GPU {} ms outside a wait of {h:?}", t.total_ms);
     }
 }
 
@@ -458,6 +472,7 @@ fn a_ray_batch_of_many_chunks_is_one_round_trip() {
     let stamps = if s.timings.from_timestamps { 4 * 2 * 16 } else { 0 };
     assert_eq!(s.downloaded_bytes, 2500 * 16 + stamps);
     assert!(s.uploaded_bytes >= 2500 * 48 && s.wall_ms > 0.0);
+    host_phases_account_for_the_wall(&s.timings, s.wall_ms);
     let want = whole.occluded(&rays, 0.0, 10.0, kind).unwrap();
     let got = chunked.occluded(&rays, 0.0, 10.0, kind).unwrap();
     assert_eq!(want, got);
