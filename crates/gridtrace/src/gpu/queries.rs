@@ -224,6 +224,13 @@ impl GpuRenderer {
         let q = &self.ctx.queue;
         q.write_buffer(upload, 0, bytemuck::cast_slice(&rays));
         q.write_buffer(upload, rays_bytes, bytemuck::cast_slice(&counts));
+        // Kept for the next batch up to one chunk's records (what the work buffers hold on the
+        // device anyway): a submission of many chunks does not leave gigabytes behind.
+        let keep = chunks[0].len().max(1);
+        if rays.capacity() > keep {
+            rays.truncate(keep);
+            rays.shrink_to(keep);
+        }
         self.batch_records = rays;
         stats.uploaded_bytes += upload_bytes;
         for (k, part) in chunks.iter().enumerate() {
