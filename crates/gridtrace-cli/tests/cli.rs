@@ -741,6 +741,19 @@ fn rays_on_the_gpu_answer_as_on_the_cpu_and_report_the_batch() {
         .parse()
         .unwrap();
     assert!(down >= 400 * 16, "{line}");
+    // The wall time's parts on the host: prepare, wait, readout, each a number of ms.
+    let host = text
+        .lines()
+        .find(|l| l.starts_with("host "))
+        .unwrap_or_else(|| panic!("no host line:\n{text}"));
+    let parts: Vec<f64> = ["prepare ", "wait ", "readout "]
+        .iter()
+        .map(|k| {
+            let v = host.split(k).nth(1).unwrap_or_else(|| panic!("{k}in {host}"));
+            v.split([',', ' ']).next().unwrap().parse().unwrap()
+        })
+        .collect();
+    assert!(parts.iter().all(|&ms| ms >= 0.0) && parts[1] > 0.0, "{host}");
     let (cpu, _) = run("cpu", true);
     let (gpu, _) = run("gpu", true);
     assert_eq!(cpu, gpu, "occlusion");

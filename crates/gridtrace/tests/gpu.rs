@@ -392,9 +392,16 @@ fn host_phases_account_for_the_wall(t: &gridtrace::gpu::GpuTimings, wall_ms: f64
     let h = t.host;
     assert!(h.prepare_ms >= 0.0 && h.wait_ms > 0.0 && h.readout_ms >= 0.0, "{h:?}");
     let sum = h.prepare_ms + h.wait_ms + h.readout_ms;
-    assert!((sum - wall_ms).abs() <= 1e-6 * wall_ms.max(1.0), "{h:?} against wall {wall_ms}");
+    assert!(
+        (sum - wall_ms).abs() <= 1e-6 * wall_ms.max(1.0),
+        "{h:?} against wall {wall_ms}"
+    );
     if t.from_timestamps {
-        assert!(t.total_ms <= 1.02 * h.wait_ms + 1.0, "GPU {} ms outside a wait of {h:?}", t.total_ms);
+        assert!(
+            t.total_ms <= 1.02 * h.wait_ms + 1.0,
+            "GPU {} ms outside a wait of {h:?}",
+            t.total_ms
+        );
     }
 }
 

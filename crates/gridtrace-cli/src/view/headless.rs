@@ -74,7 +74,11 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         // Wall time first (what the viewer waits), then the device's, its round trips and
         // the bytes read back: the same fields `render` and `bench` report.
         let trips = f.gpu.as_ref().map_or(String::new(), |g| {
-            format!(", {} round trip(s), {} B down", g.round_trips, g.downloaded_bytes)
+            let h = &g.timings.host;
+            format!(
+                ", {} round trip(s), {} B down; host prepare {:.2}, wait {:.2}, readout {:.2} ms",
+                g.round_trips, g.downloaded_bytes, h.prepare_ms, h.wait_ms, h.readout_ms
+            )
         });
         println!(
             "frame {i:4}  {ms:8.2} ms{}  {rate:8.2} Mrays/s  ({} rays{trips})",
