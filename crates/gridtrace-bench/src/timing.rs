@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use gridtrace::Result;
-use gridtrace::gpu::{GpuRenderStats, GpuRenderer};
+use gridtrace::gpu::{GpuRenderStats, GpuRenderer, HostPhases};
 use gridtrace::render::{RayCounts, RenderOptions};
 use gridtrace::scene::PreparedScene;
 
@@ -16,6 +16,12 @@ pub struct Summary {
 }
 
 impl Summary {
+    /// The median of `times`, `None` when there are none (a GPU without timestamps).
+    pub fn median_of(times: impl Iterator<Item = f64>) -> Option<f64> {
+        let t: Vec<f64> = times.collect();
+        (!t.is_empty()).then(|| Summary::of(&t).median_ms)
+    }
+
     pub fn of(times: &[f64]) -> Summary {
         if times.is_empty() {
             return Summary::default();
@@ -141,23 +147,12 @@ pub fn interleaved<T>(
     Ok(out)
 }
 
-/// Medians of the host's phases of a GPU frame or batch (`gridtrace::gpu::HostPhases`), ms.
-#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
-pub struct HostMedians {
-    pub prepare_ms: f64,
-    pub wait_ms: f64,
-    pub readout_ms: f64,
-}
-
-impl HostMedians {
-    pub fn of(phases: &[gridtrace::gpu::HostPhases]) -> HostMedians {
-        let med = |f: fn(&gridtrace::gpu::HostPhases) -> f64| {
-            Summary::of(&phases.iter().map(f).collect::<Vec<_>>()).median_ms
-        };
-        HostMedians {
-            prepare_ms: med(|h| h.prepare_ms),
-            wait_ms: med(|h| h.wait_ms),
-            readout_ms: med(|h| h.readout_ms),
-        }
+/// The medians, phase by phase, of the host's phases of GPU frames or batches.
+pub fn host_medians(phases: impl Iterator<Item = HostPhases> + Clone) -> HostPhases {
+    let med = |f: fn(HostPhases) -> f64| Summary::of(&phases.clone().map(f).collect::<Vec<_>>()).median_ms;
+    HostPhases {
+        prepare_ms: med(|h| h.prepare_ms),
+        wait_ms: med(|h| h.wait_ms),
+        readout_ms: med(|h| h.readout_ms),
     }
 }

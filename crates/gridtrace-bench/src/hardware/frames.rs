@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
+use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants, HostPhases};
 use gridtrace::render::differing_pixels;
 use gridtrace::render::{Image, PixelFormat, RenderOptions};
 use gridtrace::scene::PreparedScene;
@@ -15,7 +15,7 @@ use gridtrace::{AccelKind, Mesh, Mode, Resolution, Result};
 
 use super::{Budget, Plan};
 use crate::scenes::BenchScene;
-use crate::timing::{HostMedians, Summary, interleaved};
+use crate::timing::{Summary, host_medians, interleaved};
 
 /// Channel levels (of 255) a GPU pixel may differ from the CPU's by: float results rounded
 /// differently (a GPU may fuse multiply-adds) move a shade by a level or two.
@@ -55,7 +55,7 @@ pub struct FrameRow {
     /// The last timed frame's stages (GPU timestamps), ms.
     pub stages_ms: BTreeMap<String, f64>,
     /// Medians of the wall time's parts on the host (prepare, wait, readout); `None` on the CPU.
-    pub host_ms: Option<HostMedians>,
+    pub host_ms: Option<HostPhases>,
     /// Pixels differing from the CPU's image beyond `PIXEL_TOLERANCE` (fraction; 0 on the CPU).
     pub differing_from_cpu: f64,
 }
@@ -252,9 +252,8 @@ fn gpu_row(
     mismatches: &mut Vec<String>,
 ) -> FrameRow {
     let wall = Summary::of(walls);
-    let gpu_times: Vec<f64> = frames.iter().filter_map(|s| s.gpu_ms()).collect();
-    let gpu_median_ms = (!gpu_times.is_empty()).then(|| Summary::of(&gpu_times).median_ms);
-    let host = HostMedians::of(&frames.iter().map(|s| s.timings.host).collect::<Vec<_>>());
+    let gpu_median_ms = Summary::median_of(frames.iter().filter_map(|s| s.gpu_ms()));
+    let host = host_medians(frames.iter().map(|s| s.timings.host));
     let last = frames.last().expect("at least one timed frame");
     let rays = last.render.rays.total();
     let differing = differing_pixels(&image.to_rgb8(), reference, PIXEL_TOLERANCE);

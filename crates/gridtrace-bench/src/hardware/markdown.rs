@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 
 use super::{FrameRow, HardwareReport, RayRow};
-use crate::timing::HostMedians;
+use gridtrace::gpu::HostPhases;
 
 pub fn markdown(r: &HardwareReport) -> String {
     let mut md = String::new();
@@ -143,7 +143,7 @@ fn rays(md: &mut String, rows: &[RayRow]) {
 }
 
 /// `prepare / wait / readout` ms, or `-` on the CPU.
-fn host_cell(h: Option<&HostMedians>) -> String {
+fn host_cell(h: Option<&HostPhases>) -> String {
     h.map_or("-".into(), |h| {
         format!("{:.1} / {:.1} / {:.1}", h.prepare_ms, h.wait_ms, h.readout_ms)
     })

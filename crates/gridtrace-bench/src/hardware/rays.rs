@@ -8,14 +8,14 @@ use std::time::Instant;
 use serde::Serialize;
 
 use gridtrace::accel::{Hit, Ray};
-use gridtrace::gpu::{GpuContext, GpuQueryStats, GpuRenderer, GpuVariants};
+use gridtrace::gpu::{GpuContext, GpuRenderer, GpuVariants, HostPhases};
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
 use gridtrace::{AccelKind, Mesh, Result};
 
 use super::frames::{frame_accels, open_gpu, variants_for};
 use super::{Budget, Plan};
 use crate::query_study::incoherent_rays;
-use crate::timing::{HostMedians, Summary, interleaved, repeat_warm};
+use crate::timing::{Summary, host_medians, interleaved, repeat_warm};
 
 /// Rays whose GPU hit may differ from the CPU's (a fraction): rays through an edge or a vertex
 /// may name either triangle, or a different t within rounding. More is a mismatch.
@@ -40,7 +40,7 @@ pub struct RayRow {
     /// GPU time (timestamps summed) of the timed batches: median, where the adapter has them.
     pub gpu_median_ms: Option<f64>,
     /// Medians of the wall time's parts on the host (prepare, wait, readout); `None` on the CPU.
-    pub host_ms: Option<HostMedians>,
+    pub host_ms: Option<HostPhases>,
     /// Rays whose hit differs from the CPU's (fraction; 0 on the CPU).
     pub differing_from_cpu: f64,
 }
@@ -107,7 +107,8 @@ pub fn ray_study(
                     Ok((ms, (hits, r.last_query_stats().clone())))
                 })?;
                 for ((times, mut outs), (variant, _)) in runs.into_iter().zip(renderers.iter()) {
-                    let stats: Vec<GpuQueryStats> = outs.iter().map(|o| o.1.clone()).collect();
+                    let gpu_median_ms = Summary::median_of(outs.iter().filter_map(|o| o.1.gpu_ms()));
+                    let host = host_medians(outs.iter().map(|o| o.1.timings.host));
                     let hits = outs.pop().expect("at least one timed run").0;
                     let differing = differing_hits(&hits, &cpu_hits);
                     if differing > MAX_DIFFERING_HITS {
@@ -118,11 +119,8 @@ pub fn ray_study(
                         ));
                     }
                     let mut row = head("gpu", variant).row(&rays, &times, &hits, differing);
-                    let gpu: Vec<f64> = stats.iter().filter_map(|s| s.gpu_ms()).collect();
-                    row.gpu_median_ms = (!gpu.is_empty()).then(|| Summary::of(&gpu).median_ms);
-                    row.host_ms = Some(HostMedians::of(
-                        &stats.iter().map(|s| s.timings.host).collect::<Vec<_>>(),
-                    ));
+                    row.gpu_median_ms = gpu_median_ms;
+                    row.host_ms = Some(host);
                     log(&row_line(&row));
                     rows.push(row);
                 }

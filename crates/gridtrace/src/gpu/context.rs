@@ -4,9 +4,10 @@
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::bindings::storage_buffers_needed;
+use super::timing::HostPhases;
 use crate::{Error, Result};
 
 /// How long a submission may run before it is reported as a hang.
@@ -233,11 +234,21 @@ impl GpuContext {
         enc.copy_buffer_to_buffer(src, 0, &staging, 0, Some(size));
         self.queue.submit([enc.finish()]);
         self.map_read_with(&staging, size, |raw| raw.to_vec())
+            .map(|(bytes, _)| bytes)
     }
 
     /// The first `size` bytes (not zero) of `staging`, a `MAP_READ` buffer that submitted work
-    /// fills, once that work is done: waits, maps, hands them to `f` and unmaps.
-    pub fn map_read_with<R>(&self, staging: &wgpu::Buffer, size: u64, f: impl FnOnce(&[u8]) -> R) -> Result<R> {
+    /// fills, once that work is done: waits, maps, hands them to `f` and unmaps. Called right
+    /// after the submission; with `f`'s result come the wait (to the mapped bytes) and the
+    /// readout (`f`'s own time) on the host's clock, the preparation left at 0 for the caller
+    /// (`HostPhases::close`).
+    pub fn map_read_with<R>(
+        &self,
+        staging: &wgpu::Buffer,
+        size: u64,
+        f: impl FnOnce(&[u8]) -> R,
+    ) -> Result<(R, HostPhases)> {
+        let submitted = Instant::now();
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, ..size, move |r| {
             let _ = tx.send(r);
@@ -256,6 +267,7 @@ impl GpuContext {
             Ok(Err(e)) => return failed(Error::Gpu(format!("mapping a result buffer failed: {e}"))),
             Err(_) => return failed(Error::Gpu("mapping a result buffer did not complete".into())),
         }
+        let mapped = Instant::now();
         let out = {
             let view = staging
                 .get_mapped_range(..size)
@@ -263,6 +275,12 @@ impl GpuContext {
             f(&view)
         };
         staging.unmap();
-        Ok(out)
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        let phases = HostPhases {
+            prepare_ms: 0.0,
+            wait_ms: ms(mapped - submitted),
+            readout_ms: ms(mapped.elapsed()),
+        };
+        Ok((out, phases))
     }
 }

@@ -17,7 +17,7 @@ use super::kernels::Kernel;
 use super::layout::{GpuHit, RayRec};
 use super::renderer::grow;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
-use super::timing::{GpuQueryStats, GpuTimings, HostPhases, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
+use super::timing::{GpuQueryStats, GpuTimings, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
 use crate::Result;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
@@ -143,9 +143,7 @@ impl GpuRenderer {
             self.submit_chunks(group, &rec_of, kind, query, &mut stats, &mut take)?;
         }
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
-        // What the submissions' phases leave out (the last readout's bookkeeping) is preparation.
-        let h = &mut stats.timings.host;
-        h.prepare_ms = stats.wall_ms - h.wait_ms - h.readout_ms;
+        stats.timings.host.close(stats.wall_ms);
         stats.timings.total_ms = if self.timed() {
             stats.timings.stages_ms.values().sum()
         } else {
@@ -165,7 +163,6 @@ impl GpuRenderer {
         stats: &mut GpuQueryStats,
         take: &mut impl FnMut(&[&[u8]]),
     ) -> Result<()> {
-        let began = Instant::now();
         let rec_bytes = size_of::<RayRec>() as u64;
         // The upload: every chunk's records (`pixel` numbers an item within its chunk), then a
         // counters block per chunk. The records are made on every core into a host buffer kept
@@ -296,10 +293,8 @@ impl GpuRenderer {
         rec.timer.resolve_into(&mut enc, readback, results_bytes);
         let total = results_bytes + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
-        let submitted = Instant::now();
         let timer = rec.timer;
-        let stages = self.ctx.map_read_with(readback, total, |raw| {
-            let mapped = Instant::now();
+        let (stages, phases) = self.ctx.map_read_with(readback, total, |raw| {
             let regions: Vec<&[u8]> = query
                 .outputs()
                 .iter()
@@ -310,10 +305,8 @@ impl GpuRenderer {
             (
                 timer.parse(&self.ctx, &raw[results_bytes as usize..total as usize]),
                 timer.untimed,
-                mapped,
             )
         })?;
-        let phases = HostPhases::of_submission(began, submitted, stages.2, Instant::now());
         stats.timings.host.add(&phases);
         for (name, ms) in stages.0 {
             *stats.timings.stages_ms.entry(name).or_default() += ms;

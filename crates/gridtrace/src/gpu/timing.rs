@@ -3,7 +3,6 @@
 //! (`GpuQueryStats`; a frame's is `wavefront::GpuRenderStats`).
 
 use std::collections::BTreeMap;
-use std::time::Instant;
 
 use super::context::GpuContext;
 use crate::Result;
@@ -24,7 +23,7 @@ pub const MAX_TIMESTAMPS_BYTES: u64 = QUERY_COUNT as u64 * TIMESTAMP_BYTES;
 /// the wall time. The first hardware run (H200, docs/benchmarks.md) found 1920x1080 frames
 /// taking 13-30 ms of wall time for 0.5-5 ms of device time, and 1M-ray batches 37-90 ms for
 /// 0.3-3 ms: this says which side of the submission the rest is on.
-#[derive(Debug, Default, Clone, Copy, PartialEq)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct HostPhases {
     /// Before the submission: inputs written (rays, uniforms), outputs allocated, commands
     /// recorded and submitted.
@@ -44,17 +43,20 @@ impl HostPhases {
         self.readout_ms += other.readout_ms;
     }
 
-    /// The phases of one submission: its preparation began at `began`, it was submitted at
-    /// `submitted`, its results were mapped at `mapped` and read out by `done`. (The frame or
-    /// batch sets its preparation to what its wall time leaves, so work before the first
-    /// submission counts too.)
-    pub(crate) fn of_submission(began: Instant, submitted: Instant, mapped: Instant, done: Instant) -> HostPhases {
-        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-        HostPhases {
-            prepare_ms: ms(submitted - began),
-            wait_ms: ms(mapped - submitted),
-            readout_ms: ms(done - mapped),
-        }
+    /// Sets the preparation to what the waits and readouts of a frame or batch leave of its
+    /// `wall_ms`: everything before and between its submissions.
+    pub(crate) fn close(&mut self, wall_ms: f64) {
+        self.prepare_ms = wall_ms - self.wait_ms - self.readout_ms;
+    }
+}
+
+impl std::fmt::Display for HostPhases {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "prepare {:.2}, wait {:.2}, readout {:.2} ms",
+            self.prepare_ms, self.wait_ms, self.readout_ms
+        )
     }
 }
 

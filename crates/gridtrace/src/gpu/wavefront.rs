@@ -71,12 +71,8 @@ struct Readback {
     stage_ms: Vec<(&'static str, f64)>,
     untimed: u32,
     bytes: u64,
-    /// When the submission's recording began, it went, its results were mapped, and they were
-    /// read out.
-    began: Instant,
-    submitted: Instant,
-    mapped: Instant,
-    done: Instant,
+    /// Its wait and readout on the host's clock.
+    host: HostPhases,
 }
 
 impl GpuRenderer {
@@ -153,8 +149,7 @@ impl GpuRenderer {
                 *stats.timings.stages_ms.entry(name).or_default() += ms;
             }
             stats.timings.untimed_passes += out.untimed;
-            let phases = HostPhases::of_submission(out.began, out.submitted, out.mapped, out.done);
-            stats.timings.host.add(&phases);
+            stats.timings.host.add(&out.host);
             stats.downloaded_bytes += out.bytes;
             stats.round_trips += 1;
             k += n;
@@ -162,8 +157,7 @@ impl GpuRenderer {
         stats.tiles = tiles.len() as u32;
         stats.uploaded_bytes = uploaded;
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let h = &mut stats.timings.host;
-        h.prepare_ms = stats.wall_ms - h.wait_ms - h.readout_ms;
+        stats.timings.host.close(stats.wall_ms);
         stats.timings.from_timestamps = self.timed();
         stats.timings.total_ms = if self.timed() {
             stats.timings.stages_ms.values().sum()
@@ -189,7 +183,6 @@ impl GpuRenderer {
         opts: &RenderOptions,
         img: &mut Image,
     ) -> Result<Readback> {
-        let began = Instant::now();
         let texel = texel_bytes(opts);
         let packed = texel == PACKED_TEXEL_BYTES;
         // The readback: the tiles' pixels in order, then a counters block per tile, then the
@@ -245,10 +238,8 @@ impl GpuRenderer {
         rec.timer.resolve_into(&mut enc, readback, stamps_at);
         let total = stamps_at + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
-        let submitted = Instant::now();
         let timer = rec.timer;
-        let mut out = self.ctx.map_read_with(readback, total, |raw| {
-            let mapped = Instant::now();
+        let (out, host) = self.ctx.map_read_with(readback, total, |raw| {
             let mut at = 0usize;
             for t in tiles {
                 let n = t.pixels as usize;
@@ -283,14 +274,10 @@ impl GpuRenderer {
                 stage_ms: timer.parse(&self.ctx, &raw[stamps_at as usize..total as usize]),
                 untimed: timer.untimed,
                 bytes: total,
-                began,
-                submitted,
-                mapped,
-                done: mapped,
+                host: HostPhases::default(),
             }
         })?;
-        out.done = Instant::now();
-        Ok(out)
+        Ok(Readback { host, ..out })
     }
 
     /// Records one tile's kernels (its pass uniforms in place).
