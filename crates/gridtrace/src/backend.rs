@@ -20,7 +20,7 @@
 
 use std::sync::Arc;
 
-use crate::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
+use crate::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
 use crate::render::{Image, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
 use crate::{Error, Result};
@@ -56,11 +56,20 @@ impl Backend {
     /// 6.3-6.6 s on lavapipe against 0.89-0.97 s on the CPU with the grid, 4.9 s against 0.30 s
     /// with the BVH; 2026-11-26), so `--backend gpu` is the way to use one.
     pub fn open_device(self) -> Result<(Option<Arc<GpuContext>>, Vec<String>)> {
+        self.open_device_with(wgpu::InstanceDescriptor::new_without_display_handle)
+    }
+
+    /// `open_device`, its instance made from `desc()` (`GpuContext::new_with`): the viewer's
+    /// knows the window's display, so that it can present from the tracer's device.
+    pub fn open_device_with(
+        self,
+        desc: impl FnOnce() -> wgpu::InstanceDescriptor,
+    ) -> Result<(Option<Arc<GpuContext>>, Vec<String>)> {
         let mut notes = Vec::new();
         let ctx = match self {
             Backend::Cpu => None,
-            Backend::Gpu => Some(Arc::new(GpuContext::new()?)),
-            Backend::Auto => match GpuContext::new() {
+            Backend::Gpu => Some(Arc::new(GpuContext::new_with(desc())?)),
+            Backend::Auto => match GpuContext::new_with(desc()) {
                 Ok(c) if c.is_software() => {
                     notes.push(format!(
                         "the only adapter is a software rasteriser ({}), slower than the CPU tracer on the same \
@@ -181,6 +190,15 @@ pub struct Frame {
     pub gpu: Option<GpuRenderStats>,
 }
 
+/// A frame asked into a device image (`Tracer::render_to_device`).
+#[derive(Debug, Clone)]
+pub enum Rendered {
+    /// Its pixels are in the device image; its figures came back.
+    OnDevice(GpuRenderStats),
+    /// It was traced on the CPU (no GPU, or the GPU given up): its pixels are here.
+    OnHost(Frame),
+}
+
 /// A prepared scene owned together with where it is traced (its GPU upload, or the CPU): what
 /// every program that renders holds, for one frame or many. It owns the scene, so it can be
 /// dropped and replaced (a file dropped on the viewer) and moved (`update_vertices`).
@@ -295,6 +313,26 @@ impl Tracer {
             stats,
             gpu: None,
         })
+    }
+
+    /// `render`, the pixels left in `target` (`GpuRenderer::render_to_device`: the viewer
+    /// presents from it, so the image never crosses to the host) where the frame is traced on
+    /// the GPU; a frame traced on the CPU comes back as `render` returns it (`Rendered::OnHost`).
+    pub fn render_to_device(
+        &mut self,
+        camera: &Camera,
+        lights: &[PointLight],
+        opts: &RenderOptions,
+        target: &DeviceImage,
+    ) -> Result<Rendered> {
+        self.scene.accel.check_serves(opts.accel)?;
+        if let Some(g) = &mut self.gpu {
+            match g.render_to_device(camera, lights, opts, target) {
+                Ok(s) => return Ok(Rendered::OnDevice(s)),
+                Err(e) => self.gpu_failed(e)?,
+            }
+        }
+        self.render(camera, lights, opts).map(Rendered::OnHost)
     }
 
     /// The notes of what happened since the last call (the GPU given up for the CPU).

@@ -385,6 +385,64 @@ fn a_frame_of_many_tiles_is_one_round_trip() {
     }
 }
 
+/// A frame left on the device (`render_to_device`, what the viewer presents from) is the frame
+/// `render` reads back as 8-bit sRGB, bit for bit, whole or band by band over many tiles; its
+/// one round trip carries the counters and timestamps and no image; heat, a wrong size and
+/// another device's image are errors, not a wrong picture.
+#[test]
+fn frames_left_on_the_device_equal_read_back_frames() {
+    use gridtrace::gpu::DeviceImage;
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
+    let Some(mut gpu) = renderer(&scene) else { return };
+    gpu.set_max_tile_pixels(1000);
+    let (w, h) = (64u32, 48u32);
+    let (cam, lights) = (scene.camera, scene.lights.clone());
+    let whole = DeviceImage::new(gpu.context(), w, h).unwrap();
+    let banded = DeviceImage::new(gpu.context(), w, h).unwrap();
+    for mode in [Mode::Cast, Mode::Shadow, Mode::Trace] {
+        let opts = RenderOptions::new(w, h, mode, AccelKind::ProximityCloud).with_pixels(gridtrace::PixelFormat::Srgb8);
+        let (want, sw) = gpu.render(&cam, &lights, &opts).unwrap();
+        // The device image is 8-bit sRGB whatever the options ask.
+        let linear = RenderOptions {
+            pixels: gridtrace::PixelFormat::Linear,
+            ..opts
+        };
+        let s = gpu.render_to_device(&cam, &lights, &linear, &whole).unwrap();
+        assert_eq!((s.tiles, s.round_trips), (4, 1), "{mode:?}");
+        assert_eq!(s.render.rays, sw.render.rays, "{mode:?}");
+        assert_eq!(
+            sw.downloaded_bytes - s.downloaded_bytes,
+            (w * h * 4) as u64,
+            "{mode:?}: the device frame reads back all but its image"
+        );
+        host_phases_account_for_the_wall(&s.timings, s.wall_ms);
+        assert!(
+            whole.read().unwrap().pixels == want.pixels,
+            "{mode:?}: the device image differs"
+        );
+        for (first, end) in [(0, 7), (7, 30), (30, 48)] {
+            gpu.render_to_device(&cam, &lights, &opts.band(first, end), &banded)
+                .unwrap();
+        }
+        assert!(
+            banded.read().unwrap().pixels == want.pixels,
+            "{mode:?}: bands out of place"
+        );
+    }
+    let heat = RenderOptions::new(w, h, Mode::Heat, AccelKind::ProximityCloud);
+    assert!(gpu.render_to_device(&cam, &lights, &heat, &whole).is_err());
+    let small = RenderOptions::new(w - 1, h, Mode::Cast, AccelKind::ProximityCloud);
+    assert!(gpu.render_to_device(&cam, &lights, &small, &whole).is_err());
+    let other = std::sync::Arc::new(GpuContext::new().unwrap());
+    let elsewhere = DeviceImage::new(&other, w, h).unwrap();
+    let cast = RenderOptions::new(w, h, Mode::Cast, AccelKind::ProximityCloud);
+    let e = gpu.render_to_device(&cam, &lights, &cast, &elsewhere).unwrap_err();
+    assert!(e.to_string().contains("another device"), "{e}");
+    // The errors left the renderer whole.
+    gpu.render_to_device(&cam, &lights, &cast, &whole).unwrap();
+}
+
 /// The host's phases of a frame or batch are each positive, add up to its wall time, and the
 /// wait holds the device's work: the stages' timestamps fall between the submission and the
 /// mapped results (with 2% and 1 ms for the clocks' conversion).

@@ -24,6 +24,10 @@ pub enum Fault {
 }
 
 pub struct GpuContext {
+    /// The instance the adapter came from: a window's surface is made from it, so that the
+    /// viewer can present from this device (`Presenter`), which it can only when the instance
+    /// knows the window's display (`GpuContext::new_with`).
+    pub instance: wgpu::Instance,
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
@@ -57,11 +61,18 @@ impl GpuContext {
     /// Opens the best adapter (discrete first, software last). `GRIDTRACE_ADAPTER=text` picks the
     /// first adapter whose name contains `text` (case-insensitive).
     pub fn new() -> Result<GpuContext> {
-        pollster::block_on(Self::new_async())
+        GpuContext::new_with(wgpu::InstanceDescriptor::new_without_display_handle())
     }
 
-    async fn new_async() -> Result<GpuContext> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    /// `new`, from an instance made with `desc` (its backends and flags still from the
+    /// environment, as `new`'s): the viewer passes one that knows the window system's display
+    /// (`InstanceDescriptor::new_with_display_handle`), so that a window's surface can be made
+    /// from the tracer's own instance and the frames presented from its device.
+    pub fn new_with(desc: wgpu::InstanceDescriptor) -> Result<GpuContext> {
+        pollster::block_on(Self::new_async(desc))
+    }
+
+    async fn new_async(mut desc: wgpu::InstanceDescriptor) -> Result<GpuContext> {
         desc.backends = wgpu::Backends::PRIMARY.with_env();
         desc.flags = wgpu::InstanceFlags::empty().with_env();
         let instance = wgpu::Instance::new(desc);
@@ -132,6 +143,7 @@ impl GpuContext {
             slot.get_or_insert_with(|| format!("device lost ({reason:?}): {msg}"));
         });
         Ok(GpuContext {
+            instance,
             adapter,
             device,
             queue,

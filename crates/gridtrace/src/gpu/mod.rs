@@ -21,7 +21,8 @@
 //!   `scene`: the scene's upload (the BVH's two GPU layouts, each with a CPU mirror of its
 //!   walk, are in `walks/bvh/`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
-//! - `wavefront`: the tile loop; `queries`: ray-batch intersect and occluded; `points`:
+//! - `wavefront`: the tile loop (its pixels to the host, or left in a `device_image` that the
+//!   viewer presents from); `queries`: ray-batch intersect and occluded; `points`:
 //!   closest-point batches (each structure's `NAME_closest_point` search);
 //! - `timing`: timestamp queries and per-stage milliseconds;
 //! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results;
@@ -31,6 +32,7 @@
 pub mod bindings;
 pub mod constants;
 mod context;
+mod device_image;
 mod grid_build;
 mod kernels;
 pub mod layout;
@@ -45,6 +47,7 @@ pub mod walks;
 mod wavefront;
 
 pub use context::{Fault, GpuContext};
+pub use device_image::DeviceImage;
 pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use points::GpuClosestPoints;
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};

@@ -232,7 +232,8 @@ impl GpuRenderer {
         Ok(stats)
     }
 
-    pub fn context(&self) -> &GpuContext {
+    /// The device it traces on (shared: a `DeviceImage` for `render_to_device` is made on it).
+    pub fn context(&self) -> &Arc<GpuContext> {
         &self.ctx
     }
 

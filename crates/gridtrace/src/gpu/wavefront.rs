@@ -5,12 +5,14 @@
 //! tile ended with three blocking reads: a 4096x4096 frame waited 48 times.) A frame whose
 //! results exceed the device's largest buffer is cut into as few submissions as fit.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
 
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
+use super::device_image::DeviceImage;
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES, grow};
@@ -83,6 +85,57 @@ impl GpuRenderer {
         lights: &[PointLight],
         opts: &RenderOptions,
     ) -> Result<(Image, GpuRenderStats)> {
+        let (img, stats) = self.trace_frame(camera, lights, opts, None)?;
+        Ok((img.expect("a frame without a device image comes to the host"), stats))
+    }
+
+    /// `render`, the pixels left in `target` (8-bit sRGB, whatever `opts.pixels` says; a band
+    /// of rows, `opts.rows`, in its own rows): only the counters and timestamps come back, so
+    /// the frame's round trip carries no image. `target` must be on this renderer's device and
+    /// of the frame's size; heat frames are not taken (they are coloured on the host by the
+    /// whole frame's largest cost).
+    pub fn render_to_device(
+        &mut self,
+        camera: &Camera,
+        lights: &[PointLight],
+        opts: &RenderOptions,
+        target: &DeviceImage,
+    ) -> Result<GpuRenderStats> {
+        if !Arc::ptr_eq(target.context(), &self.ctx) {
+            return Err(Error::InvalidInput(
+                "the device image was made on another device than this renderer's".into(),
+            ));
+        }
+        if target.size() != (opts.width, opts.height) {
+            return Err(Error::InvalidInput(format!(
+                "a {}x{} frame asked into a {}x{} device image",
+                opts.width,
+                opts.height,
+                target.size().0,
+                target.size().1
+            )));
+        }
+        if opts.mode == Mode::Heat {
+            return Err(Error::InvalidInput(
+                "heat frames are coloured on the host (by the whole frame's largest cost): use render".into(),
+            ));
+        }
+        let opts = RenderOptions {
+            pixels: PixelFormat::Srgb8,
+            ..*opts
+        };
+        let (_, stats) = self.trace_frame(camera, lights, &opts, Some(target))?;
+        Ok(stats)
+    }
+
+    /// The frame: its pixels into a host image (returned) or into `target`.
+    fn trace_frame(
+        &mut self,
+        camera: &Camera,
+        lights: &[PointLight],
+        opts: &RenderOptions,
+        target: Option<&DeviceImage>,
+    ) -> Result<(Option<Image>, GpuRenderStats)> {
         opts.validate()?;
         self.check_serves(opts.accel)?;
         camera.validate().map_err(Error::Scene)?;
@@ -133,13 +186,20 @@ impl GpuRenderer {
                 opts.ablation,
             );
         }
-        let mut img = Image::new(opts.width, rows.len() as u32);
+        let mut img = target.is_none().then(|| Image::new(opts.width, rows.len() as u32));
         let mut stats = GpuRenderStats::default();
         let max_bytes = self.ctx.limits().max_buffer_size;
+        // Bytes a pixel takes in the readback: none when the image stays on the device.
+        let readback_texel = if target.is_some() { 0 } else { texel_bytes(opts) };
         let mut k = 0;
         while k < tiles.len() {
-            let n = tiles_per_submission(&tiles[k..], texel_bytes(opts), max_bytes);
-            let out = self.run_tiles(k, &tiles[k..k + n], first, opts, &mut img)?;
+            let n = tiles_per_submission(&tiles[k..], readback_texel, max_bytes);
+            let dest = match (&mut img, target) {
+                (Some(img), _) => Dest::Host(img),
+                (None, Some(t)) => Dest::Device(t),
+                (None, None) => unreachable!("a host image is made when there is no target"),
+            };
+            let out = self.run_tiles(k, &tiles[k..k + n], first, opts, dest)?;
             for (r, t) in out.rays.iter().zip(&tiles[k..k + n]) {
                 stats.render.rays.eye += t.pixels as u64;
                 stats.render.rays.shadow += r.0;
@@ -165,7 +225,9 @@ impl GpuRenderer {
             stats.wall_ms
         };
         stats.render.render_ms = stats.wall_ms;
-        if opts.mode == Mode::Heat {
+        if opts.mode == Mode::Heat
+            && let Some(img) = &img
+        {
             let cost: f64 = img.pixels.iter().map(|p| p.x as f64).sum();
             stats.render.counters.cells = cost as u64;
         }
@@ -173,21 +235,24 @@ impl GpuRenderer {
     }
 
     /// Records `tiles` (the frame's tiles from index `first_tile` on; their pass uniforms are
-    /// written) into one submission, runs it, waits once and writes their pixels into `img`
-    /// (whose first row starts at pixel `first`).
+    /// written) into one submission, runs it, waits once and writes their pixels into `dest`
+    /// (a host image, whose first row starts at pixel `first`, or a device image of the whole
+    /// frame, copied into in the command stream).
     fn run_tiles(
         &mut self,
         first_tile: usize,
         tiles: &[Tile],
         first: u32,
         opts: &RenderOptions,
-        img: &mut Image,
+        mut dest: Dest,
     ) -> Result<Readback> {
         let texel = texel_bytes(opts);
         let packed = texel == PACKED_TEXEL_BYTES;
-        // The readback: the tiles' pixels in order, then a counters block per tile, then the
-        // timestamps.
-        let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * texel).sum();
+        let to_device = matches!(dest, Dest::Device(_));
+        // The readback: the tiles' pixels in order (none for a device image), then a counters
+        // block per tile, then the timestamps.
+        let readback_texel = if to_device { 0 } else { texel };
+        let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * readback_texel).sum();
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
         let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
@@ -220,11 +285,19 @@ impl GpuRenderer {
             rec.tile_pixels = t.pixels;
             self.record_tile(&mut enc, &mut rec, opts.mode);
             let bytes = t.pixels as u64 * texel;
-            if packed {
+            if let Dest::Device(d) = &dest {
+                // The tile's pixels to their place in the frame (its pixel numbering is the
+                // frame's, bands included).
+                rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
+                let at = t.offset as u64 * PACKED_TEXEL_BYTES;
+                enc.copy_buffer_to_buffer(&w.packed, 0, d.buffer(), at, Some(bytes));
+            } else if packed {
                 rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
                 enc.copy_buffer_to_buffer(&w.packed, 0, readback, image_at, Some(bytes));
+                image_at += bytes;
             } else {
                 enc.copy_buffer_to_buffer(&w.accum, 0, readback, image_at, Some(bytes));
+                image_at += bytes;
             }
             enc.copy_buffer_to_buffer(
                 &self.counters,
@@ -233,35 +306,31 @@ impl GpuRenderer {
                 counters_at + k as u64 * COUNTERS_BYTES,
                 Some(COUNTERS_BYTES),
             );
-            image_at += bytes;
         }
         rec.timer.resolve_into(&mut enc, readback, stamps_at);
         let total = stamps_at + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
         let timer = rec.timer;
         let (out, host) = self.ctx.map_read_with(readback, total, |raw| {
-            let mut at = 0usize;
-            for t in tiles {
-                let n = t.pixels as usize;
-                let dst = &mut img.pixels[(t.offset - first) as usize..][..n];
-                // On every core: a 1920x1080 frame is 2M pixels to convert.
-                let texels = raw[at..at + n * texel as usize].par_chunks_exact(texel as usize);
-                if packed {
-                    // Red in the low byte of a little-endian u32: bytes r, g, b, a.
-                    dst.par_iter_mut().zip(texels).for_each(|(px, rgba)| {
-                        *px = Vec3::new(
-                            srgb8_to_linear(rgba[0]),
-                            srgb8_to_linear(rgba[1]),
-                            srgb8_to_linear(rgba[2]),
-                        );
-                    });
-                } else {
-                    dst.par_iter_mut().zip(texels).for_each(|(px, texel)| {
-                        let f = |i: usize| f32::from_ne_bytes(texel[4 * i..4 * i + 4].try_into().unwrap());
-                        *px = Vec3::new(f(0), f(1), f(2));
-                    });
+            if let Dest::Host(img) = &mut dest {
+                let mut at = 0usize;
+                for t in tiles {
+                    let n = t.pixels as usize;
+                    let dst = &mut img.pixels[(t.offset - first) as usize..][..n];
+                    let texels = &raw[at..at + n * texel as usize];
+                    if packed {
+                        unpack_srgb8(dst, texels);
+                    } else {
+                        // On every core: a 1920x1080 frame is 2M pixels to convert.
+                        dst.par_iter_mut()
+                            .zip(texels.par_chunks_exact(texel as usize))
+                            .for_each(|(px, texel)| {
+                                let f = |i: usize| f32::from_ne_bytes(texel[4 * i..4 * i + 4].try_into().unwrap());
+                                *px = Vec3::new(f(0), f(1), f(2));
+                            });
+                    }
+                    at += n * texel as usize;
                 }
-                at += n * texel as usize;
             }
             let counter = |k: usize, slot: usize| {
                 let i = (counters_at + k as u64 * COUNTERS_BYTES) as usize + slot * SLOT_BYTES as usize;
@@ -305,6 +374,28 @@ impl GpuRenderer {
             enc.clear_buffer(&self.counters, SLOT_SHADOW as u64 * SLOT_BYTES, Some(SLOT_BYTES));
         }
     }
+}
+
+/// Where a submission's pixels go.
+enum Dest<'a> {
+    /// Read back into the host's image.
+    Host(&'a mut Image),
+    /// Copied into a device image (in the command stream); nothing read back.
+    Device(&'a DeviceImage),
+}
+
+/// Packed 8-bit sRGB pixels (`pack.wgsl`: red in the low byte of a little-endian u32, so bytes
+/// r, g, b, a) to linear colour, on every core (a 1920x1080 frame is 2M pixels).
+pub(super) fn unpack_srgb8(dst: &mut [Vec3], raw: &[u8]) {
+    dst.par_iter_mut()
+        .zip(raw.par_chunks_exact(PACKED_TEXEL_BYTES as usize))
+        .for_each(|(px, rgba)| {
+            *px = Vec3::new(
+                srgb8_to_linear(rgba[0]),
+                srgb8_to_linear(rgba[1]),
+                srgb8_to_linear(rgba[2]),
+            );
+        });
 }
 
 /// Bytes a pixel takes in the frame's readback: 4 when the caller wants 8-bit sRGB (packed on
