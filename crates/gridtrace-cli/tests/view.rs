@@ -202,12 +202,24 @@ fn dropped_files_and_the_overlay() {
         );
         assert!(!o1.contains("error"), "{o1}");
         if backend == "gpu" {
-            let up = o1
-                .lines()
-                .find(|l| l.starts_with("uploaded"))
-                .expect("an uploaded line");
-            let bytes: u64 = up.split_whitespace().nth(1).unwrap().parse().unwrap();
-            assert!(bytes > 0 && bytes < 1024, "{up}");
+            let bytes_of = |prefix: &str| {
+                let line = o1
+                    .lines()
+                    .find(|l| l.starts_with(prefix))
+                    .unwrap_or_else(|| panic!("no {prefix} line: {o1}"));
+                let bytes: u64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+                (bytes, line.to_string())
+            };
+            let (up, line) = bytes_of("uploaded");
+            assert!(up > 0 && up < 1024, "{line}");
+            // The window is presented from the tracer's device: the frame's 96x72 pixels are
+            // not read back, only its counters and timestamps.
+            assert!(o1.contains("the tracer's device: frames stay on the GPU"), "{o1}");
+            let (down, line) = bytes_of("readback");
+            assert!(
+                down > 0 && down < 96 * 72 * 4 && line.contains("stayed on the GPU"),
+                "{line}"
+            );
         }
         // The bad file: its error names the file and line, the scene stays.
         assert!(
@@ -229,6 +241,56 @@ fn dropped_files_and_the_overlay() {
         let w = image::open(d2.join("w.png")).unwrap().to_rgb8();
         assert_eq!(w.dimensions(), (100, 80));
         assert!(w.pixels().any(|p| p != w.get_pixel(0, 0)), "the capture is blank");
+    }
+}
+
+/// What the window shows is the traced frame: with the overlay hidden, a capture of the window
+/// equals the screenshot (read back from the tracer's device on the GPU, where the frame is
+/// presented from; from the host's image on the CPU), within one level for a surface's sRGB
+/// round trip; at half resolution each traced pixel covers a 2x2 block; a heat frame (made on
+/// the host, drawn from the texture) equals its screenshot too.
+#[test]
+fn the_window_shows_the_traced_frame() {
+    if !have_display() {
+        return;
+    }
+    for backend in ["cpu", "gpu"] {
+        let (d, text, shots) = run_script(
+            "window",
+            backend,
+            &["--scene", "knot-box", "--res", "96x72", "--accel", "bvh"],
+            "key h\nscreenshot a.png\ncapture a-window.png\noverlay a.txt\nkey 3\nkey [\nscreenshot b.png\ncapture b-window.png\n\
+             key ]\nkey 4\nscreenshot c.png\ncapture c-window.png\n",
+        );
+        assert_eq!(shots.len(), 3, "{text}");
+        let overlay = std::fs::read_to_string(d.join("a.txt")).unwrap();
+        assert_eq!(
+            overlay.contains("the image stayed on the GPU"),
+            backend == "gpu",
+            "{backend}: {overlay}"
+        );
+        for (shot, block) in [("a", 1), ("b", 2), ("c", 1)] {
+            let traced = image::open(d.join(format!("{shot}.png"))).unwrap().to_rgb8();
+            let window = image::open(d.join(format!("{shot}-window.png"))).unwrap().to_rgb8();
+            assert_eq!(window.dimensions(), (96, 72), "{backend} {shot}");
+            assert_eq!(traced.dimensions(), (96 / block, 72 / block), "{backend} {shot}");
+            let mut worst = 0;
+            for (x, y, p) in window.enumerate_pixels() {
+                let q = traced.get_pixel(x / block, y / block);
+                for c in 0..3 {
+                    worst = worst.max(p.0[c].abs_diff(q.0[c]));
+                }
+            }
+            assert!(
+                worst <= 1,
+                "{backend} {shot}: the window is {worst} levels off the frame"
+            );
+            assert!(
+                traced.pixels().any(|p| p != traced.get_pixel(0, 0)),
+                "{backend} {shot}: a blank frame"
+            );
+        }
+        equals_render(&d, backend, &["--scene", "knot-box"], &shots[0]);
     }
 }
 

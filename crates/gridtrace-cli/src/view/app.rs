@@ -167,7 +167,17 @@ impl App {
             }
             Action::Screenshot(path) => {
                 self.trace(true)?;
-                let Some(image) = self.refiner.image() else {
+                // A frame left on the device is read back from there (the only time it is).
+                let image = match self.refiner.image() {
+                    None if self.refiner.done() && self.refiner.on_device() => self
+                        .presenter
+                        .as_ref()
+                        .and_then(|p| p.frame())
+                        .map(|f| f.read())
+                        .transpose()?,
+                    image => image,
+                };
+                let Some(image) = image else {
                     return Err(gridtrace::Error::InvalidInput(
                         "screenshot: no frame yet (the window has no area)".into(),
                     ));

@@ -10,7 +10,7 @@
 //! within the budget, overlay, present) and window.rs (window events to actions). Beside them:
 //! controls.rs (actions, the orbit camera, projection for the light gizmos), script.rs
 //! (`--script`), progressive.rs (bands, preview, the display image), present.rs (the surface, the
-//! image blit, egui), overlay.rs (what the overlay says, as lines), loader.rs (dropped files on a
+//! image blit from the tracer's device or a host texture, egui), overlay.rs (what the overlay says, as lines), loader.rs (dropped files on a
 //! worker thread), headless.rs (`--headless`: frames along an orbit, timed).
 
 mod app;
@@ -34,7 +34,7 @@ use glam::Vec3;
 use gridtrace::gpu::GpuContext;
 use gridtrace::scene::animated::Animation;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{AccelKind, Backend, Mode, PixelFormat, RenderOptions};
+use gridtrace::{AccelKind, Backend, Mode, PixelFormat, RenderOptions, Rendered};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
@@ -119,7 +119,13 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         Some(p) => Some(script::load(p)?),
         None => None,
     };
-    let (ctx, mut notes) = a.backend.open_device()?;
+    // The event loop first: the tracer's device is opened from an instance that knows the
+    // window system's display, so that the window can be presented from it (present.rs).
+    let event_loop = EventLoop::new().map_err(|e| window_error("opening the event loop", e))?;
+    let display = event_loop.owned_display_handle();
+    let (ctx, mut notes) = a
+        .backend
+        .open_device_with(|| wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display)))?;
     let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
     for n in &notes {
         eprintln!("note: {n}");
@@ -173,7 +179,6 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     // Prepare and upload the first structure before the window opens: errors in the scene
     // come out as errors, not as a window that closes.
     app.open_tracer()?;
-    let event_loop = EventLoop::new().map_err(|e| window_error("opening the event loop", e))?;
     event_loop.set_control_flow(ControlFlow::Wait);
     event_loop
         .run_app(&mut app)

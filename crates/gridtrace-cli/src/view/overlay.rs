@@ -144,6 +144,17 @@ impl Hud {
                     s.uploaded_bytes
                 ));
             }
+            if s.downloaded_bytes > 0 {
+                l.push(format!(
+                    "readback  {} B this frame ({})",
+                    s.downloaded_bytes,
+                    if s.on_device {
+                        "counters, timestamps: the image stayed on the GPU"
+                    } else {
+                        "the image, counters, timestamps"
+                    }
+                ));
+            }
         }
         if self.progress < 1.0 {
             l.push(format!("refining  {:.0}%", self.progress * 100.0));

@@ -13,7 +13,19 @@ impl App {
             return Ok(());
         }
         if self.dirty {
-            self.refiner.restart(self.frame_opts(), self.budget);
+            // The frame stays on the GPU where the tracer is on it and the presenter draws with
+            // its device; heat frames are coloured on the host by their whole frame's maximum,
+            // and a frame larger than one storage binding (8192x8192 on lavapipe) is read back
+            // in tiles, as `render` does.
+            let i = self.open_tracer()?;
+            let opts = self.frame_opts();
+            let on_device = self.mode != Mode::Heat
+                && self.tracers[i].1.gpu().is_some()
+                && self
+                    .presenter
+                    .as_mut()
+                    .is_some_and(|p| p.frame_target((opts.width, opts.height)).is_ok_and(|t| t.is_some()));
+            self.refiner.restart(opts, self.budget, on_device);
             self.dirty = false;
         }
         if !self.refiner.done() {
@@ -22,7 +34,15 @@ impl App {
             let i = self.open_tracer()?;
             let lights = &self.lights;
             let tracer = &mut self.tracers[i].1;
-            let mut trace = |o: &RenderOptions| tracer.render(&camera, lights, o);
+            let o = self.refiner.opts();
+            let target = match &mut self.presenter {
+                Some(p) if self.refiner.on_device() => p.frame_target((o.width, o.height))?,
+                _ => None,
+            };
+            let mut trace = |o: &RenderOptions, on_device: bool| match target {
+                Some(t) if on_device => tracer.render_to_device(&camera, lights, o, t),
+                _ => tracer.render(&camera, lights, o).map(Rendered::OnHost),
+            };
             if finish {
                 self.refiner.finish(&mut trace)?;
             } else {
@@ -39,11 +59,12 @@ impl App {
                 self.set_title();
             }
         }
-        if self.refiner.take_changed()
-            && let Some(p) = &mut self.presenter
-        {
-            let o = self.refiner.opts();
-            p.upload(&self.refiner.display, (o.width, o.height));
+        if let Some(p) = &mut self.presenter {
+            if self.refiner.take_changed() {
+                let o = self.refiner.opts();
+                p.upload(&self.refiner.display, (o.width, o.height));
+            }
+            p.set_texture_rows(self.refiner.texture_rows());
         }
         Ok(())
     }

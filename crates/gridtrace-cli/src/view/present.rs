@@ -1,11 +1,19 @@
-//! Puts the frame on the window: the traced image (a texture, drawn over the whole window by
-//! `blit.wgsl`, so a reduced resolution scale shows as blocks) and the egui overlay on top. A
-//! presentation device of its own, so the CPU and GPU tracers present alike; the traced image
-//! reaches it through host memory (the tracer reads its bands back anyway, to refine
-//! progressively and to take screenshots).
+//! Puts the frame on the window: the traced image (drawn over the whole window by `blit.wgsl`,
+//! nearest pixel, so a reduced resolution scale shows as blocks) and the egui overlay on top.
+//!
+//! When the tracer is on a GPU that can present to the window, the presenter draws with that
+//! device (`GpuContext::instance`, `adapter`, `device`): the tracer leaves each frame in a
+//! `DeviceImage` and the blit reads it there, so the frame never crosses to the host (before,
+//! every band was read back, 4 bytes a pixel, and uploaded again to a second device). Frames the
+//! host makes (the CPU tracer's, heat frames coloured by their whole frame's maximum, the coarse
+//! preview) go through a texture, as they all did before; the blit takes the rows the refiner
+//! names from it (`set_texture_rows`). A tracer on the CPU, or on an adapter that cannot present
+//! to this window, leaves the presenter a device of its own.
 
+use std::ops::Range;
 use std::sync::Arc;
 
+use gridtrace::gpu::{DeviceImage, GpuContext};
 use winit::event_loop::ActiveEventLoop;
 use winit::window::Window;
 
@@ -21,10 +29,22 @@ pub struct Presenter {
     pub device: wgpu::Device,
     queue: wgpu::Queue,
     config: wgpu::SurfaceConfiguration,
+    /// The tracer's device, when this presenter draws with it (frames stay on the GPU).
+    shared: Option<Arc<GpuContext>>,
     /// The traced image's texture format: sRGB when the surface is (the sampler decodes, the
     /// surface encodes again), plain unorm when it is not, so the bytes pass unchanged.
     image_format: wgpu::TextureFormat,
-    image: Option<ImageTexture>,
+    /// The host's image (1x1 black until the first upload).
+    image: ImageTexture,
+    /// The tracer's frame on the shared device, sized to the traced image (`frame_target`).
+    frame: Option<DeviceImage>,
+    /// Bound in `frame`'s place while there is none.
+    no_frame: wgpu::Buffer,
+    /// The blit's `Blit` uniform (size, texture rows, surface encoding).
+    blit_uniform: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    /// Rows drawn from the texture (the rest from `frame`).
+    texture_rows: Range<u32>,
     blit: wgpu::RenderPipeline,
     blit_layout: wgpu::BindGroupLayout,
     nearest: wgpu::Sampler,
@@ -32,14 +52,25 @@ pub struct Presenter {
     max_side: u32,
     /// The surface is configured (the window has an area).
     live: bool,
-    /// The adapter presenting, for the overlay.
+    /// The adapter presenting and whose device it is, for the overlay.
     pub adapter: String,
+    /// Why the tracer's device does not present, when it is on a GPU that cannot.
+    pub note: Option<String>,
 }
 
 struct ImageTexture {
     texture: wgpu::Texture,
-    bind_group: wgpu::BindGroup,
     size: (u32, u32),
+}
+
+/// The blit's uniform (`Blit` in blit.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BlitUniform {
+    size: [u32; 2],
+    texture_rows: [u32; 2],
+    srgb_target: u32,
+    _pad: u32,
 }
 
 fn err(what: &str, e: impl std::fmt::Display) -> gridtrace::Error {
@@ -47,7 +78,44 @@ fn err(what: &str, e: impl std::fmt::Display) -> gridtrace::Error {
 }
 
 impl Presenter {
-    pub fn new(el: &ActiveEventLoop, window: Arc<Window>) -> gridtrace::Result<Presenter> {
+    /// The presenter of `window`: with the tracer's device `tracer` where its adapter can
+    /// present to the window, else with a device of its own.
+    pub fn new(
+        el: &ActiveEventLoop,
+        window: Arc<Window>,
+        tracer: Option<&Arc<GpuContext>>,
+    ) -> gridtrace::Result<Presenter> {
+        let mut note = None;
+        if let Some(ctx) = tracer {
+            match ctx.instance.create_surface(window.clone()) {
+                Ok(surface) if ctx.adapter.is_surface_supported(&surface) => {
+                    let words = format!(
+                        "{}, the tracer's device: frames stay on the GPU",
+                        gridtrace::backend::adapter_words(&ctx.info)
+                    );
+                    return Presenter::with_device(
+                        surface,
+                        &ctx.adapter,
+                        (ctx.device.clone(), ctx.queue.clone()),
+                        Some(ctx.clone()),
+                        window,
+                        words,
+                        None,
+                    );
+                }
+                Ok(_) => {
+                    note = Some(format!(
+                        "the tracer's adapter ({}) cannot present to this window: frames go through the host",
+                        ctx.info.name
+                    ))
+                }
+                Err(e) => {
+                    note = Some(format!(
+                        "no window surface on the tracer's device ({e}): frames go through the host"
+                    ))
+                }
+            }
+        }
         let desc = wgpu::InstanceDescriptor::new_with_display_handle(Box::new(el.owned_display_handle())).with_env();
         let instance = wgpu::Instance::new(desc);
         let surface = instance.create_surface(window.clone()).map_err(|e| err("surface", e))?;
@@ -56,10 +124,25 @@ impl Presenter {
             ..Default::default()
         }))
         .map_err(|e| err("no adapter can present to this window", e))?;
-        let info = adapter.get_info();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
+        let device = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
             .map_err(|e| err("device", e))?;
-        let caps = surface.get_capabilities(&adapter);
+        let words = format!(
+            "{}, a device of its own: frames uploaded from the host",
+            gridtrace::backend::adapter_words(&adapter.get_info())
+        );
+        Presenter::with_device(surface, &adapter, device, None, window, words, note)
+    }
+
+    fn with_device(
+        surface: wgpu::Surface<'static>,
+        adapter: &wgpu::Adapter,
+        (device, queue): (wgpu::Device, wgpu::Queue),
+        shared: Option<Arc<GpuContext>>,
+        window: Arc<Window>,
+        adapter_words: String,
+        note: Option<String>,
+    ) -> gridtrace::Result<Presenter> {
+        let caps = surface.get_capabilities(adapter);
         // egui prefers a gamma-space (non-sRGB) target; either works, and the image texture
         // follows the surface's encoding.
         let format = caps
@@ -95,6 +178,28 @@ impl Presenter {
         };
         let max_side = device.limits().max_texture_dimension_2d;
         let (blit, blit_layout) = blit_pipeline(&device, format);
+        let image = ImageTexture {
+            texture: texture_2d(
+                &device,
+                "traced image",
+                (1, 1),
+                image_format,
+                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            ),
+            size: (1, 1),
+        };
+        let no_frame = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("no device frame"),
+            size: 4,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let blit_uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("blit uniform"),
+            size: std::mem::size_of::<BlitUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let nearest = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("nearest"),
             mag_filter: wgpu::FilterMode::Nearest,
@@ -111,23 +216,74 @@ impl Presenter {
                 predictable_texture_filtering: false,
             },
         );
+        let bind_group = blit_bind_group(
+            &device,
+            &blit_layout,
+            &image.texture,
+            &nearest,
+            &no_frame,
+            &blit_uniform,
+        );
         let mut p = Presenter {
             surface,
             device,
             queue,
             config,
+            shared,
             image_format,
-            image: None,
+            image,
+            frame: None,
+            no_frame,
+            blit_uniform,
+            bind_group,
+            texture_rows: 0..u32::MAX,
             blit,
             blit_layout,
             nearest,
             egui,
             max_side,
             live: false,
-            adapter: gridtrace::backend::adapter_words(&info),
+            adapter: adapter_words,
+            note,
         };
         p.resize(size.width, size.height);
         Ok(p)
+    }
+
+    /// The device image a `w` x `h` frame is traced into (made anew when the size changes;
+    /// black at first), when the presenter shares the tracer's device.
+    pub fn frame_target(&mut self, (w, h): (u32, u32)) -> gridtrace::Result<Option<&DeviceImage>> {
+        let Some(ctx) = &self.shared else {
+            return Ok(None);
+        };
+        if self.frame.as_ref().is_none_or(|f| f.size() != (w, h)) {
+            self.frame = Some(DeviceImage::new(ctx, w, h)?);
+            self.rebind();
+        }
+        Ok(self.frame.as_ref())
+    }
+
+    /// The device image of the last frame traced into it.
+    pub fn frame(&self) -> Option<&DeviceImage> {
+        self.frame.as_ref()
+    }
+
+    /// The rows of the traced image drawn from the host's texture; the others come from the
+    /// device image (when there is one).
+    pub fn set_texture_rows(&mut self, rows: Range<u32>) {
+        self.texture_rows = rows;
+    }
+
+    fn rebind(&mut self) {
+        let frame = self.frame.as_ref().map_or(&self.no_frame, |f| f.buffer());
+        self.bind_group = blit_bind_group(
+            &self.device,
+            &self.blit_layout,
+            &self.image.texture,
+            &self.nearest,
+            frame,
+            &self.blit_uniform,
+        );
     }
 
     /// The largest surface side the device allows.
@@ -149,7 +305,7 @@ impl Presenter {
         if w == 0 || h == 0 {
             return;
         }
-        if self.image.as_ref().is_none_or(|t| t.size != (w, h)) {
+        if self.image.size != (w, h) {
             let texture = texture_2d(
                 &self.device,
                 "traced image",
@@ -157,28 +313,10 @@ impl Presenter {
                 self.image_format,
                 wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             );
-            let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-            let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("traced image"),
-                layout: &self.blit_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::TextureView(&view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::Sampler(&self.nearest),
-                    },
-                ],
-            });
-            self.image = Some(ImageTexture {
-                texture,
-                bind_group,
-                size: (w, h),
-            });
+            self.image = ImageTexture { texture, size: (w, h) };
+            self.rebind();
         }
-        let t = self.image.as_ref().expect("created above");
+        let t = &self.image;
         self.queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &t.texture,
@@ -311,6 +449,20 @@ impl Presenter {
     }
 
     fn draw(&mut self, target: &wgpu::TextureView, size: [u32; 2], overlay: &Overlay) {
+        // Rows are counted in the device image's pixels when there is one; the texture is
+        // sampled by position, whatever its size.
+        let (frame_size, texture_rows) = match &self.frame {
+            Some(f) => (f.size(), [self.texture_rows.start, self.texture_rows.end]),
+            None => (self.image.size, [0, u32::MAX]),
+        };
+        let uniform = BlitUniform {
+            size: [frame_size.0, frame_size.1],
+            texture_rows,
+            srgb_target: self.image_format.is_srgb() as u32,
+            _pad: 0,
+        };
+        self.queue
+            .write_buffer(&self.blit_uniform, 0, bytemuck::bytes_of(&uniform));
         let screen = egui_wgpu::ScreenDescriptor {
             size_in_pixels: size,
             pixels_per_point: overlay.pixels_per_point,
@@ -340,11 +492,9 @@ impl Presenter {
                     multiview_mask: None,
                 })
                 .forget_lifetime();
-            if let Some(t) = &self.image {
-                pass.set_pipeline(&self.blit);
-                pass.set_bind_group(0, &t.bind_group, &[]);
-                pass.draw(0..3, 0..1);
-            }
+            pass.set_pipeline(&self.blit);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.draw(0..3, 0..1);
             self.egui.render(&mut pass, &overlay.primitives, &screen);
         }
         self.queue.submit(extra.into_iter().chain([enc.finish()]));
@@ -416,6 +566,26 @@ fn blit_pipeline(device: &wgpu::Device, format: wgpu::TextureFormat) -> (wgpu::R
                 ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                 count: None,
             },
+            wgpu::BindGroupLayoutEntry {
+                binding: 2,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
         ],
     });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -449,4 +619,39 @@ fn blit_pipeline(device: &wgpu::Device, format: wgpu::TextureFormat) -> (wgpu::R
         cache: None,
     });
     (pipeline, layout)
+}
+
+/// The blit's bindings: the host's texture and its sampler, the device image (or a stand-in)
+/// and the uniform.
+fn blit_bind_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    texture: &wgpu::Texture,
+    sampler: &wgpu::Sampler,
+    frame: &wgpu::Buffer,
+    uniform: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("blit"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(&view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: frame.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: uniform.as_entire_binding(),
+            },
+        ],
+    })
 }

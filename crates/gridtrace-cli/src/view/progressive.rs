@@ -6,11 +6,22 @@
 //!
 //! The bands of the full level are the same rows of the same frame (`RenderOptions::rows`), so
 //! the finished image is the one `render` makes, bit for bit on the CPU.
+//!
+//! A frame traced on a GPU that presents (`restart` with `on_device`) leaves its full level's
+//! bands in the presenter's device image (`Rendered::OnDevice`): they are not painted here, and
+//! `texture_rows` tells the presenter which rows still come from the host's display (the
+//! preview's). A band that comes back on the host instead (the GPU given up for the CPU) starts
+//! the frame again on the host.
 
+use std::ops::Range;
 use std::time::{Duration, Instant};
 
 use gridtrace::render::{RayCounts, linear_to_srgb8};
-use gridtrace::{Frame, Image, Mode, RenderOptions};
+use gridtrace::{Image, Mode, RenderOptions, Rendered};
+
+/// Traces a band (its options), into the device image when the flag says so and the tracer
+/// can (`Tracer::render_to_device`), else on the host.
+pub type TraceBand<'a> = dyn FnMut(&RenderOptions, bool) -> gridtrace::Result<Rendered> + 'a;
 
 /// Pixels a side of the coarsest preview block.
 const MAX_BLOCK: u32 = 16;
@@ -35,6 +46,11 @@ pub struct FrameSummary {
     pub uploaded_bytes: u64,
     /// Bands the full level took.
     pub bands: u32,
+    /// Bytes read back for the full level (GPU): counters and timestamps, and the image unless
+    /// it stayed on the device.
+    pub downloaded_bytes: u64,
+    /// The full level stayed on the device (the presenter drew it from there).
+    pub on_device: bool,
 }
 
 pub struct Refiner {
@@ -49,8 +65,11 @@ pub struct Refiner {
     /// The frame on screen, RGBA8 (sRGB-encoded), `width` x `height`: finished rows of the full
     /// level, the preview's blocks below them.
     pub display: Vec<u8>,
-    /// The full level's linear image, filled band by band (heat: raw costs).
+    /// The full level's linear image, filled band by band (heat: raw costs); unused when the
+    /// full level goes to the device image.
     full: Image,
+    /// This frame's full level goes to the presenter's device image.
+    on_device: bool,
     /// Largest raw cost seen in this frame (heat), to colour bands before the frame is done.
     heat_max: f32,
     /// Milliseconds per traced pixel, from the bands so far (kept across frames).
@@ -74,6 +93,7 @@ impl Refiner {
             next_row: 0,
             display: Vec::new(),
             full: Image::new(0, 0),
+            on_device: false,
             heat_max: 1.0,
             ms_per_pixel: None,
             started: Instant::now(),
@@ -83,9 +103,10 @@ impl Refiner {
         }
     }
 
-    /// Starts a new frame of `opts` (its size, mode and structure). A preview level is planned
-    /// when the pace of the frames before says the whole frame would take over `budget`.
-    pub fn restart(&mut self, opts: RenderOptions, budget: Duration) {
+    /// Starts a new frame of `opts` (its size, mode and structure), its full level into the
+    /// device image when `on_device`. A preview level is planned when the pace of the frames
+    /// before says the whole frame would take over `budget`.
+    pub fn restart(&mut self, opts: RenderOptions, budget: Duration, on_device: bool) {
         let (w, h) = (opts.width, opts.height);
         if (w, h) != (self.width, self.height) {
             self.display = vec![0; (w * h * 4) as usize];
@@ -96,7 +117,8 @@ impl Refiner {
         self.width = w;
         self.height = h;
         self.opts = RenderOptions { rows: None, ..opts };
-        self.full = Image::new(w, h);
+        self.on_device = on_device;
+        self.full = Image::new(if on_device { 0 } else { w }, if on_device { 0 } else { h });
         self.heat_max = 1.0;
         self.levels = vec![1];
         if let Some(pace) = self.ms_per_pixel {
@@ -123,9 +145,10 @@ impl Refiner {
         self.done
     }
 
-    /// The finished frame's full image (heat: coloured), or `None` while it is being traced.
+    /// The finished frame's full image (heat: coloured), or `None` while it is being traced
+    /// or when it is in the device image (`on_device`).
     pub fn image(&self) -> Option<Image> {
-        self.done.then(|| {
+        (self.done && !self.on_device).then(|| {
             if self.opts.mode == Mode::Heat {
                 self.full.heat_to_color()
             } else {
@@ -142,6 +165,31 @@ impl Refiner {
     /// The options of the frame being traced (or last traced).
     pub fn opts(&self) -> &RenderOptions {
         &self.opts
+    }
+
+    /// Whether this frame's full level goes to (or went to) the device image.
+    pub fn on_device(&self) -> bool {
+        self.on_device
+    }
+
+    /// The rows of the frame the presenter draws from the host's display; the others from
+    /// the device image. All of them for a frame made on the host; while a device frame is
+    /// refined, the preview's rows (those it has traced) below the device's finished ones.
+    pub fn texture_rows(&self) -> Range<u32> {
+        if !self.on_device {
+            return 0..u32::MAX;
+        }
+        if self.done {
+            return 0..0;
+        }
+        let previewed = self.levels.len() > 1;
+        if self.level + 1 < self.levels.len() {
+            0..(self.next_row * self.levels[self.level]).min(self.height)
+        } else if previewed {
+            self.next_row..self.height
+        } else {
+            0..0
+        }
     }
 
     /// Whether the displayed image changed since the last call.
@@ -162,11 +210,7 @@ impl Refiner {
 
     /// Traces bands with `trace` until `budget` is spent (at least one band, so every call
     /// makes progress) or the frame is finished.
-    pub fn step(
-        &mut self,
-        budget: Duration,
-        trace: &mut dyn FnMut(&RenderOptions) -> gridtrace::Result<Frame>,
-    ) -> gridtrace::Result<()> {
+    pub fn step(&mut self, budget: Duration, trace: &mut TraceBand) -> gridtrace::Result<()> {
         let t0 = Instant::now();
         while !self.done {
             let left_ms = (budget.saturating_sub(t0.elapsed())).as_secs_f64() * 1e3;
@@ -179,10 +223,7 @@ impl Refiner {
     }
 
     /// Traces the rest of the frame, whatever it takes (a screenshot, a headless frame).
-    pub fn finish(
-        &mut self,
-        trace: &mut dyn FnMut(&RenderOptions) -> gridtrace::Result<Frame>,
-    ) -> gridtrace::Result<()> {
+    pub fn finish(&mut self, trace: &mut TraceBand) -> gridtrace::Result<()> {
         while !self.done {
             self.band(f64::INFINITY, trace)?;
         }
@@ -190,11 +231,7 @@ impl Refiner {
     }
 
     /// One band of the current level, sized to take about `left_ms` at the measured pace.
-    fn band(
-        &mut self,
-        left_ms: f64,
-        trace: &mut dyn FnMut(&RenderOptions) -> gridtrace::Result<Frame>,
-    ) -> gridtrace::Result<()> {
+    fn band(&mut self, left_ms: f64, trace: &mut TraceBand) -> gridtrace::Result<()> {
         let block = self.levels[self.level];
         let (lw, lh) = (self.width.div_ceil(block), self.height.div_ceil(block));
         let rows_left = lh - self.next_row;
@@ -211,25 +248,49 @@ impl Refiner {
             ..self.opts
         }
         .band(first, first + rows);
+        let to_device = self.on_device && block == 1;
         let t0 = Instant::now();
-        let frame = trace(&opts)?;
+        let traced = trace(&opts, to_device)?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let (frame, gpu, rays) = match traced {
+            Rendered::OnHost(_) if to_device => {
+                // The GPU was given up mid-frame: the rows it left on the device are not on
+                // the host's display. The frame again, on the host from the top.
+                let opts = self.opts;
+                self.restart(opts, Duration::MAX, false);
+                return Ok(());
+            }
+            Rendered::OnHost(f) => {
+                let (gpu, rays) = (f.gpu.clone(), f.stats.rays);
+                (Some(f), gpu, rays)
+            }
+            Rendered::OnDevice(g) => {
+                let rays = g.render.rays;
+                (None, Some(g), rays)
+            }
+        };
         // The pace: a running mean that follows a change of view within a few bands.
         let pace = ms / (lw as f64 * rows as f64);
         self.ms_per_pixel = Some(match self.ms_per_pixel {
             Some(p) => 0.5 * p + 0.5 * pace,
             None => pace,
         });
-        self.paint(block, first, &frame.image);
+        if let Some(frame) = &frame {
+            self.paint(block, first, &frame.image);
+        }
         if block == 1 {
-            let at = (first * self.width) as usize;
-            self.full.pixels[at..at + frame.image.pixels.len()].copy_from_slice(&frame.image.pixels);
+            if let Some(frame) = &frame {
+                let at = (first * self.width) as usize;
+                self.full.pixels[at..at + frame.image.pixels.len()].copy_from_slice(&frame.image.pixels);
+            }
             let s = &mut self.summary;
             s.ms += ms;
-            s.rays += frame.stats.rays;
+            s.rays += rays;
             s.bands += 1;
-            if let Some(g) = &frame.gpu {
+            s.on_device = to_device;
+            if let Some(g) = &gpu {
                 s.uploaded_bytes += g.uploaded_bytes;
+                s.downloaded_bytes += g.downloaded_bytes;
                 s.from_timestamps = g.timings.from_timestamps;
                 for (k, v) in &g.timings.stages_ms {
                     match s.stages_ms.iter_mut().find(|(n, _)| n == k) {
@@ -246,7 +307,7 @@ impl Refiner {
             if self.level == self.levels.len() {
                 self.done = true;
                 self.summary.total_ms = self.started.elapsed().as_secs_f64() * 1e3;
-                if self.opts.mode == Mode::Heat {
+                if self.opts.mode == Mode::Heat && !self.on_device {
                     // Colour the whole frame by its own maximum, as `render` does.
                     let img = self.full.heat_to_color();
                     self.paint(1, 0, &img);
@@ -287,8 +348,9 @@ impl Refiner {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gridtrace::gpu::GpuRenderStats;
     use gridtrace::scene::builtin;
-    use gridtrace::{AccelKind, Resolution};
+    use gridtrace::{AccelKind, Frame, Resolution};
 
     /// Whatever the budget, bands and previews, the finished frame is `render`'s image bit for
     /// bit (CPU), and the display shows it; heat frames are coloured by the whole frame's
@@ -299,13 +361,13 @@ mod tests {
             .unwrap()
             .prepare(Resolution::default())
             .unwrap();
-        let mut trace = |o: &RenderOptions| -> gridtrace::Result<Frame> {
+        let mut trace = |o: &RenderOptions, _: bool| -> gridtrace::Result<Rendered> {
             let (image, stats) = gridtrace::cpu::render_view(&scene, &scene.camera, &scene.lights, o, None)?;
-            Ok(Frame {
+            Ok(Rendered::OnHost(Frame {
                 image,
                 stats,
                 gpu: None,
-            })
+            }))
         };
         let mut r = Refiner::new();
         // The first frame (a long budget) measures the pace; the later ones, on a budget of
@@ -317,7 +379,7 @@ mod tests {
             (Mode::Heat, 0),
         ] {
             let opts = RenderOptions::new(61, 47, mode, AccelKind::Grid);
-            r.restart(opts, Duration::from_micros(budget_us));
+            r.restart(opts, Duration::from_micros(budget_us), false);
             let mut steps = 0;
             while !r.done() {
                 r.step(Duration::from_micros(budget_us), &mut trace).unwrap();
@@ -340,11 +402,113 @@ mod tests {
         r.restart(
             RenderOptions::new(61, 47, Mode::Shadow, AccelKind::Grid),
             Duration::ZERO,
+            false,
         );
         assert_eq!(r.levels.len(), 2);
         r.step(Duration::ZERO, &mut trace).unwrap();
         assert_eq!(r.progress(), 0.0, "the preview's band comes first");
         r.finish(&mut trace).unwrap();
         assert!(r.done() && r.progress() == 1.0);
+    }
+
+    /// A frame whose full level goes to the device: its bands are not painted (the preview's
+    /// are), `texture_rows` gives the presenter the preview's traced rows, then those below the
+    /// device's finished ones, then none; the device (a CPU image stands in for it) holds
+    /// `render`'s frame and the summary its rays and readback. A band that comes back on the
+    /// host mid-frame (the GPU given up) starts the frame again on the host, which then equals
+    /// `render` and shows every row from the display.
+    #[test]
+    fn device_frames_leave_the_display_to_the_preview() {
+        let scene = builtin::scene("knot-box")
+            .unwrap()
+            .prepare(Resolution::default())
+            .unwrap();
+        let (w, h) = (61, 47);
+        let opts = RenderOptions::new(w, h, Mode::Shadow, AccelKind::Grid);
+        let (want, want_stats) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
+        let want_rgba: Vec<u8> = want.to_rgb8().chunks(3).flat_map(|c| [c[0], c[1], c[2], 255]).collect();
+        let cpu = |o: &RenderOptions| gridtrace::cpu::render_view(&scene, &scene.camera, &scene.lights, o, None);
+        let mut device = Image::new(w, h);
+        let mut trace = |o: &RenderOptions, on_device: bool| -> gridtrace::Result<Rendered> {
+            let (image, stats) = cpu(o)?;
+            if on_device {
+                let at = (o.row_range().start * w) as usize;
+                device.pixels[at..at + image.pixels.len()].copy_from_slice(&image.pixels);
+                return Ok(Rendered::OnDevice(GpuRenderStats {
+                    render: stats,
+                    downloaded_bytes: 64,
+                    ..Default::default()
+                }));
+            }
+            Ok(Rendered::OnHost(Frame {
+                image,
+                stats,
+                gpu: None,
+            }))
+        };
+        let mut r = Refiner::new();
+        // A host frame first, to measure the pace; then on a zero budget a preview comes
+        // before the device's bands.
+        r.restart(opts, Duration::from_secs(100), false);
+        r.finish(&mut trace).unwrap();
+        assert_eq!(r.texture_rows(), 0..u32::MAX);
+        r.restart(opts, Duration::ZERO, true);
+        assert_eq!(r.levels.len(), 2, "a preview is planned");
+        let block = r.levels[0];
+        let mut saw_split = false;
+        while !r.done() {
+            r.step(Duration::ZERO, &mut trace).unwrap();
+            let rows = r.texture_rows();
+            if r.done() {
+                assert_eq!(rows, 0..0);
+            } else if r.level == 0 {
+                assert_eq!(rows, 0..(r.next_row * block).min(h));
+            } else {
+                assert_eq!(rows, r.next_row..h);
+                saw_split |= r.next_row > 0;
+            }
+        }
+        assert!(saw_split, "the device's rows and the preview's shared the screen");
+        let s = r.summary().clone();
+        assert!(s.on_device && s.bands > 1);
+        assert_eq!(s.rays, want_stats.rays);
+        assert_eq!(s.downloaded_bytes, 64 * s.bands as u64);
+        assert!(r.image().is_none(), "the frame is in the device image");
+        assert!(r.display != want_rgba, "the display holds the preview, not the frame");
+        assert!(device.pixels == want.pixels, "the device image is not the frame");
+        // The GPU given up mid-frame: the frame again on the host.
+        let mut device = Image::new(w, h);
+        let mut bands = 0;
+        let mut trace = |o: &RenderOptions, on_device: bool| -> gridtrace::Result<Rendered> {
+            let (image, stats) = cpu(o)?;
+            bands += 1;
+            if on_device && bands < 3 {
+                let at = (o.row_range().start * w) as usize;
+                device.pixels[at..at + image.pixels.len()].copy_from_slice(&image.pixels);
+                return Ok(Rendered::OnDevice(GpuRenderStats {
+                    render: stats,
+                    ..Default::default()
+                }));
+            }
+            Ok(Rendered::OnHost(Frame {
+                image,
+                stats,
+                gpu: None,
+            }))
+        };
+        r.restart(opts, Duration::from_secs(100), true);
+        assert_eq!(r.levels, [1]);
+        while !r.done() {
+            r.step(Duration::ZERO, &mut trace).unwrap();
+        }
+        assert!(!r.on_device());
+        assert_eq!(r.texture_rows(), 0..u32::MAX);
+        assert!(r.image().unwrap() == want, "the host's frame after the GPU");
+        assert!(r.display == want_rgba);
+        assert_eq!(
+            r.summary().rays,
+            want_stats.rays,
+            "rays of the abandoned bands not counted"
+        );
     }
 }

@@ -14,8 +14,9 @@ impl ApplicationHandler for App {
             Ok(w) => Arc::new(w),
             Err(e) => return self.fail(el, window_error("opening a window", e)),
         };
-        match present::Presenter::new(el, window.clone()) {
+        match present::Presenter::new(el, window.clone(), self.ctx.as_ref()) {
             Ok(p) => {
+                self.notes.extend(p.note.clone());
                 self.egui = Some(egui_winit::State::new(
                     self.egui_ctx.clone(),
                     egui::ViewportId::ROOT,
