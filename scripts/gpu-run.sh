@@ -75,6 +75,10 @@ for m in cast shadow trace; do
   [ "$(left)" -gt 20 ] || break
   timeout 15 $B render $cam --mode $m --frames 60 --orbit -o /tmp/orbit.png 2>&1 | grep -E '^(first|frames|gpu|stages|rates|render|error|Error)' | sed "s/^/$m: /" | tee -a "$log"
 done
+for rb in "" "--readback"; do
+  [ "$(left)" -gt 20 ] || break
+  timeout 15 $B view --headless $cam --mode shadow --frames 60 --orbit $rb 2>&1 | grep -E '^(image|first|rest|gpu|error|Error)' | sed "s/^/view shadow $rb: /" | tee -a "$log"
+done
 say "== 4. animated mesh, grid rebuilt on the GPU every frame [left $(left)s]"
 [ "$(left)" -gt 15 ] && timeout 12 $B render --animate --scene animated --frames 30 --mode shadow --accel pc --backend gpu --res 1024x1024 -o /tmp/anim.png 2>&1 | tail -3 | tee -a "$log"
 say "== done [t=$(( $(date +%s)-T0 ))s]"

@@ -273,12 +273,44 @@ fn hardware_suite_quick_runs_every_part() {
             .map(|r| r["variant"].as_str().unwrap().to_string())
             .collect()
     };
-    assert_eq!(of("bvh").len(), variants.len(), "{:?}", of("bvh"));
+    // And beside them the default's frames left on the device (as the viewer presents them).
+    assert_eq!(of("bvh").len(), variants.len() + 1, "{:?}", of("bvh"));
     assert!(of("bvh").iter().any(|v| v.contains("wide8")));
-    assert_eq!(of("grid").len(), variants.len() - 2, "{:?}", of("grid"));
+    assert_eq!(of("grid").len(), variants.len() - 2 + 1, "{:?}", of("grid"));
     let big = json["big_frame"].as_array().unwrap();
-    assert_eq!(big.len(), 2, "{md}");
+    assert_eq!(big.len(), 3, "{md}");
     assert!(big.iter().all(|r| r["width"] == 512 && r["height"] == 512));
+    // A frame left on the device reads back its counters and timestamps only: the default's
+    // row of the same frame reads 4 bytes a pixel more; both agree with the CPU.
+    let on_device: Vec<&serde_json::Value> = frames
+        .iter()
+        .chain(big)
+        .filter(|r| r["variant"] == "image=device")
+        .collect();
+    let defaults = frames.iter().chain(big).filter(|r| r["variant"] == "default").count();
+    assert_eq!(on_device.len(), defaults, "one beside every default row: {md}");
+    for r in on_device {
+        let same = |q: &&serde_json::Value| {
+            q["variant"] == "default"
+                && q["scene"] == r["scene"]
+                && q["accel"] == r["accel"]
+                && q["mode"] == r["mode"]
+                && q["width"] == r["width"]
+        };
+        let host = frames
+            .iter()
+            .chain(big)
+            .find(same)
+            .unwrap_or_else(|| panic!("no default row beside {r}"));
+        let pixels = r["width"].as_u64().unwrap() * r["height"].as_u64().unwrap();
+        assert_eq!(r["round_trips"], 1, "{r}");
+        assert!(r["differing_from_cpu"].as_f64().unwrap() <= 0.002, "{r}");
+        assert_eq!(
+            host["bytes_down"].as_u64().unwrap() - r["bytes_down"].as_u64().unwrap(),
+            4 * pixels,
+            "{r}"
+        );
+    }
     let rays = json["rays"].as_array().unwrap();
     for set in ["camera", "incoherent"] {
         // Four structures, the BVH with every variant, the others with those that apply.

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use gridtrace::gpu::{GpuContext, GpuRenderStats, GpuRenderer, GpuVariants, HostPhases};
+use gridtrace::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants, HostPhases};
 use gridtrace::render::differing_pixels;
 use gridtrace::render::{Image, PixelFormat, RenderOptions};
 use gridtrace::scene::PreparedScene;
@@ -141,8 +141,8 @@ pub fn frame_matrix(
     Ok(rows)
 }
 
-/// One large frame (trace, the BVH, default variant) on the GPU and the CPU: the case where
-/// tiling and readback matter most.
+/// One large frame (trace, the BVH, default variant) on the GPU, read back and left on the
+/// device, and on the CPU: the case where tiling and readback matter most.
 pub fn big_frame(
     plan: &Plan,
     gpu: &Arc<GpuContext>,
@@ -173,9 +173,12 @@ pub fn big_frame(
         warmup_ms: 0.0,
         ..plan.clone()
     };
-    let row = gpu_rows(&one, bs, &prepared, &mut r, &opts, &image.to_rgb8(), mismatches)?.remove(0);
-    log(&row_line(&row));
-    Ok(vec![cpu, row])
+    let mut rows = vec![cpu];
+    for row in gpu_rows(&one, bs, &prepared, &mut r, &opts, &image.to_rgb8(), mismatches)? {
+        log(&row_line(&row));
+        rows.push(row);
+    }
+    Ok(rows)
 }
 
 fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> Result<(FrameRow, Image)> {
@@ -213,8 +216,15 @@ fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> R
     ))
 }
 
+/// The variant label of the row whose frames stay on the device (`render_to_device`, as the
+/// viewer presents them): the default kernels, no image read back.
+pub const ON_DEVICE_LABEL: &str = "image=device";
+
 /// The frames of `opts` on every renderer (a variant each, with its label), timed in rounds
-/// across them; a row each, its last image checked against the CPU's `reference`.
+/// across them; a row each, its last image checked against the CPU's `reference`. When the
+/// first renderer has the default variants (and the mode is not heat), one more row: its
+/// frames left in a device image (`ON_DEVICE_LABEL`), what the viewer waits for a frame; that
+/// image is read back once, after the timing, for the check.
 fn gpu_rows(
     plan: &Plan,
     bs: &BenchScene,
@@ -224,15 +234,35 @@ fn gpu_rows(
     reference: &[u8],
     mismatches: &mut Vec<String>,
 ) -> Result<Vec<FrameRow>> {
-    let mut last: Vec<Option<Image>> = (0..renderers.len()).map(|_| None).collect();
+    let device_image = match renderers.first() {
+        Some((_, r)) if opts.mode != Mode::Heat && r.variants() == GpuVariants::default() => {
+            DeviceImage::new(r.context(), opts.width, opts.height).ok()
+        }
+        _ => None,
+    };
+    let on_device = renderers.len();
+    let n = renderers.len() + device_image.is_some() as usize;
+    let mut last: Vec<Option<Image>> = (0..n).map(|_| None).collect();
     // Warm-up: each variant at least once (pipelines, buffers), then until `warmup_ms` passed.
-    let runs = interleaved(renderers.len(), plan.warmup_ms, plan.reps, |k| {
+    let runs = interleaved(n, plan.warmup_ms, plan.reps, |k| {
+        if k == on_device {
+            let target = device_image.as_ref().expect("a device row only with its image");
+            let s = renderers[0]
+                .1
+                .render_to_device(&prepared.camera, &prepared.lights, opts, target)?;
+            return Ok((s.wall_ms, s));
+        }
         let (image, s) = renderers[k].1.render(&prepared.camera, &prepared.lights, opts)?;
         last[k] = Some(image);
         Ok((s.wall_ms, s))
     })?;
+    let mut labels: Vec<&str> = renderers.iter().map(|(l, _)| l.as_str()).collect();
+    if let Some(t) = &device_image {
+        last[on_device] = Some(t.read()?);
+        labels.push(ON_DEVICE_LABEL);
+    }
     let mut rows = Vec::new();
-    for (((walls, frames), image), (label, _)) in runs.into_iter().zip(last).zip(renderers.iter()) {
+    for (((walls, frames), image), label) in runs.into_iter().zip(last).zip(labels) {
         let image = image.expect("at least one timed frame");
         rows.push(gpu_row(bs, opts, label, &walls, &frames, &image, reference, mismatches));
     }

@@ -78,7 +78,7 @@ fn frames(md: &mut String, title: &str, rows: &[FrameRow]) {
     }
     let _ = writeln!(
         md,
-        "## {title}\n\nWall: host clock, uploads to image in host memory (median). GPU: the stages' timestamps summed (median). x CPU: the CPU's median wall time over the GPU's. Host: the wall time's parts on the host's clock (medians): preparing and submitting / waiting for the device / reading the image out. Variants were timed in rounds across them.\n\n| scene | mode | accel | variant | size | rays | CPU ms | wall ms | GPU ms | host ms | Mrays/s (wall) | Mrays/s (GPU) | x CPU | round trips | bytes down | differing px |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "## {title}\n\nWall: host clock, uploads to image in host memory (median). GPU: the stages' timestamps summed (median). x CPU: the CPU's median wall time over the GPU's. Host: the wall time's parts on the host's clock (medians): preparing and submitting / waiting for the device / reading the image out. Variants were timed in rounds across them. `image=device`: the default variant's frames left in a device image, as the viewer presents them (only counters and timestamps read back).\n\n| scene | mode | accel | variant | size | rays | CPU ms | wall ms | GPU ms | host ms | Mrays/s (wall) | Mrays/s (GPU) | x CPU | round trips | bytes down | differing px |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for g in rows.iter().filter(|g| g.backend == "gpu") {
         let cpu = rows.iter().find(|c| {

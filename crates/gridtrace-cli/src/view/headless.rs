@@ -3,12 +3,17 @@
 //! other way, so every frame has a new camera and new lights, as an interactive session does;
 //! each frame is traced whole by the viewer's tracer and timed. Prints every frame, then the
 //! first frame and the median, 95th percentile and best of the rest, in ms and Mrays/s.
+//!
+//! On a GPU each frame stays on the device, as the window presents it (a `DeviceImage`; heat
+//! frames excepted, which are coloured on the host): what is timed is what the viewer waits.
+//! `--readback` brings every frame to the host instead, as `render` does.
 
 use std::time::Instant;
 
 use glam::{Quat, Vec3};
+use gridtrace::gpu::DeviceImage;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{PixelFormat, RenderOptions};
+use gridtrace::{Mode, PixelFormat, RenderOptions, Rendered};
 
 use super::ViewArgs;
 use crate::render::orbit;
@@ -49,6 +54,20 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
     }
     let (w, h) = a.res;
     let opts = RenderOptions::new(w, h, a.mode, accel).with_pixels(PixelFormat::Srgb8);
+    let target = match tracer.gpu() {
+        Some(g) if !a.readback && a.mode != Mode::Heat => Some(DeviceImage::new(g.context(), w, h)?),
+        _ => None,
+    };
+    if tracer.gpu().is_some() {
+        println!(
+            "image   {}",
+            if target.is_some() {
+                "stays on the device, as the window presents it (--readback: to the host)"
+            } else {
+                "read back to the host every frame"
+            }
+        );
+    }
     let centre = src.bounds().center();
     let (camera0, lights0) = (src.camera, src.lights.clone());
     // (wall ms, GPU ms where there are timestamps, Mrays/s by wall time)
@@ -59,21 +78,24 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         let camera = if a.orbit { orbit(&camera0, turn) } else { camera0 };
         let lights = circle_lights(&lights0, camera0.up, centre, turn);
         let t = Instant::now();
-        let f = tracer.render(&camera, &lights, &opts)?;
+        let f = match &target {
+            Some(t) => tracer.render_to_device(&camera, &lights, &opts, t)?,
+            None => Rendered::OnHost(tracer.render(&camera, &lights, &opts)?),
+        };
+        let (rays, gpu) = match &f {
+            Rendered::OnDevice(g) => (g.render.rays, Some(g)),
+            Rendered::OnHost(f) => (f.stats.rays, f.gpu.as_ref()),
+        };
         for n in tracer.take_notes() {
             println!("note: {n}");
         }
         let ms = t.elapsed().as_secs_f64() * 1e3;
-        let gpu_ms = f
-            .gpu
-            .as_ref()
-            .filter(|g| g.timings.from_timestamps)
-            .map(|g| g.timings.total_ms);
-        uploaded = f.gpu.as_ref().map_or(0, |g| g.uploaded_bytes);
-        let rate = f.stats.rays.total() as f64 / (ms * 1e3);
+        let gpu_ms = gpu.filter(|g| g.timings.from_timestamps).map(|g| g.timings.total_ms);
+        uploaded = gpu.map_or(0, |g| g.uploaded_bytes);
+        let rate = rays.total() as f64 / (ms * 1e3);
         // Wall time first (what the viewer waits), then the device's, its round trips and
         // the bytes read back: the same fields `render` and `bench` report.
-        let trips = f.gpu.as_ref().map_or(String::new(), |g| {
+        let trips = gpu.map_or(String::new(), |g| {
             format!(
                 ", {} round trip(s), {} B down; host {}",
                 g.round_trips, g.downloaded_bytes, g.timings.host
@@ -82,7 +104,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         println!(
             "frame {i:4}  {ms:8.2} ms{}  {rate:8.2} Mrays/s  ({} rays{trips})",
             gpu_ms.map_or(String::new(), |g| format!("  (gpu {g:.2} ms)")),
-            f.stats.rays.total()
+            rays.total()
         );
         frames.push((ms, gpu_ms, rate));
     }

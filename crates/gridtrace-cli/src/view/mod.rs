@@ -82,6 +82,10 @@ pub struct ViewArgs {
     /// With --headless: frames to trace.
     #[arg(long, default_value_t = 60, requires = "headless", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: u32,
+    /// With --headless: bring every GPU frame to the host (as `render` does) instead of leaving
+    /// it on the device as the window presents it.
+    #[arg(long, requires = "headless")]
+    readback: bool,
     /// With --headless: move the camera round its orbit (one turn over the frames); without
     /// it the view stays and only the lights move.
     #[arg(long, requires = "headless")]
