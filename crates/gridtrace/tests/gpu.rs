@@ -546,6 +546,46 @@ fn a_ray_batch_of_many_chunks_is_one_round_trip() {
     assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 1));
 }
 
+/// Batches one after another on one renderer, growing and shrinking (the mapped upload kept,
+/// made anew when too small, mapped again after each submission), of many chunks and of one
+/// ray, closest and any hit in turn: each answers exactly as a fresh renderer's first batch
+/// (which writes into a buffer mapped at creation), so no batch reads another's records.
+#[test]
+fn consecutive_batches_answer_as_fresh_ones() {
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
+    let Some(mut kept) = renderer(&scene) else { return };
+    kept.set_max_tile_pixels(700);
+    let rays = ray_set(&scene.accel, 3000, 5);
+    let kind = AccelKind::ProximityCloud;
+    for (k, (first, n)) in [(0, 1000), (7, 10), (100, 2900), (2999, 1), (50, 2000), (1, 2999)]
+        .into_iter()
+        .enumerate()
+    {
+        let batch = &rays[first..first + n];
+        let Some(mut fresh) = renderer(&scene) else { return };
+        fresh.set_max_tile_pixels(700);
+        if k % 2 == 0 {
+            let got = kept.intersect(batch, 0.0, f32::INFINITY, kind).unwrap();
+            let want = fresh.intersect(batch, 0.0, f32::INFINITY, kind).unwrap();
+            assert_eq!(got.len(), n);
+            let same = got
+                .iter()
+                .zip(&want)
+                .all(|(a, b)| a.tri == b.tri && a.t.to_bits() == b.t.to_bits());
+            assert!(
+                same,
+                "batch {k} ({n} rays from {first}) differs from a fresh renderer's"
+            );
+        } else {
+            let got = kept.occluded(batch, 0.0, 10.0, kind).unwrap();
+            let want = fresh.occluded(batch, 0.0, 10.0, kind).unwrap();
+            assert_eq!(got, want, "batch {k} ({n} rays from {first})");
+        }
+        assert_eq!(kept.last_query_stats().rays, n as u64);
+    }
+}
+
 /// A band of rows (`RenderOptions::rows`, how the viewer traces a frame within its time budget)
 /// equals the same rows of the whole frame, bit for bit, on the GPU and the CPU, in every mode
 /// and for every structure; the bands' rays add up to the frame's. Bands that do not start at

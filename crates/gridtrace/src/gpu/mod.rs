@@ -21,6 +21,7 @@
 //!   `scene`: the scene's upload (the BVH's two GPU layouts, each with a CPU mirror of its
 //!   walk, are in `walks/bvh/`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
+//! - `upload`: the ray batches' mapped upload buffer;
 //! - `wavefront`: the tile loop (its pixels to the host, or left in a `device_image` that the
 //!   viewer presents from); `queries`: ray-batch intersect and occluded; `points`:
 //!   closest-point batches (each structure's `NAME_closest_point` search);
@@ -42,6 +43,7 @@ mod renderer;
 mod scene;
 pub mod shaders;
 mod timing;
+mod upload;
 pub mod variants;
 pub mod walks;
 mod wavefront;

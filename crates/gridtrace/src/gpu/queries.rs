@@ -9,7 +9,6 @@
 use std::mem::size_of;
 use std::time::Instant;
 
-use bytemuck::Zeroable;
 use rayon::prelude::*;
 
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
@@ -18,9 +17,10 @@ use super::layout::{GpuHit, RayRec};
 use super::renderer::grow;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
 use super::timing::{GpuQueryStats, GpuTimings, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
-use crate::Result;
+use super::upload::MappedUpload;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
+use crate::{Error, Result};
 
 /// What a batch asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -67,6 +67,21 @@ impl Query {
         self.outputs().iter().map(|o| o.bytes()).sum()
     }
 }
+
+/// Bytes of a queue record.
+const RAY_REC_BYTES: usize = size_of::<RayRec>();
+/// Records a worker writes at a time: enough to amortise the hand-off, few enough that a
+/// million rays spread over every core.
+const PIECE_RECORDS: usize = 16 * 1024;
+
+/// One worker's share of a batch's mapped records.
+struct Piece<'a>(wgpu::WriteOnly<'a, [[u8; RAY_REC_BYTES]]>);
+
+// SAFETY: wgpu's `WriteOnly<[T]>` is not `Send` only because its `Send` impl asks `T: Sized`
+// (a slice is not); what it guards holds here: each piece is a disjoint part of one mapped
+// range (made by `split_at`), written by the one worker it is moved to, and the mapping (the
+// view) outlives the parallel loop, which ends before the view is dropped.
+unsafe impl Send for Piece<'_> {}
 
 impl GpuRenderer {
     /// Closest hits for a batch of rays (processed in bounded chunks).
@@ -164,24 +179,7 @@ impl GpuRenderer {
         take: &mut impl FnMut(&[&[u8]]),
     ) -> Result<()> {
         let rec_bytes = size_of::<RayRec>() as u64;
-        // The upload: every chunk's records (`pixel` numbers an item within its chunk), then a
-        // counters block per chunk. The records are made on every core into a host buffer kept
-        // between batches (a million rays are 48 MB: made serially into a fresh vector, that
-        // was a third of the host's share of a batch on lavapipe).
         let n_items: usize = chunks.iter().map(|c| c.len()).sum();
-        let mut rays = std::mem::take(&mut self.batch_records);
-        rays.resize(n_items, RayRec::zeroed());
-        let mut rest = &mut rays[..];
-        for part in chunks {
-            let (mine, tail) = rest.split_at_mut(part.len());
-            rest = tail;
-            mine.par_iter_mut().enumerate().for_each(|(k, r)| {
-                *r = RayRec {
-                    pixel: k as u32,
-                    ..rec_of(part.start + k)
-                };
-            });
-        }
         let (slot, kernel) = match query {
             Query::ClosestHit => (SLOT_QUEUE_A, Kernel::Traverse),
             Query::AnyHit => (SLOT_SHADOW, Kernel::Occlusion),
@@ -195,12 +193,47 @@ impl GpuRenderer {
                 c
             })
             .collect();
-        let items = rays.len() as u64;
+        let items = n_items as u64;
         let rays_bytes = items * rec_bytes;
         let upload_bytes = rays_bytes + counts.len() as u64 * size_of::<u32>() as u64;
         let dev = &self.ctx.device;
         let copy = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
-        grow(dev, &mut self.batch_upload, upload_bytes, "batch upload", copy);
+        // The upload: every chunk's records (`pixel` numbers an item within its chunk), then a
+        // counters block per chunk, written into the kept mapped buffer (upload.rs).
+        let upload = MappedUpload::ready(&mut self.batch_upload, dev, upload_bytes);
+        {
+            let mut view = upload
+                .get_mapped_range_mut(..upload_bytes)
+                .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
+            let (records, counters) = view.slice(..).split_at(rays_bytes as usize);
+            let (mut records, _) = records.into_chunks::<RAY_REC_BYTES>();
+            // Pieces of at most `PIECE_RECORDS`, each within one chunk, written on every core.
+            let mut pieces = Vec::new();
+            for part in chunks {
+                let (mut mine, rest) = records.split_at(part.len());
+                records = rest;
+                let mut pixel = 0;
+                while mine.len() > 0 {
+                    let take = PIECE_RECORDS.min(mine.len());
+                    let (piece, rest) = mine.split_at(take);
+                    mine = rest;
+                    pieces.push((part.start + pixel, pixel, Piece(piece)));
+                    pixel += take;
+                }
+            }
+            pieces.into_par_iter().for_each(|(item, pixel, Piece(piece))| {
+                let n = piece.len();
+                piece.write_iter((0..n).map(|j| {
+                    bytemuck::cast::<RayRec, [u8; RAY_REC_BYTES]>(RayRec {
+                        pixel: (pixel + j) as u32,
+                        ..rec_of(item + j)
+                    })
+                }));
+            });
+            let mut counters = counters;
+            counters.copy_from_slice(bytemuck::cast_slice(&counts));
+        }
+        MappedUpload::unmap(&self.batch_upload);
         grow(
             dev,
             &mut self.tile_uniforms,
@@ -217,18 +250,6 @@ impl GpuRenderer {
             "frame readback",
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
-        let upload = self.batch_upload.as_ref().unwrap();
-        let q = &self.ctx.queue;
-        q.write_buffer(upload, 0, bytemuck::cast_slice(&rays));
-        q.write_buffer(upload, rays_bytes, bytemuck::cast_slice(&counts));
-        // Kept for the next batch up to one chunk's records (what the work buffers hold on the
-        // device anyway): a submission of many chunks does not leave gigabytes behind.
-        let keep = chunks[0].len().max(1);
-        if rays.capacity() > keep {
-            rays.truncate(keep);
-            rays.shrink_to(keep);
-        }
-        self.batch_records = rays;
         stats.uploaded_bytes += upload_bytes;
         for (k, part) in chunks.iter().enumerate() {
             stats.uploaded_bytes += self.write_pass_uniforms_to(
@@ -241,7 +262,10 @@ impl GpuRenderer {
                 Ablation::default(),
             );
         }
-        let (upload, readback) = (self.batch_upload.as_ref().unwrap(), self.readback.as_ref().unwrap());
+        let (upload, readback) = (
+            self.batch_upload.as_ref().unwrap().buffer(),
+            self.readback.as_ref().unwrap(),
+        );
         let w = self.work.as_ref().unwrap();
         let queue = if slot == SLOT_SHADOW { &w.shadow } else { &w.queue_a };
         let buffer = |o: Output| match o {
@@ -293,6 +317,7 @@ impl GpuRenderer {
         rec.timer.resolve_into(&mut enc, readback, results_bytes);
         let total = results_bytes + rec.timer.bytes();
         self.ctx.queue.submit([enc.finish()]);
+        MappedUpload::remap(&self.batch_upload);
         let timer = rec.timer;
         let (stages, phases) = self.ctx.map_read_with(readback, total, |raw| {
             let regions: Vec<&[u8]> = query

@@ -76,11 +76,10 @@ pub struct GpuRenderer {
     /// The frame's results (image, counters, timestamps), mapped once per frame. Kept between
     /// frames and grown as they need.
     pub(super) readback: Option<wgpu::Buffer>,
-    /// A ray batch's rays and counters, copied into place chunk by chunk in the command stream
-    /// (`queries.rs`). Grown as batches need.
-    pub(super) batch_upload: Option<wgpu::Buffer>,
-    /// The host's copy of a batch's queue records, kept between batches (`queries.rs`).
-    pub(super) batch_records: Vec<super::layout::RayRec>,
+    /// A ray batch's rays and counters, written on the host into this mapped buffer and copied
+    /// into place chunk by chunk in the command stream (`queries.rs`, `upload.rs`). Grown as
+    /// batches need.
+    pub(super) batch_upload: Option<super::upload::MappedUpload>,
     /// What the last ray batch took (`last_query_stats`).
     pub(super) last_query: GpuQueryStats,
     /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).
@@ -162,7 +161,6 @@ impl GpuRenderer {
             tile_uniforms: None,
             readback: None,
             batch_upload: None,
-            batch_records: Vec::new(),
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
             device_grid: None,
