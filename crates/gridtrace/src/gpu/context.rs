@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use super::bindings::storage_buffers_needed;
-use super::timing::HostPhases;
+use super::host_phases::HostPhases;
 use crate::{Error, Result};
 
 /// How long a submission may run before it is reported as a hang.

@@ -9,10 +9,12 @@
 
 use std::sync::Arc;
 
+use glam::Vec3;
+use rayon::prelude::*;
+
 use super::context::GpuContext;
 use super::renderer::PACKED_TEXEL_BYTES;
-use super::wavefront::unpack_srgb8;
-use crate::render::Image;
+use crate::render::{Image, srgb8_to_linear};
 use crate::{Error, Result};
 
 pub struct DeviceImage {
@@ -74,4 +76,18 @@ impl DeviceImage {
         unpack_srgb8(&mut img.pixels, &raw);
         Ok(img)
     }
+}
+
+/// Packed 8-bit sRGB pixels (`pack.wgsl`: red in the low byte of a little-endian u32, so bytes
+/// r, g, b, a) to linear colour, on every core (a 1920x1080 frame is 2M pixels).
+pub(super) fn unpack_srgb8(dst: &mut [Vec3], raw: &[u8]) {
+    dst.par_iter_mut()
+        .zip(raw.par_chunks_exact(PACKED_TEXEL_BYTES as usize))
+        .for_each(|(px, rgba)| {
+            *px = Vec3::new(
+                srgb8_to_linear(rgba[0]),
+                srgb8_to_linear(rgba[1]),
+                srgb8_to_linear(rgba[2]),
+            );
+        });
 }

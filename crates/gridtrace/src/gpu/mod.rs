@@ -25,7 +25,8 @@
 //! - `wavefront`: the tile loop (its pixels to the host, or left in a `device_image` that the
 //!   viewer presents from); `queries`: ray-batch intersect and occluded; `points`:
 //!   closest-point batches (each structure's `NAME_closest_point` search);
-//! - `timing`: timestamp queries and per-stage milliseconds;
+//! - `timing`: timestamp queries and per-stage milliseconds; `host_phases`: the host's side of
+//!   the wall time;
 //! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results;
 //! - `grid_build`: the grid and its proximity cloud built on the GPU (`shaders/build/`), for
 //!   meshes that move.
@@ -35,6 +36,7 @@ pub mod constants;
 mod context;
 mod device_image;
 mod grid_build;
+mod host_phases;
 mod kernels;
 pub mod layout;
 mod points;

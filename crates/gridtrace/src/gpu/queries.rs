@@ -213,7 +213,7 @@ impl GpuRenderer {
                 let (mut mine, rest) = records.split_at(part.len());
                 records = rest;
                 let mut pixel = 0;
-                while mine.len() > 0 {
+                while !mine.is_empty() {
                     let take = PIECE_RECORDS.min(mine.len());
                     let (piece, rest) = mine.split_at(take);
                     mine = rest;

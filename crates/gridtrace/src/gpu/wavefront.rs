@@ -12,12 +12,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
-use super::device_image::DeviceImage;
+use super::device_image::{DeviceImage, unpack_srgb8};
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES, grow};
 use super::timing::{GpuTimings, HostPhases, MAX_TIMESTAMPS_BYTES};
-use crate::render::{Image, Mode, PixelFormat, RenderOptions, RenderStats, srgb8_to_linear};
+use crate::render::{Image, Mode, PixelFormat, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
 
@@ -382,20 +382,6 @@ enum Dest<'a> {
     Host(&'a mut Image),
     /// Copied into a device image (in the command stream); nothing read back.
     Device(&'a DeviceImage),
-}
-
-/// Packed 8-bit sRGB pixels (`pack.wgsl`: red in the low byte of a little-endian u32, so bytes
-/// r, g, b, a) to linear colour, on every core (a 1920x1080 frame is 2M pixels).
-pub(super) fn unpack_srgb8(dst: &mut [Vec3], raw: &[u8]) {
-    dst.par_iter_mut()
-        .zip(raw.par_chunks_exact(PACKED_TEXEL_BYTES as usize))
-        .for_each(|(px, rgba)| {
-            *px = Vec3::new(
-                srgb8_to_linear(rgba[0]),
-                srgb8_to_linear(rgba[1]),
-                srgb8_to_linear(rgba[2]),
-            );
-        });
 }
 
 /// Bytes a pixel takes in the frame's readback: 4 when the caller wants 8-bit sRGB (packed on
