@@ -70,6 +70,9 @@ pub struct Refiner {
     full: Image,
     /// This frame's full level goes to the presenter's device image.
     on_device: bool,
+    /// The display does not hold the last finished frame (that frame, or one since, went to
+    /// the device image): a host frame after it shows only its own rows from the display.
+    display_stale: bool,
     /// Largest raw cost seen in this frame (heat), to colour bands before the frame is done.
     heat_max: f32,
     /// Milliseconds per traced pixel, from the bands so far (kept across frames).
@@ -94,6 +97,7 @@ impl Refiner {
             display: Vec::new(),
             full: Image::new(0, 0),
             on_device: false,
+            display_stale: false,
             heat_max: 1.0,
             ms_per_pixel: None,
             started: Instant::now(),
@@ -118,6 +122,7 @@ impl Refiner {
         self.height = h;
         self.opts = RenderOptions { rows: None, ..opts };
         self.on_device = on_device;
+        self.display_stale |= on_device;
         self.full = Image::new(if on_device { 0 } else { w }, if on_device { 0 } else { h });
         self.heat_max = 1.0;
         self.levels = vec![1];
@@ -175,16 +180,32 @@ impl Refiner {
     /// The rows of the frame the presenter draws from the host's display; the others from
     /// the device image. All of them for a frame made on the host; while a device frame is
     /// refined, the preview's rows (those it has traced) below the device's finished ones.
+    ///
+    /// A host frame after a device frame (heat, say) shows its own rows from the display and
+    /// the rest from the device image, which holds the last frame, until it is done.
     pub fn texture_rows(&self) -> Range<u32> {
-        if !self.on_device {
+        if !self.on_device && (self.done || !self.display_stale) {
             return 0..u32::MAX;
         }
         if self.done {
             return 0..0;
         }
         let previewed = self.levels.len() > 1;
-        if self.level + 1 < self.levels.len() {
+        // Rows the display holds of this frame: the preview's so far, or all of them once it
+        // is done; else the full level's finished ones.
+        let painted = if self.level + 1 < self.levels.len() {
             0..(self.next_row * self.levels[self.level]).min(self.height)
+        } else if previewed {
+            0..self.height
+        } else {
+            0..self.next_row
+        };
+        if !self.on_device {
+            return painted;
+        }
+        // A device frame's finished rows are on the device; the preview's below them.
+        if self.level + 1 < self.levels.len() {
+            painted
         } else if previewed {
             self.next_row..self.height
         } else {
@@ -306,6 +327,8 @@ impl Refiner {
             self.next_row = 0;
             if self.level == self.levels.len() {
                 self.done = true;
+                // A host frame's display holds it all now.
+                self.display_stale &= self.on_device;
                 self.summary.total_ms = self.started.elapsed().as_secs_f64() * 1e3;
                 if self.opts.mode == Mode::Heat && !self.on_device {
                     // Colour the whole frame by its own maximum, as `render` does.
@@ -476,6 +499,32 @@ mod tests {
         assert!(r.image().is_none(), "the frame is in the device image");
         assert!(r.display != want_rgba, "the display holds the preview, not the frame");
         assert!(device.pixels == want.pixels, "the device image is not the frame");
+        // A host frame next (heat, say): its own rows come from the display, the rest from the
+        // device image (the last frame), until it is done; the one after shows all from the
+        // display.
+        let mut host_only = |o: &RenderOptions, _: bool| -> gridtrace::Result<Rendered> {
+            let (image, stats) = cpu(o)?;
+            Ok(Rendered::OnHost(Frame {
+                image,
+                stats,
+                gpu: None,
+            }))
+        };
+        let heat = RenderOptions::new(w, h, Mode::Heat, AccelKind::Grid);
+        for (k, want_stale) in [(0, true), (1, false)] {
+            r.restart(heat, Duration::from_secs(100), false);
+            assert_eq!(r.levels, [1], "frame {k}");
+            while !r.done() {
+                let rows = r.texture_rows();
+                if want_stale {
+                    assert_eq!(rows, 0..r.next_row, "frame {k}");
+                } else {
+                    assert_eq!(rows, 0..u32::MAX, "frame {k}");
+                }
+                r.step(Duration::ZERO, &mut host_only).unwrap();
+            }
+            assert_eq!(r.texture_rows(), 0..u32::MAX);
+        }
         // The GPU given up mid-frame: the frame again on the host.
         let mut device = Image::new(w, h);
         let mut bands = 0;
