@@ -60,11 +60,11 @@ impl App {
             }
         }
         if let Some(p) = &mut self.presenter {
+            let o = *self.refiner.opts();
             if self.refiner.take_changed() {
-                let o = self.refiner.opts();
                 p.upload(&self.refiner.display, (o.width, o.height));
             }
-            p.set_texture_rows(self.refiner.texture_rows());
+            p.set_texture_rows(self.refiner.texture_rows(), (o.width, o.height));
         }
         Ok(())
     }

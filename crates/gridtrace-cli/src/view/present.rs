@@ -268,10 +268,12 @@ impl Presenter {
         self.frame.as_ref()
     }
 
-    /// The rows of the traced image drawn from the host's texture; the others come from the
-    /// device image (when there is one).
-    pub fn set_texture_rows(&mut self, rows: Range<u32>) {
-        self.texture_rows = rows;
+    /// The rows of the traced image (`size`) drawn from the host's texture; the others come
+    /// from the device image when there is one of that size (else every row is the texture's:
+    /// a frame too large for the device image).
+    pub fn set_texture_rows(&mut self, rows: Range<u32>, size: (u32, u32)) {
+        let device = self.frame.as_ref().is_some_and(|f| f.size() == size);
+        self.texture_rows = if device { rows } else { 0..u32::MAX };
     }
 
     fn rebind(&mut self) {
