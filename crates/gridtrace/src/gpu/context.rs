@@ -46,6 +46,12 @@ pub struct GpuContext {
     cache: Mutex<HashMap<TypeId, Arc<dyn Any + Send + Sync>>>,
 }
 
+/// The most bytes one storage binding may hold on a device of `limits`: the binding limit, or
+/// the buffer limit where that is lower. Every array the kernels bind is checked against it.
+pub(crate) fn max_binding_bytes(limits: &wgpu::Limits) -> u64 {
+    limits.max_storage_buffer_binding_size.min(limits.max_buffer_size)
+}
+
 /// Adapter kinds in order of preference.
 fn rank(t: wgpu::DeviceType) -> u32 {
     match t {

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::context::GpuContext;
+use super::context::{GpuContext, max_binding_bytes};
 use super::renderer::PACKED_TEXEL_BYTES;
 use crate::render::{Image, srgb8_to_linear};
 use crate::{Error, Result};
@@ -29,8 +29,7 @@ impl DeviceImage {
     /// binding may be is an error that says so.
     pub fn new(ctx: &Arc<GpuContext>, width: u32, height: u32) -> Result<DeviceImage> {
         let bytes = width as u64 * height as u64 * PACKED_TEXEL_BYTES;
-        let limits = ctx.limits();
-        let max = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max = max_binding_bytes(&ctx.limits());
         if bytes > max {
             return Err(Error::Gpu(format!(
                 "a {width}x{height} image on the device takes {bytes} bytes; '{}' binds {max} at most",

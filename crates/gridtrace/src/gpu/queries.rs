@@ -205,7 +205,7 @@ impl GpuRenderer {
             let mut view = upload
                 .get_mapped_range_mut(..upload_bytes)
                 .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
-            let (records, counters) = view.slice(..).split_at(rays_bytes as usize);
+            let (records, mut counters) = view.slice(..).split_at(rays_bytes as usize);
             let (mut records, _) = records.into_chunks::<RAY_REC_BYTES>();
             // Pieces of at most `PIECE_RECORDS`, each within one chunk, written on every core.
             let mut pieces = Vec::new();
@@ -230,7 +230,6 @@ impl GpuRenderer {
                     })
                 }));
             });
-            let mut counters = counters;
             counters.copy_from_slice(bytemuck::cast_slice(&counts));
         }
         MappedUpload::unmap(&self.batch_upload);

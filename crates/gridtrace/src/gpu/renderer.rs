@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
 use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
-use super::context::GpuContext;
+use super::context::{GpuContext, max_binding_bytes};
 use super::grid_build::{GpuBuildStats, GpuGrid};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, GpuTri, IndirectArgs, PassUniform, RayRec};
@@ -291,8 +291,7 @@ impl GpuRenderer {
 
     /// Largest tile (pixels) whose buffers fit the device's binding limit with `lights` lights.
     pub(super) fn tile_capacity(&self, lights: u32) -> u32 {
-        let limits = self.ctx.limits();
-        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_binding = max_binding_bytes(&self.ctx.limits());
         let per_pixel_shadow = size_of::<RayRec>() as u64 * lights.max(1) as u64;
         let by_shadow = max_binding / per_pixel_shadow;
         let by_rays = max_binding / size_of::<RayRec>() as u64;

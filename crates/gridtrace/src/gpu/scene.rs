@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
-use super::context::GpuContext;
+use super::context::{GpuContext, max_binding_bytes};
 use super::kernels::{Kernels, WalkPipelines};
 use super::layout::{GpuMaterial, GpuTri, SceneUniform, TriShade};
 use super::variants::GpuVariants;
@@ -34,7 +34,7 @@ pub(crate) fn tri_shade(scene: &PreparedScene) -> Vec<TriShade> {
 /// anything is allocated: a scene too large for the device is an error that names the array and
 /// the limit, not a validation panic or a lost device.
 pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, adapter: &str) -> Result<()> {
-    let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    let max_binding = max_binding_bytes(limits);
     for &(name, bytes) in arrays {
         if bytes > max_binding {
             return Err(Error::Gpu(format!(

@@ -7,10 +7,10 @@
 //! afresh for every write (on one thread, its pages faulted in on first touch), and copied
 //! again on the device into a device-local upload buffer: the host's preparation was 6.0-6.7 ms
 //! of warm 1M-ray batches of 9-16 ms wall on the H200 machine's 16 cores (docs/benchmarks.md,
-//! "Ray batches, 1M rays"). Here
-//! the records go once, in parallel, into memory the device copies from; the buffer is asked to
-//! be mapped again right after the submission that reads it, and the batch's one wait for its
-//! results completes that mapping too, so the next batch finds it ready.
+//! "Ray batches, 1M rays"). Here the records go once, in parallel, into memory the device
+//! copies from; the buffer is asked to be mapped again right after the submission that reads
+//! it, and the batch's one wait for its results completes that mapping too, so the next batch
+//! finds it ready.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -189,16 +189,13 @@ impl GpuRenderer {
         let mut img = target.is_none().then(|| Image::new(opts.width, rows.len() as u32));
         let mut stats = GpuRenderStats::default();
         let max_bytes = self.ctx.limits().max_buffer_size;
-        // Bytes a pixel takes in the readback: none when the image stays on the device.
-        let readback_texel = if target.is_some() { 0 } else { texel_bytes(opts) };
         let mut k = 0;
         while k < tiles.len() {
-            let n = tiles_per_submission(&tiles[k..], readback_texel, max_bytes);
-            let dest = match (&mut img, target) {
-                (Some(img), _) => Dest::Host(img),
-                (None, Some(t)) => Dest::Device(t),
-                (None, None) => unreachable!("a host image is made when there is no target"),
+            let dest = match &mut img {
+                Some(img) => Dest::Host(img),
+                None => Dest::Device(target.expect("no host image only with a device image")),
             };
+            let n = tiles_per_submission(&tiles[k..], dest.readback_texel(opts), max_bytes);
             let out = self.run_tiles(k, &tiles[k..k + n], first, opts, dest)?;
             for (r, t) in out.rays.iter().zip(&tiles[k..k + n]) {
                 stats.render.rays.eye += t.pixels as u64;
@@ -248,10 +245,9 @@ impl GpuRenderer {
     ) -> Result<Readback> {
         let texel = texel_bytes(opts);
         let packed = texel == PACKED_TEXEL_BYTES;
-        let to_device = matches!(dest, Dest::Device(_));
         // The readback: the tiles' pixels in order (none for a device image), then a counters
         // block per tile, then the timestamps.
-        let readback_texel = if to_device { 0 } else { texel };
+        let readback_texel = dest.readback_texel(opts);
         let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * readback_texel).sum();
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
@@ -285,19 +281,21 @@ impl GpuRenderer {
             rec.tile_pixels = t.pixels;
             self.record_tile(&mut enc, &mut rec, opts.mode);
             let bytes = t.pixels as u64 * texel;
-            if let Dest::Device(d) = &dest {
+            if packed {
+                rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
+            }
+            let pixels = if packed { &w.packed } else { &w.accum };
+            match &dest {
                 // The tile's pixels to their place in the frame (its pixel numbering is the
-                // frame's, bands included).
-                rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
-                let at = t.offset as u64 * PACKED_TEXEL_BYTES;
-                enc.copy_buffer_to_buffer(&w.packed, 0, d.buffer(), at, Some(bytes));
-            } else if packed {
-                rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
-                enc.copy_buffer_to_buffer(&w.packed, 0, readback, image_at, Some(bytes));
-                image_at += bytes;
-            } else {
-                enc.copy_buffer_to_buffer(&w.accum, 0, readback, image_at, Some(bytes));
-                image_at += bytes;
+                // frame's, bands included; a device image is always packed).
+                Dest::Device(d) => {
+                    let at = t.offset as u64 * PACKED_TEXEL_BYTES;
+                    enc.copy_buffer_to_buffer(pixels, 0, d.buffer(), at, Some(bytes));
+                }
+                Dest::Host(_) => {
+                    enc.copy_buffer_to_buffer(pixels, 0, readback, image_at, Some(bytes));
+                    image_at += bytes;
+                }
             }
             enc.copy_buffer_to_buffer(
                 &self.counters,
@@ -382,6 +380,16 @@ enum Dest<'a> {
     Host(&'a mut Image),
     /// Copied into a device image (in the command stream); nothing read back.
     Device(&'a DeviceImage),
+}
+
+impl Dest<'_> {
+    /// Bytes a pixel takes in the readback: none when the image stays on the device.
+    fn readback_texel(&self, opts: &RenderOptions) -> u64 {
+        match self {
+            Dest::Host(_) => texel_bytes(opts),
+            Dest::Device(_) => 0,
+        }
+    }
 }
 
 /// Bytes a pixel takes in the frame's readback: 4 when the caller wants 8-bit sRGB (packed on
