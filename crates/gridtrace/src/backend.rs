@@ -199,6 +199,24 @@ pub enum Rendered {
     OnHost(Frame),
 }
 
+impl Rendered {
+    /// The frame's rays and counters, wherever its pixels are.
+    pub fn stats(&self) -> &RenderStats {
+        match self {
+            Rendered::OnDevice(g) => &g.render,
+            Rendered::OnHost(f) => &f.stats,
+        }
+    }
+
+    /// Its GPU figures, where a GPU traced it.
+    pub fn gpu(&self) -> Option<&GpuRenderStats> {
+        match self {
+            Rendered::OnDevice(g) => Some(g),
+            Rendered::OnHost(f) => f.gpu.as_ref(),
+        }
+    }
+}
+
 /// A prepared scene owned together with where it is traced (its GPU upload, or the CPU): what
 /// every program that renders holds, for one frame or many. It owns the scene, so it can be
 /// dropped and replaced (a file dropped on the viewer) and moved (`update_vertices`).

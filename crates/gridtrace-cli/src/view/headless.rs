@@ -82,10 +82,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
             Some(t) => tracer.render_to_device(&camera, &lights, &opts, t)?,
             None => Rendered::OnHost(tracer.render(&camera, &lights, &opts)?),
         };
-        let (rays, gpu) = match &f {
-            Rendered::OnDevice(g) => (g.render.rays, Some(g)),
-            Rendered::OnHost(f) => (f.stats.rays, f.gpu.as_ref()),
-        };
+        let (rays, gpu) = (f.stats().rays, f.gpu());
         for n in tracer.take_notes() {
             println!("note: {n}");
         }

@@ -184,32 +184,24 @@ impl Refiner {
     /// A host frame after a device frame (heat, say) shows its own rows from the display and
     /// the rest from the device image, which holds the last frame, until it is done.
     pub fn texture_rows(&self) -> Range<u32> {
-        if !self.on_device && (self.done || !self.display_stale) {
+        if self.done {
+            return if self.on_device { 0..0 } else { 0..u32::MAX };
+        }
+        if !self.on_device && !self.display_stale {
             return 0..u32::MAX;
         }
-        if self.done {
-            return 0..0;
-        }
+        let (h, next) = (self.height, self.next_row);
+        let in_preview = self.level + 1 < self.levels.len();
         let previewed = self.levels.len() > 1;
-        // Rows the display holds of this frame: the preview's so far, or all of them once it
-        // is done; else the full level's finished ones.
-        let painted = if self.level + 1 < self.levels.len() {
-            0..(self.next_row * self.levels[self.level]).min(self.height)
-        } else if previewed {
-            0..self.height
-        } else {
-            0..self.next_row
-        };
-        if !self.on_device {
-            return painted;
-        }
-        // A device frame's finished rows are on the device; the preview's below them.
-        if self.level + 1 < self.levels.len() {
-            painted
-        } else if previewed {
-            self.next_row..self.height
-        } else {
-            0..0
+        match (in_preview, previewed, self.on_device) {
+            // The preview's rows traced so far.
+            (true, _, _) => 0..(next * self.levels[self.level]).min(h),
+            // The preview below the device's finished rows.
+            (false, true, true) => next..h,
+            // A host frame's finished rows above its preview: the display holds them all.
+            (false, true, false) => 0..h,
+            (false, false, true) => 0..0,
+            (false, false, false) => 0..next,
         }
     }
 
@@ -273,22 +265,16 @@ impl Refiner {
         let t0 = Instant::now();
         let traced = trace(&opts, to_device)?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
-        let (frame, gpu, rays) = match traced {
-            Rendered::OnHost(_) if to_device => {
-                // The GPU was given up mid-frame: the rows it left on the device are not on
-                // the host's display. The frame again, on the host from the top.
-                let opts = self.opts;
-                self.restart(opts, Duration::MAX, false);
-                return Ok(());
-            }
-            Rendered::OnHost(f) => {
-                let (gpu, rays) = (f.gpu.clone(), f.stats.rays);
-                (Some(f), gpu, rays)
-            }
-            Rendered::OnDevice(g) => {
-                let rays = g.render.rays;
-                (None, Some(g), rays)
-            }
+        if to_device && matches!(traced, Rendered::OnHost(_)) {
+            // The GPU was given up mid-frame: the rows it left on the device are not on the
+            // host's display. The frame again, on the host from the top.
+            let opts = self.opts;
+            self.restart(opts, Duration::MAX, false);
+            return Ok(());
+        }
+        let frame = match &traced {
+            Rendered::OnHost(f) => Some(f),
+            Rendered::OnDevice(_) => None,
         };
         // The pace: a running mean that follows a change of view within a few bands.
         let pace = ms / (lw as f64 * rows as f64);
@@ -296,20 +282,20 @@ impl Refiner {
             Some(p) => 0.5 * p + 0.5 * pace,
             None => pace,
         });
-        if let Some(frame) = &frame {
+        if let Some(frame) = frame {
             self.paint(block, first, &frame.image);
         }
         if block == 1 {
-            if let Some(frame) = &frame {
+            if let Some(frame) = frame {
                 let at = (first * self.width) as usize;
                 self.full.pixels[at..at + frame.image.pixels.len()].copy_from_slice(&frame.image.pixels);
             }
             let s = &mut self.summary;
             s.ms += ms;
-            s.rays += rays;
+            s.rays += traced.stats().rays;
             s.bands += 1;
             s.on_device = to_device;
-            if let Some(g) = &gpu {
+            if let Some(g) = traced.gpu() {
                 s.uploaded_bytes += g.uploaded_bytes;
                 s.downloaded_bytes += g.downloaded_bytes;
                 s.from_timestamps = g.timings.from_timestamps;
