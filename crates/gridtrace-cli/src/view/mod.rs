@@ -10,10 +10,12 @@
 //! within the budget, overlay, present) and window.rs (window events to actions). Beside them:
 //! controls.rs (actions, the orbit camera, projection for the light gizmos), script.rs
 //! (`--script`), progressive.rs (bands, preview, the display image), present.rs (the surface, the
-//! image blit from the tracer's device or a host texture, egui), overlay.rs (what the overlay says, as lines), loader.rs (dropped files on a
-//! worker thread), headless.rs (`--headless`: frames along an orbit, timed).
+//! image from the tracer's device or a host texture, egui), blit.rs (the blit's pipeline and
+//! bindings), overlay.rs (what the overlay says, as lines), loader.rs (dropped files on a worker
+//! thread), headless.rs (`--headless`: frames along an orbit, timed).
 
 mod app;
+mod blit;
 mod controls;
 mod headless;
 mod loader;
