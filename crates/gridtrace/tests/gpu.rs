@@ -439,6 +439,13 @@ fn frames_left_on_the_device_equal_read_back_frames() {
     let cast = RenderOptions::new(w, h, Mode::Cast, AccelKind::ProximityCloud);
     let e = gpu.render_to_device(&cam, &lights, &cast, &elsewhere).unwrap_err();
     assert!(e.to_string().contains("another device"), "{e}");
+    // An image over one storage binding (16 GiB here, beyond Vulkan's 32-bit binding range)
+    // is refused before anything is allocated, saying why; the viewer and `view --headless`
+    // then read such frames back.
+    let e = DeviceImage::new(gpu.context(), 1 << 16, 1 << 16)
+        .err()
+        .expect("refused");
+    assert!(e.to_string().contains("binds"), "{e}");
     // The errors left the renderer whole.
     gpu.render_to_device(&cam, &lights, &cast, &whole).unwrap();
 }

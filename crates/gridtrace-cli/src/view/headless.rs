@@ -54,19 +54,19 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
     }
     let (w, h) = a.res;
     let opts = RenderOptions::new(w, h, a.mode, accel).with_pixels(PixelFormat::Srgb8);
-    let target = match tracer.gpu() {
-        Some(g) if !a.readback && a.mode != Mode::Heat => Some(DeviceImage::new(g.context(), w, h)?),
-        _ => None,
+    // As the window does: a frame larger than one storage binding is read back instead.
+    let (target, why) = match tracer.gpu() {
+        Some(g) if !a.readback && a.mode != Mode::Heat => match DeviceImage::new(g.context(), w, h) {
+            Ok(t) => (Some(t), String::new()),
+            Err(e) => (None, format!(" ({e})")),
+        },
+        _ => (None, String::new()),
     };
     if tracer.gpu().is_some() {
-        println!(
-            "image   {}",
-            if target.is_some() {
-                "stays on the device, as the window presents it (--readback: to the host)"
-            } else {
-                "read back to the host every frame"
-            }
-        );
+        match &target {
+            Some(_) => println!("image   stays on the device, as the window presents it (--readback: to the host)"),
+            None => println!("image   read back to the host every frame{why}"),
+        }
     }
     let centre = src.bounds().center();
     let (camera0, lights0) = (src.camera, src.lights.clone());
