@@ -2,6 +2,7 @@
 //! shading rules both backends follow (so their images agree).
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use crate::accel::{AccelKind, TraversalCounters};
 
@@ -195,11 +196,28 @@ impl std::ops::AddAssign for RayCounts {
 
 /// A linear-RGB float image, row 0 at the top. In heat mode each pixel holds the raw cost
 /// (cells + triangle tests) in all three channels until `heat_to_color`.
-#[derive(Debug, Clone, PartialEq)]
+///
+/// A frame the GPU packed as 8-bit sRGB (`PixelFormat::Srgb8`) keeps the device's levels as
+/// they came over the bus: `to_rgb8` and `save_png` use them as they are, and `pixels` turns
+/// them into linear values the first time it is asked. Why: the float round trip (each level
+/// to its linear value, then back through the sRGB curve for the PNG) was the readout of
+/// every GPU frame, 26 ms of a 1920x1080 frame on a loaded 2-core machine, for a caller that
+/// only wanted the bytes.
+#[derive(Debug, Clone)]
 pub struct Image {
     pub width: u32,
     pub height: u32,
-    pub pixels: Vec<Vec3>,
+    /// The linear pixels: made at once, or from `srgb8` on first use.
+    linear: std::sync::OnceLock<Vec<Vec3>>,
+    /// The device's levels (red, green, blue, alpha 255), when the image came packed; dropped
+    /// when the pixels are written (`pixels_mut`).
+    srgb8: Option<Vec<[u8; 4]>>,
+}
+
+impl PartialEq for Image {
+    fn eq(&self, other: &Image) -> bool {
+        (self.width, self.height) == (other.width, other.height) && self.pixels() == other.pixels()
+    }
 }
 
 impl Image {
@@ -207,19 +225,76 @@ impl Image {
     /// writing), where `vec![Vec3::ZERO; n]` wrote every pixel: 17-22 ms of a 1920x1080 GPU
     /// frame's host time on this project's 2-core machine, before a pixel was traced.
     pub fn new(width: u32, height: u32) -> Self {
+        Image::from_pixels(width, height, bytemuck::zeroed_vec((width * height) as usize))
+    }
+
+    /// An image of these linear pixels (`width * height` of them, row by row).
+    pub fn from_pixels(width: u32, height: u32, pixels: Vec<Vec3>) -> Self {
+        debug_assert_eq!(pixels.len(), (width * height) as usize);
         Image {
             width,
             height,
-            pixels: bytemuck::zeroed_vec((width * height) as usize),
+            linear: std::sync::OnceLock::from(pixels),
+            srgb8: None,
         }
     }
 
-    /// 8-bit sRGB, clamped.
+    /// An image of 8-bit sRGB levels (red, green, blue, alpha; `width * height`, row by row),
+    /// as the GPU packs them.
+    pub fn from_srgb8(width: u32, height: u32, levels: Vec<[u8; 4]>) -> Self {
+        debug_assert_eq!(levels.len(), (width * height) as usize);
+        Image {
+            width,
+            height,
+            linear: std::sync::OnceLock::new(),
+            srgb8: Some(levels),
+        }
+    }
+
+    /// The linear pixels (from the 8-bit levels, on every core, the first time for a packed
+    /// image: each level's linear value, so that `to_rgb8` of them gives the levels back).
+    pub fn pixels(&self) -> &[Vec3] {
+        self.linear.get_or_init(|| {
+            let levels = self.srgb8.as_deref().unwrap_or(&[]);
+            let mut px: Vec<Vec3> = bytemuck::zeroed_vec(levels.len());
+            px.par_iter_mut().zip(levels.par_iter()).for_each(|(p, l)| {
+                *p = Vec3::new(srgb8_to_linear(l[0]), srgb8_to_linear(l[1]), srgb8_to_linear(l[2]));
+            });
+            px
+        })
+    }
+
+    /// The linear pixels, to write (a packed image's levels are dropped: they would be stale).
+    pub fn pixels_mut(&mut self) -> &mut [Vec3] {
+        let _ = self.pixels();
+        self.srgb8 = None;
+        self.linear.get_mut().expect("made above")
+    }
+
+    /// The 8-bit levels to write, as the GPU's readout fills them: the image becomes a packed
+    /// one (black where nothing is written), its linear pixels made from the levels on use.
+    pub fn srgb8_mut(&mut self) -> &mut [[u8; 4]] {
+        if self.srgb8.is_none() {
+            self.srgb8 = Some(bytemuck::zeroed_vec((self.width * self.height) as usize));
+        }
+        self.linear = std::sync::OnceLock::new();
+        self.srgb8.as_mut().expect("set above")
+    }
+
+    /// 8-bit sRGB, clamped: the device's levels as they came for a packed image, else each
+    /// linear pixel through the sRGB curve (`linear_to_srgb8`), on every core.
     pub fn to_rgb8(&self) -> Vec<u8> {
-        self.pixels
-            .iter()
-            .flat_map(|p| p.to_array().map(linear_to_srgb8))
-            .collect()
+        let mut out: Vec<u8> = bytemuck::zeroed_vec(3 * (self.width * self.height) as usize);
+        if let Some(levels) = &self.srgb8 {
+            out.par_chunks_exact_mut(3)
+                .zip(levels.par_iter())
+                .for_each(|(o, l)| o.copy_from_slice(&l[..3]));
+        } else {
+            out.par_chunks_exact_mut(3)
+                .zip(self.pixels().par_iter())
+                .for_each(|(o, p)| o.copy_from_slice(&p.to_array().map(linear_to_srgb8)));
+        }
+        out
     }
 
     pub fn save_png(&self, path: &std::path::Path) -> crate::Result<()> {
@@ -234,7 +309,7 @@ impl Image {
 
     /// The largest raw cost of a heat image (at least 1): what `heat_to_color` normalises by.
     pub fn heat_max(&self) -> f32 {
-        self.pixels.iter().map(|p| p.x).fold(1.0f32, f32::max)
+        self.pixels().iter().map(|p| p.x).fold(1.0f32, f32::max)
     }
 
     /// `heat_to_color` normalised by `max` instead of this image's own maximum: how the viewer
@@ -256,11 +331,11 @@ impl Image {
             let i = (x.floor() as usize).min(stops.len() - 2);
             stops[i].lerp(stops[i + 1], x - i as f32)
         };
-        Image {
-            width: self.width,
-            height: self.height,
-            pixels: self.pixels.iter().map(|p| ramp(p.x / max)).collect(),
-        }
+        Image::from_pixels(
+            self.width,
+            self.height,
+            self.pixels().iter().map(|p| ramp(p.x / max)).collect(),
+        )
     }
 }
 

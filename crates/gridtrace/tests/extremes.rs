@@ -125,9 +125,9 @@ fn camera_inside_a_mesh() {
     for kind in AccelKind::ALL {
         let p = s.prepare_for(kind, Resolution::default()).unwrap();
         let (img, _) = gridtrace::cpu::render(&p, &RenderOptions::new(96, 64, Mode::Shadow, kind), None).unwrap();
-        let bg = img.pixels.iter().filter(|c| **c == s.background).count();
+        let bg = img.pixels().iter().filter(|c| **c == s.background).count();
         assert_eq!(bg, 0, "{} background pixels seen from inside", bg);
-        assert!(img.pixels.iter().all(|c| c.is_finite()));
+        assert!(img.pixels().iter().all(|c| c.is_finite()));
     }
 }
 
@@ -213,7 +213,7 @@ fn no_shadow_acne_at_grazing_light() {
                     if *backend == "cpu" {
                         checked += 1;
                     }
-                    let c = img.pixels[(y * w + x) as usize];
+                    let c = img.pixels()[(y * w + x) as usize];
                     let ambient = 0.05 * 0.8;
                     if c.x <= ambient * 1.2 {
                         acne.push((x, y, c));

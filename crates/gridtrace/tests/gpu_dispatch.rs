@@ -39,7 +39,7 @@ fn two_d_dispatches_equal_one_d() {
             let (ia, sa) = a.render(&prepared.camera, &prepared.lights, &opts).unwrap();
             let (ib, sb) = b.render(&prepared.camera, &prepared.lights, &opts).unwrap();
             assert!(
-                ia.pixels == ib.pixels,
+                ia.pixels() == ib.pixels(),
                 "{} {mode:?}: 2-D dispatch changed the image",
                 accel.name()
             );

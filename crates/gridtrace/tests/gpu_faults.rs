@@ -38,7 +38,7 @@ fn auto_hands_a_lost_device_to_the_cpu() {
         ctx.inject_fault(fault);
         let f = tracer.render(&camera, &lights, &opts).unwrap();
         assert!(f.gpu.is_none() && tracer.gpu().is_none(), "{fault:?}: still on the GPU");
-        assert!(f.image.pixels == want.pixels, "{fault:?}: the CPU's frame differs");
+        assert!(f.image.pixels() == want.pixels(), "{fault:?}: the CPU's frame differs");
         let notes = tracer.take_notes();
         assert!(
             notes.len() == 1 && notes[0].contains("the GPU failed") && notes[0].contains("CPU"),
@@ -106,7 +106,7 @@ fn auto_update_after_a_lost_device() {
     want.update_vertices(&moved, gridtrace::scene::RebuildOn::Cpu).unwrap();
     let (want, _) = gridtrace::cpu::render(&want, &opts, None).unwrap();
     let got = tracer.render(&scene.camera, &scene.lights, &opts).unwrap();
-    assert!(got.image.pixels == want.pixels);
+    assert!(got.image.pixels() == want.pixels());
     assert_eq!(tracer.take_notes().len(), 1);
 }
 

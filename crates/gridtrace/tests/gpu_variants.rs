@@ -106,7 +106,7 @@ fn render(gpu: &mut GpuRenderer, scene: &PreparedScene, opts: &RenderOptions) ->
 
 fn compare_images(what: &str, exact: bool, want: &(Image, [u64; 3]), got: &(Image, [u64; 3])) {
     if exact {
-        assert!(want.0.pixels == got.0.pixels, "{what}: pixels differ");
+        assert!(want.0.pixels() == got.0.pixels(), "{what}: pixels differ");
         assert_eq!(want.1, got.1, "{what}: ray counts");
     } else {
         let frac = differing_pixels(&want.0.to_rgb8(), &got.0.to_rgb8(), 2);

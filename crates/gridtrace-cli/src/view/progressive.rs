@@ -288,7 +288,7 @@ impl Refiner {
         if block == 1 {
             if let Some(frame) = frame {
                 let at = (first * self.width) as usize;
-                self.full.pixels[at..at + frame.image.pixels.len()].copy_from_slice(&frame.image.pixels);
+                self.full.pixels_mut()[at..at + frame.image.pixels().len()].copy_from_slice(frame.image.pixels());
             }
             let s = &mut self.summary;
             s.ms += ms;
@@ -342,7 +342,7 @@ impl Refiner {
             let y0 = (first + by) * block;
             for y in y0..(y0 + block).min(h) {
                 for x in 0..w {
-                    let p = band.pixels[(by * band.width + x / block) as usize];
+                    let p = band.pixels()[(by * band.width + x / block) as usize];
                     let i = ((y * w + x) * 4) as usize;
                     self.display[i] = linear_to_srgb8(p.x);
                     self.display[i + 1] = linear_to_srgb8(p.y);
@@ -442,7 +442,7 @@ mod tests {
             let (image, stats) = cpu(o)?;
             if on_device {
                 let at = (o.row_range().start * w) as usize;
-                device.pixels[at..at + image.pixels.len()].copy_from_slice(&image.pixels);
+                device.pixels_mut()[at..at + image.pixels().len()].copy_from_slice(image.pixels());
                 return Ok(Rendered::OnDevice(GpuRenderStats {
                     render: stats,
                     downloaded_bytes: 64,
@@ -484,7 +484,7 @@ mod tests {
         assert_eq!(s.downloaded_bytes, 64 * s.bands as u64);
         assert!(r.image().is_none(), "the frame is in the device image");
         assert!(r.display != want_rgba, "the display holds the preview, not the frame");
-        assert!(device.pixels == want.pixels, "the device image is not the frame");
+        assert!(device.pixels() == want.pixels(), "the device image is not the frame");
         // A host frame next (heat, say): its own rows come from the display, the rest from the
         // device image (the last frame), until it is done; the one after shows all from the
         // display.
@@ -519,7 +519,7 @@ mod tests {
             bands += 1;
             if on_device && bands < 3 {
                 let at = (o.row_range().start * w) as usize;
-                device.pixels[at..at + image.pixels.len()].copy_from_slice(&image.pixels);
+                device.pixels_mut()[at..at + image.pixels().len()].copy_from_slice(image.pixels());
                 return Ok(Rendered::OnDevice(GpuRenderStats {
                     render: stats,
                     ..Default::default()

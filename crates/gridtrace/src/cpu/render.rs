@@ -78,7 +78,7 @@ fn render_generic<C: Collect>(
     const BAND: usize = 4;
     let width = opts.width as usize;
     let (rays, counters) = img
-        .pixels
+        .pixels_mut()
         .par_chunks_mut(width * BAND)
         .enumerate()
         .map(|(band, rows)| {
@@ -228,7 +228,7 @@ mod tests {
                 let cam = scene.camera.frame(opts.width, opts.height);
                 let first = opts.row_range().start;
                 let mut expected_rays = RayCounts::default();
-                for (i, got) in img.pixels.iter().enumerate() {
+                for (i, got) in img.pixels().iter().enumerate() {
                     let (x, y) = (i as u32 % opts.width, first + i as u32 / opts.width);
                     let want = if mode == Mode::Heat {
                         let mut c = TraversalCounters::default();

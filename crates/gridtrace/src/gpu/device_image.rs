@@ -9,12 +9,9 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
-use rayon::prelude::*;
-
 use super::context::{GpuContext, max_binding_bytes};
 use super::renderer::PACKED_TEXEL_BYTES;
-use crate::render::{Image, srgb8_to_linear};
+use crate::render::Image;
 use crate::{Error, Result};
 
 pub struct DeviceImage {
@@ -71,22 +68,10 @@ impl DeviceImage {
     pub fn read(&self) -> Result<Image> {
         let bytes = self.width as u64 * self.height as u64 * PACKED_TEXEL_BYTES;
         let raw = self.ctx.read_buffer(&self.buffer, bytes)?;
-        let mut img = Image::new(self.width, self.height);
-        unpack_srgb8(&mut img.pixels, &raw);
-        Ok(img)
+        Ok(Image::from_srgb8(
+            self.width,
+            self.height,
+            bytemuck::cast_slice(&raw).to_vec(),
+        ))
     }
-}
-
-/// Packed 8-bit sRGB pixels (`pack.wgsl`: red in the low byte of a little-endian u32, so bytes
-/// r, g, b, a) to linear colour, on every core (a 1920x1080 frame is 2M pixels).
-pub(super) fn unpack_srgb8(dst: &mut [Vec3], raw: &[u8]) {
-    dst.par_iter_mut()
-        .zip(raw.par_chunks_exact(PACKED_TEXEL_BYTES as usize))
-        .for_each(|(px, rgba)| {
-            *px = Vec3::new(
-                srgb8_to_linear(rgba[0]),
-                srgb8_to_linear(rgba[1]),
-                srgb8_to_linear(rgba[2]),
-            );
-        });
 }

@@ -12,7 +12,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
-use super::device_image::{DeviceImage, unpack_srgb8};
+use super::device_image::DeviceImage;
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES, grow};
@@ -144,7 +144,7 @@ impl GpuRenderer {
         let rows = opts.row_range();
         let (first, pixels) = (rows.start * opts.width, rows.end * opts.width);
         let tile = self.tile_capacity(n_lights).min(pixels - first);
-        self.ensure_work(tile, n_lights);
+        self.ensure_work(tile, n_lights, super::renderer::WorkUse::FRAME);
         let t0 = Instant::now();
         let frame = camera.frame(opts.width, opts.height);
         let q = &self.ctx.queue;
@@ -225,7 +225,7 @@ impl GpuRenderer {
         if opts.mode == Mode::Heat
             && let Some(img) = &img
         {
-            let cost: f64 = img.pixels.iter().map(|p| p.x as f64).sum();
+            let cost: f64 = img.pixels().iter().map(|p| p.x as f64).sum();
             stats.render.counters.cells = cost as u64;
         }
         Ok((img, stats))
@@ -314,11 +314,17 @@ impl GpuRenderer {
                 let mut at = 0usize;
                 for t in tiles {
                     let n = t.pixels as usize;
-                    let dst = &mut img.pixels[(t.offset - first) as usize..][..n];
+                    let start = (t.offset - first) as usize;
                     let texels = &raw[at..at + n * texel as usize];
                     if packed {
-                        unpack_srgb8(dst, texels);
+                        // The device's levels as they are (`Image` makes linear values only if
+                        // asked): a copy on every core, no conversion.
+                        let dst = &mut img.srgb8_mut()[start..][..n];
+                        dst.par_chunks_mut(PIECE_PIXELS)
+                            .zip(texels.par_chunks(PIECE_PIXELS * PACKED_TEXEL_BYTES as usize))
+                            .for_each(|(d, s)| d.copy_from_slice(bytemuck::cast_slice(s)));
                     } else {
+                        let dst = &mut img.pixels_mut()[start..][..n];
                         // On every core: a 1920x1080 frame is 2M pixels to convert.
                         dst.par_iter_mut()
                             .zip(texels.par_chunks_exact(texel as usize))
@@ -373,6 +379,9 @@ impl GpuRenderer {
         }
     }
 }
+
+/// Pixels a worker copies at a time in a packed frame's readout.
+const PIECE_PIXELS: usize = 64 * 1024;
 
 /// Where a submission's pixels go.
 enum Dest<'a> {
