@@ -10,7 +10,8 @@
 # The steps, most important first: the hardware suite (every structure x GPU variant, ray
 # batches, grid builds; hardware.md/json), 1M-ray batches beside Embree 3 on the same rays
 # (rays.txt), the paper matrix on the GPU and the CPU cores (paper.md/json), a 1080p camera
-# orbit and an animated mesh (summary.txt). The first H200 runs (2026-11-26) used it; their
+# orbit and an animated mesh (summary.txt). The ray batches' lines give the bytes a ray each
+# way and the host's phases (prepare, wait, readout) of the pipelined chunks. The first H200 runs (2026-11-26) used it; their
 # output is under docs/results/h200-2026-11-26*. LOCAL=1 QUICK=1 runs it on this machine's
 # lavapipe for a check of the script (no packages unpacked, the suite's --quick plan).
 set -u
@@ -56,9 +57,14 @@ for mesh in bunny/bun_zipper.ply dragon/dragon_vrip_binary.ply; do
     e=$(timeout 40 ./embree_rays "$M/$mesh" --rays "$rays" --hits-out /tmp/emb.t --reps 5 2>/dev/null | tail -1 | python3 -c "import json,sys; print(json.load(sys.stdin)['rayfile']['mrays_per_s'], 'Mrays/s')" 2>&1)
     echo "$name $set embree($(nproc) threads): $e" >> "$r"
     for be in gpu cpu; do for accel in pc bvh irregular; do
-      line=$(timeout 40 $B rays "$M/$mesh" --rays "$rays" --accel $accel --backend $be --hits-out /tmp/gt.bin 2>&1 | grep -iE '^rays|^gpu|^error' | grep -v XDG_RUNTIME | head -3 | tr '\n' ' ')
+      line=$(timeout 40 $B rays "$M/$mesh" --rays "$rays" --accel $accel --backend $be --hits-out /tmp/gt.bin 2>&1 | grep -iE '^rays|^gpu|^bus|^host|^error' | grep -v XDG_RUNTIME | head -5 | tr '\n' ' ')
       echo "$name $set $be $accel: $line" >> "$r"
     done; done
+    # The lean answers (issue 41): (t, triangle) 8 bytes a ray down, occlusion one bit.
+    for ask in --no-uv --occluded; do
+      line=$(timeout 40 $B rays "$M/$mesh" --rays "$rays" --accel bvh --backend gpu $ask --hits-out /tmp/gt.bin 2>&1 | grep -iE '^rays|^gpu|^bus|^host|^error' | grep -v XDG_RUNTIME | head -5 | tr '\n' ' ')
+      echo "$name $set gpu bvh $ask: $line" >> "$r"
+    done
   done
 done
 cat "$r" >> "$log"

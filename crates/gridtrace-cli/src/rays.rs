@@ -2,8 +2,11 @@
 //!
 //! Rays: little-endian float32 records `ox oy oz dx dy dz` (24 bytes; the format of hagrid and of
 //! `gridtrace bench --export-rays`). Hits: little-endian records `t: f32, tri: u32, u: f32,
-//! v: f32` (16 bytes; a miss is `t = inf`, `tri = 0xFFFFFFFF`); with `--occluded`, one byte per
-//! ray (1 = occluded). Both files are streamed in chunks, so memory stays bounded.
+//! v: f32` (16 bytes; a miss is `t = inf`, `tri = 0xFFFFFFFF`), with `--no-uv` `t: f32, tri:
+//! u32` (8 bytes: a GPU then brings back 8 bytes a ray instead of 16); with `--occluded`, one
+//! byte per ray (1 = occluded; the GPU brings back one bit). Both files are streamed in
+//! chunks, so memory stays bounded. On the GPU the rays go up as they are in the file, 24
+//! bytes each; the bytes each way are printed, also per ray.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -33,6 +36,9 @@ pub struct RaysArgs {
     /// Any-hit occlusion instead of closest hits (one byte per ray).
     #[arg(long)]
     occluded: bool,
+    /// Closest hits without barycentrics: 8-byte records (t, tri) instead of 16.
+    #[arg(long, conflicts_with = "occluded")]
+    no_uv: bool,
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
     backend: Backend,
@@ -120,7 +126,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
             let out: Vec<u8> = occ.iter().map(|&o| o as u8).collect();
             output.write_all(&out).map_err(write_err)?;
         } else {
-            let found = mesh.intersect_rays(&rays, a.tmin, a.tmax)?;
+            let found = mesh.intersect_rays_answering(mesh.backend(), &rays, a.tmin, a.tmax, !a.no_uv)?;
             trace_s += t0.elapsed().as_secs_f64();
             let mut out = Vec::with_capacity(found.len() * 16);
             for h in &found {
@@ -132,8 +138,10 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
                 hits += h.is_hit() as u64;
                 out.extend_from_slice(&h.t.to_le_bytes());
                 out.extend_from_slice(&tri.to_le_bytes());
-                out.extend_from_slice(&h.u.to_le_bytes());
-                out.extend_from_slice(&h.v.to_le_bytes());
+                if !a.no_uv {
+                    out.extend_from_slice(&h.u.to_le_bytes());
+                    out.extend_from_slice(&h.v.to_le_bytes());
+                }
             }
             output.write_all(&out).map_err(write_err)?;
         }
@@ -167,6 +175,12 @@ fn print_gpu_batches(s: &gridtrace::gpu::GpuQueryStats) {
         uploaded_bytes: s.uploaded_bytes,
         downloaded_bytes: s.downloaded_bytes,
     };
+    let per_ray = |bytes: u64| bytes as f64 / s.rays.max(1) as f64;
+    println!(
+        "bus     {:.2} B up, {:.2} B down a ray (rays, answers, each chunk's constants and timestamps)",
+        per_ray(s.uploaded_bytes),
+        per_ray(s.downloaded_bytes)
+    );
     if let Some(ms) = print_gpu_figures("", &figures).filter(|ms| *ms > 0.0) {
         println!("rates   {:.2} Mrays/s on the device", s.rays as f64 / (ms * 1e3));
     }

@@ -313,9 +313,28 @@ fn hardware_suite_quick_runs_every_part() {
     }
     let rays = json["rays"].as_array().unwrap();
     for set in ["camera", "incoherent"] {
-        // Four structures, the BVH with every variant, the others with those that apply.
+        // Four structures, the BVH with every variant, the others with those that apply, and
+        // each structure's lean answers (t and triangle; occlusion bits) beside them.
         let gpu_rows = rays.iter().filter(|r| r["set"] == set && r["backend"] == "gpu").count();
-        assert_eq!(gpu_rows, variants.len() + 3 * (variants.len() - 2), "{set}: {md}");
+        assert_eq!(
+            gpu_rows,
+            variants.len() + 3 * (variants.len() - 2) + 4 * 2,
+            "{set}: {md}"
+        );
+        // Bytes a ray over the bus: 24 up (and the chunks' constants); down 16 with u, v, 8
+        // without, an eighth of a byte for occlusion (and the timestamps).
+        for r in rays.iter().filter(|r| r["set"] == set && r["backend"] == "gpu") {
+            let (up, down) = (
+                r["bytes_up_per_ray"].as_f64().unwrap(),
+                r["bytes_down_per_ray"].as_f64().unwrap(),
+            );
+            let want = match r["variant"].as_str().unwrap() {
+                "answers=t,tri" => 8.0,
+                "answers=occlusion" => 0.125,
+                _ => 16.0,
+            };
+            assert!((24.0..25.0).contains(&up) && (want..want + 1.0).contains(&down), "{r}");
+        }
     }
     assert!(rays.iter().all(|r| r["differing_from_cpu"].as_f64().unwrap() <= 0.001));
     assert!(!json["builds"].as_array().unwrap().is_empty(), "{md}");

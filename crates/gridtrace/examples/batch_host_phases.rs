@@ -1,11 +1,12 @@
 //! Times warm GPU ray batches on a mesh and splits their wall time into the host's phases
-//! (prepare: the rays' records written for the device; wait; readout: the hits converted),
-//! medians of REPS batches after one to warm up:
+//! (prepare: the rays written for the device; wait; readout: the answers converted), medians
+//! of REPS batches after one to warm up, for each answer form (hits with u, v; (t, triangle);
+//! occlusion bits), with the bytes each way per ray:
 //! `cargo run --release -p gridtrace --example batch_host_phases -- MESH [RAYS] [REPS]`
-//! (rays from a sphere round the mesh towards its centre, closest hits with the BVH).
+//! (rays from a sphere round the mesh towards its centre, with the BVH).
 use glam::Vec3;
 use gridtrace::accel::{AccelKind, Ray, Resolution};
-use gridtrace::gpu::{GpuContext, GpuRenderer};
+use gridtrace::gpu::{Answer, GpuContext, GpuRenderer, RaySlice};
 use gridtrace::scene::builtin::mesh_scene;
 
 fn main() -> gridtrace::Result<()> {
@@ -31,25 +32,54 @@ fn main() -> gridtrace::Result<()> {
             Ray::new(origin, centre - origin)
         })
         .collect();
-    gpu.intersect(&rays, 0.0, f32::INFINITY, AccelKind::Bvh)?;
-    let mut runs = Vec::new();
-    for _ in 0..reps {
-        let hits = gpu.intersect(&rays, 0.0, f32::INFINITY, AccelKind::Bvh)?;
-        std::hint::black_box(hits);
-        let s = gpu.last_query_stats();
-        runs.push((s.wall_ms, s.timings.host));
+    for (name, answer) in [
+        ("hits+uv", Answer::Hits { uv: true }),
+        ("hits", Answer::Hits { uv: false }),
+        ("occlusion", Answer::Occlusion),
+    ] {
+        let mut runs = Vec::new();
+        for rep in 0..=reps {
+            let mut answered = 0usize;
+            let t_max = if answer == Answer::Occlusion {
+                1.0
+            } else {
+                f32::INFINITY
+            };
+            gpu.cast(
+                &RaySlice { rays: &rays },
+                (0.0, t_max),
+                answer,
+                AccelKind::Bvh,
+                |_, a| {
+                    answered += std::hint::black_box(match a {
+                        gridtrace::gpu::ChunkAnswers::Hits(h) => h.len(),
+                        gridtrace::gpu::ChunkAnswers::HitsUv(h) => h.len(),
+                        gridtrace::gpu::ChunkAnswers::Occlusion(b) => b.len(),
+                        gridtrace::gpu::ChunkAnswers::Points { hits, .. } => hits.len(),
+                    })
+                },
+            )?;
+            let s = gpu.last_query_stats().clone();
+            if rep > 0 {
+                runs.push(s);
+            }
+        }
+        let median = |f: &dyn Fn(&gridtrace::gpu::GpuQueryStats) -> f64| {
+            let mut v: Vec<f64> = runs.iter().map(f).collect();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let last = runs.last().expect("REPS > 0");
+        println!(
+            "{name}: {n} rays, {reps} warm batches, {} chunks, {:.2} B up and {:.2} B down a ray; medians: wall {:.2} ms; host prepare {:.2}, wait {:.2}, readout {:.2} ms",
+            last.chunks,
+            last.uploaded_bytes as f64 / n as f64,
+            last.downloaded_bytes as f64 / n as f64,
+            median(&|s| s.wall_ms),
+            median(&|s| s.timings.host.prepare_ms),
+            median(&|s| s.timings.host.wait_ms),
+            median(&|s| s.timings.host.readout_ms)
+        );
     }
-    let median = |f: &dyn Fn(&(f64, gridtrace::gpu::HostPhases)) -> f64| {
-        let mut v: Vec<f64> = runs.iter().map(f).collect();
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    println!(
-        "{n} rays, {reps} warm batches, medians: wall {:.2} ms; host prepare {:.2}, wait {:.2}, readout {:.2} ms",
-        median(&|r| r.0),
-        median(&|r| r.1.prepare_ms),
-        median(&|r| r.1.wait_ms),
-        median(&|r| r.1.readout_ms)
-    );
     Ok(())
 }

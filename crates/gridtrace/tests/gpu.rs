@@ -194,8 +194,8 @@ fn images_match_cpu() {
                     // The CPU walks eight-wide nodes, the GPU two-wide ones: their costs differ
                     // by design. The GPU's heat is its own count: nonzero exactly where the ray
                     // entered the scene's box, and never for a ray that missed it.
-                    let lit = gi.pixels.iter().filter(|p| p.x > 0.0).count();
-                    let cpu_lit = ci.pixels.iter().filter(|p| p.x > 0.0).count();
+                    let lit = gi.pixels().iter().filter(|p| p.x > 0.0).count();
+                    let cpu_lit = ci.pixels().iter().filter(|p| p.x > 0.0).count();
                     assert!(
                         lit.abs_diff(cpu_lit) * 200 <= cpu_lit,
                         "{name} bvh heat: {lit} vs {cpu_lit}"
@@ -204,9 +204,9 @@ fn images_match_cpu() {
                 }
                 let (ci, gi) = if mode == Mode::Heat {
                     // Heat values are raw counts: compare them directly.
-                    let same = ci.pixels.iter().zip(&gi.pixels).filter(|(a, b)| a.x != b.x).count();
+                    let same = ci.pixels().iter().zip(gi.pixels()).filter(|(a, b)| a.x != b.x).count();
                     assert!(
-                        same * 200 <= ci.pixels.len(),
+                        same * 200 <= ci.pixels().len(),
                         "{name} heat {}: {same} pixels differ",
                         accel.name()
                     );
@@ -373,7 +373,7 @@ fn a_frame_of_many_tiles_is_one_round_trip() {
         let (b, sb) = tiled.render(&scene.camera, &scene.lights, &opts).unwrap();
         assert_eq!((sa.tiles, sb.tiles), (1, 4), "{mode:?}");
         assert_eq!((sa.round_trips, sb.round_trips), (1, 1), "{mode:?}");
-        assert_eq!(a.pixels, b.pixels, "{mode:?}: tiles changed the image");
+        assert_eq!(a.pixels(), b.pixels(), "{mode:?}: tiles changed the image");
         assert_eq!(sa.render.rays, sb.render.rays, "{mode:?}");
         if !sb.timings.from_timestamps {
             assert_eq!(sb.downloaded_bytes, 64 * 48 * 16 + 4 * 64, "{mode:?}");
@@ -418,7 +418,7 @@ fn frames_left_on_the_device_equal_read_back_frames() {
         );
         host_phases_account_for_the_wall(&s.timings, s.wall_ms);
         assert!(
-            whole.read().unwrap().pixels == want.pixels,
+            whole.read().unwrap().pixels() == want.pixels(),
             "{mode:?}: the device image differs"
         );
         for (first, end) in [(0, 7), (7, 30), (30, 48)] {
@@ -426,7 +426,7 @@ fn frames_left_on_the_device_equal_read_back_frames() {
                 .unwrap();
         }
         assert!(
-            banded.read().unwrap().pixels == want.pixels,
+            banded.read().unwrap().pixels() == want.pixels(),
             "{mode:?}: bands out of place"
         );
     }
@@ -488,7 +488,7 @@ fn srgb8_frames_read_back_four_bytes_a_pixel() {
         assert_eq!((sb.tiles, sb.round_trips), (4, 1), "{mode:?}");
         assert_eq!(sa.render.rays, sb.render.rays, "{mode:?}");
         if mode == Mode::Heat {
-            assert_eq!(a.pixels, b.pixels, "heat keeps its raw costs");
+            assert_eq!(a.pixels(), b.pixels(), "heat keeps its raw costs");
             assert_eq!(sa.downloaded_bytes, sb.downloaded_bytes);
             continue;
         }
@@ -519,11 +519,35 @@ fn srgb8_frames_read_back_four_bytes_a_pixel() {
     }
 }
 
-/// A ray batch of many chunks (the chunk size lowered as a batch of millions is cut on any
-/// device) is one submission and one wait, and gives the one-chunk batch's answers exactly;
-/// its statistics count the rays, chunks and bytes.
+/// Rays with an interval each, 32 bytes on the wire (origin, t_min, direction, t_max).
+struct RaysWithIntervals(Vec<[f32; 8]>);
+
+impl gridtrace::gpu::WireSource for RaysWithIntervals {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    fn stride(&self) -> usize {
+        8
+    }
+    fn write(&self, first: usize, mut out: wgpu::WriteOnly<'_, [u8]>) -> bool {
+        let n = out.len() / 32;
+        out.copy_from_slice(bytemuck::cast_slice(&self.0[first..first + n]));
+        true
+    }
+    fn invalid(&self) -> gridtrace::Error {
+        gridtrace::Error::InvalidInput("checked".into())
+    }
+}
+
+/// A ray batch of many chunks (the chunk size lowered, as a batch of millions is cut on any
+/// device) is pipelined, two chunks in flight, one submission and one readback a chunk, and
+/// gives the one-chunk batch's answers bit for bit, in every answer form: hits with u, v (16
+/// bytes a ray down), (t, triangle) pairs (8), occlusion bits; rays with their own intervals
+/// (32 bytes up) answer as the same rays given one interval for all. Its statistics count the
+/// rays, chunks and bytes: 24 bytes a ray up besides each chunk's constants.
 #[test]
-fn a_ray_batch_of_many_chunks_is_one_round_trip() {
+fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
+    use gridtrace::gpu::{Answer, ChunkAnswers, RaySlice, TriHit};
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let Some(mut whole) = renderer(&scene) else { return };
@@ -532,25 +556,108 @@ fn a_ray_batch_of_many_chunks_is_one_round_trip() {
     let rays = ray_set(&scene.accel, 2500, 11);
     let kind = AccelKind::ProximityCloud;
     let want = whole.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+    assert_eq!(whole.last_query_stats().chunks, 1);
     let got = chunked.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
-    assert!(
-        want.iter()
-            .zip(&got)
-            .all(|(a, b)| a.tri == b.tri && a.t.to_bits() == b.t.to_bits())
-    );
+    let same = |a: &Hit, b: &Hit| {
+        a.tri == b.tri
+            && a.t.to_bits() == b.t.to_bits()
+            && a.u.to_bits() == b.u.to_bits()
+            && a.v.to_bits() == b.v.to_bits()
+    };
+    assert!(want.iter().zip(&got).all(|(a, b)| same(a, b)));
     assert!(want.iter().any(|h| h.is_hit()) && want.iter().any(|h| !h.is_hit()));
     let s = chunked.last_query_stats().clone();
-    assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 1));
-    let stamps = if s.timings.from_timestamps { 4 * 2 * 16 } else { 0 };
-    assert_eq!(s.downloaded_bytes, 2500 * 16 + stamps);
-    assert!(s.uploaded_bytes >= 2500 * 48 && s.wall_ms > 0.0);
-    host_phases_account_for_the_wall(&s.timings, s.wall_ms);
-    let want = whole.occluded(&rays, 0.0, 10.0, kind).unwrap();
-    let got = chunked.occluded(&rays, 0.0, 10.0, kind).unwrap();
-    assert_eq!(want, got);
-    assert!(want.iter().any(|&o| o) && want.iter().any(|&o| !o));
-    let s = chunked.last_query_stats();
-    assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 1));
+    assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 4));
+    let stamps = |s: &gridtrace::gpu::GpuQueryStats, passes: u64| {
+        if s.timings.from_timestamps {
+            s.chunks as u64 * passes * 2 * 8
+        } else {
+            0
+        }
+    };
+    assert_eq!(s.downloaded_bytes, 2500 * 16 + stamps(&s, 3));
+    // 24 bytes a ray, and per chunk its counters (64), batch constants (16) and the three
+    // bounces' pass uniforms (3 x 48).
+    assert_eq!(s.uploaded_bytes, 2500 * 24 + 4 * (64 + 16 + 3 * 48));
+    // The phases add up to the wall time; the device's work overlaps the host's preparation
+    // of the next chunk (that is the pipelining), so it lies within the wall, not the waits.
+    let h = s.timings.host;
+    assert!(h.prepare_ms >= 0.0 && h.wait_ms > 0.0 && h.readout_ms >= 0.0, "{h:?}");
+    assert!((h.prepare_ms + h.wait_ms + h.readout_ms - s.wall_ms).abs() <= 1e-6 * s.wall_ms.max(1.0));
+    assert!(
+        !s.timings.from_timestamps || s.timings.total_ms <= 1.02 * s.wall_ms + 1.0,
+        "{s:?}"
+    );
+    // One chunk is one submission, waited for as before: its device time lies in its wait.
+    host_phases_account_for_the_wall(&whole.last_query_stats().timings, whole.last_query_stats().wall_ms);
+
+    // (t, triangle) only: 8 bytes a ray down, the same bits.
+    let mut pairs = vec![TriHit { t: 0.0, tri: 0 }; rays.len()];
+    chunked
+        .cast(
+            &RaySlice { rays: &rays },
+            (0.0, f32::INFINITY),
+            Answer::Hits { uv: false },
+            kind,
+            |first, a| {
+                let ChunkAnswers::Hits(h) = a else {
+                    panic!("asked for (t, triangle)")
+                };
+                pairs[first..first + h.len()].copy_from_slice(h);
+            },
+        )
+        .unwrap();
+    assert!(
+        want.iter()
+            .zip(&pairs)
+            .all(|(a, b)| a.tri == b.tri && a.t.to_bits() == b.t.to_bits())
+    );
+    let s = chunked.last_query_stats().clone();
+    assert_eq!(s.downloaded_bytes, 2500 * 8 + stamps(&s, 4));
+
+    // Occlusion: one bit a ray down, the one-chunk batch's answers, and the closest hits'.
+    let want_occ = whole.occluded(&rays, 0.0, 10.0, kind).unwrap();
+    let got_occ = chunked.occluded(&rays, 0.0, 10.0, kind).unwrap();
+    assert_eq!(want_occ, got_occ);
+    assert!(want_occ.iter().any(|&o| o) && want_occ.iter().any(|&o| !o));
+    for (h, &o) in want.iter().zip(&want_occ) {
+        assert_eq!(o, h.is_hit() && h.t < 10.0);
+    }
+    let s = chunked.last_query_stats().clone();
+    assert_eq!((s.rays, s.chunks, s.round_trips), (2500, 4, 4));
+    // 700 rays a chunk: 22 words each, the last chunk's 400 rays 13.
+    assert_eq!(s.downloaded_bytes, (3 * 22 + 13) * 4 + stamps(&s, 4));
+
+    // Each ray its own interval (32 bytes up): every other ray's [0, 10), the rest [2, 8).
+    let within: Vec<[f32; 8]> = rays
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let (t0, t1) = if i % 2 == 0 { (0.0, 10.0) } else { (2.0, 8.0) };
+            [r.origin.x, r.origin.y, r.origin.z, t0, r.dir.x, r.dir.y, r.dir.z, t1]
+        })
+        .collect();
+    let mut occ = vec![false; rays.len()];
+    chunked
+        .cast(
+            &RaysWithIntervals(within),
+            (0.0, 0.0),
+            Answer::Occlusion,
+            kind,
+            |first, a| {
+                let ChunkAnswers::Occlusion(bits) = a else {
+                    panic!("asked for occlusion")
+                };
+                let end = (first + bits.len() * 32).min(occ.len());
+                gridtrace::gpu::unpack_bits(bits, &mut occ[first..end]);
+            },
+        )
+        .unwrap();
+    let narrow = whole.occluded(&rays, 2.0, 8.0, kind).unwrap();
+    for i in 0..rays.len() {
+        assert_eq!(occ[i], if i % 2 == 0 { want_occ[i] } else { narrow[i] }, "ray {i}");
+    }
+    assert!(chunked.last_query_stats().uploaded_bytes >= 2500 * 32);
 }
 
 /// Batches one after another on one renderer, growing and shrinking (the mapped upload kept,
@@ -621,8 +728,8 @@ fn bands_equal_rows_of_the_frame() {
                 let (c, cs) = gridtrace::cpu::render(scene, &band, None).unwrap();
                 assert_eq!((g.width, g.height), (w, end - first));
                 let what = format!("{} {} rows {first}..{end}", accel.name(), mode.name());
-                assert!(g.pixels == gpu_whole.pixels[rows.clone()], "gpu {what}");
-                assert!(c.pixels == cpu_whole.pixels[rows], "cpu {what}");
+                assert!(*g.pixels() == gpu_whole.pixels()[rows.clone()], "gpu {what}");
+                assert!(*c.pixels() == cpu_whole.pixels()[rows], "cpu {what}");
                 gpu_rays += gs.render.rays;
                 cpu_rays += cs.rays;
             }

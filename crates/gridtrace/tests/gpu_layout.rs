@@ -8,7 +8,8 @@ use gridtrace::accel::{Cell, IrrCell};
 use gridtrace::gpu::bindings::{self, Access};
 use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
 use gridtrace::gpu::layout::{
-    GpuBvh8Node, GpuBvhNode, GpuHit, GpuMaterial, GpuTri, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
+    BatchUniform, GpuBvh8Node, GpuBvhNode, GpuHit, GpuMaterial, GpuTri, IndirectArgs, PassUniform, RayRec,
+    SceneUniform, TriShade,
 };
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
@@ -93,6 +94,7 @@ fn wgsl_structs_match_rust() {
     check!(m, PointLight, "PointLight", [position, _pad0, intensity, _pad1]);
     check!(m, RayRec, "RayRec", [origin, pixel, dir, t_max, weight, t_min]);
     check!(m, GpuHit, "GpuHit", [t, tri, u, v]);
+    check!(m, BatchUniform, "BatchUniform", [stride, to_shadow, t_min, t_max]);
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
     check!(m, GpuBvh8Node, "Bvh8Node", [p_e, info, q0, q1, q2]);
     check!(m, IrrCell, "IrrCell", [bounds, start]);
@@ -159,11 +161,12 @@ fn mismatch_is_detected() {
 }
 
 /// Every kernel compiles and validates as its own module (common + kernel): raygen, shade,
-/// resolve, indirect and pack once, traverse and occlusion once per structure, with its walk.
+/// resolve, indirect, pack and batch once, traverse, occlusion and closest point once per
+/// structure, with its walk.
 #[test]
 fn kernels_validate() {
     let modules = shaders::all_modules();
-    assert_eq!(modules.len(), 5 + 3 * gridtrace::gpu::walks::WALKS.len());
+    assert_eq!(modules.len(), 6 + 3 * gridtrace::gpu::walks::WALKS.len());
     for (name, src) in modules {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())

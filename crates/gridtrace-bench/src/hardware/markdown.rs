@@ -114,7 +114,7 @@ fn rays(md: &mut String, rows: &[RayRow]) {
     if rows.is_empty() {
         return;
     }
-    md.push_str("## Ray batches\n\nWall time of the whole query (upload, trace, readback; median); GPU: the stages' timestamps summed (median); host: the wall time's parts as in the frames. Variants were timed in rounds across them.\n\n| mesh | set | accel | backend | variant | rays | ms | GPU ms | host ms | Mrays/s | x CPU | hit | differing hits |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("## Ray batches\n\nWall time of the whole query (upload, trace, readback; median); GPU: the stages' timestamps summed (median); host: the wall time's parts as in the frames; B/ray: bytes over the bus a ray, up / down (rays, answers, each chunk's constants and timestamps), in pipelined chunks. Variants were timed in rounds across them. The GPU rows answer hits with u, v as the CPU's; `answers=t,tri` the default variant asked for (t, triangle) only, `answers=occlusion` for occlusion bits (checked against the CPU's hits).\n\n| mesh | set | accel | backend | variant | rays | ms | GPU ms | host ms | B/ray | chunks | Mrays/s | x CPU | hit | differing hits |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in rows {
         let cpu = rows.iter().find(|c| {
             r.backend == "gpu" && c.backend == "cpu" && c.mesh == r.mesh && c.set == r.set && c.accel == r.accel
@@ -124,7 +124,7 @@ fn rays(md: &mut String, rows: &[RayRow]) {
         });
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {:.2} | {ratio} | {:.1}% | {:.3}% |",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.2} | {ratio} | {:.1}% | {:.3}% |",
             r.mesh,
             r.set,
             r.accel,
@@ -134,6 +134,11 @@ fn rays(md: &mut String, rows: &[RayRow]) {
             r.wall.median_ms,
             r.gpu_median_ms.map_or("-".into(), |v| format!("{v:.2}")),
             host_cell(r.host_ms.as_ref()),
+            match (r.bytes_up_per_ray, r.bytes_down_per_ray) {
+                (Some(up), Some(down)) => format!("{up:.1} / {down:.2}"),
+                _ => "-".into(),
+            },
+            r.chunks.map_or("-".into(), |c| c.to_string()),
             r.mrays_per_s,
             100.0 * r.hit_fraction,
             100.0 * r.differing_from_cpu

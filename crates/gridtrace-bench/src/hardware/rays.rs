@@ -43,6 +43,23 @@ pub struct RayRow {
     pub host_ms: Option<HostPhases>,
     /// Rays whose hit differs from the CPU's (fraction; 0 on the CPU).
     pub differing_from_cpu: f64,
+    /// Bytes over the bus a ray, each way (the rays up, the answers down, with each chunk's
+    /// constants and timestamps); `None` on the CPU.
+    pub bytes_up_per_ray: Option<f64>,
+    pub bytes_down_per_ray: Option<f64>,
+    /// Pipelined chunks of the batch (one submission each); `None` on the CPU.
+    pub chunks: Option<u32>,
+}
+
+/// The answers a GPU ray row asks for: hits with u, v (what the CPU rows answer), or the
+/// lean forms a caller may ask for instead, timed beside them on the default variant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Asked {
+    HitsUv,
+    /// (t, triangle): 8 bytes a ray down.
+    Hits,
+    /// Occlusion within t < 1e30 (as likely as a hit): one bit a ray down.
+    Occlusion,
 }
 
 /// Camera rays of `mesh`'s auto-framed view, `n` of them in image order (row by row).
@@ -98,19 +115,41 @@ pub fn ray_study(
                 let row = head("cpu", "-").row(&rays, &cpu_times, &cpu_hits, 0.0);
                 log(&row_line(&row));
                 rows.push(row);
-                // Every variant timed in rounds across them (`interleaved`).
-                let runs = interleaved(renderers.len(), 0.0, plan.reps, |k| {
+                // Every variant timed in rounds across them (`interleaved`), and the default's
+                // lean answers beside them.
+                let asks: Vec<(usize, Asked)> = (0..renderers.len())
+                    .map(|k| (k, Asked::HitsUv))
+                    .chain([(0, Asked::Hits), (0, Asked::Occlusion)])
+                    .collect();
+                let runs = interleaved(asks.len(), 0.0, plan.reps, |j| {
+                    let (k, asked) = asks[j];
                     let r = &mut renderers[k].1;
                     let t0 = Instant::now();
-                    let hits = r.intersect(&rays, 0.0, f32::INFINITY, accel)?;
+                    let hits = ask(r, &rays, accel, asked)?;
                     let ms = t0.elapsed().as_secs_f64() * 1e3;
                     Ok((ms, (hits, r.last_query_stats().clone())))
                 })?;
-                for ((times, mut outs), (variant, _)) in runs.into_iter().zip(renderers.iter()) {
+                for ((times, mut outs), &(k, asked)) in runs.into_iter().zip(&asks) {
+                    let variant = match asked {
+                        Asked::HitsUv => renderers[k].0.clone(),
+                        Asked::Hits => "answers=t,tri".to_string(),
+                        Asked::Occlusion => "answers=occlusion".to_string(),
+                    };
+                    let variant = &variant;
+                    let last = outs.last().expect("at least one timed run").1.clone();
                     let gpu_median_ms = Summary::median_of(outs.iter().filter_map(|o| o.1.gpu_ms()));
                     let host = host_medians(outs.iter().map(|o| o.1.timings.host));
                     let hits = outs.pop().expect("at least one timed run").0;
-                    let differing = differing_hits(&hits, &cpu_hits);
+                    let differing = if asked == Asked::Occlusion {
+                        let n = hits
+                            .iter()
+                            .zip(&cpu_hits)
+                            .filter(|(a, b)| a.is_hit() != b.is_hit())
+                            .count();
+                        n as f64 / hits.len().max(1) as f64
+                    } else {
+                        differing_hits(&hits, &cpu_hits)
+                    };
                     if differing > MAX_DIFFERING_HITS {
                         mismatches.push(format!(
                             "rays {name} {set} {} {variant}: {:.3}% of hits differ from the CPU's",
@@ -121,6 +160,10 @@ pub fn ray_study(
                     let mut row = head("gpu", variant).row(&rays, &times, &hits, differing);
                     row.gpu_median_ms = gpu_median_ms;
                     row.host_ms = Some(host);
+                    let per_ray = |b: u64| b as f64 / rays.len().max(1) as f64;
+                    row.bytes_up_per_ray = Some(per_ray(last.uploaded_bytes));
+                    row.bytes_down_per_ray = Some(per_ray(last.downloaded_bytes));
+                    row.chunks = Some(last.chunks);
                     log(&row_line(&row));
                     rows.push(row);
                 }
@@ -128,6 +171,47 @@ pub fn ray_study(
         }
     }
     Ok(rows)
+}
+
+/// A GPU batch asking for `asked`, its answers as hits to check against the CPU's: without
+/// u, v those are 0; occlusion answers as a hit at t = 0 or a miss (checked against the
+/// CPU's hits: occluded where the CPU hits anything).
+fn ask(r: &mut GpuRenderer, rays: &[Ray], accel: AccelKind, asked: Asked) -> Result<Vec<Hit>> {
+    use gridtrace::gpu::{Answer, ChunkAnswers, RaySlice};
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let answer = match asked {
+        Asked::HitsUv => return r.intersect(rays, 0.0, f32::INFINITY, accel),
+        Asked::Hits => Answer::Hits { uv: false },
+        Asked::Occlusion => Answer::Occlusion,
+    };
+    r.cast(&RaySlice { rays }, (0.0, 1e30), answer, accel, |first, a| match a {
+        ChunkAnswers::Hits(h) => {
+            for (out, h) in hits[first..].iter_mut().zip(h) {
+                if h.tri != u32::MAX {
+                    *out = Hit {
+                        t: h.t,
+                        tri: h.tri,
+                        u: 0.0,
+                        v: 0.0,
+                    };
+                }
+            }
+        }
+        ChunkAnswers::Occlusion(bits) => {
+            for (i, out) in hits[first..].iter_mut().enumerate().take(bits.len() * 32) {
+                if bits[i / 32] >> (i % 32) & 1 != 0 {
+                    *out = Hit {
+                        t: 0.0,
+                        tri: 0,
+                        u: 0.0,
+                        v: 0.0,
+                    };
+                }
+            }
+        }
+        _ => {}
+    })?;
+    Ok(hits)
 }
 
 /// One warm-up, then `reps` timed runs of `f` (wall ms); the last run's hits.
@@ -181,6 +265,9 @@ impl RowHead<'_> {
             gpu_median_ms: None,
             host_ms: None,
             differing_from_cpu: differing,
+            bytes_up_per_ray: None,
+            bytes_down_per_ray: None,
+            chunks: None,
         }
     }
 }

@@ -3,7 +3,10 @@
 use glam::Vec3;
 
 /// A ray `origin + t * dir`. `dir` need not be normalised: `t` is in units of its length.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// `repr(C)`: six floats, origin then direction, the layout of ray files and Open3D's rows, so
+/// that a slice of rays goes to the GPU as it is (`gpu::queries`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,

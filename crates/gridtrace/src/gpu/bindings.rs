@@ -103,6 +103,24 @@ pub const PACK_GROUP: u32 = 1;
 /// Group 1, as declared in pack.wgsl.
 pub const PACK_BINDINGS: [Binding<PackSlot>; 1] = [row(0, "packed", StorageReadWrite, PackSlot::Packed)];
 
+/// What group 1 of the ray batches' two kernels (`batch.wgsl`) binds: the chunk's rays as they
+/// came over the bus, the answers going back, and the batch's constants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BatchSlot {
+    Wire,
+    Answers,
+    Uniform,
+}
+
+pub const BATCH_GROUP: u32 = 1;
+
+/// Group 1, as declared in batch.wgsl.
+pub const BATCH_BINDINGS: [Binding<BatchSlot>; 3] = [
+    row(0, "wire", StorageRead, BatchSlot::Wire),
+    row(1, "answers", StorageReadWrite, BatchSlot::Answers),
+    row(2, "batch", Uniform, BatchSlot::Uniform),
+];
+
 /// Every binding of every group as (group, index, WGSL name, access), for checks against WGSL.
 pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
     let frame = FRAME_BINDINGS.iter().map(|b| (FRAME_GROUP, b.index, b.name, b.access));
@@ -110,7 +128,8 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
         .iter()
         .map(|b| (INDIRECT_GROUP, b.index, b.name, b.access));
     let pack = PACK_BINDINGS.iter().map(|b| (PACK_GROUP, b.index, b.name, b.access));
-    frame.chain(indirect).chain(pack).collect()
+    let batch = BATCH_BINDINGS.iter().map(|b| (BATCH_GROUP, b.index, b.name, b.access));
+    frame.chain(indirect).chain(pack).chain(batch).collect()
 }
 
 /// Storage buffers a kernel may bind at once: group 0's storage rows and the most of group 1
@@ -119,7 +138,12 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
 pub fn storage_buffers_needed() -> u32 {
     let frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
     let structure = super::walks::WALKS.iter().map(|w| w.arrays.len()).max().unwrap_or(0);
-    (frame + structure.max(INDIRECT_BINDINGS.len()).max(PACK_BINDINGS.len())) as u32
+    let batch = BATCH_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
+    (frame
+        + structure
+            .max(INDIRECT_BINDINGS.len())
+            .max(PACK_BINDINGS.len())
+            .max(batch)) as u32
 }
 
 /// The layout entries of a table (every kernel is a compute kernel).

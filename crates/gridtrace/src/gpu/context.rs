@@ -227,9 +227,14 @@ impl GpuContext {
 
     /// Waits for all submitted work, with a time limit: a hung or lost device is an error.
     pub fn wait(&self) -> Result<()> {
+        self.wait_for(None)
+    }
+
+    /// Waits for the submission `index` (`None`: all submitted work), as `wait`.
+    pub(crate) fn wait_for(&self, index: Option<wgpu::SubmissionIndex>) -> Result<()> {
         self.device
             .poll(wgpu::PollType::Wait {
-                submission_index: None,
+                submission_index: index,
                 timeout: Some(GPU_TIMEOUT),
             })
             .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
@@ -266,18 +271,59 @@ impl GpuContext {
         size: u64,
         f: impl FnOnce(&[u8]) -> R,
     ) -> Result<(R, HostPhases)> {
-        let submitted = Instant::now();
+        self.begin_read(staging, size, None).finish(self, f)
+    }
+
+    /// Asks for the first `size` bytes (not zero) of `staging` mapped once the submission
+    /// `after` (`None`: everything submitted) is done, without waiting: `PendingRead::finish`
+    /// waits for it later. The pipelined ray batches trace one chunk while the host writes the
+    /// next and reads the one before.
+    pub(crate) fn begin_read(
+        &self,
+        staging: &wgpu::Buffer,
+        size: u64,
+        after: Option<wgpu::SubmissionIndex>,
+    ) -> PendingRead {
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, ..size, move |r| {
             let _ = tx.send(r);
         });
+        PendingRead {
+            staging: staging.clone(),
+            size,
+            after,
+            rx,
+        }
+    }
+}
+
+/// A readback asked for by `GpuContext::begin_read`, not yet waited for.
+pub(crate) struct PendingRead {
+    staging: wgpu::Buffer,
+    size: u64,
+    after: Option<wgpu::SubmissionIndex>,
+    rx: std::sync::mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+}
+
+impl PendingRead {
+    /// Waits for the submission and the mapping, hands the bytes to `f` and unmaps; with `f`'s
+    /// result come the wait (to the mapped bytes) and the readout (`f`'s own time) on the
+    /// host's clock, the preparation left at 0 for the caller (`HostPhases::close`).
+    pub(crate) fn finish<R>(self, ctx: &GpuContext, f: impl FnOnce(&[u8]) -> R) -> Result<(R, HostPhases)> {
+        let PendingRead {
+            staging,
+            size,
+            after,
+            rx,
+        } = self;
+        let waited = Instant::now();
         // On any failure the buffer is unmapped again (a pending map is cancelled), so that it
         // can be used by the next submission once the fault has passed.
         let failed = |e: Error| {
             staging.unmap();
             Err(e)
         };
-        if let Err(e) = self.wait() {
+        if let Err(e) = ctx.wait_for(after) {
             return failed(e);
         }
         match rx.recv_timeout(Duration::from_secs(5)) {
@@ -296,7 +342,7 @@ impl GpuContext {
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
         let phases = HostPhases {
             prepare_ms: 0.0,
-            wait_ms: ms(mapped - submitted),
+            wait_ms: ms(mapped - waited),
             readout_ms: ms(mapped.elapsed()),
         };
         Ok((out, phases))

@@ -8,8 +8,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use super::bindings::{
-    self, Access, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP, PACK_BINDINGS, PACK_GROUP,
-    STRUCTURE_GROUP,
+    self, Access, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP,
+    PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP,
 };
 use super::constants::{WORKGROUP, max_groups_x};
 use super::context::GpuContext;
@@ -39,6 +39,10 @@ pub(crate) enum Kernel {
     Pack,
     /// The nearest point of the mesh to each point of the input queue (`gpu::points`).
     ClosestPoint,
+    /// A ray batch's chunk: its wire rays into queue records (`batch.wgsl`, `queries.rs`).
+    BatchRays,
+    /// A ray batch's chunk: the walk's output into the answers asked for.
+    BatchAnswers,
 }
 
 /// What a kernel that walks no structure binds as group 1 (a walking kernel binds its
@@ -50,6 +54,8 @@ enum Group1 {
     IndirectArgs,
     /// The packed pixels the pack kernel writes.
     Packed,
+    /// A ray batch's wire rays, answers and constants.
+    Batch,
 }
 
 /// How many invocations a kernel's dispatch has.
@@ -101,7 +107,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 10] = [
+const SPECS: [KernelSpec; 12] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -152,6 +158,17 @@ const SPECS: [KernelSpec; 10] = [
             shaders::CLOSEST_POINT,
         )
     },
+    KernelSpec {
+        launch: Launch::PerPixel,
+        group1: Group1::Batch,
+        ..spec(Kernel::BatchRays, "batch rays", "batch in", shaders::BATCH)
+    },
+    KernelSpec {
+        launch: Launch::PerPixel,
+        group1: Group1::Batch,
+        overrides: &[("BATCH_ANSWERS", 1.0)],
+        ..spec(Kernel::BatchAnswers, "batch answers", "batch out", shaders::BATCH)
+    },
 ];
 
 fn spec_of(kernel: Kernel) -> &'static KernelSpec {
@@ -194,6 +211,8 @@ pub(crate) struct Kernels {
     pub indirect_layout: wgpu::BindGroupLayout,
     /// Layout of group 1 of the pack kernel (`PACK_BINDINGS`).
     pub pack_layout: wgpu::BindGroupLayout,
+    /// Layout of group 1 of the ray batches' kernels (`BATCH_BINDINGS`).
+    pub batch_layout: wgpu::BindGroupLayout,
     /// The kernels that walk no structure, in `SPECS` order (`None` for those that walk).
     pipelines: Vec<Option<wgpu::ComputePipeline>>,
     /// Each walk's pipelines (by `WalkSpec::name`), compiled when a scene of it is first
@@ -319,6 +338,10 @@ impl Kernels {
             label: Some("packed pixels"),
             entries: &bindings::layout_entries(&PACK_BINDINGS),
         });
+        let batch_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ray batch"),
+            entries: &bindings::layout_entries(&BATCH_BINDINGS),
+        });
         let layout = |groups: &[Option<&wgpu::BindGroupLayout>]| {
             dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("gridtrace"),
@@ -333,6 +356,7 @@ impl Kernels {
                 Group1::None => layout(&[Some(&frame_layout)]),
                 Group1::IndirectArgs => layout(&[Some(&frame_layout), Some(&indirect_layout)]),
                 Group1::Packed => layout(&[Some(&frame_layout), Some(&pack_layout)]),
+                Group1::Batch => layout(&[Some(&frame_layout), Some(&batch_layout)]),
             },
             |s| shaders::module_source_for(s.source, variants),
             false,
@@ -342,6 +366,7 @@ impl Kernels {
             frame_layout,
             indirect_layout,
             pack_layout,
+            batch_layout,
             pipelines,
             walks: Mutex::new(HashMap::new()),
         })
@@ -399,6 +424,8 @@ pub(crate) struct PassRecorder<'a> {
     pub indirect_group: &'a wgpu::BindGroup,
     /// The packed-pixels group of the pack kernel (the frame's work buffers hold it).
     pub packed_group: Option<&'a wgpu::BindGroup>,
+    /// The ray batch's group 1 (`queries.rs`), for its two kernels.
+    pub batch_group: Option<&'a wgpu::BindGroup>,
     /// The scene's structure's walking pipelines and its group 1.
     pub walk: &'a WalkPipelines,
     pub structure_group: &'a wgpu::BindGroup,
@@ -443,6 +470,11 @@ impl PassRecorder<'_> {
                 PACK_GROUP,
                 self.packed_group
                     .expect("the pack kernel runs with the frame's packed pixels"),
+                &[],
+            ),
+            Group1::Batch => cp.set_bind_group(
+                BATCH_GROUP,
+                self.batch_group.expect("the batch kernels run with a batch's buffers"),
                 &[],
             ),
         }

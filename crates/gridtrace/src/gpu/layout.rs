@@ -129,6 +129,21 @@ pub struct PassUniform {
     pub _pad2: u32,
 }
 
+/// A ray batch's constants (`batch.wgsl`): how its rays arrive and what it answers.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct BatchUniform {
+    /// Floats a wire ray: 6 (origin, direction; the interval below for every ray) or 8
+    /// (origin, t_min, direction, t_max).
+    pub stride: u32,
+    /// 1: the rays go to the shadow queue and the answers are occlusion bits; 0: queue A and
+    /// closest hits.
+    pub to_shadow: u32,
+    /// The interval of every ray when `stride` is 6.
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
 /// Arguments of the two indirect dispatches the `indirect` kernel writes: workgroups (x, y, z)
 /// for the kernels over the input ray queue, then for the occlusion kernel over the shadow queue.
 #[repr(C)]

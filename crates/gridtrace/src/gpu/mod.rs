@@ -54,6 +54,7 @@ pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;
 pub use grid_build::{GpuBuildStats, GpuGrid};
 pub use points::GpuClosestPoints;
+pub use queries::{Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, TriHit, WireSource, gpu_hit, unpack_bits};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
 pub use scene::check_scene_fits;
 pub use timing::{GpuQueryStats, GpuTimings, HostPhases};

@@ -1,10 +1,10 @@
 //! Closest-point batches: the nearest point of the mesh to each of the caller's points, through
 //! the scene's structure's search on the GPU (`shaders/closest_point.wgsl`, calling the walk
 //! file's `NAME_closest_point`: rings of cells on the grids, branch and bound on the BVH, the
-//! cells of the irregular grid, every triangle for brute force). The points go into the ray
-//! queue the kernel reads (as ray origins), in chunks that fit the work buffers, all in one
-//! submission with one wait (`queries.rs`), and the answers come back as the CPU's
-//! `ClosestPoint`s, with `last_query_stats` as for ray batches.
+//! cells of the irregular grid, every triangle for brute force). The points go up as 12 bytes
+//! each and into the ray queue the kernel reads (as ray origins), in the ray batches' pipelined
+//! chunks (`queries.rs`), and the answers come back as the CPU's `ClosestPoint`s, with
+//! `last_query_stats` as for ray batches.
 //!
 //! The GPU returns the triangle and the barycentrics; the host rebuilds the point and its
 //! squared distance from them as the CPU does (`v0 + u e1 + v e2`), so the distance is always
@@ -14,12 +14,12 @@
 use glam::Vec3;
 
 use super::constants::MISS;
-use super::layout::{GpuHit, RayRec};
-use super::queries::Query;
+use super::layout::GpuHit;
+use super::queries::{ChunkAnswers, Query, WireSource};
 use super::renderer::GpuRenderer;
-use crate::Result;
 use crate::accel::closest::ClosestPoint;
 use crate::accel::{AccelKind, TriAccel};
+use crate::{Error, Result};
 
 /// Closest points of a batch with the search's work per point.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -56,38 +56,60 @@ impl GpuRenderer {
             closest: Vec::with_capacity(points.len()),
             work: Vec::with_capacity(points.len()),
         };
-        let rec = |i: usize| {
-            let p = points[i];
-            RayRec {
-                // A stand-in for a point that is not finite (its answer is the host's).
-                origin: if Vec3::from(p).is_finite() { p } else { [0.0; 3] },
-                pixel: 0,
-                dir: [0.0, 0.0, 1.0],
-                t_max: f32::INFINITY,
-                weight: [1.0; 3],
-                t_min: 0.0,
-            }
-        };
-        // One submission and one wait for the whole batch (`queries.rs`): the answers, then
-        // the work the kernel wrote to each item's accumulation texel.
-        self.batch(points.len(), rec, kind, Query::ClosestPoint, |raw| {
-            let hits: &[GpuHit] = bytemuck::cast_slice(raw[0]);
-            let work = bytemuck::cast_slice::<u8, [f32; 4]>(raw[1]).iter().map(|a| a[0] as u32);
-            let at = out.closest.len();
-            for ((p, h), w) in points[at..].iter().zip(hits).zip(work) {
-                let p = Vec3::from(*p);
-                let (c, w) = if !p.is_finite() {
-                    (ClosestPoint::INVALID, 0)
-                } else if h.tri == MISS || h.tri as usize >= tris.len() {
-                    (ClosestPoint::NONE, w)
-                } else {
-                    (answer(&tris[h.tri as usize], *h, p), w)
+        // One pipelined batch (`queries.rs`): the points go up as 12 bytes each, and come back
+        // as the answers, then the work the kernel wrote to each item's accumulation texel.
+        self.batch(
+            &PointRows { points },
+            (0.0, f32::INFINITY),
+            kind,
+            Query::ClosestPoint,
+            |first, answers| {
+                let ChunkAnswers::Points { hits, work } = answers else {
+                    return;
                 };
-                out.closest.push(c);
-                out.work.push(w);
-            }
-        })?;
+                let work = work.iter().map(|a| a[0] as u32);
+                for ((p, h), w) in points[first..].iter().zip(hits).zip(work) {
+                    let p = Vec3::from(*p);
+                    let (c, w) = if !p.is_finite() {
+                        (ClosestPoint::INVALID, 0)
+                    } else if h.tri == MISS || h.tri as usize >= tris.len() {
+                        (ClosestPoint::NONE, w)
+                    } else {
+                        (answer(&tris[h.tri as usize], *h, p), w)
+                    };
+                    out.closest.push(c);
+                    out.work.push(w);
+                }
+            },
+        )?;
         Ok(out)
+    }
+}
+
+/// Query points on the wire, 12 bytes each; a point that is not finite goes as the origin (its
+/// answer is the host's).
+struct PointRows<'a> {
+    points: &'a [[f32; 3]],
+}
+
+impl WireSource for PointRows<'_> {
+    fn len(&self) -> usize {
+        self.points.len()
+    }
+    fn stride(&self) -> usize {
+        3
+    }
+    fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool {
+        let (out, _) = out.into_chunks::<12>();
+        let n = out.len();
+        out.write_iter(self.points[first..first + n].iter().map(|p| {
+            let p = if Vec3::from(*p).is_finite() { *p } else { [0.0; 3] };
+            bytemuck::cast::<[f32; 3], [u8; 12]>(p)
+        }));
+        true
+    }
+    fn invalid(&self) -> Error {
+        Error::InvalidInput("every query point is answered".into())
     }
 }
 

@@ -1,81 +1,194 @@
 //! Batch queries: closest hit (`traverse`) or any hit (`occlusion`) for rays given by the
-//! caller, or the nearest point (`closest point`, `points.rs`) for points, in chunks that fit
-//! the work buffers, as the frame does its tiles: every chunk of a batch in one submission (its rays, counters and pass uniforms copied into place in the
-//! command stream), its results copied into one readback buffer with the timestamps, and that
-//! buffer mapped once: one host round trip per batch. (Before, each chunk of a million rays was
-//! its own submission and blocking read.) The indirect kernel sizes each dispatch as in the
-//! tile loop.
+//! caller, or the nearest point (`closest point`, `points.rs`) for points, at the bus's speed.
+//!
+//! - **The wire.** Rays go up in the caller's own layout (`WireSource`): 24 bytes a ray
+//!   (origin, direction; one interval for the batch: Open3D's rows, the `rays` file, `Ray`
+//!   slices) or 32 (origin, t_min, direction, t_max), 12 a point; the device expands them into
+//!   the walks' 48-byte queue records (`batch.wgsl`). Only the answers asked for come down:
+//!   (t, triangle) 8 bytes a ray, with u, v 16, occlusion one bit. Before, every ray went up as
+//!   a 48-byte record and came down as 16 (closest) or 48 (occlusion) bytes: 64 MB of bus
+//!   traffic for a million closest hits where the device's work was 0.58 ms on an H200.
+//! - **Pipelined chunks.** A batch is cut into chunks of at most `PIPELINE_ITEMS`, each its
+//!   own submission, two in flight (upload and readback buffers in two slots): the host
+//!   writes chunk k+1 and reads out chunk k-1 while the device traces chunk k. wgpu has one
+//!   queue, so on the device a chunk's copies and kernels still run in order with the next
+//!   chunk's; what overlaps is the host's work (writing the records, converting the answers)
+//!   with the device's (transfers and kernels).
+//! - **Nothing allocated per batch.** The upload (mapped, `upload.rs`), readback, wire and
+//!   answer buffers are kept and grown; the work buffers are made only for what the query
+//!   uses (`WorkUse`), not a frame's whole set.
 
 use std::mem::size_of;
+use std::ops::Range;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::bindings::{self, BATCH_BINDINGS, BatchSlot};
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
+use super::context::PendingRead;
 use super::kernels::Kernel;
-use super::layout::{GpuHit, RayRec};
-use super::renderer::grow;
-use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
-use super::timing::{GpuQueryStats, GpuTimings, MAX_TIMED_PASSES, MAX_TIMESTAMPS_BYTES};
+use super::layout::{BatchUniform, GpuHit};
+use super::renderer::{ACCUM_TEXEL_BYTES, GpuRenderer, WorkUse, grow};
+use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
 use super::upload::MappedUpload;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
 use crate::{Error, Result};
 
+/// Most items of one chunk (one submission). A million rays go in four, so that the host's
+/// writing and reading of one overlaps the device's tracing of another; each submission costs
+/// the driver tens of microseconds, a chunk's tracing hundreds.
+pub const PIPELINE_ITEMS: usize = 1 << 18;
+/// Submissions in flight at once (the slots of upload and readback buffers).
+const SLOTS: usize = 2;
+/// Items a worker writes at a time: enough to amortise the hand-off, few enough that a
+/// chunk spreads over every core.
+const PIECE_ITEMS: usize = 16 * 1024;
+
+/// A batch's rays (or points) as its caller holds them, written into the upload as they are.
+pub trait WireSource: Sync {
+    /// Items in the batch.
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Floats an item on the wire: 3 (a point), 6 (origin, direction; the batch's interval)
+    /// or 8 (origin, t_min, direction, t_max).
+    fn stride(&self) -> usize;
+    /// Writes items `first..` into `out` (whole items: `stride` little-endian floats each),
+    /// false if one of them is not a valid item (the batch is then not traced).
+    fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool;
+    /// The error naming the batch's first invalid item (after `write` said there is one).
+    fn invalid(&self) -> Error;
+}
+
+/// Rays the caller has already checked (`Ray` is `repr(C)`: origin, direction, 24 bytes),
+/// copied to the wire as they are, with one interval for all.
+pub struct RaySlice<'a> {
+    pub rays: &'a [Ray],
+}
+
+impl WireSource for RaySlice<'_> {
+    fn len(&self) -> usize {
+        self.rays.len()
+    }
+    fn stride(&self) -> usize {
+        6
+    }
+    fn write(&self, first: usize, mut out: wgpu::WriteOnly<'_, [u8]>) -> bool {
+        let n = out.len() / size_of::<Ray>();
+        out.copy_from_slice(bytemuck::cast_slice(&self.rays[first..first + n]));
+        true
+    }
+    fn invalid(&self) -> Error {
+        Error::InvalidInput("a ray batch's rays were checked by its caller".into())
+    }
+}
+
+/// What a ray batch answers (and so what comes back over the bus a ray).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Answer {
+    /// The closest hit: t and the triangle (8 bytes); with `uv`, its barycentrics too (16).
+    Hits { uv: bool },
+    /// Whether anything is hit within the interval (one bit).
+    Occlusion,
+}
+
+/// A hit as the (t, triangle) answer brings it: a miss has `t = inf`, `tri = u32::MAX`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TriHit {
+    pub t: f32,
+    pub tri: u32,
+}
+
+/// One chunk's answers, its items in order (the chunk's first item is handed beside them).
+#[derive(Debug, Clone, Copy)]
+pub enum ChunkAnswers<'a> {
+    Hits(&'a [TriHit]),
+    HitsUv(&'a [GpuHit]),
+    /// Bit `i % 32` of word `i / 32` is ray `i` of the chunk.
+    Occlusion(&'a [u32]),
+    /// The nearest points and each point's search work (`x` of its accumulation texel).
+    Points {
+        hits: &'a [GpuHit],
+        work: &'a [[f32; 4]],
+    },
+}
+
 /// What a batch asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Query {
-    ClosestHit,
-    AnyHit,
-    /// The nearest point to each item (its ray's origin), with the search's work.
+    Rays(Answer),
+    /// The nearest point to each item, with the search's work.
     ClosestPoint,
 }
 
-/// A buffer a query's answers are copied from, per item.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Output {
-    /// `GpuHit`s (closest hits; closest points' triangle, squared distance and barycentrics).
-    Hits,
-    /// The shadow queue's records, whose weight the occlusion kernel zeroes when occluded.
-    Shadow,
-    /// The accumulation texels, whose x the closest-point kernel sets to its work.
-    Accum,
-}
-
-impl Output {
-    fn bytes(self) -> u64 {
-        match self {
-            Output::Hits => size_of::<GpuHit>() as u64,
-            Output::Shadow => size_of::<RayRec>() as u64,
-            Output::Accum => ACCUM_TEXEL_BYTES,
-        }
-    }
-}
-
 impl Query {
-    /// What is read back, in order: one region per output in the readback.
-    fn outputs(self) -> &'static [Output] {
+    /// The walking kernel, the queue its items go to and the work buffers it uses.
+    fn walk(self) -> (Kernel, usize, WorkUse) {
         match self {
-            Query::ClosestHit => &[Output::Hits],
-            Query::AnyHit => &[Output::Shadow],
-            Query::ClosestPoint => &[Output::Hits, Output::Accum],
+            Query::Rays(Answer::Hits { .. }) => (Kernel::Traverse, SLOT_QUEUE_A, WorkUse::CLOSEST_HITS),
+            Query::Rays(Answer::Occlusion) => (Kernel::Occlusion, SLOT_SHADOW, WorkUse::OCCLUSION),
+            Query::ClosestPoint => (Kernel::ClosestPoint, SLOT_QUEUE_A, WorkUse::CLOSEST_POINTS),
         }
     }
 
-    /// Bytes read back an item, every output together.
-    fn result_bytes(self) -> u64 {
-        self.outputs().iter().map(|o| o.bytes()).sum()
+    /// Whether the answers kernel packs the walk's output (else the output is read as it is).
+    fn packs(self) -> bool {
+        matches!(self, Query::Rays(Answer::Hits { uv: false } | Answer::Occlusion))
+    }
+
+    /// Bytes read back for a chunk of `n` items, per region in order.
+    fn regions(self, n: u64) -> Vec<u64> {
+        match self {
+            Query::Rays(Answer::Hits { uv: false }) => vec![n * size_of::<TriHit>() as u64],
+            Query::Rays(Answer::Hits { uv: true }) => vec![n * size_of::<GpuHit>() as u64],
+            Query::Rays(Answer::Occlusion) => vec![n.div_ceil(32) * 4],
+            Query::ClosestPoint => vec![n * size_of::<GpuHit>() as u64, n * ACCUM_TEXEL_BYTES],
+        }
     }
 }
 
-/// Bytes of a queue record.
-const RAY_REC_BYTES: usize = size_of::<RayRec>();
-/// Records a worker writes at a time: enough to amortise the hand-off, few enough that a
-/// million rays spread over every core.
-const PIECE_RECORDS: usize = 16 * 1024;
+/// The device-side buffers of the batches: the chunk's wire rays, its packed answers and the
+/// batch's constants, with their bind group (`batch.wgsl`'s group 1).
+struct BatchDevice {
+    /// Items a chunk may hold.
+    items: u64,
+    wire: wgpu::Buffer,
+    answers: wgpu::Buffer,
+    uniform: wgpu::Buffer,
+    group: wgpu::BindGroup,
+}
 
-/// One worker's share of a batch's mapped records.
-struct Piece<'a>(wgpu::WriteOnly<'a, [[u8; RAY_REC_BYTES]]>);
+/// A slot's host-visible buffers: the upload the host writes a chunk's rays into, the readback
+/// its answers come to.
+#[derive(Default)]
+struct Slot {
+    upload: Option<MappedUpload>,
+    readback: Option<wgpu::Buffer>,
+}
+
+/// What a renderer keeps between batches (grown as batches need).
+#[derive(Default)]
+pub(super) struct Batches {
+    device: Option<BatchDevice>,
+    slots: [Slot; SLOTS],
+}
+
+/// A submitted chunk, not yet read out.
+struct InFlight {
+    items: Range<usize>,
+    read: PendingRead,
+    /// Bytes of each answer region, then where the timestamps start.
+    regions: Vec<u64>,
+    stages: Vec<&'static str>,
+    untimed: u32,
+}
+
+/// One worker's share of a chunk's mapped upload.
+struct Piece<'a>(wgpu::WriteOnly<'a, [u8]>);
 
 // SAFETY: wgpu's `WriteOnly<[T]>` is not `Send` only because its `Send` impl asks `T: Sized`
 // (a slice is not); what it guards holds here: each piece is a disjoint part of one mapped
@@ -84,67 +197,73 @@ struct Piece<'a>(wgpu::WriteOnly<'a, [[u8; RAY_REC_BYTES]]>);
 unsafe impl Send for Piece<'_> {}
 
 impl GpuRenderer {
-    /// Closest hits for a batch of rays (processed in bounded chunks).
+    /// Closest hits (with barycentrics) for a batch of rays already checked by the caller.
     pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<Hit>> {
         let mut hits = Vec::with_capacity(rays.len());
-        let rec = |i: usize| ray_rec(&rays[i], t_min, t_max);
-        self.batch(rays.len(), rec, kind, Query::ClosestHit, |raw| {
-            let out: &[GpuHit] = bytemuck::cast_slice(raw[0]);
-            hits.par_extend(out.par_iter().map(|h| {
-                if h.tri == MISS {
-                    Hit::MISS
-                } else {
-                    Hit {
-                        t: h.t,
-                        tri: h.tri,
-                        u: h.u,
-                        v: h.v,
-                    }
+        self.cast(
+            &RaySlice { rays },
+            (t_min, t_max),
+            Answer::Hits { uv: true },
+            kind,
+            |_, answers| {
+                if let ChunkAnswers::HitsUv(out) = answers {
+                    hits.par_extend(out.par_iter().map(|h| gpu_hit(*h)));
                 }
-            }));
-        })?;
+            },
+        )?;
         Ok(hits)
     }
 
-    /// Any-hit occlusion for a batch of rays.
+    /// Any-hit occlusion for a batch of rays already checked by the caller.
     pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<bool>> {
-        let mut occ = Vec::with_capacity(rays.len());
-        let rec = |i: usize| ray_rec(&rays[i], t_min, t_max);
-        self.batch(rays.len(), rec, kind, Query::AnyHit, |raw| {
-            let out: &[RayRec] = bytemuck::cast_slice(raw[0]);
-            // The occlusion kernel zeroes an occluded ray's contribution.
-            occ.par_extend(out.par_iter().map(|r| r.weight[0] == 0.0));
-        })?;
+        let mut occ = vec![false; rays.len()];
+        self.cast(
+            &RaySlice { rays },
+            (t_min, t_max),
+            Answer::Occlusion,
+            kind,
+            |first, answers| {
+                if let ChunkAnswers::Occlusion(bits) = answers {
+                    let end = (first + bits.len() * 32).min(occ.len());
+                    unpack_bits(bits, &mut occ[first..end]);
+                }
+            },
+        )?;
         Ok(occ)
     }
 
-    /// The statistics of the last batch (`intersect`, `occluded`).
+    /// Traces `rays` (with `interval` = (t_min, t_max) for a source of stride 6) for `answer`
+    /// through the uploaded structure (`kind`), handing each chunk's answers to `take` with
+    /// the index of the chunk's first ray, in order. A ray the source finds invalid stops the
+    /// batch with its error.
+    pub fn cast(
+        &mut self,
+        rays: &dyn WireSource,
+        interval: (f32, f32),
+        answer: Answer,
+        kind: AccelKind,
+        take: impl FnMut(usize, ChunkAnswers<'_>),
+    ) -> Result<()> {
+        self.batch(rays, interval, kind, Query::Rays(answer), take)
+    }
+
+    /// The statistics of the last batch (`cast`, `intersect`, `occluded`, closest points).
     pub fn last_query_stats(&self) -> &GpuQueryStats {
         &self.last_query
     }
 
-    /// Runs `query` over `n` items (item `i`'s queue record is `rec_of(i)`) in submissions of
-    /// as many chunks as the device's largest buffer holds; `take` gets each submission's raw
-    /// results, one slice per output of the query, its items in order.
+    /// Runs `query` over the items of `source` in pipelined chunks (see the module's notes).
     pub(super) fn batch(
         &mut self,
-        n: usize,
-        rec_of: impl Fn(usize) -> RayRec + Sync,
+        source: &dyn WireSource,
+        interval: (f32, f32),
         kind: AccelKind,
         query: Query,
-        mut take: impl FnMut(&[&[u8]]),
+        mut take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
         self.check_serves(kind)?;
         let t0 = Instant::now();
-        let chunk = self.tile_capacity(1) as usize;
-        self.ensure_work(
-            chunk.min(n.max(1)) as u32,
-            self.work.as_ref().map_or(1, |w| w.max_lights),
-        );
-        let cap = (self.work.as_ref().unwrap().tile_pixels as usize).max(1);
-        let per_chunk = cap as u64 * (size_of::<RayRec>() as u64).max(query.result_bytes()) + COUNTERS_BYTES;
-        let max = self.ctx.limits().max_buffer_size.saturating_sub(MAX_TIMESTAMPS_BYTES);
-        let chunks_per_submission = (max / per_chunk).clamp(1, (MAX_TIMED_PASSES / 2) as u64) as usize;
+        let n = source.len();
         let mut stats = GpuQueryStats {
             rays: n as u64,
             timings: GpuTimings {
@@ -153,10 +272,50 @@ impl GpuRenderer {
             },
             ..GpuQueryStats::default()
         };
-        let chunks: Vec<std::ops::Range<usize>> = (0..n).step_by(cap).map(|a| a..(a + cap).min(n)).collect();
-        for group in chunks.chunks(chunks_per_submission) {
-            self.submit_chunks(group, &rec_of, kind, query, &mut stats, &mut take)?;
+        let cap = (self.tile_capacity(1) as usize).min(PIPELINE_ITEMS).max(1);
+        let chunks: Vec<Range<usize>> = (0..n).step_by(cap).map(|a| a..(a + cap).min(n)).collect();
+        if let Some(first) = chunks.first() {
+            let items = if chunks.len() > 1 { cap } else { first.len() };
+            let lights = self.work.as_ref().map_or(1, |w| w.max_lights);
+            self.ensure_work(items as u32, lights, query.walk().2);
+            self.ensure_batch_device(items as u64);
         }
+        let mut flight: [Option<InFlight>; SLOTS] = Default::default();
+        let mut outcome = Ok(());
+        for (k, items) in chunks.iter().enumerate() {
+            let slot = k % SLOTS;
+            // The chunk that used this slot before: read out first, which also completes the
+            // remapping of the slot's upload (asked for after its submission).
+            if let Some(f) = flight[slot].take() {
+                outcome = self.finish_chunk(f, query, &mut stats, &mut take);
+            }
+            if outcome.is_err() {
+                break;
+            }
+            match self.submit_chunk(slot, items.clone(), source, interval, kind, query, &mut stats) {
+                Ok(f) => flight[slot] = Some(f),
+                Err(e) => {
+                    outcome = Err(e);
+                    break;
+                }
+            }
+        }
+        // The rest in submission order; after an error, still waited for (so no buffer is
+        // left with a pending mapping), their answers dropped.
+        let next = chunks.len() % SLOTS;
+        for slot in (next..SLOTS).chain(0..next) {
+            if let Some(f) = flight[slot].take() {
+                let done = if outcome.is_ok() {
+                    self.finish_chunk(f, query, &mut stats, &mut take)
+                } else {
+                    f.read.finish(&self.ctx, |_| ()).map(|_| ())
+                };
+                if outcome.is_ok() {
+                    outcome = done;
+                }
+            }
+        }
+        outcome?;
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.timings.host.close(stats.wall_ms);
         stats.timings.total_ms = if self.timed() {
@@ -168,189 +327,233 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// One submission over `chunks` (item ranges) and its one wait.
-    fn submit_chunks(
+    /// Makes sure the batch's device buffers hold chunks of `items`.
+    fn ensure_batch_device(&mut self, items: u64) {
+        if self.batches.device.as_ref().is_some_and(|d| d.items >= items) {
+            return;
+        }
+        let dev = &self.ctx.device;
+        let storage = |label: &str, size: u64| {
+            dev.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        // The widest wire item (8 floats) and the widest packed answer (a `TriHit`).
+        let wire = storage("batch wire rays", items * 32);
+        let answers = storage("batch answers", items * size_of::<TriHit>() as u64);
+        let uniform = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("batch uniform"),
+            size: size_of::<BatchUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ray batch"),
+            layout: &self.kernels.batch_layout,
+            entries: &bindings::group_entries(&BATCH_BINDINGS, |slot| match slot {
+                BatchSlot::Wire => wire.as_entire_binding(),
+                BatchSlot::Answers => answers.as_entire_binding(),
+                BatchSlot::Uniform => uniform.as_entire_binding(),
+            }),
+        });
+        self.batches.device = Some(BatchDevice {
+            items,
+            wire,
+            answers,
+            uniform,
+            group,
+        });
+    }
+
+    /// Writes chunk `items` of `source` into `slot`'s upload and submits its copies and
+    /// passes; its readback is asked for, not waited for.
+    #[allow(clippy::too_many_arguments)]
+    fn submit_chunk(
         &mut self,
-        chunks: &[std::ops::Range<usize>],
-        rec_of: &(impl Fn(usize) -> RayRec + Sync),
+        slot: usize,
+        items: Range<usize>,
+        source: &dyn WireSource,
+        interval: (f32, f32),
         kind: AccelKind,
         query: Query,
         stats: &mut GpuQueryStats,
-        take: &mut impl FnMut(&[&[u8]]),
-    ) -> Result<()> {
-        let rec_bytes = size_of::<RayRec>() as u64;
-        let n_items: usize = chunks.iter().map(|c| c.len()).sum();
-        let (slot, kernel) = match query {
-            Query::ClosestHit => (SLOT_QUEUE_A, Kernel::Traverse),
-            Query::AnyHit => (SLOT_SHADOW, Kernel::Occlusion),
-            Query::ClosestPoint => (SLOT_QUEUE_A, Kernel::ClosestPoint),
-        };
-        let counts: Vec<u32> = chunks
-            .iter()
-            .flat_map(|part| {
-                let mut c = [0u32; COUNTER_SLOTS];
-                c[slot] = part.len() as u32;
-                c
-            })
-            .collect();
-        let items = n_items as u64;
-        let rays_bytes = items * rec_bytes;
-        let upload_bytes = rays_bytes + counts.len() as u64 * size_of::<u32>() as u64;
+    ) -> Result<InFlight> {
+        let n = items.len();
+        let item_bytes = source.stride() * size_of::<f32>();
+        let wire_bytes = (n * item_bytes) as u64;
         let dev = &self.ctx.device;
-        let copy = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
-        // The upload: every chunk's records (`pixel` numbers an item within its chunk), then a
-        // counters block per chunk, written into the kept mapped buffer (upload.rs).
-        let upload = MappedUpload::ready(&mut self.batch_upload, dev, upload_bytes);
-        {
+        // The chunk's items, in pieces written on every core straight into the mapped upload.
+        let upload = MappedUpload::ready(&mut self.batches.slots[slot].upload, dev, wire_bytes);
+        let all_valid = {
             let mut view = upload
-                .get_mapped_range_mut(..upload_bytes)
+                .get_mapped_range_mut(..wire_bytes)
                 .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
-            let (records, mut counters) = view.slice(..).split_at(rays_bytes as usize);
-            let (mut records, _) = records.into_chunks::<RAY_REC_BYTES>();
-            // Pieces of at most `PIECE_RECORDS`, each within one chunk, written on every core.
-            let mut pieces = Vec::new();
-            for part in chunks {
-                let (mut mine, rest) = records.split_at(part.len());
-                records = rest;
-                let mut pixel = 0;
-                while !mine.is_empty() {
-                    let take = PIECE_RECORDS.min(mine.len());
-                    let (piece, rest) = mine.split_at(take);
-                    mine = rest;
-                    pieces.push((part.start + pixel, pixel, Piece(piece)));
-                    pixel += take;
-                }
+            let mut rest = view.slice(..);
+            let mut pieces = Vec::with_capacity(n.div_ceil(PIECE_ITEMS));
+            let mut first = items.start;
+            while first < items.end {
+                let take = PIECE_ITEMS.min(items.end - first);
+                let (piece, tail) = rest.split_at(take * item_bytes);
+                rest = tail;
+                pieces.push((first, Piece(piece)));
+                first += take;
             }
-            pieces.into_par_iter().for_each(|(item, pixel, Piece(piece))| {
-                let n = piece.len();
-                piece.write_iter((0..n).map(|j| {
-                    bytemuck::cast::<RayRec, [u8; RAY_REC_BYTES]>(RayRec {
-                        pixel: (pixel + j) as u32,
-                        ..rec_of(item + j)
-                    })
-                }));
-            });
-            counters.copy_from_slice(bytemuck::cast_slice(&counts));
+            pieces
+                .into_par_iter()
+                .map(|(first, Piece(piece))| source.write(first, piece))
+                .reduce(|| true, |a, b| a & b)
+        };
+        MappedUpload::unmap(&self.batches.slots[slot].upload);
+        if !all_valid {
+            return Err(source.invalid());
         }
-        MappedUpload::unmap(&self.batch_upload);
-        grow(
-            dev,
-            &mut self.tile_uniforms,
-            chunks.len() as u64 * TILE_UNIFORM_BYTES,
-            "tile pass uniforms",
-            copy,
+        let (walk, queue_slot, _) = query.walk();
+        let mut counts = [0u32; COUNTER_SLOTS];
+        counts[queue_slot] = n as u32;
+        let uniform = BatchUniform {
+            stride: source.stride() as u32,
+            to_shadow: (queue_slot == SLOT_SHADOW) as u32,
+            t_min: interval.0,
+            t_max: interval.1,
+        };
+        let q = &self.ctx.queue;
+        let device_side = self.batches.device.as_ref().expect("made by `batch`");
+        q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counts));
+        q.write_buffer(&device_side.uniform, 0, bytemuck::bytes_of(&uniform));
+        let uniforms_bytes = self.write_pass_uniforms_to(
+            self.pass_uniform(),
+            0,
+            0,
+            n as u32,
+            Mode::Cast,
+            kind,
+            Ablation::default(),
         );
-        let results_bytes = items * query.result_bytes();
-        let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
+        stats.uploaded_bytes +=
+            wire_bytes + size_of_val(&counts) as u64 + size_of::<BatchUniform>() as u64 + uniforms_bytes;
+
+        let regions = query.regions(n as u64);
+        let results_bytes: u64 = regions.iter().sum();
+        let stamps_bytes = if self.timed() {
+            super::timing::MAX_TIMESTAMPS_BYTES
+        } else {
+            0
+        };
         grow(
             dev,
-            &mut self.readback,
+            &mut self.batches.slots[slot].readback,
             results_bytes + stamps_bytes,
-            "frame readback",
+            "batch readback",
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
-        stats.uploaded_bytes += upload_bytes;
-        for (k, part) in chunks.iter().enumerate() {
-            stats.uploaded_bytes += self.write_pass_uniforms_to(
-                self.tile_uniforms.as_ref().unwrap(),
-                k as u64 * TILE_UNIFORM_BYTES,
-                0,
-                part.len() as u32,
-                Mode::Cast,
-                kind,
-                Ablation::default(),
-            );
-        }
-        let (upload, readback) = (
-            self.batch_upload.as_ref().unwrap().buffer(),
-            self.readback.as_ref().unwrap(),
-        );
-        let w = self.work.as_ref().unwrap();
-        let queue = if slot == SLOT_SHADOW { &w.shadow } else { &w.queue_a };
-        let buffer = |o: Output| match o {
-            Output::Hits => &w.hits,
-            Output::Shadow => &w.shadow,
-            Output::Accum => &w.accum,
-        };
-        // The readback: one region per output, each the submission's items in order.
-        let mut region_at = Vec::new();
-        let mut at = 0;
-        for o in query.outputs() {
-            region_at.push(at);
-            at += items * o.bytes();
-        }
+        let readback = self.batches.slots[slot].readback.clone().expect("grown above");
+        let upload = self.batches.slots[slot].upload.as_ref().expect("made above").buffer();
+        let device_side = self.batches.device.as_ref().expect("made by `batch`");
+        let w = self.work.as_ref().expect("made by `batch`");
         let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("ray batch"),
         });
-        let mut rec = self.recorder(chunks[0].len() as u32, true, Ablation::default());
-        let (mut ray_at, mut item_at) = (0, 0);
-        for (k, part) in chunks.iter().enumerate() {
-            let n = part.len() as u64;
-            // In stream order: this chunk's uniforms, counters and rays into place, its two
-            // passes, its answers out; the next chunk's copies start after those.
-            enc.copy_buffer_to_buffer(
-                self.tile_uniforms.as_ref().unwrap(),
-                k as u64 * TILE_UNIFORM_BYTES,
-                self.pass_uniform(),
-                0,
-                Some(TILE_UNIFORM_BYTES),
-            );
-            enc.copy_buffer_to_buffer(
-                upload,
-                rays_bytes + k as u64 * COUNTERS_BYTES,
-                &self.counters,
-                0,
-                Some(COUNTERS_BYTES),
-            );
-            enc.copy_buffer_to_buffer(upload, ray_at, queue, 0, Some(n * rec_bytes));
-            rec.tile_pixels = n as u32;
-            rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
-            rec.pass(&mut enc, kernel, &w.bind_groups[0]);
-            for (o, region) in query.outputs().iter().zip(&region_at) {
-                let at = region + item_at * o.bytes();
-                enc.copy_buffer_to_buffer(buffer(*o), 0, readback, at, Some(n * o.bytes()));
+        enc.copy_buffer_to_buffer(upload, 0, &device_side.wire, 0, Some(wire_bytes));
+        let mut rec = self.recorder(n as u32, true, Ablation::default());
+        rec.batch_group = Some(&device_side.group);
+        rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
+        rec.pass(&mut enc, Kernel::BatchRays, &w.bind_groups[0]);
+        rec.pass(&mut enc, walk, &w.bind_groups[0]);
+        let sources: Vec<&wgpu::Buffer> = match query {
+            _ if query.packs() => {
+                rec.pass(&mut enc, Kernel::BatchAnswers, &w.bind_groups[0]);
+                vec![&device_side.answers]
             }
-            ray_at += n * rec_bytes;
-            item_at += n;
+            Query::ClosestPoint => vec![&w.hits, &w.accum],
+            _ => vec![&w.hits],
+        };
+        let mut at = 0;
+        for (src, bytes) in sources.into_iter().zip(&regions) {
+            enc.copy_buffer_to_buffer(src, 0, &readback, at, Some(*bytes));
+            at += bytes;
         }
-        rec.timer.resolve_into(&mut enc, readback, results_bytes);
+        rec.timer.resolve_into(&mut enc, &readback, results_bytes);
         let total = results_bytes + rec.timer.bytes();
-        self.ctx.queue.submit([enc.finish()]);
-        MappedUpload::remap(&self.batch_upload);
-        let timer = rec.timer;
-        let (stages, phases) = self.ctx.map_read_with(readback, total, |raw| {
-            let regions: Vec<&[u8]> = query
-                .outputs()
-                .iter()
-                .zip(&region_at)
-                .map(|(o, &r)| &raw[r as usize..(r + items * o.bytes()) as usize])
-                .collect();
-            take(&regions);
-            (
-                timer.parse(&self.ctx, &raw[results_bytes as usize..total as usize]),
-                timer.untimed,
-            )
-        })?;
-        stats.timings.host.add(&phases);
-        for (name, ms) in stages.0 {
-            *stats.timings.stages_ms.entry(name).or_default() += ms;
-        }
-        stats.timings.untimed_passes += stages.1;
-        stats.chunks += chunks.len() as u32;
+        let (stages, untimed) = (rec.timer.stages().to_vec(), rec.timer.untimed);
+        let index = self.ctx.queue.submit([enc.finish()]);
+        MappedUpload::remap(&self.batches.slots[slot].upload);
+        stats.chunks += 1;
         stats.round_trips += 1;
         stats.downloaded_bytes += total;
+        Ok(InFlight {
+            items,
+            read: self.ctx.begin_read(&readback, total, Some(index)),
+            regions,
+            stages,
+            untimed,
+        })
+    }
+
+    /// Waits for a submitted chunk and hands its answers to `take`.
+    fn finish_chunk(
+        &self,
+        f: InFlight,
+        query: Query,
+        stats: &mut GpuQueryStats,
+        take: &mut impl FnMut(usize, ChunkAnswers<'_>),
+    ) -> Result<()> {
+        let InFlight {
+            items,
+            read,
+            regions,
+            stages,
+            untimed,
+        } = f;
+        let results_bytes: u64 = regions.iter().sum();
+        let (times, phases) = read.finish(&self.ctx, |raw| {
+            let region = |k: usize| {
+                let at: u64 = regions[..k].iter().sum();
+                &raw[at as usize..(at + regions[k]) as usize]
+            };
+            let answers = match query {
+                Query::Rays(Answer::Hits { uv: false }) => ChunkAnswers::Hits(bytemuck::cast_slice(region(0))),
+                Query::Rays(Answer::Hits { uv: true }) => ChunkAnswers::HitsUv(bytemuck::cast_slice(region(0))),
+                Query::Rays(Answer::Occlusion) => ChunkAnswers::Occlusion(bytemuck::cast_slice(region(0))),
+                Query::ClosestPoint => ChunkAnswers::Points {
+                    hits: bytemuck::cast_slice(region(0)),
+                    work: bytemuck::cast_slice(region(1)),
+                },
+            };
+            take(items.start, answers);
+            parse_stages(&stages, &self.ctx, &raw[results_bytes as usize..])
+        })?;
+        stats.timings.host.add(&phases);
+        for (name, ms) in times {
+            *stats.timings.stages_ms.entry(name).or_default() += ms;
+        }
+        stats.timings.untimed_passes += untimed;
         Ok(())
     }
 }
 
-/// The queue record of a ray of a batch (`pixel` is set per chunk).
-fn ray_rec(r: &Ray, t_min: f32, t_max: f32) -> RayRec {
-    RayRec {
-        origin: r.origin.to_array(),
-        pixel: 0,
-        dir: r.dir.to_array(),
-        t_max,
-        weight: [1.0; 3],
-        t_min,
+/// A closest hit as the GPU's `GpuHit` gives it.
+pub fn gpu_hit(h: GpuHit) -> Hit {
+    if h.tri == MISS {
+        Hit::MISS
+    } else {
+        Hit {
+            t: h.t,
+            tri: h.tri,
+            u: h.u,
+            v: h.v,
+        }
     }
+}
+
+/// Occlusion bits (bit `i % 32` of word `i / 32`) into one bool a ray, in parallel.
+pub fn unpack_bits(bits: &[u32], out: &mut [bool]) {
+    out.par_chunks_mut(32 * 1024).enumerate().for_each(|(c, piece)| {
+        for (i, o) in piece.iter_mut().enumerate() {
+            let k = c * 32 * 1024 + i;
+            *o = bits[k / 32] >> (k % 32) & 1 != 0;
+        }
+    });
 }

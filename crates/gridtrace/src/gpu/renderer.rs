@@ -35,12 +35,50 @@ pub(super) const ACCUM_TEXEL_BYTES: u64 = size_of::<[f32; 4]>() as u64;
 pub(super) const PACKED_TEXEL_BYTES: u64 = size_of::<u32>() as u64;
 /// Bytes per ray of the resolve buffer (`vec2<u32>`: first shadow ray, count).
 const RESOLVE_SPAN_BYTES: u64 = size_of::<[u32; 2]>() as u64;
+/// Bytes of a work buffer that a piece of work does not use (`WorkUse`): one element of the
+/// largest array a kernel binds.
+const STAND_IN_BYTES: u64 = 64;
 pub(super) const COUNTERS_BYTES: u64 = (COUNTER_SLOTS * size_of::<u32>()) as u64;
+
+/// Which work buffers a piece of work reads or writes, as bits: the others are bound as small
+/// stand-ins, so that a ray batch allocates its queue and its hits only (a frame's buffers
+/// for a million pixels are about 200 MB, the first batch's allocation time on hardware).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct WorkUse(u8);
+
+impl WorkUse {
+    const QUEUE_A: u8 = 1;
+    const QUEUE_B: u8 = 2;
+    const HITS: u8 = 4;
+    const SHADOW: u8 = 8;
+    const RESOLVE: u8 = 16;
+    const ACCUM: u8 = 32;
+    const PACKED: u8 = 64;
+    const LIGHTS: u8 = 128;
+    /// A frame: every buffer.
+    pub const FRAME: WorkUse = WorkUse(u8::MAX);
+    /// Closest hits of a batch: queue A and the hits.
+    pub const CLOSEST_HITS: WorkUse = WorkUse(Self::QUEUE_A | Self::HITS);
+    /// Occlusion of a batch: the shadow queue.
+    pub const OCCLUSION: WorkUse = WorkUse(Self::SHADOW);
+    /// Closest points: queue A (the points), the hits and the work per point (accum).
+    pub const CLOSEST_POINTS: WorkUse = WorkUse(Self::QUEUE_A | Self::HITS | Self::ACCUM);
+
+    fn has(self, bit: u8) -> bool {
+        self.0 & bit != 0
+    }
+
+    fn covers(self, other: WorkUse) -> bool {
+        self.0 & other.0 == other.0
+    }
+}
 
 /// Queues and per-tile buffers, sized for a tile of `tile_pixels` and `max_lights` lights.
 pub(super) struct WorkBuffers {
     pub tile_pixels: u32,
     pub max_lights: u32,
+    /// The buffers made at full size; the others are stand-ins.
+    pub uses: WorkUse,
     pub queue_a: wgpu::Buffer,
     pub queue_b: wgpu::Buffer,
     pub hits: wgpu::Buffer,
@@ -76,10 +114,8 @@ pub struct GpuRenderer {
     /// The frame's results (image, counters, timestamps), mapped once per frame. Kept between
     /// frames and grown as they need.
     pub(super) readback: Option<wgpu::Buffer>,
-    /// A ray batch's rays and counters, written on the host into this mapped buffer and copied
-    /// into place chunk by chunk in the command stream (`queries.rs`, `upload.rs`). Grown as
-    /// batches need.
-    pub(super) batch_upload: Option<super::upload::MappedUpload>,
+    /// The ray batches' kept buffers: uploads, readbacks, wire rays and answers (`queries.rs`).
+    pub(super) batches: super::queries::Batches,
     /// What the last ray batch took (`last_query_stats`).
     pub(super) last_query: GpuQueryStats,
     /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).
@@ -160,7 +196,7 @@ impl GpuRenderer {
             work: None,
             tile_uniforms: None,
             readback: None,
-            batch_upload: None,
+            batches: Default::default(),
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
             device_grid: None,
@@ -281,6 +317,7 @@ impl GpuRenderer {
             indirect_args: &self.indirect_args,
             indirect_group: &self.indirect_group,
             packed_group: self.work.as_ref().map(|w| &w.packed_group),
+            batch_group: None,
             walk: &self.scene.walk,
             structure_group: &self.scene.structure_group,
             shadow_closest_hit: ablation.shadow_closest_hit,
@@ -305,20 +342,28 @@ impl GpuRenderer {
         self.max_tile_pixels = pixels.clamp(1, MAX_TILE_PIXELS);
     }
 
-    /// Makes sure the work buffers hold `tile_pixels` and `lights`; recreates them if not.
-    pub(super) fn ensure_work(&mut self, tile_pixels: u32, lights: u32) {
+    /// Makes sure the work buffers hold `tile_pixels` and `lights` in the buffers `uses` names;
+    /// recreates them if not (keeping full size the buffers earlier work used).
+    pub(super) fn ensure_work(&mut self, tile_pixels: u32, lights: u32, uses: WorkUse) {
         if let Some(w) = &self.work
             && w.tile_pixels >= tile_pixels
             && w.max_lights >= lights
+            && w.uses.covers(uses)
         {
             return;
         }
+        let uses = WorkUse(uses.0 | self.work.as_ref().map_or(0, |w| w.uses.0));
         let dev = &self.ctx.device;
-        let buf = |label: &str, size: u64| {
+        let buf = |label: &str, bit: u8, size: u64| {
             dev.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                // Zero-length bindings are invalid.
-                size: size.max(16),
+                // Zero-length bindings are invalid, and a binding must hold one element of its
+                // array (a queued ray is 48 bytes): an unused buffer is a stand-in of 64.
+                size: if uses.has(bit) {
+                    size.max(STAND_IN_BYTES)
+                } else {
+                    STAND_IN_BYTES
+                },
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             })
@@ -326,13 +371,13 @@ impl GpuRenderer {
         let n = tile_pixels as u64;
         let rec = size_of::<RayRec>() as u64;
         let max_lights = lights.max(1);
-        let queue_a = buf("ray queue A", n * rec);
-        let queue_b = buf("ray queue B", n * rec);
-        let hits = buf("hits", n * size_of::<GpuHit>() as u64);
-        let shadow = buf("shadow queue", n * rec * max_lights as u64);
-        let resolve = buf("resolve", n * RESOLVE_SPAN_BYTES);
-        let accum = buf("accum", n * ACCUM_TEXEL_BYTES);
-        let packed = buf("packed pixels", n * PACKED_TEXEL_BYTES);
+        let queue_a = buf("ray queue A", WorkUse::QUEUE_A, n * rec);
+        let queue_b = buf("ray queue B", WorkUse::QUEUE_B, n * rec);
+        let hits = buf("hits", WorkUse::HITS, n * size_of::<GpuHit>() as u64);
+        let shadow = buf("shadow queue", WorkUse::SHADOW, n * rec * max_lights as u64);
+        let resolve = buf("resolve", WorkUse::RESOLVE, n * RESOLVE_SPAN_BYTES);
+        let accum = buf("accum", WorkUse::ACCUM, n * ACCUM_TEXEL_BYTES);
+        let packed = buf("packed pixels", WorkUse::PACKED, n * PACKED_TEXEL_BYTES);
         let packed_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("packed pixels"),
             layout: &self.kernels.pack_layout,
@@ -340,7 +385,11 @@ impl GpuRenderer {
                 PackSlot::Packed => packed.as_entire_binding(),
             }),
         });
-        let lights_buf = buf("lights", size_of::<PointLight>() as u64 * max_lights as u64);
+        let lights_buf = buf(
+            "lights",
+            WorkUse::LIGHTS,
+            size_of::<PointLight>() as u64 * max_lights as u64,
+        );
         let bind_groups = (0..MAX_PASSES)
             .map(|d| {
                 let (rays_in, rays_out) = if d % 2 == 0 {
@@ -378,6 +427,7 @@ impl GpuRenderer {
         self.work = Some(WorkBuffers {
             tile_pixels,
             max_lights,
+            uses,
             queue_a,
             queue_b,
             hits,

@@ -24,8 +24,10 @@ pub const SHADE: &str = concat!(include_str!("shaders/append.wgsl"), include_str
 pub const RESOLVE: &str = include_str!("shaders/resolve.wgsl");
 pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
 pub const PACK: &str = include_str!("shaders/pack.wgsl");
+/// A ray batch's rays in from the wire and its answers out (two pipelines of one file).
+pub const BATCH: &str = include_str!("shaders/batch.wgsl");
 /// Every kernel with its name.
-pub const KERNELS: [(&str, &str); 8] = [
+pub const KERNELS: [(&str, &str); 9] = [
     ("raygen", RAYGEN),
     ("traverse", TRAVERSE),
     ("occlusion", OCCLUSION),
@@ -34,6 +36,7 @@ pub const KERNELS: [(&str, &str); 8] = [
     ("resolve", RESOLVE),
     ("indirect", INDIRECT),
     ("pack", PACK),
+    ("batch", BATCH),
 ];
 
 /// The prelude and `common.wgsl`: every declaration all kernels share.

@@ -127,17 +127,16 @@ impl<'a> StageTimer<'a> {
     /// Milliseconds of each timed pass, in pass order, from the `bytes()` bytes that
     /// `resolve_into` copied.
     pub fn parse(&self, ctx: &GpuContext, raw: &[u8]) -> Vec<(&'static str, f64)> {
-        // Copied out: `raw` is a slice of a mapped buffer, with no promise of 8-byte alignment.
-        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(raw);
-        let period_ns = ctx.queue.get_timestamp_period() as f64;
-        self.stages
-            .iter()
-            .enumerate()
-            .map(|(i, name)| {
-                let ms = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns * 1e-6;
-                (*name, ms)
-            })
-            .collect()
+        parse_stages(&self.stages, ctx, raw)
+    }
+
+    /// The stages of the timed passes, in pass order (for a `parse_stages` after the timer is
+    /// gone: a pipelined batch reads a chunk out after the next is recorded).
+    pub fn stages(&self) -> &[&'static str] {
+        match self.timestamps {
+            Some(_) => &self.stages,
+            None => &[],
+        }
     }
 
     /// Milliseconds of each timed pass, in pass order (after the submission; its own round
@@ -150,6 +149,25 @@ impl<'a> StageTimer<'a> {
     }
 }
 
+/// Milliseconds of each of `stages` (timed passes, in pass order) from their resolved
+/// timestamps `raw` (`StageTimer::resolve_into`).
+pub(crate) fn parse_stages(stages: &[&'static str], ctx: &GpuContext, raw: &[u8]) -> Vec<(&'static str, f64)> {
+    if stages.is_empty() {
+        return Vec::new();
+    }
+    // Copied out: `raw` is a slice of a mapped buffer, with no promise of 8-byte alignment.
+    let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&raw[..stages.len() * 2 * TIMESTAMP_BYTES as usize]);
+    let period_ns = ctx.queue.get_timestamp_period() as f64;
+    stages
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let ms = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns * 1e-6;
+            (*name, ms)
+        })
+        .collect()
+}
+
 /// Statistics of one GPU batch (rays, or points: `queries.rs`), with the frame's meanings
 /// (`GpuRenderStats`): `wall_ms` from the first upload to the answers in host memory,
 /// `timings` the device's own.
@@ -159,12 +177,14 @@ pub struct GpuQueryStats {
     pub timings: GpuTimings,
     /// Chunks of at most a tile's rays each (the work buffers' size).
     pub chunks: u32,
-    /// Times the host waited for the device (1 unless the batch exceeds the largest buffer).
+    /// Submissions, each read back once (one a chunk; the host waits for one while the next
+    /// is traced).
     pub round_trips: u32,
-    /// Bytes written to the device: the rays (48 a ray), counters and pass uniforms.
+    /// Bytes written to the device: the rays (24 a ray, 32 with an interval each, 12 a
+    /// point), and each chunk's counters and uniforms.
     pub uploaded_bytes: u64,
-    /// Bytes read back: the answers (16 a ray for closest hits, 48 for occlusion, 32 a point
-    /// for closest points), the timestamps.
+    /// Bytes read back: the answers (8 a ray for closest hits, 16 with u and v, one bit for
+    /// occlusion, 32 a point for closest points), the timestamps.
     pub downloaded_bytes: u64,
     pub wall_ms: f64,
 }

@@ -17,22 +17,6 @@ pub const CHUNK: usize = 1 << 20;
 /// allocates nothing of the batch's size (no array of rays, no array of hits).
 pub(super) const CPU_BATCH: usize = 1024;
 
-/// Hands a (possibly broadcast, checked) batch to `f` as rays, `CHUNK` at a time.
-/// Runs `f` on the rays of a batch of `n` (its broadcast length, `batch_len`), `CHUNK` at a
-/// time. `n` is not `max(origins, dirs)`: with one side empty and the other of length 1 the batch
-/// is empty, and there is no ray to make.
-pub(super) fn for_chunks(
-    origins: &[[f32; 3]],
-    dirs: &[[f32; 3]],
-    n: usize,
-    mut f: impl FnMut(&[Ray]) -> Result<()>,
-) -> Result<()> {
-    for start in (0..n).step_by(CHUNK) {
-        f(&make_rays(origins, dirs, start, (start + CHUNK).min(n))?)?;
-    }
-    Ok(())
-}
-
 /// Runs `f` on the CPU for every `CPU_BATCH` rays of a (possibly broadcast, checked) batch of
 /// `n`, in parallel, each with its piece of the output (`pieces` yields one per `CPU_BATCH`
 /// rays).
@@ -119,14 +103,4 @@ pub(super) fn first_bad_ray(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usiz
     (start..end)
         .find_map(|i| ray_at(origins, dirs, i).err())
         .unwrap_or_else(|| Error::InvalidInput("a ray failed validation".into()))
-}
-
-/// Rays `start..end` of a (possibly broadcast) batch, validated (`ray_at`).
-pub(super) fn make_rays(origins: &[[f32; 3]], dirs: &[[f32; 3]], start: usize, end: usize) -> Result<Vec<Ray>> {
-    let rays: Option<Vec<Ray>> = (start..end)
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| ray_at(origins, dirs, i).ok())
-        .collect();
-    rays.ok_or_else(|| first_bad_ray(origins, dirs, start, end))
 }

@@ -19,6 +19,8 @@ struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1
 // 4-byte aligned and is read as three scalars).
 struct RayRec { origin: vec3<f32>, pixel: u32, dir: vec3<f32>, t_max: f32, weight: vec3<f32>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
+// A ray batch's constants (batch.wgsl; BatchUniform on the host).
+struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,

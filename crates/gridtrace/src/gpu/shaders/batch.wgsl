@@ -1,0 +1,68 @@
+// Ray batches at the bus's speed (queries.rs): the rays come up in the caller's own layout and
+// only the answers the caller asked for go down; the queue records the walks read (48 bytes a
+// ray) and their hits (16) are made and read here, on the device, where those bytes cost
+// nothing. One file, two pipelines (override BATCH_ANSWERS), one invocation a ray of the chunk:
+// - rays: a wire ray, 24 bytes (origin, direction; the batch's interval) or 32 (origin,
+//   t_min, direction, t_max), or a point, 12 bytes, into queue A (closest hits, closest
+//   points) or the shadow queue (occlusion);
+// - answers: closest hits as (t, triangle), 8 bytes a ray (the caller who wants u, v reads the
+//   hits themselves, 16); occlusion as bits, one u32 per 32 rays (ray k of the chunk is bit
+//   k % 32 of word k / 32), made by the word's first invocation.
+
+@group(1) @binding(0) var<storage, read> wire: array<f32>;
+@group(1) @binding(1) var<storage, read_write> answers: array<u32>;
+@group(1) @binding(2) var<uniform> batch: BatchUniform;
+
+override BATCH_ANSWERS: bool = false;
+
+fn batch_ray(i: u32) {
+    let b = i * batch.stride;
+    let o = vec3<f32>(wire[b], wire[b + 1u], wire[b + 2u]);
+    var t_min = batch.t_min;
+    var t_max = batch.t_max;
+    // A point (stride 3) has no direction: the closest-point kernel reads its origin only.
+    var d = vec3<f32>(0.0);
+    if (batch.stride == 8u) {
+        t_min = wire[b + 3u];
+        d = vec3<f32>(wire[b + 4u], wire[b + 5u], wire[b + 6u]);
+        t_max = wire[b + 7u];
+    } else if (batch.stride == 6u) {
+        d = vec3<f32>(wire[b + 3u], wire[b + 4u], wire[b + 5u]);
+    }
+    // `pixel` numbers the ray within its chunk; an occluded shadow ray's weight is zeroed.
+    let rec = RayRec(o, i, d, t_max, vec3<f32>(1.0), t_min);
+    if (batch.to_shadow != 0u) {
+        shadow_rays[i] = rec;
+    } else {
+        rays_in[i] = rec;
+    }
+}
+
+fn batch_answer(i: u32) {
+    if (batch.to_shadow == 0u) {
+        let h = hits[i];
+        answers[2u * i] = bitcast<u32>(h.t);
+        answers[2u * i + 1u] = h.tri;
+        return;
+    }
+    if (i % 32u != 0u) { return; }
+    let end = min(i + 32u, pass_.tile_pixels);
+    var bits = 0u;
+    for (var k = i; k < end; k++) {
+        if (shadow_rays[k].weight.x == 0.0) {
+            bits |= 1u << (k - i);
+        }
+    }
+    answers[i / 32u] = bits;
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wg, nwg, lid);
+    if (i >= pass_.tile_pixels) { return; }
+    if (BATCH_ANSWERS) {
+        batch_answer(i);
+    } else {
+        batch_ray(i);
+    }
+}
