@@ -33,10 +33,10 @@ use crate::accel::{Hit, PACKET, Ray, intersect_lanes};
 use crate::util::set_bits as bits;
 
 use super::BvhAccel;
-use super::box_test::{BoxRay, T_SLOP, sort8_avx2};
+use super::box_test::{BoxRay, DIR_TINY, FAR_SCALE, T_SLOP, sort8_avx2};
 use super::build::LEAF_BLOCK;
 use super::walk::STACK_LEN;
-use super::wide::{ChildRef, WIDTH};
+use super::wide::{ChildRef, WIDTH, WideNode};
 
 /// A child pending on the packet's stack: the rays that entered its box, and the smallest of
 /// their entry distances (no ray in `rays` can hit anything in it nearer than that).
@@ -62,14 +62,26 @@ pub(super) struct PacketAnswers {
 pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
     let Some(first) = rays.first() else { return false };
     let d0 = first.dir;
-    let len0 = d0.length();
     // cos(8 degrees): camera rays of neighbouring pixels are well within it; the nodes near the
     // leaves of rays further apart than that are mostly different.
     const COS: f32 = 0.990;
     let near = 0.02 * extent;
+    let len0_sq = d0.length_squared();
     rays.iter().all(|r| {
-        r.dir.dot(d0) >= COS * r.dir.length() * len0 && (r.origin - first.origin).length_squared() <= near * near
+        let dot = r.dir.dot(d0);
+        dot > 0.0
+            && dot * dot >= COS * COS * r.dir.length_squared() * len0_sq
+            && (r.origin - first.origin).length_squared() <= near * near
     })
+}
+
+/// Whether the queries may take the packet route: yes, unless the environment sets
+/// `GRIDTRACE_BVH_PACKETS=0` (read once), a switch for measuring the packets against the
+/// interleaved single walks in one build (docs/benchmarks.md). The answers are the same
+/// either way.
+pub(super) fn packets_enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("GRIDTRACE_BVH_PACKETS").is_none_or(|v| v != "0"))
 }
 
 /// Transposes an 8x8 bit matrix held row by row in bytes (bit `8 * r + c` to `8 * c + r`):
@@ -91,6 +103,122 @@ pub(super) fn transpose8(mut x: u64) -> u64 {
 fn lane_splat(c: &[glam::Vec4; 3], lane: usize) -> [F8; 3] {
     splat3([c[0][lane], c[1][lane], c[2][lane]])
 }
+
+/// The box test of a whole packet whose rays go the same way along each axis (the same near
+/// and far planes): interval arithmetic over the rays' origins and inverse directions (Wald
+/// et al. 2006's interval culling, Reshetov et al. 2005's frusta). Conservative exactly, not
+/// just in real numbers: the slab distance `(plane - o) * inv` is computed with one subtract
+/// and one multiply, each rounding monotonically, so over the packet it is least (most) at an
+/// end of the origins' range and an end of the inverse directions' range; the bounds below
+/// take those ends, and every comparison after is monotone too. A box one ray's own test
+/// (`BoxRay::enter`) enters is thus entered here, at no later a distance.
+pub(super) struct Interval {
+    /// Per axis, the near and far plane arrays (as `BoxRay::near` / `far`, shared).
+    near: [usize; 3],
+    far: [usize; 3],
+    /// The origin coordinate giving the least near distance, and the greatest far one.
+    o_near: [f32; 3],
+    o_far: [f32; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+}
+
+impl Interval {
+    /// `None` where the rays' directions differ in sign along an axis.
+    #[cfg(test)]
+    pub(super) fn new(rays: &[BoxRay]) -> Option<Interval> {
+        let mut origin = [[0.0; PACKET]; 3];
+        let mut inv = [[0.0; PACKET]; 3];
+        let mut down = [0u32; 3];
+        for i in 0..PACKET {
+            let r = &rays[i.min(rays.len() - 1)];
+            for a in 0..3 {
+                origin[a][i] = r.origin[a];
+                inv[a][i] = r.inv_dir[a];
+                down[a] |= ((r.near[a] >= 3) as u32) << i;
+            }
+        }
+        Interval::from_lanes(&origin, &inv, down)
+    }
+
+    /// From a packet's rays in lanes (`PACKET` of them; lanes past the packet repeat a ray of
+    /// it): origins, inverse directions (`BoxRay::inv_dir`'s) and per axis the lanes going
+    /// down it. `None` where the rays' directions differ in sign along an axis.
+    #[inline(always)]
+    fn from_lanes(origin: &[[f32; PACKET]; 3], inv: &[[f32; PACKET]; 3], down: [u32; 3]) -> Option<Interval> {
+        const ALL: u32 = (1 << PACKET) - 1;
+        if down.iter().any(|&m| m != 0 && m != ALL) {
+            return None;
+        }
+        let lo = |v: &[f32; PACKET]| v.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+        let hi = |v: &[f32; PACKET]| v.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        let mut iv = Interval {
+            near: [0, 1, 2],
+            far: [3, 4, 5],
+            o_near: [0.0; 3],
+            o_far: [0.0; 3],
+            inv_lo: [0.0; 3],
+            inv_hi: [0.0; 3],
+        };
+        for a in 0..3 {
+            // Going up the axis a slab distance falls as the origin rises; going down, it
+            // rises with it. (As `BoxRay`: the high planes are the near ones going down.)
+            let up = down[a] == 0;
+            (iv.near[a], iv.far[a]) = if up { (a, 3 + a) } else { (3 + a, a) };
+            let (o_lo, o_hi) = (lo(&origin[a]), hi(&origin[a]));
+            (iv.o_near[a], iv.o_far[a]) = if up { (o_hi, o_lo) } else { (o_lo, o_hi) };
+            (iv.inv_lo[a], iv.inv_hi[a]) = (lo(&inv[a]), hi(&inv[a]));
+        }
+        Some(iv)
+    }
+
+    /// Entry distances (lower bounds over the rays) into the node's boxes within
+    /// `[t_min, t_max]`, `t_max` the greatest of the rays' search distances, and the entered
+    /// lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let mut t_enter = _mm256_set1_ps(t_min);
+        let mut t_exit = _mm256_set1_ps(f32::INFINITY);
+        for a in 0..3 {
+            // SAFETY: `near` and `far` index the six plane arrays (as `BoxRay`'s), each eight
+            // f32s (an unaligned load needs nothing more).
+            let (near, far) = unsafe {
+                let planes = n.planes.as_ptr() as *const [f32; WIDTH];
+                (
+                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
+                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
+                )
+            };
+            let (lo, hi) = (_mm256_set1_ps(self.inv_lo[a]), _mm256_set1_ps(self.inv_hi[a]));
+            let dn = _mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a]));
+            let df = _mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a]));
+            let t_near = _mm256_min_ps(_mm256_mul_ps(dn, lo), _mm256_mul_ps(dn, hi));
+            let t_far = _mm256_max_ps(_mm256_mul_ps(df, lo), _mm256_mul_ps(df, hi));
+            t_enter = _mm256_max_ps(t_enter, t_near);
+            t_exit = _mm256_min_ps(t_exit, t_far);
+        }
+        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
+        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
+    }
+
+    /// `enter` as arrays, for the tests.
+    #[cfg(test)]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn enter_for_test(&self, n: &WideNode, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
+        use std::arch::x86_64::*;
+        let (t, m) = self.enter(n, t_min, t_max);
+        let mut out = [0.0; WIDTH];
+        // SAFETY: `out` holds eight f32s.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t) };
+        (out, _mm256_movemask_ps(m) as u32)
+    }
+}
+
+#[cfg(test)]
+pub(super) use crate::util::set_bits as bit_iter;
 
 impl BvhAccel {
     /// The scene's size, for `coherent`: the diagonal of the root's children's boxes.
@@ -121,7 +249,6 @@ impl BvhAccel {
         // Lanes past `n` repeat ray 0; they are in no mask, and their triangle tests run up
         // to `t_min`, which no hit passes.
         let ray = |i: usize| &rays[if i < n { i } else { 0 }];
-        let boxes: [BoxRay; PACKET] = std::array::from_fn(|i| BoxRay::new(ray(i)));
         let mut origin = [[0.0; PACKET]; 3];
         let mut dir = [[0.0; PACKET]; 3];
         for i in 0..PACKET {
@@ -130,6 +257,33 @@ impl BvhAccel {
                 dir[a][i] = ray(i).dir[a];
             }
         }
+        // `BoxRay::new`'s inverse directions, eight at a time (IEEE division rounds the same in
+        // every lane): tiny components replaced by `DIR_TINY` with their sign first.
+        let mut inv = [[0.0; PACKET]; 3];
+        let mut down = [0u32; 3];
+        for a in 0..3 {
+            // SAFETY: AVX2 (the contract); the arrays hold eight f32s.
+            unsafe {
+                let d = _mm256_loadu_ps(dir[a].as_ptr());
+                let sign = _mm256_and_ps(d, _mm256_set1_ps(-0.0));
+                let tiny =
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(_mm256_set1_ps(-0.0), d), _mm256_set1_ps(DIR_TINY));
+                let safe = _mm256_blendv_ps(d, _mm256_or_ps(sign, _mm256_set1_ps(DIR_TINY)), tiny);
+                _mm256_storeu_ps(inv[a].as_mut_ptr(), _mm256_div_ps(_mm256_set1_ps(1.0), safe));
+                // `safe` is never zero: its sign bit says whether it is below zero.
+                down[a] = _mm256_movemask_ps(safe) as u32;
+            }
+        }
+        let interval = Interval::from_lanes(&origin, &inv, down);
+        // Each ray's own box test, for packets that go different ways (built only for them).
+        let boxes: Option<[BoxRay; PACKET]> = interval.is_none().then(|| {
+            std::array::from_fn(|i| BoxRay {
+                origin: [origin[0][i], origin[1][i], origin[2][i]],
+                inv_dir: [inv[0][i], inv[1][i], inv[2][i]],
+                near: std::array::from_fn(|a| (down[a] >> i & 1) as usize * 3 + a),
+                far: std::array::from_fn(|a| (down[a] >> i & 1 == 0) as usize * 3 + a),
+            })
+        });
         let origin: [F8; 3] = load3(origin);
         let dir: [F8; 3] = load3(dir);
         let mut best: [Hit; PACKET] = std::array::from_fn(|i| Hit {
@@ -157,13 +311,24 @@ impl BvhAccel {
                 let mut entered = 0u64;
                 let mut union = 0u32;
                 let mut t_near = _mm256_set1_ps(f32::INFINITY);
-                for r in bits(cur.rays) {
-                    // (A safe call: this function is compiled for AVX2 too.)
-                    let (t_enter, hit) = boxes[r].enter_avx2_packed(node, t_min, t_box[r]);
-                    t_near = _mm256_min_ps(t_near, _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t_enter, hit));
-                    let m = _mm256_movemask_ps(hit) as u32;
-                    union |= m;
-                    entered |= (m as u64) << (8 * r);
+                if let Some(iv) = &interval {
+                    // One test for the packet: every ray its own test would let in is let in.
+                    let mut reach = f32::NEG_INFINITY;
+                    for r in bits(cur.rays) {
+                        reach = reach.max(t_box[r]);
+                    }
+                    let (t_enter, hit) = iv.enter(node, t_min, reach);
+                    t_near = _mm256_blendv_ps(t_near, t_enter, hit);
+                    union = _mm256_movemask_ps(hit) as u32;
+                } else if let Some(boxes) = &boxes {
+                    for r in bits(cur.rays) {
+                        // (A safe call: this function is compiled for AVX2 too.)
+                        let (t_enter, hit) = boxes[r].enter_avx2_packed(node, t_min, t_box[r]);
+                        t_near = _mm256_min_ps(t_near, _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t_enter, hit));
+                        let m = _mm256_movemask_ps(hit) as u32;
+                        union |= m;
+                        entered |= (m as u64) << (8 * r);
+                    }
                 }
                 if union != 0 {
                     let by_child = transpose8(entered);
@@ -198,7 +363,11 @@ impl BvhAccel {
                         let k = (key & 7) as usize;
                         stack[sp] = MaybeUninit::new(Entry {
                             child: node.child[k],
-                            rays: (by_child >> (8 * k)) as u32 & 0xFF,
+                            rays: if interval.is_some() {
+                                cur.rays
+                            } else {
+                                (by_child >> (8 * k)) as u32 & 0xFF
+                            },
                             t_enter: t_near_k[k],
                         });
                         sp += 1;

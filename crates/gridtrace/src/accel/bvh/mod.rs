@@ -144,7 +144,7 @@ impl BvhAccel {
     /// for nodes and triangles, one dependent load after another). The same answers either way.
     fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, mut finish: impl FnMut(usize, &Hit)) {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::simd::has_avx2() && rays.len() >= PACKET {
+        if crate::accel::simd::has_avx2() && rays.len() >= PACKET && coherent::packets_enabled() {
             let extent = self.extent();
             // Indices of the rays left to the interleaved walks (u32: a batch is cut into
             // work items far smaller than 2^32 rays; checked).

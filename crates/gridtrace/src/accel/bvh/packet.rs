@@ -72,7 +72,12 @@ impl BvhAccel {
         // Counting walks visit what the single walk visits (their counts are compared), so
         // only a walk that counts nothing may take the packet's route.
         #[cfg(target_arch = "x86_64")]
-        if !C::COUNTS && !rays.is_empty() && has_avx2() && super::coherent::coherent(rays, self.extent()) {
+        if !C::COUNTS
+            && !rays.is_empty()
+            && has_avx2()
+            && super::coherent::packets_enabled()
+            && super::coherent::coherent(rays, self.extent())
+        {
             // SAFETY: the CPU has AVX2, checked just above.
             let a = unsafe { self.walk_coherent::<ANY>(rays, t_min, t_max) };
             for (k, ray) in rays.iter().enumerate() {

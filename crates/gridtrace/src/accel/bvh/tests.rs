@@ -95,7 +95,7 @@ fn random_ray(rng: &mut crate::util::Rng) -> Ray {
 /// A node of random boxes (some flat, some points, some slots empty) and a random ray, most
 /// of the time aimed through the first box, with `t_min` and `t_max`.
 #[cfg(target_arch = "x86_64")]
-fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
+pub(super) fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
     let mut node = WideNode::EMPTY;
     for slot in 0..WIDTH - round % 3 {
         for a in 0..3 {

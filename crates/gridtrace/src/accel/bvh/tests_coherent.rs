@@ -286,3 +286,55 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
         }
     }
 }
+
+/// The packet's interval box test lets in every box any of its rays' own tests lets in, at
+/// an entry distance no later than that ray's: random nodes (flat, point and empty boxes),
+/// packets of rays near one ray (same direction signs, some components tiny or zero), every
+/// ray's own search distance.
+#[test]
+fn interval_test_is_conservative_ray_by_ray() {
+    use super::box_test::BoxRay;
+    use super::coherent::Interval;
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+        return;
+    }
+    let mut rng = Rng::new(0x1A7E);
+    let (mut entered, mut checked) = (0, 0);
+    for round in 0..20_000 {
+        let (node, ray, t_min, t_max) = super::tests::random_node_and_ray(&mut rng, round);
+        let spread = [1e-4, 1e-2, 0.3][round % 3];
+        let rays: Vec<Ray> = (0..PACKET)
+            .map(|k| {
+                let jitter =
+                    |rng: &mut Rng| Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                let o = ray.origin + jitter(&mut rng) * spread * (k > 0) as u32 as f32;
+                let mut d = ray.dir + jitter(&mut rng) * spread * (k > 0) as u32 as f32;
+                if round % 7 == 0 {
+                    d[k % 3] = 0.0;
+                }
+                Ray::new(o, d)
+            })
+            .collect();
+        let boxes: Vec<BoxRay> = rays.iter().map(BoxRay::new).collect();
+        let Some(iv) = Interval::new(&boxes) else { continue };
+        let reach: [f32; PACKET] = std::array::from_fn(|k| if k % 2 == 0 { t_max } else { t_max * 0.5 });
+        let widest = reach.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        // SAFETY: the CPU has AVX2, checked above.
+        let (t_iv, m_iv) = unsafe { iv.enter_for_test(&node, t_min, widest) };
+        for (k, b) in boxes.iter().enumerate() {
+            // SAFETY: as above.
+            let (t, m) = unsafe { b.enter_avx2(&node, t_min, reach[k]) };
+            assert_eq!(m & !m_iv, 0, "round {round}, ray {k}: a box the ray enters is culled");
+            for slot in super::coherent::bit_iter(m) {
+                assert!(t_iv[slot] <= t[slot], "round {round}, ray {k}, box {slot}: later entry");
+            }
+            entered += m.count_ones();
+            checked += 1;
+        }
+    }
+    assert!(
+        checked > 50_000 && entered > 50_000,
+        "{checked} rays, {entered} boxes entered"
+    );
+}
