@@ -3,15 +3,17 @@
 # ../shared/tools/device-vulkan.md). Here: `../shared/tools/device-prep.sh`, then
 # `cp scripts/gpu-run.sh .device/run.sh`, then compress the binary so that the working tree and
 # .device stay under the transfer's 64 MiB (`xz -6 .device/gridtrace`, which leaves
-# .device/gridtrace.xz), then the device tool's `run` with carry [".device"], command
+# .device/gridtrace.xz), `cp scripts/cpu-vs-embree.sh .device/` (step 2b), then the device
+# tool's `run` with carry [".device"], command
 # `bash .device/run.sh` and timeout_s 600. Every step starts only while the deadline allows
 # (DEADLINE seconds, default 565), so the results of the steps that ran come back.
 #
 # The steps, most important first: the hardware suite (every structure x GPU variant, ray
 # batches, grid builds; hardware.md/json), 1M-ray batches beside Embree 3 on the same rays
-# (rays.txt), the paper matrix on the GPU and the CPU cores (paper.md/json), a 1080p camera
-# orbit and an animated mesh (summary.txt). The ray batches' lines give the bytes a ray each
-# way and the host's phases (prepare, wait, readout) of the pipelined chunks. The first H200 runs (2026-11-26) used it; their
+# (rays.txt), the CPU BVH's scaling at 1-16 threads beside Embree (cpu-scaling.md), the paper
+# matrix on the GPU and the CPU cores (paper.md/json), a 1080p camera orbit and an animated mesh
+# (summary.txt). The ray batches' lines give the bytes a ray each way and the host's phases
+# (prepare, wait, readout) of the pipelined chunks. The first H200 runs (2026-11-26) used it; their
 # output is under docs/results/h200-2026-11-26*. LOCAL=1 QUICK=1 runs it on this machine's
 # lavapipe for a check of the script (no packages unpacked, the suite's --quick plan).
 set -u
@@ -68,6 +70,16 @@ for mesh in bunny/bun_zipper.ply dragon/dragon_vrip_binary.ply; do
   done
 done
 cat "$r" >> "$log"
+
+say "== 2b. CPU BVH beside Embree 3 at 1-16 threads (eye 512x512, camera 1M, random 1M; Bunny) [left $(left)s]"
+if [ -f cpu-vs-embree.sh ] && [ "$(left)" -gt 200 ]; then
+  ths="1 2 4 8 16"; reps=2; [ -n "${QUICK:-}" ] && { ths="1 2"; reps=1; }
+  WORK=/tmp/cve timeout $(( $(left) - 150 )) bash cpu-vs-embree.sh "$M/bunny/bun_zipper.ply" "$B" "$PWD/embree_rays" "$ths" $reps \
+    > "$out/cpu-scaling.md" 2>&1; say "cpu-vs-embree exit $?"
+  cat "$out/cpu-scaling.md" >> "$log"
+else
+  say "skipped: no cpu-vs-embree.sh beside the run script, or the deadline"
+fi
 
 l=$(left); say "== 1. paper matrix, GPU and CPU [left ${l}s]"
 if [ "$l" -gt 70 ]; then

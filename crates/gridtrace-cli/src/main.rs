@@ -21,6 +21,10 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// CPU threads for the work (ray batches, renders, builds); default: one per core. To
+    /// measure scaling, or to share the machine.
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
 }
 
 #[derive(Subcommand)]
@@ -91,6 +95,13 @@ fn ensure_runtime_dir() {}
 fn main() {
     ensure_runtime_dir();
     let cli = Cli::parse();
+    if let Some(n) = cli.threads {
+        // Before any parallel work: the global pool is built once, on first use.
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.into()).build_global() {
+            eprintln!("error: --threads {n}: could not start the thread pool: {e}");
+            std::process::exit(1);
+        }
+    }
     let result = match cli.command {
         // `render --animate` is its own loop (a structure update per frame), on the same options.
         Command::Render(a) if a.animate => animate::run(&a),

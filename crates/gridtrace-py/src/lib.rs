@@ -5,6 +5,9 @@ use std::path::PathBuf;
 
 mod scene;
 mod stats;
+mod threads;
+
+use threads::on_threads;
 
 use std::sync::RwLock;
 
@@ -157,8 +160,9 @@ impl NativeMesh {
         Ok(py.detach(|| self.mesh().device_for(b)))
     }
 
-    /// Returns (t, tri, u, v, normal) as numpy arrays.
-    #[allow(clippy::type_complexity)]
+    /// Returns (t, tri, u, v, normal) as numpy arrays. `threads`: CPU threads (0: all cores).
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    #[pyo3(signature = (origins, directions, t_min, t_max, backend, threads = 0))]
     fn intersect<'py>(
         &self,
         py: Python<'py>,
@@ -167,6 +171,7 @@ impl NativeMesh {
         t_min: f32,
         t_max: f32,
         backend: &str,
+        threads: usize,
     ) -> PyResult<(
         Bound<'py, PyArray1<f32>>,
         Bound<'py, PyArray1<u32>>,
@@ -176,7 +181,7 @@ impl NativeMesh {
     )> {
         let (b, o, d) = batch(backend, &origins, &directions)?;
         let hits = py
-            .detach(|| self.mesh().intersect_with(b, o, d, t_min, t_max))
+            .detach(|| on_threads(threads, || self.mesh().intersect_with(b, o, d, t_min, t_max)))?
             .map_err(to_py)?;
         let n = hits.len();
         // The same allocation, seen as 3n floats: no copy (12 bytes a ray, in fresh pages).
@@ -191,6 +196,8 @@ impl NativeMesh {
         ))
     }
 
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (origins, directions, t_min, t_max, backend, threads = 0))]
     fn occluded<'py>(
         &self,
         py: Python<'py>,
@@ -199,10 +206,11 @@ impl NativeMesh {
         t_min: f32,
         t_max: f32,
         backend: &str,
+        threads: usize,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let (b, o, d) = batch(backend, &origins, &directions)?;
         let occ = py
-            .detach(|| self.mesh().occluded_with(b, o, d, t_min, t_max))
+            .detach(|| on_threads(threads, || self.mesh().occluded_with(b, o, d, t_min, t_max)))?
             .map_err(to_py)?;
         Ok(occ.into_pyarray(py))
     }

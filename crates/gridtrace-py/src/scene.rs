@@ -16,7 +16,7 @@ use pyo3::types::PyDict;
 
 use gridtrace::query_scene::{Geometry, QueryScene};
 
-use crate::{options, to_py};
+use crate::{on_threads, options, to_py};
 
 /// An (N, K) C-contiguous, aligned float32 or uint32 array as a slice of rows, without
 /// copying. The Python side makes arrays so (`np.require(..., requirements="CA")`): arrays
@@ -207,9 +207,18 @@ impl NativeScene {
         py.detach(|| self.read().accel_name()).map_err(to_py)
     }
 
-    fn cast_rays<'py>(&self, py: Python<'py>, rays: PyReadonlyArray2<'py, f32>) -> PyResult<Bound<'py, PyDict>> {
+    /// `nthreads`: CPU threads (0: all cores), as Open3D's.
+    #[pyo3(signature = (rays, nthreads = 0))]
+    fn cast_rays<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+        nthreads: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
-        let h = py.detach(|| self.read().cast_rays(r)).map_err(to_py)?;
+        let h = py
+            .detach(|| on_threads(nthreads, || self.read().cast_rays(r)))?
+            .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("t_hit", h.t_hit.into_pyarray(py))?;
         d.set_item("geometry_ids", h.geometry_ids.into_pyarray(py))?;
@@ -219,16 +228,18 @@ impl NativeScene {
         Ok(d)
     }
 
+    #[pyo3(signature = (rays, tnear, tfar, nthreads = 0))]
     fn test_occlusions<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
         tnear: f32,
         tfar: f32,
+        nthreads: usize,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
         let o = py
-            .detach(|| self.read().test_occlusions(r, tnear, tfar))
+            .detach(|| on_threads(nthreads, || self.read().test_occlusions(r, tnear, tfar)))?
             .map_err(to_py)?;
         Ok(o.into_pyarray(py))
     }
@@ -262,13 +273,17 @@ impl NativeScene {
         Ok(d)
     }
 
+    #[pyo3(signature = (points, nthreads = 0))]
     fn compute_closest_points<'py>(
         &self,
         py: Python<'py>,
         points: PyReadonlyArray2<'py, f32>,
+        nthreads: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let p = rows::<f32, 3>(&points, "query_points")?;
-        let c = py.detach(|| self.read().compute_closest_points(p)).map_err(to_py)?;
+        let c = py
+            .detach(|| on_threads(nthreads, || self.read().compute_closest_points(p)))?
+            .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("points", rows_out(py, c.points)?)?;
         d.set_item("geometry_ids", c.geometry_ids.into_pyarray(py))?;

@@ -3,6 +3,7 @@
 //! the batch queries and packets of one to eight rays agree with the per-ray ones.
 
 use glam::Vec3;
+use gridtrace::Ray;
 use gridtrace::accel::{
     Accel, AccelKind, Grid, Hit, NoCounters, PACKET, Resolution, TraversalCounters, TriAccel, brute_force_intersect,
     brute_force_occluded,
@@ -165,6 +166,38 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             assert!(got[n..].iter().all(|h| !h.is_hit()) && !blocked[n..].iter().any(|&b| b));
             at += n;
             len = len % PACKET + 1;
+        }
+        // Coherent packets (a ray and seven companions from its origin, directions a little
+        // apart: the route of camera rays, the BVH's packet walk), nothing counted, and the same
+        // rays as a batch (whose groups of eight then look coherent): the single walk's
+        // answers, bit for bit.
+        let coherent: Vec<Ray> = rays
+            .iter()
+            .step_by(8)
+            .filter(|r| r.origin.is_finite() && r.dir.is_finite() && r.dir != Vec3::ZERO)
+            .flat_map(|r| {
+                let side = r.dir.any_orthonormal_vector() * r.dir.length() * 2e-3;
+                (0..PACKET).map(move |j| Ray::new(r.origin, r.dir + side * j as f32))
+            })
+            .collect();
+        let bits = |h: &Hit| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits());
+        let mut batch = vec![Hit::MISS; coherent.len()];
+        accel.intersect_batch(&coherent, 0.0, f32::INFINITY, kind, &mut batch);
+        let mut occ_batch = vec![false; coherent.len()];
+        accel.occluded_batch(&coherent, 0.0, 1.0, kind, &mut occ_batch);
+        for (p, packet) in coherent.chunks(PACKET).enumerate() {
+            let mut none = [NoCounters; PACKET];
+            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, kind, &mut none);
+            let blocked = accel.occluded_packet(packet, 0.0, [1.0; PACKET], kind, &mut none);
+            for (k, r) in packet.iter().enumerate() {
+                let want = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let what = format!("{name} {}: coherent packet {p}, ray {k}, {r:?}", kind.name());
+                assert_eq!(bits(&got[k]), bits(&want), "{what}");
+                assert_eq!(bits(&batch[PACKET * p + k]), bits(&want), "{what} (batch)");
+                let want = accel.occluded(r, 0.0, 1.0, kind, &mut NoCounters);
+                assert_eq!(blocked[k], want, "{what}: any hit");
+                assert_eq!(occ_batch[PACKET * p + k], want, "{what}: any hit (batch)");
+            }
         }
         assert!(
             bad.is_empty(),

@@ -184,25 +184,26 @@ class Mesh:
         """Where queries run: ``"cpu (N threads)"`` or the GPU adapter's name and driver."""
         return self._native.device(backend or self._backend)
 
-    def intersect(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None) -> Hits:
+    def intersect(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None, threads: int = 0) -> Hits:
         """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max``.
 
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
         a single point (3,) used for every ray. Directions need not be normalised. On the CPU the
         irregular grid traces coherent rays (a camera's rays in image order, or their shadow rays
         towards a light: neighbouring origins and directions) eight at a time, faster than the same
-        rays in another order; the answers are the same.
+        rays in another order; the answers are the same. ``threads``: CPU threads (0: all cores).
         """
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
-        return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend))
+        return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend, int(threads)))
 
-    def occluded(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None) -> np.ndarray:
+    def occluded(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None, threads: int = 0) -> np.ndarray:
         """Whether each ray hits anything with ``t_min < t < t_max`` (boolean array). Coherent rays
-        in order go faster through the irregular grid, as for ``intersect``."""
+        in order go faster through the irregular grid, as for ``intersect``. ``threads``: CPU
+        threads (0: all cores)."""
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
-        return self._native.occluded(o, d, t_min, t_max, backend or self._backend)
+        return self._native.occluded(o, d, t_min, t_max, backend or self._backend, int(threads))
 
 
 def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "", stats: bool = False):

@@ -165,17 +165,18 @@ class Scene:
         """The closest hit of each ray (``rays``: ``[..., 6]``) with ``t > 0``: a dict of
         ``t_hit`` ``[...]`` float32, ``geometry_ids`` and ``primitive_ids`` ``[...]`` uint32,
         ``primitive_uvs`` ``[..., 2]`` and ``primitive_normals`` ``[..., 3]`` float32.
-        ``nthreads`` is accepted for Open3D's signature; all cores are used."""
+        ``nthreads``: CPU threads (0: all cores), as Open3D's."""
         flat, lead = _batch(rays, "rays", 6)
-        return _shaped(_chunked(flat, self._native.cast_rays), lead)
+        return _shaped(_chunked(flat, lambda r: self._native.cast_rays(r, int(nthreads))), lead)
 
     def test_occlusions(self, rays, tnear: float = 0.0, tfar: float = math.inf, nthreads: int = 0) -> np.ndarray:
-        """Whether each ray hits anything with ``tnear < t < tfar``: a bool array ``[...]``."""
+        """Whether each ray hits anything with ``tnear < t < tfar``: a bool array ``[...]``.
+        ``nthreads``: CPU threads (0: all cores)."""
         flat, lead = _batch(rays, "rays", 6)
         tnear, tfar = float(tnear), float(tfar)
         if math.isnan(tnear) or math.isnan(tfar) or tnear < 0 or tnear > tfar:
             raise ValueError(f"need 0 <= tnear <= tfar, got tnear={tnear}, tfar={tfar}")
-        call = lambda r: {"o": self._native.test_occlusions(r, tnear, tfar)}  # noqa: E731
+        call = lambda r: {"o": self._native.test_occlusions(r, tnear, tfar, int(nthreads))}  # noqa: E731
         return _chunked(flat, call)["o"].reshape(lead)
 
     def count_intersections(self, rays, nthreads: int = 0) -> np.ndarray:
@@ -212,9 +213,9 @@ class Scene:
     def compute_closest_points(self, query_points, nthreads: int = 0) -> Dict[str, np.ndarray]:
         """The nearest point of the scene to each point (``[..., 3]``): ``points`` ``[..., 3]``,
         ``geometry_ids``, ``primitive_ids``, ``primitive_uvs`` ``[..., 2]``,
-        ``primitive_normals`` ``[..., 3]``."""
+        ``primitive_normals`` ``[..., 3]``. ``nthreads``: CPU threads (0: all cores)."""
         flat, lead = _batch(query_points, "query_points", 3)
-        return _shaped(_chunked(flat, self._native.compute_closest_points), lead)
+        return _shaped(_chunked(flat, lambda p: self._native.compute_closest_points(p, int(nthreads))), lead)
 
     def compute_distance(self, query_points, nthreads: int = 0) -> np.ndarray:
         """The distance from each point to the scene (float32 ``[...]``)."""

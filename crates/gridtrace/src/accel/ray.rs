@@ -45,6 +45,10 @@ impl Hit {
 /// Traversal counters. The no-op implementation compiles to nothing, so the hot loop pays for
 /// statistics only when they are asked for.
 pub trait Counters {
+    /// Whether these counters count: a walk that counts must visit what the single-ray walk
+    /// visits (the counts are compared), one that does not may take another route to the same
+    /// answers (the BVH's coherent packets).
+    const COUNTS: bool = true;
     fn cell(&mut self) {}
     fn jump(&mut self) {}
     fn tri_test(&mut self) {}
@@ -53,7 +57,9 @@ pub trait Counters {
 /// Counters that cost nothing.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct NoCounters;
-impl Counters for NoCounters {}
+impl Counters for NoCounters {
+    const COUNTS: bool = false;
+}
 
 /// Counters that count.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]

@@ -503,10 +503,25 @@ impl TraceMesh {
             backend,
             |g| on_gpu(&mut locked(g)),
             || {
-                let mut out = vec![fill; rays.len()];
-                out.par_chunks_mut(CPU_BATCH)
+                // Allocated, not filled: each work item fills its own piece first, so the
+                // pages are touched (faulted in) by the workers, in parallel, not by this
+                // thread before them (`vec![fill; n]` is a serial pass over the whole output).
+                let n = rays.len();
+                let mut out: Vec<T> = Vec::with_capacity(n);
+                out.spare_capacity_mut()[..n]
+                    .par_chunks_mut(CPU_BATCH)
                     .zip(rays.par_chunks(CPU_BATCH))
-                    .for_each(|(o, r)| on_cpu(r, o));
+                    .for_each(|(o, r)| {
+                        for x in o.iter_mut() {
+                            x.write(fill);
+                        }
+                        // SAFETY: every element of `o` was written just above; `T: Copy`,
+                        // so `MaybeUninit<T>` and `T` have the same layout and nothing drops.
+                        let o = unsafe { &mut *(o as *mut [std::mem::MaybeUninit<T>] as *mut [T]) };
+                        on_cpu(r, o)
+                    });
+                // SAFETY: the chunks above cover `0..n` and each was written in full.
+                unsafe { out.set_len(n) };
                 Ok(out)
             },
         )

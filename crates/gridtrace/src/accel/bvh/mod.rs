@@ -17,18 +17,22 @@ use rayon::prelude::*;
 
 use super::huge::HugePageArray;
 use super::triangle::slack_pad;
-use super::{Aabb, Counters, Hit, Ray, TriAccel, TriAccel4};
+use super::{Aabb, Counters, Hit, PACKET, Ray, TriAccel, TriAccel4};
 
 mod all_hits;
 mod box_test;
 mod build;
 mod closest;
+#[cfg(target_arch = "x86_64")]
+mod coherent;
 mod interleave;
 mod packet;
 mod refit;
 mod structure;
 #[cfg(test)]
 mod tests;
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests_coherent;
 #[cfg(test)]
 mod tests_queries;
 mod walk;
@@ -92,7 +96,7 @@ impl BvhAccel {
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         let mut w = Walk::new(ray, t_min, t_max);
         self.walk::<false, C>(&mut w, counters);
-        self.result(&w)
+        self.result(&w.best)
     }
 
     /// Any hit with `t_min < t < t_max`.
@@ -103,12 +107,9 @@ impl BvhAccel {
     }
 
     /// Closest hits of a batch of rays, `out[i]` for `rays[i]`: the same answers as `intersect`,
-    /// faster. Incoherent rays spend most of their time waiting for nodes and triangles to come
-    /// from memory, one dependent load after another. Here `LANES` rays are traced at once,
-    /// one step each in turn, and each step prefetches what its ray touches next: by the time
-    /// that ray's turn comes again its data has arrived.
+    /// faster (`traced`).
     pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
-        self.interleaved::<false>(rays, t_min, t_max, |i, w| out[i] = self.result(w));
+        self.traced::<false>(rays, t_min, t_max, |i, best| out[i] = self.result(best));
     }
 
     /// Closest hits of a batch handed to `f(i, hit, normal)` as each ray `rays[i]` is done, in
@@ -118,20 +119,65 @@ impl BvhAccel {
     /// an intermediate array.
     #[inline]
     pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: f32, mut f: impl FnMut(usize, Hit, Vec3)) {
-        self.interleaved::<false>(rays, t_min, t_max, |i, w| {
-            let normal = if w.best.is_hit() {
-                let tri = w.best.tri as usize;
+        self.traced::<false>(rays, t_min, t_max, |i, best| {
+            let normal = if best.is_hit() {
+                let tri = best.tri as usize;
                 self.blocks[tri / LEAF_BLOCK].normal(tri % LEAF_BLOCK)
             } else {
                 Vec3::ZERO
             };
-            f(i, self.result(w), normal)
+            f(i, self.result(best), normal)
         });
     }
 
-    /// Any-hit results of a batch of rays (interleaved like `intersect_batch`).
+    /// Any-hit results of a batch of rays (as `intersect_batch`).
     pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
-        self.interleaved::<true>(rays, t_min, t_max, |i, w| out[i] = w.best.is_hit());
+        self.traced::<true>(rays, t_min, t_max, |i, best| out[i] = best.is_hit());
+    }
+
+    /// Traces a batch, handing each ray's walk result (`Walk::best`) to `finish(i, best)`.
+    /// Rays come in groups of `PACKET` consecutive ones: a group that looks coherent
+    /// (`coherent::coherent`: a camera's or a sensor's neighbouring rays) is walked as one
+    /// packet (`coherent.rs`); the other rays are walked one by one, `LANES` of them
+    /// interleaved, each step prefetching what its ray touches next, so that one ray's wait
+    /// for memory overlaps the others' work (incoherent rays spend most of their time waiting
+    /// for nodes and triangles, one dependent load after another). The same answers either way.
+    fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, mut finish: impl FnMut(usize, &Hit)) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::simd::has_avx2() && rays.len() >= PACKET && coherent::packets_enabled() {
+            let extent = self.extent();
+            // Indices of the rays left to the interleaved walks (u32: a batch is cut into
+            // work items far smaller than 2^32 rays; checked).
+            let mut rest: Vec<u32> = Vec::new();
+            for (g, group) in rays.chunks(PACKET).enumerate() {
+                let start = g * PACKET;
+                if group.len() == PACKET && coherent::coherent(group, extent) {
+                    // SAFETY: the CPU has AVX2, checked above.
+                    let a = unsafe { self.walk_coherent::<ANY>(group, t_min, [t_max; PACKET]) };
+                    for (k, best) in a.best.iter().enumerate() {
+                        if a.redo >> k & 1 != 0 {
+                            finish(start + k, &self.walk_best::<ANY>(&group[k], t_min, t_max));
+                        } else {
+                            finish(start + k, best);
+                        }
+                    }
+                } else {
+                    let end = u32::try_from(start + group.len()).expect("a CPU batch under 2^32 rays");
+                    rest.extend(start as u32..end);
+                }
+            }
+            let rest = rest.iter().map(|&i| (i as usize, &rays[i as usize]));
+            return self.interleaved::<ANY>(rest, t_min, t_max, |i, w| finish(i, &w.best));
+        }
+        self.interleaved::<ANY>(rays.iter().enumerate(), t_min, t_max, |i, w| finish(i, &w.best))
+    }
+
+    /// One ray's single walk, its result as `Walk::best` (a packet's ray with a tie).
+    #[cfg(target_arch = "x86_64")]
+    fn walk_best<const ANY: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> Hit {
+        let mut w = Walk::new(ray, t_min, t_max);
+        self.walk::<ANY, _>(&mut w, &mut crate::accel::NoCounters);
+        w.best
     }
 
     /// Bytes of the nodes, the triangle blocks and the index map.

@@ -1,15 +1,17 @@
-//! Up to eight coherent rays (a 4x2 block of pixels' rays) walked side by side: each ray's own
-//! walk, one step each in turn, with the next node or leaf prefetched, as the batch queries do
-//! (`walk.rs`, `interleaved`).
+//! Up to eight rays (a 4x2 block of pixels' rays, or their shadow or mirror rays) traced at
+//! once, two ways, the same answers either way:
 //!
-//! Why not a packet walk as the irregular grid's (one node for all rays, the rays in SIMD
-//! lanes)? A wide node already fills the SIMD lanes with its eight children, so a packet would
-//! not save arithmetic: eight rays against a node's eight boxes is 64 slab tests either way.
-//! What one ray cannot do is overlap its own steps: each waits for the node it just chose (a
-//! chain of dependent loads, box tests and the sort of the entered children). Eight rays'
-//! chains are independent, and the out-of-order core overlaps them when they are interleaved.
-//! Each ray keeps its own stack, order and answer: the hits and counts are the single-ray
-//! walk's, bit for bit.
+//! - Coherent rays with nothing counted go as one packet (`coherent.rs`): one stack, one visit
+//!   of each node with a box test per ray, one sort of the children for all, a triangle tested
+//!   against all the rays at once. Coherence is a cheap guess (`coherent::coherent`); only
+//!   speed depends on it.
+//! - Otherwise each ray walks on its own stack and the walks run interleaved, one step each in
+//!   turn, with the next node or leaf prefetched, as the incoherent batch queries do (`walk.rs`,
+//!   `interleaved`): one ray cannot overlap its own steps, each waiting for the node it just
+//!   chose, but eight rays' chains are independent and the out-of-order core overlaps them.
+//!   Each ray keeps its own stack, order and answer, so the hits and the counts are the single
+//!   walk's, bit for bit: the route a counting walk (`Counters::COUNTS`) must take, since its
+//!   counts are compared with the single walk's.
 
 use std::mem::MaybeUninit;
 
@@ -31,7 +33,9 @@ impl BvhAccel {
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         let mut hits = [Hit::MISS; PACKET];
-        self.packet::<false, C>(rays, t_min, [t_max; PACKET], counters, |i, w| hits[i] = self.result(w));
+        self.packet::<false, C>(rays, t_min, [t_max; PACKET], counters, |i, best| {
+            hits[i] = self.result(best)
+        });
         hits
     }
 
@@ -46,24 +50,45 @@ impl BvhAccel {
         counters: &mut [C],
     ) -> [bool; PACKET] {
         let mut hits = [false; PACKET];
-        self.packet::<true, C>(rays, t_min, t_max, counters, |i, w| hits[i] = w.best.is_hit());
+        self.packet::<true, C>(rays, t_min, t_max, counters, |i, best| hits[i] = best.is_hit());
         hits
     }
 
-    /// Walks the rays interleaved, compiled for AVX2 where the CPU has it (as `walk`), and hands
-    /// each finished walk to `finish(i, walk)`.
+    /// Walks the rays as one packet where they look coherent and nothing is counted
+    /// (`coherent.rs`), else interleaved, compiled for AVX2 where the CPU has it (as `walk`),
+    /// and hands each ray's result (`Walk::best`) to `finish(i, best)`.
     fn packet<const ANY: bool, C: Counters>(
         &self,
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
         counters: &mut [C],
-        finish: impl FnMut(usize, &Walk),
+        mut finish: impl FnMut(usize, &Hit),
     ) {
         assert!(
             rays.len() <= PACKET && counters.len() == rays.len(),
             "a packet is up to {PACKET} rays, a counter each"
         );
+        // Counting walks visit what the single walk visits (their counts are compared), so
+        // only a walk that counts nothing may take the packet's route.
+        #[cfg(target_arch = "x86_64")]
+        if !C::COUNTS
+            && !rays.is_empty()
+            && has_avx2()
+            && super::coherent::packets_enabled()
+            && super::coherent::coherent(rays, self.extent())
+        {
+            // SAFETY: the CPU has AVX2, checked just above.
+            let a = unsafe { self.walk_coherent::<ANY>(rays, t_min, t_max) };
+            for (k, ray) in rays.iter().enumerate() {
+                if a.redo >> k & 1 != 0 {
+                    finish(k, &self.walk_best::<ANY>(ray, t_min, t_max[k]));
+                } else {
+                    finish(k, &a.best[k]);
+                }
+            }
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if has_avx2() {
             // SAFETY: the CPU has AVX2, checked just above.
@@ -80,7 +105,7 @@ impl BvhAccel {
         t_min: f32,
         t_max: [f32; PACKET],
         counters: &mut [C],
-        finish: impl FnMut(usize, &Walk),
+        finish: impl FnMut(usize, &Hit),
     ) {
         self.packet_body::<ANY, true, C>(rays, t_min, t_max, counters, finish)
     }
@@ -92,7 +117,7 @@ impl BvhAccel {
         t_min: f32,
         t_max: [f32; PACKET],
         counters: &mut [C],
-        mut finish: impl FnMut(usize, &Walk),
+        mut finish: impl FnMut(usize, &Hit),
     ) {
         let n = rays.len();
         // Only the walks in use are set up (a walk's stack is left uninitialised, `Walk`).
@@ -112,7 +137,7 @@ impl BvhAccel {
                 left &= left - 1;
                 let w = &mut walks[i];
                 if w.step::<ANY, AVX, C>(self, &mut counters[i]) {
-                    finish(i, w);
+                    finish(i, &w.best);
                     live &= !(1 << i);
                 } else {
                     self.prefetch(&w.current);

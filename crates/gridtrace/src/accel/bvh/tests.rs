@@ -95,7 +95,7 @@ fn random_ray(rng: &mut crate::util::Rng) -> Ray {
 /// A node of random boxes (some flat, some points, some slots empty) and a random ray, most
 /// of the time aimed through the first box, with `t_min` and `t_max`.
 #[cfg(target_arch = "x86_64")]
-fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
+pub(super) fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
     let mut node = WideNode::EMPTY;
     for slot in 0..WIDTH - round % 3 {
         for a in 0..3 {
@@ -253,12 +253,12 @@ fn avx_and_baseline_traversals_agree() {
     let rays: Vec<Ray> = (0..20_000).map(|_| random_ray(&mut rng)).collect();
     let closest = |avx: bool| {
         let mut out = vec![Hit::MISS; rays.len()];
-        let finish = |i: usize, w: &Walk| out[i] = accel.result(w);
+        let finish = |i: usize, w: &Walk| out[i] = accel.result(&w.best);
         if avx {
             // SAFETY: the CPU has AVX2, checked above.
-            unsafe { accel.interleaved_avx2::<false>(&rays, 0.0, f32::INFINITY, finish) }
+            unsafe { accel.interleaved_avx2::<false>(rays.iter().enumerate(), 0.0, f32::INFINITY, finish) }
         } else {
-            accel.interleaved_body::<false, false>(&rays, 0.0, f32::INFINITY, finish)
+            accel.interleaved_body::<false, false>(rays.iter().enumerate(), 0.0, f32::INFINITY, finish)
         }
         out
     };
@@ -267,9 +267,9 @@ fn avx_and_baseline_traversals_agree() {
         let finish = |i: usize, w: &Walk| out[i] = w.best.is_hit();
         if avx {
             // SAFETY: the CPU has AVX2, checked above.
-            unsafe { accel.interleaved_avx2::<true>(&rays, 0.0, 1.0, finish) }
+            unsafe { accel.interleaved_avx2::<true>(rays.iter().enumerate(), 0.0, 1.0, finish) }
         } else {
-            accel.interleaved_body::<true, false>(&rays, 0.0, 1.0, finish)
+            accel.interleaved_body::<true, false>(rays.iter().enumerate(), 0.0, 1.0, finish)
         }
         out
     };

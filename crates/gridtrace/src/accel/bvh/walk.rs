@@ -35,9 +35,10 @@ impl BvhAccel {
     /// AVX instructions, `BoxRay::enter_avx2`), else the baseline build. Both give the same
     /// bits: IEEE arithmetic rounds the same at any vector width, and Rust never fuses
     /// multiply-adds on its own.
-    pub(super) fn interleaved<const ANY: bool>(
+    /// `rays` yields each ray with its index in the batch (handed back to `finish`).
+    pub(super) fn interleaved<'r, const ANY: bool>(
         &self,
-        rays: &[Ray],
+        rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
         t_max: f32,
         finish: impl FnMut(usize, &Walk),
@@ -52,9 +53,9 @@ impl BvhAccel {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    pub(super) fn interleaved_avx2<const ANY: bool>(
+    pub(super) fn interleaved_avx2<'r, const ANY: bool>(
         &self,
-        rays: &[Ray],
+        rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
         t_max: f32,
         finish: impl FnMut(usize, &Walk),
@@ -63,9 +64,9 @@ impl BvhAccel {
     }
 
     #[inline(always)]
-    pub(super) fn interleaved_body<const ANY: bool, const AVX: bool>(
+    pub(super) fn interleaved_body<'r, const ANY: bool, const AVX: bool>(
         &self,
-        rays: &[Ray],
+        rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
         t_max: f32,
         mut finish: impl FnMut(usize, &Walk),
@@ -74,7 +75,7 @@ impl BvhAccel {
         // is never copied.
         let idle = Ray::new(Vec3::ZERO, Vec3::X);
         let mut walks: [Walk; LANES] = std::array::from_fn(|_| Walk::new(&idle, t_min, t_max));
-        let mut rays_left = rays.iter().enumerate();
+        let mut rays_left = rays;
         interleave(
             &mut walks,
             |w, done| {
@@ -110,11 +111,13 @@ impl BvhAccel {
         prefetch(at.wrapping_add(192));
     }
 
-    pub(super) fn result(&self, w: &Walk) -> Hit {
-        if w.best.is_hit() {
+    /// A walk's closest hit (`Walk::best`, `tri` a block lane) as the query answers it (`tri`
+    /// the input index).
+    pub(super) fn result(&self, best: &Hit) -> Hit {
+        if best.is_hit() {
             Hit {
-                tri: self.lane_prims[w.best.tri as usize],
-                ..w.best
+                tri: self.lane_prims[best.tri as usize],
+                ..*best
             }
         } else {
             Hit::MISS

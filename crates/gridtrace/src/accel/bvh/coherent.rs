@@ -1,0 +1,459 @@
+//! Coherent rays walked through the wide BVH as one packet (Wald et al. 2001's packets on an
+//! eight-wide tree, as Embree's hybrid traversal): up to eight rays share one stack, one visit
+//! of each node and one order of its children, and a leaf's triangles are tested a triangle
+//! at a time against all the rays at once (the triangle in every lane, a ray per lane).
+//!
+//! Why, where the interleaved walks (`walk.rs`) already overlap eight rays' memory waits:
+//! coherent rays (a camera's, a sensor's, shadow rays towards one light) find their nodes in
+//! cache, so what limits them is instructions, and most of a single walk's instructions per
+//! node are its own bookkeeping: the sort of the entered children, the stack writes, the pop
+//! and the interleaving's scheduling. Here each ray costs one box test per node (the same
+//! `BoxRay` arithmetic as its single walk) and the packet pays the sort and the stack once;
+//! a leaf costs one eight-lane triangle test per triangle instead of a four-lane test per
+//! block and ray.
+//!
+//! The answers are the single walk's, bit for bit. Each ray's box test is its single walk's,
+//! with its own `t_min` and its own search distance (`t_box` from its own closest hit so far),
+//! and each (ray, triangle) test is `intersect_lanes`, the same operations as the block test.
+//! A ray takes part in a child only if its own test entered the child's box, and is dropped
+//! from a pending child when its search distance falls below the packet's nearest entry
+//! distance for it; it may still visit nodes its single walk would have culled (the packet
+//! visits a node for every ray that entered its box, in the packet's order, not the ray's),
+//! which costs tests but cannot change a closest hit: the closest triangle is found by any
+//! conservative walk. What the order does decide is a tie: two triangles hit at the very same
+//! `t`, where the single walk keeps the one it met first. The packet walk therefore tests up
+//! to and including the current closest `t` and marks a ray that met an equal `t`; when that
+//! `t` is still its closest at the end, the ray is traced again by the single walk (rare: an
+//! exact tie, as a ray through a shared edge or vertex). Any-hit queries have no ties.
+
+use std::mem::MaybeUninit;
+
+use crate::accel::lanes::{F8, Lanes, Mask, load3, splat3};
+use crate::accel::{Hit, PACKET, Ray, intersect_lanes};
+use crate::util::set_bits as bits;
+
+use super::BvhAccel;
+use super::box_test::{BoxRay, DIR_TINY, FAR_SCALE, T_SLOP, sort8_avx2};
+use super::build::LEAF_BLOCK;
+use super::walk::STACK_LEN;
+use super::wide::{ChildRef, WIDTH, WideNode};
+
+/// A child pending on the packet's stack: the rays that entered its box, and the smallest of
+/// their entry distances (no ray in `rays` can hit anything in it nearer than that).
+#[derive(Clone, Copy)]
+struct Entry {
+    child: ChildRef,
+    rays: u32,
+    t_enter: f32,
+}
+
+/// What a packet walk found: per ray the closest hit (`tri` as in `Walk::best`: `4 * block +
+/// lane`) or, for any-hit queries, whether it hit; and the rays whose answer the single walk
+/// must give (an exact tie at the closest `t`, see the module's header).
+pub(super) struct PacketAnswers {
+    pub(super) best: [Hit; PACKET],
+    pub(super) redo: u32,
+}
+
+/// Whether a group of rays is worth walking as a packet: directions within a narrow cone and
+/// origins close together, relative to `extent` (the scene's size). A cheap guess, only ever a
+/// matter of speed: the packet walk gives every ray its single-walk answer whatever the rays.
+/// Camera and sensor rays of neighbouring pixels pass; random rays do not.
+pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
+    let Some(first) = rays.first() else { return false };
+    let d0 = first.dir;
+    // cos(8 degrees): camera rays of neighbouring pixels are well within it; the nodes near the
+    // leaves of rays further apart than that are mostly different.
+    const COS: f32 = 0.990;
+    let near = 0.02 * extent;
+    let len0_sq = d0.length_squared();
+    rays.iter().all(|r| {
+        let dot = r.dir.dot(d0);
+        dot > 0.0
+            && dot * dot >= COS * COS * r.dir.length_squared() * len0_sq
+            && (r.origin - first.origin).length_squared() <= near * near
+    })
+}
+
+/// Whether the queries may take the packet route: yes, unless the environment sets
+/// `GRIDTRACE_BVH_PACKETS=0` (read once), a switch for measuring the packets against the
+/// interleaved single walks in one build (docs/benchmarks.md). The answers are the same
+/// either way.
+pub(super) fn packets_enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("GRIDTRACE_BVH_PACKETS").is_none_or(|v| v != "0"))
+}
+
+/// Transposes an 8x8 bit matrix held row by row in bytes (bit `8 * r + c` to `8 * c + r`):
+/// the per-ray masks of entered children into the per-child masks of entering rays (Hacker's
+/// Delight, "transposing a bit matrix": three rounds of swapping blocks across the diagonal).
+#[inline(always)]
+pub(super) fn transpose8(mut x: u64) -> u64 {
+    let t = (x ^ (x >> 7)) & 0x00AA_00AA_00AA_00AA;
+    x ^= t ^ (t << 7);
+    let t = (x ^ (x >> 14)) & 0x0000_CCCC_0000_CCCC;
+    x ^= t ^ (t << 14);
+    let t = (x ^ (x >> 28)) & 0x0000_0000_F0F0_F0F0;
+    x ^ t ^ (t << 28)
+}
+
+/// Lane `lane` of a block's corner (or edge) vectors, in every lane of eight: one triangle
+/// against eight rays. (A function, not a closure: closures do not inherit `target_feature`.)
+#[inline(always)]
+fn lane_splat(c: &[glam::Vec4; 3], lane: usize) -> [F8; 3] {
+    splat3([c[0][lane], c[1][lane], c[2][lane]])
+}
+
+/// The box test of a whole packet whose rays go the same way along each axis (the same near
+/// and far planes): interval arithmetic over the rays' origins and inverse directions (Wald
+/// et al. 2006's interval culling, Reshetov et al. 2005's frusta). Conservative exactly, not
+/// just in real numbers: the slab distance `(plane - o) * inv` is computed with one subtract
+/// and one multiply, each rounding monotonically, so over the packet it is least (most) at an
+/// end of the origins' range and an end of the inverse directions' range; the bounds below
+/// take those ends, and every comparison after is monotone too. A box one ray's own test
+/// (`BoxRay::enter`) enters is thus entered here, at no later a distance.
+pub(super) struct Interval {
+    /// Per axis, the near and far plane arrays (as `BoxRay::near` / `far`, shared).
+    near: [usize; 3],
+    far: [usize; 3],
+    /// The origin coordinate giving the least near distance, and the greatest far one.
+    o_near: [f32; 3],
+    o_far: [f32; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+}
+
+impl Interval {
+    /// `None` where the rays' directions differ in sign along an axis.
+    #[cfg(test)]
+    pub(super) fn new(rays: &[BoxRay]) -> Option<Interval> {
+        let mut origin = [[0.0; PACKET]; 3];
+        let mut inv = [[0.0; PACKET]; 3];
+        let mut down = [0u32; 3];
+        for i in 0..PACKET {
+            let r = &rays[i.min(rays.len() - 1)];
+            for a in 0..3 {
+                origin[a][i] = r.origin[a];
+                inv[a][i] = r.inv_dir[a];
+                down[a] |= ((r.near[a] >= 3) as u32) << i;
+            }
+        }
+        Interval::from_lanes(&origin, &inv, down)
+    }
+
+    /// From a packet's rays in lanes (`PACKET` of them; lanes past the packet repeat a ray of
+    /// it): origins, inverse directions (`BoxRay::inv_dir`'s) and per axis the lanes going
+    /// down it. `None` where the rays' directions differ in sign along an axis.
+    #[inline(always)]
+    fn from_lanes(origin: &[[f32; PACKET]; 3], inv: &[[f32; PACKET]; 3], down: [u32; 3]) -> Option<Interval> {
+        const ALL: u32 = (1 << PACKET) - 1;
+        if down.iter().any(|&m| m != 0 && m != ALL) {
+            return None;
+        }
+        let lo = |v: &[f32; PACKET]| v.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+        let hi = |v: &[f32; PACKET]| v.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        let mut iv = Interval {
+            near: [0, 1, 2],
+            far: [3, 4, 5],
+            o_near: [0.0; 3],
+            o_far: [0.0; 3],
+            inv_lo: [0.0; 3],
+            inv_hi: [0.0; 3],
+        };
+        for a in 0..3 {
+            // Going up the axis a slab distance falls as the origin rises; going down, it
+            // rises with it. (As `BoxRay`: the high planes are the near ones going down.)
+            let up = down[a] == 0;
+            (iv.near[a], iv.far[a]) = if up { (a, 3 + a) } else { (3 + a, a) };
+            let (o_lo, o_hi) = (lo(&origin[a]), hi(&origin[a]));
+            (iv.o_near[a], iv.o_far[a]) = if up { (o_hi, o_lo) } else { (o_lo, o_hi) };
+            (iv.inv_lo[a], iv.inv_hi[a]) = (lo(&inv[a]), hi(&inv[a]));
+        }
+        Some(iv)
+    }
+
+    /// Entry distances (lower bounds over the rays) into the node's boxes within
+    /// `[t_min, t_max]`, `t_max` the greatest of the rays' search distances, and the entered
+    /// lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let mut t_enter = _mm256_set1_ps(t_min);
+        let mut t_exit = _mm256_set1_ps(f32::INFINITY);
+        for a in 0..3 {
+            // SAFETY: `near` and `far` index the six plane arrays (as `BoxRay`'s), each eight
+            // f32s (an unaligned load needs nothing more).
+            let (near, far) = unsafe {
+                let planes = n.planes.as_ptr() as *const [f32; WIDTH];
+                (
+                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
+                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
+                )
+            };
+            let (lo, hi) = (_mm256_set1_ps(self.inv_lo[a]), _mm256_set1_ps(self.inv_hi[a]));
+            let dn = _mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a]));
+            let df = _mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a]));
+            let t_near = _mm256_min_ps(_mm256_mul_ps(dn, lo), _mm256_mul_ps(dn, hi));
+            let t_far = _mm256_max_ps(_mm256_mul_ps(df, lo), _mm256_mul_ps(df, hi));
+            t_enter = _mm256_max_ps(t_enter, t_near);
+            t_exit = _mm256_min_ps(t_exit, t_far);
+        }
+        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
+        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
+    }
+
+    /// `enter` as arrays, for the tests.
+    #[cfg(test)]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn enter_for_test(&self, n: &WideNode, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
+        use std::arch::x86_64::*;
+        let (t, m) = self.enter(n, t_min, t_max);
+        let mut out = [0.0; WIDTH];
+        // SAFETY: `out` holds eight f32s.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t) };
+        (out, _mm256_movemask_ps(m) as u32)
+    }
+}
+
+#[cfg(test)]
+pub(super) use crate::util::set_bits as bit_iter;
+
+impl BvhAccel {
+    /// The scene's size, for `coherent`: the diagonal of the root's children's boxes.
+    pub(super) fn extent(&self) -> f32 {
+        match self.bvh.nodes.first() {
+            Some(root) => (glam::Vec3::from(root.max) - glam::Vec3::from(root.min)).length(),
+            None => 0.0,
+        }
+    }
+
+    /// Walks up to `PACKET` rays (`rays.len()`, at least one) as one packet: closest hits with
+    /// `t_min < t < t_max[i]`, or with `ANY` whether there is one.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 (`simd::has_avx2`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn walk_coherent<const ANY: bool>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: [f32; PACKET],
+    ) -> PacketAnswers {
+        use std::arch::x86_64::*;
+        let n = rays.len();
+        debug_assert!((1..=PACKET).contains(&n));
+        let all = (1u32 << n) - 1;
+        // Lanes past `n` repeat ray 0; they are in no mask, and their triangle tests run up
+        // to `t_min`, which no hit passes.
+        let ray = |i: usize| &rays[if i < n { i } else { 0 }];
+        let mut origin = [[0.0; PACKET]; 3];
+        let mut dir = [[0.0; PACKET]; 3];
+        for i in 0..PACKET {
+            for a in 0..3 {
+                origin[a][i] = ray(i).origin[a];
+                dir[a][i] = ray(i).dir[a];
+            }
+        }
+        // `BoxRay::new`'s inverse directions, eight at a time (IEEE division rounds the same in
+        // every lane): tiny components replaced by `DIR_TINY` with their sign first.
+        let mut inv = [[0.0; PACKET]; 3];
+        let mut down = [0u32; 3];
+        for a in 0..3 {
+            // SAFETY: AVX2 (the contract); the arrays hold eight f32s.
+            unsafe {
+                let d = _mm256_loadu_ps(dir[a].as_ptr());
+                let sign = _mm256_and_ps(d, _mm256_set1_ps(-0.0));
+                let tiny =
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(_mm256_set1_ps(-0.0), d), _mm256_set1_ps(DIR_TINY));
+                let safe = _mm256_blendv_ps(d, _mm256_or_ps(sign, _mm256_set1_ps(DIR_TINY)), tiny);
+                _mm256_storeu_ps(inv[a].as_mut_ptr(), _mm256_div_ps(_mm256_set1_ps(1.0), safe));
+                // `safe` is never zero: its sign bit says whether it is below zero.
+                down[a] = _mm256_movemask_ps(safe) as u32;
+            }
+        }
+        let interval = Interval::from_lanes(&origin, &inv, down);
+        // Each ray's own box test, for packets that go different ways (built only for them).
+        let boxes: Option<[BoxRay; PACKET]> = interval.is_none().then(|| {
+            std::array::from_fn(|i| BoxRay {
+                origin: [origin[0][i], origin[1][i], origin[2][i]],
+                inv_dir: [inv[0][i], inv[1][i], inv[2][i]],
+                near: std::array::from_fn(|a| (down[a] >> i & 1) as usize * 3 + a),
+                far: std::array::from_fn(|a| (down[a] >> i & 1 == 0) as usize * 3 + a),
+            })
+        });
+        let origin: [F8; 3] = load3(origin);
+        let dir: [F8; 3] = load3(dir);
+        let mut best: [Hit; PACKET] = std::array::from_fn(|i| Hit {
+            t: t_max[i],
+            ..Hit::MISS
+        });
+        // Per ray: boxes are searched up to `t_box` (its single walk's `t_far * T_SLOP`);
+        // triangles are tested up to `limit`: `t_max`, then just past the closest hit so far,
+        // so that a triangle at the same `t` is seen (a tie) rather than passed over.
+        let mut t_box: [f32; PACKET] = std::array::from_fn(|i| t_max[i] * T_SLOP);
+        let mut limit = t_max;
+        let mut tie_t = [f32::NAN; PACKET];
+        let mut live = all;
+        let mut stack: [MaybeUninit<Entry>; STACK_LEN] = [const { MaybeUninit::uninit() }; STACK_LEN];
+        let mut sp = 0;
+        let mut cur = Entry {
+            child: ChildRef::node(0),
+            rays: all,
+            t_enter: t_min,
+        };
+        'walk: loop {
+            let count = cur.child.count();
+            if count == 0 {
+                let node = &self.nodes[cur.child.index() as usize];
+                let mut entered = 0u64;
+                let mut union = 0u32;
+                let mut t_near = _mm256_set1_ps(f32::INFINITY);
+                if let Some(iv) = &interval {
+                    // One test for the packet: every ray its own test would let in is let in.
+                    let mut reach = f32::NEG_INFINITY;
+                    for r in bits(cur.rays) {
+                        reach = reach.max(t_box[r]);
+                    }
+                    let (t_enter, hit) = iv.enter(node, t_min, reach);
+                    t_near = _mm256_blendv_ps(t_near, t_enter, hit);
+                    union = _mm256_movemask_ps(hit) as u32;
+                } else if let Some(boxes) = &boxes {
+                    for r in bits(cur.rays) {
+                        // (A safe call: this function is compiled for AVX2 too.)
+                        let (t_enter, hit) = boxes[r].enter_avx2_packed(node, t_min, t_box[r]);
+                        t_near = _mm256_min_ps(t_near, _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t_enter, hit));
+                        let m = _mm256_movemask_ps(hit) as u32;
+                        union |= m;
+                        entered |= (m as u64) << (8 * r);
+                    }
+                }
+                if union != 0 {
+                    let by_child = transpose8(entered);
+                    // The entered children farthest first (`order_key`, as `push_entered_avx2`):
+                    // the nearest ends on top of the stack.
+                    let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+                    let t_bits = _mm256_max_epi32(_mm256_castps_si256(t_near), _mm256_setzero_si256());
+                    let hit_key = _mm256_or_si256(
+                        _mm256_and_si256(
+                            _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), t_bits),
+                            _mm256_set1_epi32(!7),
+                        ),
+                        slot,
+                    );
+                    let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
+                    let in_union = _mm256_cmpeq_epi32(
+                        _mm256_and_si256(
+                            _mm256_set1_epi32(union as i32),
+                            _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
+                        ),
+                        _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
+                    );
+                    let key = _mm256_blendv_epi8(miss_key, hit_key, in_union);
+                    let mut order = [0u32; WIDTH];
+                    let mut t_near_k = [0f32; WIDTH];
+                    // SAFETY: AVX2 (the contract); both arrays hold eight 32-bit values.
+                    unsafe {
+                        _mm256_storeu_si256(order.as_mut_ptr() as *mut __m256i, sort8_avx2(key));
+                        _mm256_storeu_ps(t_near_k.as_mut_ptr(), t_near);
+                    }
+                    for &key in &order[..union.count_ones() as usize] {
+                        let k = (key & 7) as usize;
+                        stack[sp] = MaybeUninit::new(Entry {
+                            child: node.child[k],
+                            rays: if interval.is_some() {
+                                cur.rays
+                            } else {
+                                (by_child >> (8 * k)) as u32 & 0xFF
+                            },
+                            t_enter: t_near_k[k],
+                        });
+                        sp += 1;
+                    }
+                }
+            } else {
+                let first = cur.child.index() as usize;
+                let mut testing = cur.rays;
+                for k in 0..count as usize {
+                    let block = &self.blocks[first + k / LEAF_BLOCK];
+                    let lane = k % LEAF_BLOCK;
+                    let tri = (
+                        &lane_splat(&block.v0, lane),
+                        &lane_splat(&block.e1, lane),
+                        &lane_splat(&block.e2, lane),
+                    );
+                    let lim = F8::select(
+                        <F8 as Lanes<8>>::Mask::from_bits(testing),
+                        F8::from_array(limit),
+                        F8::splat(t_min),
+                    );
+                    let h = intersect_lanes(tri, &origin, &dir, t_min, lim);
+                    let hits = h.mask() & testing;
+                    if hits == 0 {
+                        continue;
+                    }
+                    let (t, u, v) = (h.t.to_array(), h.u.to_array(), h.v.to_array());
+                    let id = (LEAF_BLOCK * (first + k / LEAF_BLOCK) + lane) as u32;
+                    for r in bits(hits) {
+                        if ANY {
+                            best[r] = Hit {
+                                t: t[r],
+                                tri: id,
+                                u: u[r],
+                                v: v[r],
+                            };
+                            live &= !(1 << r);
+                            testing &= !(1 << r);
+                        } else if t[r] < best[r].t {
+                            best[r] = Hit {
+                                t: t[r],
+                                tri: id,
+                                u: u[r],
+                                v: v[r],
+                            };
+                            // A hit has `t > t_min >= 0`: finite and positive, so the next
+                            // float up is the next bit pattern.
+                            limit[r] = f32::from_bits(t[r].to_bits() + 1);
+                            t_box[r] = t[r] * T_SLOP;
+                        } else {
+                            tie_t[r] = t[r];
+                        }
+                    }
+                    if ANY && live == 0 {
+                        break 'walk;
+                    }
+                }
+            }
+            // The nearest pending child that one of its rays can still hit something in.
+            loop {
+                if sp == 0 {
+                    break 'walk;
+                }
+                sp -= 1;
+                // SAFETY: entries below `sp` were written by a push.
+                let e = unsafe { stack[sp].assume_init() };
+                // SAFETY: AVX2 (the contract); `t_box` holds eight f32s.
+                let reach = unsafe {
+                    _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(
+                        _mm256_set1_ps(e.t_enter),
+                        _mm256_loadu_ps(t_box.as_ptr()),
+                    )) as u32
+                };
+                let rays = e.rays & live & reach;
+                if rays != 0 {
+                    cur = Entry { rays, ..e };
+                    break;
+                }
+            }
+        }
+        let mut redo = 0;
+        if !ANY {
+            for r in 0..n {
+                redo |= ((best[r].is_hit() && tie_t[r] == best[r].t) as u32) << r;
+            }
+        }
+        PacketAnswers { best, redo }
+    }
+}
