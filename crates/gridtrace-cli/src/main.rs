@@ -27,7 +27,8 @@ struct Cli {
 enum Command {
     /// Render a scene to a PNG.
     Render(render::RenderArgs),
-    /// Print mesh and grid statistics and memory use.
+    /// Print a scene's mesh statistics, its structure's (--accel; auto: the BVH) and memory use,
+    /// with the paper's memory model for a grid (--accel grid or pc).
     Info(info::InfoArgs),
     /// Cast rays from a file at a mesh and write the hits to a file.
     Rays(rays::RaysArgs),

@@ -166,6 +166,32 @@ fn info_prints_grid_and_memory() {
     }
 }
 
+/// `info` says what it describes, as the README does: by default the structure `auto` picks
+/// (the BVH), named, with where the paper's memory model is; with `--accel pc` the grid and the
+/// paper's model, M = n*96 + cells*16 = 1020*96 + 4096*16 = 163,456 B for the knot box.
+#[test]
+fn info_says_which_structure_it_describes() {
+    let (ok, text) = gridtrace(&["info", "--scene", "knot-box"]);
+    assert!(ok, "{text}");
+    for want in [
+        "accel            bvh (auto's pick; --accel grid or pc for the grid and the paper's memory model)",
+        "structure        bvh ",
+        "the paper's model is a uniform grid's: --accel grid or pc",
+    ] {
+        assert!(text.contains(want), "missing '{want}' in:\n{text}");
+    }
+    let (ok, text) = gridtrace(&["info", "--scene", "knot-box", "--accel", "pc", "--grid", "16"]);
+    assert!(ok, "{text}");
+    for want in [
+        "accel            pc\n",
+        "triangles        1020 ",
+        "16x16x16 = 4096 cells",
+        "159.6 KiB   (paper's model M = n*96 + cells*16)",
+    ] {
+        assert!(text.contains(want), "missing '{want}' in:\n{text}");
+    }
+}
+
 #[test]
 fn bad_input_gives_located_errors() {
     let dir = std::env::temp_dir().join(format!("gridtrace-cli-bad-{}", std::process::id()));
