@@ -1,65 +1,90 @@
 #!/usr/bin/env bash
-# Builds the Python wheel that installs without Rust: the extension module and the `gridtrace`
-# command-line tool (installed into the environment's bin/, so on PATH in an active venv), both
-# from the `dist` profile (stripped, thin LTO). One abi3 wheel serves CPython 3.9 and later; its
-# manylinux tag is the lowest that the glibc symbols the binaries use allow (maturin's check).
+# Builds the Python wheel that installs without Rust on any x86-64 (or aarch64) Linux with glibc
+# 2.17 or newer, tagged manylinux2014 (manylinux_2_17): RHEL/CentOS 7, 8 and 9, Debian 9 and
+# later, Ubuntu 18.04 and later, Amazon Linux 2. It holds the extension module and the
+# `gridtrace` command-line tool (installed into the environment's bin/, so on PATH in an active
+# venv), both from the `dist` profile (stripped, thin LTO), both linked by zig against glibc
+# 2.17's symbols whatever glibc the build machine has: no container. One abi3 wheel serves
+# CPython 3.9 and later.
 #
 #   scripts/build-wheel.sh [OUT_DIR]     default: target/wheels (or $CARGO_TARGET_DIR/wheels)
 #
-# Needs Rust, and maturin (>=1.7,<2) on PATH or in .venv/ (scripts/test.sh installs it there).
-# Prints the wheel's path and size last; the wheel's path alone goes to $WHEEL_PATH_FILE if set.
+# Needs Rust and python3. The build tools come from PyPI into .venv/ (made if missing) unless
+# they are there already: maturin and ziglang (zig, the linker). Prints the wheel's path and
+# size last; the wheel's path alone goes to $WHEEL_PATH_FILE if set.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
 target="${CARGO_TARGET_DIR:-$root/target}"
 out="${1:-$target/wheels}"
 
-maturin=$(command -v maturin || true)
-if [ -z "$maturin" ] && [ -x .venv/bin/maturin ]; then
-    maturin=$root/.venv/bin/maturin
-fi
-if [ -z "$maturin" ]; then
-    echo "build-wheel: maturin not found; install it: python3 -m pip install 'maturin>=1.7,<2'" >&2
-    exit 1
-fi
+# The oldest glibc the binaries may need: manylinux2014's.
+glibc=2.17
+arch=$(uname -m)
+triple="$arch-unknown-linux-gnu"
 
-# 1. The command-line tool.
-cargo build --profile dist --locked -p gridtrace-cli
-cli="$target/dist/gridtrace"
-
-# 2. The wheel. maturin packs a `<module>.data/scripts/` folder next to pyproject.toml into the
-# wheel's scripts, which pip installs into the environment's bin/. The folder exists only while
-# this script runs (and is ignored by git), so `maturin develop` and `pip install
-# ./crates/gridtrace-py` do not ship a stale binary.
-data=crates/gridtrace-py/gridtrace._gridtrace.data
 tmp=$(mktemp -d)
+data=crates/gridtrace-py/gridtrace._gridtrace.data
 cleanup() { rm -rf "$root/$data" "$tmp"; }
 trap cleanup EXIT
+
+# 1. The tools, in .venv/ (scripts/test.sh's environment). Versions known to work together.
+tools=("maturin>=1.7,<2" "ziglang==0.17.1")
+venv=$root/.venv
+if [ ! -x "$venv/bin/maturin" ] || ! "$venv/bin/python" -m ziglang version >/dev/null 2>&1; then
+    [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+    echo "build-wheel: installing ${tools[*]} into $venv" >&2
+    "$venv/bin/python" -m pip install -q --disable-pip-version-check "${tools[@]}"
+fi
+# maturin finds zig as `python3 -m ziglang`: the venv's python first on PATH.
+export PATH="$venv/bin:$PATH"
+# `--zig` links with zig against the glibc that `--compatibility` names, and the target is
+# named, so the binaries go to $target/$triple/dist.
+zig=(--profile dist --locked --zig --target "$triple" --compatibility manylinux2014 --auditwheel check)
+
+# 2. The command-line tool, built by maturin as a `bin` wheel whose binary is all we keep. Not
+# by cargo-zigbuild: cargo counts the linker among a crate's settings, and the two tools link
+# through wrappers of different paths, so every crate the tool shares with the extension would
+# be built twice. Through maturin both builds share them (and auditwheel checks the tool).
+maturin build "${zig[@]}" -b bin -m crates/gridtrace-cli/Cargo.toml --out "$tmp/tool"
+cli="$target/$triple/dist/gridtrace"
+
+# 3. The wheel. maturin packs a `<module>.data/scripts/` folder next to pyproject.toml into the
+# wheel's scripts, which pip installs into the environment's bin/. The folder exists only while
+# this script runs (and is ignored by git), so `maturin develop` and `pip install
+# ./crates/gridtrace-py` do not ship a stale binary. `--auditwheel check` fails the build if
+# the tag is not earned.
 rm -rf "$data"
 mkdir -p "$data/scripts"
 cp "$cli" "$data/scripts/gridtrace"
 chmod 755 "$data/scripts/gridtrace"
-"$maturin" build --profile dist --locked --auditwheel check -m crates/gridtrace-py/Cargo.toml --out "$tmp"
+maturin build "${zig[@]}" -m crates/gridtrace-py/Cargo.toml --out "$tmp/wheel"
 
 shopt -s nullglob
-wheels=("$tmp"/*.whl)
+wheels=("$tmp"/wheel/*.whl)
 if [ "${#wheels[@]}" -ne 1 ]; then
     echo "build-wheel: expected one wheel from maturin, got ${#wheels[@]}" >&2
     exit 1
 fi
 whl=${wheels[0]}
+case "$(basename "$whl")" in
+*manylinux_2_17_"$arch"* | *manylinux2014_"$arch"*) ;;
+*)
+    echo "build-wheel: $(basename "$whl") is not tagged manylinux2014 / manylinux_2_17" >&2
+    exit 1
+    ;;
+esac
 if ! python3 -m zipfile -l "$whl" | grep -q "\.data/scripts/gridtrace "; then
     echo "build-wheel: the wheel lacks the gridtrace tool (data/scripts)" >&2
     exit 1
 fi
 
-# maturin's manylinux check covers the extension; the tool must need no newer glibc than the tag
-# promises either.
-tag=$(basename "$whl" .whl | sed -n 's/.*manylinux_\([0-9]*\)_\([0-9]*\)_.*/\1.\2/p')
-if [ -n "$tag" ] && command -v objdump >/dev/null 2>&1; then
+# maturin's check covers the extension; the tool must need no newer glibc than the tag promises
+# either (scripts/test-wheel.sh checks both again, from the wheel itself).
+if command -v objdump >/dev/null 2>&1; then
     need=$(objdump -T "$cli" | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -n 1)
-    if [ -n "$need" ] && [ "$(printf '%s\n%s\n' "$need" "$tag" | sort -V | tail -n 1)" != "$tag" ]; then
-        echo "build-wheel: the tool needs glibc $need, newer than the wheel's manylinux tag ($tag)" >&2
+    if [ -n "$need" ] && [ "$(printf '%s\n%s\n' "$need" "$glibc" | sort -V | tail -n 1)" != "$glibc" ]; then
+        echo "build-wheel: the tool needs glibc $need, newer than the wheel's manylinux tag ($glibc)" >&2
         exit 1
     fi
 fi

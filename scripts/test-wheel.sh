@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# The wheel as a user gets it: builds it (scripts/build-wheel.sh), installs it into a new virtual
-# environment whose PATH has no Rust (no cargo, no rustc), and there runs a ray query, a render,
-# the `gridtrace` tool the wheel put on PATH and `python -m gridtrace`. Fails, never skips, when
-# anything is missing. Run by scripts/test.sh.
+# The wheel as a user gets it: builds it (scripts/build-wheel.sh); checks that it is tagged
+# manylinux2014 (manylinux_2_17) and earns it (auditwheel), and that neither the extension nor
+# the `gridtrace` tool inside needs a glibc symbol newer than 2.17 or a library outside
+# manylinux2014's list (objdump); installs it into a new virtual environment whose PATH has no
+# Rust (no cargo, no rustc), and there runs a ray query, a render, the `gridtrace` tool the wheel
+# put on PATH and `python -m gridtrace`. Fails, never skips, when anything is missing. Run by
+# scripts/test.sh.
 #
 #   scripts/test-wheel.sh [CLI]     CLI: a cargo-built gridtrace whose --version the wheel's tool
 #                                   must print too (default: target/release/gridtrace, if built)
@@ -18,6 +21,54 @@ trap 'rm -rf "$tmp"' EXIT
 
 WHEEL_PATH_FILE="$tmp/wheel-path" ./scripts/build-wheel.sh "$tmp/wheels"
 whl=$(cat "$tmp/wheel-path")
+
+# The platform tag: in the name, and earned (auditwheel reads every ELF file in the wheel, the
+# tool among them). auditwheel goes into .venv/ beside the build tools.
+glibc=2.17
+arch=$(uname -m)
+case "$(basename "$whl")" in
+*manylinux_2_17_"$arch"*) ;;
+*)
+    echo "test-wheel: $(basename "$whl") is not tagged manylinux_2_17 (manylinux2014)" >&2
+    exit 1
+    ;;
+esac
+if [ ! -x .venv/bin/auditwheel ]; then
+    .venv/bin/python -m pip install -q --disable-pip-version-check "auditwheel>=6,<7"
+fi
+show=$(.venv/bin/auditwheel show "$whl")
+if ! grep -q "\"manylinux_2_17_$arch\"" <<<"$show"; then
+    echo "test-wheel: auditwheel does not find $(basename "$whl") consistent with manylinux_2_17_$arch:" >&2
+    echo "$show" >&2
+    exit 1
+fi
+echo "test-wheel: auditwheel: consistent with manylinux_2_17_$arch"
+
+# The binaries themselves: no glibc symbol version above 2.17, and only the libraries that
+# manylinux2014 lets a wheel expect on the system (Vulkan, X11 and the like are opened with
+# dlopen at run time, and only by the GPU and window code).
+unpacked="$tmp/unpacked"
+python3 -m zipfile -e "$whl" "$unpacked"
+allowed=" libc.so.6 libm.so.6 libdl.so.2 libpthread.so.0 librt.so.1 libgcc_s.so.1 libutil.so.1 ld-linux-x86-64.so.2 ld-linux-aarch64.so.1 "
+elves=("$unpacked"/gridtrace/_gridtrace*.so "$unpacked"/*.data/scripts/gridtrace)
+for elf in "${elves[@]}"; do
+    if [ ! -f "$elf" ]; then
+        echo "test-wheel: $elf missing from the wheel" >&2
+        exit 1
+    fi
+    need=$(objdump -T "$elf" | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -n 1)
+    if [ -z "$need" ] || [ "$(printf '%s\n%s\n' "$need" "$glibc" | sort -V | tail -n 1)" != "$glibc" ]; then
+        echo "test-wheel: ${elf#"$unpacked"/} needs glibc '${need}', above $glibc" >&2
+        exit 1
+    fi
+    for lib in $(objdump -p "$elf" | awk '$1 == "NEEDED" { print $2 }'); do
+        if [[ "$allowed" != *" $lib "* ]]; then
+            echo "test-wheel: ${elf#"$unpacked"/} needs $lib, which manylinux2014 does not promise" >&2
+            exit 1
+        fi
+    done
+    echo "test-wheel: ${elf#"$unpacked"/}: newest glibc symbol $need, libraries: $(objdump -p "$elf" | awk '$1 == "NEEDED" { printf "%s ", $2 }')"
+done
 
 # PATH without any directory that holds cargo or rustc (~/.cargo/bin, a distribution's Rust).
 clean_path=""

@@ -1,4 +1,6 @@
-//! `gridtrace info`: mesh, grid and memory statistics.
+//! `gridtrace info`: a scene's mesh statistics, those of the structure `--accel` picks (`auto`:
+//! the BVH, which renders fastest on the CPU) and memory use; for a grid (`--accel grid` or
+//! `pc`) the paper's memory model beside ours. The README's `info` line says the same.
 
 use crate::common::{GridArgs, SceneArgs, fmt_bytes};
 use clap::Args;
@@ -34,6 +36,12 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     println!("lights           {}", prepared.lights.len());
     let b = prepared.accel.bounds();
     println!("bounds           {} .. {}", b.min, b.max);
+    let picked = if a.grid.accel == gridtrace::AccelChoice::Auto {
+        " (auto's pick; --accel grid or pc for the grid and the paper's memory model)"
+    } else {
+        ""
+    };
+    println!("accel            {}{picked}", accel.name());
     for (label, value) in prepared.accel.info_lines()? {
         println!("{label:<16} {value}");
     }
@@ -44,12 +52,17 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
         total += b;
     }
     println!("  {:<14} {:>12}", "total", fmt_bytes(total));
-    if let Some(model) = prepared.paper_memory_model() {
-        println!(
+    match prepared.paper_memory_model() {
+        Some(model) => println!(
             "  {:<14} {:>12}   (paper's model M = n*96 + cells*16)",
             "paper model",
             fmt_bytes(model)
-        );
+        ),
+        // The model counts a grid's cells: say so rather than leave the line out unexplained.
+        None => println!(
+            "  {:<14} {:>12}   (the paper's model is a uniform grid's: --accel grid or pc)",
+            "paper model", "-"
+        ),
     }
     Ok(())
 }

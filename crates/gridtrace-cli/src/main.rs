@@ -31,7 +31,8 @@ struct Cli {
 enum Command {
     /// Render a scene to a PNG.
     Render(render::RenderArgs),
-    /// Print mesh and grid statistics and memory use.
+    /// Print a scene's mesh statistics, its structure's (--accel; auto: the BVH) and memory use,
+    /// with the paper's memory model for a grid (--accel grid or pc).
     Info(info::InfoArgs),
     /// Cast rays from a file at a mesh and write the hits to a file.
     Rays(rays::RaysArgs),
@@ -92,7 +93,26 @@ fn ensure_runtime_dir() {
 #[cfg(not(unix))]
 fn ensure_runtime_dir() {}
 
+/// Ends the process quietly, as Unix tools do, when the reader of its output goes away
+/// (`gridtrace render ... | head -1`): the Rust runtime ignores SIGPIPE, so a write to a closed
+/// pipe fails with EPIPE and `println!` panics ("failed printing to stdout: Broken pipe", exit
+/// 101). With the default action restored, the write ends the process by the signal, and the
+/// shell's pipeline takes the status of its last command (`head`'s 0). Files the command had yet
+/// to write are not written, as with any tool whose reader left.
+#[cfg(unix)]
+fn restore_sigpipe() {
+    // SAFETY: `signal` with SIG_DFL installs no handler of ours; it is called first thing in
+    // `main`, before any other thread exists that could be changing signal dispositions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn restore_sigpipe() {}
+
 fn main() {
+    restore_sigpipe();
     ensure_runtime_dir();
     let cli = Cli::parse();
     if let Some(n) = cli.threads {

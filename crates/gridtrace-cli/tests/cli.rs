@@ -166,6 +166,32 @@ fn info_prints_grid_and_memory() {
     }
 }
 
+/// `info` says what it describes, as the README does: by default the structure `auto` picks
+/// (the BVH), named, with where the paper's memory model is; with `--accel pc` the grid and the
+/// paper's model, M = n*96 + cells*16 = 1020*96 + 4096*16 = 163,456 B for the knot box.
+#[test]
+fn info_says_which_structure_it_describes() {
+    let (ok, text) = gridtrace(&["info", "--scene", "knot-box"]);
+    assert!(ok, "{text}");
+    for want in [
+        "accel            bvh (auto's pick; --accel grid or pc for the grid and the paper's memory model)",
+        "structure        bvh ",
+        "the paper's model is a uniform grid's: --accel grid or pc",
+    ] {
+        assert!(text.contains(want), "missing '{want}' in:\n{text}");
+    }
+    let (ok, text) = gridtrace(&["info", "--scene", "knot-box", "--accel", "pc", "--grid", "16"]);
+    assert!(ok, "{text}");
+    for want in [
+        "accel            pc\n",
+        "triangles        1020 ",
+        "16x16x16 = 4096 cells",
+        "159.6 KiB   (paper's model M = n*96 + cells*16)",
+    ] {
+        assert!(text.contains(want), "missing '{want}' in:\n{text}");
+    }
+}
+
 #[test]
 fn bad_input_gives_located_errors() {
     let dir = std::env::temp_dir().join(format!("gridtrace-cli-bad-{}", std::process::id()));
@@ -187,6 +213,94 @@ fn bad_input_gives_located_errors() {
     assert!(!ok && text.contains("grid"), "{text}");
     let (ok, text) = gridtrace(&["info", dir.join("missing.ply").to_str().unwrap()]);
     assert!(!ok && text.contains("missing.ply"), "{text}");
+}
+
+/// A reader that leaves early (`gridtrace render ... | head -1`) ends the tool quietly, as it
+/// ends Unix tools: by SIGPIPE at its next write, with nothing on stderr, never the panic
+/// "failed printing to stdout: Broken pipe" (exit 101). Each command's stdout is closed before it
+/// writes anything (so its first line meets a closed pipe), and the README's pipeline runs
+/// through the shell, whose status is `head`'s.
+#[cfg(unix)]
+#[test]
+fn closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    // SIGPIPE is 13 on Linux, macOS and the BSDs.
+    const SIGPIPE: i32 = 13;
+    let dir = scratch("pipe");
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, TET_OBJ).unwrap();
+    let rays = dir.join("one.rays");
+    let ray: Vec<u8> = [0.2f32, 0.2, 2.0, 0.0, 0.0, -1.0]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    std::fs::write(&rays, ray).unwrap();
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let (obj, rays) = (obj.to_str().unwrap(), rays.to_str().unwrap());
+    let (png, hits, bench) = (path("k.png"), path("hits.bin"), path("bench"));
+    let commands: Vec<Vec<&str>> = vec![
+        vec![
+            "render",
+            "--scene",
+            "knot-box",
+            "--backend",
+            "cpu",
+            "--res",
+            "32x24",
+            "-o",
+            &png,
+        ],
+        vec!["info", "--scene", "knot-box"],
+        vec!["rays", obj, "--rays", rays, "--backend", "cpu", "--hits-out", &hits],
+        vec![
+            "view",
+            "--headless",
+            "--scene",
+            "knot-box",
+            "--backend",
+            "cpu",
+            "--res",
+            "32x24",
+            "--frames",
+            "2",
+        ],
+        vec!["bench", "--quick", "--backend", "cpu", "--out", &bench],
+        vec!["--version"],
+    ];
+    for args in &commands {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("run gridtrace");
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            out.status.signal(),
+            Some(SIGPIPE),
+            "{args:?}: {:?}, stderr:\n{stderr}",
+            out.status
+        );
+        assert!(
+            !stderr.contains("panicked") && !stderr.contains("Broken pipe"),
+            "{args:?}: {stderr}"
+        );
+    }
+    let pipeline = format!(
+        "'{}' render --scene knot-box --backend cpu --res 32x24 -o '{png}' | head -1",
+        env!("CARGO_BIN_EXE_gridtrace")
+    );
+    let out = Command::new("sh").args(["-c", &pipeline]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{pipeline}: {:?}, stderr:\n{stderr}", out.status);
+    assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 1);
+    assert!(
+        !stderr.contains("panicked") && !stderr.contains("Broken pipe"),
+        "{stderr}"
+    );
 }
 
 /// Like [`gridtrace`], with stderr apart and the environment adjusted by `env`.

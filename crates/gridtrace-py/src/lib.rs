@@ -20,15 +20,35 @@ use gridtrace::{AccelChoice, Error, Mode, PixelFormat, RenderOptions, Resolution
 
 fn to_py(e: Error) -> PyErr {
     match e {
-        Error::InvalidInput(_) | Error::Parse { .. } | Error::Scene(_) => PyValueError::new_err(e.to_string()),
+        // "ValueError: ray 3 has ...": the exception's type says what "invalid input: " would.
+        Error::InvalidInput(m) => PyValueError::new_err(m),
+        Error::Parse { .. } | Error::Scene(_) => PyValueError::new_err(e.to_string()),
         Error::Io { .. } => pyo3::exceptions::PyOSError::new_err(e.to_string()),
         Error::Gpu(_) => PyRuntimeError::new_err(e.to_string()),
     }
 }
 
+/// `s` as the argument `what`; a ValueError naming the argument once: the library's own messages
+/// mostly name it already ("accel must be ...", "GPU variant ..."), and then take no prefix.
 fn parse<T: std::str::FromStr<Err = String>>(what: &str, s: &str) -> PyResult<T> {
-    s.parse::<T>()
-        .map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
+    s.parse::<T>().map_err(|e| PyValueError::new_err(named(what, &e)))
+}
+
+/// `message` about the argument `what`, naming it once: as it is when it names `what` already
+/// ("accel must be ..."); with the library's words for it replaced by the Python name where it
+/// uses them ("GPU variant bvh=x: ..." becomes "gpu_variant bvh=x: ..."); else prefixed.
+fn named(what: &str, message: &str) -> String {
+    // Some parsers check with the library's own errors, whose text starts so (as `to_py`).
+    let message = message.strip_prefix("invalid input: ").unwrap_or(message);
+    if message.contains(what) {
+        return message.to_string();
+    }
+    let words = what.replace('_', " ");
+    // ASCII lowercasing keeps byte offsets, so the match's place in `message` is the same.
+    match message.to_ascii_lowercase().find(&words) {
+        Some(at) if words != what => format!("{}{what}{}", &message[..at], &message[at + words.len()..]),
+        _ => format!("{what}: {message}"),
+    }
 }
 
 fn options(accel: &str, grid: &str, irregular: &str, backend: &str, gpu_variant: &str) -> PyResult<QueryOptions> {
@@ -77,11 +97,32 @@ fn batch<'a>(
 struct NativeMesh {
     /// Queries share it; `update_vertices` takes it alone.
     inner: RwLock<TraceMesh>,
+    /// The vertices and faces as given, for `vertices`, `faces` and pickling: the structure
+    /// keeps neither (its triangles are precomputed, zero-area faces dropped). Taken after
+    /// `inner` when both are.
+    arrays: RwLock<MeshArrays>,
+}
+
+/// A mesh's vertices (as last moved) and faces (all of them, in input order).
+struct MeshArrays {
+    vertices: Vec<[f32; 3]>,
+    faces: Vec<[u32; 3]>,
 }
 
 impl NativeMesh {
+    fn new_from(mesh: TraceMesh, vertices: Vec<[f32; 3]>, faces: Vec<[u32; 3]>) -> Self {
+        NativeMesh {
+            inner: RwLock::new(mesh),
+            arrays: RwLock::new(MeshArrays { vertices, faces }),
+        }
+    }
+
     fn mesh(&self) -> std::sync::RwLockReadGuard<'_, TraceMesh> {
         self.inner.read().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn arrays(&self) -> std::sync::RwLockReadGuard<'_, MeshArrays> {
+        self.arrays.read().unwrap_or_else(|p| p.into_inner())
     }
 }
 
@@ -103,12 +144,8 @@ impl NativeMesh {
         let opts = options(accel, grid, irregular, backend, gpu_variant)?;
         let v = rows3(&vertices, "vertices")?.to_vec();
         let f = rows3(&faces, "faces")?.to_vec();
-        let inner = py
-            .detach(move || TraceMesh::from_arrays(&v, &f, &opts))
-            .map_err(to_py)?;
-        Ok(NativeMesh {
-            inner: RwLock::new(inner),
-        })
+        let inner = py.detach(|| TraceMesh::from_arrays(&v, &f, &opts)).map_err(to_py)?;
+        Ok(NativeMesh::new_from(inner, v, f))
     }
 
     #[staticmethod]
@@ -123,10 +160,15 @@ impl NativeMesh {
         gpu_variant: &str,
     ) -> PyResult<Self> {
         let opts = options(accel, grid, irregular, backend, gpu_variant)?;
-        let inner = py.detach(move || TraceMesh::load(&path, &opts)).map_err(to_py)?;
-        Ok(NativeMesh {
-            inner: RwLock::new(inner),
-        })
+        let (inner, v, f) = py
+            .detach(move || -> gridtrace::Result<_> {
+                let mesh = gridtrace::io::load_mesh(&path)?;
+                let v: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
+                let f = mesh.triangles.clone();
+                Ok((TraceMesh::from_mesh(mesh, &opts)?, v, f))
+            })
+            .map_err(to_py)?;
+        Ok(NativeMesh::new_from(inner, v, f))
     }
 
     /// Moves the vertices (an (N, 3) float32 array of the mesh's N vertices); the structure is
@@ -134,12 +176,27 @@ impl NativeMesh {
     fn update_vertices(&self, py: Python<'_>, vertices: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
         let v = rows3(&vertices, "vertices")?.to_vec();
         py.detach(|| {
-            self.inner
-                .write()
-                .unwrap_or_else(|p| p.into_inner())
-                .update_vertices(&v)
+            let mut mesh = self.inner.write().unwrap_or_else(|p| p.into_inner());
+            mesh.update_vertices(&v)?;
+            // Under the structure's lock, so no reader sees the arrays ahead of the structure.
+            self.arrays.write().unwrap_or_else(|p| p.into_inner()).vertices = v;
+            Ok(())
         })
         .map_err(to_py)
+    }
+
+    /// The vertices, (N, 3) float32 (a copy).
+    fn vertices<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let a = self.arrays();
+        let flat: Vec<f32> = a.vertices.iter().flatten().copied().collect();
+        Ok(flat.into_pyarray(py).reshape([a.vertices.len(), 3])?)
+    }
+
+    /// The faces, (M, 3) uint32 (a copy).
+    fn faces<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<u32>>> {
+        let a = self.arrays();
+        let flat: Vec<u32> = a.faces.iter().flatten().copied().collect();
+        Ok(flat.into_pyarray(py).reshape([a.faces.len(), 3])?)
     }
 
     #[getter]

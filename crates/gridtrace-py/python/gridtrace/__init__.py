@@ -61,10 +61,15 @@ from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
 from .scene import INVALID_ID, Scene  # noqa: E402
 
+# `gridtrace.trimesh` after a plain `import gridtrace`, as the README writes it. Importing it
+# costs nothing: it is pure Python over `Scene` and does not import trimesh itself (an optional
+# dependency, needed only for the mesh objects a user hands it).
+from . import trimesh  # noqa: E402
+
 #: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
 ACCELS: tuple = tuple(_ACCELS)
 
-__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "__version__"]
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "__version__", "trimesh"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)
@@ -149,6 +154,7 @@ class Mesh:
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(f"faces index vertices out of range 0..{len(v) - 1}")
         self._backend = backend
+        self._params = (accel, grid, irregular, backend, gpu_variant)
         self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, irregular, backend, gpu_variant)
 
     @classmethod
@@ -156,8 +162,49 @@ class Mesh:
         """Loads an OBJ, PLY, glTF/GLB, STL or OFF file."""
         self = cls.__new__(cls)
         self._backend = backend
+        self._params = (accel, grid, irregular, backend, gpu_variant)
         self._native = _NativeMesh.load(str(path), accel, grid, irregular, backend, gpu_variant)
         return self
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(N, 3) float32 vertex positions, as given or loaded and as last moved by
+        ``update_vertices`` (a copy: changing it changes nothing; ``update_vertices`` does)."""
+        return self._native.vertices()
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(M, 3) uint32 vertex indices of every face, zero-area faces included (the numbering
+        that ``Hits.tri`` uses). A copy."""
+        return self._native.faces()
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(M, 3) float32 unit geometric normal of each face, ``(v1 - v0) x (v2 - v0)``
+        normalised (the input winding: ``Hits.normal`` of a hit on that face); zeros for a
+        zero-area face."""
+        v = self.vertices.astype(np.float64)
+        f = self.faces
+        n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        # Zero-area faces (never hit) get zeros rather than 0/0.
+        return np.divide(n, length, out=np.zeros_like(n), where=length > 0).astype(np.float32)
+
+    # Pickling keeps the vertices, the faces and the parameters; the structure is rebuilt when
+    # the mesh is loaded (as for Scene), so a pickle is the mesh's size, not its structure's.
+    def __getstate__(self):
+        return {"params": self._params, "vertices": self.vertices, "faces": self.faces}
+
+    def __setstate__(self, state):
+        accel, grid, irregular, backend, gpu_variant = self._params = tuple(state["params"])
+        self._backend = backend
+        # Serialisers may hand arrays back as views of a buffer: make them C-ordered and aligned.
+        v = np.require(state["vertices"], dtype=np.float32, requirements="CA")
+        f = np.require(state["faces"], dtype=np.uint32, requirements="CA")
+        self._native = _NativeMesh(v, f, accel, grid, irregular, backend, gpu_variant)
+
+    def __repr__(self) -> str:
+        return f"gridtrace.Mesh({len(self.faces)} faces, accel={self._params[0]!r}, backend={self._backend!r})"
 
     def update_vertices(self, vertices: ArrayLike) -> None:
         """Moves the mesh's vertices: an (N, 3) array of all N vertices it was made with, in the
@@ -188,7 +235,9 @@ class Mesh:
         """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max``.
 
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
-        a single point (3,) used for every ray. Directions need not be normalised. On the CPU the
+        a single point (3,) used for every ray. Directions need not be normalised. A ray with a NaN
+        or infinite component or a zero direction raises ``ValueError`` naming it (``Scene``
+        answers such rays with a miss, as Open3D's code expects). On the CPU the
         irregular grid traces coherent rays (a camera's rays in image order, or their shadow rays
         towards a light: neighbouring origins and directions) eight at a time, faster than the same
         rays in another order; the answers are the same. ``threads``: CPU threads (0: all cores).

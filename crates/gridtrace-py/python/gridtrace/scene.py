@@ -6,7 +6,9 @@ Conventions (Open3D's): a ray is ``[ox, oy, oz, dx, dy, dz]`` and ``t`` is in un
 direction's length; a miss has ``t_hit = inf`` and ids ``INVALID_ID`` (``2**32 - 1``); uvs are the
 barycentric weights of the face's second and third vertex; normals are unit geometric normals
 ``(v1 - v0) x (v2 - v0)`` in world space. Rays with NaN or infinite components or a zero direction
-miss; points with a NaN or infinite coordinate get NaN distances.
+miss; points with a NaN or infinite coordinate get NaN distances and ``INVALID_ID``: the answers
+Open3D's code expects, kept for it (``Mesh``, gridtrace's own interface, raises ``ValueError``
+for such rays instead: the README's "NaN and infinity").
 """
 
 from __future__ import annotations
