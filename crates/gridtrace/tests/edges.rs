@@ -74,10 +74,11 @@ fn all_structures(scene: PreparedScene) -> Vec<PreparedScene> {
     std::iter::once(scene).chain(own).collect()
 }
 
-/// The share of rays a structure the driver intersects (`hwrt`, by ray query) may leak: none of
-/// ours may. Measured on lavapipe (Mesa 25.0.7): see `gpu_edges_and_vertices_do_not_leak`'s
-/// output and docs/benchmarks.md.
-const DRIVER_LEAKS: f64 = 0.01;
+/// The share of rays a structure the driver intersects (`hwrt`, by ray query) may leak; none of
+/// ours may. lavapipe (Mesa 25.0.7) leaked 355 of the icosphere's 350,000 rays and 318 of the
+/// torus knot's (2026-11-27; each run prints its counts): its ray-query triangle test is not
+/// watertight at shared edges and vertices. Five times that is allowed.
+const DRIVER_LEAKS: f64 = 0.005;
 
 /// Leaking rays per mesh and accel kind, on the CPU.
 fn cpu_leaks() -> (usize, Vec<String>) {
@@ -169,7 +170,7 @@ fn gpu_edges_and_vertices_do_not_leak() {
                 bad.iter().take(3).map(|&i| (rays[i], hits[i])).collect::<Vec<_>>()
             );
         }
-        eprintln!("GPU {name}: {} rays, no leaks", rays.len());
+        eprintln!("GPU {name}: {} rays, no leaks beyond the allowances", rays.len());
     }
     assert!(total >= 700_000);
 }
