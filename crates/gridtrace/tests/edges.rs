@@ -45,9 +45,17 @@ pub fn meshes() -> Vec<(&'static str, gridtrace::Mesh, usize)> {
 
 /// The rays `kind` is tested with: all of them, or for a structure whose rays test every
 /// triangle (brute force: a million rays at the Stanford Bunny would be 7e10 triangle tests)
-/// every 200th.
-fn rays_for(kind: AccelKind, rays: &[AimedRay]) -> Vec<AimedRay> {
-    let step = if kind.entry().every_triangle { 200 } else { 1 };
+/// every 200th; for one the driver traverses (`hwrt`) on a software adapter every 20th: on
+/// lavapipe its ray queries took over the 120-second device wait for the Stanford Bunny's
+/// 300,000 rays on two shared cores (2026-11-27).
+fn rays_for(kind: AccelKind, rays: &[AimedRay], software: bool) -> Vec<AimedRay> {
+    let step = if kind.entry().every_triangle {
+        200
+    } else if !kind.entry().cpu && software {
+        20
+    } else {
+        1
+    };
     rays.iter().step_by(step).copied().collect()
 }
 
@@ -76,8 +84,9 @@ fn all_structures(scene: PreparedScene) -> Vec<PreparedScene> {
 
 /// The share of rays a structure the driver intersects (`hwrt`, by ray query) may leak; none of
 /// ours may. lavapipe (Mesa 25.0.7) leaked 355 of the icosphere's 350,000 rays and 318 of the
-/// torus knot's (2026-11-27; each run prints its counts): its ray-query triangle test is not
-/// watertight at shared edges and vertices. Five times that is allowed.
+/// torus knot's (2026-11-27, all the rays; the test now gives a software adapter every 20th,
+/// and prints its counts): its ray-query triangle test is not watertight at shared edges and
+/// vertices. Five times that share is allowed.
 const DRIVER_LEAKS: f64 = 0.005;
 
 /// Leaking rays per mesh and accel kind, on the CPU.
@@ -91,7 +100,7 @@ fn cpu_leaks() -> (usize, Vec<String>) {
         // `hwrt`'s CPU side is the BVH's walk, tested as the BVH; its rays are the GPU's.
         for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().cpu) {
             let scene = scenes.iter().find(|s| s.accel.serves(kind)).unwrap();
-            let rays = rays_for(kind, &rays);
+            let rays = rays_for(kind, &rays, false);
             let hits: Vec<Hit> = rays
                 .par_iter()
                 .map(|r| scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, kind, &mut NoCounters))
@@ -149,7 +158,7 @@ fn gpu_edges_and_vertices_do_not_leak() {
             .collect();
         for &kind in &kinds {
             let (_, gpu) = gpus.iter_mut().find(|(s, _)| s.accel.serves(kind)).unwrap();
-            let rays = rays_for(kind, &rays);
+            let rays = rays_for(kind, &rays, ctx.is_software());
             let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
             let hits = gpu.intersect(&plain, 0.0, f32::INFINITY, kind).unwrap();
             let bad = leaks(&rays, &hits);
