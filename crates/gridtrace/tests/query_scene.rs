@@ -470,7 +470,8 @@ fn gpu_rays_equal_cpu() {
         let (c, g) = (on_cpu.cast_rays(&rays).unwrap(), on_gpu.cast_rays(&rays).unwrap());
         let mut odd = 0;
         // `hwrt` is the driver's triangle test: lavapipe (Mesa 25.0.7) lets some of the rays
-        // aimed exactly at shared vertices and edges through; counted, printed, held to 1%.
+        // aimed exactly at shared vertices and edges through (17 of these 2,003, 2026-11-27);
+        // counted, printed, held to 1%.
         let driver = !kind.entry().cpu;
         let mut driver_leaks = 0;
         for (i, q) in rays.iter().enumerate() {
@@ -510,8 +511,16 @@ fn gpu_rays_equal_cpu() {
             "{}: {odd} faces not hit at the GPU's t",
             kind.name()
         );
-        eprintln!("{}: {driver_leaks} of {} rays answered otherwise by the driver", kind.name(), rays.len());
-        assert!(driver_leaks * 100 <= rays.len(), "{}: {driver_leaks} rays leak", kind.name());
+        eprintln!(
+            "{}: {driver_leaks} of {} rays answered otherwise by the driver",
+            kind.name(),
+            rays.len()
+        );
+        assert!(
+            driver_leaks * 100 <= rays.len(),
+            "{}: {driver_leaks} rays leak",
+            kind.name()
+        );
         let (c, g) = (
             on_cpu.test_occlusions(&rays, 0.0, 1.5).unwrap(),
             on_gpu.test_occlusions(&rays, 0.0, 1.5).unwrap(),
