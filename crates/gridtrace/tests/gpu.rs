@@ -116,7 +116,12 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
         // not ours: lavapipe's (Mesa 25.0.7) lets rays aimed exactly at a shared edge or vertex
         // through (311 and 535 of these 100,000), so it is held to `DRIVER_LEAKS`.
         let allowed = allowed_differences(kind, rays.len());
-        eprintln!("{scene_name} {}: {} of {} rays disagree", kind.name(), bad.len(), rays.len());
+        eprintln!(
+            "{scene_name} {}: {} of {} rays disagree",
+            kind.name(),
+            bad.len(),
+            rays.len()
+        );
         assert!(
             bad.len() <= allowed,
             "{scene_name} {}: {} rays disagree; first: {:?}",
