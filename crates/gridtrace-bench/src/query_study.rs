@@ -109,7 +109,8 @@ pub fn query_study(
     use gridtrace::query::{Backend, QueryOptions, TraceMesh};
     let mut rows = Vec::new();
     for (name, mesh) in meshes {
-        for accel in AccelKind::ALL {
+        // The structures the CPU traces (`hwrt`'s rays are the hardware suite's).
+        for accel in AccelKind::ALL.into_iter().filter(|k| k.entry().cpu) {
             let opts = QueryOptions {
                 accel: accel.into(),
                 backend: Backend::Cpu,

@@ -16,13 +16,16 @@ import pytest
 import gridtrace
 
 # Every structure the library's registry lists ("auto" picks one of them).
-STRUCTURES = [a for a in gridtrace.ACCELS if a != "auto"]
+# The structures the CPU traces: "hwrt" is the GPU's ray-tracing hardware (its own test below
+# or in test_scene.py, on a GPU with ray queries).
+STRUCTURES = [a for a in gridtrace.ACCELS if a not in ("auto", "hwrt")]
 
 
 def test_accels_come_from_the_registry():
     """`ACCELS` is "auto" and the registry's names; `auto` (the default) builds one of them."""
     assert gridtrace.ACCELS[0] == "auto"
     assert set(STRUCTURES) >= {"grid", "pc", "bvh", "irregular", "brute"}
+    assert "hwrt" in gridtrace.ACCELS
     mesh = gridtrace.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], backend="cpu")
     hits = mesh.intersect([[0.2, 0.2, 1.0]], [[0.0, 0.0, -1.0]])
     assert hits.tri[0] == 0 and hits.t[0] == 1.0

@@ -136,9 +136,10 @@ impl Backend {
                 ))),
             };
         }
+        let cpu_traces = scene.accel.check_cpu_traces().is_ok();
         match GpuRenderer::with_variants(ctx, scene, variants) {
             Ok(gpu) => Ok(Some(gpu)),
-            Err(e) if self == Backend::Auto => {
+            Err(e) if self == Backend::Auto && cpu_traces => {
                 notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
                 Ok(None)
             }
@@ -154,8 +155,22 @@ impl Backend {
 /// `Backend::Auto` would use it. Probed once per process by opening a device: callers that
 /// decide before they open one (the ray queries choose a structure and keep a mesh) ask here.
 pub fn hardware_adapter_present() -> bool {
-    static PRESENT: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *PRESENT.get_or_init(|| GpuContext::new().is_ok_and(|c| !c.is_software()))
+    hardware_probe().0
+}
+
+/// Whether that hardware adapter has ray queries (`hwrt`): what `--accel auto` asks before
+/// it picks `hwrt` (never on a software adapter). Probed with `hardware_adapter_present`.
+pub fn hardware_ray_queries_present() -> bool {
+    hardware_probe().1
+}
+
+/// (a hardware adapter, with ray queries), probed once per process.
+fn hardware_probe() -> (bool, bool) {
+    static PRESENT: std::sync::OnceLock<(bool, bool)> = std::sync::OnceLock::new();
+    *PRESENT.get_or_init(|| match GpuContext::new() {
+        Ok(c) if !c.is_software() => (true, c.ray_query),
+        _ => (false, false),
+    })
 }
 
 /// Where frames are traced, in words: "cpu (N threads)" or "gpu: " and the adapter's
@@ -266,6 +281,16 @@ impl Tracer {
             Some(ctx) => backend.upload_with(ctx.clone(), &scene, variants, notes)?,
             None => None,
         };
+        if gpu.is_none() {
+            // A structure only a GPU traces (`hwrt`) is refused here, before any frame.
+            scene.accel.check_cpu_traces().map_err(|e| match backend {
+                Backend::Auto => Error::InvalidInput(format!(
+                    "{e} (backend auto found no hardware GPU to trace it: {})",
+                    notes.join("; ")
+                )),
+                _ => e,
+            })?;
+        }
         Ok(Tracer {
             scene,
             gpu,
@@ -363,7 +388,7 @@ impl Tracer {
     /// and says so; anything else, or any error under `gpu`, is the caller's.
     fn gpu_failed(&mut self, e: Error) -> Result<()> {
         match e {
-            Error::Gpu(why) if self.backend == Backend::Auto => {
+            Error::Gpu(why) if self.backend == Backend::Auto && self.scene.accel.check_cpu_traces().is_ok() => {
                 self.gpu = None;
                 if self.scene.accel.structure_stale {
                     let tris = self.scene.accel.tris.clone();

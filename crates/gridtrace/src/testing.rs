@@ -531,6 +531,30 @@ pub fn skip_gpu() -> bool {
     s
 }
 
+/// Whether a GPU test runs `kind` on `ctx`: every kind with a GPU walk, but one that traces by
+/// ray query (`hwrt`) only where the adapter has ray queries. Where it has none the kind is
+/// left out with a note on stderr, except under `CI=1`: CI's lavapipe (Mesa 25) has them, so
+/// there their absence panics, naming the adapter, rather than skipping `hwrt`'s tests.
+pub fn gpu_runs(ctx: &crate::gpu::GpuContext, kind: AccelKind) -> bool {
+    if !kind.entry().gpu {
+        return false;
+    }
+    if ctx.ray_query || !crate::gpu::walks::needs_ray_queries(kind.structure_name()) {
+        return true;
+    }
+    let why = ctx.check_ray_queries(kind.name()).unwrap_err();
+    if std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && v != "false") {
+        panic!("CI=1: {why} (CI installs Mesa 25's lavapipe from bookworm-backports: .ci/run)");
+    }
+    eprintln!("{why}: its GPU tests are left out on this adapter");
+    false
+}
+
+/// The kinds a GPU test runs on `ctx` (`gpu_runs`), in registry order.
+pub fn gpu_kinds(ctx: &crate::gpu::GpuContext) -> Vec<AccelKind> {
+    AccelKind::ALL.into_iter().filter(|&k| gpu_runs(ctx, k)).collect()
+}
+
 /// The triangles as vertex and face arrays (three vertices of its own per triangle).
 pub fn soup_arrays(tris: &[TriAccel]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     let vertices = tris.iter().flat_map(|t| t.vertices().map(|v| v.to_array())).collect();

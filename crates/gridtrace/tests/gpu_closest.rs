@@ -33,6 +33,19 @@ use rayon::prelude::*;
 
 static GPU_LOCK: Mutex<()> = Mutex::new(());
 
+/// The structures with a GPU walk this adapter runs (`testing::gpu_runs`: `hwrt` where it has
+/// ray queries, and always under CI=1), probed once.
+fn gpu_kinds() -> Vec<AccelKind> {
+    static KINDS: std::sync::OnceLock<Vec<AccelKind>> = std::sync::OnceLock::new();
+    KINDS
+        .get_or_init(|| {
+            let ctx = gridtrace::gpu::GpuContext::new()
+                .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
+            gridtrace::testing::gpu_kinds(&ctx)
+        })
+        .clone()
+}
+
 fn context() -> Arc<GpuContext> {
     Arc::new(
         GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")),
@@ -224,7 +237,7 @@ fn check_mesh(name: &str, mesh: &Mesh, ctx: &Arc<GpuContext>, n: usize, seed: u6
             }
         })
         .collect();
-    for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().gpu) {
+    for kind in gpu_kinds().into_iter() {
         let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
         let grid = scene
             .accel
@@ -299,7 +312,7 @@ fn coincident_copies_keep_the_smaller_index() {
         ..Default::default()
     };
     let base = TraceMesh::from_arrays(&vertices, &faces, &cpu).unwrap();
-    for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().gpu) {
+    for kind in gpu_kinds().into_iter() {
         let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
         let pts = points(&scene.accel.tris, None, 600, 4);
         let mut variants = vec![GpuVariants::default()];
@@ -362,7 +375,7 @@ fn query_scene_on_the_gpu() {
         return;
     }
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    for accel in AccelKind::ALL.into_iter().filter(|k| k.entry().gpu) {
+    for accel in gpu_kinds().into_iter() {
         let scene_with = |backend| {
             let mut s = QueryScene::new(QueryOptions {
                 accel: accel.into(),

@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-use gridtrace::accel::{AccelKind, Resolution};
+use gridtrace::accel::Resolution;
 use gridtrace::gpu::constants::{MAX_GROUPS_X, max_groups_x, set_max_groups_x};
 use gridtrace::gpu::{GpuContext, GpuGrid, GpuRenderer};
 use gridtrace::scene::builtin;
@@ -30,7 +30,7 @@ fn two_d_dispatches_equal_one_d() {
     let scene = builtin::scene("knot-box").unwrap();
     let grid = scene.prepare(Resolution::default()).unwrap();
     let rays = ray_set(&grid.accel, 5000, 3);
-    for accel in AccelKind::ALL {
+    for accel in gridtrace::testing::gpu_kinds(&one_d) {
         let prepared = scene.prepare_for(accel, Resolution::default()).unwrap();
         let mut a = GpuRenderer::new(one_d.clone(), &prepared).unwrap();
         let mut b = GpuRenderer::new(two_d.clone(), &prepared).unwrap();

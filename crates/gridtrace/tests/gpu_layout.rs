@@ -303,6 +303,11 @@ fn bindings_match_wgsl() {
                 naga::AddressSpace::Uniform => "uniform",
                 naga::AddressSpace::Storage { access } if access.contains(naga::StorageAccess::STORE) => "read_write",
                 naga::AddressSpace::Storage { .. } => "read",
+                naga::AddressSpace::Handle
+                    if matches!(m.types[g.ty].inner, naga::TypeInner::AccelerationStructure { .. }) =>
+                {
+                    "acceleration structure"
+                }
                 _ => "other",
             };
             declared.insert((b.group, b.binding, g.name.clone().unwrap_or_default(), access));
@@ -319,10 +324,21 @@ fn bindings_match_wgsl() {
             (group, index, name.to_string(), access)
         })
         .chain(gridtrace::gpu::walks::WALKS.iter().flat_map(|w| {
-            w.arrays
+            let arrays = w
+                .arrays
                 .iter()
                 .enumerate()
-                .map(|(i, (_, name))| (bindings::STRUCTURE_GROUP, i as u32, name.to_string(), "read"))
+                .map(|(i, (_, name))| (bindings::STRUCTURE_GROUP, i as u32, name.to_string(), "read"));
+            // A walk by ray query binds its top-level structure after its arrays.
+            let tlas = w.tlas.map(|name| {
+                (
+                    bindings::STRUCTURE_GROUP,
+                    w.arrays.len() as u32,
+                    name.to_string(),
+                    "acceleration structure",
+                )
+            });
+            arrays.chain(tlas)
         }))
         .collect();
     assert_eq!(declared, table);

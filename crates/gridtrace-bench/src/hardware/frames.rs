@@ -74,12 +74,36 @@ pub fn mesh_bench_scene(name: &str, mesh: Mesh) -> BenchScene {
     }
 }
 
-/// The structures the frames run: those with a GPU walk, brute force left out.
-pub fn frame_accels() -> Vec<AccelKind> {
+/// The structures the frames run on `gpu`: those with a GPU walk, brute force left out, and
+/// `hwrt` only where the adapter has ray queries (`not_offered` says why it is left out).
+pub fn frame_accels(gpu: &GpuContext) -> Vec<AccelKind> {
     AccelKind::ALL
         .into_iter()
         .filter(|k| k.entry().gpu && !k.entry().every_triangle)
+        .filter(|&k| not_offered(gpu, k).is_none())
         .collect()
+}
+
+/// Why `accel` is left out on `gpu`, if it is: `hwrt` on an adapter without ray queries.
+pub fn not_offered(gpu: &GpuContext, accel: AccelKind) -> Option<String> {
+    let structure = accel.structure_name();
+    let needs_rq = gridtrace::gpu::walks::WALKS
+        .iter()
+        .any(|w| w.structure == structure && w.tlas.is_some());
+    (needs_rq && !gpu.ray_query).then(|| {
+        format!(
+            "{}: not offered by this adapter ({}: no ray queries)",
+            accel.name(),
+            gpu.info.name
+        )
+    })
+}
+
+/// The CPU's stand-in for `accel` where the CPU does not trace it (`hwrt`, the GPU's
+/// ray-tracing hardware): the BVH, whose images and hits its frames and batches are checked
+/// against. Every other structure is its own.
+pub fn cpu_reference(accel: AccelKind) -> AccelKind {
+    if accel.entry().cpu { accel } else { AccelKind::Bvh }
 }
 
 /// A renderer of `prepared` with the GPU variants `variant`.
@@ -110,15 +134,21 @@ pub fn frame_matrix(
     let mut rows = Vec::new();
     let (w, h) = plan.frame_size;
     for bs in scenes {
-        for accel in frame_accels() {
+        for accel in frame_accels(gpu) {
             if !budget.allows(&format!("frames of {} with {}", bs.name, accel.name()), skipped) {
                 continue;
             }
             let prepared = bs.scene.prepare_for(accel, Resolution::default())?;
+            // The CPU's row and reference image: the structure's own, or its stand-in's.
+            let on_cpu = cpu_reference(accel);
+            let cpu_prepared = match on_cpu == accel {
+                true => None,
+                false => Some(bs.scene.prepare_for(on_cpu, Resolution::default())?),
+            };
             let mut reference = Vec::new();
             for &mode in &plan.modes {
-                let opts = RenderOptions::new(w, h, mode, accel);
-                let (row, image) = cpu_row(bs, &prepared, &opts)?;
+                let opts = RenderOptions::new(w, h, mode, on_cpu);
+                let (row, image) = cpu_row(bs, cpu_prepared.as_ref().unwrap_or(&prepared), &opts)?;
                 log(&row_line(&row));
                 rows.push(row);
                 reference.push(image.to_rgb8());

@@ -26,7 +26,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use gridtrace::gpu::{GpuContext, GpuVariants};
-use gridtrace::{Mode, Result};
+use gridtrace::{AccelKind, Mode, Result};
 
 use crate::{Machine, scenes};
 
@@ -271,6 +271,8 @@ pub fn run(
         .copied()
         .collect();
     let variants = &variants[..];
+    // A structure the adapter cannot run (`hwrt` without ray queries) is left out, said.
+    skipped.extend(AccelKind::ALL.into_iter().filter_map(|k| frames::not_offered(&gpu, k)));
     let mut meshes = Vec::new();
     for name in &plan.ray_meshes {
         match study_mesh(name, data_dir).unwrap_or_else(|| procedural_mesh(name)) {

@@ -12,7 +12,7 @@ use gridtrace::gpu::{GpuContext, GpuRenderer, GpuVariants, HostPhases};
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
 use gridtrace::{AccelKind, Mesh, Result};
 
-use super::frames::{frame_accels, open_gpu, variants_for};
+use super::frames::{cpu_reference, frame_accels, open_gpu, variants_for};
 use super::{Budget, Plan};
 use crate::query_study::incoherent_rays;
 use crate::timing::{Summary, host_medians, interleaved, repeat_warm};
@@ -83,16 +83,23 @@ pub fn ray_study(
 ) -> Result<Vec<RayRow>> {
     let mut rows = Vec::new();
     for (name, mesh) in meshes {
-        for accel in frame_accels() {
+        for accel in frame_accels(gpu) {
             if !budget.allows(&format!("rays of {name} with {}", accel.name()), skipped) {
                 continue;
             }
-            let opts = QueryOptions {
-                accel: accel.into(),
-                backend: Backend::Cpu,
-                ..Default::default()
+            // The CPU's rows and reference hits: the structure's own, or its stand-in's (`hwrt`
+            // has no CPU walk: the BVH's).
+            let mesh_for = |accel: AccelKind| {
+                let opts = QueryOptions {
+                    accel: accel.into(),
+                    backend: Backend::Cpu,
+                    ..Default::default()
+                };
+                TraceMesh::from_mesh(mesh.clone(), &opts)
             };
-            let tm = TraceMesh::from_mesh(mesh.clone(), &opts)?;
+            let on_cpu = cpu_reference(accel);
+            let tm = mesh_for(accel)?;
+            let cpu_tm = if on_cpu == accel { None } else { Some(mesh_for(on_cpu)?) };
             let (o, d) = incoherent_rays(tm.prepared().accel.bounds(), plan.rays, 7);
             let incoherent: Vec<Ray> = o
                 .iter()
@@ -111,8 +118,13 @@ pub fn ray_study(
                     backend: backend.to_string(),
                     variant: variant.to_string(),
                 };
-                let (cpu_times, cpu_hits) = timed(plan.reps, || tm.intersect_rays(&rays, 0.0, f32::INFINITY))?;
-                let row = head("cpu", "-").row(&rays, &cpu_times, &cpu_hits, 0.0);
+                let cpu = cpu_tm.as_ref().unwrap_or(&tm);
+                let (cpu_times, cpu_hits) = timed(plan.reps, || cpu.intersect_rays(&rays, 0.0, f32::INFINITY))?;
+                let row = RowHead {
+                    accel: on_cpu,
+                    ..head("cpu", "-")
+                }
+                .row(&rays, &cpu_times, &cpu_hits, 0.0);
                 log(&row_line(&row));
                 rows.push(row);
                 // Every variant timed in rounds across them (`interleaved`), and the default's

@@ -132,8 +132,10 @@ class Mesh:
     ``accel`` is ``"auto"`` (the structure measured fastest for ray batches, today the BVH),
     ``"grid"``, ``"pc"`` (proximity clouds), ``"bvh"`` (a bounding volume hierarchy, the fastest
     for incoherent rays), ``"irregular"`` (an irregular grid, the grid that adapts to the mesh),
-    each on the CPU and the GPU, or ``"brute"`` (every triangle per ray, CPU only: a check for
-    small meshes); ``gridtrace.ACCELS`` lists them; ``irregular`` tunes the irregular grid's build
+    each on the CPU and the GPU, ``"brute"`` (every triangle per ray, CPU and GPU: a check for
+    small meshes), or ``"hwrt"`` (the GPU's ray-tracing hardware by ray query, ``backend="gpu"``
+    on an adapter with ray queries only: elsewhere its rays are an error naming what is
+    missing; closest points by a BVH); ``gridtrace.ACCELS`` lists them; ``irregular`` tunes the irregular grid's build
     (``"top=0.12,cell=2,alpha=1,merge=8,expand=3"``, any subset; ``""`` for the defaults);
     ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (a hardware GPU if present, else the CPU: a software adapter such as

@@ -19,6 +19,7 @@ pub mod closest;
 pub mod contract;
 pub mod grid;
 pub mod huge;
+pub mod hwrt;
 pub mod irregular;
 pub mod lanes;
 pub mod lattice;
@@ -61,6 +62,8 @@ pub enum Structure {
     Irregular(IrregularGrid),
     /// No structure: every triangle per ray.
     Brute(Brute),
+    /// The GPU's ray queries; a BVH kept for closest points and the CPU's answers.
+    Hwrt(hwrt::Hwrt),
 }
 
 /// Runs `$body` with `$s` bound to the structure inside `$structure`, whatever it is: the one
@@ -72,6 +75,7 @@ macro_rules! dispatch {
             Structure::Bvh($s) => $body,
             Structure::Irregular($s) => $body,
             Structure::Brute($s) => $body,
+            Structure::Hwrt($s) => $body,
         }
     };
 }
@@ -84,6 +88,7 @@ impl Structure {
             "bvh" => Structure::Bvh(AccelStructure::build(tris, params)?),
             "irregular" => Structure::Irregular(AccelStructure::build(tris, params)?),
             "brute" => Structure::Brute(AccelStructure::build(tris, params)?),
+            "hwrt" => Structure::Hwrt(AccelStructure::build(tris, params)?),
             other => unreachable!("registry names structure '{other}', which Structure::build lacks"),
         })
     }
@@ -95,6 +100,7 @@ impl Structure {
             Structure::Bvh(_) => "bvh",
             Structure::Irregular(_) => "irregular",
             Structure::Brute(_) => "brute",
+            Structure::Hwrt(_) => "hwrt",
         }
     }
 }
@@ -204,6 +210,21 @@ impl Accel {
             ));
         }
         Ok(())
+    }
+
+    /// An error when the CPU may not trace this structure's rays: `check_current`'s, or the
+    /// registry's `cpu` column false (`hwrt`: rays on the GPU's ray-tracing hardware only; its
+    /// closest points and hit lists, which are not ray queries, still run on the CPU).
+    pub fn check_cpu_traces(&self) -> Result<()> {
+        self.check_current()?;
+        match registry::ENTRIES.iter().find(|e| e.structure == self.structure_name()) {
+            Some(e) if !e.cpu => Err(Error::InvalidInput(format!(
+                "accel '{}' traces rays only on a GPU with ray queries (its ray-tracing hardware), not on the \
+                 CPU: use --backend gpu on such a GPU, or another structure (--accel bvh) on the CPU",
+                e.name
+            ))),
+            _ => Ok(()),
+        }
     }
 
     /// The grid, if that is the structure.

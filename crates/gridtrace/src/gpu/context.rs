@@ -36,6 +36,9 @@ pub struct GpuContext {
     pub timestamps: bool,
     /// Subgroup operations are available (the `appends=subgroup` variant).
     pub subgroups: bool,
+    /// Ray queries are available (`Features::EXPERIMENTAL_RAY_QUERY`, Vulkan's VK_KHR_ray_query
+    /// and VK_KHR_acceleration_structure): the `hwrt` structure.
+    pub ray_query: bool,
     /// First uncaptured device error, if any (validation, out of memory, lost device).
     errors: Arc<Mutex<Option<String>>>,
     /// Why the device was lost, once it was: every later wait is an error (a lost device
@@ -114,8 +117,22 @@ impl GpuContext {
         if subgroups {
             required_features |= wgpu::Features::SUBGROUP;
         }
+        let ray_query = features.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY);
+        if ray_query {
+            required_features |= wgpu::Features::EXPERIMENTAL_RAY_QUERY;
+        }
+        // SAFETY: wgpu asks the caller to accept that its experimental features may have bugs.
+        // The one used is ray queries, only where the adapter offers them, and only by the
+        // `hwrt` walk (its acceleration structures built and bound through wgpu's validated
+        // API); every other kernel is unchanged by it.
+        let experimental_features = if ray_query {
+            unsafe { wgpu::ExperimentalFeatures::enabled() }
+        } else {
+            wgpu::ExperimentalFeatures::disabled()
+        };
         // Ask for what the adapter really has, not the conservative defaults (8 storage buffers,
-        // 128 MiB bindings): large scenes need the real limits.
+        // 128 MiB bindings): large scenes need the real limits, and ray queries the adapter's
+        // acceleration-structure limits (0 by default: no BLAS could hold a triangle).
         let limits = adapter.limits();
         let needed = storage_buffers_needed();
         if limits.max_storage_buffers_per_shader_stage < needed {
@@ -130,7 +147,7 @@ impl GpuContext {
                 label: Some("gridtrace"),
                 required_features,
                 required_limits: limits,
-                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                experimental_features,
                 memory_hints: wgpu::MemoryHints::Performance,
                 trace: wgpu::Trace::Off,
             })
@@ -156,6 +173,7 @@ impl GpuContext {
             info,
             timestamps,
             subgroups,
+            ray_query,
             errors,
             lost,
             cache: Mutex::new(HashMap::new()),
@@ -170,7 +188,36 @@ impl GpuContext {
         } else {
             format!(", driver {} {}", i.driver, i.driver_info)
         };
-        format!("{} ({:?}, {:?}{driver})", i.name, i.backend, i.device_type)
+        format!(
+            "{} ({:?}, {:?}{driver}; {})",
+            i.name,
+            i.backend,
+            i.device_type,
+            self.ray_queries_words()
+        )
+    }
+
+    /// Whether `hwrt` can run here, in words: "ray queries" or "no ray queries".
+    pub fn ray_queries_words(&self) -> &'static str {
+        if self.ray_query {
+            "ray queries"
+        } else {
+            "no ray queries"
+        }
+    }
+
+    /// An error naming this adapter and what it lacks, for a structure that traces by ray
+    /// query (`hwrt`); `Ok` where it has them.
+    pub fn check_ray_queries(&self, structure: &str) -> Result<()> {
+        if self.ray_query {
+            return Ok(());
+        }
+        Err(Error::Gpu(format!(
+            "'{structure}' needs ray queries, which adapter '{}' ({:?}, driver {} {}) does not offer \
+             (wgpu feature EXPERIMENTAL_RAY_QUERY: Vulkan's VK_KHR_ray_query and VK_KHR_acceleration_structure; \
+             Mesa's lavapipe has them from Mesa 25)",
+            self.info.name, self.info.backend, self.info.driver, self.info.driver_info
+        )))
     }
 
     /// True for software rasterisers such as lavapipe or llvmpipe.

@@ -389,9 +389,19 @@ impl Kernels {
                 slot: i,
             })
             .collect();
+        let mut entries = bindings::layout_entries(&rows);
+        if spec.tlas.is_some() {
+            // A walk by ray query binds its top-level structure after its arrays.
+            entries.push(wgpu::BindGroupLayoutEntry {
+                binding: rows.len() as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::AccelerationStructure { vertex_return: false },
+                count: None,
+            });
+        }
         let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some(spec.structure),
-            entries: &bindings::layout_entries(&rows),
+            entries: &entries,
         });
         let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(spec.structure),

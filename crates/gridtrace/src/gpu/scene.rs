@@ -10,7 +10,7 @@ use super::context::{GpuContext, max_binding_bytes};
 use super::kernels::{Kernels, WalkPipelines};
 use super::layout::{GpuMaterial, GpuTri, SceneUniform, TriShade};
 use super::variants::GpuVariants;
-use super::walks::{WalkSpec, upload_of};
+use super::walks::{WalkSpec, device_structure, upload_of};
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
 
@@ -52,6 +52,9 @@ pub(crate) struct SceneBuffers {
     pub walk: Arc<WalkPipelines>,
     /// The structure's arrays, in `walk.spec.arrays` order, and their bind group (group 1).
     pub structure: Vec<wgpu::Buffer>,
+    /// The top-level acceleration structure of a walk by ray query (`WalkSpec::tlas`), bound
+    /// after the arrays.
+    pub tlas: Option<wgpu::Tlas>,
     pub structure_group: wgpu::BindGroup,
     pub tris: wgpu::Buffer,
     pub tri_shade: wgpu::Buffer,
@@ -115,6 +118,10 @@ impl SceneBuffers {
                 )));
             }
         }
+        if walk.spec.tlas.is_some() {
+            // Before compiling: the walk's module needs the feature this names.
+            ctx.check_ray_queries(walk.spec.structure)?;
+        }
         let pipelines = Kernels::of(ctx, variants)?.walk(dev, walk.spec)?;
         let structure: Vec<wgpu::Buffer> = walk
             .spec
@@ -123,7 +130,13 @@ impl SceneBuffers {
             .zip(&walk.arrays)
             .map(|((label, _), data)| storage(dev, label, data))
             .collect();
-        let structure_group = structure_group(dev, &pipelines, &structure);
+        let device = device_structure(ctx, scene)?;
+        let mut bytes = bytes;
+        if let Some(d) = &device {
+            bytes.push(("ray-query geometry", d.input_bytes));
+        }
+        let tlas = device.map(|d| d.tlas);
+        let structure_group = structure_group(dev, &pipelines, &structure, tlas.as_ref());
         let [tris, tri_shade, materials] = shared.map(|(n, d)| storage(dev, n, d));
 
         let l = walk.lattice;
@@ -153,6 +166,7 @@ impl SceneBuffers {
         Ok(SceneBuffers {
             walk: pipelines,
             structure,
+            tlas,
             structure_group,
             tris,
             tri_shade,
@@ -178,14 +192,20 @@ impl SceneBuffers {
             return false;
         }
         self.structure[i] = buffer.clone();
-        self.structure_group = structure_group(dev, &self.walk, &self.structure);
+        self.structure_group = structure_group(dev, &self.walk, &self.structure, self.tlas.as_ref());
         true
     }
 }
 
-/// Group 1 of the walking kernels: the structure's arrays in binding order.
-fn structure_group(dev: &wgpu::Device, walk: &WalkPipelines, arrays: &[wgpu::Buffer]) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = arrays
+/// Group 1 of the walking kernels: the structure's arrays in binding order, then its top-level
+/// acceleration structure where its walk traces by ray query.
+fn structure_group(
+    dev: &wgpu::Device,
+    walk: &WalkPipelines,
+    arrays: &[wgpu::Buffer],
+    tlas: Option<&wgpu::Tlas>,
+) -> wgpu::BindGroup {
+    let mut entries: Vec<wgpu::BindGroupEntry> = arrays
         .iter()
         .enumerate()
         .map(|(i, b)| wgpu::BindGroupEntry {
@@ -193,6 +213,12 @@ fn structure_group(dev: &wgpu::Device, walk: &WalkPipelines, arrays: &[wgpu::Buf
             resource: b.as_entire_binding(),
         })
         .collect();
+    if let Some(t) = tlas {
+        entries.push(wgpu::BindGroupEntry {
+            binding: arrays.len() as u32,
+            resource: t.as_binding(),
+        });
+    }
     dev.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some(walk.spec.structure),
         layout: &walk.layout,

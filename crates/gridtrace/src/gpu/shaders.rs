@@ -57,8 +57,17 @@ pub fn common_source() -> String {
             }
         }
     }
-    format!("{}\n{}\n{}", shared_source(), CLOSEST_TRI, files.join("\n"))
+    let enable = if super::walks::WALKS.iter().any(|w| w.tlas.is_some()) {
+        RAY_QUERY_ENABLE
+    } else {
+        ""
+    };
+    format!("{enable}{}\n{}\n{}", shared_source(), CLOSEST_TRI, files.join("\n"))
 }
+
+/// The directive a walk that traces by ray query (`WalkSpec::tlas`) needs: WGSL wants it
+/// before every declaration, so it starts the module.
+pub const RAY_QUERY_ENABLE: &str = "enable wgpu_ray_query;\n";
 
 /// The whole module of a kernel that walks no structure, as the device compiles it.
 pub fn module_source(kernel: &str) -> String {
@@ -82,7 +91,8 @@ pub fn module_source_for(kernel: &str, variants: &super::variants::GpuVariants) 
 /// `walk` names.
 pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String {
     format!(
-        "{}\n{}\n{}\n{}\n{}",
+        "{}{}\n{}\n{}\n{}\n{}",
+        if walk.tlas.is_some() { RAY_QUERY_ENABLE } else { "" },
         shared_source(),
         CLOSEST_TRI,
         walk.wgsl.join("\n"),

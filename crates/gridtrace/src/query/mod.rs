@@ -314,6 +314,7 @@ impl TraceMesh {
             backend,
             |gpu| self.intersect_on_gpu(gpu, origins, dirs, n, t_min, t_max),
             || {
+                self.scene.accel.check_cpu_traces()?;
                 let mut out = Hits::zeroed(n);
                 on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, mut piece| {
                     // Each hit goes straight into the output as its ray is done.
@@ -411,6 +412,7 @@ impl TraceMesh {
                 Ok(out)
             },
             || {
+                self.scene.accel.check_cpu_traces()?;
                 let mut out = vec![false; n];
                 on_cpu_batches(origins, dirs, n, out.par_chunks_mut(CPU_BATCH), |rays, piece| {
                     self.scene.accel.occluded_batch(rays, t_min, t_max, self.accel, piece)
@@ -503,6 +505,7 @@ impl TraceMesh {
             backend,
             |g| on_gpu(&mut locked(g)),
             || {
+                self.scene.accel.check_cpu_traces()?;
                 // Allocated, not filled: each work item fills its own piece first, so the
                 // pages are touched (faulted in) by the workers, in parallel, not by this
                 // thread before them (`vec![fill; n]` is a serial pass over the whole output).
@@ -566,8 +569,14 @@ mod tests {
         let faces = [[0u32, 1, 2]];
         let origins: Vec<[f32; 3]> = (0..3).map(|i| [0.1 + 0.1 * i as f32, 0.2, 1.0]).collect();
         let dirs: Vec<[f32; 3]> = (0..3).map(|i| [0.0, 0.05 * i as f32, -1.0]).collect();
+        // `hwrt` traces only on a GPU, and there only with ray queries.
+        let ray_queries = crate::gpu::GpuContext::new().is_ok_and(|c| c.ray_query);
         for accel in AccelKind::ALL {
-            for backend in [Backend::Cpu, Backend::Gpu] {
+            let backends = [Backend::Cpu, Backend::Gpu].into_iter().filter(|&b| match b {
+                Backend::Cpu => accel.entry().cpu,
+                _ => ray_queries || !crate::gpu::walks::needs_ray_queries(accel.structure_name()),
+            });
+            for backend in backends {
                 let opts = QueryOptions {
                     accel: accel.into(),
                     backend,
@@ -643,7 +652,11 @@ mod tests {
     /// normal; and occlusion agrees with it.
     #[test]
     fn cpu_queries_equal_brute_force_in_input_terms() {
-        for (degenerate, accel) in [false, true].into_iter().flat_map(|d| AccelKind::ALL.map(|a| (d, a))) {
+        let on_cpu = AccelKind::ALL.into_iter().filter(|k| k.entry().cpu);
+        for (degenerate, accel) in [false, true]
+            .into_iter()
+            .flat_map(|d| on_cpu.clone().map(move |a| (d, a)))
+        {
             let (vertices, faces, origins, dirs) = soup(degenerate);
             let opts = QueryOptions {
                 accel: accel.into(),

@@ -38,7 +38,7 @@ impl QueryScene {
             return Ok(RayHits::misses(rays.len()));
         };
         if !self.opts.backend.traces_on_gpu() {
-            mesh.prepared().accel.check_current()?;
+            mesh.prepared().accel.check_cpu_traces()?;
             let mut out = RayHits::zeroed(rays.len());
             cpu_rays::cast(&m, mesh, rays, &mut out);
             return Ok(out);
@@ -78,7 +78,7 @@ impl QueryScene {
             return Ok(out);
         };
         if !self.opts.backend.traces_on_gpu() {
-            mesh.prepared().accel.check_current()?;
+            mesh.prepared().accel.check_cpu_traces()?;
             cpu_rays::occluded(mesh, rays, t_near, t_far, &mut out);
             return Ok(out);
         }

@@ -11,6 +11,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     prefix: "brute",
     arrays: &[],
     device_build: false,
+    tlas: None,
     // Four triangles a loop iteration (brute.wgsl) times llvmpipe's 65,535 iterations.
     short_stack: false,
     software_max_tris: Some(4 * 65_535),

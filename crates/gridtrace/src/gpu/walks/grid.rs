@@ -11,6 +11,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     prefix: "grid",
     arrays: &[("cells", "cells"), ("refs", "grid_refs")],
     device_build: true,
+    tlas: None,
     short_stack: false,
     software_max_tris: None,
 };

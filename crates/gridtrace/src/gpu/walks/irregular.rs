@@ -16,6 +16,7 @@ pub const SPEC: WalkSpec = WalkSpec {
         ("refs", "irr_refs"),
     ],
     device_build: false,
+    tlas: None,
     short_stack: false,
     software_max_tris: None,
 };

@@ -7,11 +7,13 @@
 //! compiled when a scene of it is first uploaded (`Kernels::walk`).
 //!
 //! Adding a structure's GPU side: a walk file, a file here with its `WalkSpec` and its upload,
-//! one entry of `WALKS` and one arm of `upload_of`.
+//! one entry of `WALKS` and one arm of `upload_of` (and of `device_structure` for a walk by
+//! ray query, whose structure the device builds: `hwrt`).
 
 mod brute;
 pub mod bvh;
 mod grid;
+mod hwrt;
 mod irregular;
 
 use std::borrow::Cow;
@@ -20,6 +22,7 @@ use glam::{UVec3, Vec3};
 
 use crate::Result;
 use crate::accel::{Aabb, Structure};
+use crate::gpu::context::GpuContext;
 use crate::gpu::variants::GpuVariants;
 use crate::scene::PreparedScene;
 
@@ -49,6 +52,11 @@ pub struct WalkSpec {
     /// Keeps its stack in workgroup memory (`stack=short`): its stack file defines the same
     /// functions as the private stack's, so the two never share a module.
     pub short_stack: bool,
+    /// The WGSL name of a top-level acceleration structure the walk traces by ray query
+    /// (`hwrt`), bound in group 1 after the arrays (binding `arrays.len()`) and built on the
+    /// device at upload (`device_structure`); its modules start with `enable wgpu_ray_query;`
+    /// and need a device with ray queries. `None` for the software walks.
+    pub tlas: Option<&'static str>,
 }
 
 impl WalkSpec {
@@ -66,11 +74,12 @@ impl WalkSpec {
 
 /// Every GPU walk: each structure's default first, then the BVH's variants
 /// (`gpu::variants`).
-pub const WALKS: [&WalkSpec; 7] = [
+pub const WALKS: [&WalkSpec; 8] = [
     &grid::SPEC,
     &bvh::SPEC,
     &irregular::SPEC,
     &brute::SPEC,
+    &hwrt::SPEC,
     &bvh::SPEC_SHORT,
     &bvh::SPEC_WIDE8,
     &bvh::SPEC_WIDE8_SHORT,
@@ -79,6 +88,12 @@ pub const WALKS: [&WalkSpec; 7] = [
 /// The default walk of the structure named `structure`, if the GPU has one.
 pub fn spec(structure: &str) -> Option<&'static WalkSpec> {
     WALKS.iter().copied().find(|w| w.structure == structure)
+}
+
+/// Whether the structure named `structure` traces by ray query (`WalkSpec::tlas`): it runs
+/// only on an adapter with ray queries (`GpuContext::ray_query`).
+pub fn needs_ray_queries(structure: &str) -> bool {
+    spec(structure).is_some_and(|w| w.tlas.is_some())
 }
 
 /// The lattice fields of `SceneUniform` that a walk reads: the grid's cells, the irregular
@@ -123,9 +138,28 @@ pub fn upload_of<'a>(scene: &'a PreparedScene, variants: &GpuVariants) -> Result
         Structure::Bvh(b) => bvh::upload(b, &scene.accel.tris, scene.accel.bounds(), variants)?,
         Structure::Irregular(g) => irregular::upload(g),
         Structure::Brute(_) => brute::upload(scene.accel.bounds()),
+        Structure::Hwrt(h) => hwrt::upload(h, &scene.accel.tris, scene.accel.bounds(), variants)?,
     };
     debug_assert_eq!(upload.arrays.len(), upload.spec.arrays.len());
     Ok(upload)
+}
+
+/// The acceleration structure a ray-query walk (`WalkSpec::tlas`) binds, built on `ctx`'s
+/// device from the scene's triangles: the one place the GPU backend builds one.
+pub(crate) fn device_structure(ctx: &GpuContext, scene: &PreparedScene) -> Result<Option<DeviceStructure>> {
+    Ok(match &scene.accel.structure {
+        Structure::Hwrt(_) => Some(hwrt::build_on_device(ctx, &scene.accel.tris)?),
+        _ => None,
+    })
+}
+
+/// A top-level acceleration structure on the device, with what it cost.
+pub(crate) struct DeviceStructure {
+    /// Bound after the walk's arrays; it keeps its bottom-level structures alive.
+    pub tlas: wgpu::Tlas,
+    /// Bytes of the geometry uploaded for the build (the driver's own structures are not
+    /// counted: wgpu does not report them).
+    pub input_bytes: u64,
 }
 
 /// A slice's bytes, borrowed.

@@ -43,6 +43,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     prefix: "bvh",
     arrays: BINARY_ARRAYS,
     device_build: false,
+    tlas: None,
     software_max_tris: None,
     short_stack: false,
 };
