@@ -189,14 +189,14 @@ impl NativeMesh {
     fn vertices<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let a = self.arrays();
         let flat: Vec<f32> = a.vertices.iter().flatten().copied().collect();
-        Ok(flat.into_pyarray(py).reshape([a.vertices.len(), 3])?)
+        flat.into_pyarray(py).reshape([a.vertices.len(), 3])
     }
 
     /// The faces, (M, 3) uint32 (a copy).
     fn faces<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<u32>>> {
         let a = self.arrays();
         let flat: Vec<u32> = a.faces.iter().flatten().copied().collect();
-        Ok(flat.into_pyarray(py).reshape([a.faces.len(), 3])?)
+        flat.into_pyarray(py).reshape([a.faces.len(), 3])
     }
 
     #[getter]

@@ -44,8 +44,7 @@ fn hwrt_on_the_cpu_is_an_error() {
     let (o, d) = ([[0.0f32, 0.0, -5.0]], [[0.0f32, 0.0, 1.0]]);
     let e = mesh
         .intersect(&o, &d, 0.0, f32::INFINITY)
-        .err()
-        .expect("hwrt's rays refused on the CPU")
+        .expect_err("hwrt's rays refused on the CPU")
         .to_string();
     assert!(e.contains("'hwrt'"), "{e}");
     assert!(mesh.occluded(&o, &d, 0.0, f32::INFINITY).is_err());

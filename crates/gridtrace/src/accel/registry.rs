@@ -324,6 +324,6 @@ mod tests {
         );
         assert!("auto".parse::<AccelKind>().is_err());
         let e = "nope".parse::<AccelKind>().unwrap_err();
-        assert!(e.contains("'grid'") && e.contains("or 'brute'"), "{e}");
+        assert!(e.contains("'grid'") && e.contains("'brute'") && e.contains("or 'hwrt'"), "{e}");
     }
 }

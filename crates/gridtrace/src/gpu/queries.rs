@@ -272,7 +272,7 @@ impl GpuRenderer {
             },
             ..GpuQueryStats::default()
         };
-        let cap = (self.tile_capacity(1) as usize).min(PIPELINE_ITEMS).max(1);
+        let cap = (self.tile_capacity(1) as usize).clamp(1, PIPELINE_ITEMS);
         let chunks: Vec<Range<usize>> = (0..n).step_by(cap).map(|a| a..(a + cap).min(n)).collect();
         if let Some(first) = chunks.first() {
             let items = if chunks.len() > 1 { cap } else { first.len() };
