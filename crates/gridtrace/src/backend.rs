@@ -136,7 +136,7 @@ impl Backend {
                 ))),
             };
         }
-        let cpu_traces = scene.accel.check_cpu_traces().is_ok();
+        let cpu_traces = scene.accel.check_cpu_kind().is_ok();
         match GpuRenderer::with_variants(ctx, scene, variants) {
             Ok(gpu) => Ok(Some(gpu)),
             Err(e) if self == Backend::Auto && cpu_traces => {
@@ -283,7 +283,7 @@ impl Tracer {
         };
         if gpu.is_none() {
             // A structure only a GPU traces (`hwrt`) is refused here, before any frame.
-            scene.accel.check_cpu_traces().map_err(|e| match backend {
+            scene.accel.check_cpu_kind().map_err(|e| match backend {
                 Backend::Auto => Error::InvalidInput(format!(
                     "{e} (backend auto found no hardware GPU to trace it: {})",
                     notes.join("; ")
@@ -388,7 +388,7 @@ impl Tracer {
     /// and says so; anything else, or any error under `gpu`, is the caller's.
     fn gpu_failed(&mut self, e: Error) -> Result<()> {
         match e {
-            Error::Gpu(why) if self.backend == Backend::Auto && self.scene.accel.check_cpu_traces().is_ok() => {
+            Error::Gpu(why) if self.backend == Backend::Auto && self.scene.accel.check_cpu_kind().is_ok() => {
                 self.gpu = None;
                 if self.scene.accel.structure_stale {
                     let tris = self.scene.accel.tris.clone();

@@ -217,6 +217,13 @@ impl Accel {
     /// closest points and hit lists, which are not ray queries, still run on the CPU).
     pub fn check_cpu_traces(&self) -> Result<()> {
         self.check_current()?;
+        self.check_cpu_kind()
+    }
+
+    /// The registry's half of `check_cpu_traces`: whether the CPU may ever trace this kind of
+    /// structure's rays (a stale grid it may, once rebuilt: what a tracer does when its GPU
+    /// fails).
+    pub fn check_cpu_kind(&self) -> Result<()> {
         match registry::ENTRIES.iter().find(|e| e.structure == self.structure_name()) {
             Some(e) if !e.cpu => Err(Error::InvalidInput(format!(
                 "accel '{}' traces rays only on a GPU with ray queries (its ray-tracing hardware), not on the \

@@ -324,6 +324,9 @@ mod tests {
         );
         assert!("auto".parse::<AccelKind>().is_err());
         let e = "nope".parse::<AccelKind>().unwrap_err();
-        assert!(e.contains("'grid'") && e.contains("'brute'") && e.contains("or 'hwrt'"), "{e}");
+        assert!(
+            e.contains("'grid'") && e.contains("'brute'") && e.contains("or 'hwrt'"),
+            "{e}"
+        );
     }
 }
