@@ -496,7 +496,7 @@ fn help_shows_formats_and_values() {
     assert!(!ok && text.contains("image size must be positive"), "{text}");
     let (ok, text) = gridtrace(&["render", "--accel", "kd-tree"]);
     assert!(
-        !ok && text.contains("[possible values: auto, grid, pc, bvh, irregular, brute]"),
+        !ok && text.contains("[possible values: auto, grid, pc, bvh, irregular, brute, hwrt]"),
         "{text}"
     );
     // The short aliases the library accepts still work.
