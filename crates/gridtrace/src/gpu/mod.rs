@@ -31,6 +31,7 @@
 //! - `grid_build`: the grid and its proximity cloud built on the GPU (`shaders/build/`), for
 //!   meshes that move.
 
+mod batch_buffers;
 pub mod bindings;
 pub mod constants;
 mod context;

@@ -24,6 +24,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::batch_buffers::{BatchDevice, SLOTS};
 use super::bindings::{self, BATCH_BINDINGS, BatchSlot};
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
 use super::context::PendingRead;
@@ -40,8 +41,6 @@ use crate::{Error, Result};
 /// writing and reading of one overlaps the device's tracing of another; each submission costs
 /// the driver tens of microseconds, a chunk's tracing hundreds.
 pub const PIPELINE_ITEMS: usize = 1 << 18;
-/// Submissions in flight at once (the slots of upload and readback buffers).
-const SLOTS: usize = 2;
 /// Items a worker writes at a time: enough to amortise the hand-off, few enough that a
 /// chunk spreads over every core.
 const PIECE_ITEMS: usize = 16 * 1024;
@@ -149,32 +148,6 @@ impl Query {
             Query::ClosestPoint => vec![n * size_of::<GpuHit>() as u64, n * ACCUM_TEXEL_BYTES],
         }
     }
-}
-
-/// The device-side buffers of the batches: the chunk's wire rays, its packed answers and the
-/// batch's constants, with their bind group (`batch.wgsl`'s group 1).
-struct BatchDevice {
-    /// Items a chunk may hold.
-    items: u64,
-    wire: wgpu::Buffer,
-    answers: wgpu::Buffer,
-    uniform: wgpu::Buffer,
-    group: wgpu::BindGroup,
-}
-
-/// A slot's host-visible buffers: the upload the host writes a chunk's rays into, the readback
-/// its answers come to.
-#[derive(Default)]
-struct Slot {
-    upload: Option<MappedUpload>,
-    readback: Option<wgpu::Buffer>,
-}
-
-/// What a renderer keeps between batches (grown as batches need).
-#[derive(Default)]
-pub(super) struct Batches {
-    device: Option<BatchDevice>,
-    slots: [Slot; SLOTS],
 }
 
 /// A submitted chunk, not yet read out.

@@ -115,7 +115,7 @@ pub struct GpuRenderer {
     /// frames and grown as they need.
     pub(super) readback: Option<wgpu::Buffer>,
     /// The ray batches' kept buffers: uploads, readbacks, wire rays and answers (`queries.rs`).
-    pub(super) batches: super::queries::Batches,
+    pub(super) batches: super::batch_buffers::Batches,
     /// What the last ray batch took (`last_query_stats`).
     pub(super) last_query: GpuQueryStats,
     /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).

@@ -1,0 +1,36 @@
+//! What a renderer keeps between ray batches (`queries.rs`), grown as batches need: per slot
+//! of the pipeline a mapped upload and a readback, and on the device a chunk's wire rays, its
+//! packed answers and the batch's constants with their bind group. Apart from `queries.rs` so
+//! that the renderer, which owns them, and the batches, which use the renderer, do not import
+//! each other.
+
+use super::upload::MappedUpload;
+
+/// Submissions in flight at once (the slots of upload and readback buffers).
+pub(super) const SLOTS: usize = 2;
+
+/// The device-side buffers of the batches: the chunk's wire rays, its packed answers and the
+/// batch's constants, with their bind group (`batch.wgsl`'s group 1).
+pub(super) struct BatchDevice {
+    /// Items a chunk may hold.
+    pub items: u64,
+    pub wire: wgpu::Buffer,
+    pub answers: wgpu::Buffer,
+    pub uniform: wgpu::Buffer,
+    pub group: wgpu::BindGroup,
+}
+
+/// A slot's host-visible buffers: the upload the host writes a chunk's rays into, the readback
+/// its answers come to.
+#[derive(Default)]
+pub(super) struct Slot {
+    pub upload: Option<MappedUpload>,
+    pub readback: Option<wgpu::Buffer>,
+}
+
+/// What a renderer keeps between batches (grown as batches need).
+#[derive(Default)]
+pub(super) struct Batches {
+    pub device: Option<BatchDevice>,
+    pub slots: [Slot; SLOTS],
+}
