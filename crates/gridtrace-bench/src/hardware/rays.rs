@@ -189,41 +189,27 @@ pub fn ray_study(
 /// u, v those are 0; occlusion answers as a hit at t = 0 or a miss (checked against the
 /// CPU's hits: occluded where the CPU hits anything).
 fn ask(r: &mut GpuRenderer, rays: &[Ray], accel: AccelKind, asked: Asked) -> Result<Vec<Hit>> {
-    use gridtrace::gpu::{Answer, ChunkAnswers, RaySlice};
-    let mut hits = vec![Hit::MISS; rays.len()];
-    let answer = match asked {
-        Asked::HitsUv => return r.intersect(rays, 0.0, f32::INFINITY, accel),
-        Asked::Hits => Answer::Hits { uv: false },
-        Asked::Occlusion => Answer::Occlusion,
-    };
-    r.cast(&RaySlice { rays }, (0.0, 1e30), answer, accel, |first, a| match a {
-        ChunkAnswers::Hits(h) => {
-            for (out, h) in hits[first..].iter_mut().zip(h) {
-                if h.tri != u32::MAX {
-                    *out = Hit {
-                        t: h.t,
-                        tri: h.tri,
-                        u: 0.0,
-                        v: 0.0,
-                    };
-                }
-            }
-        }
-        ChunkAnswers::Occlusion(bits) => {
-            for (i, out) in hits[first..].iter_mut().enumerate().take(bits.len() * 32) {
-                if bits[i / 32] >> (i % 32) & 1 != 0 {
-                    *out = Hit {
+    let rays_of = gridtrace::gpu::RaySlice { rays };
+    match asked {
+        Asked::HitsUv => r.intersect(rays, 0.0, f32::INFINITY, accel),
+        Asked::Hits => r.intersect_of(&rays_of, (0.0, 1e30), false, accel),
+        Asked::Occlusion => Ok(r
+            .occluded_of(&rays_of, (0.0, 1e30), accel)?
+            .into_iter()
+            .map(|o| {
+                if o {
+                    Hit {
                         t: 0.0,
                         tri: 0,
                         u: 0.0,
                         v: 0.0,
-                    };
+                    }
+                } else {
+                    Hit::MISS
                 }
-            }
-        }
-        _ => {}
-    })?;
-    Ok(hits)
+            })
+            .collect()),
+    }
 }
 
 /// One warm-up, then `reps` timed runs of `f` (wall ms); the last run's hits.

@@ -172,36 +172,50 @@ unsafe impl Send for Piece<'_> {}
 impl GpuRenderer {
     /// Closest hits (with barycentrics) for a batch of rays already checked by the caller.
     pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<Hit>> {
+        self.intersect_of(&RaySlice { rays }, (t_min, t_max), true, kind)
+    }
+
+    /// Closest hits for the rays of `rays` (`interval` as `cast` takes it), with their
+    /// barycentrics only if `uv` (16 bytes a ray down, else 8 and every `u`, `v` 0).
+    pub fn intersect_of(
+        &mut self,
+        rays: &dyn WireSource,
+        interval: (f32, f32),
+        uv: bool,
+        kind: AccelKind,
+    ) -> Result<Vec<Hit>> {
         let mut hits = Vec::with_capacity(rays.len());
-        self.cast(
-            &RaySlice { rays },
-            (t_min, t_max),
-            Answer::Hits { uv: true },
-            kind,
-            |_, answers| {
-                if let ChunkAnswers::HitsUv(out) = answers {
-                    hits.par_extend(out.par_iter().map(|h| gpu_hit(*h)));
-                }
-            },
-        )?;
+        self.cast(rays, interval, Answer::Hits { uv }, kind, |_, answers| match answers {
+            ChunkAnswers::HitsUv(out) => hits.par_extend(out.par_iter().map(|h| gpu_hit(*h))),
+            ChunkAnswers::Hits(out) => hits.par_extend(out.par_iter().map(|h| match h.tri {
+                MISS => Hit::MISS,
+                tri => Hit {
+                    t: h.t,
+                    tri,
+                    u: 0.0,
+                    v: 0.0,
+                },
+            })),
+            _ => {}
+        })?;
         Ok(hits)
     }
 
     /// Any-hit occlusion for a batch of rays already checked by the caller.
     pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<bool>> {
+        self.occluded_of(&RaySlice { rays }, (t_min, t_max), kind)
+    }
+
+    /// Any-hit occlusion for the rays of `rays` (`interval` as `cast` takes it): one bit a ray
+    /// comes down, one bool a ray goes back.
+    pub fn occluded_of(&mut self, rays: &dyn WireSource, interval: (f32, f32), kind: AccelKind) -> Result<Vec<bool>> {
         let mut occ = vec![false; rays.len()];
-        self.cast(
-            &RaySlice { rays },
-            (t_min, t_max),
-            Answer::Occlusion,
-            kind,
-            |first, answers| {
-                if let ChunkAnswers::Occlusion(bits) = answers {
-                    let end = (first + bits.len() * 32).min(occ.len());
-                    unpack_bits(bits, &mut occ[first..end]);
-                }
-            },
-        )?;
+        self.cast(rays, interval, Answer::Occlusion, kind, |first, answers| {
+            if let ChunkAnswers::Occlusion(bits) = answers {
+                let end = (first + bits.len() * 32).min(occ.len());
+                unpack_bits(bits, &mut occ[first..end]);
+            }
+        })?;
         Ok(occ)
     }
 

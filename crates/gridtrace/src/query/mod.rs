@@ -34,7 +34,7 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::{AccelChoice, AccelKind, Hit, IrregularParams, Ray, Resolution, Work};
-use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, GpuVariants, unpack_bits};
+use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, GpuVariants};
 use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
 
@@ -395,21 +395,8 @@ impl TraceMesh {
             backend,
             |gpu| {
                 // One bit a ray comes down.
-                let mut out = vec![false; n];
                 let rays = wire::SplitRays { origins, dirs, n };
-                locked(gpu).cast(
-                    &rays,
-                    (t_min, t_max),
-                    Answer::Occlusion,
-                    self.accel,
-                    |first, answers| {
-                        if let ChunkAnswers::Occlusion(bits) = answers {
-                            let end = (first + bits.len() * 32).min(n);
-                            unpack_bits(bits, &mut out[first..end]);
-                        }
-                    },
-                )?;
-                Ok(out)
+                locked(gpu).occluded_of(&rays, (t_min, t_max), self.accel)
             },
             || {
                 self.scene.accel.check_cpu_traces()?;
@@ -445,28 +432,7 @@ impl TraceMesh {
         self.run(
             backend,
             rays,
-            |g| {
-                if uv {
-                    return g.intersect(rays, t_min, t_max, self.accel);
-                }
-                let mut hits = Vec::with_capacity(rays.len());
-                let answer = Answer::Hits { uv: false };
-                let rays = crate::gpu::RaySlice { rays };
-                g.cast(&rays, (t_min, t_max), answer, self.accel, |_, answers| {
-                    if let ChunkAnswers::Hits(out) = answers {
-                        hits.par_extend(out.par_iter().map(|h| match h.tri {
-                            u32::MAX => Hit::MISS,
-                            tri => Hit {
-                                t: h.t,
-                                tri,
-                                u: 0.0,
-                                v: 0.0,
-                            },
-                        }));
-                    }
-                })?;
-                Ok(hits)
-            },
+            |g| g.intersect_of(&crate::gpu::RaySlice { rays }, (t_min, t_max), uv, self.accel),
             |r, out| {
                 self.scene.accel.intersect_batch(r, t_min, t_max, self.accel, out);
                 if !uv {
