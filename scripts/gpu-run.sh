@@ -11,8 +11,8 @@
 # The steps, most important first: the hardware suite (every structure x GPU variant, ray
 # batches, grid builds; hardware.md/json), 1M-ray batches beside Embree 3 on the same rays
 # (rays.txt), the CPU BVH's scaling at 1-16 threads beside Embree (cpu-scaling.md), the paper
-# matrix on the GPU and the CPU cores (paper.md/json), a 1080p camera orbit and an animated mesh
-# (summary.txt). The ray batches' lines give the bytes a ray each way and the host's phases
+# matrix on the GPU and the CPU cores (paper.md/json), a 1080p camera orbit one frame at a time
+# and with two frames in flight, and an animated mesh (summary.txt). The ray batches' lines give the bytes a ray each way and the host's phases
 # (prepare, wait, readout) of the pipelined chunks. The first H200 runs (2026-11-26) used it; their
 # output is under docs/results/h200-2026-11-26*. LOCAL=1 QUICK=1 runs it on this machine's
 # lavapipe for a check of the script (no packages unpacked, the suite's --quick plan).
@@ -89,14 +89,16 @@ if [ "$l" -gt 70 ]; then
 fi
 say "== 3. headless camera path [left $(left)s]"
 cam="--mesh $M/bunny/bun_zipper.ply --res 1920x1080 --backend gpu"
-for m in cast shadow trace; do
+# Frames in flight (issue 41): one by one, then two in flight; `rate` is the throughput
+# (frames/s and Mrays/s of wall time after the first frame), `frames` each frame's latency.
+for m in cast shadow trace; do for fl in 1 2; do
   [ "$(left)" -gt 20 ] || break
-  timeout 15 $B render $cam --mode $m --frames 60 --orbit -o /tmp/orbit.png 2>&1 | grep -E '^(first|frames|gpu|stages|rates|render|error|Error)' | sed "s/^/$m: /" | tee -a "$log"
-done
-for rb in "" "--readback"; do
+  timeout 15 $B render $cam --mode $m --frames 60 --orbit --in-flight $fl -o /tmp/orbit.png 2>&1 | grep -E '^(first|frames|gpu|stages|rates|rate|render|error|Error)' | sed "s/^/$m in-flight=$fl: /" | tee -a "$log"
+done; done
+for rb in "" "--readback"; do for fl in 1 2; do
   [ "$(left)" -gt 20 ] || break
-  timeout 15 $B view --headless $cam --mode shadow --frames 60 --orbit $rb 2>&1 | grep -E '^(image|first|rest|gpu|error|Error)' | sed "s/^/view shadow $rb: /" | tee -a "$log"
-done
+  timeout 15 $B view --headless $cam --mode shadow --frames 60 --orbit --in-flight $fl $rb 2>&1 | grep -E '^(image|first|rest|gpu|rate|error|Error)' | sed "s/^/view shadow in-flight=$fl $rb: /" | tee -a "$log"
+done; done
 say "== 4. animated mesh, grid rebuilt on the GPU every frame [left $(left)s]"
 [ "$(left)" -gt 15 ] && timeout 12 $B render --animate --scene animated --frames 30 --mode shadow --accel pc --backend gpu --res 1024x1024 -o /tmp/anim.png 2>&1 | tail -3 | tee -a "$log"
 say "== done [t=$(( $(date +%s)-T0 ))s]"

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
+use clap::builder::TypedValueParser;
 use glam::Vec3;
 use gridtrace::scene::PointLight;
-use gridtrace::{Mode, PixelFormat, RenderOptions};
+use gridtrace::{FramesOptions, FramesStats, Mode, PixelFormat, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::common::{
@@ -61,6 +62,11 @@ pub struct RenderArgs {
     /// of the rest are reported, so the figure compares with `bench` (warm, not one cold frame).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub frames: u32,
+    /// With --frames: frames the GPU may have in flight. 2 (the default) prepares and submits
+    /// frame N+1 before it reads back frame N; 1 traces them one by one. The CPU makes frames one
+    /// by one (each takes every core).
+    #[arg(long, default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT, value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize))]
+    pub in_flight: usize,
     /// Move the camera along a circle around its target over the frames (about the up axis,
     /// one turn in all): the paper's dynamic camera.
     #[arg(long)]
@@ -162,34 +168,48 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             b.inc(rows as u64);
         }
     };
-    let mut frames = Vec::with_capacity(a.frames as usize);
-    let mut first = None;
-    let mut last_gpu = None;
-    for i in 0..a.frames {
+    let views = (0..a.frames).map(|i| {
         let camera = if a.orbit {
             orbit(&camera0, i as f32 / a.frames as f32)
         } else {
             camera0
         };
-        let frame = if a.stats && renderer.gpu().is_none() {
+        (camera, lights.clone())
+    });
+    let mut frames = Vec::with_capacity(a.frames as usize);
+    let mut first = None;
+    let mut last_gpu = None;
+    let mut run = None;
+    if a.stats && renderer.gpu().is_none() {
+        // The counting renderer (CPU): one frame after another.
+        for (camera, lights) in views {
             let (image, stats) = gridtrace::cpu::render_with_counters(&renderer.scene, &camera, &lights, &opts)?;
-            gridtrace::Frame {
+            frames.push(stats);
+            first.get_or_insert(gridtrace::Frame {
                 image,
                 stats,
                 gpu: None,
-            }
-        } else {
-            renderer.render_with_progress(&camera, &lights, &opts, Some(&tick))?
+            });
+        }
+    } else {
+        let how = FramesOptions {
+            in_flight: a.in_flight,
+            target: None,
+            progress: Some(&tick),
         };
+        run = Some(renderer.render_frames(views, &opts, how, |_, frame| {
+            let gridtrace::Rendered::OnHost(frame) = frame else {
+                unreachable!("frames come to the host without a device image")
+            };
+            frames.push(frame.stats);
+            if let Some(g) = &frame.gpu {
+                last_gpu = Some(g.clone());
+            }
+            first.get_or_insert(frame);
+            Ok(())
+        })?);
         for n in renderer.take_notes() {
             println!("note: {n}");
-        }
-        frames.push(frame.stats);
-        if let Some(g) = &frame.gpu {
-            last_gpu = Some(g.clone());
-        }
-        if first.is_none() {
-            first = Some(frame);
         }
     }
     if let Some(b) = bar {
@@ -217,7 +237,14 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         a.res.1
     );
     if frames.len() > 1 {
-        println!("{}", describe_frames(&frames[1..], a.orbit));
+        let overlapped = renderer.gpu().is_some() && a.in_flight > 1;
+        println!("{}", describe_frames(&frames[1..], a.orbit, overlapped));
+        if let Some(rate) = run
+            .as_ref()
+            .and_then(describe_throughput(renderer.gpu().is_some(), a.in_flight))
+        {
+            println!("{rate}");
+        }
     }
     if a.stats && stats.counters.cells > 0 {
         let c = stats.counters;
@@ -290,8 +317,10 @@ pub(crate) fn orbit(camera: &gridtrace::scene::Camera, turn: f32) -> gridtrace::
     }
 }
 
-/// The frames after the first: median and best, in ms and Mrays/s.
-fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool) -> String {
+/// The frames after the first: median and best, in ms and Mrays/s. With frames in flight
+/// (`overlapped`) a frame's time is its latency, which holds another frame's host work, so the
+/// rates are left to the run's throughput line.
+fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool, overlapped: bool) -> String {
     let mut ms: Vec<f64> = rest.iter().map(|s| s.render_ms).collect();
     ms.sort_by(f64::total_cmp);
     let median = ms[ms.len() / 2];
@@ -301,6 +330,13 @@ fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool) -> String {
     // middle frames) and the best is the fastest.
     let mut rates: Vec<f64> = rest.iter().map(|s| s.mrays_per_s()).collect();
     rates.sort_by(|a, b| b.total_cmp(a));
+    if overlapped {
+        return format!(
+            "frames  {} more{}: latency median {median:.1} ms, best {best:.1} ms (frames in flight)",
+            rest.len(),
+            if orbit { " along the orbit" } else { "" },
+        );
+    }
     format!(
         "frames  {} more{}: median {median:.1} ms ({:.2} Mrays/s), best {best:.1} ms ({:.2} Mrays/s)",
         rest.len(),
@@ -308,6 +344,21 @@ fn describe_frames(rest: &[gridtrace::RenderStats], orbit: bool) -> String {
         rates[rates.len() / 2],
         rates[0]
     )
+}
+
+/// A run's steady throughput (frames after the first), and how many frames were in flight.
+fn describe_throughput(gpu: bool, in_flight: usize) -> impl Fn(&FramesStats) -> Option<String> {
+    move |run| {
+        let (fps, mrays) = (run.frames_per_s()?, run.mrays_per_s()?);
+        let how = if gpu {
+            format!("{} in flight", in_flight.max(1))
+        } else {
+            "one by one".into()
+        };
+        Some(format!(
+            "rate    {fps:.1} frames/s, {mrays:.2} Mrays/s of wall time ({how})"
+        ))
+    }
 }
 
 /// Whether to draw progress: only on a terminal (piped or captured stderr stays exactly as it

@@ -273,12 +273,13 @@ fn hardware_suite_quick_runs_every_part() {
             .map(|r| r["variant"].as_str().unwrap().to_string())
             .collect()
     };
-    // And beside them the default's frames left on the device (as the viewer presents them).
-    assert_eq!(of("bvh").len(), variants.len() + 1, "{:?}", of("bvh"));
+    // And beside them the default's frames left on the device (as the viewer presents them)
+    // and read back with frames in flight.
+    assert_eq!(of("bvh").len(), variants.len() + 2, "{:?}", of("bvh"));
     assert!(of("bvh").iter().any(|v| v.contains("wide8")));
-    assert_eq!(of("grid").len(), variants.len() - 2 + 1, "{:?}", of("grid"));
+    assert_eq!(of("grid").len(), variants.len() - 2 + 2, "{:?}", of("grid"));
     let big = json["big_frame"].as_array().unwrap();
-    assert_eq!(big.len(), 3, "{md}");
+    assert_eq!(big.len(), 4, "{md}");
     assert!(big.iter().all(|r| r["width"] == 512 && r["height"] == 512));
     // A frame left on the device reads back its counters and timestamps only: the default's
     // row of the same frame reads 4 bytes a pixel more; both agree with the CPU.
@@ -310,6 +311,34 @@ fn hardware_suite_quick_runs_every_part() {
             4 * pixels,
             "{r}"
         );
+    }
+    // Frames in flight: one row beside every default row, the same frame (its rays, the CPU's
+    // pixels), read back whole in one round trip each.
+    let in_flight: Vec<&serde_json::Value> = frames
+        .iter()
+        .chain(big)
+        .filter(|r| r["variant"] == "in-flight=2")
+        .collect();
+    assert_eq!(in_flight.len(), defaults, "one beside every default row: {md}");
+    for r in in_flight {
+        let host = frames
+            .iter()
+            .chain(big)
+            .find(|q| {
+                q["variant"] == "default"
+                    && q["scene"] == r["scene"]
+                    && q["accel"] == r["accel"]
+                    && q["mode"] == r["mode"]
+                    && q["width"] == r["width"]
+            })
+            .unwrap_or_else(|| panic!("no default row beside {r}"));
+        assert_eq!(
+            (&r["rays"], &r["round_trips"]),
+            (&host["rays"], &host["round_trips"]),
+            "{r}"
+        );
+        assert_eq!(r["bytes_down"], host["bytes_down"], "{r}");
+        assert!(r["differing_from_cpu"].as_f64().unwrap() <= 0.002, "{r}");
     }
     let rays = json["rays"].as_array().unwrap();
     for set in ["camera", "incoherent"] {

@@ -237,7 +237,7 @@ impl Rendered {
 /// dropped and replaced (a file dropped on the viewer) and moved (`update_vertices`).
 pub struct Tracer {
     pub scene: PreparedScene,
-    gpu: Option<GpuRenderer>,
+    pub(crate) gpu: Option<GpuRenderer>,
     /// The choice it was opened with: under `auto` a GPU that fails (a lost device, memory
     /// gone) hands the work to the CPU for good, with a note, and the frame is still made.
     backend: Backend,
@@ -386,7 +386,7 @@ impl Tracer {
     /// The GPU failed with `e`: under `auto` a device error hands the scene to the CPU for
     /// good (its structure brought up to date first, when the GPU was the one rebuilding it)
     /// and says so; anything else, or any error under `gpu`, is the caller's.
-    fn gpu_failed(&mut self, e: Error) -> Result<()> {
+    pub(crate) fn gpu_failed(&mut self, e: Error) -> Result<()> {
         match e {
             Error::Gpu(why) if self.backend == Backend::Auto && self.scene.accel.check_cpu_kind().is_ok() => {
                 self.gpu = None;

@@ -250,11 +250,20 @@ fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> R
 /// viewer presents them): the default kernels, no image read back.
 pub const ON_DEVICE_LABEL: &str = "image=device";
 
+/// The variant label of the row whose frames are read back with frames in flight (frame N+1
+/// submitted before frame N is read back, `GpuRenderer::submit_frame`): the default kernels;
+/// its wall time is a run's time over its frames (the throughput), not one frame's latency.
+pub const IN_FLIGHT_LABEL: &str = "in-flight=2";
+/// Frames in flight in the `IN_FLIGHT_LABEL` row, and frames a measurement of it runs.
+const IN_FLIGHT: usize = gridtrace::frames::DEFAULT_IN_FLIGHT;
+const IN_FLIGHT_RUN: usize = 6;
+
 /// The frames of `opts` on every renderer (a variant each, with its label), timed in rounds
 /// across them; a row each, its last image checked against the CPU's `reference`. When the
-/// first renderer has the default variants (and the mode is not heat), one more row: its
-/// frames left in a device image (`ON_DEVICE_LABEL`), what the viewer waits for a frame; that
-/// image is read back once, after the timing, for the check.
+/// first renderer has the default variants, one more row with frames in flight
+/// (`IN_FLIGHT_LABEL`), and (unless the mode is heat) one with its frames left in a device
+/// image (`ON_DEVICE_LABEL`), what the viewer waits for a frame; that image is read back once,
+/// after the timing, for the check.
 fn gpu_rows(
     plan: &Plan,
     bs: &BenchScene,
@@ -270,8 +279,12 @@ fn gpu_rows(
         }
         _ => None,
     };
+    let defaults = renderers
+        .first()
+        .is_some_and(|(_, r)| r.variants() == GpuVariants::default());
     let on_device = renderers.len();
-    let n = renderers.len() + device_image.is_some() as usize;
+    let in_flight = on_device + device_image.is_some() as usize;
+    let n = in_flight + defaults as usize;
     let mut last: Vec<Option<Image>> = (0..n).map(|_| None).collect();
     // Warm-up: each variant at least once (pipelines, buffers), then until `warmup_ms` passed.
     let runs = interleaved(n, plan.warmup_ms, plan.reps, |k| {
@@ -282,6 +295,11 @@ fn gpu_rows(
                 .render_to_device(&prepared.camera, &prepared.lights, opts, target)?;
             return Ok((s.wall_ms, s));
         }
+        if k == in_flight {
+            let (ms, image, s) = frames_in_flight(&mut renderers[0].1, prepared, opts)?;
+            last[k] = Some(image);
+            return Ok((ms, s));
+        }
         let (image, s) = renderers[k].1.render(&prepared.camera, &prepared.lights, opts)?;
         last[k] = Some(image);
         Ok((s.wall_ms, s))
@@ -291,12 +309,39 @@ fn gpu_rows(
         last[on_device] = Some(t.read()?);
         labels.push(ON_DEVICE_LABEL);
     }
+    if defaults {
+        labels.push(IN_FLIGHT_LABEL);
+    }
     let mut rows = Vec::new();
     for (((walls, frames), image), label) in runs.into_iter().zip(last).zip(labels) {
         let image = image.expect("at least one timed frame");
         rows.push(gpu_row(bs, opts, label, &walls, &frames, &image, reference, mismatches));
     }
     Ok(rows)
+}
+
+/// `IN_FLIGHT_RUN` frames of `opts` with `IN_FLIGHT` in flight: the milliseconds a frame of
+/// the run (its wall time over its frames), the last frame's image and figures.
+fn frames_in_flight(
+    gpu: &mut GpuRenderer,
+    prepared: &PreparedScene,
+    opts: &RenderOptions,
+) -> Result<(f64, Image, GpuRenderStats)> {
+    let t0 = std::time::Instant::now();
+    let mut flight = std::collections::VecDeque::with_capacity(IN_FLIGHT);
+    let mut last = None;
+    for _ in 0..IN_FLIGHT_RUN {
+        flight.push_back(gpu.submit_frame(&prepared.camera, &prepared.lights, opts, None)?);
+        if flight.len() >= IN_FLIGHT {
+            last = Some(gpu.finish_frame(flight.pop_front().expect("in flight"))?);
+        }
+    }
+    while let Some(f) = flight.pop_front() {
+        last = Some(gpu.finish_frame(f)?);
+    }
+    let (image, stats) = last.expect("at least one frame");
+    let ms = t0.elapsed().as_secs_f64() * 1e3 / IN_FLIGHT_RUN as f64;
+    Ok((ms, image.expect("frames read back come to the host"), stats))
 }
 
 /// One variant's row from its timed frames.

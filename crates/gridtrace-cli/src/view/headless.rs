@@ -13,7 +13,7 @@ use std::time::Instant;
 use glam::{Quat, Vec3};
 use gridtrace::gpu::DeviceImage;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{Mode, PixelFormat, RenderOptions, Rendered};
+use gridtrace::{FramesOptions, Mode, PixelFormat, RenderOptions};
 
 use super::ViewArgs;
 use crate::render::orbit;
@@ -73,20 +73,21 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
     // (wall ms, GPU ms where there are timestamps, Mrays/s by wall time)
     let mut frames: Vec<(f64, Option<f64>, f64)> = Vec::with_capacity(a.frames as usize);
     let mut uploaded = 0;
-    for i in 0..a.frames {
+    let views = (0..a.frames).map(|i| {
         let turn = i as f32 / a.frames as f32;
         let camera = if a.orbit { orbit(&camera0, turn) } else { camera0 };
-        let lights = circle_lights(&lights0, camera0.up, centre, turn);
-        let t = Instant::now();
-        let f = match &target {
-            Some(t) => tracer.render_to_device(&camera, &lights, &opts, t)?,
-            None => Rendered::OnHost(tracer.render(&camera, &lights, &opts)?),
-        };
+        (camera, circle_lights(&lights0, camera0.up, centre, turn))
+    });
+    let how = FramesOptions {
+        in_flight: a.in_flight,
+        target: target.as_ref(),
+        progress: None,
+    };
+    let run = tracer.render_frames(views, &opts, how, |i, f| {
         let (rays, gpu) = (f.stats().rays, f.gpu());
-        for n in tracer.take_notes() {
-            println!("note: {n}");
-        }
-        let ms = t.elapsed().as_secs_f64() * 1e3;
+        // The frame's latency: from its preparation to its pixels in place (the device image,
+        // or host memory), what the viewer waits for one frame.
+        let ms = gpu.map_or(f.stats().render_ms, |g| g.wall_ms);
         let gpu_ms = gpu.filter(|g| g.timings.from_timestamps).map(|g| g.timings.total_ms);
         uploaded = gpu.map_or(0, |g| g.uploaded_bytes);
         let rate = rays.total() as f64 / (ms * 1e3);
@@ -104,6 +105,10 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
             rays.total()
         );
         frames.push((ms, gpu_ms, rate));
+        Ok(())
+    })?;
+    for n in tracer.take_notes() {
+        println!("note: {n}");
     }
     let (first, rest) = frames.split_first().expect("at least one frame");
     println!(
@@ -140,6 +145,13 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
                 g.median, g.p95, g.best
             );
         }
+    }
+    if let (Some(fps), Some(mrays)) = (run.frames_per_s(), run.mrays_per_s()) {
+        let how = match tracer.gpu() {
+            Some(_) => format!("{} in flight", a.in_flight.max(1)),
+            None => "one by one".into(),
+        };
+        println!("rate    {fps:.1} frames/s, {mrays:.2} Mrays/s of wall time after the first frame ({how})");
     }
     if uploaded > 0 {
         println!("upload  {uploaded} B per frame (camera, lights, pass uniforms)");

@@ -32,6 +32,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::Args;
+use clap::builder::TypedValueParser;
 use glam::Vec3;
 use gridtrace::gpu::GpuContext;
 use gridtrace::scene::animated::Animation;
@@ -88,6 +89,11 @@ pub struct ViewArgs {
     /// it on the device as the window presents it.
     #[arg(long, requires = "headless")]
     readback: bool,
+    /// With --headless: frames the GPU may have in flight. 2 (the default) prepares and
+    /// submits frame N+1 before it waits for frame N; 1 traces them one by one.
+    #[arg(long, requires = "headless", default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT,
+          value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize))]
+    in_flight: usize,
     /// With --headless: move the camera round its orbit (one turn over the frames); without
     /// it the view stays and only the lights move.
     #[arg(long, requires = "headless")]

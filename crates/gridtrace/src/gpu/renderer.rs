@@ -111,9 +111,10 @@ pub struct GpuRenderer {
     /// `pass_uniform` in the command stream before the tile's passes: so all tiles of a frame
     /// go in one submission. Grown as frames need.
     pub(super) tile_uniforms: Option<wgpu::Buffer>,
-    /// The frame's results (image, counters, timestamps), mapped once per frame. Kept between
-    /// frames and grown as they need.
-    pub(super) readback: Option<wgpu::Buffer>,
+    /// Spare frame readbacks (image, counters, timestamps; each mapped once per frame): a
+    /// frame takes one and gives it back once read, so frames in flight have one each
+    /// (`wavefront.rs`). At most `SPARE_READBACKS` are kept.
+    readbacks: Vec<wgpu::Buffer>,
     /// The ray batches' kept buffers: uploads, readbacks, wire rays and answers (`queries.rs`).
     pub(super) batches: super::batch_buffers::Batches,
     /// What the last ray batch took (`last_query_stats`).
@@ -195,7 +196,7 @@ impl GpuRenderer {
             timestamps,
             work: None,
             tile_uniforms: None,
-            readback: None,
+            readbacks: Vec::new(),
             batches: Default::default(),
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
@@ -480,6 +481,35 @@ impl GpuRenderer {
             bytes += size_of::<PassUniform>() as u64;
         }
         bytes
+    }
+}
+
+/// Frame readbacks kept for the next frames: two frames in flight and one being prepared.
+const SPARE_READBACKS: usize = 3;
+
+impl GpuRenderer {
+    /// A frame readback of at least `size` bytes: a spare if one is large enough, else a new
+    /// one of `size` (a smaller spare is dropped for it).
+    pub(super) fn take_readback(&mut self, size: u64) -> wgpu::Buffer {
+        if let Some(i) = self.readbacks.iter().position(|b| b.size() >= size) {
+            return self.readbacks.swap_remove(i);
+        }
+        if self.readbacks.len() >= SPARE_READBACKS {
+            self.readbacks.pop();
+        }
+        self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// A frame readback read out (unmapped), kept for a later frame.
+    pub(super) fn give_back_readback(&mut self, buffer: wgpu::Buffer) {
+        if self.readbacks.len() < SPARE_READBACKS {
+            self.readbacks.push(buffer);
+        }
     }
 }
 

@@ -12,11 +12,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
+use super::context::PendingRead;
 use super::device_image::DeviceImage;
 use super::kernels::{Kernel, PassRecorder};
 use super::layout::SceneUniform;
 use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES, grow};
-use super::timing::{GpuTimings, HostPhases, MAX_TIMESTAMPS_BYTES};
+use super::timing::{GpuTimings, HostPhases, MAX_TIMESTAMPS_BYTES, parse_stages};
 use crate::render::{Image, Mode, PixelFormat, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight};
 use crate::{Error, Result};
@@ -77,6 +78,69 @@ struct Readback {
     host: HostPhases,
 }
 
+/// A frame given to the device and not yet read back (`GpuRenderer::submit_frame`); hand it
+/// to `finish_frame` of the same renderer. Dropped unfinished, its results are discarded.
+pub struct FrameInFlight(Flight);
+
+enum Flight {
+    /// One submission, its results on their way to a mapped readback.
+    Submitted(Box<SubmittedFrame>),
+    /// A frame too large for one submission: traced and read back already.
+    Done(Option<Image>, GpuRenderStats),
+}
+
+struct SubmittedFrame {
+    run: SubmittedTiles,
+    shape: FrameShape,
+    /// Its tiles and uploads so far.
+    stats: GpuRenderStats,
+    /// When its preparation began.
+    t0: Instant,
+}
+
+/// The tiles of a frame and where its pixels go.
+struct FrameShape {
+    tiles: Vec<Tile>,
+    /// The first pixel of the frame's band of rows (the host image's first pixel).
+    first: u32,
+    width: u32,
+    rows: u32,
+    /// The pixels come to a host image (else they stay in a device image).
+    to_host: bool,
+    heat: bool,
+}
+
+/// A run of a frame's tiles in one submission (`submit_tiles`), its readback asked for.
+struct SubmittedTiles {
+    read: PendingRead,
+    readback: wgpu::Buffer,
+    /// Which of the frame's tiles.
+    range: std::ops::Range<usize>,
+    /// Bytes a pixel on the device (packed or accumulated).
+    texel: u64,
+    counters_at: u64,
+    stamps_at: u64,
+    total: u64,
+    stages: Vec<&'static str>,
+    untimed: u32,
+}
+
+/// Adds a run's readback (over `tiles`) to the frame's figures.
+fn add_readback(stats: &mut GpuRenderStats, out: Readback, tiles: &[Tile]) {
+    for (r, t) in out.rays.iter().zip(tiles) {
+        stats.render.rays.eye += t.pixels as u64;
+        stats.render.rays.shadow += r.0;
+        stats.render.rays.reflection += r.1;
+    }
+    for (name, ms) in out.stage_ms {
+        *stats.timings.stages_ms.entry(name).or_default() += ms;
+    }
+    stats.timings.untimed_passes += out.untimed;
+    stats.timings.host.add(&out.host);
+    stats.downloaded_bytes += out.bytes;
+    stats.round_trips += 1;
+}
+
 impl GpuRenderer {
     /// Renders one frame with the given camera and lights (the scene's own need not be used).
     pub fn render(
@@ -101,34 +165,12 @@ impl GpuRenderer {
         opts: &RenderOptions,
         target: &DeviceImage,
     ) -> Result<GpuRenderStats> {
-        if !Arc::ptr_eq(target.context(), &self.ctx) {
-            return Err(Error::InvalidInput(
-                "the device image was made on another device than this renderer's".into(),
-            ));
-        }
-        if target.size() != (opts.width, opts.height) {
-            return Err(Error::InvalidInput(format!(
-                "a {}x{} frame asked into a {}x{} device image",
-                opts.width,
-                opts.height,
-                target.size().0,
-                target.size().1
-            )));
-        }
-        if opts.mode == Mode::Heat {
-            return Err(Error::InvalidInput(
-                "heat frames are coloured on the host (by the whole frame's largest cost): use render".into(),
-            ));
-        }
-        let opts = RenderOptions {
-            pixels: PixelFormat::Srgb8,
-            ..*opts
-        };
-        let (_, stats) = self.trace_frame(camera, lights, &opts, Some(target))?;
+        let (_, stats) = self.trace_frame(camera, lights, opts, Some(target))?;
         Ok(stats)
     }
 
-    /// The frame: its pixels into a host image (returned) or into `target`.
+    /// The frame: its pixels into a host image (returned) or into `target`; submitted and
+    /// waited for at once.
     fn trace_frame(
         &mut self,
         camera: &Camera,
@@ -136,16 +178,49 @@ impl GpuRenderer {
         opts: &RenderOptions,
         target: Option<&DeviceImage>,
     ) -> Result<(Option<Image>, GpuRenderStats)> {
+        let frame = self.submit_frame(camera, lights, opts, target)?;
+        self.finish_frame(frame)
+    }
+
+    /// Gives the device a frame (`render`'s, or `render_to_device`'s when `target` is given)
+    /// and returns without waiting for it: the host can prepare and submit the next frame
+    /// while the device traces this one, and `finish_frame` reads it back later. wgpu has one
+    /// queue, so frames run on the device in the order submitted; what overlaps is the host's
+    /// work (uniforms, command recording, submission, readout) with the device's. Uniforms
+    /// written for the next frame reach the device only at its submission, after this one's
+    /// commands, and every frame in flight has its own readback buffer, so any number of
+    /// frames may be in flight; each one's pixels are those it would have alone. Frames into
+    /// one `target` overwrite it in submission order.
+    ///
+    /// A frame whose results exceed the device's largest buffer takes several submissions;
+    /// it is traced and read back here, whole (its `finish_frame` only hands it over).
+    pub fn submit_frame(
+        &mut self,
+        camera: &Camera,
+        lights: &[PointLight],
+        opts: &RenderOptions,
+        target: Option<&DeviceImage>,
+    ) -> Result<FrameInFlight> {
+        if let Some(target) = target {
+            self.check_target(opts, target)?;
+        }
+        let opts = match target {
+            Some(_) => RenderOptions {
+                pixels: PixelFormat::Srgb8,
+                ..*opts
+            },
+            None => *opts,
+        };
         opts.validate()?;
         self.check_serves(opts.accel)?;
         camera.validate().map_err(Error::Scene)?;
+        let t0 = Instant::now();
         let n_lights = lights.len() as u32;
         // The frame's pixels are numbered row by row; a band of rows is a range of them.
         let rows = opts.row_range();
         let (first, pixels) = (rows.start * opts.width, rows.end * opts.width);
         let tile = self.tile_capacity(n_lights).min(pixels - first);
         self.ensure_work(tile, n_lights, super::renderer::WorkUse::FRAME);
-        let t0 = Instant::now();
         let frame = camera.frame(opts.width, opts.height);
         let q = &self.ctx.queue;
         q.write_buffer(&self.camera_uniform, 0, bytemuck::bytes_of(&frame));
@@ -186,33 +261,96 @@ impl GpuRenderer {
                 opts.ablation,
             );
         }
-        let mut img = target.is_none().then(|| Image::new(opts.width, rows.len() as u32));
-        let mut stats = GpuRenderStats::default();
+        let shape = FrameShape {
+            tiles,
+            first,
+            width: opts.width,
+            rows: rows.len() as u32,
+            to_host: target.is_none(),
+            heat: opts.mode == Mode::Heat,
+        };
+        let mut stats = GpuRenderStats {
+            tiles: shape.tiles.len() as u32,
+            uploaded_bytes: uploaded,
+            ..Default::default()
+        };
+        let texel = if shape.to_host { texel_bytes(&opts) } else { 0 };
         let max_bytes = self.ctx.limits().max_buffer_size;
+        if tiles_per_submission(&shape.tiles, texel, max_bytes) == shape.tiles.len() {
+            let run = self.submit_tiles(0..shape.tiles.len(), &shape, &opts, target)?;
+            return Ok(FrameInFlight(Flight::Submitted(Box::new(SubmittedFrame {
+                run,
+                shape,
+                stats,
+                t0,
+            }))));
+        }
+        // Several submissions, each waited for before the next: the device's largest buffer
+        // holds one run of tiles' results at a time.
+        let mut img = shape.to_host.then(|| Image::new(shape.width, shape.rows));
         let mut k = 0;
-        while k < tiles.len() {
-            let dest = match &mut img {
-                Some(img) => Dest::Host(img),
-                None => Dest::Device(target.expect("no host image only with a device image")),
-            };
-            let n = tiles_per_submission(&tiles[k..], dest.readback_texel(opts), max_bytes);
-            let out = self.run_tiles(k, &tiles[k..k + n], first, opts, dest)?;
-            for (r, t) in out.rays.iter().zip(&tiles[k..k + n]) {
-                stats.render.rays.eye += t.pixels as u64;
-                stats.render.rays.shadow += r.0;
-                stats.render.rays.reflection += r.1;
-            }
-            for (name, ms) in out.stage_ms {
-                *stats.timings.stages_ms.entry(name).or_default() += ms;
-            }
-            stats.timings.untimed_passes += out.untimed;
-            stats.timings.host.add(&out.host);
-            stats.downloaded_bytes += out.bytes;
-            stats.round_trips += 1;
+        while k < shape.tiles.len() {
+            let n = tiles_per_submission(&shape.tiles[k..], texel, max_bytes);
+            let run = self.submit_tiles(k..k + n, &shape, &opts, target)?;
+            let out = self.read_tiles(run, &shape, img.as_mut())?;
+            add_readback(&mut stats, out, &shape.tiles[k..k + n]);
             k += n;
         }
-        stats.tiles = tiles.len() as u32;
-        stats.uploaded_bytes = uploaded;
+        self.close_stats(&mut stats, t0, img.as_ref(), shape.heat);
+        Ok(FrameInFlight(Flight::Done(img, stats)))
+    }
+
+    /// Waits for a frame from `submit_frame` (of this renderer) and reads it back: its host
+    /// image (`None` for a frame into a device image) and its figures. Its `wall_ms` is the
+    /// frame's latency: from its preparation to its pixels in host memory. Its host phases add
+    /// up to it; with frames in flight its `prepare_ms` holds, besides its own preparation, the
+    /// host's work on other frames between its submission and its wait.
+    pub fn finish_frame(&mut self, frame: FrameInFlight) -> Result<(Option<Image>, GpuRenderStats)> {
+        let f = match frame.0 {
+            Flight::Done(img, stats) => return Ok((img, stats)),
+            Flight::Submitted(f) => *f,
+        };
+        let SubmittedFrame {
+            run,
+            shape,
+            mut stats,
+            t0,
+        } = f;
+        let mut img = shape.to_host.then(|| Image::new(shape.width, shape.rows));
+        let out = self.read_tiles(run, &shape, img.as_mut())?;
+        add_readback(&mut stats, out, &shape.tiles);
+        self.close_stats(&mut stats, t0, img.as_ref(), shape.heat);
+        Ok((img, stats))
+    }
+
+    /// A device image fit for this renderer's frame of `opts`.
+    fn check_target(&self, opts: &RenderOptions, target: &DeviceImage) -> Result<()> {
+        if !Arc::ptr_eq(target.context(), &self.ctx) {
+            return Err(Error::InvalidInput(
+                "the device image was made on another device than this renderer's".into(),
+            ));
+        }
+        if target.size() != (opts.width, opts.height) {
+            return Err(Error::InvalidInput(format!(
+                "a {}x{} frame asked into a {}x{} device image",
+                opts.width,
+                opts.height,
+                target.size().0,
+                target.size().1
+            )));
+        }
+        if opts.mode == Mode::Heat {
+            return Err(Error::InvalidInput(
+                "heat frames are coloured on the host (by the whole frame's largest cost): use render".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The frame's totals once its pixels are in: wall time since `t0`, the host phases (the
+    /// preparation is what the waits and readouts leave of the wall time), the device's total,
+    /// and a heat frame's summed cost.
+    fn close_stats(&self, stats: &mut GpuRenderStats, t0: Instant, img: Option<&Image>, heat: bool) {
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.timings.host.close(stats.wall_ms);
         stats.timings.from_timestamps = self.timed();
@@ -222,44 +360,32 @@ impl GpuRenderer {
             stats.wall_ms
         };
         stats.render.render_ms = stats.wall_ms;
-        if opts.mode == Mode::Heat
-            && let Some(img) = &img
-        {
+        if heat && let Some(img) = img {
             let cost: f64 = img.pixels().iter().map(|p| p.x as f64).sum();
             stats.render.counters.cells = cost as u64;
         }
-        Ok((img, stats))
     }
 
-    /// Records `tiles` (the frame's tiles from index `first_tile` on; their pass uniforms are
-    /// written) into one submission, runs it, waits once and writes their pixels into `dest`
-    /// (a host image, whose first row starts at pixel `first`, or a device image of the whole
-    /// frame, copied into in the command stream).
-    fn run_tiles(
+    /// Records the tiles `range` of `shape` (their pass uniforms are written) into one
+    /// submission, submits it and asks for its readback, without waiting: the tiles' pixels
+    /// (unless they go to `target`, copied in the command stream), a counters block per tile,
+    /// the timestamps. The readback buffer is the run's own until `read_tiles`.
+    fn submit_tiles(
         &mut self,
-        first_tile: usize,
-        tiles: &[Tile],
-        first: u32,
+        range: std::ops::Range<usize>,
+        shape: &FrameShape,
         opts: &RenderOptions,
-        mut dest: Dest,
-    ) -> Result<Readback> {
+        target: Option<&DeviceImage>,
+    ) -> Result<SubmittedTiles> {
+        let tiles = &shape.tiles[range.clone()];
         let texel = texel_bytes(opts);
         let packed = texel == PACKED_TEXEL_BYTES;
-        // The readback: the tiles' pixels in order (none for a device image), then a counters
-        // block per tile, then the timestamps.
-        let readback_texel = dest.readback_texel(opts);
+        let readback_texel = if shape.to_host { texel } else { 0 };
         let image_bytes: u64 = tiles.iter().map(|t| t.pixels as u64 * readback_texel).sum();
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
         let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
-        grow(
-            &self.ctx.device,
-            &mut self.readback,
-            stamps_at + stamps_bytes,
-            "frame readback",
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
-        let readback = self.readback.as_ref().unwrap();
+        let readback = self.take_readback(stamps_at + stamps_bytes);
         let w = self.work.as_ref().unwrap();
         let mut enc = self
             .ctx
@@ -273,7 +399,7 @@ impl GpuRenderer {
             // results are copied out.
             enc.copy_buffer_to_buffer(
                 self.tile_uniforms.as_ref().unwrap(),
-                (first_tile + k) as u64 * TILE_UNIFORM_BYTES,
+                (range.start + k) as u64 * TILE_UNIFORM_BYTES,
                 self.pass_uniform(),
                 0,
                 Some(TILE_UNIFORM_BYTES),
@@ -285,36 +411,68 @@ impl GpuRenderer {
                 rec.pass(&mut enc, Kernel::Pack, &w.bind_groups[0]);
             }
             let pixels = if packed { &w.packed } else { &w.accum };
-            match &dest {
+            match target {
                 // The tile's pixels to their place in the frame (its pixel numbering is the
                 // frame's, bands included; a device image is always packed).
-                Dest::Device(d) => {
+                Some(d) => {
                     let at = t.offset as u64 * PACKED_TEXEL_BYTES;
                     enc.copy_buffer_to_buffer(pixels, 0, d.buffer(), at, Some(bytes));
                 }
-                Dest::Host(_) => {
-                    enc.copy_buffer_to_buffer(pixels, 0, readback, image_at, Some(bytes));
+                None => {
+                    enc.copy_buffer_to_buffer(pixels, 0, &readback, image_at, Some(bytes));
                     image_at += bytes;
                 }
             }
             enc.copy_buffer_to_buffer(
                 &self.counters,
                 0,
-                readback,
+                &readback,
                 counters_at + k as u64 * COUNTERS_BYTES,
                 Some(COUNTERS_BYTES),
             );
         }
-        rec.timer.resolve_into(&mut enc, readback, stamps_at);
+        rec.timer.resolve_into(&mut enc, &readback, stamps_at);
         let total = stamps_at + rec.timer.bytes();
-        self.ctx.queue.submit([enc.finish()]);
-        let timer = rec.timer;
-        let (out, host) = self.ctx.map_read_with(readback, total, |raw| {
-            if let Dest::Host(img) = &mut dest {
+        let (stages, untimed) = (rec.timer.stages().to_vec(), rec.timer.untimed);
+        let index = self.ctx.queue.submit([enc.finish()]);
+        let read = self.ctx.begin_read(&readback, total, Some(index));
+        Ok(SubmittedTiles {
+            read,
+            readback,
+            range,
+            texel,
+            counters_at,
+            stamps_at,
+            total,
+            stages,
+            untimed,
+        })
+    }
+
+    /// Waits for a run of tiles from `submit_tiles` and writes their pixels into `img` (the
+    /// frame's host image, whose first row starts at the shape's first pixel; `None` when they
+    /// went to a device image); its readback buffer goes back to the renderer's spares.
+    fn read_tiles(&mut self, run: SubmittedTiles, shape: &FrameShape, mut img: Option<&mut Image>) -> Result<Readback> {
+        let SubmittedTiles {
+            read,
+            readback,
+            range,
+            texel,
+            counters_at,
+            stamps_at,
+            total,
+            stages,
+            untimed,
+        } = run;
+        let tiles = &shape.tiles[range];
+        let packed = texel == PACKED_TEXEL_BYTES;
+        let ctx = self.ctx.clone();
+        let (out, host) = read.finish(&ctx, |raw| {
+            if let Some(img) = img.as_deref_mut() {
                 let mut at = 0usize;
                 for t in tiles {
                     let n = t.pixels as usize;
-                    let start = (t.offset - first) as usize;
+                    let start = (t.offset - shape.first) as usize;
                     let texels = &raw[at..at + n * texel as usize];
                     if packed {
                         // The device's levels as they are (`Image` makes linear values only if
@@ -344,12 +502,13 @@ impl GpuRenderer {
                 rays: (0..tiles.len())
                     .map(|k| (counter(k, SLOT_SHADOW_TOTAL), counter(k, SLOT_REFLECT_TOTAL)))
                     .collect(),
-                stage_ms: timer.parse(&self.ctx, &raw[stamps_at as usize..total as usize]),
-                untimed: timer.untimed,
+                stage_ms: parse_stages(&stages, &ctx, &raw[stamps_at as usize..total as usize]),
+                untimed,
                 bytes: total,
                 host: HostPhases::default(),
             }
         })?;
+        self.give_back_readback(readback);
         Ok(Readback { host, ..out })
     }
 
@@ -382,24 +541,6 @@ impl GpuRenderer {
 
 /// Pixels a worker copies at a time in a packed frame's readout.
 const PIECE_PIXELS: usize = 64 * 1024;
-
-/// Where a submission's pixels go.
-enum Dest<'a> {
-    /// Read back into the host's image.
-    Host(&'a mut Image),
-    /// Copied into a device image (in the command stream); nothing read back.
-    Device(&'a DeviceImage),
-}
-
-impl Dest<'_> {
-    /// Bytes a pixel takes in the readback: none when the image stays on the device.
-    fn readback_texel(&self, opts: &RenderOptions) -> u64 {
-        match self {
-            Dest::Host(_) => texel_bytes(opts),
-            Dest::Device(_) => 0,
-        }
-    }
-}
 
 /// Bytes a pixel takes in the frame's readback: 4 when the caller wants 8-bit sRGB (packed on
 /// the device), else the accumulation's 16. Heat frames keep their raw costs.
