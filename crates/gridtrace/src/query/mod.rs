@@ -496,6 +496,18 @@ impl TraceMesh {
         )
     }
 
+    /// Answers on this mesh's GPU where its backend traces there (`on_gpu`, given the renderer
+    /// and the mesh's structure kind), else on the CPU (`on_cpu`), which also answers a query
+    /// whose GPU work failed under `auto` (the mesh's queries then stay on the CPU). How
+    /// `QueryScene` sends its own wire sources (`query_scene/rays.rs`) through the mesh.
+    pub(crate) fn on_gpu_or_cpu<T>(
+        &self,
+        on_gpu: impl FnOnce(&mut GpuRenderer, AccelKind) -> Result<T>,
+        on_cpu: impl FnOnce() -> Result<T>,
+    ) -> Result<T> {
+        self.on_backend(self.backend, |g| on_gpu(&mut locked(g), self.accel), on_cpu)
+    }
+
     /// What the last batch on the GPU took (wall and GPU time, round trips, bytes), with the
     /// frame's meanings; `None` while no batch has run on the GPU.
     pub fn last_gpu_batch(&self) -> Option<crate::gpu::GpuQueryStats> {

@@ -1,24 +1,59 @@
 //! Closest hits and occlusion of ray batches (`cast_rays`, `test_occlusions`), the hits named
 //! by geometry and face. On the CPU the rays go straight to the structure's batch walks
-//! (`cpu_rays.rs`); where the backend traces on a GPU they are checked and made `CHUNK` at a
-//! time and traced by the merged mesh there (or on the CPU, if `auto` found no GPU).
+//! (`cpu_rays.rs`); where the backend traces on a GPU, the caller's rows go straight onto the
+//! GPU's wire (`RowRays`: 24 bytes a ray, written into the mapped upload on every core, no
+//! array of rays made), and each chunk's answers are written out as they come back (16 bytes a
+//! ray for closest hits, one bit for occlusion); on the CPU if `auto` found no GPU or the GPU
+//! failed.
 
 use rayon::prelude::*;
 
+use super::INVALID_ID;
 use super::QueryScene;
 use super::batch::{RayHits, STAND_IN, ray_of};
 use super::cpu_rays;
 use super::merged::Merged;
-use crate::accel::{Hit, Ray};
-use crate::query::CHUNK;
+use crate::accel::Hit;
+use crate::gpu::{Answer, ChunkAnswers, WireSource, gpu_hit, unpack_bits};
 use crate::{Error, Result};
 
-/// Rays `rays`, made for the tracer: bad ones replaced by `STAND_IN` and marked false.
-fn make(rays: &[[f32; 6]]) -> (Vec<Ray>, Vec<bool>) {
-    rays.par_iter()
-        .with_min_len(4096)
-        .map(|r| ray_of(r).map_or((STAND_IN, false), |r| (r, true)))
-        .unzip()
+/// Open3D's rows (`[ox, oy, oz, dx, dy, dz]`) as the GPU's wire takes them: each row as it is,
+/// or `STAND_IN` for a row that cannot hit anything (`ray_of`), whose answer the caller makes
+/// a miss: `Scene` answers such rays as Open3D does, without an error (README, "NaN").
+struct RowRays<'a> {
+    rows: &'a [[f32; 6]],
+}
+
+impl WireSource for RowRays<'_> {
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    fn stride(&self) -> usize {
+        6
+    }
+
+    fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool {
+        let (out, _) = out.into_chunks::<24>();
+        let count = out.len();
+        let stand_in = [
+            STAND_IN.origin.x,
+            STAND_IN.origin.y,
+            STAND_IN.origin.z,
+            STAND_IN.dir.x,
+            STAND_IN.dir.y,
+            STAND_IN.dir.z,
+        ];
+        out.write_iter(self.rows[first..first + count].iter().map(|r| {
+            let row = if ray_of(r).is_some() { *r } else { stand_in };
+            bytemuck::cast::<[f32; 6], [u8; 24]>(row)
+        }));
+        true
+    }
+
+    fn invalid(&self) -> Error {
+        Error::InvalidInput("a scene's rays go to the GPU whole, bad ones as stand-ins".into())
+    }
 }
 
 pub(crate) fn check_interval(t_near: f32, t_far: f32) -> Result<()> {
@@ -37,35 +72,54 @@ impl QueryScene {
         let Some(mesh) = m.mesh.as_ref() else {
             return Ok(RayHits::misses(rays.len()));
         };
-        if !self.opts.backend.traces_on_gpu() {
+        let on_cpu = || {
             mesh.prepared().accel.check_cpu_traces()?;
             let mut out = RayHits::zeroed(rays.len());
             cpu_rays::cast(&m, mesh, rays, &mut out);
-            return Ok(out);
+            Ok(out)
+        };
+        if !self.opts.backend.traces_on_gpu() {
+            return on_cpu();
         }
-        let mut out = RayHits::misses(rays.len());
-        for (c, chunk) in rays.chunks(CHUNK).enumerate() {
-            let (made, good) = make(chunk);
-            let hits = mesh.intersect_rays(&made, 0.0, f32::INFINITY)?;
-            let start = c * CHUNK;
-            let end = start + chunk.len();
-            (
-                &mut out.t_hit[start..end],
-                &mut out.geometry_ids[start..end],
-                &mut out.primitive_ids[start..end],
-                &mut out.primitive_uvs[start..end],
-                &mut out.primitive_normals[start..end],
-            )
-                .into_par_iter()
-                .zip((&hits[..], &good[..]))
-                .with_min_len(1024)
-                .for_each(|((t, g, p, uv, n), (h, &ok))| {
-                    if ok && h.is_hit() {
-                        write_hit(&m, h, t, g, p, uv, n);
-                    }
-                });
-        }
-        Ok(out)
+        mesh.on_gpu_or_cpu(
+            |gpu, kind| {
+                // Every entry is written below (a miss's uv and normal are these zeros).
+                let mut out = RayHits::zeroed(rays.len());
+                let source = RowRays { rows: rays };
+                gpu.cast(
+                    &source,
+                    (0.0, f32::INFINITY),
+                    Answer::Hits { uv: true },
+                    kind,
+                    |first, answers| {
+                        let ChunkAnswers::HitsUv(hits) = answers else {
+                            return;
+                        };
+                        let end = first + hits.len();
+                        (
+                            &mut out.t_hit[first..end],
+                            &mut out.geometry_ids[first..end],
+                            &mut out.primitive_ids[first..end],
+                            &mut out.primitive_uvs[first..end],
+                            &mut out.primitive_normals[first..end],
+                        )
+                            .into_par_iter()
+                            .zip((&hits[..], &rays[first..end]))
+                            .with_min_len(1024)
+                            .for_each(|((t, g, p, uv, n), (h, r))| {
+                                let h = gpu_hit(*h);
+                                if h.is_hit() && ray_of(r).is_some() {
+                                    write_hit(&m, &h, t, g, p, uv, n);
+                                } else {
+                                    (*t, *g, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
+                                }
+                            });
+                    },
+                )?;
+                Ok(out)
+            },
+            on_cpu,
+        )
     }
 
     /// Whether each ray hits anything with `t_near < t < t_far` (Open3D's `test_occlusions`;
@@ -73,25 +127,39 @@ impl QueryScene {
     pub fn test_occlusions(&self, rays: &[[f32; 6]], t_near: f32, t_far: f32) -> Result<Vec<bool>> {
         check_interval(t_near, t_far)?;
         let m = self.merged()?;
-        let mut out = vec![false; rays.len()];
         let Some(mesh) = m.mesh.as_ref() else {
-            return Ok(out);
+            return Ok(vec![false; rays.len()]);
+        };
+        let on_cpu = || {
+            mesh.prepared().accel.check_cpu_traces()?;
+            let mut out = vec![false; rays.len()];
+            cpu_rays::occluded(mesh, rays, t_near, t_far, &mut out);
+            Ok(out)
         };
         if !self.opts.backend.traces_on_gpu() {
-            mesh.prepared().accel.check_cpu_traces()?;
-            cpu_rays::occluded(mesh, rays, t_near, t_far, &mut out);
-            return Ok(out);
+            return on_cpu();
         }
-        for (c, chunk) in rays.chunks(CHUNK).enumerate() {
-            let (made, good) = make(chunk);
-            let occluded = mesh.occluded_rays(&made, t_near, t_far)?;
-            out[c * CHUNK..c * CHUNK + chunk.len()]
-                .par_iter_mut()
-                .zip((&occluded[..], &good[..]))
-                .with_min_len(4096)
-                .for_each(|(o, (&hit, &ok))| *o = ok && hit);
-        }
-        Ok(out)
+        mesh.on_gpu_or_cpu(
+            |gpu, kind| {
+                let mut out = vec![false; rays.len()];
+                let source = RowRays { rows: rays };
+                gpu.cast(&source, (t_near, t_far), Answer::Occlusion, kind, |first, answers| {
+                    let ChunkAnswers::Occlusion(bits) = answers else {
+                        return;
+                    };
+                    let end = (first + bits.len() * 32).min(rays.len());
+                    unpack_bits(bits, &mut out[first..end]);
+                    // A stand-in's answer is not the row's: such a ray hits nothing.
+                    out[first..end]
+                        .par_iter_mut()
+                        .zip(&rays[first..end])
+                        .with_min_len(4096)
+                        .for_each(|(o, r)| *o &= ray_of(r).is_some());
+                })?;
+                Ok(out)
+            },
+            on_cpu,
+        )
     }
 }
 
