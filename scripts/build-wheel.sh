@@ -74,7 +74,10 @@ case "$(basename "$whl")" in
     exit 1
     ;;
 esac
-if ! python3 -m zipfile -l "$whl" | grep -q "\.data/scripts/gridtrace "; then
+# The listing is taken whole first: `grep -q` stops reading at its match, and under pipefail
+# the lister's broken pipe would fail the check of a wheel that has the tool.
+listing=$(python3 -m zipfile -l "$whl")
+if ! grep -q "\.data/scripts/gridtrace " <<<"$listing"; then
     echo "build-wheel: the wheel lacks the gridtrace tool (data/scripts)" >&2
     exit 1
 fi
