@@ -277,7 +277,9 @@ fn print_gpu_frame(s: &gridtrace::gpu::GpuRenderStats, which: &str) {
         uploaded_bytes: s.uploaded_bytes,
         downloaded_bytes: s.downloaded_bytes,
     };
-    if print_gpu_figures(&format!("{which}: "), &figures).is_none() {
+    let timed = print_gpu_figures(&format!("{which}: "), &figures).is_some();
+    println!("prepare {} (the host's preparation, by part)", s.prepare_parts);
+    if !timed {
         return;
     }
     // Rays per second by kind, from the stage that traces them.

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use gridtrace::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants, HostPhases};
+use gridtrace::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants, HostPhases, PrepareParts};
 use gridtrace::render::differing_pixels;
 use gridtrace::render::{Image, PixelFormat, RenderOptions};
 use gridtrace::scene::PreparedScene;
@@ -56,6 +56,9 @@ pub struct FrameRow {
     pub stages_ms: BTreeMap<String, f64>,
     /// Medians of the wall time's parts on the host (prepare, wait, readout); `None` on the CPU.
     pub host_ms: Option<HostPhases>,
+    /// Medians of the preparation's parts (buffers, uniforms, recording, submission); `None`
+    /// on the CPU.
+    pub prepare_ms: Option<PrepareParts>,
     /// Pixels differing from the CPU's image beyond `PIXEL_TOLERANCE` (fraction; 0 on the CPU).
     pub differing_from_cpu: f64,
 }
@@ -240,6 +243,7 @@ fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> R
             bytes_down: 0,
             stages_ms: BTreeMap::new(),
             host_ms: None,
+            prepare_ms: None,
             differing_from_cpu: 0.0,
         },
         image,
@@ -344,6 +348,17 @@ fn frames_in_flight(
     Ok((ms, image.expect("frames read back come to the host"), stats))
 }
 
+/// The medians, part by part, of frames' preparations.
+fn prepare_medians(parts: impl Iterator<Item = PrepareParts> + Clone) -> PrepareParts {
+    let med = |f: fn(PrepareParts) -> f64| Summary::of(&parts.clone().map(f).collect::<Vec<_>>()).median_ms;
+    PrepareParts {
+        buffers_ms: med(|p| p.buffers_ms),
+        uniforms_ms: med(|p| p.uniforms_ms),
+        record_ms: med(|p| p.record_ms),
+        submit_ms: med(|p| p.submit_ms),
+    }
+}
+
 /// One variant's row from its timed frames.
 #[allow(clippy::too_many_arguments)]
 fn gpu_row(
@@ -398,6 +413,7 @@ fn gpu_row(
             .map(|(k, v)| (k.to_string(), *v))
             .collect(),
         host_ms: Some(host),
+        prepare_ms: Some(prepare_medians(frames.iter().map(|s| s.prepare_parts))),
         differing_from_cpu: differing,
     }
 }

@@ -62,4 +62,4 @@ pub use timing::{GpuQueryStats, GpuTimings, HostPhases};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.
 pub use walks::bvh::binary as bvh;
-pub use wavefront::{FrameInFlight, GpuRenderStats};
+pub use wavefront::{FrameInFlight, GpuRenderStats, PrepareParts};

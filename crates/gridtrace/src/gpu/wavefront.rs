@@ -45,6 +45,42 @@ pub struct GpuRenderStats {
     pub round_trips: u32,
     /// Host wall clock of the frame, uploads to image (ms).
     pub wall_ms: f64,
+    /// The preparation's own parts (before the frame's submission returned).
+    pub prepare_parts: PrepareParts,
+}
+
+/// Where a frame's preparation goes, on the host's clock (ms): the H200 run of 2026-11-26 spent
+/// about 3 ms of a 1080p frame's wall time before its wait, where lavapipe spends 0.2-0.4 ms;
+/// these say which part it is on the next hardware run.
+#[derive(Debug, Default, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PrepareParts {
+    /// Checking the work buffers (made anew only when a frame outgrows them).
+    pub buffers_ms: f64,
+    /// Writing the camera, scene constants, lights and tiles' pass uniforms (`write_buffer`).
+    pub uniforms_ms: f64,
+    /// Recording the frame's passes and copies into a command buffer.
+    pub record_ms: f64,
+    /// `queue.submit` and asking for the readback's mapping.
+    pub submit_ms: f64,
+}
+
+impl PrepareParts {
+    fn add(&mut self, o: &PrepareParts) {
+        self.buffers_ms += o.buffers_ms;
+        self.uniforms_ms += o.uniforms_ms;
+        self.record_ms += o.record_ms;
+        self.submit_ms += o.submit_ms;
+    }
+}
+
+impl std::fmt::Display for PrepareParts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "buffers {:.2}, uniforms {:.2}, record {:.2}, submit {:.2} ms",
+            self.buffers_ms, self.uniforms_ms, self.record_ms, self.submit_ms
+        )
+    }
 }
 
 impl GpuRenderStats {
@@ -76,6 +112,8 @@ struct Readback {
     bytes: u64,
     /// Its wait and readout on the host's clock.
     host: HostPhases,
+    /// Its recording and submission.
+    parts: PrepareParts,
 }
 
 /// A frame given to the device and not yet read back (`GpuRenderer::submit_frame`); hand it
@@ -123,6 +161,8 @@ struct SubmittedTiles {
     total: u64,
     stages: Vec<&'static str>,
     untimed: u32,
+    /// Its recording and submission.
+    parts: PrepareParts,
 }
 
 /// Adds a run's readback (over `tiles`) to the frame's figures.
@@ -137,6 +177,7 @@ fn add_readback(stats: &mut GpuRenderStats, out: Readback, tiles: &[Tile]) {
     }
     stats.timings.untimed_passes += out.untimed;
     stats.timings.host.add(&out.host);
+    stats.prepare_parts.add(&out.parts);
     stats.downloaded_bytes += out.bytes;
     stats.round_trips += 1;
 }
@@ -221,6 +262,12 @@ impl GpuRenderer {
         let (first, pixels) = (rows.start * opts.width, rows.end * opts.width);
         let tile = self.tile_capacity(n_lights).min(pixels - first);
         self.ensure_work(tile, n_lights, super::renderer::WorkUse::FRAME);
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let mut parts = PrepareParts {
+            buffers_ms: ms(t0),
+            ..Default::default()
+        };
+        let t_uniforms = Instant::now();
         let frame = camera.frame(opts.width, opts.height);
         let q = &self.ctx.queue;
         q.write_buffer(&self.camera_uniform, 0, bytemuck::bytes_of(&frame));
@@ -269,9 +316,11 @@ impl GpuRenderer {
             to_host: target.is_none(),
             heat: opts.mode == Mode::Heat,
         };
+        parts.uniforms_ms = ms(t_uniforms);
         let mut stats = GpuRenderStats {
             tiles: shape.tiles.len() as u32,
             uploaded_bytes: uploaded,
+            prepare_parts: parts,
             ..Default::default()
         };
         let texel = if shape.to_host { texel_bytes(&opts) } else { 0 };
@@ -385,6 +434,7 @@ impl GpuRenderer {
         let counters_at = image_bytes;
         let stamps_at = counters_at + tiles.len() as u64 * COUNTERS_BYTES;
         let stamps_bytes = if self.timed() { MAX_TIMESTAMPS_BYTES } else { 0 };
+        let t_record = Instant::now();
         let readback = self.take_readback(stamps_at + stamps_bytes);
         let w = self.work.as_ref().unwrap();
         let mut enc = self
@@ -434,8 +484,16 @@ impl GpuRenderer {
         rec.timer.resolve_into(&mut enc, &readback, stamps_at);
         let total = stamps_at + rec.timer.bytes();
         let (stages, untimed) = (rec.timer.stages().to_vec(), rec.timer.untimed);
-        let index = self.ctx.queue.submit([enc.finish()]);
+        let commands = enc.finish();
+        let record_ms = t_record.elapsed().as_secs_f64() * 1e3;
+        let t_submit = Instant::now();
+        let index = self.ctx.queue.submit([commands]);
         let read = self.ctx.begin_read(&readback, total, Some(index));
+        let parts = PrepareParts {
+            record_ms,
+            submit_ms: t_submit.elapsed().as_secs_f64() * 1e3,
+            ..Default::default()
+        };
         Ok(SubmittedTiles {
             read,
             readback,
@@ -446,6 +504,7 @@ impl GpuRenderer {
             total,
             stages,
             untimed,
+            parts,
         })
     }
 
@@ -463,6 +522,7 @@ impl GpuRenderer {
             total,
             stages,
             untimed,
+            parts,
         } = run;
         let tiles = &shape.tiles[range];
         let packed = texel == PACKED_TEXEL_BYTES;
@@ -506,6 +566,7 @@ impl GpuRenderer {
                 untimed,
                 bytes: total,
                 host: HostPhases::default(),
+                parts,
             }
         })?;
         self.give_back_readback(readback);
