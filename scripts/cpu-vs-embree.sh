@@ -9,8 +9,9 @@
 # `random` (1M incoherent rays: make_random_rays.py beside EMBREE_RAYS, else a numpy-free
 # inline generator with the same recipe). Both tools report their tracing rate alone (no file
 # reading, no build): Embree's `rayfile.mrays_per_s` (the median of its --reps 3), gridtrace
-# `rays`' `Mrays/s` (one pass, `--backend cpu --accel bvh`). Each row gives the best of the
-# REPS alternating runs of each, and ratio = gridtrace / Embree (above 1: gridtrace faster).
+# `rays`' `Mrays/s` (the median of its --reps 3, `--backend cpu --accel bvh`): warm passes
+# both. Each row gives the best of the REPS alternating runs of each, and ratio = gridtrace /
+# Embree (above 1: gridtrace faster).
 # The closing rows give gridtrace's scaling: its rate at N threads over its rate at the first.
 # Embree's library and its TBB/OpenMP come from LD_LIBRARY_PATH (scripts/gpu-run.sh sets it).
 set -u
@@ -25,7 +26,7 @@ embree() { # threads rays -> Mrays/s
     python3 -c "import json,sys; print(json.load(sys.stdin)['rayfile']['mrays_per_s'])" 2>/dev/null || echo nan
 }
 ours() { # threads rays -> Mrays/s
-  "$gt" rays "$mesh" --rays "$2" --threads "$1" --backend cpu --accel bvh --hits-out "$work/gt.bin" 2>/dev/null |
+  "$gt" rays "$mesh" --rays "$2" --threads "$1" --reps 3 --backend cpu --accel bvh --hits-out "$work/gt.bin" 2>/dev/null |
     sed -n 's/^rays .* \([0-9.]*\) Mrays\/s$/\1/p' | head -1 | grep . || echo nan
 }
 best() { tr ' ' '\n' | grep -v nan | sort -g | tail -1 | grep . || echo nan; }

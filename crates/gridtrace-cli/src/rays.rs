@@ -47,6 +47,12 @@ pub struct RaysArgs {
     gpu: GpuVariantArgs,
     #[command(flatten)]
     grid: GridArgs,
+    /// Trace every chunk of rays this many times in a row (the answers of the last are
+    /// written) and report the median pass: warm figures, as `embree_rays --reps` reports
+    /// its own (a single pass of a small file also times the threads' start and the first
+    /// touch of fresh memory).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    reps: u32,
     /// Output file.
     #[arg(long)]
     hits_out: PathBuf,
@@ -95,7 +101,8 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let write_err = |e| Error::io(&a.hits_out, e);
     let mut buf = vec![0u8; CHUNK * 24];
     let (mut done, mut hits) = (0u64, 0u64);
-    let mut trace_s = 0.0;
+    // Each pass's tracing time, summed over the file's chunks.
+    let mut pass_s = vec![0.0; a.reps as usize];
     // The GPU batches' own figures, summed over the file's chunks.
     let mut gpu = gridtrace::gpu::GpuQueryStats::default();
     while done < n {
@@ -125,16 +132,23 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
                 ),
             ));
         }
-        let t0 = Instant::now();
         if a.occluded {
-            let occ = mesh.occluded_rays(&rays, a.tmin, a.tmax)?;
-            trace_s += t0.elapsed().as_secs_f64();
+            let mut occ = Vec::new();
+            for s in pass_s.iter_mut() {
+                let t0 = Instant::now();
+                occ = mesh.occluded_rays(&rays, a.tmin, a.tmax)?;
+                *s += t0.elapsed().as_secs_f64();
+            }
             hits += occ.par_iter().filter(|o| **o).count() as u64;
             let out: Vec<u8> = occ.par_iter().map(|&o| o as u8).collect();
             output.write_all(&out).map_err(write_err)?;
         } else {
-            let found = mesh.intersect_rays_answering(mesh.backend(), &rays, a.tmin, a.tmax, !a.no_uv)?;
-            trace_s += t0.elapsed().as_secs_f64();
+            let mut found = Vec::new();
+            for s in pass_s.iter_mut() {
+                let t0 = Instant::now();
+                found = mesh.intersect_rays_answering(mesh.backend(), &rays, a.tmin, a.tmax, !a.no_uv)?;
+                *s += t0.elapsed().as_secs_f64();
+            }
             // Records written in parallel into a zeroed buffer (fresh pages, first touched by
             // the workers): 16 bytes, or 8 without u, v.
             let rec = if a.no_uv { 8 } else { 16 };
@@ -165,8 +179,19 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         done += count as u64;
     }
     output.flush().map_err(write_err)?;
+    // The median pass (the slower of two middle ones), the rate from it.
+    let first_s = pass_s[0];
+    pass_s.sort_by(f64::total_cmp);
+    let trace_s = pass_s[pass_s.len() / 2];
+    let passes = match a.reps {
+        1 => String::new(),
+        r => format!(
+            "median of {r} passes (first {:.2} Mrays/s), ",
+            n as f64 / first_s.max(1e-9) / 1e6
+        ),
+    };
     println!(
-        "rays    {n} ({}), {hits} hit, {:.1} ms, {:.2} Mrays/s",
+        "rays    {n} ({}), {hits} hit, {passes}{:.1} ms, {:.2} Mrays/s",
         if a.occluded { "occlusion" } else { "closest hit" },
         trace_s * 1e3,
         n as f64 / trace_s.max(1e-9) / 1e6

@@ -872,4 +872,44 @@ fn rays_on_the_gpu_answer_as_on_the_cpu_and_report_the_batch() {
     let (gpu, _) = run("gpu", true);
     assert_eq!(cpu, gpu, "occlusion");
     assert!(cpu.contains(&0) && cpu.contains(&1));
+
+    // `--reps 3`: three passes timed, the answers those of one pass, the GPU's figures one
+    // pass's (one round trip, not three).
+    for backend in ["cpu", "gpu"] {
+        let out = dir.join(format!("{backend}-reps.bin"));
+        let args = [
+            "rays",
+            obj,
+            "--rays",
+            rays,
+            "--backend",
+            backend,
+            "--reps",
+            "3",
+            "--hits-out",
+            out.to_str().unwrap(),
+        ];
+        let (ok, text) = gridtrace(&args);
+        assert!(ok, "{text}");
+        assert_eq!(
+            std::fs::read(&out).unwrap(),
+            run(backend, false).0,
+            "{backend}: --reps 3 answers otherwise"
+        );
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("rays "))
+            .unwrap_or_else(|| panic!("{text}"));
+        assert!(
+            line.contains("median of 3 passes") && line.ends_with("Mrays/s"),
+            "{line}"
+        );
+        if backend == "gpu" {
+            assert!(
+                text.lines()
+                    .any(|l| l.starts_with("gpu ") && l.contains("1 round trip,")),
+                "{text}"
+            );
+        }
+    }
 }
