@@ -512,22 +512,12 @@ impl GpuRenderer {
     /// frame's host image, whose first row starts at the shape's first pixel; `None` when they
     /// went to a device image); its readback buffer goes back to the renderer's spares.
     fn read_tiles(&mut self, run: SubmittedTiles, shape: &FrameShape, mut img: Option<&mut Image>) -> Result<Readback> {
-        let SubmittedTiles {
-            read,
-            readback,
-            range,
-            texel,
-            counters_at,
-            stamps_at,
-            total,
-            stages,
-            untimed,
-            parts,
-        } = run;
-        let tiles = &shape.tiles[range];
+        let (texel, counters_at, stamps_at, total) = (run.texel, run.counters_at, run.stamps_at, run.total);
+        let (stages, untimed, parts) = (run.stages, run.untimed, run.parts);
+        let tiles = &shape.tiles[run.range];
         let packed = texel == PACKED_TEXEL_BYTES;
         let ctx = self.ctx.clone();
-        let (out, host) = read.finish(&ctx, |raw| {
+        let (out, host) = run.read.finish(&ctx, |raw| {
             if let Some(img) = img.as_deref_mut() {
                 let mut at = 0usize;
                 for t in tiles {
@@ -569,7 +559,7 @@ impl GpuRenderer {
                 parts,
             }
         })?;
-        self.give_back_readback(readback);
+        self.give_back_readback(run.readback);
         Ok(Readback { host, ..out })
     }
 
