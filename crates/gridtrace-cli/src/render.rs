@@ -90,6 +90,25 @@ pub struct RenderArgs {
 
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     let (mut scene, name) = a.scene.load(!a.no_floor)?;
+    set_view(&a, &mut scene, &name);
+    let (mut renderer, accel) = open_tracer(&a, &scene, &name)?;
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel).with_pixels(PixelFormat::Srgb8);
+    let traced = trace_frames(&a, &mut renderer, &opts)?;
+    report(&a, &renderer, &opts, &traced);
+    let image = traced.first.image;
+    let out = if a.mode == Mode::Heat {
+        image.heat_to_color()
+    } else {
+        image
+    };
+    out.save_png(&a.output)?;
+    println!("wrote   {}", a.output.display());
+    Ok(())
+}
+
+/// The camera and lights the options give in place of the scene's, and a warning for a scene
+/// left without lights.
+fn set_view(a: &RenderArgs, scene: &mut gridtrace::Scene, name: &str) {
     if let Some(e) = a.eye {
         scene.camera.eye = e;
     }
@@ -118,10 +137,19 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
              tables to the scene file, or --light X,Y,Z)"
         );
     }
+}
+
+/// The scene prepared for the structure `--accel` resolves to, on the device `--backend`
+/// gives, with what was chosen printed.
+fn open_tracer(
+    a: &RenderArgs,
+    scene: &gridtrace::Scene,
+    name: &str,
+) -> gridtrace::Result<(gridtrace::Tracer, gridtrace::AccelKind)> {
     let (ctx, mut notes) = a.backend.open_device()?;
     let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
     let t_build = Instant::now();
-    let prepared = crate::common::prepare(&scene, &name, accel, &a.grid)?;
+    let prepared = crate::common::prepare(scene, name, accel, &a.grid)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
     println!(
         "scene {name}: {} triangles ({} degenerate dropped), {}",
@@ -130,11 +158,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         crate::common::describe_structure(&prepared.accel)
     );
     println!("build   {build_ms:.1} ms");
-
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel).with_pixels(PixelFormat::Srgb8);
-    let mut renderer =
-        gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
-    let (camera0, lights) = (renderer.scene.camera, renderer.scene.lights.clone());
+    let renderer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");
     }
@@ -148,6 +172,21 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         }
         None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
     }
+    Ok((renderer, accel))
+}
+
+/// The frames of a run: the first (the one written), every frame's figures, the last GPU
+/// frame's, and the run's throughput (none for the counting renderer).
+struct Traced {
+    first: gridtrace::Frame,
+    frames: Vec<gridtrace::RenderStats>,
+    last_gpu: Option<gridtrace::gpu::GpuRenderStats>,
+    run: Option<FramesStats>,
+}
+
+/// Traces `--frames` frames (along the orbit with `--orbit`), with a bar or spinner.
+fn trace_frames(a: &RenderArgs, renderer: &mut gridtrace::Tracer, opts: &RenderOptions) -> gridtrace::Result<Traced> {
+    let (camera0, lights) = (renderer.scene.camera, renderer.scene.lights.clone());
     // `cpu::render` calls back with the number of image rows each finished band holds, from
     // the worker threads: a bar of rows fits that. The GPU and the counting renderer report no
     // progress: a spinner at least shows they are working.
@@ -183,7 +222,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     if a.stats && renderer.gpu().is_none() {
         // The counting renderer (CPU): one frame after another.
         for (camera, lights) in views {
-            let (image, stats) = gridtrace::cpu::render_with_counters(&renderer.scene, &camera, &lights, &opts)?;
+            let (image, stats) = gridtrace::cpu::render_with_counters(&renderer.scene, &camera, &lights, opts)?;
             frames.push(stats);
             first.get_or_insert(gridtrace::Frame {
                 image,
@@ -197,7 +236,7 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             target: None,
             progress: Some(&tick),
         };
-        run = Some(renderer.render_frames(views, &opts, how, |_, frame| {
+        run = Some(renderer.render_frames(views, opts, how, |_, frame| {
             let gridtrace::Rendered::OnHost(frame) = frame else {
                 unreachable!("frames come to the host without a device image")
             };
@@ -215,10 +254,21 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    let gridtrace::Frame { image, stats, gpu } = first.expect("at least one frame (--frames is at least 1)");
+    Ok(Traced {
+        first: first.expect("at least one frame (--frames is at least 1)"),
+        frames,
+        last_gpu,
+        run,
+    })
+}
+
+/// The run's figures: the last GPU frame's stages, the first frame, the rest, the rate and
+/// (with --stats) the work per ray.
+fn report(a: &RenderArgs, renderer: &gridtrace::Tracer, opts: &RenderOptions, t: &Traced) {
+    let stats = &t.first.stats;
     // The stages of the last frame: with --frames above 1 a warm one (the first pays for
     // pipeline and buffer creation).
-    if let Some(s) = last_gpu.as_ref().or(gpu.as_ref()) {
+    if let Some(s) = t.last_gpu.as_ref().or(t.first.gpu.as_ref()) {
         print_gpu_frame(s, if a.frames > 1 { "last frame" } else { "frame" });
     }
     let r = stats.rays;
@@ -232,14 +282,15 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
         r.reflection,
         stats.mrays_per_s(),
         a.mode.name(),
-        accel.name(),
+        opts.accel.name(),
         a.res.0,
         a.res.1
     );
-    if frames.len() > 1 {
+    if t.frames.len() > 1 {
         let overlapped = renderer.gpu().is_some() && a.in_flight > 1;
-        println!("{}", describe_frames(&frames[1..], a.orbit, overlapped));
-        if let Some(rate) = run
+        println!("{}", describe_frames(&t.frames[1..], a.orbit, overlapped));
+        if let Some(rate) = t
+            .run
             .as_ref()
             .and_then(describe_throughput(renderer.gpu().is_some(), a.in_flight))
         {
@@ -256,14 +307,6 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
             c.tri_tests as f64 / n
         );
     }
-    let out = if a.mode == Mode::Heat {
-        image.heat_to_color()
-    } else {
-        image
-    };
-    out.save_png(&a.output)?;
-    println!("wrote   {}", a.output.display());
-    Ok(())
 }
 
 /// A GPU frame's times, round trips and bytes, and its stages with the rates of the two that
