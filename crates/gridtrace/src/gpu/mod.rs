@@ -22,8 +22,9 @@
 //!   walk, are in `walks/bvh/`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
 //! - `upload`: the ray batches' mapped upload buffer;
-//! - `wavefront`: the tile loop (its pixels to the host, or left in a `device_image` that the
-//!   viewer presents from); `queries`: ray-batch intersect and occluded; `points`:
+//! - `wavefront`: the frame, submitted and read back later so that frames can be in flight
+//!   (its pixels to the host, or left in a `device_image` that the viewer presents from);
+//!   `tiles`: a run of its tiles in one submission, recorded, submitted and read out; `queries`: ray-batch intersect and occluded; `points`:
 //!   closest-point batches (each structure's `NAME_closest_point` search);
 //! - `timing`: timestamp queries and per-stage milliseconds; `host_phases`: the host's side of
 //!   the wall time;
@@ -45,6 +46,7 @@ mod queries;
 mod renderer;
 mod scene;
 pub mod shaders;
+mod tiles;
 mod timing;
 mod upload;
 pub mod variants;
