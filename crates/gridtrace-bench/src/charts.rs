@@ -144,6 +144,18 @@ impl LineChart<'_> {
 /// Draws every chart the report has data for into `dir`; returns the files written.
 pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
+    time_vs_resolution(report, dir, &mut out)?;
+    grid_sweep(report, dir, &mut out)?;
+    build_scaling(report, dir, &mut out)?;
+    for sc in &report.scaling {
+        scaling(sc, dir, &mut out)?;
+    }
+    pc_study(report, dir, &mut out)?;
+    Ok(out)
+}
+
+/// Time against resolution, one chart per scene.
+fn time_vs_resolution(report: &BenchReport, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     let rows = &report.matrix.rows;
     // Time against resolution, one chart per scene: each backend/mode/accel a line, the paper's
     // figures beside them.
@@ -196,6 +208,11 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .save(&path)?;
         out.push(path);
     }
+    Ok(())
+}
+
+/// Time against the grid's cells per triangle.
+fn grid_sweep(report: &BenchReport, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     if !report.grid_sweep.is_empty() {
         let series = report
             .grid_sweep
@@ -222,6 +239,11 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .save(&path)?;
         out.push(path);
     }
+    Ok(())
+}
+
+/// Build time against triangle count, each builder a line.
+fn build_scaling(report: &BenchReport, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     if !report.build_scaling.is_empty() {
         let b = &report.build_scaling;
         let threads = b[0].cpu_threads;
@@ -265,82 +287,91 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .save(&path)?;
         out.push(path);
     }
-    for sc in &report.scaling {
-        // The CPU's charts keep their old names; the GPU's get a suffix.
-        let suffix = if sc.backend == "cpu" {
-            String::new()
-        } else {
-            format!("_{}", sc.backend)
-        };
-        let mut families: Vec<String> = sc.by_triangles.iter().map(|p| p.family.clone()).collect();
-        families.dedup();
-        let mut series: Vec<Series> = families
-            .iter()
-            .map(|f| Series {
-                name: f.clone(),
-                points: sc
-                    .by_triangles
-                    .iter()
-                    .filter(|p| &p.family == f)
-                    .map(|p| (p.triangles as f64, p.ns_per_ray))
-                    .collect(),
-                reference: false,
-            })
-            .collect();
-        if let Some(fit) = sc.fits.iter().find(|f| f.series == "ns/ray vs triangles: all") {
-            let xs: Vec<f64> = sc.by_triangles.iter().map(|p| p.triangles as f64).collect();
-            let (lo, hi) = (
-                xs.iter().copied().fold(f64::INFINITY, f64::min),
-                xs.iter().copied().fold(0.0, f64::max),
-            );
-            let f = |x: f64| (fit.intercept_ln + fit.exponent * x.ln()).exp();
-            series.push(Series {
-                name: format!("fit: n^{:.3}", fit.exponent),
-                points: vec![(lo, f(lo)), (hi, f(hi))],
-                reference: true,
-            });
-        }
-        let path = dir.join(format!("scaling_triangles{suffix}.png"));
+    Ok(())
+}
+
+/// Time per ray against triangle count (with the fitted power law) and time against pixel
+/// count, for one backend's scaling study.
+fn scaling(sc: &crate::studies::Scaling, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+    // The CPU's charts keep their old names; the GPU's get a suffix.
+    let suffix = if sc.backend == "cpu" {
+        String::new()
+    } else {
+        format!("_{}", sc.backend)
+    };
+    let mut families: Vec<String> = sc.by_triangles.iter().map(|p| p.family.clone()).collect();
+    families.dedup();
+    let mut series: Vec<Series> = families
+        .iter()
+        .map(|f| Series {
+            name: f.clone(),
+            points: sc
+                .by_triangles
+                .iter()
+                .filter(|p| &p.family == f)
+                .map(|p| (p.triangles as f64, p.ns_per_ray))
+                .collect(),
+            reference: false,
+        })
+        .collect();
+    if let Some(fit) = sc.fits.iter().find(|f| f.series == "ns/ray vs triangles: all") {
+        let xs: Vec<f64> = sc.by_triangles.iter().map(|p| p.triangles as f64).collect();
+        let (lo, hi) = (
+            xs.iter().copied().fold(f64::INFINITY, f64::min),
+            xs.iter().copied().fold(0.0, f64::max),
+        );
+        let f = |x: f64| (fit.intercept_ln + fit.exponent * x.ln()).exp();
+        series.push(Series {
+            name: format!("fit: n^{:.3}", fit.exponent),
+            points: vec![(lo, f(lo)), (hi, f(hi))],
+            reference: true,
+        });
+    }
+    let path = dir.join(format!("scaling_triangles{suffix}.png"));
+    LineChart {
+        title: &format!(
+            "Time per ray vs triangle count ({} {} {})",
+            sc.backend, sc.mode, sc.accel
+        ),
+        x_label: "triangles (log)",
+        y_label: "ns per ray (log)",
+        log_x: true,
+        log_y: true,
+        series,
+    }
+    .save(&path)?;
+    out.push(path);
+    if !sc.by_pixels.is_empty() {
+        let exp = sc.fits.iter().find(|f| f.series == "ms vs pixels").map(|f| f.exponent);
+        let path = dir.join(format!("scaling_pixels{suffix}.png"));
         LineChart {
             title: &format!(
-                "Time per ray vs triangle count ({} {} {})",
-                sc.backend, sc.mode, sc.accel
+                "Time vs pixel count ({}){}",
+                sc.by_pixels[0].mesh,
+                exp.map_or(String::new(), |e| format!(", slope {e:.3}"))
             ),
-            x_label: "triangles (log)",
-            y_label: "ns per ray (log)",
+            x_label: "pixels (log)",
+            y_label: "ms (log)",
             log_x: true,
             log_y: true,
-            series,
+            series: vec![Series {
+                name: format!("{} {}", sc.mode, sc.accel),
+                points: sc
+                    .by_pixels
+                    .iter()
+                    .map(|p| ((p.width * p.height) as f64, p.summary.best_ms))
+                    .collect(),
+                reference: false,
+            }],
         }
         .save(&path)?;
         out.push(path);
-        if !sc.by_pixels.is_empty() {
-            let exp = sc.fits.iter().find(|f| f.series == "ms vs pixels").map(|f| f.exponent);
-            let path = dir.join(format!("scaling_pixels{suffix}.png"));
-            LineChart {
-                title: &format!(
-                    "Time vs pixel count ({}){}",
-                    sc.by_pixels[0].mesh,
-                    exp.map_or(String::new(), |e| format!(", slope {e:.3}"))
-                ),
-                x_label: "pixels (log)",
-                y_label: "ms (log)",
-                log_x: true,
-                log_y: true,
-                series: vec![Series {
-                    name: format!("{} {}", sc.mode, sc.accel),
-                    points: sc
-                        .by_pixels
-                        .iter()
-                        .map(|p| ((p.width * p.height) as f64, p.summary.best_ms))
-                        .collect(),
-                    reference: false,
-                }],
-            }
-            .save(&path)?;
-            out.push(path);
-        }
     }
+    Ok(())
+}
+
+/// Cells visited per ray for each study scene and mode, grid against pc.
+fn pc_study(report: &BenchReport, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     if !report.pc_study.is_empty() {
         // Cells visited per ray for each study scene and mode, grid vs pc.
         let mut series = Vec::new();
@@ -370,5 +401,5 @@ pub fn write_charts(report: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .save(&path)?;
         out.push(path);
     }
-    Ok(out)
+    Ok(())
 }
