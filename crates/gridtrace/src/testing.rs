@@ -321,6 +321,60 @@ pub struct BadFile {
 /// out of range, NaN/Inf coordinates, faces with fewer than 3 vertices, wrong types, non-UTF-8
 /// bytes, empty files, meshes with only degenerate triangles, absurd header sizes.
 pub fn bad_input_corpus() -> Vec<BadFile> {
+    [
+        obj_cases(),
+        ply_cases(),
+        off_cases(),
+        stl_cases(),
+        gltf_cases(),
+        scene_cases(),
+    ]
+    .concat()
+}
+
+/// A corpus entry.
+fn bad(name: &'static str, bytes: &[u8], location: &'static str) -> BadFile {
+    BadFile {
+        name,
+        bytes: bytes.to_vec(),
+        location,
+    }
+}
+
+/// One triangle's vertices as little-endian float32 (x y z, three times).
+fn tri_f32() -> Vec<u8> {
+    [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect()
+}
+
+fn obj_cases() -> Vec<BadFile> {
+    vec![
+        bad("empty.obj", b"", ""),
+        bad("truncated.obj", b"v 0 0 0\nv 1 0 0\nv 0 1", "line 3"),
+        bad("index-range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "line 4"),
+        bad("index-zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "line 4"),
+        bad(
+            "index-negative.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -7\n",
+            "line 4",
+        ),
+        bad("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
+        bad("inf.obj", b"v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
+        bad("two-vertex-face.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "line 4"),
+        bad("wrong-type.obj", b"v 0 0 0\nv one 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
+        bad("non-utf8.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \xff\xfe\n", "line 4"),
+        bad("degenerate.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n", ""),
+        bad(
+            "huge-index.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n",
+            "line 4",
+        ),
+    ]
+}
+
+fn ply_cases() -> Vec<BadFile> {
     let ply_head = |format: &str, nv: &str, nf: &str| {
         format!(
             "ply\nformat {format} 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n\
@@ -329,10 +383,71 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
         .into_bytes()
     };
     let cat = |a: Vec<u8>, b: &[u8]| [a, b.to_vec()].concat();
-    let tri_f32: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
-        .iter()
-        .flat_map(|f| f.to_le_bytes())
-        .collect();
+    let tri_f32 = tri_f32();
+    vec![
+        bad("empty.ply", b"", ""),
+        bad("no-end-header.ply", b"ply\nformat ascii 1.0\nelement vertex 3\n", ""),
+        bad(
+            "count-lies.ply",
+            &cat(ply_head("ascii", "5", "1"), b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+            "line ",
+        ),
+        bad(
+            "truncated-binary.ply",
+            &cat(ply_head("binary_little_endian", "3", "1"), &tri_f32[..20]),
+            "byte ",
+        ),
+        bad(
+            "absurd-count.ply",
+            &cat(ply_head("binary_little_endian", "4000000000", "1"), &tri_f32),
+            "byte ",
+        ),
+        bad(
+            "index-range.ply",
+            &cat(ply_head("ascii", "3", "1"), b"0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"),
+            "line 13",
+        ),
+        bad(
+            "two-vertex-face.ply",
+            &cat(ply_head("ascii", "3", "1"), b"0 0 0\n1 0 0\n0 1 0\n2 0 1\n"),
+            "line 13",
+        ),
+        bad(
+            "nan.ply",
+            &cat(ply_head("ascii", "3", "1"), b"0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n"),
+            "line 11",
+        ),
+        bad(
+            "wrong-type.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty quaternion x\nend_header\n",
+            "line 4",
+        ),
+        // Whole-file errors from the PLY header check and the gltf crate (no offsets to give).
+        bad(
+            "non-utf8-header.ply",
+            b"ply\nformat ascii 1.0\nelement vert\xffex 3\nend_header\n",
+            "",
+        ),
+        bad("bad-format.ply", b"ply\nformat ebcdic 1.0\nend_header\n", "line 2"),
+    ]
+}
+
+fn off_cases() -> Vec<BadFile> {
+    vec![
+        bad("empty.off", b"", ""),
+        bad("count-lies.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n", "line "),
+        bad("absurd-count.off", b"OFF\n4000000000 4000000000 0\n0 0 0\n", "line "),
+        bad("nan.off", b"OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n", "line 4"),
+        bad(
+            "two-vertex-face.off",
+            b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+            "line 6",
+        ),
+    ]
+}
+
+fn stl_cases() -> Vec<BadFile> {
+    let tri_f32 = tri_f32();
     let mut stl_bin = vec![0u8; 80];
     stl_bin.extend(1_000_000_000u32.to_le_bytes());
     stl_bin.extend([0u8; 12]);
@@ -344,6 +459,19 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
     stl_nan.extend(f32::NAN.to_le_bytes());
     stl_nan.extend(&tri_f32[4..]);
     stl_nan.extend([0u8; 2]);
+    vec![
+        bad("empty.stl", b"", ""),
+        bad("count-lies.stl", &stl_bin, "byte "),
+        bad("nan.stl", &stl_nan, "byte "),
+        bad(
+            "truncated-ascii.stl",
+            b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0",
+            "line 5",
+        ),
+    ]
+}
+
+fn gltf_cases() -> Vec<BadFile> {
     let glb = |json: &str, declared_len: u32| {
         let mut j = json.as_bytes().to_vec();
         while !j.len().is_multiple_of(4) {
@@ -357,129 +485,42 @@ pub fn bad_input_corpus() -> Vec<BadFile> {
         v.extend(j);
         v
     };
-    let b = |name, bytes: &[u8], location| BadFile {
-        name,
-        bytes: bytes.to_vec(),
-        location,
-    };
     vec![
-        // OBJ
-        b("empty.obj", b"", ""),
-        b("truncated.obj", b"v 0 0 0\nv 1 0 0\nv 0 1", "line 3"),
-        b("index-range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "line 4"),
-        b("index-zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "line 4"),
-        b(
-            "index-negative.obj",
-            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -7\n",
-            "line 4",
-        ),
-        b("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
-        b("inf.obj", b"v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
-        b("two-vertex-face.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "line 4"),
-        b("wrong-type.obj", b"v 0 0 0\nv one 0 0\nv 0 1 0\nf 1 2 3\n", "line 2"),
-        b("non-utf8.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \xff\xfe\n", "line 4"),
-        b("degenerate.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n", ""),
-        b(
-            "huge-index.obj",
-            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n",
-            "line 4",
-        ),
-        // PLY
-        b("empty.ply", b"", ""),
-        b("no-end-header.ply", b"ply\nformat ascii 1.0\nelement vertex 3\n", ""),
-        b(
-            "count-lies.ply",
-            &cat(ply_head("ascii", "5", "1"), b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
-            "line ",
-        ),
-        b(
-            "truncated-binary.ply",
-            &cat(ply_head("binary_little_endian", "3", "1"), &tri_f32[..20]),
-            "byte ",
-        ),
-        b(
-            "absurd-count.ply",
-            &cat(ply_head("binary_little_endian", "4000000000", "1"), &tri_f32),
-            "byte ",
-        ),
-        b(
-            "index-range.ply",
-            &cat(ply_head("ascii", "3", "1"), b"0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"),
-            "line 13",
-        ),
-        b(
-            "two-vertex-face.ply",
-            &cat(ply_head("ascii", "3", "1"), b"0 0 0\n1 0 0\n0 1 0\n2 0 1\n"),
-            "line 13",
-        ),
-        b(
-            "nan.ply",
-            &cat(ply_head("ascii", "3", "1"), b"0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n"),
-            "line 11",
-        ),
-        b(
-            "wrong-type.ply",
-            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty quaternion x\nend_header\n",
-            "line 4",
-        ),
-        // Whole-file errors from the PLY header check and the gltf crate (no offsets to give).
-        b(
-            "non-utf8-header.ply",
-            b"ply\nformat ascii 1.0\nelement vert\xffex 3\nend_header\n",
-            "",
-        ),
-        b("bad-format.ply", b"ply\nformat ebcdic 1.0\nend_header\n", "line 2"),
-        // OFF
-        b("empty.off", b"", ""),
-        b("count-lies.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n", "line "),
-        b("absurd-count.off", b"OFF\n4000000000 4000000000 0\n0 0 0\n", "line "),
-        b("nan.off", b"OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n", "line 4"),
-        b(
-            "two-vertex-face.off",
-            b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
-            "line 6",
-        ),
-        // STL
-        b("empty.stl", b"", ""),
-        b("count-lies.stl", &stl_bin, "byte "),
-        b("nan.stl", &stl_nan, "byte "),
-        b(
-            "truncated-ascii.stl",
-            b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0",
-            "line 5",
-        ),
-        // glTF
-        b("empty.gltf", b"", ""),
-        b(
+        bad("empty.gltf", b"", ""),
+        bad(
             "bad-json.gltf",
             b"{\n\"asset\": {\"version\": \"2.0\"},\n\"meshes\": [\n",
             "line ",
         ),
-        b("wrong-type.gltf", b"{\n\"asset\": {\"version\": 2}\n}\n", "line "),
-        b(
+        bad("wrong-type.gltf", b"{\n\"asset\": {\"version\": 2}\n}\n", "line "),
+        bad(
             "truncated.glb",
             &glb("{\"asset\":{\"version\":\"2.0\"}}", 1_000_000)[..30],
             "",
         ),
-        // Scene files
-        b("empty.toml", b"", ""),
-        b(
+    ]
+}
+
+fn scene_cases() -> Vec<BadFile> {
+    vec![
+        bad("empty.toml", b"", ""),
+        bad(
             "wrong-type.toml",
             b"[camera]\neye = [0, 1, 4]\ntarget = \"origin\"\n",
             "line 3",
         ),
-        b(
+        bad(
             "unknown-key.toml",
             b"[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\nzoom = 2\n",
             "line 4",
         ),
-        b("non-utf8.toml", b"[camera]\neye = [0, 1, 4]\xff\n", "byte 24"),
-        b(
+        bad("non-utf8.toml", b"[camera]\neye = [0, 1, 4]\xff\n", "byte 24"),
+        bad(
             "missing-mesh.toml",
             b"[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n[[object]]\nmesh = \"nowhere.ply\"\n",
             "line 4",
         ),
-        b(
+        bad(
             "nan-transform.toml",
             b"[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n[[object]]\nshape = \"plane\"\nscale = nan\n",
             "line ",
