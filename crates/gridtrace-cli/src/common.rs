@@ -8,7 +8,7 @@ use glam::Vec3;
 use gridtrace::accel::IrregularParams;
 use gridtrace::gpu::GpuVariants;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
-use gridtrace::{AccelChoice, AccelKind, Resolution, Work};
+use gridtrace::{AccelChoice, AccelKind, Resolution, TracedOn, Work};
 
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
@@ -38,10 +38,10 @@ pub struct GridArgs {
 }
 
 impl GridArgs {
-    /// The traversal `--accel` names, or `auto`'s pick for `work` on the GPU (`on_gpu`) or the
-    /// CPU, with its note pushed to `notes`.
-    pub fn accel_for(&self, on_gpu: bool, work: Work, notes: &mut Vec<String>) -> AccelKind {
-        let (kind, note) = self.accel.resolve(on_gpu, work);
+    /// The traversal `--accel` names, or `auto`'s pick for `work` traced where `traced_on`
+    /// says, with its note pushed to `notes`.
+    pub fn accel_for(&self, traced_on: TracedOn, work: Work, notes: &mut Vec<String>) -> AccelKind {
+        let (kind, note) = self.accel.resolve(traced_on, work);
         notes.extend(note);
         kind
     }

@@ -325,7 +325,7 @@ fn render<'py>(
                 s.camera.target = t.into();
             }
             let (ctx, mut notes) = backend.open_device()?;
-            let (accel, _why) = accel.resolve(ctx.is_some(), gridtrace::Work::Render);
+            let (accel, _why) = accel.resolve(gridtrace::backend::traced_on(ctx.as_deref()), gridtrace::Work::Render);
             let prepared = s.prepare_for(accel, grid)?;
             let opts = RenderOptions::new(width, height, mode, accel).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());

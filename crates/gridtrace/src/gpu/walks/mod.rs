@@ -22,6 +22,7 @@ use glam::{UVec3, Vec3};
 
 use crate::Result;
 use crate::accel::{Aabb, Structure};
+use crate::gpu::bindings::STRUCTURE_ARRAYS_MAX;
 use crate::gpu::context::GpuContext;
 use crate::gpu::variants::GpuVariants;
 use crate::scene::PreparedScene;
@@ -84,6 +85,19 @@ pub const WALKS: [&WalkSpec; 8] = [
     &bvh::SPEC_WIDE8,
     &bvh::SPEC_WIDE8_SHORT,
 ];
+
+// Every walk's arrays fit what a device is asked to allow for them (a walk with more fails to
+// compile here, not on a device with exactly the budget): raise the budget with the walk.
+const _: () = {
+    let mut i = 0;
+    while i < WALKS.len() {
+        assert!(
+            WALKS[i].arrays.len() <= STRUCTURE_ARRAYS_MAX,
+            "a walk binds more arrays than bindings::STRUCTURE_ARRAYS_MAX"
+        );
+        i += 1;
+    }
+};
 
 /// The default walk of the structure named `structure`, if the GPU has one.
 pub fn spec(structure: &str) -> Option<&'static WalkSpec> {
@@ -165,4 +179,17 @@ pub(crate) struct DeviceStructure {
 /// A slice's bytes, borrowed.
 fn bytes<T: bytemuck::Pod>(v: &[T]) -> Cow<'_, [u8]> {
     Cow::Borrowed(bytemuck::cast_slice(v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The budget is no larger than the walks need: a larger one would refuse adapters that
+    /// can run every walk.
+    #[test]
+    fn the_largest_walk_uses_the_whole_array_budget() {
+        let most = WALKS.iter().map(|w| w.arrays.len()).max();
+        assert_eq!(most, Some(STRUCTURE_ARRAYS_MAX));
+    }
 }
