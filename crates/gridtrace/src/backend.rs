@@ -2,7 +2,7 @@
 //! has (an adapter, whether it is a software one, room for the scene) into a CPU or a GPU
 //! tracer, with a note for the user on every choice that was not the one asked for. `Tracer`
 //! is the one type that owns a prepared scene with where it is traced; render, animate, the
-//! viewer and Python trace through it, and the ray queries (`query.rs`) and the benchmarks
+//! viewer and Python trace through it, and the ray queries (`query/`) and the benchmarks
 //! open their device here.
 //!
 //! ```

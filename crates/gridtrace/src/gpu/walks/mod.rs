@@ -99,15 +99,10 @@ const _: () = {
     }
 };
 
-/// The default walk of the structure named `structure`, if the GPU has one.
-pub fn spec(structure: &str) -> Option<&'static WalkSpec> {
-    WALKS.iter().copied().find(|w| w.structure == structure)
-}
-
 /// Whether the structure named `structure` traces by ray query (`WalkSpec::tlas`): it runs
 /// only on an adapter with ray queries (`GpuContext::ray_query`).
 pub fn needs_ray_queries(structure: &str) -> bool {
-    spec(structure).is_some_and(|w| w.tlas.is_some())
+    WALKS.iter().any(|w| w.structure == structure && w.tlas.is_some())
 }
 
 /// The lattice fields of `SceneUniform` that a walk reads: the grid's cells, the irregular
