@@ -31,7 +31,11 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         )));
     }
     let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Animate, &mut notes);
+    let accel = a.grid.accel_for(
+        gridtrace::backend::traced_on(ctx.as_deref()),
+        gridtrace::Work::Animate,
+        &mut notes,
+    );
     let t0 = Instant::now();
     let scene = crate::common::prepare(&anim.scene, name, accel, &a.grid)?;
     println!(

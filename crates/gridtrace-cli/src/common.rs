@@ -8,7 +8,7 @@ use glam::Vec3;
 use gridtrace::accel::IrregularParams;
 use gridtrace::gpu::GpuVariants;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
-use gridtrace::{AccelChoice, AccelKind, Resolution, Work};
+use gridtrace::{AccelChoice, AccelKind, Resolution, TracedOn, Work};
 
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
@@ -38,10 +38,10 @@ pub struct GridArgs {
 }
 
 impl GridArgs {
-    /// The traversal `--accel` names, or `auto`'s pick for `work` on the GPU (`on_gpu`) or the
-    /// CPU, with its note pushed to `notes`.
-    pub fn accel_for(&self, on_gpu: bool, work: Work, notes: &mut Vec<String>) -> AccelKind {
-        let (kind, note) = self.accel.resolve(on_gpu, work);
+    /// The traversal `--accel` names, or `auto`'s pick for `work` traced where `traced_on`
+    /// says, with its note pushed to `notes`.
+    pub fn accel_for(&self, traced_on: TracedOn, work: Work, notes: &mut Vec<String>) -> AccelKind {
+        let (kind, note) = self.accel.resolve(traced_on, work);
         notes.extend(note);
         kind
     }
@@ -116,12 +116,41 @@ pub fn mode_parser() -> impl TypedValueParser<Value = gridtrace::Mode> {
 /// commands that trace on a GPU.
 #[derive(Args, Debug, Clone, Default)]
 pub struct GpuVariantArgs {
-    /// GPU variants, KEY=VALUE,... (any subset; the first value of each is the default):
-    /// bvh=binary|wide8, stack=short|private|shortN, order=tiles|rows, appends=workgroup|per_ray|subgroup,
-    /// stats=off|on, checks=on|off. Same images and hits, other speed; the defaults are what the
-    /// hardware suite found fastest on an NVIDIA H200 (docs/benchmarks.md).
-    #[arg(long = "gpu-variant", default_value = "", value_parser = |s: &str| s.parse::<GpuVariants>())]
+    // The help is written from the library's table of variants (`gpu::variants::VARIANTS`).
+    #[arg(
+        long = "gpu-variant",
+        default_value = "",
+        value_parser = |s: &str| s.parse::<GpuVariants>(),
+        help = gpu_variant_help(),
+        long_help = gpu_variant_long_help()
+    )]
     pub gpu_variant: GpuVariants,
+}
+
+/// `--gpu-variant`'s help: every key with its values.
+fn gpu_variant_help() -> String {
+    format!(
+        "GPU variants, KEY=VALUE,... (any subset; the first value of each is the default): {}. Same images \
+         and hits, other speed; the defaults are what the hardware suite found fastest on an NVIDIA H200 \
+         (docs/benchmarks.md).",
+        gridtrace::gpu::variants::keys_text()
+    )
+}
+
+/// `--gpu-variant`'s `--help`: the short help, then each key's values and what it changes.
+fn gpu_variant_long_help() -> String {
+    let keys: Vec<String> = gridtrace::gpu::variants::VARIANTS
+        .iter()
+        .map(|r| {
+            let only = if r.structures.is_empty() {
+                String::new()
+            } else {
+                format!(" (--accel {} only)", r.structures.join(", "))
+            };
+            format!("- {}={}: {}{only}", r.key, r.values_text(), r.help)
+        })
+        .collect();
+    format!("{}\n\n{}", gpu_variant_help(), keys.join("\n"))
 }
 
 /// `--backend`: the values are listed in `--help` and in the error for a wrong one.

@@ -20,7 +20,9 @@ pub struct InfoArgs {
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     let (scene, name) = a.scene.load(a.with_floor)?;
     let mut notes = Vec::new();
-    let accel = a.grid.accel_for(false, gridtrace::Work::Render, &mut notes);
+    let accel = a
+        .grid
+        .accel_for(gridtrace::TracedOn::Cpu, gridtrace::Work::Render, &mut notes);
     for n in notes {
         eprintln!("note: {n}");
     }

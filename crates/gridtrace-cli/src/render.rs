@@ -147,7 +147,11 @@ fn open_tracer(
     name: &str,
 ) -> gridtrace::Result<(gridtrace::Tracer, gridtrace::AccelKind)> {
     let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
+    let accel = a.grid.accel_for(
+        gridtrace::backend::traced_on(ctx.as_deref()),
+        gridtrace::Work::Render,
+        &mut notes,
+    );
     let t_build = Instant::now();
     let prepared = crate::common::prepare(scene, name, accel, &a.grid)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;

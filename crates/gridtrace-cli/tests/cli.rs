@@ -459,8 +459,8 @@ fn negative_values_reach_every_number_and_vector_option() {
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }
 
-/// `--help` shows the x,y,z format, the values of --accel, --mode and --backend, and that
-/// --res takes N; a zero size says it must be positive.
+/// `--help` shows the x,y,z format, the values of --accel, --mode, --backend and
+/// --gpu-variant, and that --res takes N; a zero size says it must be positive.
 #[test]
 fn help_shows_formats_and_values() {
     let (ok, help) = gridtrace(&["render", "--help"]);
@@ -480,6 +480,12 @@ fn help_shows_formats_and_values() {
     ] {
         assert!(help.contains(want), "render --help lacks '{want}':\n{help}");
     }
+    // Every GPU variant key with its values, from the library's table, default first.
+    for r in &gridtrace::gpu::variants::VARIANTS {
+        let want = format!("- {}={}: ", r.key, r.values_text());
+        assert!(help.contains(&want), "render --help lacks '{want}':\n{help}");
+    }
+    assert!(help.contains("appends=workgroup|per_ray|subgroup"), "{help}");
     let (ok, help) = gridtrace(&["bench", "--help"]);
     assert!(
         ok && help.contains("- irregular: ")

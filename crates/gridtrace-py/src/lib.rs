@@ -325,7 +325,7 @@ fn render<'py>(
                 s.camera.target = t.into();
             }
             let (ctx, mut notes) = backend.open_device()?;
-            let (accel, _why) = accel.resolve(ctx.is_some(), gridtrace::Work::Render);
+            let (accel, _why) = accel.resolve(gridtrace::backend::traced_on(ctx.as_deref()), gridtrace::Work::Render);
             let prepared = s.prepare_for(accel, grid)?;
             let opts = RenderOptions::new(width, height, mode, accel).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
@@ -359,5 +359,29 @@ fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
         .chain(gridtrace::accel::registry::ENTRIES.iter().map(|e| e.name))
         .collect();
     m.add("ACCELS", accels)?;
+    m.add("GPU_VARIANTS", gpu_variants(m.py())?)?;
     Ok(())
+}
+
+/// The library's table of GPU variants (`gpu::variants::VARIANTS`), as `gpu_variant=` takes
+/// them: key -> {"values" (the default first), "numbered" (`(prefix, min, max)` for values such
+/// as `short3`, else `None`), "default", "structures" (the ones whose walk it changes; `None`:
+/// every structure), "help"}.
+fn gpu_variants(py: Python<'_>) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
+    use pyo3::types::PyDict;
+    let all = PyDict::new(py);
+    for r in &gridtrace::gpu::variants::VARIANTS {
+        let row = PyDict::new(py);
+        row.set_item("values", pyo3::types::PyTuple::new(py, r.values().collect::<Vec<_>>())?)?;
+        row.set_item("numbered", r.numbered.map(|n| (n.prefix, n.min, n.max)))?;
+        row.set_item("default", r.default_value())?;
+        let structures = (!r.structures.is_empty()).then(|| r.structures.to_vec());
+        row.set_item(
+            "structures",
+            structures.map(|s| pyo3::types::PyTuple::new(py, s)).transpose()?,
+        )?;
+        row.set_item("help", r.help)?;
+        all.set_item(r.key, row)?;
+    }
+    Ok(all)
 }

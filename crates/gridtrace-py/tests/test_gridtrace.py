@@ -33,6 +33,44 @@ def test_accels_come_from_the_registry():
         gridtrace.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], accel="kd-tree")
 
 
+def test_gpu_variants_are_what_gpu_variant_accepts():
+    """`GPU_VARIANTS` (the library's table) lists what `gpu_variant=` takes, on `Mesh` and
+    `Scene` alike: every listed value and both ends of a numbered family are accepted, the
+    default is the first value, and a value or key it does not list is refused with a message
+    that lists what it does."""
+    variants = gridtrace.GPU_VARIANTS
+    assert list(variants) == ["bvh", "stack", "order", "appends", "stats", "checks"]
+    tri = ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+
+    def make(gpu_variant):
+        gridtrace.Mesh(*tri, backend="cpu", gpu_variant=gpu_variant)
+        gridtrace.Scene(backend="cpu", gpu_variant=gpu_variant)
+
+    for key, spec in variants.items():
+        assert spec["default"] == spec["values"][0], key
+        assert spec["help"], key
+        assert spec["structures"] is None or set(spec["structures"]) <= set(gridtrace.ACCELS), key
+        accepted = list(spec["values"])
+        refused = [spec["values"][0] + "x"]
+        if spec["numbered"] is not None:
+            prefix, low, high = spec["numbered"]
+            accepted += [f"{prefix}{low}", f"{prefix}{high}"]
+            refused += [f"{prefix}{low - 1}", f"{prefix}{high + 1}"]
+        for value in accepted:
+            make(f"{key}={value}")
+        for value in refused:
+            with pytest.raises(ValueError, match="gpu_variant") as info:
+                gridtrace.Mesh(*tri, backend="cpu", gpu_variant=f"{key}={value}")
+            assert "|".join(spec["values"]) in str(info.value), str(info.value)
+            with pytest.raises(ValueError, match="gpu_variant"):
+                gridtrace.Scene(gpu_variant=f"{key}={value}")
+    make(",".join(f"{key}={spec['default']}" for key, spec in variants.items()))
+    assert variants["bvh"]["structures"] == ("bvh",) and variants["order"]["structures"] is None
+    with pytest.raises(ValueError) as info:
+        make("colour=red")
+    assert all(f"{key}=" in str(info.value) for key in variants), str(info.value)
+
+
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 
 

@@ -2,7 +2,7 @@
 //! has (an adapter, whether it is a software one, room for the scene) into a CPU or a GPU
 //! tracer, with a note for the user on every choice that was not the one asked for. `Tracer`
 //! is the one type that owns a prepared scene with where it is traced; render, animate, the
-//! viewer and Python trace through it, and the ray queries (`query.rs`) and the benchmarks
+//! viewer and Python trace through it, and the ray queries (`query/`) and the benchmarks
 //! open their device here.
 //!
 //! ```
@@ -20,6 +20,7 @@
 
 use std::sync::Arc;
 
+use crate::accel::TracedOn;
 use crate::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
 use crate::render::{Image, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
@@ -100,6 +101,18 @@ impl Backend {
         }
     }
 
+    /// `traces_on_gpu` as `AccelChoice::resolve` weighs it, with whether that GPU has ray
+    /// queries: for the callers that choose a structure before they open a device.
+    pub fn traced_on(self) -> TracedOn {
+        if self.traces_on_gpu() {
+            TracedOn::Gpu {
+                hardware_ray_queries: hardware_ray_queries_present(),
+            }
+        } else {
+            TracedOn::Cpu
+        }
+    }
+
     /// The scene uploaded to the device `ctx` that this backend opened (`open_device`), or
     /// `None` to trace it on the CPU: with `auto`, a scene the GPU cannot hold (over its buffer
     /// limits) is traced on the CPU, with a note; with `gpu` that is an error that says so.
@@ -158,8 +171,9 @@ pub fn hardware_adapter_present() -> bool {
     hardware_probe().0
 }
 
-/// Whether that hardware adapter has ray queries (`hwrt`): what `--accel auto` asks before
-/// it picks `hwrt` (never on a software adapter). Probed with `hardware_adapter_present`.
+/// Whether that hardware adapter has ray queries (`hwrt`): what `--accel auto` weighs before
+/// it picks `hwrt` where no device is open yet (`Backend::traced_on`). Probed with
+/// `hardware_adapter_present`.
 pub fn hardware_ray_queries_present() -> bool {
     hardware_probe().1
 }
@@ -168,9 +182,20 @@ pub fn hardware_ray_queries_present() -> bool {
 fn hardware_probe() -> (bool, bool) {
     static PRESENT: std::sync::OnceLock<(bool, bool)> = std::sync::OnceLock::new();
     *PRESENT.get_or_init(|| match GpuContext::new() {
-        Ok(c) if !c.is_software() => (true, c.ray_query),
+        Ok(c) if !c.is_software() => (true, c.hardware_ray_queries()),
         _ => (false, false),
     })
+}
+
+/// Where work on `device` (`None`: the CPU) runs, as `AccelChoice::resolve` weighs it: for the
+/// callers that opened the device first (`Backend::open_device`).
+pub fn traced_on(device: Option<&GpuContext>) -> TracedOn {
+    match device {
+        None => TracedOn::Cpu,
+        Some(c) => TracedOn::Gpu {
+            hardware_ray_queries: c.hardware_ray_queries(),
+        },
+    }
 }
 
 /// Where frames are traced, in words: "cpu (N threads)" or "gpu: " and the adapter's

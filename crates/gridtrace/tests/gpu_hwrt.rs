@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-use gridtrace::accel::{AccelChoice, AccelKind, Hit, NoCounters, Resolution, Work};
+use gridtrace::accel::{AccelChoice, AccelKind, Hit, NoCounters, Resolution, TracedOn, Work};
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::query::{QueryOptions, TraceMesh};
 use gridtrace::scene::builtin;
@@ -54,22 +54,46 @@ fn hwrt_on_the_cpu_is_an_error() {
 
 /// `auto` picks `hwrt` only on a hardware adapter with ray queries: never on the CPU, never on
 /// a software adapter (lavapipe has ray queries from Mesa 25, and runs them on the CPU's
-/// cores).
+/// cores), whether the caller opened the device first (frames: `backend::traced_on`) or
+/// chooses before it opens one (ray batches: `Backend::traced_on`, on the process's probe).
 #[test]
 fn auto_picks_hwrt_only_on_hardware_with_ray_queries() {
     for work in [Work::Render, Work::Animate, Work::Rays] {
-        assert_ne!(AccelChoice::Auto.resolve(false, work).0, AccelKind::Hwrt);
-        let (k, note) = AccelChoice::Auto.resolve(true, work);
+        assert_ne!(AccelChoice::Auto.resolve(TracedOn::Cpu, work).0, AccelKind::Hwrt);
+        assert_eq!(Backend::Cpu.traced_on(), TracedOn::Cpu);
+        let (k, note) = AccelChoice::Auto.resolve(Backend::Gpu.traced_on(), work);
         assert_eq!(
             k == AccelKind::Hwrt,
             gridtrace::backend::hardware_ray_queries_present(),
             "{note:?}"
         );
     }
-    if let Ok(c) = GpuContext::new()
-        && c.is_software()
-    {
-        assert!(!gridtrace::backend::hardware_ray_queries_present(), "{}", c.describe());
+    if let Ok(mut c) = GpuContext::new() {
+        // As an adapter with ray queries, whatever this one has: a software one still never
+        // decides.
+        c.ray_query = true;
+        let on = gridtrace::backend::traced_on(Some(&c));
+        assert_eq!(
+            on,
+            TracedOn::Gpu {
+                hardware_ray_queries: !c.is_software()
+            },
+            "{}",
+            c.describe()
+        );
+        c.ray_query = false;
+        let on = gridtrace::backend::traced_on(Some(&c));
+        assert_eq!(
+            on,
+            TracedOn::Gpu {
+                hardware_ray_queries: false
+            },
+            "{}",
+            c.describe()
+        );
+        if c.is_software() {
+            assert!(!gridtrace::backend::hardware_ray_queries_present(), "{}", c.describe());
+        }
     }
 }
 

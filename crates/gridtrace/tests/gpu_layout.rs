@@ -50,7 +50,7 @@ macro_rules! check {
 /// checked the same way, in every build kernel's module.
 #[test]
 fn grid_build_structs_match_rust() {
-    use gridtrace::gpu::layout::BuildParams;
+    use gridtrace::gpu::layout::GridBuildUniform;
     for kernel in [
         shaders::BUILD_REFS,
         shaders::BUILD_SCAN,
@@ -62,8 +62,8 @@ fn grid_build_structs_match_rust() {
         check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
         check!(
             m,
-            BuildParams,
-            "BuildParams",
+            GridBuildUniform,
+            "GridBuildUniform",
             [
                 bounds_min,
                 n_tris,

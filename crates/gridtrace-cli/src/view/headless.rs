@@ -35,7 +35,11 @@ fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Ve
 
 pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
     let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
+    let accel = a.grid.accel_for(
+        gridtrace::backend::traced_on(ctx.as_deref()),
+        gridtrace::Work::Render,
+        &mut notes,
+    );
     let t0 = Instant::now();
     let scene = crate::common::prepare(&src, name, accel, &a.grid)?;
     println!(

@@ -138,7 +138,11 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     let (ctx, mut notes) = a
         .backend
         .open_device_with(|| wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display)))?;
-    let accel = a.grid.accel_for(ctx.is_some(), gridtrace::Work::Render, &mut notes);
+    let accel = a.grid.accel_for(
+        gridtrace::backend::traced_on(ctx.as_deref()),
+        gridtrace::Work::Render,
+        &mut notes,
+    );
     for n in &notes {
         eprintln!("note: {n}");
     }

@@ -57,6 +57,7 @@ _ensure_runtime_dir()
 
 from ._gridtrace import NativeMesh as _NativeMesh  # noqa: E402
 from ._gridtrace import ACCELS as _ACCELS  # noqa: E402
+from ._gridtrace import GPU_VARIANTS as _GPU_VARIANTS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
 from .scene import INVALID_ID, Scene  # noqa: E402
@@ -69,7 +70,13 @@ from . import trimesh  # noqa: E402
 #: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
 ACCELS: tuple = tuple(_ACCELS)
 
-__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "__version__", "trimesh"]
+#: The keys ``gpu_variant=`` accepts (from the library's table of GPU variants), each with
+#: ``values`` (the default first), ``numbered`` (``(prefix, min, max)`` for values such as
+#: ``"short3"``, else ``None``), ``default``, ``structures`` (those whose walk it changes;
+#: ``None``: every structure) and ``help``.
+GPU_VARIANTS: dict = dict(_GPU_VARIANTS)
+
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "GPU_VARIANTS", "__version__", "trimesh"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)
@@ -141,8 +148,8 @@ class Mesh:
     or ``"AxBxC"``, ``backend`` is ``"auto"`` (a hardware GPU if present, else the CPU: a software adapter such as
     lavapipe is slower than the CPU tracer on the same cores), ``"gpu"`` or ``"cpu"``.
     ``gpu_variant`` chooses the GPU kernels' variants where the mesh traces on a GPU
-    (``"bvh=wide8,stack=short"``: keys bvh, stack, order, appends, stats, checks; ``""`` for the
-    defaults): the same hits, other speed.
+    (``"bvh=wide8,stack=short"``: any subset of the keys ``gridtrace.GPU_VARIANTS`` lists; ``""``
+    for the defaults): the same hits, other speed.
     Degenerate faces are kept in the numbering but can never be hit.
     """
 

@@ -1,6 +1,6 @@
 import math
 from os import PathLike
-from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Union
+from typing import Any, Dict, List, NamedTuple, Optional, Sequence, TypedDict, Union
 
 import numpy as np
 
@@ -8,6 +8,15 @@ from . import trimesh as trimesh
 
 __version__: str
 ACCELS: tuple[str, ...]
+
+class _GpuVariantSpec(TypedDict):
+    values: tuple[str, ...]
+    numbered: Optional[tuple[str, int, int]]
+    default: str
+    structures: Optional[tuple[str, ...]]
+    help: str
+
+GPU_VARIANTS: dict[str, _GpuVariantSpec]
 MISS: np.uint32
 ArrayLike = Union[np.ndarray, Sequence[float], Sequence[Sequence[float]]]
 

@@ -42,7 +42,7 @@ pub use contract::{AccelStructure, BuildParams};
 pub use grid::{Cell, Grid, GridLattice, GridStats, Stepping};
 pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
 pub use ray::{Counters, Hit, NoCounters, Ray, TraversalCounters};
-pub use registry::{AccelChoice, AccelEntry, AccelKind, Work};
+pub use registry::{AccelChoice, AccelEntry, AccelKind, TracedOn, Work};
 pub use resolution::{DEFAULT_LAMBDA, MAX_CELLS, Resolution, dims_str};
 pub use simd::PACKET;
 pub use triangle::{LaneHits, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};

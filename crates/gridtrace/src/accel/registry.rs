@@ -215,6 +215,26 @@ pub enum Work {
     Rays,
 }
 
+/// Where the traversal will run, as `auto` weighs it. The caller says so: it has opened the
+/// device (`backend::traced_on`) or decided where the work runs (`Backend::traced_on`), and
+/// this file stays below the backend that knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TracedOn {
+    Cpu,
+    /// A GPU; `hardware_ray_queries`: a hardware adapter with ray queries, where `auto` picks
+    /// `hwrt` (a software adapter's ray queries run on the CPU's cores: it never decides).
+    Gpu {
+        hardware_ray_queries: bool,
+    },
+}
+
+impl TracedOn {
+    /// Whether the work runs on a GPU, hardware or software.
+    pub fn on_gpu(self) -> bool {
+        matches!(self, TracedOn::Gpu { .. })
+    }
+}
+
 /// What `--accel` (Python's `accel=`) asks for: one traversal by name, or `auto`, the one
 /// measured fastest for the work on the backend that traces it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -243,8 +263,8 @@ impl std::str::FromStr for AccelChoice {
 }
 
 impl AccelChoice {
-    /// The traversal to use for `work` traced on the GPU (`on_gpu`) or the CPU, with a note
-    /// saying what `auto` picked and why (`None` when a kind was named).
+    /// The traversal to use for `work` traced where `traced_on` says, with a note saying what
+    /// `auto` picked and why (`None` when a kind was named).
     ///
     /// The rule, from the measurements in docs/benchmarks.md ("Which structure for what", 2 CPU
     /// cores): on the CPU the BVH is the fastest structure for ray batches (1M incoherent rays
@@ -258,17 +278,22 @@ impl AccelChoice {
     /// the Stanford Bunny's cast and shadow frames, 0.51 ms against 1.53 and 2.18 against 2.37)
     /// and in every incoherent ray batch (Dragon: 4.1 ms for 1M rays against 5.7-6.5); the
     /// software adapter, which runs on the CPU's cores, had picked otherwise. On a hardware
-    /// adapter with ray queries (`backend::hardware_ray_queries_present`) it picks `hwrt`: the
+    /// adapter with ray queries (`TracedOn::Gpu { hardware_ray_queries: true }`) it picks `hwrt`: the
     /// GPU's ray-tracing units (DGriffin91/tray_racing, wgpu on an RTX 4070 Ti: 0.51 ms a 1080p
     /// frame by ray query against 2.75-3.53 ms for its best software BVH); the H100 and H200
     /// have no such units, and a software adapter never decides.
-    pub fn resolve(self, on_gpu: bool, work: Work) -> (AccelKind, Option<String>) {
-        let kind = match self {
-            AccelChoice::Kind(k) => return (k, None),
-            AccelChoice::Auto if on_gpu && crate::backend::hardware_ray_queries_present() => AccelKind::Hwrt,
-            AccelChoice::Auto => AccelKind::Bvh,
+    pub fn resolve(self, traced_on: TracedOn, work: Work) -> (AccelKind, Option<String>) {
+        let kind = match (self, traced_on) {
+            (AccelChoice::Kind(k), _) => return (k, None),
+            (
+                AccelChoice::Auto,
+                TracedOn::Gpu {
+                    hardware_ray_queries: true,
+                },
+            ) => AccelKind::Hwrt,
+            (AccelChoice::Auto, _) => AccelKind::Bvh,
         };
-        let why = match (on_gpu, work) {
+        let why = match (traced_on.on_gpu(), work) {
             _ if kind == AccelKind::Hwrt => {
                 "the GPU has ray queries: its ray-tracing units walk the driver's structure, several times faster \
                  than a software BVH walk on the same GPU in the literature (not yet measured here)"
@@ -292,14 +317,30 @@ mod tests {
     /// `auto` always names a structure and says why; a named kind is kept as it is.
     #[test]
     fn auto_names_its_pick() {
-        for on_gpu in [false, true] {
+        let places = [
+            TracedOn::Cpu,
+            TracedOn::Gpu {
+                hardware_ray_queries: false,
+            },
+            TracedOn::Gpu {
+                hardware_ray_queries: true,
+            },
+        ];
+        for traced_on in places {
             for work in [Work::Render, Work::Animate, Work::Rays] {
-                let (k, note) = AccelChoice::Auto.resolve(on_gpu, work);
+                let (k, note) = AccelChoice::Auto.resolve(traced_on, work);
                 let note = note.expect("auto explains itself");
                 assert!(note.contains(k.name()) && note.contains('('), "{note}");
+                let on_gpu = traced_on.on_gpu();
                 assert!(!on_gpu || k.entry().gpu, "auto picked {k:?}, which has no GPU walk");
+                assert!(on_gpu || k.entry().cpu, "auto picked {k:?}, which the CPU cannot trace");
+                let hwrt = traced_on
+                    == TracedOn::Gpu {
+                        hardware_ray_queries: true,
+                    };
+                assert_eq!(k == AccelKind::Hwrt, hwrt, "{traced_on:?} {work:?}: {note}");
                 assert_eq!(
-                    AccelChoice::Kind(AccelKind::Grid).resolve(on_gpu, work),
+                    AccelChoice::Kind(AccelKind::Grid).resolve(traced_on, work),
                     (AccelKind::Grid, None)
                 );
             }

@@ -132,15 +132,20 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
     frame.chain(indirect).chain(pack).chain(batch).collect()
 }
 
+/// The most arrays a structure's walk binds in group 1 (the irregular grid's four): what the
+/// device is asked to allow for them. A fixed budget rather than the walks' maximum, so that
+/// opening a device (`context`) needs no walk; `walks` checks every walk against it when the
+/// crate compiles.
+pub const STRUCTURE_ARRAYS_MAX: usize = 4;
+
 /// Storage buffers a kernel may bind at once: group 0's storage rows and the most of group 1
-/// (a structure's arrays, the indirect arguments or the packed pixels): the device must allow this many per
-/// shader stage.
+/// (a structure's arrays, the indirect arguments or the packed pixels): the device must allow
+/// this many per shader stage.
 pub fn storage_buffers_needed() -> u32 {
     let frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
-    let structure = super::walks::WALKS.iter().map(|w| w.arrays.len()).max().unwrap_or(0);
     let batch = BATCH_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
     (frame
-        + structure
+        + STRUCTURE_ARRAYS_MAX
             .max(INDIRECT_BINDINGS.len())
             .max(PACK_BINDINGS.len())
             .max(batch)) as u32

@@ -220,6 +220,12 @@ impl GpuContext {
         )))
     }
 
+    /// Whether `--accel auto` may pick `hwrt` here: ray queries on a hardware adapter (a
+    /// software one's, lavapipe's from Mesa 25, run on the CPU's cores).
+    pub fn hardware_ray_queries(&self) -> bool {
+        self.ray_query && !self.is_software()
+    }
+
     /// True for software rasterisers such as lavapipe or llvmpipe.
     pub fn is_software(&self) -> bool {
         self.info.device_type == wgpu::DeviceType::Cpu

@@ -167,7 +167,8 @@ pub use super::constants::{COUNTER_SLOTS, SLOT_QUEUE_A, SLOT_REFLECT_TOTAL, SLOT
 /// that one node fetch tests both and the ray descends into the nearer (Aila and Laine 2009).
 /// The boxes are interleaved as their layout has it, `xy01` = child 0's x and y slabs,
 /// `xy11` = child 1's, `z01` = both z slabs, so every field is one 16-byte load.
-/// `child[k]` is a `BvhEntry` (gpu/bvh.rs): an inner node's index, or a leaf's triangle range.
+/// `child[k]` is a stack entry (`gpu/walks/bvh/binary.rs`, `encode_leaf`): an inner node's
+/// index, or a leaf's triangle range.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuBvhNode {
@@ -198,11 +199,11 @@ pub struct GpuBvh8Node {
     pub q2: [u32; 4],
 }
 
-/// The GPU grid build's parameters (`shaders/build/common.wgsl`): the lattice, the sizes, and
-/// per dispatch the scan level or distance axis it works on. 80 bytes, one per 256-byte slot.
+/// The uniform of one GPU grid-build dispatch (`shaders/build/common.wgsl`): the lattice, the
+/// sizes, and the scan level or distance axis it works on. 80 bytes, one per 256-byte slot.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
-pub struct BuildParams {
+pub struct GridBuildUniform {
     pub bounds_min: [f32; 3],
     pub n_tris: u32,
     pub cell_size: [f32; 3],

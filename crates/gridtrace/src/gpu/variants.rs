@@ -98,8 +98,8 @@ pub enum Appends {
     Subgroup,
 }
 
-/// One choice of every GPU variant. `Default` is what the H200 runs chose (module docs);
-/// `before_hardware` the kernels as first written.
+/// One choice of every GPU variant. Its default, the kernels as first written
+/// (`before_hardware`), its text and the hardware suite all come from `VARIANTS`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct GpuVariants {
     pub bvh: BvhLayout,
@@ -112,79 +112,276 @@ pub struct GpuVariants {
     pub checks: bool,
 }
 
-impl Default for GpuVariants {
-    fn default() -> Self {
-        GpuVariants {
-            bvh: BvhLayout::Binary,
-            stack: BvhStack::Short(SHORT_STACK_DEFAULT),
-            order: RayOrder::Tiles,
-            appends: Appends::Workgroup,
-            stats: false,
-            checks: true,
+/// Sets one key of a `GpuVariants` to one value.
+type Set = fn(&mut GpuVariants);
+
+/// A family of numbered values beside a key's named ones: `{prefix}N` for N in `min..=max`
+/// (`stack=shortN`).
+#[derive(Debug, Clone, Copy)]
+pub struct Numbered {
+    pub prefix: &'static str,
+    pub min: u8,
+    pub max: u8,
+    set: fn(&mut GpuVariants, u8),
+}
+
+/// One key of `--gpu-variant` (Python's `gpu_variant=`) and everything about it: parsing,
+/// printing, the default, the hardware suite, the overrides and the help texts all read its
+/// row. A new variant is its field of `GpuVariants`, one row of `VARIANTS` and its use in the
+/// kernels.
+#[derive(Debug, Clone, Copy)]
+pub struct VariantSpec {
+    pub key: &'static str,
+    /// The named values as typed and printed, each with what it sets; the default first (help
+    /// texts say "the first value of each is the default").
+    values: &'static [(&'static str, Set)],
+    pub numbered: Option<Numbered>,
+    /// The value the kernels as first written had, before any ran on a GPU (`before_hardware`).
+    first_written: &'static str,
+    /// The values the hardware suite runs, each as the one change from the default, in order.
+    suite: &'static [&'static str],
+    /// The structures (the registry's structure names) whose walk it changes; empty: every
+    /// structure's kernels.
+    pub structures: &'static [&'static str],
+    /// One line for help texts.
+    pub help: &'static str,
+    /// The pipeline-overridable constant of common.wgsl it sets.
+    wgsl_override: Option<WgslOverride>,
+}
+
+/// A pipeline-overridable constant of common.wgsl and its value for a choice of variants.
+#[derive(Debug, Clone, Copy)]
+struct WgslOverride {
+    name: &'static str,
+    value: fn(&GpuVariants) -> f64,
+}
+
+/// Every GPU variant, in the order they are printed (`Display`) and listed.
+pub const VARIANTS: [VariantSpec; 6] = [
+    VariantSpec {
+        key: "bvh",
+        values: &[
+            ("binary", |v| v.bvh = BvhLayout::Binary),
+            ("wide8", |v| v.bvh = BvhLayout::Wide8),
+        ],
+        numbered: None,
+        first_written: "binary",
+        suite: &["wide8"],
+        structures: &["bvh"],
+        help: "the BVH's GPU layout: two-child nodes (binary), or Ylitie et al.'s 8-wide compressed nodes (wide8)",
+        wgsl_override: None,
+    },
+    VariantSpec {
+        key: "stack",
+        values: &[
+            ("short", |v| v.stack = BvhStack::Short(SHORT_STACK_DEFAULT)),
+            ("private", |v| v.stack = BvhStack::Private),
+        ],
+        numbered: Some(Numbered {
+            prefix: "short",
+            min: 1,
+            max: SHORT_STACK_MAX,
+            set: |v, n| v.stack = BvhStack::Short(n),
+        }),
+        first_written: "private",
+        suite: &["private"],
+        structures: &["bvh"],
+        help: "the BVH walk's stack: a ring of 8 (shortN: N) entries in workgroup memory that climbs by \
+               parent links when it runs dry, or a private array per thread",
+        wgsl_override: Some(WgslOverride {
+            name: "SHORT_STACK",
+            value: |v| match v.stack {
+                BvhStack::Short(n) => n as f64,
+                // The private stack's walk never reads it; any valid ring size compiles.
+                BvhStack::Private => SHORT_STACK_DEFAULT as f64,
+            },
+        }),
+    },
+    VariantSpec {
+        key: "order",
+        values: &[
+            ("tiles", |v| v.order = RayOrder::Tiles),
+            ("rows", |v| v.order = RayOrder::Rows),
+        ],
+        numbered: None,
+        first_written: "rows",
+        suite: &["rows"],
+        structures: &[],
+        help: "which pixels a workgroup's 64 eye rays start from: an 8x8 tile, or a 64x1 strip of a row",
+        wgsl_override: Some(WgslOverride {
+            name: "TILE_ORDER",
+            value: |v| (v.order == RayOrder::Tiles) as u8 as f64,
+        }),
+    },
+    VariantSpec {
+        key: "appends",
+        values: &[
+            ("workgroup", |v| v.appends = Appends::Workgroup),
+            ("per_ray", |v| v.appends = Appends::PerRay),
+            ("subgroup", |v| v.appends = Appends::Subgroup),
+        ],
+        numbered: None,
+        first_written: "per_ray",
+        suite: &["per_ray", "subgroup"],
+        structures: &[],
+        help: "how kernels append to the ray queues: one global atomic per workgroup, per ray, or per \
+               subgroup (needs the adapter's subgroup operations)",
+        wgsl_override: Some(WgslOverride {
+            name: "WG_APPENDS",
+            value: |v| (v.appends == Appends::Workgroup) as u8 as f64,
+        }),
+    },
+    VariantSpec {
+        key: "stats",
+        values: &[("off", |v| v.stats = false), ("on", |v| v.stats = true)],
+        numbered: None,
+        first_written: "on",
+        suite: &["on"],
+        structures: &[],
+        help: "per-ray statistics atomics in shading (off: the same counts read off the queue lengths)",
+        wgsl_override: Some(WgslOverride {
+            name: "RAY_STATS",
+            value: |v| v.stats as u8 as f64,
+        }),
+    },
+    VariantSpec {
+        key: "checks",
+        values: &[("on", |v| v.checks = true), ("off", |v| v.checks = false)],
+        numbered: None,
+        first_written: "on",
+        suite: &["off"],
+        structures: &[],
+        help: "bounds checks and loop bounding in the shader modules (off: trusted modules, every index \
+               in bounds by construction)",
+        wgsl_override: None,
+    },
+];
+
+impl VariantSpec {
+    /// The named values, the default first.
+    pub fn values(&self) -> impl Iterator<Item = &'static str> + '_ {
+        self.values.iter().map(|(name, _)| *name)
+    }
+
+    pub fn default_value(&self) -> &'static str {
+        self.values[0].0
+    }
+
+    /// The valid values in words, as errors and help list them: `short|private|shortN (N =
+    /// 1..16)`.
+    pub fn values_text(&self) -> String {
+        let named: Vec<&str> = self.values().collect();
+        match self.numbered {
+            Some(n) => format!("{}|{}N (N = {}..{})", named.join("|"), n.prefix, n.min, n.max),
+            None => named.join("|"),
         }
+    }
+
+    /// Sets this key of `v` to `value`; `None` where `value` is not one of its values.
+    fn set(&self, v: &mut GpuVariants, value: &str) -> Option<()> {
+        if let Some((_, set)) = self.values.iter().find(|(name, _)| *name == value) {
+            set(v);
+            return Some(());
+        }
+        let n = self.numbered?;
+        match value.strip_prefix(n.prefix).map(str::parse::<u8>) {
+            Some(Ok(i)) if (n.min..=n.max).contains(&i) => {
+                (n.set)(v, i);
+                Some(())
+            }
+            _ => None,
+        }
+    }
+
+    /// This key's value in `v`, as printed: the value whose setting leaves `v` as it is (a
+    /// named one before a numbered one: `short`, not `short8`).
+    fn value_in(&self, v: &GpuVariants) -> String {
+        let keeps = |set: &dyn Fn(&mut GpuVariants)| {
+            let mut w = *v;
+            set(&mut w);
+            w == *v
+        };
+        if let Some((name, _)) = self.values.iter().find(|(_, set)| keeps(set)) {
+            return name.to_string();
+        }
+        // Numbered values outside the parsed range too: a `GpuVariants` written in code prints
+        // what it holds.
+        let n = self
+            .numbered
+            .expect("a key without numbered values names every value of its field");
+        let i = (0..=u8::MAX)
+            .find(|&i| keeps(&|w: &mut GpuVariants| (n.set)(w, i)))
+            .expect("every value of a numbered key's field is a number");
+        format!("{}{i}", n.prefix)
     }
 }
 
-/// Every key with its valid values, as errors list them.
-const KEYS: [(&str, &str); 6] = [
-    ("bvh", "binary|wide8"),
-    ("stack", "short|private|shortN (N = 1..16)"),
-    ("order", "tiles|rows"),
-    ("appends", "workgroup|per_ray|subgroup"),
-    ("stats", "off|on"),
-    ("checks", "on|off"),
-];
+/// Every key with its values, as errors and the CLI's help list them:
+/// `bvh=binary|wide8, stack=...`.
+pub fn keys_text() -> String {
+    VARIANTS
+        .iter()
+        .map(|r| format!("{}={}", r.key, r.values_text()))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
-fn on_off(v: bool) -> &'static str {
-    if v { "on" } else { "off" }
+impl Default for GpuVariants {
+    /// Each key's first value (`VARIANTS`): what the H200 runs chose (module docs).
+    fn default() -> Self {
+        GpuVariants::from_table(|r| r.default_value())
+    }
 }
 
 impl GpuVariants {
-    /// What the hardware suite runs: the default, then each single change from it, then the
-    /// kernels as first written (`before_hardware`), so that every run measures what the
-    /// defaults gained on its GPU.
+    /// Every key set to `value_of` its row: the rows set every field, so the starting value
+    /// does not show (a test checks it).
+    fn from_table(value_of: impl Fn(&VariantSpec) -> &'static str) -> GpuVariants {
+        GpuVariants::from_table_over(
+            GpuVariants {
+                bvh: BvhLayout::Binary,
+                stack: BvhStack::Private,
+                order: RayOrder::Rows,
+                appends: Appends::PerRay,
+                stats: false,
+                checks: false,
+            },
+            value_of,
+        )
+    }
+
+    fn from_table_over(mut v: GpuVariants, value_of: impl Fn(&VariantSpec) -> &'static str) -> GpuVariants {
+        for r in &VARIANTS {
+            r.set(&mut v, value_of(r))
+                .unwrap_or_else(|| panic!("VARIANTS: '{}' is not a value of {}", value_of(r), r.key));
+        }
+        v
+    }
+
+    /// What the hardware suite runs: the default, then each single change from it (`VARIANTS`'
+    /// suite values, in order), then the kernels as first written (`before_hardware`), so that
+    /// every run measures what the defaults gained on its GPU.
     pub fn suite() -> Vec<GpuVariants> {
         let d = GpuVariants::default();
-        vec![
-            d,
-            GpuVariants {
-                bvh: BvhLayout::Wide8,
-                ..d
-            },
-            GpuVariants {
-                stack: BvhStack::Private,
-                ..d
-            },
-            GpuVariants {
-                order: RayOrder::Rows,
-                ..d
-            },
-            GpuVariants {
-                appends: Appends::PerRay,
-                ..d
-            },
-            GpuVariants {
-                appends: Appends::Subgroup,
-                ..d
-            },
-            GpuVariants { stats: true, ..d },
-            GpuVariants { checks: false, ..d },
-            GpuVariants::before_hardware(),
-        ]
+        let changes = VARIANTS.iter().flat_map(|r| {
+            r.suite.iter().map(move |value| {
+                let mut v = d;
+                r.set(&mut v, value)
+                    .unwrap_or_else(|| panic!("VARIANTS: suite value '{value}' is not a value of {}", r.key));
+                v
+            })
+        });
+        std::iter::once(d)
+            .chain(changes)
+            .chain(std::iter::once(GpuVariants::before_hardware()))
+            .collect()
     }
 
     /// The kernels as first written, before any ran on a GPU: a private stack, rows, an atomic
     /// per appended ray, statistics atomics. The first H200 runs measured each of these against
     /// the others (module docs).
     pub fn before_hardware() -> GpuVariants {
-        GpuVariants {
-            bvh: BvhLayout::Binary,
-            stack: BvhStack::Private,
-            order: RayOrder::Rows,
-            appends: Appends::PerRay,
-            stats: true,
-            checks: true,
-        }
+        GpuVariants::from_table(|r| r.first_written)
     }
 
     /// Whether the device of `ctx` can run these variants: `appends=subgroup` needs its
@@ -200,16 +397,18 @@ impl GpuVariants {
         Ok(())
     }
 
+    /// The keys whose value differs from the default's.
+    fn changed(&self) -> impl Iterator<Item = (&'static VariantSpec, String)> + '_ {
+        let d = GpuVariants::default();
+        VARIANTS.iter().filter_map(move |r| {
+            let own = r.value_in(self);
+            (own != r.value_in(&d)).then_some((r, own))
+        })
+    }
+
     /// Only the keys that differ from the default (`default` when none): a short label.
     pub fn changes(&self) -> String {
-        let d = GpuVariants::default().to_string();
-        let own = self.to_string();
-        let diff: Vec<&str> = own
-            .split(',')
-            .zip(d.split(','))
-            .filter(|(a, b)| a != b)
-            .map(|p| p.0)
-            .collect();
+        let diff: Vec<String> = self.changed().map(|(r, value)| format!("{}={value}", r.key)).collect();
         if diff.is_empty() {
             "default".to_string()
         } else {
@@ -218,60 +417,30 @@ impl GpuVariants {
     }
 
     /// Whether these variants change the walk of `structure` (the registry's structure name):
-    /// the BVH's layout and stack apply to the BVH only.
+    /// the BVH's layout and stack apply to the BVH only (`VariantSpec::structures`).
     pub fn applies_to(&self, structure: &str) -> bool {
-        let d = GpuVariants::default();
-        let walk_only = self.bvh != d.bvh || self.stack != d.stack;
-        let others = GpuVariants {
-            bvh: d.bvh,
-            stack: d.stack,
-            ..*self
-        } != d;
-        others || (walk_only && structure == "bvh")
+        self.changed()
+            .any(|(r, _)| r.structures.is_empty() || r.structures.contains(&structure))
     }
 
     /// The pipeline-overridable constants these variants set (declared in common.wgsl): the same
     /// set for every pipeline, so that every kernel sees one consistent choice.
-    pub fn overrides(&self) -> [(&'static str, f64); 4] {
-        let short = match self.stack {
-            BvhStack::Short(n) => n,
-            BvhStack::Private => SHORT_STACK_DEFAULT,
-        };
-        [
-            ("TILE_ORDER", (self.order == RayOrder::Tiles) as u8 as f64),
-            ("WG_APPENDS", (self.appends == Appends::Workgroup) as u8 as f64),
-            ("RAY_STATS", self.stats as u8 as f64),
-            ("SHORT_STACK", short as f64),
-        ]
+    pub fn overrides(&self) -> Vec<(&'static str, f64)> {
+        VARIANTS
+            .iter()
+            .filter_map(|r| r.wgsl_override.map(|o| (o.name, (o.value)(self))))
+            .collect()
     }
 }
 
 impl fmt::Display for GpuVariants {
+    /// Every key, `KEY=VALUE` in `VARIANTS`' order, comma separated.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let bvh = match self.bvh {
-            BvhLayout::Binary => "binary",
-            BvhLayout::Wide8 => "wide8",
-        };
-        let stack = match self.stack {
-            BvhStack::Private => "private".to_string(),
-            BvhStack::Short(SHORT_STACK_DEFAULT) => "short".to_string(),
-            BvhStack::Short(n) => format!("short{n}"),
-        };
-        let order = match self.order {
-            RayOrder::Rows => "rows",
-            RayOrder::Tiles => "tiles",
-        };
-        let appends = match self.appends {
-            Appends::PerRay => "per_ray",
-            Appends::Workgroup => "workgroup",
-            Appends::Subgroup => "subgroup",
-        };
-        write!(
-            f,
-            "bvh={bvh},stack={stack},order={order},appends={appends},stats={},checks={}",
-            on_off(self.stats),
-            on_off(self.checks)
-        )
+        for (i, r) in VARIANTS.iter().enumerate() {
+            let comma = if i == 0 { "" } else { "," };
+            write!(f, "{comma}{}={}", r.key, r.value_in(self))?;
+        }
+        Ok(())
     }
 }
 
@@ -286,63 +455,20 @@ impl FromStr for GpuVariants {
         if s.is_empty() || s == "default" {
             return Ok(v);
         }
-        let keys = || {
-            KEYS.iter()
-                .map(|(k, vals)| format!("{k}={vals}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
         for pair in s.split(',').map(str::trim) {
             let Some((key, value)) = pair.split_once('=') else {
-                return Err(format!("GPU variant '{pair}' is not KEY=VALUE; valid: {}", keys()));
+                return Err(format!("GPU variant '{pair}' is not KEY=VALUE; valid: {}", keys_text()));
             };
             let (key, value) = (key.trim(), value.trim());
-            let Some(&(_, valid)) = KEYS.iter().find(|k| k.0 == key) else {
-                return Err(format!("unknown GPU variant key '{key}'; valid: {}", keys()));
+            let Some(row) = VARIANTS.iter().find(|r| r.key == key) else {
+                return Err(format!("unknown GPU variant key '{key}'; valid: {}", keys_text()));
             };
-            let bad = || format!("GPU variant {key}={value}: '{value}' is not one of {valid}");
-            let flag = || match value {
-                "on" => Ok(true),
-                "off" => Ok(false),
-                _ => Err(bad()),
-            };
-            match key {
-                "bvh" => {
-                    v.bvh = match value {
-                        "binary" => BvhLayout::Binary,
-                        "wide8" => BvhLayout::Wide8,
-                        _ => return Err(bad()),
-                    }
-                }
-                "stack" => {
-                    v.stack = match value {
-                        "private" => BvhStack::Private,
-                        "short" => BvhStack::Short(SHORT_STACK_DEFAULT),
-                        _ => match value.strip_prefix("short").map(str::parse::<u8>) {
-                            Some(Ok(n)) if (1..=SHORT_STACK_MAX).contains(&n) => BvhStack::Short(n),
-                            _ => return Err(bad()),
-                        },
-                    }
-                }
-                "order" => {
-                    v.order = match value {
-                        "rows" => RayOrder::Rows,
-                        "tiles" => RayOrder::Tiles,
-                        _ => return Err(bad()),
-                    }
-                }
-                "appends" => {
-                    v.appends = match value {
-                        "per_ray" => Appends::PerRay,
-                        "workgroup" => Appends::Workgroup,
-                        "subgroup" => Appends::Subgroup,
-                        _ => return Err(bad()),
-                    }
-                }
-                "stats" => v.stats = flag()?,
-                "checks" => v.checks = flag()?,
-                _ => unreachable!("every key of KEYS has an arm"),
-            }
+            row.set(&mut v, value).ok_or_else(|| {
+                format!(
+                    "GPU variant {key}={value}: '{value}' is not one of {}",
+                    row.values_text()
+                )
+            })?;
         }
         Ok(v)
     }
@@ -405,21 +531,109 @@ mod tests {
     }
 
     /// The suite is the default, one change of each key (both other appends), each exactly one
-    /// key off, and the kernels as first written.
+    /// key off, and the kernels as first written, in this order (the hardware reports' rows).
     #[test]
     fn suite_is_default_plus_single_changes() {
         let s = GpuVariants::suite();
         assert_eq!(s[0], GpuVariants::default());
-        assert_eq!(s.len(), 1 + KEYS.len() + 1 + 1);
+        assert_eq!(s.len(), 1 + VARIANTS.len() + 1 + 1);
         assert_eq!(s.last(), Some(&GpuVariants::before_hardware()));
         for v in &s[1..s.len() - 1] {
             assert_eq!(v.changes().split(',').count(), 1, "{v}");
             assert_ne!(v.changes(), "default");
         }
         let mut labels: Vec<String> = s.iter().map(|v| v.changes()).collect();
+        assert_eq!(
+            labels,
+            [
+                "default",
+                "bvh=wide8",
+                "stack=private",
+                "order=rows",
+                "appends=per_ray",
+                "appends=subgroup",
+                "stats=on",
+                "checks=off",
+                "stack=private,order=rows,appends=per_ray,stats=on",
+            ]
+        );
         labels.dedup();
         assert_eq!(labels.len(), s.len());
         assert!(!s[1].applies_to("grid") && s[1].applies_to("bvh"));
+        assert!(!s[2].applies_to("irregular") && s[2].applies_to("bvh"));
         assert!(s[3].applies_to("grid"));
+    }
+
+    /// The table's rows set every field: the default and the kernels as first written are the
+    /// same whatever value they start from, and the overrides are those common.wgsl declares.
+    #[test]
+    fn the_table_sets_every_field() {
+        let other = GpuVariants {
+            bvh: BvhLayout::Wide8,
+            stack: BvhStack::Short(3),
+            order: RayOrder::Tiles,
+            appends: Appends::Subgroup,
+            stats: true,
+            checks: true,
+        };
+        for value_of in [
+            (|r: &VariantSpec| r.default_value()) as fn(&VariantSpec) -> &'static str,
+            |r| r.first_written,
+        ] {
+            assert_eq!(
+                GpuVariants::from_table_over(other, value_of),
+                GpuVariants::from_table(value_of)
+            );
+        }
+        assert_eq!(
+            GpuVariants::default(),
+            GpuVariants {
+                bvh: BvhLayout::Binary,
+                stack: BvhStack::Short(SHORT_STACK_DEFAULT),
+                order: RayOrder::Tiles,
+                appends: Appends::Workgroup,
+                stats: false,
+                checks: true,
+            }
+        );
+        assert_eq!(
+            GpuVariants::before_hardware(),
+            GpuVariants {
+                bvh: BvhLayout::Binary,
+                stack: BvhStack::Private,
+                order: RayOrder::Rows,
+                appends: Appends::PerRay,
+                stats: true,
+                checks: true,
+            }
+        );
+        let mut names: Vec<&str> = GpuVariants::default().overrides().iter().map(|o| o.0).collect();
+        names.sort();
+        assert_eq!(names, ["RAY_STATS", "SHORT_STACK", "TILE_ORDER", "WG_APPENDS"]);
+        let common = include_str!("shaders/common.wgsl");
+        for n in names {
+            assert!(common.contains(&format!("override {n}:")), "common.wgsl lacks {n}");
+        }
+        let over = |s: &str| s.parse::<GpuVariants>().unwrap().overrides();
+        assert!(over("stack=short3").contains(&("SHORT_STACK", 3.0)));
+        assert!(over("stack=private").contains(&("SHORT_STACK", SHORT_STACK_DEFAULT as f64)));
+        assert!(over("order=rows").contains(&("TILE_ORDER", 0.0)));
+        assert!(over("appends=subgroup").contains(&("WG_APPENDS", 0.0)));
+        assert!(over("stats=on").contains(&("RAY_STATS", 1.0)));
+    }
+
+    /// The keys as errors and help list them: each key's values, the default first.
+    #[test]
+    fn keys_text_lists_every_value() {
+        assert_eq!(
+            keys_text(),
+            "bvh=binary|wide8, stack=short|private|shortN (N = 1..16), order=tiles|rows, \
+             appends=workgroup|per_ray|subgroup, stats=off|on, checks=on|off"
+        );
+        let printed = GpuVariants {
+            stack: BvhStack::Short(40),
+            ..GpuVariants::default()
+        };
+        assert_eq!(printed.changes(), "stack=short40");
     }
 }

@@ -162,7 +162,7 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let (accel, note) = opts.accel.resolve(opts.backend.traces_on_gpu(), Work::Rays);
+        let (accel, note) = opts.accel.resolve(opts.backend.traced_on(), Work::Rays);
         let prepared = scene.prepare_with(accel, opts.grid, opts.irregular)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;

@@ -40,7 +40,7 @@ use pipelines::{STAGES, Stage};
 use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK, SCAN_GROUP, WORKGROUP};
 use super::context::GpuContext;
 use super::kernels::dispatch_groups;
-use super::layout::{BuildParams, GpuTri};
+use super::layout::{GpuTri, GridBuildUniform};
 use super::scene::check_scene_fits;
 use super::timing::{GpuTimings, StageTimer, Timestamps};
 use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
@@ -349,7 +349,7 @@ impl GpuGrid {
         let dev = &self.ctx.device;
         let n_cells = lattice.cells() as u32;
         let refs_capacity = (self.refs.size() / 4).min(u32::MAX as u64) as u32;
-        let base = BuildParams {
+        let base = GridBuildUniform {
             bounds_min: lattice.bounds.min.to_array(),
             n_tris,
             cell_size: lattice.cell_size.to_array(),
@@ -367,14 +367,14 @@ impl GpuGrid {
         };
         // Every dispatch: stage, parameters, workgroups. (The bind group is made per build: the
         // triangle buffer is the caller's and may change.)
-        let mut plan: Vec<(Stage, BuildParams, (u32, u32))> = Vec::new();
+        let mut plan: Vec<(Stage, GridBuildUniform, (u32, u32))> = Vec::new();
         let per_tri = dispatch_groups(n_tris, WORKGROUP);
         plan.push((Stage::Count, base, per_tri));
         let levels = scan_levels(n_cells);
         let top = levels.len() - 1;
         plan.push((
             Stage::ScanCells,
-            BuildParams {
+            GridBuildUniform {
                 n: n_cells,
                 out_offset: levels[0].0,
                 last: (top == 0) as u32,
@@ -386,7 +386,7 @@ impl GpuGrid {
             let (offset, n) = levels[j];
             plan.push((
                 Stage::ScanSums,
-                BuildParams {
+                GridBuildUniform {
                     n,
                     in_offset: offset,
                     out_offset: levels[j + 1].0,
@@ -403,7 +403,7 @@ impl GpuGrid {
             if n > SCAN_BLOCK {
                 plan.push((
                     Stage::AddSums,
-                    BuildParams {
+                    GridBuildUniform {
                         n,
                         in_offset: offset,
                         out_offset: levels[j + 1].0,
@@ -416,7 +416,7 @@ impl GpuGrid {
         if n_cells > SCAN_BLOCK {
             plan.push((
                 Stage::AddCells,
-                BuildParams {
+                GridBuildUniform {
                     n: n_cells,
                     out_offset: levels[0].0,
                     ..base
@@ -430,7 +430,7 @@ impl GpuGrid {
         for (axis, lines) in [(0u32, d.y * d.z), (1, d.x * d.z), (2, d.x * d.y)] {
             plan.push((
                 Stage::Distance,
-                BuildParams { axis, n: lines, ..base },
+                GridBuildUniform { axis, n: lines, ..base },
                 dispatch_groups(lines, WORKGROUP),
             ));
         }
@@ -440,7 +440,7 @@ impl GpuGrid {
         let mut bytes = vec![0u8; params_bytes as usize];
         for (i, (_, p, _)) in plan.iter().enumerate() {
             let at = i * PARAMS_STRIDE as usize;
-            bytes[at..at + size_of::<BuildParams>()].copy_from_slice(bytemuck::bytes_of(p));
+            bytes[at..at + size_of::<GridBuildUniform>()].copy_from_slice(bytemuck::bytes_of(p));
         }
         self.ctx.queue.write_buffer(&self.params, 0, &bytes);
 
@@ -465,7 +465,7 @@ impl GpuGrid {
                         wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                             buffer,
                             offset: 0,
-                            size: wgpu::BufferSize::new(size_of::<BuildParams>() as u64),
+                            size: wgpu::BufferSize::new(size_of::<GridBuildUniform>() as u64),
                         })
                     } else {
                         buffer.as_entire_binding()

@@ -3,7 +3,7 @@
 
 use std::mem::size_of;
 
-use super::super::layout::BuildParams;
+use super::super::layout::GridBuildUniform;
 use super::super::shaders;
 use crate::{Error, Result};
 
@@ -114,7 +114,7 @@ impl BuildKernels {
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
                     has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<BuildParams>() as u64),
+                    min_binding_size: wgpu::BufferSize::new(size_of::<GridBuildUniform>() as u64),
                 },
                 count: None,
             },

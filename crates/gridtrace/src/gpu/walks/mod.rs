@@ -22,6 +22,7 @@ use glam::{UVec3, Vec3};
 
 use crate::Result;
 use crate::accel::{Aabb, Structure};
+use crate::gpu::bindings::STRUCTURE_ARRAYS_MAX;
 use crate::gpu::context::GpuContext;
 use crate::gpu::variants::GpuVariants;
 use crate::scene::PreparedScene;
@@ -85,15 +86,23 @@ pub const WALKS: [&WalkSpec; 8] = [
     &bvh::SPEC_WIDE8_SHORT,
 ];
 
-/// The default walk of the structure named `structure`, if the GPU has one.
-pub fn spec(structure: &str) -> Option<&'static WalkSpec> {
-    WALKS.iter().copied().find(|w| w.structure == structure)
-}
+// Every walk's arrays fit what a device is asked to allow for them (a walk with more fails to
+// compile here, not on a device with exactly the budget): raise the budget with the walk.
+const _: () = {
+    let mut i = 0;
+    while i < WALKS.len() {
+        assert!(
+            WALKS[i].arrays.len() <= STRUCTURE_ARRAYS_MAX,
+            "a walk binds more arrays than bindings::STRUCTURE_ARRAYS_MAX"
+        );
+        i += 1;
+    }
+};
 
 /// Whether the structure named `structure` traces by ray query (`WalkSpec::tlas`): it runs
 /// only on an adapter with ray queries (`GpuContext::ray_query`).
 pub fn needs_ray_queries(structure: &str) -> bool {
-    spec(structure).is_some_and(|w| w.tlas.is_some())
+    WALKS.iter().any(|w| w.structure == structure && w.tlas.is_some())
 }
 
 /// The lattice fields of `SceneUniform` that a walk reads: the grid's cells, the irregular
@@ -165,4 +174,17 @@ pub(crate) struct DeviceStructure {
 /// A slice's bytes, borrowed.
 fn bytes<T: bytemuck::Pod>(v: &[T]) -> Cow<'_, [u8]> {
     Cow::Borrowed(bytemuck::cast_slice(v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The budget is no larger than the walks need: a larger one would refuse adapters that
+    /// can run every walk.
+    #[test]
+    fn the_largest_walk_uses_the_whole_array_budget() {
+        let most = WALKS.iter().map(|w| w.arrays.len()).max();
+        assert_eq!(most, Some(STRUCTURE_ARRAYS_MAX));
+    }
 }

@@ -7,8 +7,8 @@
 // builtins whose order is unspecified): the GPU-built grid must reference exactly the cells the
 // CPU-built one does, and a test compares the two cell by cell.
 
-// `BuildParams` in layout.rs: one per dispatch, at a 256-byte slot of the params buffer.
-struct BuildParams {
+// `GridBuildUniform` in layout.rs: one per dispatch, at a 256-byte slot of the params buffer.
+struct GridBuildUniform {
     bounds_min: vec3<f32>, n_tris: u32,
     cell_size: vec3<f32>, n_cells: u32,
     inv_cell_size: vec3<f32>, refs_capacity: u32,
@@ -20,7 +20,7 @@ struct Cell { start: u32, count: u32, dist: u32 }
 // `layout::GpuTri`, as the tracer reads it.
 struct GpuTri { v0: vec3<f32>, _pad0: u32, e1: vec3<f32>, _pad1: u32, e2: vec3<f32>, _pad2: u32 }
 
-@group(0) @binding(0) var<uniform> P: BuildParams;
+@group(0) @binding(0) var<uniform> P: GridBuildUniform;
 @group(0) @binding(1) var<storage, read> tris: array<GpuTri>;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> {

@@ -1,6 +1,6 @@
-// BVH traversal: closest and any hit over the two-child nodes of gpu/bvh.rs, mirroring the CPU
-// BVH's walk (accel/bvh/walk.rs) in its box test and its limits, and using the same triangle
-// test as the grid (`intersect_tri`).
+// BVH traversal: closest and any hit over the two-child nodes of gpu/walks/bvh/binary.rs,
+// mirroring the CPU BVH's walk (accel/bvh/walk.rs) in its box test and its limits, and using
+// the same triangle test as the grid (`intersect_tri`).
 //
 // The loop is Aila and Laine's "while-while" (2009): an inner loop descends inner nodes until
 // it holds a leaf, then the leaf's triangles are tested, so the threads of a group tend to be
@@ -16,8 +16,8 @@
 // A BVH node (GpuBvhNode in layout.rs): both children's boxes, interleaved, and their entries.
 struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32> }
 
-// The nodes, and the triangle indices in leaf order (`Bvh::prims`); group 1 as gpu/walks/bvh.rs
-// uploads them.
+// The nodes, and the triangle indices in leaf order (`Bvh::prims`); group 1 as
+// gpu/walks/bvh/mod.rs uploads them.
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(1) @binding(1) var<storage, read> bvh_prims: array<u32>;
 // The triangles in leaf order (`bvh_tris[k]` is `tris[bvh_prims[k]]`): a leaf's triangles are

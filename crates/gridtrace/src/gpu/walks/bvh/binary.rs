@@ -141,7 +141,7 @@ impl GpuBvhNode {
     }
 }
 
-/// The walk of `shaders/bvh.wgsl` on the CPU, step for step: the same box test, visiting order
+/// The walk of `shaders/walks/bvh.wgsl` on the CPU, step for step: the same box test, visiting order
 /// and stack. It is the layout's oracle where no GPU is (unit tests), and it counts the work of
 /// the GPU's walk (`counters.cell()` per node, `tri_test()` per triangle) for the benchmarks,
 /// which the CPU's eight-wide BVH cannot tell. `ANY`: stop at the first hit.
