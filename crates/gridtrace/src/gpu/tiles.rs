@@ -170,7 +170,7 @@ impl GpuRenderer {
         &mut self,
         run: SubmittedTiles,
         shape: &FrameShape,
-        mut img: Option<&mut Image>,
+        img: Option<&mut Image>,
     ) -> Result<Readback> {
         let (texel, counters_at, stamps_at, total) = (run.texel, run.counters_at, run.stamps_at, run.total);
         let (stages, untimed) = (run.stages, run.untimed);
@@ -179,7 +179,7 @@ impl GpuRenderer {
         let packed = texel == PACKED_TEXEL_BYTES;
         let ctx = self.ctx.clone();
         let (out, host) = run.read.finish(&ctx, |raw| {
-            if let Some(img) = img.as_deref_mut() {
+            if let Some(img) = img {
                 let mut at = 0usize;
                 for t in tiles {
                     let n = t.pixels as usize;

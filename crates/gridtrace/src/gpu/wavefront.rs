@@ -87,8 +87,9 @@ pub struct FrameInFlight(Flight);
 enum Flight {
     /// One submission, its results on their way to a mapped readback.
     Submitted(Box<SubmittedFrame>),
-    /// A frame too large for one submission: traced and read back already.
-    Done(Option<Image>, GpuRenderStats),
+    /// A frame too large for one submission: traced and read back already (boxed as the
+    /// other: a frame in flight is moved from caller to caller).
+    Done(Box<(Option<Image>, GpuRenderStats)>),
 }
 
 struct SubmittedFrame {
@@ -99,8 +100,6 @@ struct SubmittedFrame {
     /// When its preparation began.
     t0: Instant,
 }
-
-/// The tiles of a frame and where its pixels go.
 
 /// Adds a run's readback (over `tiles`) to the frame's figures.
 fn add_readback(stats: &mut GpuRenderStats, out: Readback, tiles: &[Tile]) {
@@ -284,7 +283,7 @@ impl GpuRenderer {
             k += n;
         }
         self.close_stats(&mut stats, t0, img.as_ref(), shape.heat);
-        Ok(FrameInFlight(Flight::Done(img, stats)))
+        Ok(FrameInFlight(Flight::Done(Box::new((img, stats)))))
     }
 
     /// Waits for a frame from `submit_frame` (of this renderer) and reads it back: its host
@@ -294,7 +293,7 @@ impl GpuRenderer {
     /// host's work on other frames between its submission and its wait.
     pub fn finish_frame(&mut self, frame: FrameInFlight) -> Result<(Option<Image>, GpuRenderStats)> {
         let f = match frame.0 {
-            Flight::Done(img, stats) => return Ok((img, stats)),
+            Flight::Done(done) => return Ok(*done),
             Flight::Submitted(f) => *f,
         };
         let SubmittedFrame {

@@ -104,7 +104,7 @@ impl QueryScene {
                             &mut out.primitive_normals[first..end],
                         )
                             .into_par_iter()
-                            .zip((&hits[..], &rays[first..end]))
+                            .zip((hits, &rays[first..end]))
                             .with_min_len(1024)
                             .for_each(|((t, g, p, uv, n), (h, r))| {
                                 let h = gpu_hit(*h);
