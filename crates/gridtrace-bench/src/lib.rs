@@ -10,6 +10,7 @@ pub mod build_scaling;
 pub mod charts;
 pub mod hardware;
 pub mod irregular;
+mod machine;
 pub mod query_study;
 pub mod rays;
 pub mod report;
@@ -29,6 +30,7 @@ use gridtrace::render::{Mode, PixelFormat, RayCounts, RenderOptions};
 use gridtrace::scene::PreparedScene;
 use gridtrace::{Error, Result};
 
+pub use machine::Machine;
 pub use scenes::{BenchScene, PAPER_SCENES, build_paper_scene, find_data_dir, paper_ms};
 pub use timing::{Summary, repeat, time_cpu, time_gpu};
 
@@ -459,51 +461,6 @@ pub fn loglog_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     let sxy: f64 = p.iter().map(|q| (q.0 - mx) * (q.1 - my)).sum();
     let slope = sxy / sxx;
     Some((slope, my - slope * mx))
-}
-
-/// The machine the benchmark ran on.
-#[derive(Debug, Clone, Serialize)]
-pub struct Machine {
-    pub cpu_model: String,
-    pub logical_cores: usize,
-    pub threads: usize,
-    pub os: String,
-    pub adapter: Option<String>,
-    pub adapter_is_software: Option<bool>,
-}
-
-impl Machine {
-    pub fn detect(gpu: Option<&GpuContext>) -> Machine {
-        let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-        let cpu_model = cpuinfo
-            .lines()
-            .find(|l| l.starts_with("model name"))
-            .and_then(|l| l.split(':').nth(1))
-            .map(|s| s.trim().to_string())
-            .unwrap_or_else(|| std::env::consts::ARCH.to_string());
-        let pretty = std::fs::read_to_string("/etc/os-release")
-            .ok()
-            .and_then(|s| {
-                s.lines()
-                    .find(|l| l.starts_with("PRETTY_NAME="))
-                    .map(|l| l["PRETTY_NAME=".len()..].trim_matches('"').to_string())
-            })
-            .unwrap_or_else(|| std::env::consts::OS.to_string());
-        let kernel = std::fs::read_to_string("/proc/sys/kernel/osrelease").unwrap_or_default();
-        let os = if kernel.trim().is_empty() {
-            pretty
-        } else {
-            format!("{pretty}, kernel {}", kernel.trim())
-        };
-        Machine {
-            cpu_model,
-            logical_cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
-            threads: rayon::current_num_threads(),
-            os,
-            adapter: gpu.map(|g| g.describe()),
-            adapter_is_software: gpu.map(|g| g.is_software()),
-        }
-    }
 }
 
 /// Everything one `gridtrace bench` run measured.

@@ -54,7 +54,7 @@ override COUNT_WORK: bool = false;
 // Set per pipeline: the occlusion kernel of the `shadow closest hit` ablation finds the closest
 // hit of each shadow ray instead of stopping at the first (RenderOptions::ablation).
 override SHADOW_CLOSEST: bool = false;
-// GPU variants (gpu/variants.rs; every pipeline gets the same values, GpuVariants::overrides):
+// GPU variants (gpu/variants/; every pipeline gets the same values, GpuVariants::overrides):
 // ray generation in 8x8 squares (`order=tiles`), queue appends aggregated per workgroup
 // (`appends=workgroup`), per-ray statistics atomics in shading (`stats=on`), and the entries of
 // the BVH walk's short stack (`stack=short`, read by the short-stack walks only).
