@@ -349,91 +349,7 @@ impl GpuGrid {
         let dev = &self.ctx.device;
         let n_cells = lattice.cells() as u32;
         let refs_capacity = (self.refs.size() / 4).min(u32::MAX as u64) as u32;
-        let base = GridBuildUniform {
-            bounds_min: lattice.bounds.min.to_array(),
-            n_tris,
-            cell_size: lattice.cell_size.to_array(),
-            n_cells,
-            inv_cell_size: lattice.inv_cell_size.to_array(),
-            refs_capacity,
-            margin: lattice.margin.to_array(),
-            axis: 0,
-            dims: lattice.dims.to_array(),
-            n: 0,
-            in_offset: 0,
-            out_offset: 0,
-            last: 0,
-            _pad0: 0,
-        };
-        // Every dispatch: stage, parameters, workgroups. (The bind group is made per build: the
-        // triangle buffer is the caller's and may change.)
-        let mut plan: Vec<(Stage, GridBuildUniform, (u32, u32))> = Vec::new();
-        let per_tri = dispatch_groups(n_tris, WORKGROUP);
-        plan.push((Stage::Count, base, per_tri));
-        let levels = scan_levels(n_cells);
-        let top = levels.len() - 1;
-        plan.push((
-            Stage::ScanCells,
-            GridBuildUniform {
-                n: n_cells,
-                out_offset: levels[0].0,
-                last: (top == 0) as u32,
-                ..base
-            },
-            dispatch_groups(n_cells, SCAN_BLOCK),
-        ));
-        for j in 0..top {
-            let (offset, n) = levels[j];
-            plan.push((
-                Stage::ScanSums,
-                GridBuildUniform {
-                    n,
-                    in_offset: offset,
-                    out_offset: levels[j + 1].0,
-                    last: (j + 1 == top) as u32,
-                    ..base
-                },
-                dispatch_groups(n, SCAN_BLOCK),
-            ));
-        }
-        for j in (0..top).rev() {
-            let (offset, n) = levels[j];
-            // The scanned block totals one level up go back into the level. A level of one
-            // block has nothing to add (and the level above it is the raw total, not scanned).
-            if n > SCAN_BLOCK {
-                plan.push((
-                    Stage::AddSums,
-                    GridBuildUniform {
-                        n,
-                        in_offset: offset,
-                        out_offset: levels[j + 1].0,
-                        ..base
-                    },
-                    dispatch_groups(n, SCAN_GROUP),
-                ));
-            }
-        }
-        if n_cells > SCAN_BLOCK {
-            plan.push((
-                Stage::AddCells,
-                GridBuildUniform {
-                    n: n_cells,
-                    out_offset: levels[0].0,
-                    ..base
-                },
-                dispatch_groups(n_cells, SCAN_GROUP),
-            ));
-        }
-        plan.push((Stage::Place, base, per_tri));
-        plan.push((Stage::Sort, base, dispatch_groups(n_cells, WORKGROUP)));
-        let d = lattice.dims;
-        for (axis, lines) in [(0u32, d.y * d.z), (1, d.x * d.z), (2, d.x * d.y)] {
-            plan.push((
-                Stage::Distance,
-                GridBuildUniform { axis, n: lines, ..base },
-                dispatch_groups(lines, WORKGROUP),
-            ));
-        }
+        let plan = build_plan(n_tris, lattice, refs_capacity);
 
         let params_bytes = plan.len() as u64 * PARAMS_STRIDE;
         debug_assert!(params_bytes <= self.params.size(), "`reserve` sizes the params");
@@ -513,6 +429,99 @@ impl GpuGrid {
             bytemuck::cast_slice(&refs).to_vec(),
         ))
     }
+}
+
+/// Every dispatch of a build over `n_tris` triangles into `lattice`, in order: its stage, its
+/// parameters and its workgroups (count, the scan's levels up and back down, place, sort, the
+/// distance transform's three axes).
+fn build_plan(n_tris: u32, lattice: &GridLattice, refs_capacity: u32) -> Vec<(Stage, GridBuildUniform, (u32, u32))> {
+    let n_cells = lattice.cells() as u32;
+    let base = GridBuildUniform {
+        bounds_min: lattice.bounds.min.to_array(),
+        n_tris,
+        cell_size: lattice.cell_size.to_array(),
+        n_cells,
+        inv_cell_size: lattice.inv_cell_size.to_array(),
+        refs_capacity,
+        margin: lattice.margin.to_array(),
+        axis: 0,
+        dims: lattice.dims.to_array(),
+        n: 0,
+        in_offset: 0,
+        out_offset: 0,
+        last: 0,
+        _pad0: 0,
+    };
+    // Every dispatch: stage, parameters, workgroups. (The bind group is made per build: the
+    // triangle buffer is the caller's and may change.)
+    let mut plan: Vec<(Stage, GridBuildUniform, (u32, u32))> = Vec::new();
+    let per_tri = dispatch_groups(n_tris, WORKGROUP);
+    plan.push((Stage::Count, base, per_tri));
+    let levels = scan_levels(n_cells);
+    let top = levels.len() - 1;
+    plan.push((
+        Stage::ScanCells,
+        GridBuildUniform {
+            n: n_cells,
+            out_offset: levels[0].0,
+            last: (top == 0) as u32,
+            ..base
+        },
+        dispatch_groups(n_cells, SCAN_BLOCK),
+    ));
+    for j in 0..top {
+        let (offset, n) = levels[j];
+        plan.push((
+            Stage::ScanSums,
+            GridBuildUniform {
+                n,
+                in_offset: offset,
+                out_offset: levels[j + 1].0,
+                last: (j + 1 == top) as u32,
+                ..base
+            },
+            dispatch_groups(n, SCAN_BLOCK),
+        ));
+    }
+    for j in (0..top).rev() {
+        let (offset, n) = levels[j];
+        // The scanned block totals one level up go back into the level. A level of one
+        // block has nothing to add (and the level above it is the raw total, not scanned).
+        if n > SCAN_BLOCK {
+            plan.push((
+                Stage::AddSums,
+                GridBuildUniform {
+                    n,
+                    in_offset: offset,
+                    out_offset: levels[j + 1].0,
+                    ..base
+                },
+                dispatch_groups(n, SCAN_GROUP),
+            ));
+        }
+    }
+    if n_cells > SCAN_BLOCK {
+        plan.push((
+            Stage::AddCells,
+            GridBuildUniform {
+                n: n_cells,
+                out_offset: levels[0].0,
+                ..base
+            },
+            dispatch_groups(n_cells, SCAN_GROUP),
+        ));
+    }
+    plan.push((Stage::Place, base, per_tri));
+    plan.push((Stage::Sort, base, dispatch_groups(n_cells, WORKGROUP)));
+    let d = lattice.dims;
+    for (axis, lines) in [(0u32, d.y * d.z), (1, d.x * d.z), (2, d.x * d.y)] {
+        plan.push((
+            Stage::Distance,
+            GridBuildUniform { axis, n: lines, ..base },
+            dispatch_groups(lines, WORKGROUP),
+        ));
+    }
+    plan
 }
 
 #[cfg(test)]
