@@ -6,12 +6,13 @@
 //! (the mesh folder found as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else
 //! `shared/data/meshes` beside the checkout). Then signed distances (nearest points on the BVH,
 //! fast winding numbers for the sign) of the first 100,000 points.
+use gridtrace::AccelParams;
 use std::time::Instant;
 
 use glam::Vec3;
 use gridtrace::accel::closest::{closest_point_brute, closest_points};
 use gridtrace::accel::winding::signed_distances;
-use gridtrace::accel::{Aabb, Accel, AccelKind, Resolution, TriAccel};
+use gridtrace::accel::{Aabb, Accel, AccelKind, TriAccel};
 use gridtrace::util::Rng;
 
 fn main() -> gridtrace::Result<()> {
@@ -47,7 +48,7 @@ fn main() -> gridtrace::Result<()> {
     let check = &points[..n.min(200)];
     for kind in kinds {
         let t0 = Instant::now();
-        let accel = Accel::build(tris.clone(), kind, Resolution::default())?;
+        let accel = Accel::build(tris.clone(), kind, &AccelParams::NONE)?;
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         for (p, c) in check.iter().zip(closest_points(&accel, check)?) {
             let truth = closest_point_brute(&tris, Vec3::from(*p));
@@ -64,7 +65,7 @@ fn main() -> gridtrace::Result<()> {
             n as f64 / s / 1e6
         );
     }
-    let accel = Accel::build(tris, AccelKind::Bvh, Resolution::default())?;
+    let accel = Accel::build(tris, AccelKind::Bvh, &AccelParams::NONE)?;
     let few = &points[..n.min(100_000)];
     let t0 = Instant::now();
     signed_distances(&accel, few)?;

@@ -10,9 +10,10 @@
 //! camera rays' image side) to 256, RAYS (incoherent rays, `query_study::incoherent_rays`) to
 //! 65,536. The other variants (stack, order, appends, stats, checks) do the same work per ray.
 
+use gridtrace::AccelParams;
 use std::path::PathBuf;
 
-use gridtrace::accel::{AccelKind, Hit, Ray, Resolution, Structure, TraversalCounters};
+use gridtrace::accel::{AccelKind, Hit, Ray, Structure, TraversalCounters};
 use gridtrace::gpu::layout::{GpuBvh8Node, GpuBvhNode, GpuTri};
 use gridtrace::gpu::walks::bvh::wide8::{self, Wide8, Wide8Work};
 use rayon::prelude::*;
@@ -67,7 +68,7 @@ fn main() -> gridtrace::Result<()> {
     let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(256);
     let n_incoherent: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(65_536);
     let scene = gridtrace::scene::builtin::mesh_scene(gridtrace::io::load_mesh(&mesh)?, false);
-    let prepared = scene.prepare_for(AccelKind::Bvh, Resolution::default())?;
+    let prepared = scene.prepare_for(AccelKind::Bvh, &AccelParams::NONE)?;
     let Structure::Bvh(b) = &prepared.accel.structure else {
         unreachable!("prepared for the BVH")
     };

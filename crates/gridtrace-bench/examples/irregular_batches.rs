@@ -6,7 +6,7 @@
 //! `cargo run --release -p gridtrace-bench --example irregular_batches`
 //! (the mesh folder found as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else
 //! `shared/data/meshes` beside the checkout).
-use gridtrace::accel::{AccelKind, Hit, IrregularParams, Ray, Resolution};
+use gridtrace::accel::{AccelKind, Hit, Ray};
 
 fn main() -> gridtrace::Result<()> {
     let data = gridtrace_bench::scenes::find_data_dir(None);
@@ -19,7 +19,7 @@ fn main() -> gridtrace::Result<()> {
         let mut line = format!("{name:<15}");
         let mut answers = Vec::new();
         for kind in [AccelKind::Bvh, AccelKind::Irregular] {
-            let prepared = scene.prepare_with(kind, Resolution::default(), IrregularParams::default())?;
+            let prepared = scene.prepare_for(kind, &gridtrace::AccelParams::NONE)?;
             let accel = &prepared.accel;
             let mut hits = vec![Hit::MISS; eye.len()];
             let eye_ms =

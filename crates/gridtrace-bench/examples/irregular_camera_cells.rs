@@ -4,7 +4,7 @@
 //! `cargo run --release -p gridtrace-bench --example irregular_camera_cells -- [PARAMS]`
 //! (`PARAMS` as `--irregular` spells them; the mesh folder found as `gridtrace bench`
 //! finds it: `GRIDTRACE_DATA_DIR`, else `shared/data/meshes` beside the checkout).
-use gridtrace::accel::{AccelKind, Hit, IrregularParams, Resolution, TraversalCounters};
+use gridtrace::accel::{AccelKind, Hit, IrregularParams, TraversalCounters};
 
 fn main() -> gridtrace::Result<()> {
     let params: IrregularParams = match std::env::args().nth(1) {
@@ -14,7 +14,7 @@ fn main() -> gridtrace::Result<()> {
     let data = gridtrace_bench::scenes::find_data_dir(None)
         .ok_or_else(|| gridtrace::Error::InvalidInput("no mesh data folder found: set GRIDTRACE_DATA_DIR".into()))?;
     let scene = gridtrace_bench::scenes::bunny_room(&data)?;
-    let prepared = scene.prepare_with(AccelKind::Irregular, Resolution::default(), params)?;
+    let prepared = scene.prepare_for(AccelKind::Irregular, &params.to_params())?;
     let grid = prepared.accel.irregular().expect("an irregular grid");
     let tris = &prepared.accel.tris;
     let frame = scene.camera.frame(512, 512);

@@ -4,7 +4,7 @@
 //! on one thread (best of 5, ms); every packet's hits are checked to equal the single rays': `cargo run --release -p gridtrace-bench --example irregular_packets`
 //! (the mesh folder found as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else
 //! `shared/data/meshes` beside the checkout).
-use gridtrace::accel::{AccelKind, Hit, IrregularParams, NoCounters, PACKET, Ray, Resolution, Structure};
+use gridtrace::accel::{AccelKind, Hit, NoCounters, PACKET, Ray, Structure};
 use gridtrace::scene::CameraFrame;
 
 /// The camera's rays block by block (`w` x `h` pixels, the renderer's order), and the pixel
@@ -55,7 +55,7 @@ fn main() -> gridtrace::Result<()> {
         let eye = blocks(&cam, SIZE, (1, 1)).0;
         let (quads, octs) = (blocks(&cam, SIZE, (2, 2)), blocks(&cam, SIZE, (4, 2)));
         let n = eye.len();
-        let bvh = scene.prepare_with(AccelKind::Bvh, Resolution::default(), IrregularParams::default())?;
+        let bvh = scene.prepare_for(AccelKind::Bvh, &gridtrace::AccelParams::NONE)?;
         let mut want = vec![Hit::MISS; n];
         let bvh_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in want.iter_mut().zip(&eye) {
@@ -64,7 +64,7 @@ fn main() -> gridtrace::Result<()> {
                     .intersect(r, 0.0, f32::INFINITY, AccelKind::Bvh, &mut NoCounters);
             }
         });
-        let prepared = scene.prepare_with(AccelKind::Irregular, Resolution::default(), IrregularParams::default())?;
+        let prepared = scene.prepare_for(AccelKind::Irregular, &gridtrace::AccelParams::NONE)?;
         let accel = &prepared.accel;
         let Structure::Irregular(g) = &accel.structure else {
             unreachable!("an irregular grid was asked for")

@@ -5,7 +5,7 @@
 //! (each `PARAMS` as `--irregular` spells them, `""` for the defaults; the mesh folder found
 //! as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else `shared/data/meshes` beside the
 //! checkout).
-use gridtrace::accel::{AccelKind, IrregularParams, Resolution};
+use gridtrace::accel::{AccelKind, IrregularParams};
 use gridtrace::render::{Mode, RenderOptions};
 
 fn main() -> gridtrace::Result<()> {
@@ -25,7 +25,7 @@ fn main() -> gridtrace::Result<()> {
             .chain(sets.iter().map(|s| (AccelKind::Irregular, s.clone())));
         for (kind, set) in runs {
             let params: IrregularParams = set.parse().map_err(gridtrace::Error::InvalidInput)?;
-            let prepared = scene.prepare_with(kind, Resolution::default(), params)?;
+            let prepared = scene.prepare_for(kind, &params.to_params())?;
             let opts = RenderOptions {
                 width: 512,
                 height: 512,

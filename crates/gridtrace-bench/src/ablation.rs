@@ -84,9 +84,10 @@ pub fn ablation_study(plan: &AblationPlan, log: &mut dyn FnMut(&str)) -> Result<
                 continue;
             }
         };
-        let res = bs.resolution(plan.paper_grids, plan.grid);
         for &accel in plan.accels {
-            let scene = bs.scene.prepare_for(accel, res)?;
+            let scene = bs
+                .scene
+                .prepare_for(accel, &bs.params_for(accel, plan.paper_grids, plan.grid))?;
             let mut gpu = match plan.gpu {
                 Some(ctx) => Some(GpuRenderer::new(ctx.clone(), &scene)?),
                 None => None,

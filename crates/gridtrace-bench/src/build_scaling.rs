@@ -5,6 +5,7 @@
 //! `crates/gridtrace-py/bench/build_vs_embree.py` over the meshes `export` writes, and joins the
 //! table and chart through `with_embree`.
 
+use gridtrace::AccelParams;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
@@ -81,9 +82,7 @@ pub fn build_scaling(
         }
         let (cpu_1t_ms, _) = one.install(|| best(reps, || Grid::build(&tris, Resolution::default())))?;
         let (cpu_ms, grid) = best(reps, || Grid::build(&tris, Resolution::default()))?;
-        let (bvh_ms, _) = best(reps, || {
-            Accel::build(tris.clone(), AccelKind::Bvh, Resolution::default())
-        })?;
+        let (bvh_ms, _) = best(reps, || Accel::build(tris.clone(), AccelKind::Bvh, &AccelParams::NONE))?;
         // The clone is part of what `Accel::build` takes; time it alone and take it off.
         let (clone_ms, _) = best(reps, || Ok(tris.clone()))?;
         let bvh_ms = (bvh_ms - clone_ms).max(0.0);

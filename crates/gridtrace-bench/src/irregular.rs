@@ -2,13 +2,14 @@
 //! bytes) and its traversal on incoherent rays (work and speed), beside the uniform grid with
 //! proximity clouds and the BVH on the same rays, in one run.
 
+use gridtrace::AccelParams;
 use rayon::prelude::*;
 use serde::Serialize;
 
 use super::query_study::incoherent_rays;
 use super::{Summary, repeat};
 use gridtrace::Result;
-use gridtrace::accel::{Accel, AccelKind, Hit, IrregularParams, Ray, Resolution, TraversalCounters};
+use gridtrace::accel::{Accel, AccelKind, Hit, IrregularParams, Ray, TraversalCounters};
 
 /// The parameter sets `--irregular-sweep` tries by default: the defaults, then one parameter
 /// changed at a time.
@@ -73,12 +74,12 @@ pub fn irregular_sweep(
         let mut builds: Vec<(AccelKind, String, f64, Accel)> = Vec::new();
         for kind in [AccelKind::ProximityCloud, AccelKind::Bvh] {
             let t0 = std::time::Instant::now();
-            let a = Accel::build(tris.clone(), kind, Resolution::default())?;
+            let a = Accel::build(tris.clone(), kind, &AccelParams::NONE)?;
             builds.push((kind, String::new(), t0.elapsed().as_secs_f64() * 1e3, a));
         }
         for p in sweep {
             let t0 = std::time::Instant::now();
-            let a = Accel::build_with(tris.clone(), AccelKind::Irregular, Resolution::default(), *p)?;
+            let a = Accel::build(tris.clone(), AccelKind::Irregular, &p.to_params())?;
             builds.push((AccelKind::Irregular, params_str(p), t0.elapsed().as_secs_f64() * 1e3, a));
         }
         let (o, d) = incoherent_rays(builds[0].3.bounds(), rays, 7);

@@ -18,6 +18,7 @@ pub mod scenes;
 pub mod studies;
 mod timing;
 
+use gridtrace::AccelParams;
 use gridtrace::accel::dims_str;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -339,7 +340,7 @@ pub fn run_matrix(
         let mut own: Vec<(AccelKind, PreparedScene)> = Vec::new();
         for &accel in cfg.accels.iter().filter(|a| !a.uses_grid()) {
             if !own.iter().any(|(k, _)| *k == accel) {
-                own.push((accel, prepared.with_accel(accel, res)?));
+                own.push((accel, prepared.with_accel(accel, &AccelParams::NONE)?));
             }
         }
         let for_accel = |accel: AccelKind| own.iter().find(|(k, _)| *k == accel).map_or(&prepared, |(_, s)| s);

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Vec3};
 
-use gridtrace::accel::{Aabb, Resolution};
+use gridtrace::accel::{Aabb, AccelKind, AccelParams, Resolution};
 use gridtrace::scene::procedural::{box_mesh, icosphere, torus_knot};
 use gridtrace::scene::{Camera, Material, Mesh, PointLight, Scene, builtin};
 use gridtrace::{Error, Result};
@@ -188,6 +188,16 @@ impl BenchScene {
         match (paper_grids, self.paper_grid) {
             (true, Some(d)) => Resolution::Fixed(d),
             _ => fallback,
+        }
+    }
+
+    /// The build parameters for `kind`: `resolution`'s for the grid (the benchmark's grid study
+    /// sets them), every other structure's defaults.
+    pub fn params_for(&self, kind: AccelKind, paper_grids: bool, fallback: Resolution) -> AccelParams {
+        if kind.uses_grid() {
+            self.resolution(paper_grids, fallback).into()
+        } else {
+            AccelParams::NONE
         }
     }
 }

@@ -2,6 +2,7 @@
 //! pixel count, and the proximity-cloud study with traversal counters. The ray-query study has
 //! a file of its own (`query_study.rs`, re-exported here).
 
+use gridtrace::AccelParams;
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
@@ -220,7 +221,7 @@ pub fn scaling(
     };
     for m in meshes {
         let scene = builtin::mesh_scene(m.mesh, false);
-        let prepared = scene.prepare_for(accel, Resolution::default())?;
+        let prepared = scene.prepare_for(accel, &AccelParams::NONE)?;
         let mut on_gpu = upload(&prepared)?;
         let opts = RenderOptions::new(res.0, res.1, mode, accel);
         let (summary, rays) = time(&prepared, &mut on_gpu, &opts)?;

@@ -31,13 +31,13 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         )));
     }
     let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.grid.accel_for(
+    let accel = a.accel_args.accel_for(
         gridtrace::backend::traced_on(ctx.as_deref()),
         gridtrace::Work::Animate,
         &mut notes,
     );
     let t0 = Instant::now();
-    let scene = crate::common::prepare(&anim.scene, name, accel, &a.grid)?;
+    let scene = crate::common::prepare(&anim.scene, name, accel, &a.accel_args)?;
     println!(
         "scene {name} (animated): {} triangles, {}; first build {:.1} ms",
         scene.accel.tris.len(),

@@ -5,10 +5,9 @@ use std::path::PathBuf;
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use glam::Vec3;
-use gridtrace::accel::IrregularParams;
 use gridtrace::gpu::GpuVariants;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
-use gridtrace::{AccelChoice, AccelKind, Resolution, TracedOn, Work};
+use gridtrace::{AccelChoice, AccelKind, AccelParams, AccelSpec, TracedOn, Work};
 
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
@@ -22,22 +21,28 @@ pub struct SceneArgs {
     pub mesh: Option<PathBuf>,
 }
 
+/// `--accel` and `--accel-params`: the structure and its build parameters, which the structure
+/// reads itself (the registry lists each one's keys; this file names none).
 #[derive(Args, Debug, Clone)]
-pub struct GridArgs {
-    /// Acceleration structure: auto (the one measured fastest for the work on the backend that
-    /// traces it; it says which and why), or one by name.
-    #[arg(long, default_value = "auto", value_parser = accel_parser())]
-    pub accel: AccelChoice,
-    /// Grid resolution: auto, auto:LAMBDA (cells per triangle), N or AxBxC.
-    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<Resolution>())]
-    pub grid: Resolution,
-    /// The irregular grid's build: top=TOP_CELLS_PER_TRI,cell=CELLS_PER_REF,alpha=MERGE_ALPHA,
-    /// merge=PASSES,expand=PASSES, any subset (defaults: top=0.12,cell=2,alpha=1,merge=8,expand=3).
-    #[arg(long, default_value = "", value_parser = |s: &str| s.parse::<IrregularParams>())]
-    pub irregular: IrregularParams,
+pub struct AccelArgs {
+    // The help is written from the registry (`accel::registry::ENTRIES`).
+    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<AccelSpec>(), help = accel_help(), long_help = accel_long_help())]
+    pub accel: AccelSpec,
+    /// More build parameters for the structure --accel names, KEY=VALUE,... (as after NAME:; a
+    /// key given in both takes this value).
+    #[arg(long = "accel-params", default_value = "", value_parser = |s: &str| s.parse::<AccelParams>())]
+    pub accel_params: AccelParams,
 }
 
-impl GridArgs {
+impl AccelArgs {
+    /// `--accel` with `--accel-params` merged in.
+    pub fn spec(&self) -> gridtrace::Result<AccelSpec> {
+        self.accel
+            .clone()
+            .with_params(&self.accel_params)
+            .map_err(gridtrace::Error::InvalidInput)
+    }
+
     /// The traversal `--accel` names, or `auto`'s pick for `work` traced where `traced_on`
     /// says, with its note pushed to `notes`.
     pub fn accel_for(&self, traced_on: TracedOn, work: Work, notes: &mut Vec<String>) -> AccelKind {
@@ -45,6 +50,47 @@ impl GridArgs {
         notes.extend(note);
         kind
     }
+
+    /// The build parameters for a structure serving `kind`: the ones given, when `--accel`
+    /// named a traversal of that structure; its defaults otherwise (the viewer's G cycle moves
+    /// to structures the parameters were not written for).
+    pub fn params_for(&self, kind: AccelKind) -> gridtrace::Result<AccelParams> {
+        let spec = self.spec()?;
+        Ok(match spec.choice {
+            AccelChoice::Kind(named) if named.structure_name() == kind.structure_name() => spec.params,
+            _ => AccelParams::NONE,
+        })
+    }
+}
+
+/// `--accel`'s help: the form, then each name with what it is and the parameters it reads.
+fn accel_help() -> String {
+    "Acceleration structure: auto (the one measured fastest for the work on the backend that traces it; it \
+     says which and why), or NAME[:KEY=VALUE,...], the structure's build parameters after the colon \
+     (grid:res=64, irregular:top=0.2,cell=4; --help lists each one's)"
+        .into()
+}
+
+/// `--accel`'s `--help`: the short help, then `auto` and every traversal with what it is, its
+/// aliases and its parameters, laid out as clap lays out possible values.
+fn accel_long_help() -> String {
+    let row = |name: &str, about: &str| format!("- {:<10} {about}", format!("{name}:"));
+    let auto = row(
+        "auto",
+        "the structure measured fastest for the work (it says which and why)",
+    );
+    let rows = gridtrace::accel::registry::ENTRIES.iter().map(|e| {
+        let mut about = e.about.to_string();
+        if !e.aliases.is_empty() {
+            about += &format!(" (also {})", e.aliases.join(", "));
+        }
+        if !e.params.is_empty() {
+            about += &format!("\n             parameters: {}", e.params);
+        }
+        row(e.name, &about)
+    });
+    let rows: Vec<String> = std::iter::once(auto).chain(rows).collect();
+    format!("{}\n\n{}", accel_help(), rows.join("\n"))
 }
 
 impl SceneArgs {
@@ -91,14 +137,6 @@ fn kind_values() -> impl Iterator<Item = PossibleValue> {
             .aliases(e.aliases.iter().copied())
             .help(e.about)
     })
-}
-
-/// `--accel`: `auto` and the registry's names; the values are listed in `--help` and in the
-/// error for a wrong one.
-pub fn accel_parser() -> impl TypedValueParser<Value = AccelChoice> {
-    let auto = PossibleValue::new("auto").help("the structure measured fastest for the work (it says which and why)");
-    PossibleValuesParser::new(std::iter::once(auto).chain(kind_values()))
-        .map(|s| s.parse::<AccelChoice>().expect("every listed accel parses"))
 }
 
 /// `bench --accel`: the registry's names (a benchmark names what it measures).
@@ -183,21 +221,19 @@ pub use gridtrace::util::fmt_bytes;
 pub use gridtrace::query::Backend;
 
 /// The scene prepared with the structure that serves `accel` (which may differ from
-/// `grid.accel`: the viewer switches), built with `grid`'s resolution or irregular parameters,
-/// and a scene-level error (nothing to trace, NaN camera...) naming the scene or file it came
-/// from.
+/// `args.accel`: the viewer switches), built with the parameters given for it
+/// (`AccelArgs::params_for`), and a scene-level error (nothing to trace, NaN camera...) naming
+/// the scene or file it came from.
 pub fn prepare(
     scene: &Scene,
     name: &str,
     accel: AccelKind,
-    grid: &GridArgs,
+    args: &AccelArgs,
 ) -> gridtrace::Result<gridtrace::PreparedScene> {
-    scene
-        .prepare_with(accel, grid.grid, grid.irregular)
-        .map_err(|e| match e {
-            gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
-            e => e,
-        })
+    scene.prepare_for(accel, &args.params_for(accel)?).map_err(|e| match e {
+        gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
+        e => e,
+    })
 }
 
 /// The structure in a few words: a grid's dimensions and references per triangle, a BVH's

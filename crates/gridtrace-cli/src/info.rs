@@ -2,7 +2,7 @@
 //! the BVH, which renders fastest on the CPU) and memory use; for a grid (`--accel grid` or
 //! `pc`) the paper's memory model beside ours. The README's `info` line says the same.
 
-use crate::common::{GridArgs, SceneArgs, fmt_bytes};
+use crate::common::{AccelArgs, SceneArgs, fmt_bytes};
 use clap::Args;
 
 #[derive(Args)]
@@ -14,19 +14,19 @@ pub struct InfoArgs {
     #[arg(long)]
     with_floor: bool,
     #[command(flatten)]
-    grid: GridArgs,
+    accel_args: AccelArgs,
 }
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     let (scene, name) = a.scene.load(a.with_floor)?;
     let mut notes = Vec::new();
     let accel = a
-        .grid
+        .accel_args
         .accel_for(gridtrace::TracedOn::Cpu, gridtrace::Work::Render, &mut notes);
     for n in notes {
         eprintln!("note: {n}");
     }
-    let prepared = crate::common::prepare(&scene, &name, accel, &a.grid)?;
+    let prepared = crate::common::prepare(&scene, &name, accel, &a.accel_args)?;
     println!("scene            {name}");
     println!("vertices         {}", scene.mesh.positions.len());
     println!(
@@ -38,7 +38,7 @@ pub fn run(a: InfoArgs) -> gridtrace::Result<()> {
     println!("lights           {}", prepared.lights.len());
     let b = prepared.accel.bounds();
     println!("bounds           {} .. {}", b.min, b.max);
-    let picked = if a.grid.accel == gridtrace::AccelChoice::Auto {
+    let picked = if a.accel_args.accel.choice == gridtrace::AccelChoice::Auto {
         " (auto's pick; --accel grid or pc for the grid and the paper's memory model)"
     } else {
         ""

@@ -18,7 +18,7 @@ use gridtrace::query::{CHUNK, QueryOptions, TraceMesh};
 use gridtrace::{Error, Ray};
 use rayon::prelude::*;
 
-use crate::common::{Backend, GpuFigures, GpuVariantArgs, GridArgs, backend_parser, print_gpu_figures};
+use crate::common::{AccelArgs, Backend, GpuFigures, GpuVariantArgs, backend_parser, print_gpu_figures};
 
 #[derive(Args)]
 pub struct RaysArgs {
@@ -46,7 +46,7 @@ pub struct RaysArgs {
     #[command(flatten)]
     gpu: GpuVariantArgs,
     #[command(flatten)]
-    grid: GridArgs,
+    accel_args: AccelArgs,
     /// Trace every chunk of rays this many times in a row (the answers of the last are
     /// written) and report the median pass: warm figures, as `embree_rays --reps` reports
     /// its own (a single pass of a small file also times the threads' start and the first
@@ -77,9 +77,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     }
     let n = size / 24;
     let opts = QueryOptions {
-        accel: a.grid.accel,
-        grid: a.grid.grid,
-        irregular: a.grid.irregular,
+        accel: a.accel_args.spec()?,
         backend: a.backend,
         gpu_variants: a.gpu.gpu_variant,
     };

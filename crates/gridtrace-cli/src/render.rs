@@ -12,7 +12,7 @@ use gridtrace::{FramesOptions, FramesStats, Mode, PixelFormat, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::common::{
-    Backend, GpuFigures, GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3,
+    AccelArgs, Backend, GpuFigures, GpuVariantArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3,
     print_gpu_figures,
 };
 
@@ -26,7 +26,7 @@ pub struct RenderArgs {
     #[arg(long)]
     no_floor: bool,
     #[command(flatten)]
-    pub grid: GridArgs,
+    pub accel_args: AccelArgs,
     /// cast (eye rays), shadow (+ shadow rays), trace (+ two levels of reflection), heat (cost).
     #[arg(long, default_value = "trace", value_parser = mode_parser())]
     pub mode: Mode,
@@ -147,13 +147,13 @@ fn open_tracer(
     name: &str,
 ) -> gridtrace::Result<(gridtrace::Tracer, gridtrace::AccelKind)> {
     let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.grid.accel_for(
+    let accel = a.accel_args.accel_for(
         gridtrace::backend::traced_on(ctx.as_deref()),
         gridtrace::Work::Render,
         &mut notes,
     );
     let t_build = Instant::now();
-    let prepared = crate::common::prepare(scene, name, accel, &a.grid)?;
+    let prepared = crate::common::prepare(scene, name, accel, &a.accel_args)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
     println!(
         "scene {name}: {} triangles ({} degenerate dropped), {}",

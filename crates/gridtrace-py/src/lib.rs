@@ -16,7 +16,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
-use gridtrace::{AccelChoice, Error, Mode, PixelFormat, RenderOptions, Resolution};
+use gridtrace::{AccelSpec, Error, Mode, PixelFormat, RenderOptions};
 
 fn to_py(e: Error) -> PyErr {
     match e {
@@ -51,11 +51,18 @@ fn named(what: &str, message: &str) -> String {
     }
 }
 
-fn options(accel: &str, grid: &str, irregular: &str, backend: &str, gpu_variant: &str) -> PyResult<QueryOptions> {
+/// `accel` (`NAME` or `NAME:KEY=VALUE,...`) with `accel_params` (more `KEY=VALUE` pairs for the
+/// same structure), as the CLI's `--accel` and `--accel-params`.
+fn accel_spec(accel: &str, accel_params: &str) -> PyResult<AccelSpec> {
+    let spec: AccelSpec = parse("accel", accel)?;
+    let more: gridtrace::AccelParams = parse("accel_params", accel_params)?;
+    spec.with_params(&more)
+        .map_err(|e| PyValueError::new_err(named("accel_params", &e)))
+}
+
+fn options(accel: &str, accel_params: &str, backend: &str, gpu_variant: &str) -> PyResult<QueryOptions> {
     Ok(QueryOptions {
-        accel: parse("accel", accel)?,
-        grid: parse("grid", grid)?,
-        irregular: parse("irregular", irregular)?,
+        accel: accel_spec(accel, accel_params)?,
         backend: parse("backend", backend)?,
         gpu_variants: parse("gpu_variant", gpu_variant)?,
     })
@@ -129,19 +136,17 @@ impl NativeMesh {
 #[pymethods]
 impl NativeMesh {
     #[new]
-    #[pyo3(signature = (vertices, faces, accel, grid, irregular, backend, gpu_variant = ""))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (vertices, faces, accel, accel_params, backend, gpu_variant = ""))]
     fn new(
         py: Python<'_>,
         vertices: PyReadonlyArray2<'_, f32>,
         faces: PyReadonlyArray2<'_, u32>,
         accel: &str,
-        grid: &str,
-        irregular: &str,
+        accel_params: &str,
         backend: &str,
         gpu_variant: &str,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend, gpu_variant)?;
+        let opts = options(accel, accel_params, backend, gpu_variant)?;
         let v = rows3(&vertices, "vertices")?.to_vec();
         let f = rows3(&faces, "faces")?.to_vec();
         let inner = py.detach(|| TraceMesh::from_arrays(&v, &f, &opts)).map_err(to_py)?;
@@ -149,17 +154,16 @@ impl NativeMesh {
     }
 
     #[staticmethod]
-    #[pyo3(signature = (path, accel, grid, irregular, backend, gpu_variant = ""))]
+    #[pyo3(signature = (path, accel, accel_params, backend, gpu_variant = ""))]
     fn load(
         py: Python<'_>,
         path: PathBuf,
         accel: &str,
-        grid: &str,
-        irregular: &str,
+        accel_params: &str,
         backend: &str,
         gpu_variant: &str,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend, gpu_variant)?;
+        let opts = options(accel, accel_params, backend, gpu_variant)?;
         let (inner, v, f) = py
             .detach(move || -> gridtrace::Result<_> {
                 let mesh = gridtrace::io::load_mesh(&path)?;
@@ -275,7 +279,7 @@ impl NativeMesh {
 
 /// Renders a built-in scene, a scene file or a mesh file; returns (H, W, 3) uint8 sRGB.
 #[pyfunction]
-#[pyo3(signature = (scene, width, height, mode, accel, grid, backend, eye, target, gpu_variant = ""))]
+#[pyo3(signature = (scene, width, height, mode, accel, accel_params, backend, eye, target, gpu_variant = ""))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -284,7 +288,7 @@ fn render<'py>(
     height: u32,
     mode: &str,
     accel: &str,
-    grid: &str,
+    accel_params: &str,
     backend: &str,
     eye: Option<[f32; 3]>,
     target: Option<[f32; 3]>,
@@ -292,8 +296,7 @@ fn render<'py>(
 ) -> PyResult<(Bound<'py, PyArray3<u8>>, Bound<'py, pyo3::types::PyDict>)> {
     let variants: gridtrace::gpu::GpuVariants = parse("gpu_variant", gpu_variant)?;
     let mode: Mode = parse("mode", mode)?;
-    let accel: AccelChoice = parse("accel", accel)?;
-    let grid: Resolution = parse("grid", grid)?;
+    let spec = accel_spec(accel, accel_params)?;
     let backend = parse::<Backend>("backend", backend)?;
     let scene_name = scene.to_string();
     let (rgb, frame) = py
@@ -325,8 +328,8 @@ fn render<'py>(
                 s.camera.target = t.into();
             }
             let (ctx, mut notes) = backend.open_device()?;
-            let (accel, _why) = accel.resolve(gridtrace::backend::traced_on(ctx.as_deref()), gridtrace::Work::Render);
-            let prepared = s.prepare_for(accel, grid)?;
+            let (accel, _why) = spec.resolve(gridtrace::backend::traced_on(ctx.as_deref()), gridtrace::Work::Render);
+            let prepared = s.prepare_for(accel, &spec.params)?;
             let opts = RenderOptions::new(width, height, mode, accel).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
             let mut tracer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), backend, &variants, &mut notes)?;
@@ -359,6 +362,12 @@ fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
         .chain(gridtrace::accel::registry::ENTRIES.iter().map(|e| e.name))
         .collect();
     m.add("ACCELS", accels)?;
+    // Each structure's build parameters in words, as `accel="NAME:..."` and `accel_params=` take them.
+    let params: std::collections::BTreeMap<&str, &str> = gridtrace::accel::registry::ENTRIES
+        .iter()
+        .map(|e| (e.name, e.params))
+        .collect();
+    m.add("ACCEL_PARAMS", params)?;
     m.add("GPU_VARIANTS", gpu_variants(m.py())?)?;
     Ok(())
 }

@@ -81,22 +81,21 @@ impl NativeScene {
 #[pymethods]
 impl NativeScene {
     #[new]
-    #[pyo3(signature = (accel, grid, irregular, backend, gpu_variant = ""))]
-    fn new(accel: &str, grid: &str, irregular: &str, backend: &str, gpu_variant: &str) -> PyResult<Self> {
+    #[pyo3(signature = (accel, accel_params, backend, gpu_variant = ""))]
+    fn new(accel: &str, accel_params: &str, backend: &str, gpu_variant: &str) -> PyResult<Self> {
         Ok(NativeScene {
-            inner: RwLock::new(QueryScene::new(options(accel, grid, irregular, backend, gpu_variant)?)),
+            inner: RwLock::new(QueryScene::new(options(accel, accel_params, backend, gpu_variant)?)),
         })
     }
 
     /// Rebuilds a scene from `parts()` (unpickling).
     #[staticmethod]
-    #[pyo3(signature = (accel, grid, irregular, backend, next_id, geometries, gpu_variant = ""))]
-    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    #[pyo3(signature = (accel, accel_params, backend, next_id, geometries, gpu_variant = ""))]
+    #[allow(clippy::type_complexity)]
     fn from_parts(
         py: Python<'_>,
         accel: &str,
-        grid: &str,
-        irregular: &str,
+        accel_params: &str,
         backend: &str,
         next_id: u32,
         geometries: Vec<(
@@ -107,7 +106,7 @@ impl NativeScene {
         )>,
         gpu_variant: &str,
     ) -> PyResult<Self> {
-        let opts = options(accel, grid, irregular, backend, gpu_variant)?;
+        let opts = options(accel, accel_params, backend, gpu_variant)?;
         let mut parts = Vec::with_capacity(geometries.len());
         for (id, v, f, t) in &geometries {
             parts.push((

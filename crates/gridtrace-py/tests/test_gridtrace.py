@@ -388,15 +388,16 @@ def test_irregular_parameters():
     t_ref, _, margin, _ = brute_force(vertices, faces, o, d)
     clear = (margin > 1e-4) | ~np.isfinite(t_ref)
     for params in ["", "top=0.5,cell=8,expand=0", "alpha=1.5,merge=1"]:
-        mesh = gridtrace.Mesh(vertices, faces, accel="irregular", backend="cpu", irregular=params)
+        mesh = gridtrace.Mesh(vertices, faces, accel="irregular", backend="cpu", accel_params=params)
         hits = mesh.intersect(o, d)
         assert (np.isfinite(hits.t) == np.isfinite(t_ref))[clear].all(), params
         both = np.isfinite(t_ref) & clear
         np.testing.assert_allclose(hits.t[both], t_ref[both], rtol=2e-5)
     with pytest.raises(ValueError, match="^irregular grid: top density"):
-        gridtrace.Mesh(vertices, faces, accel="irregular", irregular="top=0")
-    with pytest.raises(ValueError, match="unknown irregular parameter 'depth'"):
-        gridtrace.Mesh(vertices, faces, accel="irregular", irregular="depth=3")
+        gridtrace.Mesh(vertices, faces, accel="irregular", accel_params="top=0")
+    with pytest.raises(ValueError, match=r"'depth=3': unknown key \('irregular' takes top, cell, alpha, merge, expand\)"):
+        gridtrace.Mesh(vertices, faces, accel="irregular:depth=3")
+    assert gridtrace.ACCEL_PARAMS["irregular"].startswith("top=0.12,cell=2") and gridtrace.ACCEL_PARAMS["bvh"] == ""
 
 
 @pytest.mark.parametrize("accel", STRUCTURES)

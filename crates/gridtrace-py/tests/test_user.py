@@ -98,7 +98,7 @@ def test_mesh_pickles(backend, tmp_path):
     if backend == "gpu" and os.environ.get("GRIDTRACE_SKIP_GPU"):
         pytest.skip("GRIDTRACE_SKIP_GPU is set")
     v, f = tetrahedron()
-    mesh = gridtrace.Mesh(v, f, accel="pc", grid="4x4x4", backend=backend)
+    mesh = gridtrace.Mesh(v, f, accel="pc", accel_params="res=4x4x4", backend=backend)
     mesh.update_vertices(v * 1.5)
     again = pickle.loads(pickle.dumps(mesh))
     assert isinstance(again, gridtrace.Mesh) and again._params == mesh._params
@@ -124,11 +124,14 @@ def test_mesh_pickles(backend, tmp_path):
 V3, F1 = [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]
 BAD_ARGUMENTS = [
     ("accel", lambda: gridtrace.Mesh(V3, F1, accel="kd-tree")),
-    ("grid", lambda: gridtrace.Mesh(V3, F1, accel="pc", grid="0x1x1")),
-    ("grid", lambda: gridtrace.Mesh(V3, F1, accel="pc", grid="auto:x")),
+    ("grid", lambda: gridtrace.Mesh(V3, F1, accel="pc", accel_params="res=0x1x1")),
+    ("grid", lambda: gridtrace.Mesh(V3, F1, accel="pc:res=auto:x")),
+    ("accel_params", lambda: gridtrace.Mesh(V3, F1, accel_params="res=4")),
+    ("accel_params", lambda: gridtrace.Mesh(V3, F1, accel="bvh", accel_params="res")),
+    ("bvh", lambda: gridtrace.Mesh(V3, F1, accel="bvh:res=4")),
     ("backend", lambda: gridtrace.Mesh(V3, F1, backend="tpu")),
-    ("irregular", lambda: gridtrace.Mesh(V3, F1, accel="irregular", irregular="top=0")),
-    ("irregular", lambda: gridtrace.Mesh(V3, F1, accel="irregular", irregular="depth=3")),
+    ("irregular", lambda: gridtrace.Mesh(V3, F1, accel="irregular", accel_params="top=0")),
+    ("irregular", lambda: gridtrace.Mesh(V3, F1, accel="irregular:depth=3")),
     ("gpu_variant", lambda: gridtrace.Mesh(V3, F1, gpu_variant="bvh=wide4")),
     ("gpu_variant", lambda: gridtrace.Mesh(V3, F1, gpu_variant="nope=1")),
     ("accel", lambda: Scene(accel="kd-tree")),

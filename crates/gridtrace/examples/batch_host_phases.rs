@@ -5,7 +5,8 @@
 //! `cargo run --release -p gridtrace --example batch_host_phases -- MESH [RAYS] [REPS]`
 //! (rays from a sphere round the mesh towards its centre, with the BVH).
 use glam::Vec3;
-use gridtrace::accel::{AccelKind, Ray, Resolution};
+use gridtrace::AccelParams;
+use gridtrace::accel::{AccelKind, Ray};
 use gridtrace::gpu::{Answer, GpuContext, GpuRenderer, RaySlice};
 use gridtrace::scene::builtin::mesh_scene;
 
@@ -15,7 +16,7 @@ fn main() -> gridtrace::Result<()> {
     let n: usize = args.get(2).map_or(1_000_000, |r| r.parse().expect("RAYS is a count"));
     let reps: usize = args.get(3).map_or(7, |r| r.parse().expect("REPS is a count"));
     let mesh = gridtrace::io::load_mesh(std::path::Path::new(path))?;
-    let scene = mesh_scene(mesh, false).prepare_for(AccelKind::Bvh, Resolution::default())?;
+    let scene = mesh_scene(mesh, false).prepare_for(AccelKind::Bvh, &AccelParams::NONE)?;
     let ctx = std::sync::Arc::new(GpuContext::new()?);
     println!("adapter {}", ctx.describe());
     let mut gpu = GpuRenderer::new(ctx, &scene)?;

@@ -6,10 +6,10 @@
 //! open their device here.
 //!
 //! ```
-//! use gridtrace::{scene::builtin, AccelKind, Backend, Mode, RenderOptions, Resolution, Tracer};
+//! use gridtrace::{scene::builtin, AccelKind, AccelParams, Backend, Mode, RenderOptions, Tracer};
 //!
 //! let accel = AccelKind::ProximityCloud;
-//! let scene = builtin::knot_box().prepare_for(accel, Resolution::default())?;
+//! let scene = builtin::knot_box().prepare_for(accel, &AccelParams::NONE)?;
 //! let (mut tracer, notes) = Tracer::open_with(Backend::Cpu, scene)?;
 //! assert!(notes.is_empty() && tracer.gpu().is_none());
 //! let opts = RenderOptions::new(32, 24, Mode::Shadow, accel);

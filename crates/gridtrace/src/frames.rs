@@ -12,10 +12,10 @@
 //! bound by the larger of the device's time and the host's, not their sum.
 //!
 //! ```
-//! use gridtrace::{scene::builtin, AccelKind, Backend, FramesOptions, Mode, RenderOptions, Resolution, Tracer};
+//! use gridtrace::{scene::builtin, AccelKind, Backend, FramesOptions, Mode, RenderOptions, Tracer, AccelParams};
 //!
 //! let accel = AccelKind::Bvh;
-//! let scene = builtin::knot_box().prepare_for(accel, Resolution::default())?;
+//! let scene = builtin::knot_box().prepare_for(accel, &AccelParams::NONE)?;
 //! let (mut tracer, _) = Tracer::open_with(Backend::Cpu, scene)?;
 //! let views = (0..3).map(|_| (tracer.scene.camera, tracer.scene.lights.clone())).collect::<Vec<_>>();
 //! let opts = RenderOptions::new(16, 16, Mode::Cast, accel);

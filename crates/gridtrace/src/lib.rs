@@ -18,7 +18,7 @@ pub mod scene;
 pub mod testing;
 pub mod util;
 
-pub use accel::{Accel, AccelChoice, AccelKind, Hit, Ray, Resolution, TracedOn, Work};
+pub use accel::{Accel, AccelChoice, AccelKind, AccelParams, AccelSpec, Hit, Ray, Resolution, TracedOn, Work};
 pub use backend::{Backend, Frame, Rendered, Tracer};
 pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};

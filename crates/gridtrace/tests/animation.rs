@@ -10,10 +10,11 @@
 //! The GPU half fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1
 //! skips it knowingly.
 
+use gridtrace::AccelParams;
 use std::sync::Arc;
 
 use glam::Vec3;
-use gridtrace::accel::{AccelKind, Resolution};
+use gridtrace::accel::AccelKind;
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::scene::animated::Animation;
 use gridtrace::scene::{PreparedScene, RebuildOn, Scene};
@@ -33,7 +34,7 @@ fn fresh(anim: &Animation, time: f32, accel: AccelKind) -> PreparedScene {
     scene.mesh.positions = anim.positions_at(time);
     // Area-weighted normals of the moved mesh, as an update computes them.
     scene.mesh.normals.clear();
-    scene.prepare_for(accel, Resolution::default()).unwrap()
+    scene.prepare_for(accel, &AccelParams::NONE).unwrap()
 }
 
 fn cpu_image(scene: &PreparedScene, accel: AccelKind) -> Vec<u8> {
@@ -44,7 +45,7 @@ fn cpu_image(scene: &PreparedScene, accel: AccelKind) -> Vec<u8> {
 fn cpu_updates_equal_fresh_builds() {
     let anim = Animation::by_name("animated").unwrap();
     for accel in [AccelKind::ProximityCloud, AccelKind::Bvh, AccelKind::Irregular] {
-        let mut scene = anim.scene.prepare_for(accel, Resolution::default()).unwrap();
+        let mut scene = anim.scene.prepare_for(accel, &AccelParams::NONE).unwrap();
         for &t in &TIMES {
             let up = scene.update_vertices(&anim.positions_at(t), RebuildOn::Cpu).unwrap();
             let want = fresh(&anim, t, accel);
@@ -70,7 +71,7 @@ fn cpu_updates_equal_fresh_builds() {
 #[test]
 fn bad_updates_leave_the_mesh_in_place() {
     let anim = Animation::by_name("bouncing-spheres").unwrap();
-    let mut scene = anim.scene.prepare_for(AccelKind::Grid, Resolution::default()).unwrap();
+    let mut scene = anim.scene.prepare_for(AccelKind::Grid, &AccelParams::NONE).unwrap();
     scene.update_vertices(&anim.positions_at(0.5), RebuildOn::Cpu).unwrap();
     let before = cpu_image(&scene, AccelKind::Grid);
     let tris = scene.accel.tris.clone();
@@ -90,7 +91,7 @@ fn bad_updates_leave_the_mesh_in_place() {
 #[test]
 fn stale_cpu_grid_is_refused() {
     let anim = Animation::by_name("bouncing-spheres").unwrap();
-    let mut scene = anim.scene.prepare_for(AccelKind::Grid, Resolution::default()).unwrap();
+    let mut scene = anim.scene.prepare_for(AccelKind::Grid, &AccelParams::NONE).unwrap();
     scene
         .update_vertices(&anim.positions_at(0.5), RebuildOn::Device)
         .unwrap();
@@ -121,7 +122,7 @@ fn gpu_frames_equal_fresh_cpu_renders() {
         .into_iter()
         .chain(hwrt)
     {
-        let mut scene = anim.scene.prepare_for(accel, Resolution::default()).unwrap();
+        let mut scene = anim.scene.prepare_for(accel, &AccelParams::NONE).unwrap();
         let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap();
         for &t in &TIMES {
             scene.update_vertices(&anim.positions_at(t), RebuildOn::Device).unwrap();
@@ -143,7 +144,7 @@ fn gpu_frames_equal_fresh_cpu_renders() {
         }
     }
     // A vertex array of the wrong length never reaches the GPU: the scene refuses it.
-    let mut scene = anim.scene.prepare_for(AccelKind::Grid, Resolution::default()).unwrap();
+    let mut scene = anim.scene.prepare_for(AccelKind::Grid, &AccelParams::NONE).unwrap();
     assert!(scene.update_vertices(&[Vec3::ZERO; 3], RebuildOn::Device).is_err());
     assert!(!scene.accel.structure_stale);
 }

@@ -6,6 +6,7 @@
 //! occupancy follow the winding number on closed meshes.
 
 use glam::Vec3;
+use gridtrace::AccelParams;
 use gridtrace::accel::closest::{ClosestPoint, closest_point_brute, closest_points};
 use gridtrace::accel::winding::{occupancy, signed_distances, winding_number_brute, winding_numbers};
 use gridtrace::accel::{Accel, AccelKind, Resolution, TriAccel};
@@ -158,7 +159,7 @@ fn closest_rounding_collinear_triangles_on_the_bvh() {
     let tris = degenerate(4, 600, 21);
     let mut pts = random_points(&tris, 3000, 22);
     pts.extend(surface_points(&tris, 23));
-    let bvh = Accel::build(tris.clone(), AccelKind::Bvh, Resolution::default()).unwrap();
+    let bvh = Accel::build(tris.clone(), AccelKind::Bvh, &AccelParams::NONE).unwrap();
     let got = closest_points(&bvh, &pts).unwrap();
     for (p, g) in pts.iter().zip(got) {
         let t = closest_point_brute(&tris, Vec3::from(*p));
@@ -185,7 +186,7 @@ fn closest_points_that_are_not_finite_and_empty_meshes() {
         assert!(got[3].is_found());
     }
     for kind in AccelKind::ALL {
-        let empty = Accel::build(Vec::new(), kind, Resolution::default()).unwrap();
+        let empty = Accel::build(Vec::new(), kind, &AccelParams::NONE).unwrap();
         let got = closest_points(&empty, &[[0.0, 0.0, 0.0], [f32::NAN; 3]]).unwrap();
         let none = ClosestPoint::NONE;
         assert_eq!((got[0].tri, got[0].dist_sq), (none.tri, none.dist_sq), "{kind:?}");
@@ -197,7 +198,7 @@ fn closest_points_that_are_not_finite_and_empty_meshes() {
 #[test]
 fn closest_refuses_a_stale_structure() {
     let tris = triangle_soup(100, 1);
-    let mut accel = Accel::build(tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
+    let mut accel = Accel::build(tris.clone(), AccelKind::Grid, &AccelParams::NONE).unwrap();
     accel.update_triangles_only(tris).unwrap();
     assert!(closest_points(&accel, &[[0.0; 3]]).is_err());
     assert!(signed_distances(&accel, &[[0.0; 3]]).is_err());
@@ -231,7 +232,7 @@ fn signed_distance_and_occupancy_on_closed_meshes() {
         false,
     ));
     for kind in AccelKind::ALL {
-        let accel = Accel::build(sphere.clone(), kind, Resolution::default()).unwrap();
+        let accel = Accel::build(sphere.clone(), kind, &AccelParams::NONE).unwrap();
         let sd = signed_distances(&accel, &pts).unwrap();
         let occ = occupancy(&accel, &pts).unwrap();
         for ((p, d), o) in pts.iter().zip(&sd).zip(&occ) {
@@ -244,7 +245,7 @@ fn signed_distance_and_occupancy_on_closed_meshes() {
             assert!((w - if inside { 1.0 } else { 0.0 }).abs() < 1e-3, "winding {w}");
         }
         // A box: inside exactly where the point is in it.
-        let accel = Accel::build(closed_box.clone(), kind, Resolution::default()).unwrap();
+        let accel = Accel::build(closed_box.clone(), kind, &AccelParams::NONE).unwrap();
         let pts = random_points(&closed_box, 2000, 8);
         let occ = occupancy(&accel, &pts).unwrap();
         let sd = signed_distances(&accel, &pts).unwrap();
@@ -258,7 +259,7 @@ fn signed_distance_and_occupancy_on_closed_meshes() {
         }
     }
     // NaN in, NaN out.
-    let accel = Accel::build(sphere, AccelKind::Bvh, Resolution::default()).unwrap();
+    let accel = Accel::build(sphere, AccelKind::Bvh, &AccelParams::NONE).unwrap();
     assert!(signed_distances(&accel, &[[f32::NAN; 3]]).unwrap()[0].is_nan());
     assert!(occupancy(&accel, &[[f32::NAN; 3]]).unwrap()[0].is_nan());
 }

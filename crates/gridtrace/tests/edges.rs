@@ -3,6 +3,7 @@
 //! every structure (the plain grid, proximity clouds, the BVH and the irregular grid). A ray
 //! "leaks" if it misses, or if its first hit lies beyond the aim point (relative 1e-4).
 
+use gridtrace::AccelParams;
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
@@ -78,7 +79,7 @@ fn all_structures(scene: PreparedScene) -> Vec<PreparedScene> {
     let own: Vec<PreparedScene> = AccelKind::ALL
         .into_iter()
         .filter(|k| !k.uses_grid())
-        .map(|k| scene.with_accel(k, Resolution::default()).unwrap())
+        .map(|k| scene.with_accel(k, &AccelParams::NONE).unwrap())
         .collect();
     std::iter::once(scene).chain(own).collect()
 }

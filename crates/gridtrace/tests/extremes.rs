@@ -3,6 +3,7 @@
 //! Traversal must equal brute force on each (adversarial rays from `testing::ray_set`).
 
 use glam::{Mat4, Vec3};
+use gridtrace::AccelParams;
 use gridtrace::accel::{
     Accel, AccelKind, Hit, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect, brute_force_occluded,
 };
@@ -46,7 +47,7 @@ fn single_triangle() {
     let t = TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y);
     check("single", vec![t], Resolution::default());
     check("single-fine", vec![t], Resolution::Fixed([9, 9, 1]));
-    let accel = Accel::build(vec![t], AccelKind::ProximityCloud, Resolution::default()).unwrap();
+    let accel = Accel::build(vec![t], AccelKind::ProximityCloud, &AccelParams::NONE).unwrap();
     let h = accel.intersect(
         &Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z),
         0.0,
@@ -123,7 +124,7 @@ fn camera_inside_a_mesh() {
     s.background = Vec3::new(1.0, 0.0, 1.0);
     s.lights.push(PointLight::new(Vec3::new(0.0, 0.5, 0.0), Vec3::ONE));
     for kind in AccelKind::ALL {
-        let p = s.prepare_for(kind, Resolution::default()).unwrap();
+        let p = s.prepare_for(kind, &AccelParams::NONE).unwrap();
         let (img, _) = gridtrace::cpu::render(&p, &RenderOptions::new(96, 64, Mode::Shadow, kind), None).unwrap();
         let bg = img.pixels().iter().filter(|c| **c == s.background).count();
         assert_eq!(bg, 0, "{} background pixels seen from inside", bg);

@@ -6,6 +6,7 @@
 //! Regenerate after an intended change with `GRIDTRACE_BLESS=1 cargo test --test golden` and
 //! look at the new images before committing them.
 
+use gridtrace::AccelParams;
 use std::path::PathBuf;
 
 use gridtrace::scene::builtin;
@@ -107,7 +108,7 @@ fn comparison_detects_differences() {
 fn every_structure_renders_the_same_image() {
     let scene = builtin::scene("mirror-spheres").unwrap();
     let render = |accel| {
-        let prepared = scene.prepare_for(accel, Resolution::default()).unwrap();
+        let prepared = scene.prepare_for(accel, &AccelParams::NONE).unwrap();
         let (img, stats) =
             gridtrace::cpu::render(&prepared, &RenderOptions::new(64, 64, Mode::Trace, accel), None).unwrap();
         (img.to_rgb8(), stats.rays)

@@ -53,13 +53,13 @@ fn agree(accel: &Accel, r: &gridtrace::Ray, cpu: &Hit, gpu: &Hit) -> bool {
 /// and `pc`), then one for every kind with a structure of its own (the BVH, the irregular grid).
 type Prepared = Vec<(PreparedScene, Option<GpuRenderer>)>;
 
-fn prepared(scene: &PreparedScene, res: Resolution) -> Prepared {
+fn prepared(scene: &PreparedScene) -> Prepared {
     let first = renderer(scene);
     // `hwrt` where the adapter has ray queries (and under CI=1 always: `gpu_runs`).
     let kinds = first.as_ref().map_or(Vec::new(), |g| gpu_kinds(g.context()));
     let mut p = vec![(scene.clone(), first)];
     for kind in kinds.into_iter().filter(|k| !k.uses_grid()) {
-        let s = scene.with_accel(kind, res).unwrap();
+        let s = scene.with_accel(kind, &gridtrace::AccelParams::NONE).unwrap();
         let g = renderer(&s);
         p.push((s, g));
     }
@@ -70,7 +70,7 @@ fn prepared(scene: &PreparedScene, res: Resolution) -> Prepared {
 /// renderer; `None` when the GPU tests are skipped.
 fn builtin_prepared(name: &str) -> Option<Prepared> {
     let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
-    let p = prepared(&scene, Resolution::default());
+    let p = prepared(&scene);
     p[0].1.is_some().then_some(p)
 }
 
@@ -94,7 +94,7 @@ fn for_kind(p: &mut Prepared, kind: AccelKind) -> (&PreparedScene, &mut GpuRende
 fn per_ray_agreement(scene_name: &str, res: Resolution) {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let scene = builtin::scene(scene_name).unwrap().prepare(res).unwrap();
-    let mut p = prepared(&scene, res);
+    let mut p = prepared(&scene);
     if p[0].1.is_none() {
         return;
     }
@@ -217,7 +217,7 @@ fn images_match_cpu() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     for name in ["knot-box", "mirror-spheres"] {
         let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
-        let mut p = prepared(&scene, Resolution::default());
+        let mut p = prepared(&scene);
         if p[0].1.is_none() {
             return;
         }
@@ -801,7 +801,7 @@ fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
         GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")),
     );
     let small = builtin::knot_box()
-        .prepare_for(AccelKind::Grid, Resolution::Fixed([8; 3]))
+        .prepare_for(AccelKind::Grid, &Resolution::Fixed([8; 3]).into())
         .unwrap();
     for backend in [Backend::Auto, Backend::Gpu] {
         let mut notes = Vec::new();
@@ -814,7 +814,7 @@ fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
         return;
     }
     let big = builtin::knot_box()
-        .prepare_for(AccelKind::Grid, Resolution::Fixed([300, 300, 160]))
+        .prepare_for(AccelKind::Grid, &Resolution::Fixed([300, 300, 160]).into())
         .unwrap();
     let mut notes = Vec::new();
     let up = Backend::Auto.upload(ctx.clone(), &big, &mut notes).unwrap();

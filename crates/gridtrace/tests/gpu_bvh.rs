@@ -9,7 +9,7 @@ use std::sync::Mutex;
 
 use glam::Vec3;
 use gridtrace::Backend;
-use gridtrace::accel::{Accel, AccelKind, Hit, Ray, Resolution, TriAccel, brute_force_intersect, brute_force_occluded};
+use gridtrace::accel::{Accel, AccelKind, Hit, Ray, TriAccel, brute_force_intersect, brute_force_occluded};
 use gridtrace::query::TraceMesh;
 use gridtrace::testing::{flat_scene, gpu_mesh, long_strip, ray_set, skip_gpu, soup_arrays, triangle_soup};
 use rayon::prelude::*;
@@ -21,7 +21,7 @@ fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
     let grid = Accel::build(
         mesh.prepared().accel.tris.clone(),
         AccelKind::Grid,
-        Resolution::default(),
+        &gridtrace::AccelParams::NONE,
     )
     .unwrap();
     ray_set(&grid, n, seed)

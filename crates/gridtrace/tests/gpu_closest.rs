@@ -18,11 +18,12 @@
 //!
 //! Fails, not skips, without an adapter; GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
+use gridtrace::AccelParams;
 use std::sync::{Arc, Mutex};
 
 use glam::{Mat4, Vec3};
 use gridtrace::accel::closest::{ClosestPoint, closest_on_triangle, closest_point_brute};
-use gridtrace::accel::{AccelKind, Resolution, TriAccel};
+use gridtrace::accel::{AccelKind, TriAccel};
 use gridtrace::gpu::{GpuContext, GpuRenderer, GpuVariants};
 use gridtrace::query::{Backend, QueryOptions, TraceMesh};
 use gridtrace::query_scene::QueryScene;
@@ -238,7 +239,7 @@ fn check_mesh(name: &str, mesh: &Mesh, ctx: &Arc<GpuContext>, n: usize, seed: u6
         })
         .collect();
     for kind in gpu_kinds().into_iter() {
-        let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
+        let scene = base.prepared().with_accel(kind, &AccelParams::NONE).unwrap();
         let grid = scene
             .accel
             .grid()
@@ -313,7 +314,7 @@ fn coincident_copies_keep_the_smaller_index() {
     };
     let base = TraceMesh::from_arrays(&vertices, &faces, &cpu).unwrap();
     for kind in gpu_kinds().into_iter() {
-        let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
+        let scene = base.prepared().with_accel(kind, &AccelParams::NONE).unwrap();
         let pts = points(&scene.accel.tris, None, 600, 4);
         let mut variants = vec![GpuVariants::default()];
         if kind == AccelKind::Bvh {
@@ -346,7 +347,7 @@ fn chunked_and_empty_batches() {
     };
     let base = TraceMesh::from_arrays(&vertices, &faces, &cpu).unwrap();
     for kind in [AccelKind::ProximityCloud, AccelKind::Bvh] {
-        let scene = base.prepared().with_accel(kind, Resolution::default()).unwrap();
+        let scene = base.prepared().with_accel(kind, &AccelParams::NONE).unwrap();
         let pts = points(&scene.accel.tris, None, 2500, 8);
         assert!(pts.len() > 2000);
         let tris = &scene.accel.tris;

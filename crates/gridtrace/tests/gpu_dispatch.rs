@@ -7,6 +7,7 @@
 //!
 //! Fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
+use gridtrace::AccelParams;
 use std::sync::Arc;
 
 use gridtrace::accel::Resolution;
@@ -31,7 +32,7 @@ fn two_d_dispatches_equal_one_d() {
     let grid = scene.prepare(Resolution::default()).unwrap();
     let rays = ray_set(&grid.accel, 5000, 3);
     for accel in gridtrace::testing::gpu_kinds(&one_d) {
-        let prepared = scene.prepare_for(accel, Resolution::default()).unwrap();
+        let prepared = scene.prepare_for(accel, &AccelParams::NONE).unwrap();
         let mut a = GpuRenderer::new(one_d.clone(), &prepared).unwrap();
         let mut b = GpuRenderer::new(two_d.clone(), &prepared).unwrap();
         for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {

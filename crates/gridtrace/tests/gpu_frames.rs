@@ -6,10 +6,11 @@
 //!
 //! Fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
+use gridtrace::AccelParams;
 use std::sync::Arc;
 
 use glam::{Quat, Vec3};
-use gridtrace::accel::{AccelKind, Resolution};
+use gridtrace::accel::AccelKind;
 use gridtrace::gpu::{DeviceImage, Fault, GpuContext};
 use gridtrace::scene::{Camera, PointLight, PreparedScene, builtin};
 use gridtrace::testing::skip_gpu;
@@ -74,7 +75,7 @@ fn frames_in_flight_equal_frames_one_by_one() {
         return;
     }
     let scene = builtin::knot_box()
-        .prepare_for(AccelKind::Bvh, Resolution::default())
+        .prepare_for(AccelKind::Bvh, &AccelParams::NONE)
         .unwrap();
     let ctx = ctx();
     let mut notes = Vec::new();
@@ -152,7 +153,7 @@ fn a_fault_hands_the_frames_in_flight_to_the_cpu() {
         return;
     }
     let scene = builtin::knot_box()
-        .prepare_for(AccelKind::Bvh, Resolution::default())
+        .prepare_for(AccelKind::Bvh, &AccelParams::NONE)
         .unwrap();
     let ctx = ctx();
     let mut notes = Vec::new();

@@ -7,6 +7,7 @@
 //! line says whether ray queries are there, and its hits name the triangles and barycentrics
 //! every walk names.
 
+use gridtrace::AccelParams;
 use std::sync::Arc;
 
 use gridtrace::accel::{AccelChoice, AccelKind, Hit, NoCounters, Resolution, TracedOn, Work};
@@ -18,7 +19,7 @@ use gridtrace::{Backend, Tracer};
 
 fn hwrt_scene() -> gridtrace::PreparedScene {
     builtin::knot_box()
-        .prepare_for(AccelKind::Hwrt, Resolution::default())
+        .prepare_for(AccelKind::Hwrt, &AccelParams::NONE)
         .unwrap()
 }
 

@@ -11,13 +11,14 @@
 //!
 //! Fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
+use gridtrace::AccelParams;
 use std::sync::{Arc, Mutex};
 
 use glam::Vec3;
 use gridtrace::Backend;
 use gridtrace::accel::{
-    Accel, AccelKind, Hit, IrregularGrid, IrregularParams, NoCounters, Ray, Resolution, TriAccel,
-    brute_force_intersect, brute_force_occluded,
+    Accel, AccelKind, Hit, IrregularGrid, IrregularParams, NoCounters, Ray, TriAccel, brute_force_intersect,
+    brute_force_occluded,
 };
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::query::{QueryOptions, TraceMesh};
@@ -88,7 +89,7 @@ fn voxel_rays(g: &IrregularGrid, n: usize, seed: u64) -> Vec<Ray> {
 /// `testing::ray_set`'s adversarial rays (drawn from a uniform grid over the same triangles),
 /// then as many of `voxel_rays`.
 fn rays_for(accel: &Accel, n: usize, seed: u64) -> Vec<Ray> {
-    let grid = Accel::build(accel.tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
+    let grid = Accel::build(accel.tris.clone(), AccelKind::Grid, &AccelParams::NONE).unwrap();
     let mut rays = ray_set(&grid, n / 2, seed);
     rays.extend(voxel_rays(accel.irregular().unwrap(), n - n / 2, seed ^ 0x1EE6));
     rays
@@ -403,11 +404,10 @@ fn other_build_parameters() {
     );
     for (i, (name, params)) in variants.into_iter().enumerate() {
         let scene = PreparedScene {
-            accel: Accel::build_with(
+            accel: Accel::build(
                 mesh.prepared().accel.tris.clone(),
                 AccelKind::Irregular,
-                Resolution::default(),
-                params,
+                &params.to_params(),
             )
             .unwrap(),
             ..mesh.prepared().clone()

@@ -12,6 +12,7 @@
 //!
 //! Fails, not skips, without an adapter; GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
+use gridtrace::AccelParams;
 use std::sync::{Arc, Mutex};
 
 use gridtrace::accel::{Accel, AccelKind, Hit, Resolution};
@@ -94,7 +95,7 @@ fn per_structure(ctx: &GpuContext, scene: &PreparedScene) -> Vec<(AccelKind, Pre
     gridtrace::testing::gpu_kinds(ctx)
         .into_iter()
         .filter(|k| *k != AccelKind::ProximityCloud)
-        .map(|k| (k, scene.with_accel(k, Resolution::default()).unwrap()))
+        .map(|k| (k, scene.with_accel(k, &AccelParams::NONE).unwrap()))
         .collect()
 }
 
@@ -206,7 +207,7 @@ fn variants_give_the_default_hits() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let ctx = context();
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
-    let grid = Accel::build(scene.accel.tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
+    let grid = Accel::build(scene.accel.tris.clone(), AccelKind::Grid, &AccelParams::NONE).unwrap();
     let rays = ray_set(&grid, 40_000, 0x5EED);
     for (kind, scene) in per_structure(&ctx, &scene) {
         let structure = kind.structure_name();

@@ -2,6 +2,7 @@
 //! triangle) and every GPU variant, each frame's image checked against the CPU's before its
 //! time counts, and the CPU's own time on the same frame for the ratio.
 
+use gridtrace::AccelParams;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -11,7 +12,7 @@ use gridtrace::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVa
 use gridtrace::render::differing_pixels;
 use gridtrace::render::{Image, PixelFormat, RenderOptions};
 use gridtrace::scene::PreparedScene;
-use gridtrace::{AccelKind, Mesh, Mode, Resolution, Result};
+use gridtrace::{AccelKind, Mesh, Mode, Result};
 
 use super::{Budget, Plan};
 use crate::scenes::BenchScene;
@@ -141,12 +142,12 @@ pub fn frame_matrix(
             if !budget.allows(&format!("frames of {} with {}", bs.name, accel.name()), skipped) {
                 continue;
             }
-            let prepared = bs.scene.prepare_for(accel, Resolution::default())?;
+            let prepared = bs.scene.prepare_for(accel, &AccelParams::NONE)?;
             // The CPU's row and reference image: the structure's own, or its stand-in's.
             let on_cpu = cpu_reference(accel);
             let cpu_prepared = match on_cpu == accel {
                 true => None,
-                false => Some(bs.scene.prepare_for(on_cpu, Resolution::default())?),
+                false => Some(bs.scene.prepare_for(on_cpu, &AccelParams::NONE)?),
             };
             let mut reference = Vec::new();
             for &mode in &plan.modes {
@@ -192,7 +193,7 @@ pub fn big_frame(
         return Ok(Vec::new());
     }
     let (w, h) = plan.big_frame;
-    let prepared = bs.scene.prepare_for(AccelKind::Bvh, Resolution::default())?;
+    let prepared = bs.scene.prepare_for(AccelKind::Bvh, &AccelParams::NONE)?;
     let opts = RenderOptions::new(w, h, Mode::Trace, AccelKind::Bvh);
     let (cpu, image) = cpu_row(bs, &prepared, &opts)?;
     log(&row_line(&cpu));

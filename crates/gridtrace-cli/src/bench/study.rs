@@ -252,7 +252,7 @@ impl Run<'_> {
         let bs = scenes::build_paper_scene(name, data_dir.as_deref())?;
         let prepared = bs
             .scene
-            .prepare_for(cfg.accels[0], bs.resolution(cfg.paper_grids, cfg.grid))?;
+            .prepare_for(cfg.accels[0], &bs.params_for(cfg.accels[0], cfg.paper_grids, cfg.grid))?;
         let opts = RenderOptions::new(first_res.0, first_res.1, mode, cfg.accels[0]);
         let set = bench::rays::collect_rays(&prepared, &opts)?;
         let c = set.counts();

@@ -30,7 +30,7 @@ impl App {
             Some(i) => i,
             None => {
                 let t0 = Instant::now();
-                let scene = crate::common::prepare(&self.src, &self.name, self.accel, &self.grid_args)?;
+                let scene = crate::common::prepare(&self.src, &self.name, self.accel, &self.accel_args)?;
                 let tracer = Tracer::open_variants(
                     scene,
                     self.ctx.as_ref(),
@@ -162,7 +162,7 @@ impl App {
                 } else {
                     println!("drop {}: loading", path.display());
                     self.drop_error = None;
-                    self.loader = Some(loader::Loader::start(path, self.accel, self.grid_args.clone()));
+                    self.loader = Some(loader::Loader::start(path, self.accel, self.accel_args.clone()));
                 }
             }
             Action::Screenshot(path) => {

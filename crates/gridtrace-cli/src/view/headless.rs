@@ -35,13 +35,13 @@ fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Ve
 
 pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
     let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.grid.accel_for(
+    let accel = a.accel_args.accel_for(
         gridtrace::backend::traced_on(ctx.as_deref()),
         gridtrace::Work::Render,
         &mut notes,
     );
     let t0 = Instant::now();
-    let scene = crate::common::prepare(&src, name, accel, &a.grid)?;
+    let scene = crate::common::prepare(&src, name, accel, &a.accel_args)?;
     println!(
         "scene {name}: {} triangles, {} (prepared in {:.0} ms)",
         scene.accel.tris.len(),

@@ -10,7 +10,7 @@ use std::time::Instant;
 use gridtrace::AccelKind;
 use gridtrace::scene::{PreparedScene, Scene};
 
-use crate::common::{GridArgs, SceneArgs};
+use crate::common::{AccelArgs, SceneArgs};
 
 /// A loaded file: its scene, its name, and the scene prepared for the structure on screen.
 pub struct Loaded {
@@ -31,8 +31,8 @@ pub struct Loader {
 
 impl Loader {
     /// Starts loading `path` (a mesh in an auto-framed scene with a floor, or a TOML scene),
-    /// prepared for `accel` with `grid`.
-    pub fn start(path: PathBuf, accel: AccelKind, grid: GridArgs) -> Loader {
+    /// prepared for `accel` with the parameters given for it.
+    pub fn start(path: PathBuf, accel: AccelKind, accel_args: AccelArgs) -> Loader {
         let stage = Arc::new(Mutex::new("reading"));
         let s = stage.clone();
         let p = path.clone();
@@ -44,7 +44,7 @@ impl Loader {
             };
             let (src, name) = args.load(true)?;
             *s.lock().unwrap_or_else(|e| e.into_inner()) = "building the structure";
-            let prepared = crate::common::prepare(&src, &name, accel, &grid)?;
+            let prepared = crate::common::prepare(&src, &name, accel, &accel_args)?;
             Ok(Loaded {
                 accel,
                 src,

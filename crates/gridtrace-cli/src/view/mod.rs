@@ -44,7 +44,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::common::{GpuVariantArgs, GridArgs, SceneArgs, backend_parser, mode_parser, parse_res};
+use crate::common::{AccelArgs, GpuVariantArgs, SceneArgs, backend_parser, mode_parser, parse_res};
 use controls::{Action, MAX_SCALE_STEPS, Orbit, key_action, next_accel, project, unproject};
 use gridtrace::Tracer;
 use overlay::{GIZMO_RADIUS_PT, HISTORY, Hud};
@@ -55,7 +55,7 @@ pub struct ViewArgs {
     #[command(flatten)]
     scene: SceneArgs,
     #[command(flatten)]
-    grid: GridArgs,
+    accel_args: AccelArgs,
     /// The first mode: cast, shadow, trace or heat (keys 1-4 switch).
     #[arg(long, default_value = "shadow", value_parser = mode_parser())]
     mode: Mode,
@@ -138,7 +138,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     let (ctx, mut notes) = a
         .backend
         .open_device_with(|| wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display)))?;
-    let accel = a.grid.accel_for(
+    let accel = a.accel_args.accel_for(
         gridtrace::backend::traced_on(ctx.as_deref()),
         gridtrace::Work::Render,
         &mut notes,
@@ -150,7 +150,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     let mut app = App {
         name,
         src,
-        grid_args: a.grid.clone(),
+        accel_args: a.accel_args.clone(),
         backend: a.backend,
         gpu_variants: a.gpu.gpu_variant,
         ctx,
@@ -240,7 +240,7 @@ enum Drag {
 struct App {
     name: String,
     src: Scene,
-    grid_args: GridArgs,
+    accel_args: AccelArgs,
     backend: Backend,
     /// `--gpu-variant`: the kernels of every tracer on the GPU.
     gpu_variants: gridtrace::gpu::GpuVariants,

@@ -57,10 +57,11 @@ _ensure_runtime_dir()
 
 from ._gridtrace import NativeMesh as _NativeMesh  # noqa: E402
 from ._gridtrace import ACCELS as _ACCELS  # noqa: E402
+from ._gridtrace import ACCEL_PARAMS as _ACCEL_PARAMS  # noqa: E402
 from ._gridtrace import GPU_VARIANTS as _GPU_VARIANTS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
-from .scene import INVALID_ID, Scene  # noqa: E402
+from .scene import INVALID_ID, Scene, _params_of_state  # noqa: E402
 
 # `gridtrace.trimesh` after a plain `import gridtrace`, as the README writes it. Importing it
 # costs nothing: it is pure Python over `Scene` and does not import trimesh itself (an optional
@@ -70,13 +71,17 @@ from . import trimesh  # noqa: E402
 #: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
 ACCELS: tuple = tuple(_ACCELS)
 
+#: Each structure's build parameters, in words (``""``: none): what ``accel="NAME:KEY=VALUE,..."``
+#: and ``accel_params=`` take for it (from the library's registry; the structure reads them).
+ACCEL_PARAMS: dict = dict(_ACCEL_PARAMS)
+
 #: The keys ``gpu_variant=`` accepts (from the library's table of GPU variants), each with
 #: ``values`` (the default first), ``numbered`` (``(prefix, min, max)`` for values such as
 #: ``"short3"``, else ``None``), ``default``, ``structures`` (those whose walk it changes;
 #: ``None``: every structure) and ``help``.
 GPU_VARIANTS: dict = dict(_GPU_VARIANTS)
 
-__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "GPU_VARIANTS", "__version__", "trimesh"]
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "ACCEL_PARAMS", "GPU_VARIANTS", "__version__", "trimesh"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)
@@ -142,10 +147,12 @@ class Mesh:
     each on the CPU and the GPU, ``"brute"`` (every triangle per ray, CPU and GPU: a check for
     small meshes), or ``"hwrt"`` (the GPU's ray-tracing hardware by ray query, ``backend="gpu"``
     on an adapter with ray queries only: elsewhere its rays are an error naming what is
-    missing; closest points by a BVH); ``gridtrace.ACCELS`` lists them; ``irregular`` tunes the irregular grid's build
-    (``"top=0.12,cell=2,alpha=1,merge=8,expand=3"``, any subset; ``""`` for the defaults);
-    ``grid`` is ``"auto"``, ``"auto:LAMBDA"``
-    or ``"AxBxC"``, ``backend`` is ``"auto"`` (a hardware GPU if present, else the CPU: a software adapter such as
+    missing; closest points by a BVH); ``gridtrace.ACCELS`` lists them. The structure's build
+    parameters follow its name after a colon or go in ``accel_params``, ``"KEY=VALUE,..."``, and
+    the structure reads them itself: ``"grid:res=64"`` or ``accel="pc", accel_params="res=4x4x4"``
+    (``res`` is ``"auto"``, ``"auto:LAMBDA"`` cells per triangle, ``"N"`` or ``"AxBxC"``);
+    ``"irregular:top=0.12,cell=2,alpha=1,merge=8,expand=3"`` (any subset); ``gridtrace.ACCEL_PARAMS``
+    lists each structure's keys; ``""`` for the defaults. ``backend`` is ``"auto"`` (a hardware GPU if present, else the CPU: a software adapter such as
     lavapipe is slower than the CPU tracer on the same cores), ``"gpu"`` or ``"cpu"``.
     ``gpu_variant`` chooses the GPU kernels' variants where the mesh traces on a GPU
     (``"bvh=wide8,stack=short"``: any subset of the keys ``gridtrace.GPU_VARIANTS`` lists; ``""``
@@ -153,7 +160,7 @@ class Mesh:
     Degenerate faces are kept in the numbering but can never be hit.
     """
 
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "", gpu_variant: str = ""):
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike, accel: str = "auto", backend: str = "auto", accel_params: str = "", gpu_variant: str = ""):
         v = _points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3:
@@ -163,16 +170,16 @@ class Mesh:
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(f"faces index vertices out of range 0..{len(v) - 1}")
         self._backend = backend
-        self._params = (accel, grid, irregular, backend, gpu_variant)
-        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, grid, irregular, backend, gpu_variant)
+        self._params = (accel, accel_params, backend, gpu_variant)
+        self._native = _NativeMesh(v, np.ascontiguousarray(f, dtype=np.uint32), accel, accel_params, backend, gpu_variant)
 
     @classmethod
-    def load(cls, path: Union[str, PathLike], accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "", gpu_variant: str = "") -> "Mesh":
+    def load(cls, path: Union[str, PathLike], accel: str = "auto", backend: str = "auto", accel_params: str = "", gpu_variant: str = "") -> "Mesh":
         """Loads an OBJ, PLY, glTF/GLB, STL or OFF file."""
         self = cls.__new__(cls)
         self._backend = backend
-        self._params = (accel, grid, irregular, backend, gpu_variant)
-        self._native = _NativeMesh.load(str(path), accel, grid, irregular, backend, gpu_variant)
+        self._params = (accel, accel_params, backend, gpu_variant)
+        self._native = _NativeMesh.load(str(path), accel, accel_params, backend, gpu_variant)
         return self
 
     @property
@@ -205,12 +212,12 @@ class Mesh:
         return {"params": self._params, "vertices": self.vertices, "faces": self.faces}
 
     def __setstate__(self, state):
-        accel, grid, irregular, backend, gpu_variant = self._params = tuple(state["params"])
+        accel, accel_params, backend, gpu_variant = self._params = _params_of_state(state["params"])
         self._backend = backend
         # Serialisers may hand arrays back as views of a buffer: make them C-ordered and aligned.
         v = np.require(state["vertices"], dtype=np.float32, requirements="CA")
         f = np.require(state["faces"], dtype=np.uint32, requirements="CA")
-        self._native = _NativeMesh(v, f, accel, grid, irregular, backend, gpu_variant)
+        self._native = _NativeMesh(v, f, accel, accel_params, backend, gpu_variant)
 
     def __repr__(self) -> str:
         return f"gridtrace.Mesh({len(self.faces)} faces, accel={self._params[0]!r}, backend={self._backend!r})"
@@ -264,11 +271,12 @@ class Mesh:
         return self._native.occluded(o, d, t_min, t_max, backend or self._backend, int(threads))
 
 
-def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", grid: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "", stats: bool = False):
+def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "", stats: bool = False, accel_params: str = ""):
     """Renders a built-in scene (``"knot-box"``, ``"mirror-spheres"``, ``"sparse-room"``), a TOML
     scene file or a mesh file; returns an (height, width, 3) uint8 sRGB image.
     ``mode`` is ``"cast"``, ``"shadow"``, ``"trace"`` or ``"heat"``. An unknown scene name raises
-    ``ValueError`` listing the built-in scenes. ``gpu_variant`` as for ``Mesh``.
+    ``ValueError`` listing the built-in scenes. ``accel``, ``accel_params`` and ``gpu_variant`` as
+    for ``Mesh`` (``auto`` picks for renders).
 
     With ``stats=True`` returns ``(image, stats)``: a dict with the CLI's meanings —
     ``backend`` (``"gpu"`` or ``"cpu"``), ``wall_ms`` (upload to image in host memory),
@@ -279,5 +287,5 @@ def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: i
         raise ValueError(f"image size must be positive, got {width}x{height}")
     e = None if eye is None else [float(x) for x in eye]
     t = None if target is None else [float(x) for x in target]
-    image, figures = _render(str(scene), int(width), int(height), mode, accel, grid, backend, e, t, gpu_variant)
+    image, figures = _render(str(scene), int(width), int(height), mode, accel, accel_params, backend, e, t, gpu_variant)
     return (image, figures) if stats else image

@@ -73,10 +73,27 @@ def _mat4(transform) -> Optional[np.ndarray]:
     return _f32(t)
 
 
+def _params_of_state(params) -> tuple:
+    """A pickle's parameters as ``(accel, accel_params, backend, gpu_variant)``. Pickles made
+    before the structures read their own parameters hold ``(accel, grid, irregular, backend,
+    gpu_variant)``: their grid resolution and irregular grid's build become ``accel_params``, for
+    whichever of the two the structure is."""
+    params = tuple(params)
+    if len(params) == 5:
+        accel, grid, irregular, backend, gpu_variant = params
+        name = accel.split(":", 1)[0]
+        if name in ("grid", "g", "pc", "proximity"):
+            extra = "" if grid == "auto" else f"res={grid}"
+        else:
+            extra = irregular if name in ("irregular", "irr") else ""
+        return (accel, extra, backend, gpu_variant)
+    return params
+
+
 class Scene:
     """Several triangle meshes, each with an id and a 4x4 transform, for ray and point queries.
 
-    ``accel``, ``grid``, ``irregular``, ``backend`` and ``gpu_variant`` are as for :class:`gridtrace.Mesh`
+    ``accel``, ``accel_params``, ``backend`` and ``gpu_variant`` are as for :class:`gridtrace.Mesh`
     (``"auto"``: the BVH, on a hardware GPU if there is one, else on the CPU). Ray queries
     (``cast_rays``, ``test_occlusions``) and the nearest-point search of the point queries
     (``compute_closest_points``, ``compute_distance``, the distance of
@@ -90,9 +107,9 @@ class Scene:
 
     INVALID_ID = INVALID_ID
 
-    def __init__(self, accel: str = "auto", grid: str = "auto", backend: str = "auto", irregular: str = "", gpu_variant: str = ""):
-        self._params = (accel, grid, irregular, backend, gpu_variant)
-        self._native = _NativeScene(accel, grid, irregular, backend, gpu_variant)
+    def __init__(self, accel: str = "auto", backend: str = "auto", accel_params: str = "", gpu_variant: str = ""):
+        self._params = (accel, accel_params, backend, gpu_variant)
+        self._native = _NativeScene(accel, accel_params, backend, gpu_variant)
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -253,17 +270,17 @@ class Scene:
         return {"params": self._params, "next_id": next_id, "geometries": geometries}
 
     def __setstate__(self, state):
-        self._params = tuple(state["params"])
-        accel, grid, irregular, backend, gpu_variant = self._params
+        self._params = _params_of_state(state["params"])
+        accel, accel_params, backend, gpu_variant = self._params
         # Serialisers (Dask's among them) may hand arrays back as views of a buffer: make them
         # the C-ordered arrays the native side reads.
         geometries = [
             (int(i), _f32(v), np.require(f, dtype=np.uint32, requirements="CA"), _f32(t)) for i, v, f, t in state["geometries"]
         ]
-        self._native = _NativeScene.from_parts(accel, grid, irregular, backend, int(state["next_id"]), geometries, gpu_variant)
+        self._native = _NativeScene.from_parts(accel, accel_params, backend, int(state["next_id"]), geometries, gpu_variant)
 
     def __repr__(self) -> str:
-        return f"gridtrace.Scene({len(self.geometry_ids)} geometries, {self.triangle_count} triangles, accel={self._params[0]!r}, backend={self._params[3]!r})"
+        return f"gridtrace.Scene({len(self.geometry_ids)} geometries, {self.triangle_count} triangles, accel={self._params[0]!r}, backend={self._params[2]!r})"
 
 
 def _id(geometry_id) -> int:

@@ -11,18 +11,8 @@ use glam::Vec3;
 
 use super::binning::grid_bounds;
 use super::closest::{ClosestPoint, closest_point_brute};
-use super::{Aabb, AccelKind, Counters, Hit, IrregularParams, NoCounters, PACKET, Ray, Resolution, TriAccel};
+use super::{Aabb, AccelKind, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel};
 use crate::Result;
-
-/// Everything a build may be parameterised by; each structure reads its own part (the uniform
-/// grids the resolution, the irregular grid its parameters) and ignores the rest.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct BuildParams {
-    /// The uniform grid's cell count (`--grid`).
-    pub resolution: Resolution,
-    /// The irregular grid's build (`--irregular`).
-    pub irregular: IrregularParams,
-}
 
 /// One acceleration structure over triangles: its build, its update when the triangles move,
 /// what it reports, and its closest-hit and any-hit walks for single rays, packets and batches.
@@ -33,14 +23,22 @@ pub struct BuildParams {
 /// when it has something faster that gives the same hits and counts bit for bit (the shared
 /// tests check it for every structure).
 pub trait AccelStructure: Sized {
-    /// Builds over `tris` (checked finite by the caller or refused by the build).
-    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<Self>;
+    /// Builds over `tris` (checked finite by the caller or refused by the build), reading its
+    /// own keys of `params` (`AccelParams::read`: an unknown key or a bad value is an error that
+    /// names them) and keeping what it read, for `params` and `update`.
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Self>;
 
-    /// The triangles moved (same count and order): rebuild by default; a structure that can do
-    /// better (the BVH's refit) says so. On an error nothing has changed. Returns what was done,
-    /// in a word.
-    fn update(&mut self, tris: &[TriAccel], params: &BuildParams) -> Result<&'static str> {
-        *self = Self::build(tris, params)?;
+    /// The parameters it was built with, as `build` reads them (empty for a structure that
+    /// takes none).
+    fn params(&self) -> AccelParams {
+        AccelParams::NONE
+    }
+
+    /// The triangles moved (same count and order): rebuilt as it was built by default; a
+    /// structure that can do better (the BVH's refit) says so. On an error nothing has changed.
+    /// Returns what was done, in a word.
+    fn update(&mut self, tris: &[TriAccel]) -> Result<&'static str> {
+        *self = Self::build(tris, &self.params())?;
         Ok("rebuilt")
     }
 
@@ -58,7 +56,7 @@ pub trait AccelStructure: Sized {
     fn summary(&self) -> String;
 
     /// The structure's statistics, a line each (`gridtrace info`), as `label  value`.
-    fn info_lines(&self, _tris: &[TriAccel], _params: &BuildParams) -> Result<Vec<(String, String)>> {
+    fn info_lines(&self, _tris: &[TriAccel]) -> Result<Vec<(String, String)>> {
         Ok(vec![("structure".into(), self.summary())])
     }
 

@@ -23,6 +23,7 @@ pub mod hwrt;
 pub mod irregular;
 pub mod lanes;
 pub mod lattice;
+pub mod params;
 pub mod ray;
 pub mod registry;
 pub mod resolution;
@@ -38,11 +39,12 @@ pub use binning::grid_bounds;
 pub use brute::Brute;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
-pub use contract::{AccelStructure, BuildParams};
+pub use contract::AccelStructure;
 pub use grid::{Cell, Grid, GridLattice, GridStats, Stepping};
 pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
+pub use params::AccelParams;
 pub use ray::{Counters, Hit, NoCounters, Ray, TraversalCounters};
-pub use registry::{AccelChoice, AccelEntry, AccelKind, TracedOn, Work};
+pub use registry::{AccelChoice, AccelEntry, AccelKind, AccelSpec, TracedOn, Work};
 pub use resolution::{DEFAULT_LAMBDA, MAX_CELLS, Resolution, dims_str};
 pub use simd::PACKET;
 pub use triangle::{LaneHits, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};
@@ -81,8 +83,8 @@ macro_rules! dispatch {
 }
 
 impl Structure {
-    /// Builds the structure `kind` walks.
-    pub fn build(kind: AccelKind, tris: &[TriAccel], params: &BuildParams) -> Result<Structure> {
+    /// Builds the structure `kind` walks, which reads its own keys of `params`.
+    pub fn build(kind: AccelKind, tris: &[TriAccel], params: &AccelParams) -> Result<Structure> {
         Ok(match kind.structure_name() {
             "grid" => Structure::Grid(AccelStructure::build(tris, params)?),
             "bvh" => Structure::Bvh(AccelStructure::build(tris, params)?),
@@ -110,11 +112,9 @@ impl Structure {
 pub struct Accel {
     /// The triangles, in the order hits name them (`Hit::tri`).
     pub tris: Vec<TriAccel>,
+    /// The structure, which keeps the parameters it was built with (`params`), so that
+    /// `update` builds it the same way after the triangles move.
     pub structure: Structure,
-    /// How the structure was built, so that `update` builds it the same way after the
-    /// triangles move.
-    pub resolution: Resolution,
-    pub irregular: IrregularParams,
     /// Set when the triangles moved and the structure was left to a GPU to rebuild
     /// (`update_triangles_only`): CPU traversal of it would be wrong, and `check_current`
     /// says so.
@@ -122,26 +122,13 @@ pub struct Accel {
 }
 
 impl Accel {
-    /// Builds the structure that serves `kind` over `tris` (`resolution` sizes a grid; the other
-    /// structures ignore it; the irregular grid gets `IrregularParams::default()`).
-    pub fn build(tris: Vec<TriAccel>, kind: AccelKind, resolution: Resolution) -> Result<Accel> {
-        Self::build_with(tris, kind, resolution, IrregularParams::default())
-    }
-
-    /// `build`, with the irregular grid's parameters (the other structures ignore them).
-    pub fn build_with(
-        tris: Vec<TriAccel>,
-        kind: AccelKind,
-        resolution: Resolution,
-        irregular: IrregularParams,
-    ) -> Result<Accel> {
-        let params = BuildParams { resolution, irregular };
-        let structure = Structure::build(kind, &tris, &params)?;
+    /// Builds the structure that serves `kind` over `tris`; the structure reads its own keys of
+    /// `params` (`AccelParams::NONE`: its defaults) and refuses the others.
+    pub fn build(tris: Vec<TriAccel>, kind: AccelKind, params: &AccelParams) -> Result<Accel> {
+        let structure = Structure::build(kind, &tris, params)?;
         Ok(Accel {
             tris,
             structure,
-            resolution,
-            irregular,
             structure_stale: false,
         })
     }
@@ -150,19 +137,14 @@ impl Accel {
     pub fn from_grid(grid: Grid, tris: Vec<TriAccel>) -> Accel {
         Accel {
             tris,
-            resolution: Resolution::Fixed(grid.dims.to_array()),
             structure: Structure::Grid(grid),
-            irregular: IrregularParams::default(),
             structure_stale: false,
         }
     }
 
-    /// How the structure was built (`update` builds it the same way).
-    pub fn params(&self) -> BuildParams {
-        BuildParams {
-            resolution: self.resolution,
-            irregular: self.irregular,
-        }
+    /// The parameters the structure was built with (`update` builds it the same way).
+    pub fn params(&self) -> AccelParams {
+        dispatch!(&self.structure, s => AccelStructure::params(s))
     }
 
     /// New positions of the same triangles (same count and order): each structure updates as
@@ -171,10 +153,9 @@ impl Accel {
     /// the BVH is refitted). On an error nothing has changed. Returns what was done.
     pub fn update(&mut self, tris: Vec<TriAccel>) -> Result<&'static str> {
         self.check_same_count(&tris)?;
-        let params = self.params();
         // A build that fails returns before anything is assigned (`update` builds into a new
         // value and assigns it last); a refit cannot fail.
-        let how = dispatch!(&mut self.structure, s => AccelStructure::update(s, &tris, &params))?;
+        let how = dispatch!(&mut self.structure, s => AccelStructure::update(s, &tris))?;
         self.tris = tris;
         self.structure_stale = false;
         Ok(how)
@@ -276,8 +257,7 @@ impl Accel {
 
     /// The structure's statistics for `gridtrace info`, a `(label, value)` each.
     pub fn info_lines(&self) -> Result<Vec<(String, String)>> {
-        let params = self.params();
-        dispatch!(&self.structure, s => AccelStructure::info_lines(s, &self.tris, &params))
+        dispatch!(&self.structure, s => AccelStructure::info_lines(s, &self.tris))
     }
 
     /// Whether this structure can run traversal `kind`.

@@ -1,10 +1,13 @@
 //! The one list of structures: each traversal's name and aliases as users type them
-//! (`--accel`, Python's `accel=`), the structure it walks, what it is for, and which build
-//! parameters it reads. The CLI's values and help, Python's accepted names, the viewer's G
+//! (`--accel`, Python's `accel=`), the structure it walks, what it is for, and the build
+//! parameters it reads (in words: each structure parses its own, `params.rs`). The CLI's
+//! values and help, Python's accepted names, the viewer's G
 //! cycle, the benchmarks' columns and the tests' "every structure" all come from here.
 //!
 //! Adding a structure: its folder (implementing `contract::AccelStructure`), one `AccelKind`
 //! variant and one `ENTRIES` row here, one arm of `Structure` in `mod.rs`.
+
+use super::AccelParams;
 
 /// Which traversal (and so which structure) is used.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -23,16 +26,6 @@ pub enum AccelKind {
     Hwrt,
 }
 
-/// The build parameters a structure reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Params {
-    None,
-    /// The uniform grid's resolution (`--grid`).
-    Resolution,
-    /// The irregular grid's build (`--irregular`).
-    Irregular,
-}
-
 /// One row of the registry.
 #[derive(Debug, Clone, Copy)]
 pub struct AccelEntry {
@@ -46,7 +39,9 @@ pub struct AccelEntry {
     pub structure: &'static str,
     /// One line for help texts.
     pub about: &'static str,
-    pub params: Params,
+    /// The build parameters its structure reads, for help texts (`NAME:KEY=VALUE,...`); the
+    /// structure parses them itself (`AccelStructure::build`), so this is words only.
+    pub params: &'static str,
     /// Whether a ray tests every triangle (brute force): tests on large meshes give it a sample
     /// of their rays.
     pub every_triangle: bool,
@@ -69,7 +64,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         aliases: &["g"],
         structure: "grid",
         about: "the paper's uniform grid, one DDA step per cell",
-        params: Params::Resolution,
+        params: "res=auto|auto:LAMBDA|N|AxBxC (cells: auto at LAMBDA=4 cells per triangle)",
         every_triangle: false,
         gpu: true,
         interactive: true,
@@ -81,7 +76,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         aliases: &["proximity"],
         structure: "grid",
         about: "the uniform grid with proximity clouds: jumps over empty cells",
-        params: Params::Resolution,
+        params: "res=auto|auto:LAMBDA|N|AxBxC (cells: auto at LAMBDA=4 cells per triangle)",
         every_triangle: false,
         gpu: true,
         interactive: true,
@@ -93,7 +88,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         aliases: &[],
         structure: "bvh",
         about: "an eight-wide SAH bounding volume hierarchy (fastest for incoherent rays)",
-        params: Params::None,
+        params: "",
         every_triangle: false,
         gpu: true,
         interactive: true,
@@ -105,7 +100,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         aliases: &["irr"],
         structure: "irregular",
         about: "an irregular grid: merged and expanded cells, point lookups instead of a DDA",
-        params: Params::Irregular,
+        params: "top=0.12,cell=2,alpha=1,merge=8,expand=3 (top cells per triangle, cells per reference, merge alpha, merge and expansion passes)",
         every_triangle: false,
         gpu: true,
         interactive: true,
@@ -117,7 +112,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         aliases: &["brute-force"],
         structure: "brute",
         about: "no structure: every triangle per ray (the oracle; small meshes and checks)",
-        params: Params::None,
+        params: "",
         every_triangle: true,
         gpu: true,
         interactive: false,
@@ -129,7 +124,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         aliases: &["ray-query"],
         structure: "hwrt",
         about: "the GPU's ray-tracing hardware by ray query (GPU only; closest points by a BVH)",
-        params: Params::None,
+        params: "",
         every_triangle: false,
         gpu: true,
         // The G cycle must run on every tracer, and this one only on a GPU with ray queries:
@@ -259,6 +254,70 @@ impl std::str::FromStr for AccelChoice {
         s.parse::<AccelKind>()
             .map(AccelChoice::Kind)
             .map_err(|_| format!("accel must be 'auto', {}, got '{s}'", AccelKind::names_list()))
+    }
+}
+
+/// What `--accel` (Python's `accel=`, `accel_params=`) asks for: a choice, and the parameters
+/// its structure is built with (`irregular:top=0.2,cell=4`; `grid:res=64`). The parameters are
+/// words here; the structure reads them when it is built (`AccelStructure::build`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct AccelSpec {
+    pub choice: AccelChoice,
+    pub params: AccelParams,
+}
+
+impl From<AccelKind> for AccelSpec {
+    fn from(k: AccelKind) -> Self {
+        AccelSpec {
+            choice: AccelChoice::Kind(k),
+            params: AccelParams::NONE,
+        }
+    }
+}
+
+impl std::str::FromStr for AccelSpec {
+    type Err = String;
+    /// `NAME`, `NAME:KEY=VALUE,...` or `auto`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (name, params) = s.split_once(':').unwrap_or((s, ""));
+        AccelSpec {
+            choice: name.trim().parse()?,
+            params: AccelParams::NONE,
+        }
+        .with_params(&params.parse()?)
+    }
+}
+
+impl std::fmt::Display for AccelSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.choice {
+            AccelChoice::Auto => f.write_str("auto")?,
+            AccelChoice::Kind(k) => f.write_str(k.name())?,
+        }
+        if !self.params.is_empty() {
+            write!(f, ":{}", self.params)?;
+        }
+        Ok(())
+    }
+}
+
+impl AccelSpec {
+    /// More parameters (`--accel-params`, Python's `accel_params=`): a key given twice takes
+    /// the later value. `auto` takes none, since which structure would read them is not known
+    /// until it has picked.
+    pub fn with_params(mut self, more: &AccelParams) -> Result<AccelSpec, String> {
+        if self.choice == AccelChoice::Auto && !more.is_empty() {
+            return Err(format!(
+                "parameters '{more}' need a structure named: 'auto' picks one itself (accel NAME:{more})"
+            ));
+        }
+        self.params = self.params.merged(more);
+        Ok(self)
+    }
+
+    /// `AccelChoice::resolve`'s pick, with these parameters.
+    pub fn resolve(&self, traced_on: TracedOn, work: Work) -> (AccelKind, Option<String>) {
+        self.choice.resolve(traced_on, work)
     }
 }
 

@@ -1,4 +1,4 @@
-//! How many cells a lattice over the scene has: the uniform grid's resolution (`--grid`) and the
+//! How many cells a lattice over the scene has: the uniform grid's resolution (`--accel grid:res=...`) and the
 //! cube-root rule that the uniform grid and the irregular grid's top level share.
 
 use glam::{UVec3, Vec3};
@@ -23,6 +23,17 @@ pub enum Resolution {
 impl Default for Resolution {
     fn default() -> Self {
         Resolution::Auto { lambda: DEFAULT_LAMBDA }
+    }
+}
+
+impl std::fmt::Display for Resolution {
+    /// The form `FromStr` reads: `auto`, `auto:LAMBDA` or `AxBxC`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Resolution::Auto { lambda } if lambda == DEFAULT_LAMBDA => f.write_str("auto"),
+            Resolution::Auto { lambda } => write!(f, "auto:{lambda}"),
+            Resolution::Fixed([a, b, c]) => write!(f, "{a}x{b}x{c}"),
+        }
     }
 }
 

@@ -189,7 +189,7 @@ fn trace_pixel<C: Counters, O: RayObserver>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::accel::{AccelKind, Resolution};
+    use crate::accel::{AccelKind, AccelParams};
     use crate::render::Ablation;
     use crate::scene::builtin;
 
@@ -207,7 +207,7 @@ mod tests {
             .flat_map(|kind| ["knot-box", "mirror-spheres", "sparse-room"].map(|name| (name, kind)))
         {
             let scene = builtin::scene(name).unwrap();
-            let prepared = scene.prepare_for(kind, Resolution::default()).unwrap();
+            let prepared = scene.prepare_for(kind, &AccelParams::NONE).unwrap();
             for (mode, ablation, rows) in [
                 (Mode::Cast, Ablation::default(), None),
                 (Mode::Shadow, Ablation::default(), Some((5, 18))),

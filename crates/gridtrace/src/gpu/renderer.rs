@@ -237,7 +237,9 @@ impl GpuRenderer {
         q.write_buffer(&self.scene.tris, 0, bytemuck::cast_slice(&GpuTri::all(tris)));
         q.write_buffer(&self.scene.tri_shade, 0, bytemuck::cast_slice(&tri_shade(scene)));
         stats.upload_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let lattice = GridLattice::new(tris, scene.accel.resolution)?;
+        // The grid's own resolution: an automatic one sizes the cells for the moved bounds.
+        let resolution = scene.accel.grid().map(|g| g.resolution).unwrap_or_default();
+        let lattice = GridLattice::new(tris, resolution)?;
         let grid = match &mut self.device_grid {
             Some(g) => g,
             None => self.device_grid.insert(GpuGrid::new(self.ctx.clone())?),

@@ -32,7 +32,7 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use glam::{Mat4, Vec3};
 
-use crate::accel::{AccelChoice, AccelKind, IrregularParams, Resolution, Work};
+use crate::accel::{AccelKind, AccelSpec, Work};
 use crate::gpu::{GpuContext, GpuRenderer, GpuVariants};
 use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
@@ -50,14 +50,11 @@ pub use hits::Hits;
 /// Where ray queries run (the same choice as rendering's).
 pub use crate::backend::Backend;
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct QueryOptions {
-    /// The structure, or `auto` (the one measured fastest for ray batches; `TraceMesh::notes`
-    /// says which it picked).
-    pub accel: AccelChoice,
-    pub grid: Resolution,
-    /// The irregular grid's build (`accel = irregular` only).
-    pub irregular: IrregularParams,
+    /// The structure and its build parameters, or `auto` (the one measured fastest for ray
+    /// batches; `TraceMesh::notes` says which it picked).
+    pub accel: AccelSpec,
     pub backend: Backend,
     /// The GPU kernels and layouts, where the queries run on a GPU (`gpu::variants`).
     pub gpu_variants: GpuVariants,
@@ -66,9 +63,7 @@ pub struct QueryOptions {
 impl Default for QueryOptions {
     fn default() -> Self {
         QueryOptions {
-            accel: AccelChoice::Auto,
-            grid: Resolution::default(),
-            irregular: IrregularParams::default(),
+            accel: AccelSpec::default(),
             backend: Backend::Auto,
             gpu_variants: GpuVariants::default(),
         }
@@ -163,7 +158,7 @@ impl TraceMesh {
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
         let (accel, note) = opts.accel.resolve(opts.backend.traced_on(), Work::Rays);
-        let prepared = scene.prepare_with(accel, opts.grid, opts.irregular)?;
+        let prepared = scene.prepare_for(accel, &opts.accel.params)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
         let mesh = TraceMesh {

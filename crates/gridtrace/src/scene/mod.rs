@@ -12,7 +12,7 @@ use glam::{Mat4, Vec3};
 pub use crate::mesh::{Material, Mesh};
 pub use camera::{Camera, CameraFrame};
 
-use crate::accel::{Aabb, Accel, AccelKind, IrregularParams, Resolution, TriAccel};
+use crate::accel::{Aabb, Accel, AccelKind, AccelParams, Resolution, TriAccel};
 use crate::{Error, Result};
 
 /// A point light. Irradiance falls off with the squared distance: `intensity / d^2`.
@@ -99,24 +99,15 @@ impl Scene {
         Aabb::from_points(&self.mesh.positions)
     }
 
-    /// Validates the scene and builds everything the tracers need, with a grid (which serves
-    /// `AccelKind::Grid` and `AccelKind::ProximityCloud`).
+    /// Validates the scene and builds everything the tracers need, with the paper's grid at
+    /// `resolution` (which serves `AccelKind::Grid` and `AccelKind::ProximityCloud`).
     pub fn prepare(&self, resolution: Resolution) -> Result<PreparedScene> {
-        self.prepare_for(AccelKind::Grid, resolution)
+        self.prepare_for(AccelKind::Grid, &resolution.into())
     }
 
-    /// `prepare`, building the structure that serves `accel` (`resolution` sizes a grid).
-    pub fn prepare_for(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
-        self.prepare_with(accel, resolution, IrregularParams::default())
-    }
-
-    /// `prepare_for`, with the irregular grid's build parameters (`Accel::build_with`).
-    pub fn prepare_with(
-        &self,
-        accel: AccelKind,
-        resolution: Resolution,
-        irregular: IrregularParams,
-    ) -> Result<PreparedScene> {
+    /// `prepare`, building the structure that serves `accel`, which reads its own keys of
+    /// `params` (`AccelParams::NONE`: its defaults).
+    pub fn prepare_for(&self, accel: AccelKind, params: &AccelParams) -> Result<PreparedScene> {
         self.camera.validate().map_err(Error::Scene)?;
         for (i, l) in self.lights.iter().enumerate() {
             if !(Vec3::from(l.position).is_finite() && Vec3::from(l.intensity).is_finite()) {
@@ -175,7 +166,7 @@ impl Scene {
         }
         let ray_epsilon = ray_epsilon(&m.positions);
         Ok(PreparedScene {
-            accel: Accel::build_with(tris, accel, resolution, irregular)?,
+            accel: Accel::build(tris, accel, params)?,
             normals,
             tri_vertices,
             tri_material,
@@ -289,13 +280,14 @@ impl PreparedScene {
         })
     }
 
-    /// The same scene with the structure for `accel` (rebuilt unless it already serves it).
-    pub fn with_accel(&self, accel: AccelKind, resolution: Resolution) -> Result<PreparedScene> {
+    /// The same scene with the structure for `accel` (rebuilt, with `params`, unless it already
+    /// serves it).
+    pub fn with_accel(&self, accel: AccelKind, params: &AccelParams) -> Result<PreparedScene> {
         if self.accel.serves(accel) {
             return Ok(self.clone());
         }
         Ok(PreparedScene {
-            accel: Accel::build(self.accel.tris.clone(), accel, resolution)?,
+            accel: Accel::build(self.accel.tris.clone(), accel, params)?,
             ..self.clone()
         })
     }

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use crate::accel::{Aabb, Accel, AccelKind, Grid, Ray, Resolution, TriAccel};
+use crate::accel::{Aabb, Accel, AccelKind, AccelParams, Grid, Ray, Resolution, TriAccel};
 use crate::scene::procedural;
 use crate::util::Rng;
 
@@ -326,7 +326,7 @@ impl AllAccels {
         let mut others: Vec<Accel> = Vec::new();
         for kind in AccelKind::ALL {
             if !grid.serves(kind) && !others.iter().any(|a| a.serves(kind)) {
-                others.push(Accel::build(tris.clone(), kind, resolution)?);
+                others.push(Accel::build(tris.clone(), kind, &AccelParams::NONE)?);
             }
         }
         Ok(AllAccels { grid, others })

@@ -7,7 +7,8 @@
 //! (`gpu/shaders/walks/brute.wgsl`) and `gpu/walks/brute.rs` with one entry of `WALKS`.
 
 use crate::Result;
-use crate::accel::contract::{AccelStructure, BuildParams};
+use crate::accel::AccelParams;
+use crate::accel::contract::AccelStructure;
 use crate::accel::{AccelKind, Counters, Hit, Ray, TriAccel};
 
 /// Nothing is built: the walk is the triangle list.
@@ -18,7 +19,8 @@ pub struct Brute {
 }
 
 impl AccelStructure for Brute {
-    fn build(tris: &[TriAccel], _params: &BuildParams) -> Result<Brute> {
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Brute> {
+        params.read("brute", &[], |_, _| Ok(()))?;
         Ok(Brute { triangles: tris.len() })
     }
 

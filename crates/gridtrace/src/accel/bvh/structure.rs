@@ -5,19 +5,21 @@ use glam::Vec3;
 
 use super::BvhAccel;
 use crate::Result;
-use crate::accel::contract::{AccelStructure, BuildParams};
+use crate::accel::AccelParams;
+use crate::accel::contract::AccelStructure;
 use crate::accel::{AccelKind, Counters, Hit, PACKET, Ray, TriAccel};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for BvhAccel {
-    fn build(tris: &[TriAccel], _params: &BuildParams) -> Result<BvhAccel> {
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<BvhAccel> {
+        params.read("bvh", &[], |_, _| Ok(()))?;
         Ok(BvhAccel::build(tris))
     }
 
     /// The tree is kept and its boxes recomputed: much cheaper than a rebuild, at a quality
     /// that degrades as the vertices move away from the build pose. Cannot fail (the count is
     /// checked by `Accel::update`).
-    fn update(&mut self, tris: &[TriAccel], _params: &BuildParams) -> Result<&'static str> {
+    fn update(&mut self, tris: &[TriAccel]) -> Result<&'static str> {
         self.refit(tris);
         Ok("refitted")
     }

@@ -70,6 +70,9 @@ pub struct Grid {
     /// Packed triangle indices, cell after cell, ascending within a cell.
     pub refs: Vec<u32>,
     pub stats: GridStats,
+    /// The resolution it was asked for (an automatic one stays automatic, so a rebuild after
+    /// the triangles move sizes the cells for the new bounds); `dims` is what it gave.
+    pub resolution: Resolution,
 }
 
 /// Where a grid's cells lie: everything about a grid but its contents. The CPU build
@@ -131,11 +134,15 @@ impl Grid {
     pub fn build(tris: &[TriAccel], resolution: Resolution) -> Result<Grid> {
         let t0 = Instant::now();
         let lattice = GridLattice::new(tris, resolution)?;
-        Ok(Self::build_on(tris, lattice, t0))
+        Ok(Grid {
+            resolution,
+            ..Self::build_on(tris, lattice, t0)
+        })
     }
 
     /// Builds the grid over `tris` on a given lattice (`GridLattice::new` over the same
-    /// triangles); `t0` is when the build started, for `GridStats::build_ms`.
+    /// triangles); `t0` is when the build started, for `GridStats::build_ms`. Its `resolution`
+    /// is the lattice's cell counts.
     pub fn build_on(tris: &[TriAccel], lattice: GridLattice, t0: Instant) -> Grid {
         let GridLattice {
             bounds,
@@ -194,6 +201,7 @@ impl Grid {
             cells,
             refs,
             stats,
+            resolution: Resolution::Fixed(dims.to_array()),
         }
     }
 

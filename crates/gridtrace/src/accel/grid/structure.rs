@@ -3,8 +3,10 @@
 
 use super::{Grid, Stepping};
 use crate::Result;
-use crate::accel::contract::{AccelStructure, BuildParams, dedup_hits};
-use crate::accel::{Aabb, AccelKind, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
+use crate::accel::contract::{AccelStructure, dedup_hits};
+use crate::accel::{
+    Aabb, AccelKind, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, Resolution, TriAccel, dims_str,
+};
 
 /// How the grid crosses empty space for a traversal kind.
 #[inline(always)]
@@ -16,9 +18,31 @@ fn stepping(kind: AccelKind) -> Stepping {
     }
 }
 
+/// The grid's build parameters for this resolution (`res=...`; none for the default): what
+/// `--accel grid:res=...` gives, for programs and tests that size a grid by hand.
+impl From<Resolution> for AccelParams {
+    fn from(r: Resolution) -> Self {
+        if r == Resolution::default() {
+            AccelParams::NONE
+        } else {
+            AccelParams::NONE.with("res", r)
+        }
+    }
+}
+
 impl AccelStructure for Grid {
-    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<Grid> {
-        Grid::build(tris, params.resolution)
+    /// One key: `res`, the cell counts (`Resolution`'s forms: auto, auto:LAMBDA, N, AxBxC).
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Grid> {
+        let mut resolution = Resolution::default();
+        params.read("grid", &["res"], |_, v| {
+            resolution = v.parse()?;
+            Ok(())
+        })?;
+        Grid::build(tris, resolution)
+    }
+
+    fn params(&self) -> AccelParams {
+        AccelParams::from(self.resolution)
     }
 
     fn bounds(&self, _tris: &[TriAccel]) -> Aabb {
@@ -42,7 +66,7 @@ impl AccelStructure for Grid {
         )
     }
 
-    fn info_lines(&self, _tris: &[TriAccel], _params: &BuildParams) -> Result<Vec<(String, String)>> {
+    fn info_lines(&self, _tris: &[TriAccel]) -> Result<Vec<(String, String)>> {
         let s = &self.stats;
         Ok(vec![
             ("grid".into(), format!("{} = {} cells", dims_str(s.dims), s.cells)),

@@ -14,9 +14,10 @@
 use glam::Vec3;
 
 use crate::Result;
+use crate::accel::AccelParams;
 use crate::accel::bvh::BvhAccel;
 use crate::accel::closest::ClosestPoint;
-use crate::accel::contract::{AccelStructure, BuildParams};
+use crate::accel::contract::AccelStructure;
 use crate::accel::{AccelKind, Counters, Hit, PACKET, Ray, TriAccel};
 
 /// The BVH kept beside the device's acceleration structures (see the module's note).
@@ -31,17 +32,18 @@ pub struct Hwrt {
 const BVH: AccelKind = AccelKind::Bvh;
 
 impl AccelStructure for Hwrt {
-    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<Hwrt> {
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Hwrt> {
+        params.read("hwrt", &[], |_, _| Ok(()))?;
         Ok(Hwrt {
-            bvh: AccelStructure::build(tris, params)?,
+            bvh: AccelStructure::build(tris, &AccelParams::NONE)?,
             triangles: tris.len(),
         })
     }
 
     /// The BVH is refitted here; the device's structures are rebuilt from the moved triangles
     /// when the scene is uploaded again (`gpu/walks/hwrt/`).
-    fn update(&mut self, tris: &[TriAccel], params: &BuildParams) -> Result<&'static str> {
-        AccelStructure::update(&mut self.bvh, tris, params)?;
+    fn update(&mut self, tris: &[TriAccel]) -> Result<&'static str> {
+        AccelStructure::update(&mut self.bvh, tris)?;
         Ok("rebuilt on the device (its CPU-side BVH refitted)")
     }
 

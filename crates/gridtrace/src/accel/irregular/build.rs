@@ -96,6 +96,7 @@ pub(super) fn build(tris: &[TriAccel], params: IrregularParams) -> Result<Irregu
         refs,
         partition,
         stats,
+        params,
     })
 }
 

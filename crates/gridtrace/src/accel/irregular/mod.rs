@@ -22,7 +22,7 @@ use glam::{UVec3, Vec3};
 use bytemuck::{Pod, Zeroable};
 
 use super::triangle::{any_in, closest_in};
-use super::{Aabb, Counters, Hit, Ray, TriAccel};
+use super::{Aabb, AccelParams, Counters, Hit, Ray, TriAccel};
 use crate::{Error, Result};
 
 mod boxes;
@@ -162,40 +162,61 @@ impl IrregularParams {
     }
 }
 
-impl std::str::FromStr for IrregularParams {
-    type Err = String;
-    /// `top=0.12,cell=2,alpha=1,merge=8,expand=3`, any subset, in any order.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+impl IrregularParams {
+    /// The keys `--accel irregular:KEY=VALUE,...` takes, in the order `to_params` writes them.
+    pub const KEYS: [&'static str; 5] = ["top", "cell", "alpha", "merge", "expand"];
+
+    /// Reads the irregular grid's keys of `params` (any subset, in any order; the others keep
+    /// their defaults) and checks the result.
+    pub fn from_params(params: &AccelParams) -> Result<IrregularParams> {
         let mut p = IrregularParams::default();
-        for kv in s.split(',').map(str::trim).filter(|kv| !kv.is_empty()) {
-            let (k, v) = kv
-                .split_once('=')
-                .ok_or_else(|| format!("irregular parameter '{kv}' is not KEY=VALUE"))?;
-            let f = || {
-                v.trim()
-                    .parse::<f32>()
-                    .map_err(|_| format!("irregular parameter {k}: bad number '{v}'"))
-            };
-            let n = || {
-                v.trim()
-                    .parse::<u32>()
-                    .map_err(|_| format!("irregular parameter {k}: bad count '{v}'"))
-            };
-            match k.trim() {
+        params.read("irregular", &Self::KEYS, |k, v| {
+            let f = || v.parse::<f32>().map_err(|_| format!("bad number '{v}'"));
+            let n = || v.parse::<u32>().map_err(|_| format!("bad count '{v}'"));
+            match k {
                 "top" => p.top_density = f()?,
                 "cell" => p.cell_density = f()?,
                 "alpha" => p.merge_alpha = f()?,
                 "merge" => p.merge_passes = n()?,
-                "expand" => p.expand_passes = n()?,
-                other => {
-                    return Err(format!(
-                        "unknown irregular parameter '{other}' (top, cell, alpha, merge, expand)"
-                    ));
-                }
+                _ => p.expand_passes = n()?,
+            }
+            Ok(())
+        })?;
+        p.check()?;
+        Ok(p)
+    }
+
+    /// The parameters that differ from the defaults, as `from_params` reads them.
+    pub fn to_params(&self) -> AccelParams {
+        let d = IrregularParams::default();
+        let mut out = AccelParams::NONE;
+        let floats = [
+            ("top", self.top_density, d.top_density),
+            ("cell", self.cell_density, d.cell_density),
+            ("alpha", self.merge_alpha, d.merge_alpha),
+        ];
+        for (k, v, dv) in floats {
+            if v != dv {
+                out = out.with(k, v);
             }
         }
-        p.check().map_err(|e| e.to_string())?;
-        Ok(p)
+        for (k, v, dv) in [
+            ("merge", self.merge_passes, d.merge_passes),
+            ("expand", self.expand_passes, d.expand_passes),
+        ] {
+            if v != dv {
+                out = out.with(k, v);
+            }
+        }
+        out
+    }
+}
+
+impl std::str::FromStr for IrregularParams {
+    type Err = String;
+    /// `top=0.12,cell=2,alpha=1,merge=8,expand=3`, any subset, in any order.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        IrregularParams::from_params(&s.parse()?).map_err(|e| e.to_string())
     }
 }
 
@@ -253,6 +274,8 @@ pub struct IrregularGrid {
     /// virtual grid. Kept for checks and statistics; the traversal reads the grown boxes only.
     pub partition: Vec<[UVec3; 2]>,
     pub stats: IrregularStats,
+    /// What it was built with (a rebuild after the triangles move uses them again).
+    pub params: IrregularParams,
 }
 
 impl IrregularGrid {

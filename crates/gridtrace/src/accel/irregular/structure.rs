@@ -3,15 +3,20 @@
 
 use glam::Vec3;
 
-use super::{IrregularGrid, IrregularStats};
+use super::{IrregularGrid, IrregularParams, IrregularStats};
 use crate::Result;
-use crate::accel::contract::{AccelStructure, BuildParams, dedup_hits, hit_normal};
-use crate::accel::{Aabb, AccelKind, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
+use crate::accel::contract::{AccelStructure, dedup_hits, hit_normal};
+use crate::accel::{Aabb, AccelKind, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for IrregularGrid {
-    fn build(tris: &[TriAccel], params: &BuildParams) -> Result<IrregularGrid> {
-        IrregularGrid::build(tris, params.irregular)
+    /// The keys of `IrregularParams::KEYS` (`top=0.12,cell=2,alpha=1,merge=8,expand=3`).
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<IrregularGrid> {
+        IrregularGrid::build(tris, IrregularParams::from_params(params)?)
+    }
+
+    fn params(&self) -> AccelParams {
+        self.params.to_params()
     }
 
     fn bounds(&self, _tris: &[TriAccel]) -> Aabb {
@@ -35,7 +40,7 @@ impl AccelStructure for IrregularGrid {
         )
     }
 
-    fn info_lines(&self, tris: &[TriAccel], params: &BuildParams) -> Result<Vec<(String, String)>> {
+    fn info_lines(&self, tris: &[TriAccel]) -> Result<Vec<(String, String)>> {
         let s = &self.stats;
         let v = self.voxel_dims();
         let mut lines = vec![
@@ -69,7 +74,7 @@ impl AccelStructure for IrregularGrid {
             lines.push((format!("  {phase}"), format!("{ms:>9.2} ms")));
         }
         // What `memory_bound` says before a build, beside what this one made.
-        let m = IrregularGrid::memory_bound(tris, params.irregular)?;
+        let m = IrregularGrid::memory_bound(tris, self.params)?;
         lines.push((
             "bound".into(),
             format!(

@@ -283,11 +283,11 @@ mod tests {
     /// hit): the layout and the walk's logic, checked without a GPU.
     #[test]
     fn mirror_walk_equals_brute_force() {
-        use crate::accel::{AccelKind, NoCounters, Resolution, brute_force_intersect};
+        use crate::accel::{AccelKind, AccelParams, NoCounters, brute_force_intersect};
         use crate::testing::{ray_set, triangle_soup};
         for (n, seed) in [(1, 1), (40, 2), (2000, 3)] {
             let tris = triangle_soup(n, seed);
-            let grid = crate::accel::Accel::build(tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
+            let grid = crate::accel::Accel::build(tris.clone(), AccelKind::Grid, &AccelParams::NONE).unwrap();
             let accel = BvhAccel::build(&tris);
             let nodes = gpu_nodes(&accel.bvh).unwrap();
             for r in ray_set(&grid, 5000, seed) {

@@ -354,7 +354,7 @@ pub fn walk<const ANY: bool, C: Counters>(
 mod tests {
     use super::*;
     use crate::accel::bvh::BvhAccel;
-    use crate::accel::{AccelKind, NoCounters, Resolution, brute_force_intersect};
+    use crate::accel::{AccelKind, AccelParams, NoCounters, brute_force_intersect};
     use crate::testing::{ray_set, triangle_soup};
 
     /// The encoding against the CPU tree it came from: every GPU node's used slots are the
@@ -458,7 +458,7 @@ mod tests {
     fn mirror_walk_equals_brute_force() {
         for (n, seed) in [(1, 1), (40, 2), (3000, 3)] {
             let tris = triangle_soup(n, seed);
-            let grid = crate::accel::Accel::build(tris.clone(), AccelKind::Grid, Resolution::default()).unwrap();
+            let grid = crate::accel::Accel::build(tris.clone(), AccelKind::Grid, &AccelParams::NONE).unwrap();
             let w = Wide8::build(&BvhAccel::build(&tris)).unwrap();
             let mut work = Wide8Work::default();
             for r in ray_set(&grid, 5000, seed) {
