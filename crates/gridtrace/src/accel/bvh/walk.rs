@@ -267,22 +267,29 @@ impl Walk {
         } else {
             counters.cell();
             let n = &accel.nodes[cur.child.index() as usize];
+            #[cfg(target_arch = "x86_64")]
+            if AVX {
+                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
+                let next = unsafe { self.r.descend_avx2(n, self.t_min, self.t_box, &mut self.stack, &mut self.sp) };
+                if let Some(next) = next {
+                    self.current = next;
+                    return false;
+                }
+                return self.pop();
+            }
             // The entered children, nearest on top: popped first, just below.
             let out = (&mut self.stack[self.sp..self.sp + WIDTH])
                 .try_into()
                 .expect("WIDTH entries");
-            #[cfg(target_arch = "x86_64")]
-            let pushed = if AVX {
-                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                unsafe { self.r.push_entered_avx2(n, self.t_min, self.t_box, out) }
-            } else {
-                self.r.push_entered(n, self.t_min, self.t_box, out)
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let pushed = self.r.push_entered(n, self.t_min, self.t_box, out);
-            self.sp += pushed;
+            self.sp += self.r.push_entered(n, self.t_min, self.t_box, out);
         }
-        // Pop the nearest pending entry that can still hold a closer hit.
+        self.pop()
+    }
+
+    /// Pops the nearest pending entry that can still hold a closer hit into `current`;
+    /// returns true (the walk is done) when none is left.
+    #[inline(always)]
+    fn pop(&mut self) -> bool {
         while self.sp > 0 {
             self.sp -= 1;
             // SAFETY: entries below `sp` were written by a push.
