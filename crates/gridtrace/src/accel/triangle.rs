@@ -263,6 +263,33 @@ impl<const N: usize, L: Lanes<N>> LaneHits<N, L> {
 /// the same comparison (negated where the scalar test rejects), so that NaNs fall the same way.
 #[inline(always)]
 pub fn intersect_lanes<const N: usize, L: Lanes<N>>(
+    tri: (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
+    origin: &Lanes3<L>,
+    dir: &Lanes3<L>,
+    t_min: f32,
+    t_max: L,
+) -> LaneHits<N, L> {
+    intersect_lanes_maybe_culled::<N, L, false>(tri, origin, dir, t_min, t_max)
+}
+
+/// `intersect_lanes`, the same `LaneHits` bit for bit, but returned as soon as the barycentric
+/// and distance checks reject every lane, before the error bound and the grazing test (which
+/// only ever reject more): about half the work of a test where no lane hits, the common case
+/// of a BVH leaf's block (incoherent rays through the Stanford Bunny: 5.4 triangles tested per
+/// ray, 0.6 hit). A branch the caller pays for where lanes often hit.
+#[inline(always)]
+pub fn intersect_lanes_culled<const N: usize, L: Lanes<N>>(
+    tri: (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
+    origin: &Lanes3<L>,
+    dir: &Lanes3<L>,
+    t_min: f32,
+    t_max: L,
+) -> LaneHits<N, L> {
+    intersect_lanes_maybe_culled::<N, L, true>(tri, origin, dir, t_min, t_max)
+}
+
+#[inline(always)]
+fn intersect_lanes_maybe_culled<const N: usize, L: Lanes<N>, const CULL: bool>(
     (v0, e1, e2): (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
     origin: &Lanes3<L>,
     dir: &Lanes3<L>,
@@ -285,6 +312,9 @@ pub fn intersect_lanes<const N: usize, L: Lanes<N>>(
         & !(u + v).gt(L::splat(1.0 + 2.0 * LOOSE))
         & t.gt(L::splat(t_min))
         & t.lt(t_max);
+    if CULL && ok.bits() == 0 {
+        return LaneHits { hit: ok, t, u, v };
+    }
     // The error-bound slack (see `TriAccel::intersect`). The scalar test skips it inside the
     // `BARY_EPS` box; computing it everywhere changes nothing, since the bounded box always
     // contains that one (each tolerance is at least `BARY_EPS`).
@@ -372,6 +402,12 @@ impl TriAccel4 {
     #[inline(always)]
     pub fn intersect_upto(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: Vec4) -> TriHit4 {
         intersect_lanes((&self.v0, &self.e1, &self.e2), origin, dir, t_min, t_max)
+    }
+
+    /// `intersect`, the same bits, with `intersect_lanes_culled`'s early return.
+    #[inline(always)]
+    pub fn intersect_culled(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: f32) -> TriHit4 {
+        intersect_lanes_culled((&self.v0, &self.e1, &self.e2), origin, dir, t_min, Vec4::splat(t_max))
     }
 }
 

@@ -238,29 +238,30 @@ impl Walk {
             let start = cur.child.index() as usize;
             for b in start..start + count.div_ceil(LEAF_BLOCK as u32) as usize {
                 let block = &accel.blocks[b];
-                let h = block.intersect(&self.origin, &self.dir, self.t_min, self.t_far);
-                // The closest lane, the first of equals: the same hit as testing the triangles
-                // one by one, each kept only if strictly closer. Without a branch on whether
-                // any lane hit, which is a coin toss: selects instead (every hit lane has
-                // `t < t_far`, and with none `t_min_lane` is +inf, so `t_far` stays).
+                let h = block.intersect_culled(&self.origin, &self.dir, self.t_min, self.t_far);
                 let mask = h.mask();
+                // Most blocks are missed by every lane; the test has already branched on
+                // that (`intersect_culled`), so the branch here is taken the same way.
+                if mask == 0 {
+                    continue;
+                }
+                // The closest lane, the first of equals: the same hit as testing the triangles
+                // one by one, each kept only if strictly closer (every hit lane has
+                // `t < t_far`).
                 let t = Vec4::select(h.hit, h.t, Vec4::INFINITY);
                 let t_min_lane = t.min_element();
                 let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & mask).trailing_zeros() as usize & 3;
-                let closer = mask != 0;
-                self.t_far = self.t_far.min(t_min_lane);
-                let lane = Hit {
+                self.t_far = t_min_lane;
+                self.best = Hit {
                     t: t_min_lane,
                     tri: (LEAF_BLOCK * b + k) as u32,
                     u: h.u[k],
                     v: h.v[k],
                 };
-                self.best = if closer { lane } else { self.best };
-                if ANY && closer {
+                if ANY {
                     return true;
                 }
-                // The hit's input index is looked up when the ray is done. (Only an address:
-                // with no hit yet, `tri` is u32::MAX and the hint useless but harmless.)
+                // The hit's input index is looked up when the ray is done.
                 prefetch(accel.lane_prims.as_ptr().wrapping_add(self.best.tri as usize) as *const i8);
             }
             self.t_box = self.t_far * T_SLOP;
