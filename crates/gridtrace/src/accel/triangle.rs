@@ -269,27 +269,15 @@ pub fn intersect_lanes<const N: usize, L: Lanes<N>>(
     t_min: f32,
     t_max: L,
 ) -> LaneHits<N, L> {
-    intersect_lanes_maybe_culled::<N, L, false>(tri, origin, dir, t_min, t_max)
+    intersect_lanes_cull::<N, L, false>(tri, origin, dir, t_min, t_max)
 }
 
-/// `intersect_lanes`, the same `LaneHits` bit for bit, but returned as soon as the barycentric
-/// and distance checks reject every lane, before the error bound and the grazing test (which
-/// only ever reject more): about half the work of a test where no lane hits, the common case
-/// of a BVH leaf's block (incoherent rays through the Stanford Bunny: 5.4 triangles tested per
-/// ray, 0.6 hit). A branch the caller pays for where lanes often hit.
+/// `intersect_lanes`, the same `LaneHits` bit for bit; with `CULL` returned as soon as the
+/// barycentric and distance checks reject every lane, before the error bound and the grazing
+/// test (which only ever reject more): half the work where no lane hits, most of a BVH leaf's
+/// blocks (incoherent rays, Stanford Bunny: 5.4 triangles tested per ray, 0.6 hit).
 #[inline(always)]
-pub fn intersect_lanes_culled<const N: usize, L: Lanes<N>>(
-    tri: (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
-    origin: &Lanes3<L>,
-    dir: &Lanes3<L>,
-    t_min: f32,
-    t_max: L,
-) -> LaneHits<N, L> {
-    intersect_lanes_maybe_culled::<N, L, true>(tri, origin, dir, t_min, t_max)
-}
-
-#[inline(always)]
-fn intersect_lanes_maybe_culled<const N: usize, L: Lanes<N>, const CULL: bool>(
+pub fn intersect_lanes_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
     (v0, e1, e2): (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
     origin: &Lanes3<L>,
     dir: &Lanes3<L>,
@@ -402,12 +390,6 @@ impl TriAccel4 {
     #[inline(always)]
     pub fn intersect_upto(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: Vec4) -> TriHit4 {
         intersect_lanes((&self.v0, &self.e1, &self.e2), origin, dir, t_min, t_max)
-    }
-
-    /// `intersect`, the same bits, with `intersect_lanes_culled`'s early return.
-    #[inline(always)]
-    pub fn intersect_culled(&self, origin: &[Vec4; 3], dir: &[Vec4; 3], t_min: f32, t_max: f32) -> TriHit4 {
-        intersect_lanes_culled((&self.v0, &self.e1, &self.e2), origin, dir, t_min, Vec4::splat(t_max))
     }
 }
 

@@ -6,6 +6,7 @@ use std::mem::MaybeUninit;
 use glam::{Vec3, Vec4};
 
 use crate::accel::simd::{has_avx2, prefetch};
+use crate::accel::triangle::intersect_lanes_cull;
 use crate::accel::{Counters, Hit, NoCounters, Ray};
 
 use super::BvhAccel;
@@ -238,10 +239,12 @@ impl Walk {
             let start = cur.child.index() as usize;
             for b in start..start + count.div_ceil(LEAF_BLOCK as u32) as usize {
                 let block = &accel.blocks[b];
-                let h = block.intersect_culled(&self.origin, &self.dir, self.t_min, self.t_far);
+                let tri = (&block.v0, &block.e1, &block.e2);
+                let far = Vec4::splat(self.t_far);
+                let h = intersect_lanes_cull::<4, Vec4, true>(tri, &self.origin, &self.dir, self.t_min, far);
                 let mask = h.mask();
                 // Most blocks are missed by every lane; the test has already branched on
-                // that (`intersect_culled`), so the branch here is taken the same way.
+                // that (`intersect_lanes_cull`), so the branch here is taken the same way.
                 if mask == 0 {
                     continue;
                 }
