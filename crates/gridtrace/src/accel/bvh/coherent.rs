@@ -29,7 +29,8 @@
 use std::mem::MaybeUninit;
 
 use crate::accel::lanes::{F8, Lanes, Mask, load3, splat3};
-use crate::accel::{Hit, PACKET, Ray, intersect_lanes};
+use crate::accel::triangle::intersect_lanes_cull;
+use crate::accel::{Hit, PACKET, Ray};
 use crate::util::set_bits as bits;
 
 use super::BvhAccel;
@@ -389,7 +390,7 @@ impl BvhAccel {
                         F8::from_array(limit),
                         F8::splat(t_min),
                     );
-                    let h = intersect_lanes(tri, &origin, &dir, t_min, lim);
+                    let h = intersect_lanes_cull::<8, F8, true>(tri, &origin, &dir, t_min, lim);
                     let hits = h.mask() & testing;
                     if hits == 0 {
                         continue;

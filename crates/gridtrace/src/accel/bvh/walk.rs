@@ -6,6 +6,7 @@ use std::mem::MaybeUninit;
 use glam::{Vec3, Vec4};
 
 use crate::accel::simd::{has_avx2, prefetch};
+use crate::accel::triangle::intersect_lanes_cull;
 use crate::accel::{Counters, Hit, NoCounters, Ray};
 
 use super::BvhAccel;
@@ -238,51 +239,61 @@ impl Walk {
             let start = cur.child.index() as usize;
             for b in start..start + count.div_ceil(LEAF_BLOCK as u32) as usize {
                 let block = &accel.blocks[b];
-                let h = block.intersect(&self.origin, &self.dir, self.t_min, self.t_far);
-                // The closest lane, the first of equals: the same hit as testing the triangles
-                // one by one, each kept only if strictly closer. Without a branch on whether
-                // any lane hit, which is a coin toss: selects instead (every hit lane has
-                // `t < t_far`, and with none `t_min_lane` is +inf, so `t_far` stays).
+                let tri = (&block.v0, &block.e1, &block.e2);
+                let far = Vec4::splat(self.t_far);
+                let h = intersect_lanes_cull::<4, Vec4, true>(tri, &self.origin, &self.dir, self.t_min, far);
                 let mask = h.mask();
+                // Most blocks are missed by every lane; the test has already branched on
+                // that (`intersect_lanes_cull`), so the branch here is taken the same way.
+                if mask == 0 {
+                    continue;
+                }
+                // The closest lane, the first of equals: the same hit as testing the triangles
+                // one by one, each kept only if strictly closer (every hit lane has
+                // `t < t_far`).
                 let t = Vec4::select(h.hit, h.t, Vec4::INFINITY);
                 let t_min_lane = t.min_element();
                 let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & mask).trailing_zeros() as usize & 3;
-                let closer = mask != 0;
-                self.t_far = self.t_far.min(t_min_lane);
-                let lane = Hit {
+                self.t_far = t_min_lane;
+                self.best = Hit {
                     t: t_min_lane,
                     tri: (LEAF_BLOCK * b + k) as u32,
                     u: h.u[k],
                     v: h.v[k],
                 };
-                self.best = if closer { lane } else { self.best };
-                if ANY && closer {
+                if ANY {
                     return true;
                 }
-                // The hit's input index is looked up when the ray is done. (Only an address:
-                // with no hit yet, `tri` is u32::MAX and the hint useless but harmless.)
+                // The hit's input index is looked up when the ray is done.
                 prefetch(accel.lane_prims.as_ptr().wrapping_add(self.best.tri as usize) as *const i8);
             }
             self.t_box = self.t_far * T_SLOP;
         } else {
             counters.cell();
             let n = &accel.nodes[cur.child.index() as usize];
+            #[cfg(target_arch = "x86_64")]
+            if AVX {
+                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
+                let next = unsafe { self.r.descend_avx2(n, self.t_min, self.t_box, &mut self.stack, &mut self.sp) };
+                if let Some(next) = next {
+                    self.current = next;
+                    return false;
+                }
+                return self.pop();
+            }
             // The entered children, nearest on top: popped first, just below.
             let out = (&mut self.stack[self.sp..self.sp + WIDTH])
                 .try_into()
                 .expect("WIDTH entries");
-            #[cfg(target_arch = "x86_64")]
-            let pushed = if AVX {
-                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                unsafe { self.r.push_entered_avx2(n, self.t_min, self.t_box, out) }
-            } else {
-                self.r.push_entered(n, self.t_min, self.t_box, out)
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let pushed = self.r.push_entered(n, self.t_min, self.t_box, out);
-            self.sp += pushed;
+            self.sp += self.r.push_entered(n, self.t_min, self.t_box, out);
         }
-        // Pop the nearest pending entry that can still hold a closer hit.
+        self.pop()
+    }
+
+    /// Pops the nearest pending entry that can still hold a closer hit into `current`;
+    /// returns true (the walk is done) when none is left.
+    #[inline(always)]
+    fn pop(&mut self) -> bool {
         while self.sp > 0 {
             self.sp -= 1;
             // SAFETY: entries below `sp` were written by a push.
