@@ -59,9 +59,7 @@ fn main() -> gridtrace::Result<()> {
         let mut want = vec![Hit::MISS; n];
         let bvh_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in want.iter_mut().zip(&eye) {
-                *h = bvh
-                    .accel
-                    .intersect(r, 0.0, f32::INFINITY, AccelKind::Bvh, &mut NoCounters);
+                *h = bvh.accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
             }
         });
         let prepared = scene.prepare_for(AccelKind::Irregular, &gridtrace::AccelParams::NONE)?;
@@ -72,7 +70,7 @@ fn main() -> gridtrace::Result<()> {
         let mut single = vec![Hit::MISS; n];
         let single_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in single.iter_mut().zip(&eye) {
-                *h = accel.intersect(r, 0.0, f32::INFINITY, AccelKind::Irregular, &mut NoCounters);
+                *h = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
             }
         });
         let (mut four, mut eight) = (vec![Hit::MISS; n], vec![Hit::MISS; n]);

@@ -30,7 +30,6 @@ fn main() -> gridtrace::Result<()> {
                 width: 512,
                 height: 512,
                 mode,
-                accel: kind,
                 ablation: Default::default(),
                 rows: None,
                 pixels: Default::default(),

@@ -111,7 +111,7 @@ pub fn ablation_study(plan: &AblationPlan, log: &mut dyn FnMut(&str)) -> Result<
                         if off.no_compaction && *backend == "cpu" {
                             continue;
                         }
-                        let with = RenderOptions::new(plan.size.0, plan.size.1, mode, accel);
+                        let with = RenderOptions::new(plan.size.0, plan.size.1, mode);
                         let without = RenderOptions { ablation: off, ..with };
                         let (mut a, mut b) = (Vec::new(), Vec::new());
                         let mut shadow_rays = 0;

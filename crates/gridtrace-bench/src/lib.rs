@@ -237,12 +237,13 @@ fn make_row(
     summary: Summary,
     rays: RayCounts,
 ) -> Row {
-    let paper = paper_ms(scene, opts.mode, (opts.width, opts.height), opts.accel);
+    let accel = prepared.accel.kind();
+    let paper = paper_ms(scene, opts.mode, (opts.width, opts.height), accel);
     Row {
         scene: scene.into(),
         backend,
         mode: opts.mode.name().into(),
-        accel: opts.accel.name().into(),
+        accel: accel.name().into(),
         width: opts.width,
         height: opts.height,
         grid_dims: prepared.accel.grid().map_or([0; 3], |g| g.stats.dims),
@@ -336,9 +337,10 @@ pub fn run_matrix(
             info.grid.choice,
             bs.description
         ));
-        // The grid serves grid and pc; every other kind gets its own structure, built once.
+        // The grid serves grid and pc (pc's scene a copy switched to it: `with_accel` builds
+        // nothing for it); every other kind gets its own structure, built once.
         let mut own: Vec<(AccelKind, PreparedScene)> = Vec::new();
-        for &accel in cfg.accels.iter().filter(|a| !a.uses_grid()) {
+        for &accel in cfg.accels.iter().filter(|&&a| a != prepared.accel.kind()) {
             if !own.iter().any(|(k, _)| *k == accel) {
                 own.push((accel, prepared.with_accel(accel, &AccelParams::NONE)?));
             }
@@ -348,7 +350,7 @@ pub fn run_matrix(
             for &(w, h) in &cfg.resolutions {
                 for &mode in &cfg.modes {
                     for &accel in &cfg.accels {
-                        let opts = RenderOptions::new(w, h, mode, accel);
+                        let opts = RenderOptions::new(w, h, mode);
                         let row = cpu_row(&bs.name, for_accel(accel), &opts, cfg)?;
                         log(&row_line(&row));
                         out.rows.push(row);
@@ -360,7 +362,7 @@ pub fn run_matrix(
             // One renderer per structure uploaded: the grid's (grid, pc) and each other one's.
             let mut grid_gpu = GpuRenderer::with_variants(ctx.clone(), &prepared, &cfg.gpu_variants)?;
             let mut own_gpu: Vec<(AccelKind, GpuRenderer)> = Vec::new();
-            for (k, s) in &own {
+            for (k, s) in own.iter().filter(|(k, _)| !k.uses_grid()) {
                 own_gpu.push((*k, GpuRenderer::with_variants(ctx.clone(), s, &cfg.gpu_variants)?));
             }
             let mut largest = 0u64;
@@ -368,10 +370,13 @@ pub fn run_matrix(
                 for &mode in &cfg.modes {
                     for &accel in &cfg.accels {
                         // As `render` asks: 8-bit pixels, packed on the device.
-                        let opts = RenderOptions::new(w, h, mode, accel).with_pixels(PixelFormat::Srgb8);
+                        let opts = RenderOptions::new(w, h, mode).with_pixels(PixelFormat::Srgb8);
                         let r = match own_gpu.iter_mut().find(|(k, _)| *k == accel) {
                             Some((_, r)) => r,
-                            None => &mut grid_gpu,
+                            None => {
+                                grid_gpu.set_traversal(accel)?;
+                                &mut grid_gpu
+                            }
                         };
                         let row = gpu_row(&bs.name, for_accel(accel), r, &opts, cfg)?;
                         log(&row_line(&row));

@@ -61,13 +61,7 @@ fn ms_since(t0: std::time::Instant) -> f64 {
 /// Work per ray of one structure's walk, counted on a sample of the rays: cells (grid, pc) or
 /// nodes (BVH) visited, and triangle tests. `gpu_bvh_walk`: count the GPU's BVH walk over
 /// two-wide nodes (`gpu::bvh::walk` counts it on the CPU, step for step) instead of the CPU's.
-fn work_per_ray(
-    tm: &gridtrace::query::TraceMesh,
-    accel: AccelKind,
-    gpu_bvh_walk: bool,
-    o: &[[f32; 3]],
-    d: &[[f32; 3]],
-) -> (f64, f64) {
+fn work_per_ray(tm: &gridtrace::query::TraceMesh, gpu_bvh_walk: bool, o: &[[f32; 3]], d: &[[f32; 3]]) -> (f64, f64) {
     use gridtrace::accel::{Ray, TraversalCounters};
     let sample = o.len().min(100_000);
     let scene = tm.prepared();
@@ -83,7 +77,7 @@ fn work_per_ray(
                 gridtrace::gpu::bvh::walk::<false, _>(nodes, prims, &scene.accel.tris, &r, 0.0, f32::INFINITY, &mut c);
             }
             None => {
-                scene.accel.intersect(&r, 0.0, f32::INFINITY, accel, &mut c);
+                scene.accel.intersect(&r, 0.0, f32::INFINITY, &mut c);
             }
         }
     }
@@ -138,7 +132,7 @@ pub fn query_study(
                     .collect();
                 let (times, hits) = repeat(warmup, reps, || {
                     let t0 = std::time::Instant::now();
-                    let h = r.intersect(&ray_vec, 0.0, f32::INFINITY, accel)?;
+                    let h = r.intersect(&ray_vec, 0.0, f32::INFINITY)?;
                     Ok((ms_since(t0), h.iter().filter(|h| h.is_hit()).count()))
                 })?;
                 runs.push(("gpu", times, hits[0]));
@@ -148,7 +142,7 @@ pub fn query_study(
             for (backend, times, hits) in runs {
                 let gpu_walk = backend == "gpu" && accel == AccelKind::Bvh;
                 let (cells_per_ray, tri_tests_per_ray) =
-                    *work[gpu_walk as usize].get_or_insert_with(|| work_per_ray(&tm, accel, gpu_walk, &o, &d));
+                    *work[gpu_walk as usize].get_or_insert_with(|| work_per_ray(&tm, gpu_walk, &o, &d));
                 let summary = Summary::of(&times);
                 let row = QueryStudyRow {
                     scene: name.clone(),

@@ -77,14 +77,12 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 /// Records the rays a CPU render of `scene` with `opts` traces. Heat mode records eye rays only.
 pub fn collect_rays(scene: &PreparedScene, opts: &RenderOptions) -> Result<RaySet> {
     opts.validate()?;
-    scene.accel.check_serves(opts.accel)?;
     let cam = scene.camera.frame(opts.width, opts.height);
     let rows: Vec<Vec<RayRecord>> = (0..opts.height)
         .into_par_iter()
         .map(|y| {
             let mut recorder = Recorder {
                 scene,
-                opts,
                 out: Vec::with_capacity(opts.width as usize),
             };
             for x in 0..opts.width {
@@ -102,7 +100,6 @@ pub fn collect_rays(scene: &PreparedScene, opts: &RenderOptions) -> Result<RaySe
 /// traces them.
 struct Recorder<'a> {
     scene: &'a PreparedScene,
-    opts: &'a RenderOptions,
     out: Vec<RayRecord>,
 }
 
@@ -119,10 +116,7 @@ impl RayObserver for Recorder<'_> {
     /// the closest occluder's `t` (infinity when the light is visible).
     fn shadow(&mut self, ray: &Ray, dist: f32, occluded: bool) {
         let t = if occluded {
-            let h = self
-                .scene
-                .accel
-                .intersect(ray, 0.0, dist, self.opts.accel, &mut NoCounters);
+            let h = self.scene.accel.intersect(ray, 0.0, dist, &mut NoCounters);
             if h.is_hit() { h.t } else { dist }
         } else {
             f32::INFINITY
@@ -145,7 +139,7 @@ mod tests {
         let prepared = builtin::mirror_spheres().prepare(Resolution::default()).unwrap();
         for mode in [Mode::Cast, Mode::Shadow, Mode::Trace] {
             for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
-                let opts = RenderOptions::new(40, 30, mode, accel);
+                let opts = RenderOptions::new(40, 30, mode);
                 let set = collect_rays(&prepared, &opts).unwrap();
                 let (_, stats) = gridtrace::cpu::render(&prepared, &opts, None).unwrap();
                 assert_eq!(set.counts(), stats.rays, "{mode:?} {accel:?}");
@@ -156,7 +150,7 @@ mod tests {
     #[test]
     fn binary_layout() {
         let prepared = builtin::knot_box().prepare(Resolution::default()).unwrap();
-        let set = collect_rays(&prepared, &RenderOptions::new(8, 4, Mode::Cast, AccelKind::Grid)).unwrap();
+        let set = collect_rays(&prepared, &RenderOptions::new(8, 4, Mode::Cast)).unwrap();
         let dir = std::env::temp_dir().join(format!("gridtrace-rays-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         set.write_rays(&dir.join("r.bin")).unwrap();

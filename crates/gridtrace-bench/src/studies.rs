@@ -51,8 +51,10 @@ pub struct Sweep {
 }
 
 /// Renders `bs` with each grid of the sweep (lambda 0.5..32 and the paper's dims if known).
+/// `accel` is the grid's traversal to time (`grid` or `pc`).
 pub fn grid_sweep(
     bs: &BenchScene,
+    accel: AccelKind,
     opts: &RenderOptions,
     warmup: u32,
     reps: u32,
@@ -67,7 +69,7 @@ pub fn grid_sweep(
     }
     let mut points = Vec::new();
     for (choice, lambda, res) in choices {
-        let prepared = bs.scene.prepare(res)?;
+        let prepared = bs.scene.prepare_for(accel, &res.into())?;
         let (_, summary, _) = time_cpu(&prepared, opts, warmup, reps)?;
         let grid = GridInfo::of(&prepared, choice.clone());
         let p = SweepPoint {
@@ -92,7 +94,7 @@ pub fn grid_sweep(
     Ok(Sweep {
         scene: bs.name.clone(),
         mode: opts.mode.name().into(),
-        accel: opts.accel.name().into(),
+        accel: accel.name().into(),
         width: opts.width,
         height: opts.height,
         best: best.choice.clone(),
@@ -223,7 +225,7 @@ pub fn scaling(
         let scene = builtin::mesh_scene(m.mesh, false);
         let prepared = scene.prepare_for(accel, &AccelParams::NONE)?;
         let mut on_gpu = upload(&prepared)?;
-        let opts = RenderOptions::new(res.0, res.1, mode, accel);
+        let opts = RenderOptions::new(res.0, res.1, mode);
         let (summary, rays) = time(&prepared, &mut on_gpu, &opts)?;
         let p = ScalingPoint {
             family: family(&m.name),
@@ -258,7 +260,7 @@ pub fn scaling(
     let mut by_pixels = Vec::new();
     if let Some((name, fam, source, prepared, mut on_gpu)) = pixel_mesh {
         for &side in pixel_sides {
-            let opts = RenderOptions::new(side, side, mode, accel);
+            let opts = RenderOptions::new(side, side, mode);
             let (summary, rays) = time(&prepared, &mut on_gpu, &opts)?;
             log(&format!(
                 "  pixels  {:<22} {:>5}x{:<5} best {:>8.2} ms",
@@ -405,7 +407,7 @@ pub fn pc_study(
         let prepared = scene.prepare(Resolution::default())?;
         for &mode in modes {
             for accel in [AccelKind::Grid, AccelKind::ProximityCloud] {
-                let opts = RenderOptions::new(res.0, res.1, mode, accel);
+                let opts = RenderOptions::new(res.0, res.1, mode);
                 let (_, stats) =
                     gridtrace::cpu::render_with_counters(&prepared, &prepared.camera, &prepared.lights, &opts)?;
                 let (_, summary, _) = time_cpu(&prepared, &opts, warmup, reps)?;

@@ -51,7 +51,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
                 println!("        (a software adapter: CPU speed, not GPU speed)");
             }
         }
-        None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
+        None => println!("backend {}", gridtrace::backend::describe_cpu()),
     }
     let mut tracer = Tracer::open(scene, ctx.as_ref(), a.backend, &mut notes)?;
     for n in notes {
@@ -60,7 +60,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     if let Some(dir) = &a.sequence {
         std::fs::create_dir_all(dir).map_err(|e| gridtrace::Error::io(dir, e))?;
     }
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel).with_pixels(PixelFormat::Srgb8);
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode).with_pixels(PixelFormat::Srgb8);
     println!("frame  time_s  move_ms  geometry_ms  build_ms  trace_ms  total_ms  structure");
     let mut rows = Vec::with_capacity(a.frames as usize);
     for i in 0..a.frames {

@@ -91,10 +91,10 @@ pub struct RenderArgs {
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     let (mut scene, name) = a.scene.load(!a.no_floor)?;
     set_view(&a, &mut scene, &name);
-    let (mut renderer, accel) = open_tracer(&a, &scene, &name)?;
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode, accel).with_pixels(PixelFormat::Srgb8);
+    let (mut renderer, _) = open_tracer(&a, &scene, &name)?;
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode).with_pixels(PixelFormat::Srgb8);
     let traced = trace_frames(&a, &mut renderer, &opts)?;
-    report(&a, &renderer, &opts, &traced);
+    report(&a, &renderer, &traced);
     let image = traced.first.image;
     let out = if a.mode == Mode::Heat {
         image.heat_to_color()
@@ -174,7 +174,7 @@ fn open_tracer(
             }
             println!("        gpu variants: {}", gpu.variants().changes());
         }
-        None => println!("backend cpu ({} threads)", rayon::current_num_threads()),
+        None => println!("backend {}", gridtrace::backend::describe_cpu()),
     }
     Ok((renderer, accel))
 }
@@ -268,7 +268,7 @@ fn trace_frames(a: &RenderArgs, renderer: &mut gridtrace::Tracer, opts: &RenderO
 
 /// The run's figures: the last GPU frame's stages, the first frame, the rest, the rate and
 /// (with --stats) the work per ray.
-fn report(a: &RenderArgs, renderer: &gridtrace::Tracer, opts: &RenderOptions, t: &Traced) {
+fn report(a: &RenderArgs, renderer: &gridtrace::Tracer, t: &Traced) {
     let stats = &t.first.stats;
     // The stages of the last frame: with --frames above 1 a warm one (the first pays for
     // pipeline and buffer creation).
@@ -286,7 +286,7 @@ fn report(a: &RenderArgs, renderer: &gridtrace::Tracer, opts: &RenderOptions, t:
         r.reflection,
         stats.mrays_per_s(),
         a.mode.name(),
-        opts.accel.name(),
+        renderer.scene.accel.kind().name(),
         a.res.0,
         a.res.1
     );

@@ -330,7 +330,7 @@ fn render<'py>(
             let (ctx, mut notes) = backend.open_device()?;
             let (accel, _why) = spec.resolve(gridtrace::backend::traced_on(ctx.as_deref()), gridtrace::Work::Render);
             let prepared = s.prepare_for(accel, &spec.params)?;
-            let opts = RenderOptions::new(width, height, mode, accel).with_pixels(PixelFormat::Srgb8);
+            let opts = RenderOptions::new(width, height, mode).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
             let mut tracer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), backend, &variants, &mut notes)?;
             let mut frame = tracer.render(&camera, &lights, &opts)?;

@@ -46,20 +46,14 @@ fn main() -> gridtrace::Result<()> {
             } else {
                 f32::INFINITY
             };
-            gpu.cast(
-                &RaySlice { rays: &rays },
-                (0.0, t_max),
-                answer,
-                AccelKind::Bvh,
-                |_, a| {
-                    answered += std::hint::black_box(match a {
-                        gridtrace::gpu::ChunkAnswers::Hits(h) => h.len(),
-                        gridtrace::gpu::ChunkAnswers::HitsUv(h) => h.len(),
-                        gridtrace::gpu::ChunkAnswers::Occlusion(b) => b.len(),
-                        gridtrace::gpu::ChunkAnswers::Points { hits, .. } => hits.len(),
-                    })
-                },
-            )?;
+            gpu.cast(&RaySlice { rays: &rays }, (0.0, t_max), answer, |_, a| {
+                answered += std::hint::black_box(match a {
+                    gridtrace::gpu::ChunkAnswers::Hits(h) => h.len(),
+                    gridtrace::gpu::ChunkAnswers::HitsUv(h) => h.len(),
+                    gridtrace::gpu::ChunkAnswers::Occlusion(b) => b.len(),
+                    gridtrace::gpu::ChunkAnswers::Points { hits, .. } => hits.len(),
+                })
+            })?;
             let s = gpu.last_query_stats().clone();
             if rep > 0 {
                 runs.push(s);

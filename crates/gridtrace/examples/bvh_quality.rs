@@ -19,8 +19,7 @@ use gridtrace::accel::{BvhAccel, Hit, Ray, TraversalCounters, TriAccel};
 fn wide_sah(accel: &BvhAccel, node_cost: f64) -> f64 {
     let n = &accel.nodes[0];
     let area = |node: &gridtrace::accel::bvh::WideNode, k: usize| {
-        let e: [f64; 3] =
-            std::array::from_fn(|a| (node.planes[1][a][k] - node.planes[0][a][k]).max(0.0) as f64);
+        let e: [f64; 3] = std::array::from_fn(|a| (node.planes[1][a][k] - node.planes[0][a][k]).max(0.0) as f64);
         e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
     };
     let root_area = {
@@ -93,7 +92,12 @@ fn main() -> gridtrace::Result<()> {
         let f = |r: &[u8], k: usize| f32::from_le_bytes(r[4 * k..4 * k + 4].try_into().expect("4 bytes"));
         let rays: Vec<Ray> = bytes
             .chunks_exact(24)
-            .map(|r| Ray::new(Vec3::new(f(r, 0), f(r, 1), f(r, 2)), Vec3::new(f(r, 3), f(r, 4), f(r, 5))))
+            .map(|r| {
+                Ray::new(
+                    Vec3::new(f(r, 0), f(r, 1), f(r, 2)),
+                    Vec3::new(f(r, 3), f(r, 4), f(r, 5)),
+                )
+            })
             .collect();
         if batch_only {
             let mut out = vec![Hit::MISS; rays.len()];

@@ -12,7 +12,7 @@
 //! let scene = builtin::knot_box().prepare_for(accel, &AccelParams::NONE)?;
 //! let (mut tracer, notes) = Tracer::open_with(Backend::Cpu, scene)?;
 //! assert!(notes.is_empty() && tracer.gpu().is_none());
-//! let opts = RenderOptions::new(32, 24, Mode::Shadow, accel);
+//! let opts = RenderOptions::new(32, 24, Mode::Shadow);
 //! let frame = tracer.render(&tracer.scene.camera.clone(), &tracer.scene.lights.clone(), &opts)?;
 //! assert_eq!((frame.image.width, frame.stats.rays.eye), (32, 32 * 24));
 //! # Ok::<(), gridtrace::Error>(())
@@ -20,7 +20,7 @@
 
 use std::sync::Arc;
 
-use crate::accel::TracedOn;
+use crate::accel::{AccelKind, TracedOn};
 use crate::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
 use crate::render::{Image, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
@@ -203,8 +203,14 @@ pub fn traced_on(device: Option<&GpuContext>) -> TracedOn {
 pub fn describe_tracer(gpu: Option<&GpuRenderer>) -> String {
     match gpu {
         Some(g) => format!("gpu: {}", g.context().describe()),
-        None => format!("cpu ({} threads)", rayon::current_num_threads()),
+        None => describe_cpu(),
     }
+}
+
+/// The CPU as every report names it: "cpu (N threads)", the threads of the pool the work runs
+/// on (`--threads`, Python's `threads=`, else every core).
+pub fn describe_cpu() -> String {
+    format!("cpu ({} threads)", rayon::current_num_threads())
 }
 
 /// An adapter in a few words: "NAME (BACKEND)", with ", software" for a software rasteriser.
@@ -348,8 +354,18 @@ impl Tracer {
         }
     }
 
-    /// One frame (or band of rows, `opts.rows`) from `camera` with `lights`. `opts.accel` must
-    /// be a traversal the scene's structure serves.
+    /// Switches to another traversal of the same structure (the grid's `grid` and `pc`), on the
+    /// CPU's scene and the GPU's upload alike: nothing is built or uploaded. An error for a
+    /// traversal of another structure, which needs a scene prepared for it.
+    pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
+        if let Some(g) = &mut self.gpu {
+            g.set_traversal(kind)?;
+        }
+        self.scene.accel.set_traversal(kind)
+    }
+
+    /// One frame (or band of rows, `opts.rows`) from `camera` with `lights`, by the traversal
+    /// the scene's structure serves (`Accel::kind`; `set_traversal` switches grid and pc).
     pub fn render(&mut self, camera: &Camera, lights: &[PointLight], opts: &RenderOptions) -> Result<Frame> {
         self.render_with_progress(camera, lights, opts, None)
     }
@@ -362,7 +378,6 @@ impl Tracer {
         opts: &RenderOptions,
         progress: Option<&(dyn Fn(u32) + Sync)>,
     ) -> Result<Frame> {
-        self.scene.accel.check_serves(opts.accel)?;
         if let Some(g) = &mut self.gpu {
             match g.render(camera, lights, opts) {
                 Ok((image, s)) => {
@@ -393,7 +408,6 @@ impl Tracer {
         opts: &RenderOptions,
         target: &DeviceImage,
     ) -> Result<Rendered> {
-        self.scene.accel.check_serves(opts.accel)?;
         if let Some(g) = &mut self.gpu {
             match g.render_to_device(camera, lights, opts, target) {
                 Ok(s) => return Ok(Rendered::OnDevice(s)),

@@ -18,7 +18,7 @@
 //! let scene = builtin::knot_box().prepare_for(accel, &AccelParams::NONE)?;
 //! let (mut tracer, _) = Tracer::open_with(Backend::Cpu, scene)?;
 //! let views = (0..3).map(|_| (tracer.scene.camera, tracer.scene.lights.clone())).collect::<Vec<_>>();
-//! let opts = RenderOptions::new(16, 16, Mode::Cast, accel);
+//! let opts = RenderOptions::new(16, 16, Mode::Cast);
 //! let mut seen = Vec::new();
 //! let run = tracer.render_frames(views, &opts, FramesOptions::default(), |i, frame| {
 //!     seen.push((i, frame.stats().rays.eye));
@@ -120,7 +120,6 @@ impl Tracer {
     where
         I: IntoIterator<Item = (Camera, Vec<PointLight>)>,
     {
-        self.scene.accel.check_serves(opts.accel)?;
         let t0 = Instant::now();
         let mut run = FramesStats::default();
         let mut deliver = |run: &mut FramesStats, index: usize, frame: Rendered| {

@@ -4,7 +4,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::accel::{AccelKind, TraversalCounters};
+use crate::accel::TraversalCounters;
 
 /// The paper's three workloads plus a traversal-cost view.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -59,7 +59,6 @@ pub struct RenderOptions {
     pub width: u32,
     pub height: u32,
     pub mode: Mode,
-    pub accel: AccelKind,
     /// Optimisations turned off, to measure what they buy (`bench --ablate`); none by default.
     pub ablation: Ablation,
     /// Trace only image rows `first..end` of the `width` x `height` frame (the camera still
@@ -120,12 +119,11 @@ impl Ablation {
 }
 
 impl RenderOptions {
-    pub fn new(width: u32, height: u32, mode: Mode, accel: AccelKind) -> Self {
+    pub fn new(width: u32, height: u32, mode: Mode) -> Self {
         RenderOptions {
             width,
             height,
             mode,
-            accel,
             ablation: Ablation::default(),
             rows: None,
             pixels: PixelFormat::Linear,

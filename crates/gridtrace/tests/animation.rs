@@ -24,8 +24,8 @@ use gridtrace::{Mode, RenderOptions};
 /// Times that deform the knot and squash a sphere (the helper's tests show both happen).
 const TIMES: [f32; 3] = [0.35, 1.7, 4.2];
 
-fn opts(accel: AccelKind) -> RenderOptions {
-    RenderOptions::new(96, 72, Mode::Shadow, accel)
+fn opts() -> RenderOptions {
+    RenderOptions::new(96, 72, Mode::Shadow)
 }
 
 /// The scene prepared from scratch with the animation's vertices at `time`.
@@ -37,8 +37,8 @@ fn fresh(anim: &Animation, time: f32, accel: AccelKind) -> PreparedScene {
     scene.prepare_for(accel, &AccelParams::NONE).unwrap()
 }
 
-fn cpu_image(scene: &PreparedScene, accel: AccelKind) -> Vec<u8> {
-    gridtrace::cpu::render(scene, &opts(accel), None).unwrap().0.to_rgb8()
+fn cpu_image(scene: &PreparedScene) -> Vec<u8> {
+    gridtrace::cpu::render(scene, &opts(), None).unwrap().0.to_rgb8()
 }
 
 #[test]
@@ -49,8 +49,8 @@ fn cpu_updates_equal_fresh_builds() {
         for &t in &TIMES {
             let up = scene.update_vertices(&anim.positions_at(t), RebuildOn::Cpu).unwrap();
             let want = fresh(&anim, t, accel);
-            let got = cpu_image(&scene, accel);
-            let expect = cpu_image(&want, accel);
+            let got = cpu_image(&scene);
+            let expect = cpu_image(&want);
             if accel == AccelKind::Bvh {
                 assert_eq!(up.how, "refitted");
                 let d = differing_pixels(&got, &expect, 2);
@@ -73,7 +73,7 @@ fn bad_updates_leave_the_mesh_in_place() {
     let anim = Animation::by_name("bouncing-spheres").unwrap();
     let mut scene = anim.scene.prepare_for(AccelKind::Grid, &AccelParams::NONE).unwrap();
     scene.update_vertices(&anim.positions_at(0.5), RebuildOn::Cpu).unwrap();
-    let before = cpu_image(&scene, AccelKind::Grid);
+    let before = cpu_image(&scene);
     let tris = scene.accel.tris.clone();
     let mut p = anim.positions_at(1.0);
     p.pop();
@@ -84,7 +84,7 @@ fn bad_updates_leave_the_mesh_in_place() {
     let e = scene.update_vertices(&p, RebuildOn::Cpu).unwrap_err().to_string();
     assert!(e.contains("vertex 17") && e.contains("NaN"), "{e}");
     assert_eq!(scene.accel.tris, tris);
-    assert_eq!(cpu_image(&scene, AccelKind::Grid), before);
+    assert_eq!(cpu_image(&scene), before);
 }
 
 /// A grid left to the GPU is not traced stale on the CPU: that is an error, not a wrong image.
@@ -95,15 +95,10 @@ fn stale_cpu_grid_is_refused() {
     scene
         .update_vertices(&anim.positions_at(0.5), RebuildOn::Device)
         .unwrap();
-    let e = gridtrace::cpu::render(&scene, &opts(AccelKind::Grid), None)
-        .unwrap_err()
-        .to_string();
+    let e = gridtrace::cpu::render(&scene, &opts(), None).unwrap_err().to_string();
     assert!(e.contains("GPU"), "{e}");
     scene.update_vertices(&anim.positions_at(0.5), RebuildOn::Cpu).unwrap();
-    assert_eq!(
-        cpu_image(&scene, AccelKind::Grid),
-        cpu_image(&fresh(&anim, 0.5, AccelKind::Grid), AccelKind::Grid)
-    );
+    assert_eq!(cpu_image(&scene), cpu_image(&fresh(&anim, 0.5, AccelKind::Grid)));
 }
 
 /// GPU frames: the grid rebuilt on the device every frame (and the BVH refitted and uploaded)
@@ -131,9 +126,9 @@ fn gpu_frames_equal_fresh_cpu_renders() {
                 let b = up.build.expect("the grid is built on the GPU");
                 assert!(b.cpu_fallback.is_none(), "{:?}", b.cpu_fallback);
             }
-            let (image, _) = gpu.render(&scene.camera, &scene.lights, &opts(accel)).unwrap();
+            let (image, _) = gpu.render(&scene.camera, &scene.lights, &opts()).unwrap();
             let on_cpu = if accel.entry().cpu { accel } else { AccelKind::Bvh };
-            let expect = cpu_image(&fresh(&anim, t, on_cpu), on_cpu);
+            let expect = cpu_image(&fresh(&anim, t, on_cpu));
             let d = differing_pixels(&image.to_rgb8(), &expect, 2);
             assert!(
                 d <= 0.005,

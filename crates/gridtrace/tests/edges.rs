@@ -105,7 +105,12 @@ fn cpu_leaks(packets: bool) -> (usize, Vec<String>) {
         let scenes = all_structures(scene);
         // `hwrt`'s CPU side is the BVH's walk, tested as the BVH; its rays are the GPU's.
         for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().cpu) {
-            let scene = scenes.iter().find(|s| s.accel.serves(kind)).unwrap();
+            let scene = &scenes
+                .iter()
+                .find(|s| s.accel.structure_name() == kind.structure_name())
+                .unwrap()
+                .with_accel(kind, &gridtrace::AccelParams::NONE)
+                .unwrap();
             let mut rays = rays_for(kind, &rays, false);
             if packets {
                 rays = rays.into_iter().step_by(PACKET).collect();
@@ -115,16 +120,14 @@ fn cpu_leaks(packets: bool) -> (usize, Vec<String>) {
                 .enumerate()
                 .map(|(i, r)| {
                     if !packets {
-                        return scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                        return scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, &mut NoCounters);
                     }
                     let k = i % PACKET;
                     let side = r.ray.dir.any_orthonormal_vector() * r.ray.dir.length() * 1e-3;
                     let lanes: [Ray; PACKET] =
                         std::array::from_fn(|j| Ray::new(r.ray.origin, r.ray.dir + side * (j as f32 - k as f32)));
                     let mut none = [NoCounters; PACKET];
-                    scene
-                        .accel
-                        .intersect_packet(&lanes, 0.0, f32::INFINITY, kind, &mut none)[k]
+                    scene.accel.intersect_packet(&lanes, 0.0, f32::INFINITY, &mut none)[k]
                 })
                 .collect();
             let bad = leaks(&rays, &hits);
@@ -180,17 +183,21 @@ fn gpu_edges_and_vertices_do_not_leak() {
         let kinds = gridtrace::testing::gpu_kinds(&ctx);
         let mut gpus: Vec<(PreparedScene, gridtrace::gpu::GpuRenderer)> = all_structures(scene)
             .into_iter()
-            .filter(|s| kinds.iter().any(|&k| s.accel.serves(k)))
+            .filter(|s| kinds.iter().any(|&k| s.accel.structure_name() == k.structure_name()))
             .map(|s| {
                 let g = gridtrace::gpu::GpuRenderer::new(ctx.clone(), &s).unwrap();
                 (s, g)
             })
             .collect();
         for &kind in &kinds {
-            let (_, gpu) = gpus.iter_mut().find(|(s, _)| s.accel.serves(kind)).unwrap();
+            let (_, gpu) = gpus
+                .iter_mut()
+                .find(|(s, _)| s.accel.structure_name() == kind.structure_name())
+                .unwrap();
+            gpu.set_traversal(kind).unwrap();
             let rays = rays_for(kind, &rays, ctx.is_software());
             let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
-            let hits = gpu.intersect(&plain, 0.0, f32::INFINITY, kind).unwrap();
+            let hits = gpu.intersect(&plain, 0.0, f32::INFINITY).unwrap();
             let bad = leaks(&rays, &hits);
             eprintln!("GPU {name} {}: {} of {} rays leak", kind.name(), bad.len(), rays.len());
             // `hwrt` is the driver's triangle test, not ours: its leaks are measured and held

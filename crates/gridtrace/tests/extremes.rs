@@ -25,10 +25,10 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .par_iter()
             .filter_map(|r| {
                 let want = brute_force_intersect(&all.grid.tris, r, 0.0, f32::INFINITY);
-                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
                 let ok = got.is_hit() == want.is_hit()
                     && (!want.is_hit() || (got.t - want.t).abs() <= 1e-6 * want.t.abs())
-                    && all.get(kind).occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters) == want.is_hit();
+                    && all.get(kind).occluded(r, 0.0, f32::INFINITY, &mut NoCounters) == want.is_hit();
                 (!ok).then_some((*r, got, want))
             })
             .collect();
@@ -52,7 +52,6 @@ fn single_triangle() {
         &Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z),
         0.0,
         f32::INFINITY,
-        AccelKind::ProximityCloud,
         &mut NoCounters,
     );
     assert_eq!((h.tri, h.t), (0, 1.0));
@@ -125,7 +124,7 @@ fn camera_inside_a_mesh() {
     s.lights.push(PointLight::new(Vec3::new(0.0, 0.5, 0.0), Vec3::ONE));
     for kind in AccelKind::ALL {
         let p = s.prepare_for(kind, &AccelParams::NONE).unwrap();
-        let (img, _) = gridtrace::cpu::render(&p, &RenderOptions::new(96, 64, Mode::Shadow, kind), None).unwrap();
+        let (img, _) = gridtrace::cpu::render(&p, &RenderOptions::new(96, 64, Mode::Shadow), None).unwrap();
         let bg = img.pixels().iter().filter(|c| **c == s.background).count();
         assert_eq!(bg, 0, "{} background pixels seen from inside", bg);
         assert!(img.pixels().iter().all(|c| c.is_finite()));
@@ -168,14 +167,14 @@ fn no_shadow_acne_at_grazing_light() {
         assert_eq!(p.degenerate_dropped, 0);
         let mut images = vec![(
             "cpu",
-            gridtrace::cpu::render(&p, &RenderOptions::new(w, h, Mode::Shadow, AccelKind::Grid), None)
+            gridtrace::cpu::render(&p, &RenderOptions::new(w, h, Mode::Shadow), None)
                 .unwrap()
                 .0,
         )];
         if std::env::var_os("GRIDTRACE_SKIP_GPU").is_none() {
             let ctx = gridtrace::gpu::GpuContext::new().expect("GPU adapter");
             let mut gpu = gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &p).unwrap();
-            let opts = RenderOptions::new(w, h, Mode::Shadow, AccelKind::ProximityCloud);
+            let opts = RenderOptions::new(w, h, Mode::Shadow);
             images.push(("gpu", gpu.render(&p.camera, &p.lights, &opts).unwrap().0));
         }
         let mut checked = 0;
@@ -184,9 +183,7 @@ fn no_shadow_acne_at_grazing_light() {
             for y in 0..h {
                 for x in 0..w {
                     let r = frame.ray(x, y);
-                    let hit = p
-                        .accel
-                        .intersect(&r, 0.0, f32::INFINITY, AccelKind::Grid, &mut NoCounters);
+                    let hit = p.accel.intersect(&r, 0.0, f32::INFINITY, &mut NoCounters);
                     if !hit.is_hit() {
                         continue;
                     }

@@ -55,7 +55,7 @@ fn golden_images() {
             .unwrap();
         for mode in Mode::ALL {
             let name = format!("{scene_name}_{}", mode.name());
-            let opts = RenderOptions::new(SIZE, SIZE, mode, AccelKind::Grid);
+            let opts = RenderOptions::new(SIZE, SIZE, mode);
             let (img, stats) = gridtrace::cpu::render(&prepared, &opts, None).unwrap();
             let img = if mode == Mode::Heat { img.heat_to_color() } else { img };
             let rgb = img.to_rgb8();
@@ -109,8 +109,7 @@ fn every_structure_renders_the_same_image() {
     let scene = builtin::scene("mirror-spheres").unwrap();
     let render = |accel| {
         let prepared = scene.prepare_for(accel, &AccelParams::NONE).unwrap();
-        let (img, stats) =
-            gridtrace::cpu::render(&prepared, &RenderOptions::new(64, 64, Mode::Trace, accel), None).unwrap();
+        let (img, stats) = gridtrace::cpu::render(&prepared, &RenderOptions::new(64, 64, Mode::Trace), None).unwrap();
         (img.to_rgb8(), stats.rays)
     };
     let (g, rg) = render(AccelKind::Grid);

@@ -78,17 +78,21 @@ fn builtin_prepared(name: &str) -> Option<Prepared> {
 fn kinds_of(p: &Prepared) -> Vec<AccelKind> {
     AccelKind::ALL
         .into_iter()
-        .filter(|k| p.iter().any(|(s, _)| s.accel.serves(*k)))
+        .filter(|k| p.iter().any(|(s, _)| s.accel.structure_name() == k.structure_name()))
         .collect()
 }
 
-/// The prepared scene that serves `kind`, and its renderer.
+/// The prepared scene whose structure serves `kind`, and its renderer, both switched to it
+/// (`set_traversal`: the grid serves `grid` and `pc`).
 fn for_kind(p: &mut Prepared, kind: AccelKind) -> (&PreparedScene, &mut GpuRenderer) {
     let (s, g) = p
         .iter_mut()
-        .find(|(s, _)| s.accel.serves(kind))
+        .find(|(s, _)| s.accel.structure_name() == kind.structure_name())
         .unwrap_or_else(|| panic!("no prepared scene serves {}", kind.name()));
-    (s, g.as_mut().unwrap())
+    s.accel.set_traversal(kind).unwrap();
+    let g = g.as_mut().unwrap();
+    g.set_traversal(kind).unwrap();
+    (s, g)
 }
 
 fn per_ray_agreement(scene_name: &str, res: Resolution) {
@@ -104,9 +108,9 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
         let accel = &scene.accel;
         let cpu_hits: Vec<Hit> = rays
             .iter()
-            .map(|r| accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
+            .map(|r| accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters))
             .collect();
-        let gpu_hits = gpu.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+        let gpu_hits = gpu.intersect(&rays, 0.0, f32::INFINITY).unwrap();
         assert_eq!(gpu_hits.len(), rays.len());
         let bad: Vec<_> = (0..rays.len())
             .filter(|&i| !agree(accel, &rays[i], &cpu_hits[i], &gpu_hits[i]))
@@ -137,9 +141,9 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
         // Any hit, with t_max at the CPU's closest hit (+-) and unbounded.
         let cpu_occ: Vec<bool> = rays
             .iter()
-            .map(|r| accel.occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
+            .map(|r| accel.occluded(r, 0.0, f32::INFINITY, &mut NoCounters))
             .collect();
-        let gpu_occ = gpu.occluded(&rays, 0.0, f32::INFINITY, kind).unwrap();
+        let gpu_occ = gpu.occluded(&rays, 0.0, f32::INFINITY).unwrap();
         let bad_occ = cpu_occ.iter().zip(&gpu_occ).filter(|(a, b)| a != b).count();
         assert!(
             bad_occ <= allowed,
@@ -182,8 +186,9 @@ fn per_ray_sparse_room_pc() {
     per_ray_agreement("sparse-room", Resolution::Fixed([48, 48, 48]));
 }
 
-/// A GPU scene answers the kinds its structure serves and refuses the others with an error
-/// that names the kind asked for (as the CPU's `Accel::check_serves`).
+/// A GPU scene switches to the kinds its structure serves (the grid's `grid` and `pc`, in
+/// place) and refuses the others with an error that names the kind asked for, as the CPU's
+/// `Accel::set_traversal`; a switched renderer then walks the kind it was switched to.
 #[test]
 fn uploads_serve_their_kinds_only() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
@@ -194,16 +199,29 @@ fn uploads_serve_their_kinds_only() {
     for (s, g) in &mut p {
         let gpu = g.as_mut().unwrap();
         for kind in AccelKind::ALL {
-            let got = gpu.intersect(&rays, 0.0, f32::INFINITY, kind);
+            let serves = s.accel.structure_name() == kind.structure_name();
+            let switched = gpu.set_traversal(kind);
             assert_eq!(
-                got.is_ok(),
-                s.accel.serves(kind),
+                switched.is_ok(),
+                serves,
                 "{} on a {}",
                 kind.name(),
                 s.accel.structure_name()
             );
-            if let Err(e) = got {
-                assert!(e.to_string().contains(&format!("'{}'", kind.name())), "{e}");
+            let cpu = s.accel.clone().with_traversal(kind);
+            assert_eq!(
+                cpu.is_ok(),
+                serves,
+                "{} on a CPU {}",
+                kind.name(),
+                s.accel.structure_name()
+            );
+            match switched {
+                Err(e) => assert!(e.to_string().contains(&format!("'{}'", kind.name())), "{e}"),
+                Ok(()) => {
+                    assert_eq!(gpu.kind(), kind);
+                    assert!(gpu.intersect(&rays, 0.0, f32::INFINITY).is_ok());
+                }
             }
         }
     }
@@ -224,7 +242,7 @@ fn images_match_cpu() {
         for mode in Mode::ALL {
             for accel in kinds_of(&p) {
                 let (scene, gpu) = for_kind(&mut p, accel);
-                let opts = RenderOptions::new(160, 120, mode, accel);
+                let opts = RenderOptions::new(160, 120, mode);
                 let (ci, cs) = gridtrace::cpu::render(scene, &opts, None).unwrap();
                 let (gi, gs) = gpu.render(&scene.camera, &scene.lights, &opts).unwrap();
                 if mode == Mode::Heat && matches!(accel, AccelKind::Bvh | AccelKind::Hwrt) {
@@ -293,7 +311,7 @@ fn dynamic_camera_and_lights() {
         .prepare(Resolution::default())
         .unwrap();
     let Some(mut gpu) = renderer(&scene) else { return };
-    let opts = RenderOptions::new(96, 96, Mode::Trace, AccelKind::Grid);
+    let opts = RenderOptions::new(96, 96, Mode::Trace);
     let mut cam2 = scene.camera;
     cam2.eye = Vec3::new(-3.0, 1.5, 4.0);
     let lights2 = vec![
@@ -331,7 +349,7 @@ fn ablations_keep_images() {
     for accel in kinds_of(&p) {
         let (scene, gpu) = for_kind(&mut p, accel);
         for mode in [Mode::Shadow, Mode::Trace, Mode::Heat] {
-            let base = RenderOptions::new(96, 72, mode, accel);
+            let base = RenderOptions::new(96, 72, mode);
             let (want, ws) = gpu.render(&scene.camera, &scene.lights, &base).unwrap();
             let (cpu_want, _) = gridtrace::cpu::render(scene, &base, None).unwrap();
             for name in Ablation::NAMES {
@@ -374,7 +392,7 @@ fn per_frame_uploads_are_uniforms_only() {
     for name in ["knot-box", "sparse-room"] {
         let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
         let Some(mut gpu) = renderer(&scene) else { return };
-        let opts = RenderOptions::new(64, 48, Mode::Trace, AccelKind::Grid);
+        let opts = RenderOptions::new(64, 48, Mode::Trace);
         let mut cam = scene.camera;
         let mut sizes = Vec::new();
         for _ in 0..3 {
@@ -402,12 +420,14 @@ fn per_frame_uploads_are_uniforms_only() {
 #[test]
 fn a_frame_of_many_tiles_is_one_round_trip() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
+    let scene = builtin::knot_box()
+        .prepare_for(AccelKind::ProximityCloud, &gridtrace::AccelParams::NONE)
+        .unwrap();
     let Some(mut whole) = renderer(&scene) else { return };
     let Some(mut tiled) = renderer(&scene) else { return };
     tiled.set_max_tile_pixels(1000);
     for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
-        let opts = RenderOptions::new(64, 48, mode, AccelKind::ProximityCloud);
+        let opts = RenderOptions::new(64, 48, mode);
         let (a, sa) = whole.render(&scene.camera, &scene.lights, &opts).unwrap();
         let (b, sb) = tiled.render(&scene.camera, &scene.lights, &opts).unwrap();
         assert_eq!((sa.tiles, sb.tiles), (1, 4), "{mode:?}");
@@ -432,7 +452,9 @@ fn a_frame_of_many_tiles_is_one_round_trip() {
 fn frames_left_on_the_device_equal_read_back_frames() {
     use gridtrace::gpu::DeviceImage;
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
+    let scene = builtin::knot_box()
+        .prepare_for(AccelKind::ProximityCloud, &gridtrace::AccelParams::NONE)
+        .unwrap();
     let Some(mut gpu) = renderer(&scene) else { return };
     gpu.set_max_tile_pixels(1000);
     let (w, h) = (64u32, 48u32);
@@ -440,7 +462,7 @@ fn frames_left_on_the_device_equal_read_back_frames() {
     let whole = DeviceImage::new(gpu.context(), w, h).unwrap();
     let banded = DeviceImage::new(gpu.context(), w, h).unwrap();
     for mode in [Mode::Cast, Mode::Shadow, Mode::Trace] {
-        let opts = RenderOptions::new(w, h, mode, AccelKind::ProximityCloud).with_pixels(gridtrace::PixelFormat::Srgb8);
+        let opts = RenderOptions::new(w, h, mode).with_pixels(gridtrace::PixelFormat::Srgb8);
         let (want, sw) = gpu.render(&cam, &lights, &opts).unwrap();
         // The device image is 8-bit sRGB whatever the options ask.
         let linear = RenderOptions {
@@ -469,13 +491,13 @@ fn frames_left_on_the_device_equal_read_back_frames() {
             "{mode:?}: bands out of place"
         );
     }
-    let heat = RenderOptions::new(w, h, Mode::Heat, AccelKind::ProximityCloud);
+    let heat = RenderOptions::new(w, h, Mode::Heat);
     assert!(gpu.render_to_device(&cam, &lights, &heat, &whole).is_err());
-    let small = RenderOptions::new(w - 1, h, Mode::Cast, AccelKind::ProximityCloud);
+    let small = RenderOptions::new(w - 1, h, Mode::Cast);
     assert!(gpu.render_to_device(&cam, &lights, &small, &whole).is_err());
     let other = std::sync::Arc::new(GpuContext::new().unwrap());
     let elsewhere = DeviceImage::new(&other, w, h).unwrap();
-    let cast = RenderOptions::new(w, h, Mode::Cast, AccelKind::ProximityCloud);
+    let cast = RenderOptions::new(w, h, Mode::Cast);
     let e = gpu.render_to_device(&cam, &lights, &cast, &elsewhere).unwrap_err();
     assert!(e.to_string().contains("another device"), "{e}");
     // An image over one storage binding (16 GiB here, beyond Vulkan's 32-bit binding range)
@@ -516,11 +538,13 @@ fn host_phases_account_for_the_wall(t: &gridtrace::gpu::GpuTimings, wall_ms: f64
 #[test]
 fn srgb8_frames_read_back_four_bytes_a_pixel() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-    let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
+    let scene = builtin::knot_box()
+        .prepare_for(AccelKind::ProximityCloud, &gridtrace::AccelParams::NONE)
+        .unwrap();
     let Some(mut gpu) = renderer(&scene) else { return };
     gpu.set_max_tile_pixels(1000);
     for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
-        let linear = RenderOptions::new(64, 48, mode, AccelKind::ProximityCloud);
+        let linear = RenderOptions::new(64, 48, mode);
         let srgb8 = linear.with_pixels(gridtrace::PixelFormat::Srgb8);
         let (a, sa) = gpu.render(&scene.camera, &scene.lights, &linear).unwrap();
         let (b, sb) = gpu.render(&scene.camera, &scene.lights, &srgb8).unwrap();
@@ -594,9 +618,11 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
     chunked.set_max_tile_pixels(700);
     let rays = ray_set(&scene.accel, 2500, 11);
     let kind = AccelKind::ProximityCloud;
-    let want = whole.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+    whole.set_traversal(kind).unwrap();
+    chunked.set_traversal(kind).unwrap();
+    let want = whole.intersect(&rays, 0.0, f32::INFINITY).unwrap();
     assert_eq!(whole.last_query_stats().chunks, 1);
-    let got = chunked.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
+    let got = chunked.intersect(&rays, 0.0, f32::INFINITY).unwrap();
     let same = |a: &Hit, b: &Hit| {
         a.tri == b.tri
             && a.t.to_bits() == b.t.to_bits()
@@ -637,7 +663,6 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
             &RaySlice { rays: &rays },
             (0.0, f32::INFINITY),
             Answer::Hits { uv: false },
-            kind,
             |first, a| {
                 let ChunkAnswers::Hits(h) = a else {
                     panic!("asked for (t, triangle)")
@@ -655,8 +680,8 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
     assert_eq!(s.downloaded_bytes, 2500 * 8 + stamps(&s, 4));
 
     // Occlusion: one bit a ray down, the one-chunk batch's answers, and the closest hits'.
-    let want_occ = whole.occluded(&rays, 0.0, 10.0, kind).unwrap();
-    let got_occ = chunked.occluded(&rays, 0.0, 10.0, kind).unwrap();
+    let want_occ = whole.occluded(&rays, 0.0, 10.0).unwrap();
+    let got_occ = chunked.occluded(&rays, 0.0, 10.0).unwrap();
     assert_eq!(want_occ, got_occ);
     assert!(want_occ.iter().any(|&o| o) && want_occ.iter().any(|&o| !o));
     for (h, &o) in want.iter().zip(&want_occ) {
@@ -678,21 +703,15 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
         .collect();
     let mut occ = vec![false; rays.len()];
     chunked
-        .cast(
-            &RaysWithIntervals(within),
-            (0.0, 0.0),
-            Answer::Occlusion,
-            kind,
-            |first, a| {
-                let ChunkAnswers::Occlusion(bits) = a else {
-                    panic!("asked for occlusion")
-                };
-                let end = (first + bits.len() * 32).min(occ.len());
-                gridtrace::gpu::unpack_bits(bits, &mut occ[first..end]);
-            },
-        )
+        .cast(&RaysWithIntervals(within), (0.0, 0.0), Answer::Occlusion, |first, a| {
+            let ChunkAnswers::Occlusion(bits) = a else {
+                panic!("asked for occlusion")
+            };
+            let end = (first + bits.len() * 32).min(occ.len());
+            gridtrace::gpu::unpack_bits(bits, &mut occ[first..end]);
+        })
         .unwrap();
-    let narrow = whole.occluded(&rays, 2.0, 8.0, kind).unwrap();
+    let narrow = whole.occluded(&rays, 2.0, 8.0).unwrap();
     for i in 0..rays.len() {
         assert_eq!(occ[i], if i % 2 == 0 { want_occ[i] } else { narrow[i] }, "ray {i}");
     }
@@ -711,6 +730,7 @@ fn consecutive_batches_answer_as_fresh_ones() {
     kept.set_max_tile_pixels(700);
     let rays = ray_set(&scene.accel, 3000, 5);
     let kind = AccelKind::ProximityCloud;
+    kept.set_traversal(kind).unwrap();
     for (k, (first, n)) in [(0, 1000), (7, 10), (100, 2900), (2999, 1), (50, 2000), (1, 2999)]
         .into_iter()
         .enumerate()
@@ -718,9 +738,10 @@ fn consecutive_batches_answer_as_fresh_ones() {
         let batch = &rays[first..first + n];
         let Some(mut fresh) = renderer(&scene) else { return };
         fresh.set_max_tile_pixels(700);
+        fresh.set_traversal(kind).unwrap();
         if k % 2 == 0 {
-            let got = kept.intersect(batch, 0.0, f32::INFINITY, kind).unwrap();
-            let want = fresh.intersect(batch, 0.0, f32::INFINITY, kind).unwrap();
+            let got = kept.intersect(batch, 0.0, f32::INFINITY).unwrap();
+            let want = fresh.intersect(batch, 0.0, f32::INFINITY).unwrap();
             assert_eq!(got.len(), n);
             let same = got
                 .iter()
@@ -731,8 +752,8 @@ fn consecutive_batches_answer_as_fresh_ones() {
                 "batch {k} ({n} rays from {first}) differs from a fresh renderer's"
             );
         } else {
-            let got = kept.occluded(batch, 0.0, 10.0, kind).unwrap();
-            let want = fresh.occluded(batch, 0.0, 10.0, kind).unwrap();
+            let got = kept.occluded(batch, 0.0, 10.0).unwrap();
+            let want = fresh.occluded(batch, 0.0, 10.0).unwrap();
             assert_eq!(got, want, "batch {k} ({n} rays from {first})");
         }
         assert_eq!(kept.last_query_stats().rays, n as u64);
@@ -753,7 +774,7 @@ fn bands_equal_rows_of_the_frame() {
     for accel in kinds_of(&p) {
         let (scene, gpu) = for_kind(&mut p, accel);
         for mode in Mode::ALL {
-            let whole = RenderOptions::new(w, h, mode, accel);
+            let whole = RenderOptions::new(w, h, mode);
             let (gpu_whole, gpu_stats) = gpu.render(&scene.camera, &scene.lights, &whole).unwrap();
             let (cpu_whole, cpu_stats) = gridtrace::cpu::render(scene, &whole, None).unwrap();
             let (mut gpu_rays, mut cpu_rays) = (
@@ -779,7 +800,7 @@ fn bands_equal_rows_of_the_frame() {
     // Bands outside the image, or empty, are errors, not panics.
     let (scene, gpu) = for_kind(&mut p, AccelKind::Grid);
     for (first, end) in [(0, 0), (5, 3), (40, 42)] {
-        let band = RenderOptions::new(w, h, Mode::Cast, AccelKind::Grid).band(first, end);
+        let band = RenderOptions::new(w, h, Mode::Cast).band(first, end);
         assert!(gpu.render(&scene.camera, &scene.lights, &band).is_err());
         assert!(gridtrace::cpu::render(scene, &band, None).is_err());
     }

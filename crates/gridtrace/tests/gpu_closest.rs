@@ -146,9 +146,9 @@ fn tied(tris: &[TriAccel], p: Vec3, tri: u32, best: f32, tol: f32) -> bool {
 
 /// The GPU's answers against the CPU structure's and brute force's; returns the mean work per
 /// point.
-fn compare(what: &str, scene: &PreparedScene, gpu: &mut GpuRenderer, kind: AccelKind, pts: &[[f32; 3]]) -> f64 {
+fn compare(what: &str, scene: &PreparedScene, gpu: &mut GpuRenderer, pts: &[[f32; 3]]) -> f64 {
     let tris = &scene.accel.tris;
-    let got = gpu.closest_points_counted(tris, pts, kind).unwrap();
+    let got = gpu.closest_points_counted(tris, pts).unwrap();
     assert_eq!(got.closest.len(), pts.len(), "{what}");
     let extent = scene.accel.bounds().extent().max_element();
     let (mut found, mut ties) = (0, 0);
@@ -252,13 +252,7 @@ fn check_mesh(name: &str, mesh: &Mesh, ctx: &Arc<GpuContext>, n: usize, seed: u6
                 continue;
             }
             let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, var).unwrap();
-            compare(
-                &format!("{name}, {} ({var})", kind.name()),
-                &scene,
-                &mut gpu,
-                kind,
-                &pts,
-            );
+            compare(&format!("{name}, {} ({var})", kind.name()), &scene, &mut gpu, &pts);
         }
     }
 }
@@ -323,8 +317,8 @@ fn coincident_copies_keep_the_smaller_index() {
         for var in variants {
             let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
             let what = format!("two knots, {} ({var})", kind.name());
-            compare(&what, &scene, &mut gpu, kind, &pts);
-            let got = gpu.closest_points(&scene.accel.tris, &pts, kind).unwrap();
+            compare(&what, &scene, &mut gpu, &pts);
+            let got = gpu.closest_points(&scene.accel.tris, &pts).unwrap();
             let second = got.iter().filter(|c| c.is_found() && c.tri >= n_faces).count();
             assert_eq!(second, 0, "{what}: {second} points named the second copy's triangle");
         }
@@ -355,15 +349,15 @@ fn chunked_and_empty_batches() {
         let mut chunked = GpuRenderer::new(ctx.clone(), &scene).unwrap();
         chunked.set_max_tile_pixels(1000);
         let (a, b) = (
-            whole.closest_points_counted(tris, &pts, kind).unwrap(),
-            chunked.closest_points_counted(tris, &pts, kind).unwrap(),
+            whole.closest_points_counted(tris, &pts).unwrap(),
+            chunked.closest_points_counted(tris, &pts).unwrap(),
         );
         assert_eq!(a.work, b.work, "{}", kind.name());
         for (i, (x, y)) in a.closest.iter().zip(&b.closest).enumerate() {
             let same = x.tri == y.tri && x.dist_sq.to_bits() == y.dist_sq.to_bits() && (x.u, x.v) == (y.u, y.v);
             assert!(same, "{} point {i}: {x:?} vs {y:?}", kind.name());
         }
-        assert!(chunked.closest_points(tris, &[], kind).unwrap().is_empty());
+        assert!(chunked.closest_points(tris, &[]).unwrap().is_empty());
     }
 }
 

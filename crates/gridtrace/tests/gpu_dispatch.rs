@@ -36,7 +36,7 @@ fn two_d_dispatches_equal_one_d() {
         let mut a = GpuRenderer::new(one_d.clone(), &prepared).unwrap();
         let mut b = GpuRenderer::new(two_d.clone(), &prepared).unwrap();
         for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
-            let opts = RenderOptions::new(64, 48, mode, accel);
+            let opts = RenderOptions::new(64, 48, mode);
             let (ia, sa) = a.render(&prepared.camera, &prepared.lights, &opts).unwrap();
             let (ib, sb) = b.render(&prepared.camera, &prepared.lights, &opts).unwrap();
             assert!(
@@ -46,11 +46,11 @@ fn two_d_dispatches_equal_one_d() {
             );
             assert_eq!(sa.render.rays, sb.render.rays, "{} {mode:?}", accel.name());
         }
-        let ha = a.intersect(&rays, 0.0, f32::INFINITY, accel).unwrap();
-        let hb = b.intersect(&rays, 0.0, f32::INFINITY, accel).unwrap();
+        let ha = a.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+        let hb = b.intersect(&rays, 0.0, f32::INFINITY).unwrap();
         assert!(ha == hb, "{}: 2-D dispatch changed the hits", accel.name());
-        let oa = a.occluded(&rays, 0.0, f32::INFINITY, accel).unwrap();
-        let ob = b.occluded(&rays, 0.0, f32::INFINITY, accel).unwrap();
+        let oa = a.occluded(&rays, 0.0, f32::INFINITY).unwrap();
+        let ob = b.occluded(&rays, 0.0, f32::INFINITY).unwrap();
         assert_eq!(oa, ob, "{}: 2-D dispatch changed occlusion", accel.name());
     }
     let tris = grid.accel.tris;

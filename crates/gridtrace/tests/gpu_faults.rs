@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-use gridtrace::accel::{AccelKind, Resolution};
+use gridtrace::accel::Resolution;
 use gridtrace::gpu::{Fault, GpuContext};
 use gridtrace::scene::builtin;
 use gridtrace::testing::skip_gpu;
@@ -26,7 +26,7 @@ fn auto_hands_a_lost_device_to_the_cpu() {
     }
     for fault in [Fault::DeviceLost, Fault::OutOfMemory] {
         let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
-        let opts = RenderOptions::new(48, 32, Mode::Shadow, AccelKind::Grid);
+        let opts = RenderOptions::new(48, 32, Mode::Shadow);
         let (want, _) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
         let ctx = ctx();
         let mut notes = Vec::new();
@@ -56,7 +56,7 @@ fn gpu_backend_reports_the_fault() {
         return;
     }
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
-    let opts = RenderOptions::new(48, 32, Mode::Cast, AccelKind::Grid);
+    let opts = RenderOptions::new(48, 32, Mode::Cast);
     let ctx = ctx();
     let mut notes = Vec::new();
     let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Gpu, &mut notes).unwrap();
@@ -101,7 +101,7 @@ fn auto_update_after_a_lost_device() {
     let up = tracer.update_vertices(&moved).unwrap();
     assert!(up.how.contains("CPU"), "{}", up.how);
     assert!(tracer.gpu().is_none());
-    let opts = RenderOptions::new(48, 32, Mode::Cast, AccelKind::Grid);
+    let opts = RenderOptions::new(48, 32, Mode::Cast);
     let mut want = scene.clone();
     want.update_vertices(&moved, gridtrace::scene::RebuildOn::Cpu).unwrap();
     let (want, _) = gridtrace::cpu::render(&want, &opts, None).unwrap();

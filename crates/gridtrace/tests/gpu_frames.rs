@@ -88,7 +88,7 @@ fn frames_in_flight_equal_frames_one_by_one() {
         (Mode::Trace, PixelFormat::Srgb8),
         (Mode::Heat, PixelFormat::Linear),
     ] {
-        let opts = RenderOptions::new(w, h, mode, AccelKind::Bvh).with_pixels(pixels);
+        let opts = RenderOptions::new(w, h, mode).with_pixels(pixels);
         let alone: Vec<_> = views.iter().map(|(c, l)| tracer.render(c, l, &opts).unwrap()).collect();
         for in_flight in [1, 2, 3] {
             let frames = run(&mut tracer, &views, &opts, in_flight);
@@ -118,7 +118,7 @@ fn frames_in_flight_equal_frames_one_by_one() {
 
     // Left in a device image: it holds the last frame, as that frame alone leaves it, and each
     // frame's figures come back without its image.
-    let opts = RenderOptions::new(w, h, Mode::Shadow, AccelKind::Bvh).with_pixels(PixelFormat::Srgb8);
+    let opts = RenderOptions::new(w, h, Mode::Shadow).with_pixels(PixelFormat::Srgb8);
     let target = DeviceImage::new(&ctx, w, h).unwrap();
     let mut seen = Vec::new();
     let how = FramesOptions {
@@ -160,7 +160,7 @@ fn a_fault_hands_the_frames_in_flight_to_the_cpu() {
     let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Auto, &mut notes).unwrap();
     assert!(tracer.gpu().is_some());
     let views = views(&scene, 6);
-    let opts = RenderOptions::new(32, 24, Mode::Shadow, AccelKind::Bvh);
+    let opts = RenderOptions::new(32, 24, Mode::Shadow);
     let mut got = Vec::new();
     let how = FramesOptions {
         in_flight: 2,

@@ -113,10 +113,10 @@ impl GpuQueries for &TraceMesh {
 
 impl GpuQueries for GpuRenderer {
     fn closest(&mut self, rays: &[Ray]) -> Vec<Hit> {
-        self.intersect(rays, 0.0, f32::INFINITY, AccelKind::Irregular).unwrap()
+        self.intersect(rays, 0.0, f32::INFINITY).unwrap()
     }
     fn any(&mut self, rays: &[Ray], t_max: f32) -> Vec<bool> {
-        self.occluded(rays, 0.0, t_max, AccelKind::Irregular).unwrap()
+        self.occluded(rays, 0.0, t_max).unwrap()
     }
 }
 
@@ -139,14 +139,13 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
         .par_iter()
         .map(|r| brute_force_intersect(tris, r, 0.0, f32::INFINITY))
         .collect();
-    let kind = AccelKind::Irregular;
     let cpu: Vec<Hit> = rays
         .par_iter()
-        .map(|r| accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
+        .map(|r| accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters))
         .collect();
     let cpu_occ: Vec<bool> = rays
         .par_iter()
-        .map(|r| accel.occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters))
+        .map(|r| accel.occluded(r, 0.0, f32::INFINITY, &mut NoCounters))
         .collect();
     let cpu_bad: Vec<usize> = (0..rays.len())
         .filter(|&i| {

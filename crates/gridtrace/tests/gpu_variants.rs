@@ -153,7 +153,7 @@ fn variants_render_the_default_images() {
                     // Without compaction the queues keep slots by invocation (ray order, the
                     // appends and the statistics change that path); the walks never see it.
                     for no_compaction in [false, true].into_iter().filter(|&nc| !nc || !walk_changed) {
-                        let mut opts = RenderOptions::new(157, 83, mode, kind);
+                        let mut opts = RenderOptions::new(157, 83, mode);
                         opts.ablation = Ablation {
                             no_compaction,
                             ..Ablation::default()
@@ -190,7 +190,7 @@ fn tiles_order_across_tile_boundaries() {
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
     let mut tiles = GpuRenderer::with_variants(ctx.clone(), &scene, &v("order=tiles,appends=workgroup")).unwrap();
-    let opts = RenderOptions::new(1100, 960, Mode::Cast, AccelKind::Grid);
+    let opts = RenderOptions::new(1100, 960, Mode::Cast);
     const { assert!(1100 * 960 > gridtrace::gpu::MAX_TILE_PIXELS && !gridtrace::gpu::MAX_TILE_PIXELS.is_multiple_of(1100)) };
     let want = render(&mut base, &scene, &opts);
     let got = render(&mut tiles, &scene, &opts);
@@ -212,14 +212,14 @@ fn variants_give_the_default_hits() {
     for (kind, scene) in per_structure(&ctx, &scene) {
         let structure = kind.structure_name();
         let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
-        let want = base.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
-        let want_any = base.occluded(&rays, 0.0, f32::INFINITY, kind).unwrap();
+        let want = base.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+        let want_any = base.occluded(&rays, 0.0, f32::INFINITY).unwrap();
         let hits = want.iter().filter(|h| h.is_hit()).count();
         assert!(hits > rays.len() / 10, "{structure}: the rays must hit");
         for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
             let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
-            let got = gpu.intersect(&rays, 0.0, f32::INFINITY, kind).unwrap();
-            let got_any = gpu.occluded(&rays, 0.0, f32::INFINITY, kind).unwrap();
+            let got = gpu.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+            let got_any = gpu.occluded(&rays, 0.0, f32::INFINITY).unwrap();
             let what = format!("{structure} {}", var.changes());
             assert_eq!(got_any, want_any, "{what}: any hit");
             if !tie_order_differs(&var, structure) {

@@ -44,7 +44,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .par_iter()
             .zip(&truth)
             .filter_map(|(r, want)| {
-                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
                 let mut errs = Vec::new();
                 if !agree(&got, want) {
                     errs.push(format!("closest {got:?} want {want:?}"));
@@ -56,18 +56,14 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                         errs.push("tie partner not hit".into());
                     }
                 }
-                let occ = all.get(kind).occluded(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let occ = all.get(kind).occluded(r, 0.0, f32::INFINITY, &mut NoCounters);
                 if occ != want.is_hit() {
                     errs.push(format!("occluded {occ} but closest {want:?}"));
                 }
                 if want.is_hit() {
                     // Nothing strictly before the closest hit; something just past it.
-                    let before = all
-                        .get(kind)
-                        .occluded(r, 0.0, want.t * (1.0 - 1e-5), kind, &mut NoCounters);
-                    let past = all
-                        .get(kind)
-                        .occluded(r, 0.0, want.t * (1.0 + 1e-5), kind, &mut NoCounters);
+                    let before = all.get(kind).occluded(r, 0.0, want.t * (1.0 - 1e-5), &mut NoCounters);
+                    let past = all.get(kind).occluded(r, 0.0, want.t * (1.0 + 1e-5), &mut NoCounters);
                     if before != brute_force_occluded(&all.grid.tris, r, 0.0, want.t * (1.0 - 1e-5)) || !past {
                         errs.push(format!("occluded window wrong: before {before} past {past}"));
                     }
@@ -77,17 +73,15 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .collect();
         // The batch queries (interleaved rays for the BVH) give exactly the per-ray answers.
         let mut batch = vec![Hit::MISS; rays.len()];
-        all.get(kind)
-            .intersect_batch(&rays, 0.0, f32::INFINITY, kind, &mut batch);
+        all.get(kind).intersect_batch(&rays, 0.0, f32::INFINITY, &mut batch);
         let mut occ_batch = vec![false; rays.len()];
-        all.get(kind)
-            .occluded_batch(&rays, 0.0, f32::INFINITY, kind, &mut occ_batch);
+        all.get(kind).occluded_batch(&rays, 0.0, f32::INFINITY, &mut occ_batch);
         // With normals (the BVH takes them from the triangle it hits): the same hits, and each
         // normal the hit triangle's.
         let mut with_normals = vec![Hit::MISS; rays.len()];
         let mut normals = vec![Vec3::NAN; rays.len()];
         all.get(kind)
-            .intersect_batch_each(&rays, 0.0, f32::INFINITY, kind, |i, hit, normal| {
+            .intersect_batch_each(&rays, 0.0, f32::INFINITY, |i, hit, normal| {
                 with_normals[i] = hit;
                 normals[i] = normal;
             });
@@ -103,7 +97,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         for (i, r) in rays.iter().enumerate() {
             assert_eq!(
                 batch[i],
-                all.get(kind).intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters),
+                all.get(kind).intersect(r, 0.0, f32::INFINITY, &mut NoCounters),
                 "{name} {} batch {r:?}",
                 kind.name()
             );
@@ -134,13 +128,13 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             let packet = &rays[at..(at + len).min(rays.len())];
             let n = packet.len();
             let mut counted = vec![TraversalCounters::default(); n];
-            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, kind, &mut counted);
+            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, &mut counted);
             let limits: [f32; PACKET] = std::array::from_fn(|k| [f32::INFINITY, 1.0, 0.25][(at + k) % 3]);
             let mut counted_any = vec![TraversalCounters::default(); n];
-            let blocked = accel.occluded_packet(packet, 0.0, limits, kind, &mut counted_any);
+            let blocked = accel.occluded_packet(packet, 0.0, limits, &mut counted_any);
             for (k, r) in packet.iter().enumerate() {
                 let mut c = TraversalCounters::default();
-                let want = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut c);
+                let want = accel.intersect(r, 0.0, f32::INFINITY, &mut c);
                 assert_eq!(
                     (
                         got[k].t.to_bits(),
@@ -154,7 +148,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                     kind.name()
                 );
                 let mut c = TraversalCounters::default();
-                let want = accel.occluded(r, 0.0, limits[k], kind, &mut c);
+                let want = accel.occluded(r, 0.0, limits[k], &mut c);
                 assert_eq!(
                     (blocked[k], counted_any[k]),
                     (want, c),
@@ -182,19 +176,19 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .collect();
         let bits = |h: &Hit| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits());
         let mut batch = vec![Hit::MISS; coherent.len()];
-        accel.intersect_batch(&coherent, 0.0, f32::INFINITY, kind, &mut batch);
+        accel.intersect_batch(&coherent, 0.0, f32::INFINITY, &mut batch);
         let mut occ_batch = vec![false; coherent.len()];
-        accel.occluded_batch(&coherent, 0.0, 1.0, kind, &mut occ_batch);
+        accel.occluded_batch(&coherent, 0.0, 1.0, &mut occ_batch);
         for (p, packet) in coherent.chunks(PACKET).enumerate() {
             let mut none = [NoCounters; PACKET];
-            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, kind, &mut none);
-            let blocked = accel.occluded_packet(packet, 0.0, [1.0; PACKET], kind, &mut none);
+            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, &mut none);
+            let blocked = accel.occluded_packet(packet, 0.0, [1.0; PACKET], &mut none);
             for (k, r) in packet.iter().enumerate() {
-                let want = accel.intersect(r, 0.0, f32::INFINITY, kind, &mut NoCounters);
+                let want = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
                 let what = format!("{name} {}: coherent packet {p}, ray {k}, {r:?}", kind.name());
                 assert_eq!(bits(&got[k]), bits(&want), "{what}");
                 assert_eq!(bits(&batch[PACKET * p + k]), bits(&want), "{what} (batch)");
-                let want = accel.occluded(r, 0.0, 1.0, kind, &mut NoCounters);
+                let want = accel.occluded(r, 0.0, 1.0, &mut NoCounters);
                 assert_eq!(blocked[k], want, "{what}: any hit");
                 assert_eq!(occ_batch[PACKET * p + k], want, "{what}: any hit (batch)");
             }
@@ -261,11 +255,13 @@ fn proximity_cloud_visits_fewer_cells() {
     let tris = scene_tris("sparse-room");
     let grid = Grid::build(&tris, Resolution::Fixed([48, 48, 48])).unwrap();
     let accel = Accel::from_grid(grid, tris);
+    assert_eq!(accel.kind(), AccelKind::Grid);
+    let pc = accel.clone().with_traversal(AccelKind::ProximityCloud).unwrap();
     let rays = ray_set(&accel, 20_000, 9);
     let (mut g, mut p) = (TraversalCounters::default(), TraversalCounters::default());
     for r in &rays {
-        accel.intersect(r, 0.0, f32::INFINITY, AccelKind::Grid, &mut g);
-        accel.intersect(r, 0.0, f32::INFINITY, AccelKind::ProximityCloud, &mut p);
+        accel.intersect(r, 0.0, f32::INFINITY, &mut g);
+        pc.intersect(r, 0.0, f32::INFINITY, &mut p);
     }
     assert_eq!(g.jumps, 0);
     assert!(p.jumps > 0);

@@ -151,7 +151,7 @@ pub fn frame_matrix(
             };
             let mut reference = Vec::new();
             for &mode in &plan.modes {
-                let opts = RenderOptions::new(w, h, mode, on_cpu);
+                let opts = RenderOptions::new(w, h, mode);
                 let (row, image) = cpu_row(bs, cpu_prepared.as_ref().unwrap_or(&prepared), &opts)?;
                 log(&row_line(&row));
                 rows.push(row);
@@ -164,7 +164,7 @@ pub fn frame_matrix(
                 .collect::<Result<Vec<(String, GpuRenderer)>>>()?;
             for (k, &mode) in plan.modes.iter().enumerate() {
                 // As `render` and the viewer ask: 8-bit pixels, packed on the device.
-                let opts = RenderOptions::new(w, h, mode, accel).with_pixels(PixelFormat::Srgb8);
+                let opts = RenderOptions::new(w, h, mode).with_pixels(PixelFormat::Srgb8);
                 for row in gpu_rows(plan, bs, &prepared, &mut renderers, &opts, &reference[k], mismatches)? {
                     log(&row_line(&row));
                     rows.push(row);
@@ -194,7 +194,7 @@ pub fn big_frame(
     }
     let (w, h) = plan.big_frame;
     let prepared = bs.scene.prepare_for(AccelKind::Bvh, &AccelParams::NONE)?;
-    let opts = RenderOptions::new(w, h, Mode::Trace, AccelKind::Bvh);
+    let opts = RenderOptions::new(w, h, Mode::Trace);
     let (cpu, image) = cpu_row(bs, &prepared, &opts)?;
     log(&row_line(&cpu));
     let opts = opts.with_pixels(PixelFormat::Srgb8);
@@ -228,7 +228,7 @@ fn cpu_row(bs: &BenchScene, prepared: &PreparedScene, opts: &RenderOptions) -> R
         FrameRow {
             scene: bs.name.clone(),
             triangles: bs.triangles,
-            accel: opts.accel.name().into(),
+            accel: prepared.accel.kind().name().into(),
             backend: "cpu".into(),
             variant: "-".into(),
             mode: opts.mode.name().into(),
@@ -320,7 +320,17 @@ fn gpu_rows(
     let mut rows = Vec::new();
     for (((walls, frames), image), label) in runs.into_iter().zip(last).zip(labels) {
         let image = image.expect("at least one timed frame");
-        rows.push(gpu_row(bs, opts, label, &walls, &frames, &image, reference, mismatches));
+        rows.push(gpu_row(
+            bs,
+            prepared.accel.kind(),
+            opts,
+            label,
+            &walls,
+            &frames,
+            &image,
+            reference,
+            mismatches,
+        ));
     }
     Ok(rows)
 }
@@ -364,6 +374,7 @@ fn prepare_medians(parts: impl Iterator<Item = PrepareParts> + Clone) -> Prepare
 #[allow(clippy::too_many_arguments)]
 fn gpu_row(
     bs: &BenchScene,
+    accel: AccelKind,
     opts: &RenderOptions,
     variant: &str,
     walls: &[f64],
@@ -382,7 +393,7 @@ fn gpu_row(
         mismatches.push(format!(
             "{} {} {} {} {}x{}: {:.3}% of pixels differ from the CPU's",
             bs.name,
-            opts.accel.name(),
+            accel.name(),
             variant,
             opts.mode.name(),
             opts.width,
@@ -393,7 +404,7 @@ fn gpu_row(
     FrameRow {
         scene: bs.name.clone(),
         triangles: bs.triangles,
-        accel: opts.accel.name().into(),
+        accel: accel.name().into(),
         backend: "gpu".into(),
         variant: variant.into(),
         mode: opts.mode.name().into(),

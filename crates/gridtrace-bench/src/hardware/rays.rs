@@ -137,7 +137,7 @@ pub fn ray_study(
                     let (k, asked) = asks[j];
                     let r = &mut renderers[k].1;
                     let t0 = Instant::now();
-                    let hits = ask(r, &rays, accel, asked)?;
+                    let hits = ask(r, &rays, asked)?;
                     let ms = t0.elapsed().as_secs_f64() * 1e3;
                     Ok((ms, (hits, r.last_query_stats().clone())))
                 })?;
@@ -188,13 +188,13 @@ pub fn ray_study(
 /// A GPU batch asking for `asked`, its answers as hits to check against the CPU's: without
 /// u, v those are 0; occlusion answers as a hit at t = 0 or a miss (checked against the
 /// CPU's hits: occluded where the CPU hits anything).
-fn ask(r: &mut GpuRenderer, rays: &[Ray], accel: AccelKind, asked: Asked) -> Result<Vec<Hit>> {
+fn ask(r: &mut GpuRenderer, rays: &[Ray], asked: Asked) -> Result<Vec<Hit>> {
     let rays_of = gridtrace::gpu::RaySlice { rays };
     match asked {
-        Asked::HitsUv => r.intersect(rays, 0.0, f32::INFINITY, accel),
-        Asked::Hits => r.intersect_of(&rays_of, (0.0, 1e30), false, accel),
+        Asked::HitsUv => r.intersect(rays, 0.0, f32::INFINITY),
+        Asked::Hits => r.intersect_of(&rays_of, (0.0, 1e30), false),
         Asked::Occlusion => Ok(r
-            .occluded_of(&rays_of, (0.0, 1e30), accel)?
+            .occluded_of(&rays_of, (0.0, 1e30))?
             .into_iter()
             .map(|o| {
                 if o {

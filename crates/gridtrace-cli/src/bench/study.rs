@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use gridtrace::accel::dims_str;
 use gridtrace::gpu::GpuContext;
-use gridtrace::{AccelKind, Mode, RenderOptions, Resolution};
+use gridtrace::{Mode, RenderOptions, Resolution};
 use gridtrace_bench::{self as bench, BenchConfig, BenchReport, scenes, studies};
 
 use super::{BenchArgs, BenchBackendArg};
@@ -36,11 +36,11 @@ impl Run<'_> {
             first_res.0,
             first_res.1
         );
-        let opts = RenderOptions::new(first_res.0, first_res.1, cfg.modes[0], cfg.accels[0]);
+        let opts = RenderOptions::new(first_res.0, first_res.1, cfg.modes[0]);
         for name in &cfg.scenes {
             match scenes::build_paper_scene(name, data_dir.as_deref()) {
                 Ok(bs) => {
-                    let sw = studies::grid_sweep(&bs, &opts, cfg.warmup, cfg.reps, &mut log)?;
+                    let sw = studies::grid_sweep(&bs, cfg.accels[0], &opts, cfg.warmup, cfg.reps, &mut log)?;
                     println!(
                         "  {}: best {} {} {:.2} ms; automatic {} {:.2} ms",
                         sw.scene,
@@ -253,7 +253,7 @@ impl Run<'_> {
         let prepared = bs
             .scene
             .prepare_for(cfg.accels[0], &bs.params_for(cfg.accels[0], cfg.paper_grids, cfg.grid))?;
-        let opts = RenderOptions::new(first_res.0, first_res.1, mode, cfg.accels[0]);
+        let opts = RenderOptions::new(first_res.0, first_res.1, mode);
         let set = bench::rays::collect_rays(&prepared, &opts)?;
         let c = set.counts();
         if let Some(p) = &a.export_rays {
@@ -267,7 +267,7 @@ impl Run<'_> {
             "exported {} rays of {name} {} {} {}x{} (eye {}, shadow {}, reflection {}; {hits} with a hit)",
             c.total(),
             mode.name(),
-            opts.accel.name(),
+            cfg.accels[0].name(),
             opts.width,
             opts.height,
             c.eye,
@@ -277,7 +277,7 @@ impl Run<'_> {
         report.ray_export = Some(studies::RayExport {
             scene: name.clone(),
             mode: mode.name().into(),
-            accel: opts.accel.name().into(),
+            accel: cfg.accels[0].name().into(),
             width: opts.width,
             height: opts.height,
             rays_file: a.export_rays.as_ref().map(|p| p.display().to_string()),
@@ -299,7 +299,7 @@ impl Run<'_> {
         for s in &report.matrix.scenes {
             let bs = scenes::build_paper_scene(&s.name, data_dir.as_deref())?;
             let prepared = bs.scene.prepare(bs.resolution(cfg.paper_grids, cfg.grid))?;
-            let opts = RenderOptions::new(first_res.0, first_res.1, Mode::Trace, AccelKind::Grid);
+            let opts = RenderOptions::new(first_res.0, first_res.1, Mode::Trace);
             let (image, _) = gridtrace::cpu::render(&prepared, &opts, None)?;
             let path = dir.join(format!("scene_{}.png", s.name));
             image.save_png(&path)?;

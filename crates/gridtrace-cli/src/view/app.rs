@@ -59,6 +59,8 @@ impl App {
             ));
             *at = p.time;
         }
+        // The grid's two traversals share one tracer: G switches between them in place.
+        tracer.set_traversal(self.accel)?;
         Ok(i)
     }
 
@@ -71,7 +73,7 @@ impl App {
     /// The options of the frame for the current view.
     pub(super) fn frame_opts(&self) -> RenderOptions {
         let (w, h) = self.traced_size();
-        RenderOptions::new(w, h, self.mode, self.accel).with_pixels(PixelFormat::Srgb8)
+        RenderOptions::new(w, h, self.mode).with_pixels(PixelFormat::Srgb8)
     }
 
     pub(super) fn apply(&mut self, action: Action, el: &ActiveEventLoop) -> gridtrace::Result<()> {

@@ -57,7 +57,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         println!("       (a software adapter: CPU speed, not GPU speed)");
     }
     let (w, h) = a.res;
-    let opts = RenderOptions::new(w, h, a.mode, accel).with_pixels(PixelFormat::Srgb8);
+    let opts = RenderOptions::new(w, h, a.mode).with_pixels(PixelFormat::Srgb8);
     // As the window does: a frame larger than one storage binding is read back instead.
     let (target, why) = match tracer.gpu() {
         Some(g) if !a.readback && a.mode != Mode::Heat => match DeviceImage::new(g.context(), w, h) {

@@ -90,7 +90,7 @@ impl Refiner {
         Refiner {
             width: 0,
             height: 0,
-            opts: RenderOptions::new(1, 1, Mode::Cast, gridtrace::AccelKind::Grid),
+            opts: RenderOptions::new(1, 1, Mode::Cast),
             levels: Vec::new(),
             level: 0,
             next_row: 0,
@@ -359,7 +359,7 @@ mod tests {
     use super::*;
     use gridtrace::gpu::GpuRenderStats;
     use gridtrace::scene::builtin;
-    use gridtrace::{AccelKind, Frame, Resolution};
+    use gridtrace::{Frame, Resolution};
 
     /// Whatever the budget, bands and previews, the finished frame is `render`'s image bit for
     /// bit (CPU), and the display shows it; heat frames are coloured by the whole frame's
@@ -387,7 +387,7 @@ mod tests {
             (Mode::Trace, 50),
             (Mode::Heat, 0),
         ] {
-            let opts = RenderOptions::new(61, 47, mode, AccelKind::Grid);
+            let opts = RenderOptions::new(61, 47, mode);
             r.restart(opts, Duration::from_micros(budget_us), false);
             let mut steps = 0;
             while !r.done() {
@@ -408,11 +408,7 @@ mod tests {
             }
         }
         // The pace is known now: a zero budget plans a preview before the full level.
-        r.restart(
-            RenderOptions::new(61, 47, Mode::Shadow, AccelKind::Grid),
-            Duration::ZERO,
-            false,
-        );
+        r.restart(RenderOptions::new(61, 47, Mode::Shadow), Duration::ZERO, false);
         assert_eq!(r.levels.len(), 2);
         r.step(Duration::ZERO, &mut trace).unwrap();
         assert_eq!(r.progress(), 0.0, "the preview's band comes first");
@@ -433,7 +429,7 @@ mod tests {
             .prepare(Resolution::default())
             .unwrap();
         let (w, h) = (61, 47);
-        let opts = RenderOptions::new(w, h, Mode::Shadow, AccelKind::Grid);
+        let opts = RenderOptions::new(w, h, Mode::Shadow);
         let (want, want_stats) = gridtrace::cpu::render(&scene, &opts, None).unwrap();
         let want_rgba: Vec<u8> = want.to_rgb8().chunks(3).flat_map(|c| [c[0], c[1], c[2], 255]).collect();
         let cpu = |o: &RenderOptions| gridtrace::cpu::render_view(&scene, &scene.camera, &scene.lights, o, None);
@@ -496,7 +492,7 @@ mod tests {
                 gpu: None,
             }))
         };
-        let heat = RenderOptions::new(w, h, Mode::Heat, AccelKind::Grid);
+        let heat = RenderOptions::new(w, h, Mode::Heat);
         for (k, want_stale) in [(0, true), (1, false)] {
             r.restart(heat, Duration::from_secs(100), false);
             assert_eq!(r.levels, [1], "frame {k}");

@@ -11,14 +11,15 @@ use glam::Vec3;
 
 use super::binning::grid_bounds;
 use super::closest::{ClosestPoint, closest_point_brute};
-use super::{Aabb, AccelKind, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel};
+use super::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel};
 use crate::Result;
 
 /// One acceleration structure over triangles: its build, its update when the triangles move,
 /// what it reports, and its closest-hit and any-hit walks for single rays, packets and batches.
 ///
-/// `kind` in the walks is the traversal asked for, one the structure serves (the registry's
-/// `structure` column): only the uniform grid serves two (`grid` steps every cell, `pc` jumps).
+/// A structure knows the traversal it serves (`Structure::kind`): only the uniform grid serves
+/// two (`grid` steps every cell, `pc` jumps), and it keeps which in its `stepping`.
+///
 /// The packet and batch defaults run the single-ray walk ray by ray; a structure overrides them
 /// when it has something faster that gives the same hits and counts bit for bit (the shared
 /// tests check it for every structure).
@@ -61,26 +62,10 @@ pub trait AccelStructure: Sized {
     }
 
     /// Closest hit with `t_min < t < t_max`, `Hit::MISS` for none.
-    fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit;
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit;
 
     /// Whether anything is hit with `t_min < t < t_max` (stops at the first hit found).
-    fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        counters: &mut C,
-    ) -> bool;
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool;
 
     /// Closest hits of up to `PACKET` coherent rays (a 4x2 block of pixels), each counted into
     /// its own `counters[i]`; misses past `rays.len()`.
@@ -90,13 +75,12 @@ pub trait AccelStructure: Sized {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         check_packet(rays.len(), counters.len());
         let mut out = [Hit::MISS; PACKET];
         for ((o, r), c) in out.iter_mut().zip(rays).zip(counters.iter_mut()) {
-            *o = self.intersect(tris, r, t_min, t_max, kind, c);
+            *o = self.intersect(tris, r, t_min, t_max, c);
         }
         out
     }
@@ -108,13 +92,12 @@ pub trait AccelStructure: Sized {
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
-        kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
         check_packet(rays.len(), counters.len());
         let mut out = [false; PACKET];
         for (i, (r, c)) in rays.iter().zip(counters.iter_mut()).enumerate() {
-            out[i] = self.occluded(tris, r, t_min, t_max[i], kind, c);
+            out[i] = self.occluded(tris, r, t_min, t_max[i], c);
         }
         out
     }
@@ -127,11 +110,10 @@ pub trait AccelStructure: Sized {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        kind: AccelKind,
         mut f: impl FnMut(usize, Hit, Vec3),
     ) {
         for (i, r) in rays.iter().enumerate() {
-            let hit = self.intersect(tris, r, t_min, t_max, kind, &mut NoCounters);
+            let hit = self.intersect(tris, r, t_min, t_max, &mut NoCounters);
             f(i, hit, hit_normal(tris, &hit));
         }
     }
@@ -159,42 +141,26 @@ pub trait AccelStructure: Sized {
     /// triangle tested (`all_hits_brute`); a structure overrides it with its own walk, which
     /// must report the very hits brute force reports (the same triangle test, so the same
     /// bits).
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
         all_hits_brute(tris, ray, t_min, t_max, out)
     }
 
     /// How many triangles each ray of a batch hits with `t_min < t < t_max`, into `out`
     /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists. On this thread. Default:
     /// `all_hits` ray by ray; a structure overrides it with a walk that counts without listing.
-    fn count_hits_batch(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        out: &mut [u32],
-    ) {
+    fn count_hits_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         let mut hits = Vec::new();
         for (r, o) in rays.iter().zip(out) {
             hits.clear();
-            self.all_hits(tris, r, t_min, t_max, kind, &mut hits);
+            self.all_hits(tris, r, t_min, t_max, &mut hits);
             *o = hits.len() as u32;
         }
     }
 
     /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.
-    fn occluded_batch(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        out: &mut [bool],
-    ) {
+    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
         for (r, o) in rays.iter().zip(out) {
-            *o = self.occluded(tris, r, t_min, t_max, kind, &mut NoCounters);
+            *o = self.occluded(tris, r, t_min, t_max, &mut NoCounters);
         }
     }
 }

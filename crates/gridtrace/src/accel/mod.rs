@@ -83,8 +83,15 @@ macro_rules! dispatch {
 }
 
 impl Structure {
-    /// Builds the structure `kind` walks, which reads its own keys of `params`.
+    /// Builds the structure `kind` walks, which reads its own keys of `params`, set to serve
+    /// `kind` (`kind()` says so).
     pub fn build(kind: AccelKind, tris: &[TriAccel], params: &AccelParams) -> Result<Structure> {
+        let mut s = Structure::build_structure(kind, tris, params)?;
+        s.set_traversal(kind)?;
+        Ok(s)
+    }
+
+    fn build_structure(kind: AccelKind, tris: &[TriAccel], params: &AccelParams) -> Result<Structure> {
         Ok(match kind.structure_name() {
             "grid" => Structure::Grid(AccelStructure::build(tris, params)?),
             "bvh" => Structure::Bvh(AccelStructure::build(tris, params)?),
@@ -95,15 +102,42 @@ impl Structure {
         })
     }
 
+    /// The traversal it serves: its own, or for the uniform grid the one its `stepping` says.
+    pub fn kind(&self) -> AccelKind {
+        match self {
+            Structure::Grid(g) if g.stepping == Stepping::ProximityJumps => AccelKind::ProximityCloud,
+            Structure::Grid(_) => AccelKind::Grid,
+            Structure::Bvh(_) => AccelKind::Bvh,
+            Structure::Irregular(_) => AccelKind::Irregular,
+            Structure::Brute(_) => AccelKind::Brute,
+            Structure::Hwrt(_) => AccelKind::Hwrt,
+        }
+    }
+
     /// The structure's name, as the registry's `structure` column spells it.
     pub fn name(&self) -> &'static str {
-        match self {
-            Structure::Grid(_) => "grid",
-            Structure::Bvh(_) => "bvh",
-            Structure::Irregular(_) => "irregular",
-            Structure::Brute(_) => "brute",
-            Structure::Hwrt(_) => "hwrt",
+        self.kind().structure_name()
+    }
+
+    /// Serves `kind` from now on: another traversal of the same structure (the grid's `grid`
+    /// and `pc`, which share every array), so nothing is built. An error for a kind of another
+    /// structure, which needs a build (`PreparedScene::with_accel`).
+    pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
+        if kind.structure_name() != self.name() {
+            return Err(Error::InvalidInput(format!(
+                "accel '{}' asked of a scene prepared with a {}: prepare it for '{}'",
+                kind.name(),
+                self.name(),
+                kind.name()
+            )));
         }
+        if let Structure::Grid(g) = self {
+            g.stepping = match kind {
+                AccelKind::ProximityCloud => Stepping::ProximityJumps,
+                _ => Stepping::EveryCell,
+            };
+        }
+        Ok(())
     }
 }
 
@@ -133,7 +167,7 @@ impl Accel {
         })
     }
 
-    /// A grid built elsewhere (over these triangles).
+    /// A grid built elsewhere (over these triangles), serving the traversal its `stepping` says.
     pub fn from_grid(grid: Grid, tris: Vec<TriAccel>) -> Accel {
         Accel {
             tris,
@@ -250,6 +284,23 @@ impl Accel {
         self.structure.name()
     }
 
+    /// The traversal its walks run (`Structure::kind`).
+    pub fn kind(&self) -> AccelKind {
+        self.structure.kind()
+    }
+
+    /// `Structure::set_traversal`: `grid` and `pc` switch in place; any other change is an
+    /// error that says to prepare the scene for it.
+    pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
+        self.structure.set_traversal(kind)
+    }
+
+    /// This structure switched to `kind` (`set_traversal`), as a new value.
+    pub fn with_traversal(mut self, kind: AccelKind) -> Result<Accel> {
+        self.set_traversal(kind)?;
+        Ok(self)
+    }
+
     /// The structure in a few words (`AccelStructure::summary`).
     pub fn summary(&self) -> String {
         dispatch!(&self.structure, s => AccelStructure::summary(s))
@@ -260,39 +311,17 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::info_lines(s, &self.tris))
     }
 
-    /// Whether this structure can run traversal `kind`.
-    pub fn serves(&self, kind: AccelKind) -> bool {
-        kind.structure_name() == self.structure_name()
-    }
-
-    /// `serves`, as an error that says what to do.
-    pub fn check_serves(&self, kind: AccelKind) -> Result<()> {
-        if self.serves(kind) {
-            Ok(())
-        } else {
-            Err(Error::InvalidInput(format!(
-                "accel '{}' asked of a scene prepared with a {}: prepare it for '{}'",
-                kind.name(),
-                self.structure_name(),
-                kind.name()
-            )))
-        }
-    }
-
-    /// Closest hit with `t_min < t < t_max`. `kind` must be one this structure serves
-    /// (`serves`); the grid's `Grid` and `ProximityCloud` differ only in how they cross empty
-    /// space.
+    /// Closest hit with `t_min < t < t_max`, by the traversal the structure serves (`kind`: the
+    /// grid's `grid` and `pc` differ only in how they cross empty space).
     #[inline]
-    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> Hit {
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        dispatch!(&self.structure, s => AccelStructure::intersect(s, &self.tris, ray, t_min, t_max, kind, counters))
+    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
+        dispatch!(&self.structure, s => AccelStructure::intersect(s, &self.tris, ray, t_min, t_max, counters))
     }
 
     /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
     #[inline]
-    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, counters: &mut C) -> bool {
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        dispatch!(&self.structure, s => AccelStructure::occluded(s, &self.tris, ray, t_min, t_max, kind, counters))
+    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
+        dispatch!(&self.structure, s => AccelStructure::occluded(s, &self.tris, ray, t_min, t_max, counters))
     }
 
     /// Closest hits of a packet of up to `PACKET` coherent rays (a 4x2 block of pixels' rays:
@@ -307,11 +336,9 @@ impl Accel {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        dispatch!(&self.structure, s => AccelStructure::intersect_packet(s, &self.tris, rays, t_min, t_max, kind, counters))
+        dispatch!(&self.structure, s => AccelStructure::intersect_packet(s, &self.tris, rays, t_min, t_max, counters))
     }
 
     /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (the
@@ -323,11 +350,9 @@ impl Accel {
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
-        kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        dispatch!(&self.structure, s => AccelStructure::occluded_packet(s, &self.tris, rays, t_min, t_max, kind, counters))
+        dispatch!(&self.structure, s => AccelStructure::occluded_packet(s, &self.tris, rays, t_min, t_max, counters))
     }
 
     /// The batch query: closest hits of `rays` handed to `f(i, hit, normal)` for each ray
@@ -337,43 +362,34 @@ impl Accel {
     /// the hit's block while it is still in cache; the irregular grid takes runs of coherent
     /// rays as packets.
     #[inline]
-    pub fn intersect_batch_each(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        f: impl FnMut(usize, Hit, Vec3),
-    ) {
-        dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, kind, f))
+    pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: f32, f: impl FnMut(usize, Hit, Vec3)) {
+        dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, f))
     }
 
     /// Closest hits of a batch into `out` (`out[i]` for `rays[i]`), like `intersect_batch_each`.
-    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [Hit]) {
+    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        self.intersect_batch_each(rays, t_min, t_max, kind, |i, hit, _| out[i] = hit);
+        self.intersect_batch_each(rays, t_min, t_max, |i, hit, _| out[i] = hit);
     }
 
     /// Any-hit results of a batch into `out` (`out[i]` for `rays[i]`).
-    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [bool]) {
+    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, kind, out))
+        dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, out))
     }
 
     /// Every hit with `t_min < t < t_max`, each triangle once, appended to `out` in no
     /// particular order (`AccelStructure::all_hits`).
     #[inline]
-    pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, out: &mut Vec<Hit>) {
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        dispatch!(&self.structure, s => AccelStructure::all_hits(s, &self.tris, ray, t_min, t_max, kind, out))
+    pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+        dispatch!(&self.structure, s => AccelStructure::all_hits(s, &self.tris, ray, t_min, t_max, out))
     }
 
     /// How many triangles each ray of a batch hits with `t_min < t < t_max` (`out[i]` for
     /// `rays[i]`; `AccelStructure::count_hits_batch`): the number of hits `all_hits` lists.
-    pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind, out: &mut [u32]) {
+    pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         assert_eq!(rays.len(), out.len(), "one count per ray");
-        debug_assert!(self.serves(kind), "{kind:?} on a {}", self.structure_name());
-        dispatch!(&self.structure, s => AccelStructure::count_hits_batch(s, &self.tris, rays, t_min, t_max, kind, out))
+        dispatch!(&self.structure, s => AccelStructure::count_hits_batch(s, &self.tris, rays, t_min, t_max, out))
     }
 
     /// The point of the mesh nearest to `p`, through the structure's own search

@@ -89,7 +89,7 @@ fn trace_paths<C: Collect>(
         let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
         let hits = scene
             .accel
-            .intersect_packet(&traced[..m], 0.0, f32::INFINITY, opts.accel, &mut counted[..m]);
+            .intersect_packet(&traced[..m], 0.0, f32::INFINITY, &mut counted[..m]);
         for (j, counted) in counted.into_iter().take(m).enumerate() {
             let k = lane_of[j];
             counters[k].absorb(counted);
@@ -123,9 +123,7 @@ fn trace_paths<C: Collect>(
                 // The ablation traces shadow rays as closest-hit queries, one by one.
                 std::array::from_fn(|j| j < m && shadow_query(scene, opts, &shadow[j], dist[j], &mut counted[j]))
             } else {
-                scene
-                    .accel
-                    .occluded_packet(&shadow[..m], 0.0, dist, opts.accel, &mut counted[..m])
+                scene.accel.occluded_packet(&shadow[..m], 0.0, dist, &mut counted[..m])
             };
             for (j, counted) in counted.into_iter().take(m).enumerate() {
                 let (k, contribution) = adds[j];

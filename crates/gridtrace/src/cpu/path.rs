@@ -215,8 +215,8 @@ pub(super) fn shadow_query<C: Counters>(
     c: &mut C,
 ) -> bool {
     if opts.ablation.shadow_closest_hit {
-        scene.accel.intersect(ray, 0.0, dist, opts.accel, c).is_hit()
+        scene.accel.intersect(ray, 0.0, dist, c).is_hit()
     } else {
-        scene.accel.occluded(ray, 0.0, dist, opts.accel, c)
+        scene.accel.occluded(ray, 0.0, dist, c)
     }
 }

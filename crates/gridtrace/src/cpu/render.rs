@@ -69,7 +69,6 @@ fn render_generic<C: Collect>(
     progress: Option<&(dyn Fn(u32) + Sync)>,
 ) -> Result<(Image, RenderStats)> {
     opts.validate()?;
-    scene.accel.check_serves(opts.accel)?;
     view.camera.validate().map_err(crate::Error::Scene)?;
     let t0 = Instant::now();
     let cam = view.camera.frame(opts.width, opts.height);
@@ -157,9 +156,7 @@ fn trace_pixel<C: Counters, O: RayObserver>(
     let mut path = Path::new(cam.ray(x, y));
     rays.eye += 1;
     loop {
-        let hit = scene
-            .accel
-            .intersect(&path.ray, 0.0, f32::INFINITY, opts.accel, counters);
+        let hit = scene.accel.intersect(&path.ray, 0.0, f32::INFINITY, counters);
         observer.closest(path.kind, &path.ray, &hit);
         let Some(shading) = path.shade(scene, opts, &hit) else {
             break;
@@ -219,7 +216,6 @@ mod tests {
                     width: 37,
                     height: 23,
                     mode,
-                    accel: kind,
                     ablation,
                     rows,
                     pixels: Default::default(),
@@ -232,9 +228,7 @@ mod tests {
                     let (x, y) = (i as u32 % opts.width, first + i as u32 / opts.width);
                     let want = if mode == Mode::Heat {
                         let mut c = TraversalCounters::default();
-                        prepared
-                            .accel
-                            .intersect(&cam.ray(x, y), 0.0, f32::INFINITY, opts.accel, &mut c);
+                        prepared.accel.intersect(&cam.ray(x, y), 0.0, f32::INFINITY, &mut c);
                         Vec3::splat(c.cost() as f32)
                     } else {
                         let tally = (&mut expected_rays, &mut NoCounters);

@@ -17,8 +17,8 @@ use super::constants::MISS;
 use super::layout::GpuHit;
 use super::queries::{ChunkAnswers, Query, WireSource};
 use super::renderer::GpuRenderer;
+use crate::accel::TriAccel;
 use crate::accel::closest::ClosestPoint;
-use crate::accel::{AccelKind, TriAccel};
 use crate::{Error, Result};
 
 /// Closest points of a batch with the search's work per point.
@@ -33,25 +33,15 @@ pub struct GpuClosestPoints {
 }
 
 impl GpuRenderer {
-    /// The nearest point of the mesh to each of `points`, searched with `kind`'s walk; `tris`
+    /// The nearest point of the mesh to each of `points`, searched with the structure's walk; `tris`
     /// are the triangles this renderer's scene was uploaded with (the points are rebuilt from
     /// them).
-    pub fn closest_points(
-        &mut self,
-        tris: &[TriAccel],
-        points: &[[f32; 3]],
-        kind: AccelKind,
-    ) -> Result<Vec<ClosestPoint>> {
-        Ok(self.closest_points_counted(tris, points, kind)?.closest)
+    pub fn closest_points(&mut self, tris: &[TriAccel], points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
+        Ok(self.closest_points_counted(tris, points)?.closest)
     }
 
     /// `closest_points` with each point's search work.
-    pub fn closest_points_counted(
-        &mut self,
-        tris: &[TriAccel],
-        points: &[[f32; 3]],
-        kind: AccelKind,
-    ) -> Result<GpuClosestPoints> {
+    pub fn closest_points_counted(&mut self, tris: &[TriAccel], points: &[[f32; 3]]) -> Result<GpuClosestPoints> {
         let mut out = GpuClosestPoints {
             closest: Vec::with_capacity(points.len()),
             work: Vec::with_capacity(points.len()),
@@ -61,7 +51,6 @@ impl GpuRenderer {
         self.batch(
             &PointRows { points },
             (0.0, f32::INFINITY),
-            kind,
             Query::ClosestPoint,
             |first, answers| {
                 let ChunkAnswers::Points { hits, work } = answers else {

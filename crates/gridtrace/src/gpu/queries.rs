@@ -171,21 +171,15 @@ unsafe impl Send for Piece<'_> {}
 
 impl GpuRenderer {
     /// Closest hits (with barycentrics) for a batch of rays already checked by the caller.
-    pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<Hit>> {
-        self.intersect_of(&RaySlice { rays }, (t_min, t_max), true, kind)
+    pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
+        self.intersect_of(&RaySlice { rays }, (t_min, t_max), true)
     }
 
     /// Closest hits for the rays of `rays` (`interval` as `cast` takes it), with their
     /// barycentrics only if `uv` (16 bytes a ray down, else 8 and every `u`, `v` 0).
-    pub fn intersect_of(
-        &mut self,
-        rays: &dyn WireSource,
-        interval: (f32, f32),
-        uv: bool,
-        kind: AccelKind,
-    ) -> Result<Vec<Hit>> {
+    pub fn intersect_of(&mut self, rays: &dyn WireSource, interval: (f32, f32), uv: bool) -> Result<Vec<Hit>> {
         let mut hits = Vec::with_capacity(rays.len());
-        self.cast(rays, interval, Answer::Hits { uv }, kind, |_, answers| match answers {
+        self.cast(rays, interval, Answer::Hits { uv }, |_, answers| match answers {
             ChunkAnswers::HitsUv(out) => hits.par_extend(out.par_iter().map(|h| gpu_hit(*h))),
             ChunkAnswers::Hits(out) => hits.par_extend(out.par_iter().map(|h| match h.tri {
                 MISS => Hit::MISS,
@@ -202,15 +196,15 @@ impl GpuRenderer {
     }
 
     /// Any-hit occlusion for a batch of rays already checked by the caller.
-    pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32, kind: AccelKind) -> Result<Vec<bool>> {
-        self.occluded_of(&RaySlice { rays }, (t_min, t_max), kind)
+    pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
+        self.occluded_of(&RaySlice { rays }, (t_min, t_max))
     }
 
     /// Any-hit occlusion for the rays of `rays` (`interval` as `cast` takes it): one bit a ray
     /// comes down, one bool a ray goes back.
-    pub fn occluded_of(&mut self, rays: &dyn WireSource, interval: (f32, f32), kind: AccelKind) -> Result<Vec<bool>> {
+    pub fn occluded_of(&mut self, rays: &dyn WireSource, interval: (f32, f32)) -> Result<Vec<bool>> {
         let mut occ = vec![false; rays.len()];
-        self.cast(rays, interval, Answer::Occlusion, kind, |first, answers| {
+        self.cast(rays, interval, Answer::Occlusion, |first, answers| {
             if let ChunkAnswers::Occlusion(bits) = answers {
                 let end = (first + bits.len() * 32).min(occ.len());
                 unpack_bits(bits, &mut occ[first..end]);
@@ -220,7 +214,7 @@ impl GpuRenderer {
     }
 
     /// Traces `rays` (with `interval` = (t_min, t_max) for a source of stride 6) for `answer`
-    /// through the uploaded structure (`kind`), handing each chunk's answers to `take` with
+    /// through the uploaded structure (by its traversal, `kind`), handing each chunk's answers to `take` with
     /// the index of the chunk's first ray, in order. A ray the source finds invalid stops the
     /// batch with its error.
     pub fn cast(
@@ -228,10 +222,9 @@ impl GpuRenderer {
         rays: &dyn WireSource,
         interval: (f32, f32),
         answer: Answer,
-        kind: AccelKind,
         take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
-        self.batch(rays, interval, kind, Query::Rays(answer), take)
+        self.batch(rays, interval, Query::Rays(answer), take)
     }
 
     /// The statistics of the last batch (`cast`, `intersect`, `occluded`, closest points).
@@ -244,11 +237,10 @@ impl GpuRenderer {
         &mut self,
         source: &dyn WireSource,
         interval: (f32, f32),
-        kind: AccelKind,
         query: Query,
         mut take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
-        self.check_serves(kind)?;
+        let kind = self.kind;
         let t0 = Instant::now();
         let n = source.len();
         let mut stats = GpuQueryStats {

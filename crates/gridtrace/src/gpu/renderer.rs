@@ -123,6 +123,9 @@ pub struct GpuRenderer {
     max_tile_pixels: u32,
     /// The grid the GPU builds when the mesh moves (`update_vertices`), once it has.
     device_grid: Option<GpuGrid>,
+    /// The traversal its walks run: the uploaded scene's (`Accel::kind`), or what
+    /// `set_traversal` switched it to.
+    pub(super) kind: AccelKind,
 }
 
 /// What `GpuRenderer::update_vertices` did, and its times.
@@ -185,6 +188,7 @@ impl GpuRenderer {
         let timestamps = Timestamps::new(&ctx);
         ctx.check_errors()?;
         let mut renderer = GpuRenderer {
+            kind: prepared.accel.kind(),
             ctx,
             kernels,
             scene,
@@ -279,18 +283,25 @@ impl GpuRenderer {
         self.kernels.variants
     }
 
-    /// Whether this scene's upload serves `accel` (as `Accel::serves`: the grid serves `grid`
-    /// and `pc`, every other structure its own kind). An error that says what to do otherwise.
-    pub(super) fn check_serves(&self, accel: AccelKind) -> Result<()> {
+    /// The traversal its walks run (`Accel::kind` of the scene it was given).
+    pub fn kind(&self) -> AccelKind {
+        self.kind
+    }
+
+    /// Serves `kind` from now on: another traversal of the uploaded structure (the grid's
+    /// `grid` and `pc`, which differ only in a uniform), so nothing is uploaded. An error for a
+    /// kind of another structure, which needs a scene prepared and uploaded for it.
+    pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
         let uploaded = self.scene.spec().structure;
-        if accel.structure_name() == uploaded {
-            return Ok(());
+        if kind.structure_name() != uploaded {
+            return Err(Error::InvalidInput(format!(
+                "accel '{}' asked of a GPU scene uploaded with a {uploaded}: prepare the scene for '{}'",
+                kind.name(),
+                kind.name()
+            )));
         }
-        Err(Error::InvalidInput(format!(
-            "accel '{}' asked of a GPU scene uploaded with a {uploaded}: prepare the scene for '{}'",
-            accel.name(),
-            accel.name()
-        )))
+        self.kind = kind;
+        Ok(())
     }
 
     /// Bytes of each GPU array: the scene's and the current work buffers'.

@@ -190,7 +190,6 @@ impl GpuRenderer {
             None => *opts,
         };
         opts.validate()?;
-        self.check_serves(opts.accel)?;
         camera.validate().map_err(Error::Scene)?;
         let t0 = Instant::now();
         let n_lights = lights.len() as u32;
@@ -241,7 +240,7 @@ impl GpuRenderer {
                 t.offset,
                 t.pixels,
                 opts.mode,
-                opts.accel,
+                self.kind,
                 opts.ablation,
             );
         }

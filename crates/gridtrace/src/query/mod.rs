@@ -77,7 +77,6 @@ pub struct TraceMesh {
     /// kept, the usual case, which spares every hit a lookup (a cache miss; a few per cent of a
     /// query).
     original: Option<Vec<u32>>,
-    accel: AccelKind,
     /// What was chosen for the caller (`auto`'s pick), in words.
     notes: Vec<String>,
     backend: Backend,
@@ -164,7 +163,6 @@ impl TraceMesh {
         let mesh = TraceMesh {
             scene: prepared,
             original: (!all_kept).then_some(original),
-            accel,
             notes: note.into_iter().collect(),
             backend: opts.backend,
             gpu_variants: opts.gpu_variants,
@@ -179,9 +177,9 @@ impl TraceMesh {
         Ok(mesh)
     }
 
-    /// The traversal the queries run (`auto` resolved).
+    /// The traversal the queries run (`auto` resolved): the structure's own (`Accel::kind`).
     pub fn accel(&self) -> AccelKind {
-        self.accel
+        self.scene.accel.kind()
     }
 
     /// What was chosen for the caller, in words (`auto`'s pick and why).
@@ -238,7 +236,7 @@ impl TraceMesh {
 
     /// Where queries with `backend` run (opens the GPU if needed).
     pub fn device_for(&self, backend: Backend) -> String {
-        let cpu = || format!("cpu ({} threads)", rayon::current_num_threads());
+        let cpu = crate::backend::describe_cpu;
         match self.renderer(backend) {
             Ok(Some(_)) => self
                 .gpu
@@ -430,7 +428,7 @@ mod tests {
                 let got = mesh
                     .prepared()
                     .accel
-                    .intersect(&ray, 0.0, f32::INFINITY, accel, &mut NoCounters);
+                    .intersect(&ray, 0.0, f32::INFINITY, &mut NoCounters);
                 assert_eq!(hits.t[i], got.t, "{} ray {i}", accel.name());
                 assert!(
                     (got.t - want.t).abs() <= 1e-6 * want.t.abs() || got.t == want.t,

@@ -19,7 +19,7 @@ impl TraceMesh {
     pub fn closest_points_with(&self, backend: Backend, points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
         self.on_backend(
             backend,
-            |gpu| locked(gpu).closest_points(&self.scene.accel.tris, points, self.accel),
+            |gpu| locked(gpu).closest_points(&self.scene.accel.tris, points),
             || closest_points(&self.scene.accel, points),
         )
     }

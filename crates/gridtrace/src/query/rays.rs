@@ -11,7 +11,7 @@ use super::batch::{CPU_BATCH, batch_len, check_interval, on_cpu_batches};
 use super::hits::{Hits, HitsMut};
 use super::{Backend, TraceMesh, locked, wire};
 use crate::Result;
-use crate::accel::{AccelKind, Hit, Ray};
+use crate::accel::{Hit, Ray};
 use crate::gpu::{Answer, ChunkAnswers, GpuRenderer};
 
 impl TraceMesh {
@@ -41,7 +41,7 @@ impl TraceMesh {
                 on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, mut piece| {
                     // Each hit goes straight into the output as its ray is done.
                     let accel = &self.scene.accel;
-                    accel.intersect_batch_each(rays, t_min, t_max, self.accel, |i, hit, normal| {
+                    accel.intersect_batch_each(rays, t_min, t_max, |i, hit, normal| {
                         self.write_hit(&mut piece, i, hit, normal)
                     });
                 })?;
@@ -65,7 +65,7 @@ impl TraceMesh {
         let mut out = Hits::zeroed(n);
         let rays = wire::SplitRays { origins, dirs, n };
         let answer = Answer::Hits { uv: true };
-        locked(gpu).cast(&rays, (t_min, t_max), answer, self.accel, |first, answers| {
+        locked(gpu).cast(&rays, (t_min, t_max), answer, |first, answers| {
             let ChunkAnswers::HitsUv(hits) = answers else {
                 return;
             };
@@ -118,13 +118,13 @@ impl TraceMesh {
             |gpu| {
                 // One bit a ray comes down.
                 let rays = wire::SplitRays { origins, dirs, n };
-                locked(gpu).occluded_of(&rays, (t_min, t_max), self.accel)
+                locked(gpu).occluded_of(&rays, (t_min, t_max))
             },
             || {
                 self.scene.accel.check_cpu_traces()?;
                 let mut out = vec![false; n];
                 on_cpu_batches(origins, dirs, n, out.par_chunks_mut(CPU_BATCH), |rays, piece| {
-                    self.scene.accel.occluded_batch(rays, t_min, t_max, self.accel, piece)
+                    self.scene.accel.occluded_batch(rays, t_min, t_max, piece)
                 })?;
                 Ok(out)
             },
@@ -154,9 +154,9 @@ impl TraceMesh {
         self.run(
             backend,
             rays,
-            |g| g.intersect_of(&crate::gpu::RaySlice { rays }, (t_min, t_max), uv, self.accel),
+            |g| g.intersect_of(&crate::gpu::RaySlice { rays }, (t_min, t_max), uv),
             |r, out| {
-                self.scene.accel.intersect_batch(r, t_min, t_max, self.accel, out);
+                self.scene.accel.intersect_batch(r, t_min, t_max, out);
                 if !uv {
                     out.iter_mut().for_each(|h| (h.u, h.v) = (0.0, 0.0));
                 }
@@ -173,8 +173,8 @@ impl TraceMesh {
         self.run(
             backend,
             rays,
-            |g| g.occluded(rays, t_min, t_max, self.accel),
-            |r, out| self.scene.accel.occluded_batch(r, t_min, t_max, self.accel, out),
+            |g| g.occluded(rays, t_min, t_max),
+            |r, out| self.scene.accel.occluded_batch(r, t_min, t_max, out),
             false,
         )
     }
@@ -218,15 +218,15 @@ impl TraceMesh {
         )
     }
 
-    /// Answers on this mesh's GPU where its backend traces there (`on_gpu`, given the renderer
-    /// and the mesh's structure kind), else on the CPU (`on_cpu`), which also answers a query
+    /// Answers on this mesh's GPU where its backend traces there (`on_gpu`, given the
+    /// renderer), else on the CPU (`on_cpu`), which also answers a query
     /// whose GPU work failed under `auto` (the mesh's queries then stay on the CPU). How
     /// `QueryScene` sends its own wire sources (`query_scene/rays.rs`) through the mesh.
     pub(crate) fn on_gpu_or_cpu<T>(
         &self,
-        on_gpu: impl FnOnce(&mut GpuRenderer, AccelKind) -> Result<T>,
+        on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<T>,
         on_cpu: impl FnOnce() -> Result<T>,
     ) -> Result<T> {
-        self.on_backend(self.backend, |g| on_gpu(&mut locked(g), self.accel), on_cpu)
+        self.on_backend(self.backend, |g| on_gpu(&mut locked(g)), on_cpu)
     }
 }

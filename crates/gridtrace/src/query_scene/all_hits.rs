@@ -47,18 +47,17 @@ impl QueryScene {
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
         let m = self.merged()?;
         let mut out = vec![0u32; rays.len()];
-        let (Some(mesh), Some(accel)) = (m.mesh.as_ref(), m.accel()) else {
+        let Some(accel) = m.accel() else {
             return Ok(out);
         };
         accel.check_current()?;
-        let kind = mesh.accel();
         out.par_chunks_mut(COUNT_BATCH)
             .zip(rays.par_chunks(COUNT_BATCH))
             .for_each_init(
                 || Vec::with_capacity(COUNT_BATCH),
                 |made, (o, r)| {
                     let bad = make_into(r, made);
-                    accel.count_hits_batch(made, 0.0, f32::INFINITY, kind, o);
+                    accel.count_hits_batch(made, 0.0, f32::INFINITY, o);
                     if bad {
                         for (o, q) in o.iter_mut().zip(r) {
                             if ray_of(q).is_none() {
@@ -131,7 +130,5 @@ fn ray_hits(m: &Merged, r: &[f32; 6], out: &mut Vec<Hit>) {
     let (Some(mesh), Some(ray)) = (m.mesh.as_ref(), ray_of(r)) else {
         return;
     };
-    mesh.prepared()
-        .accel
-        .all_hits(&ray, 0.0, f32::INFINITY, mesh.accel(), out);
+    mesh.prepared().accel.all_hits(&ray, 0.0, f32::INFINITY, out);
 }

@@ -34,7 +34,6 @@ pub(super) fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
 /// hits only (a miss keeps the zeros of `RayHits::zeroed`).
 pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut RayHits) {
     let accel = &mesh.prepared().accel;
-    let kind = mesh.accel();
     (
         out.t_hit.par_chunks_mut(BATCH),
         out.geometry_ids.par_chunks_mut(BATCH),
@@ -48,7 +47,7 @@ pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut Ra
             || Vec::with_capacity(BATCH),
             |made, (t, g, p, uv, n, r)| {
                 let bad = make_into(r, made);
-                accel.intersect_batch_each(made, 0.0, f32::INFINITY, kind, |i, hit, normal| {
+                accel.intersect_batch_each(made, 0.0, f32::INFINITY, |i, hit, normal| {
                     if hit.is_hit() {
                         let (id, prim) = m.name(hit.tri);
                         t[i] = hit.t;
@@ -75,12 +74,11 @@ pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut Ra
 /// Whether each ray hits anything with `t_near < t < t_far`, into `out`.
 pub(super) fn occluded(mesh: &TraceMesh, rays: &[[f32; 6]], t_near: f32, t_far: f32, out: &mut [bool]) {
     let accel = &mesh.prepared().accel;
-    let kind = mesh.accel();
     out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
         || Vec::with_capacity(BATCH),
         |made, (o, r)| {
             let bad = make_into(r, made);
-            accel.occluded_batch(made, t_near, t_far, kind, o);
+            accel.occluded_batch(made, t_near, t_far, o);
             if bad {
                 for (o, q) in o.iter_mut().zip(r) {
                     *o &= ray_of(q).is_some();

@@ -213,10 +213,9 @@ impl QueryScene {
     /// Where the ray queries run: "cpu (N threads)" or the GPU adapter (builds the scene).
     pub fn device(&self) -> Result<String> {
         let m = self.merged()?;
-        Ok(m.mesh.as_ref().map_or_else(
-            || format!("cpu ({} threads)", rayon::current_num_threads()),
-            |mesh| mesh.device(),
-        ))
+        Ok(m.mesh
+            .as_ref()
+            .map_or_else(crate::backend::describe_cpu, |mesh| mesh.device()))
     }
 
     /// The structure the queries walk (`auto` resolved), in a word; "none" for a scene with

@@ -82,7 +82,7 @@ impl QueryScene {
             return on_cpu();
         }
         mesh.on_gpu_or_cpu(
-            |gpu, kind| {
+            |gpu| {
                 // Every entry is written below (a miss's uv and normal are these zeros).
                 let mut out = RayHits::zeroed(rays.len());
                 let source = RowRays { rows: rays };
@@ -90,7 +90,6 @@ impl QueryScene {
                     &source,
                     (0.0, f32::INFINITY),
                     Answer::Hits { uv: true },
-                    kind,
                     |first, answers| {
                         let ChunkAnswers::HitsUv(hits) = answers else {
                             return;
@@ -140,10 +139,10 @@ impl QueryScene {
             return on_cpu();
         }
         mesh.on_gpu_or_cpu(
-            |gpu, kind| {
+            |gpu| {
                 let mut out = vec![false; rays.len()];
                 let source = RowRays { rows: rays };
-                gpu.cast(&source, (t_near, t_far), Answer::Occlusion, kind, |first, answers| {
+                gpu.cast(&source, (t_near, t_far), Answer::Occlusion, |first, answers| {
                     let ChunkAnswers::Occlusion(bits) = answers else {
                         return;
                     };

@@ -280,11 +280,15 @@ impl PreparedScene {
         })
     }
 
-    /// The same scene with the structure for `accel` (rebuilt, with `params`, unless it already
-    /// serves it).
+    /// The same scene with the structure for `accel`: switched in place where the structure
+    /// serves it too (`Accel::set_traversal`: the grid's `grid` and `pc`), else rebuilt with
+    /// `params`.
     pub fn with_accel(&self, accel: AccelKind, params: &AccelParams) -> Result<PreparedScene> {
-        if self.accel.serves(accel) {
-            return Ok(self.clone());
+        if accel.structure_name() == self.accel.structure_name() {
+            return Ok(PreparedScene {
+                accel: self.accel.clone().with_traversal(accel)?,
+                ..self.clone()
+            });
         }
         Ok(PreparedScene {
             accel: Accel::build(self.accel.tris.clone(), accel, params)?,

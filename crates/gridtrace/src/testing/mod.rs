@@ -313,8 +313,10 @@ pub fn edge_aimed_rays(
 /// One structure per traversal kind over the same triangles, for tests that compare them all:
 /// the grid (serving `grid` and `pc`) and every other structure of the registry.
 pub struct AllAccels {
-    /// The uniform grid (it serves `grid` and `pc`; ray sets are drawn from its bounds).
+    /// The uniform grid, serving `grid` (ray sets are drawn from its bounds).
     pub grid: Accel,
+    /// The same grid serving `pc` (`Accel::set_traversal`).
+    pc: Accel,
     /// Every other structure of the registry (`accel::registry::ENTRIES`), in its order, over
     /// the same triangles.
     pub others: Vec<Accel>,
@@ -323,23 +325,27 @@ pub struct AllAccels {
 impl AllAccels {
     pub fn build(tris: Vec<TriAccel>, resolution: Resolution) -> crate::Result<AllAccels> {
         let grid = Accel::from_grid(Grid::build(&tris, resolution)?, tris.clone());
+        let pc = grid.clone().with_traversal(AccelKind::ProximityCloud)?;
         let mut others: Vec<Accel> = Vec::new();
-        for kind in AccelKind::ALL {
-            if !grid.serves(kind) && !others.iter().any(|a| a.serves(kind)) {
+        for kind in AccelKind::ALL.into_iter().filter(|k| !k.uses_grid()) {
+            if !others.iter().any(|a| a.structure_name() == kind.structure_name()) {
                 others.push(Accel::build(tris.clone(), kind, &AccelParams::NONE)?);
             }
         }
-        Ok(AllAccels { grid, others })
+        Ok(AllAccels { grid, pc, others })
     }
 
-    /// Every structure, the grid first.
+    /// Every structure once, the grid (serving `grid`) first.
     pub fn all(&self) -> impl Iterator<Item = &Accel> {
         std::iter::once(&self.grid).chain(&self.others)
     }
 
-    /// The structure that serves `kind`.
+    /// The structure serving `kind` (`Accel::kind`).
     pub fn get(&self, kind: AccelKind) -> &Accel {
-        self.all().find(|a| a.serves(kind)).expect("every kind has a structure")
+        self.all()
+            .chain(std::iter::once(&self.pc))
+            .find(|a| a.kind() == kind)
+            .expect("every kind has a structure")
     }
 }
 

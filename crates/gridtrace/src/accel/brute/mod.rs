@@ -9,7 +9,7 @@
 use crate::Result;
 use crate::accel::AccelParams;
 use crate::accel::contract::AccelStructure;
-use crate::accel::{AccelKind, Counters, Hit, Ray, TriAccel};
+use crate::accel::{Counters, Hit, Ray, TriAccel};
 
 /// Nothing is built: the walk is the triangle list.
 #[derive(Debug, Clone, Default)]
@@ -35,15 +35,7 @@ impl AccelStructure for Brute {
     /// The closest of every triangle's hit, the first in triangle order on equal `t` (as every
     /// structure's walk, which tests a cell's references in ascending order).
     #[inline]
-    fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit {
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         let mut best = Hit { t: t_max, ..Hit::MISS };
         for (i, tri) in tris.iter().enumerate() {
             counters.tri_test();
@@ -55,15 +47,7 @@ impl AccelStructure for Brute {
     }
 
     #[inline]
-    fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> bool {
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         tris.iter().any(|tri| {
             counters.tri_test();
             tri.intersect(ray.origin, ray.dir, t_min, t_max).is_some()

@@ -7,7 +7,7 @@ use super::BvhAccel;
 use crate::Result;
 use crate::accel::AccelParams;
 use crate::accel::contract::AccelStructure;
-use crate::accel::{AccelKind, Counters, Hit, PACKET, Ray, TriAccel};
+use crate::accel::{Counters, Hit, PACKET, Ray, TriAccel};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for BvhAccel {
@@ -38,28 +38,12 @@ impl AccelStructure for BvhAccel {
     }
 
     #[inline]
-    fn intersect<C: Counters>(
-        &self,
-        _tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit {
+    fn intersect<C: Counters>(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         BvhAccel::intersect(self, ray, t_min, t_max, counters)
     }
 
     #[inline]
-    fn occluded<C: Counters>(
-        &self,
-        _tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> bool {
+    fn occluded<C: Counters>(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         BvhAccel::occluded(self, ray, t_min, t_max, counters)
     }
 
@@ -70,7 +54,6 @@ impl AccelStructure for BvhAccel {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        _kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         BvhAccel::intersect_packet(self, rays, t_min, t_max, counters)
@@ -83,7 +66,6 @@ impl AccelStructure for BvhAccel {
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
-        _kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
         BvhAccel::occluded_packet(self, rays, t_min, t_max, counters)
@@ -98,39 +80,22 @@ impl AccelStructure for BvhAccel {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        _kind: AccelKind,
         f: impl FnMut(usize, Hit, Vec3),
     ) {
         BvhAccel::intersect_batch_each(self, rays, t_min, t_max, f)
     }
 
-    fn occluded_batch(
-        &self,
-        _tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        out: &mut [bool],
-    ) {
+    fn occluded_batch(&self, _tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
         BvhAccel::occluded_batch(self, rays, t_min, t_max, out)
     }
 
     /// The tree walked with no early exit (`all_hits.rs`); a triangle is in one leaf only.
-    fn all_hits(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
+    fn all_hits(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
         BvhAccel::all_hits(self, ray, t_min, t_max, out)
     }
 
     /// The all-hits walk counting instead of listing, rays interleaved (`all_hits.rs`).
-    fn count_hits_batch(
-        &self,
-        _tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        out: &mut [u32],
-    ) {
+    fn count_hits_batch(&self, _tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         BvhAccel::count_hits_batch(self, rays, t_min, t_max, out)
     }
 

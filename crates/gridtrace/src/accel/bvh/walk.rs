@@ -274,7 +274,10 @@ impl Walk {
             #[cfg(target_arch = "x86_64")]
             if AVX {
                 // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                let next = unsafe { self.r.descend_avx2(n, self.t_min, self.t_box, &mut self.stack, &mut self.sp) };
+                let next = unsafe {
+                    self.r
+                        .descend_avx2(n, self.t_min, self.t_box, &mut self.stack, &mut self.sp)
+                };
                 if let Some(next) = next {
                     self.current = next;
                     return false;

@@ -73,6 +73,9 @@ pub struct Grid {
     /// The resolution it was asked for (an automatic one stays automatic, so a rebuild after
     /// the triangles move sizes the cells for the new bounds); `dims` is what it gave.
     pub resolution: Resolution,
+    /// How its walks cross empty cells: the traversal it serves, `grid` (every cell) or `pc`
+    /// (jumps). The two share every array, so switching is setting this (`Accel::set_traversal`).
+    pub stepping: Stepping,
 }
 
 /// Where a grid's cells lie: everything about a grid but its contents. The CPU build
@@ -202,6 +205,7 @@ impl Grid {
             refs,
             stats,
             resolution: Resolution::Fixed(dims.to_array()),
+            stepping: Stepping::EveryCell,
         }
     }
 

@@ -1,22 +1,10 @@
 //! The uniform grid under the structure contract: one structure, two traversals (`grid` steps
 //! every cell, `pc` jumps over empty space with the proximity cloud).
 
-use super::{Grid, Stepping};
+use super::Grid;
 use crate::Result;
 use crate::accel::contract::{AccelStructure, dedup_hits};
-use crate::accel::{
-    Aabb, AccelKind, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, Resolution, TriAccel, dims_str,
-};
-
-/// How the grid crosses empty space for a traversal kind.
-#[inline(always)]
-fn stepping(kind: AccelKind) -> Stepping {
-    if kind == AccelKind::ProximityCloud {
-        Stepping::ProximityJumps
-    } else {
-        Stepping::EveryCell
-    }
-}
+use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, Resolution, TriAccel, dims_str};
 
 /// The grid's build parameters for this resolution (`res=...`; none for the default): what
 /// `--accel grid:res=...` gives, for programs and tests that size a grid by hand.
@@ -43,6 +31,15 @@ impl AccelStructure for Grid {
 
     fn params(&self) -> AccelParams {
         AccelParams::from(self.resolution)
+    }
+
+    /// Rebuilt as it was built, serving the same traversal (`stepping`).
+    fn update(&mut self, tris: &[TriAccel]) -> Result<&'static str> {
+        *self = Grid {
+            stepping: self.stepping,
+            ..Grid::build(tris, self.resolution)?
+        };
+        Ok("rebuilt")
     }
 
     fn bounds(&self, _tris: &[TriAccel]) -> Aabb {
@@ -85,29 +82,13 @@ impl AccelStructure for Grid {
     }
 
     #[inline]
-    fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit {
-        Grid::intersect(self, tris, ray, t_min, t_max, stepping(kind), counters)
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
+        Grid::intersect(self, tris, ray, t_min, t_max, self.stepping, counters)
     }
 
     #[inline]
-    fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        kind: AccelKind,
-        counters: &mut C,
-    ) -> bool {
-        Grid::occluded(self, tris, ray, t_min, t_max, stepping(kind), counters)
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
+        Grid::occluded(self, tris, ray, t_min, t_max, self.stepping, counters)
     }
 
     #[inline]
@@ -117,10 +98,9 @@ impl AccelStructure for Grid {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
-        Grid::intersect_packet(self, tris, rays, t_min, t_max, stepping(kind), counters)
+        Grid::intersect_packet(self, tris, rays, t_min, t_max, self.stepping, counters)
     }
 
     #[inline]
@@ -130,18 +110,17 @@ impl AccelStructure for Grid {
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
-        kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
-        Grid::occluded_packet(self, tris, rays, t_min, t_max, stepping(kind), counters)
+        Grid::occluded_packet(self, tris, rays, t_min, t_max, self.stepping, counters)
     }
 
     /// Every cell the ray crosses (no early exit), each triangle tested where it is met;
     /// a triangle in several cells is kept once (`dedup_hits`). The grid finds every hit
     /// brute force finds (enlarged cell boxes), so this is brute force's set.
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, kind: AccelKind, out: &mut Vec<Hit>) {
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
         let from = out.len();
-        self.walk(ray, t_min, t_max, stepping(kind), &mut NoCounters, |refs, _, _| {
+        self.walk(ray, t_min, t_max, self.stepping, &mut NoCounters, |refs, _, _| {
             for &r in refs {
                 if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, t_min, t_max) {
                     out.push(h.on(r));

@@ -18,7 +18,7 @@ use crate::accel::AccelParams;
 use crate::accel::bvh::BvhAccel;
 use crate::accel::closest::ClosestPoint;
 use crate::accel::contract::AccelStructure;
-use crate::accel::{AccelKind, Counters, Hit, PACKET, Ray, TriAccel};
+use crate::accel::{Counters, Hit, PACKET, Ray, TriAccel};
 
 /// The BVH kept beside the device's acceleration structures (see the module's note).
 #[derive(Debug, Clone)]
@@ -27,9 +27,6 @@ pub struct Hwrt {
     /// Triangles when built, for the summary.
     pub triangles: usize,
 }
-
-/// The BVH's walks answer for the CPU: they are the BVH's, so they are asked as the BVH.
-const BVH: AccelKind = AccelKind::Bvh;
 
 impl AccelStructure for Hwrt {
     fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Hwrt> {
@@ -61,28 +58,12 @@ impl AccelStructure for Hwrt {
         )
     }
 
-    fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit {
-        AccelStructure::intersect(&self.bvh, tris, ray, t_min, t_max, BVH, counters)
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
+        AccelStructure::intersect(&self.bvh, tris, ray, t_min, t_max, counters)
     }
 
-    fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> bool {
-        AccelStructure::occluded(&self.bvh, tris, ray, t_min, t_max, BVH, counters)
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
+        AccelStructure::occluded(&self.bvh, tris, ray, t_min, t_max, counters)
     }
 
     fn intersect_packet<C: Counters>(
@@ -91,10 +72,9 @@ impl AccelStructure for Hwrt {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        _kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
-        AccelStructure::intersect_packet(&self.bvh, tris, rays, t_min, t_max, BVH, counters)
+        AccelStructure::intersect_packet(&self.bvh, tris, rays, t_min, t_max, counters)
     }
 
     fn occluded_packet<C: Counters>(
@@ -103,10 +83,9 @@ impl AccelStructure for Hwrt {
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
-        _kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
-        AccelStructure::occluded_packet(&self.bvh, tris, rays, t_min, t_max, BVH, counters)
+        AccelStructure::occluded_packet(&self.bvh, tris, rays, t_min, t_max, counters)
     }
 
     fn intersect_batch_each(
@@ -115,38 +94,21 @@ impl AccelStructure for Hwrt {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        _kind: AccelKind,
         f: impl FnMut(usize, Hit, Vec3),
     ) {
-        AccelStructure::intersect_batch_each(&self.bvh, tris, rays, t_min, t_max, BVH, f)
+        AccelStructure::intersect_batch_each(&self.bvh, tris, rays, t_min, t_max, f)
     }
 
-    fn occluded_batch(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        out: &mut [bool],
-    ) {
-        AccelStructure::occluded_batch(&self.bvh, tris, rays, t_min, t_max, BVH, out)
+    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
+        AccelStructure::occluded_batch(&self.bvh, tris, rays, t_min, t_max, out)
     }
 
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
-        AccelStructure::all_hits(&self.bvh, tris, ray, t_min, t_max, BVH, out)
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+        AccelStructure::all_hits(&self.bvh, tris, ray, t_min, t_max, out)
     }
 
-    fn count_hits_batch(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        out: &mut [u32],
-    ) {
-        AccelStructure::count_hits_batch(&self.bvh, tris, rays, t_min, t_max, BVH, out)
+    fn count_hits_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+        AccelStructure::count_hits_batch(&self.bvh, tris, rays, t_min, t_max, out)
     }
 
     fn closest_point(&self, tris: &[TriAccel], p: Vec3) -> ClosestPoint {

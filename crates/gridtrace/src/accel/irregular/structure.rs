@@ -6,7 +6,7 @@ use glam::Vec3;
 use super::{IrregularGrid, IrregularParams, IrregularStats};
 use crate::Result;
 use crate::accel::contract::{AccelStructure, dedup_hits, hit_normal};
-use crate::accel::{Aabb, AccelKind, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
+use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for IrregularGrid {
@@ -89,28 +89,12 @@ impl AccelStructure for IrregularGrid {
     }
 
     #[inline]
-    fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> Hit {
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         IrregularGrid::intersect(self, tris, ray, t_min, t_max, counters)
     }
 
     #[inline]
-    fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        counters: &mut C,
-    ) -> bool {
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         IrregularGrid::occluded(self, tris, ray, t_min, t_max, counters)
     }
 
@@ -121,7 +105,6 @@ impl AccelStructure for IrregularGrid {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        _kind: AccelKind,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         IrregularGrid::intersect_packet(self, tris, rays, t_min, t_max, counters)
@@ -134,7 +117,6 @@ impl AccelStructure for IrregularGrid {
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
-        _kind: AccelKind,
         counters: &mut [C],
     ) -> [bool; PACKET] {
         IrregularGrid::occluded_packet(self, tris, rays, t_min, t_max, counters)
@@ -147,27 +129,18 @@ impl AccelStructure for IrregularGrid {
         rays: &[Ray],
         t_min: f32,
         t_max: f32,
-        _kind: AccelKind,
         mut f: impl FnMut(usize, Hit, Vec3),
     ) {
         self.batch::<false>(tris, rays, t_min, t_max, |i, hit| f(i, hit, hit_normal(tris, &hit)))
     }
 
-    fn occluded_batch(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        _kind: AccelKind,
-        out: &mut [bool],
-    ) {
+    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
         self.batch::<true>(tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
     }
 
     /// Every cell the ray crosses (no early exit), each triangle tested where it is met, kept
     /// once (`dedup_hits`): brute force's set, as the closest-hit walk finds brute force's hit.
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, _kind: AccelKind, out: &mut Vec<Hit>) {
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
         let from = out.len();
         self.walk(ray, t_min, t_max, &mut NoCounters, |refs, _, _| {
             for &r in refs {
