@@ -114,7 +114,7 @@ fn lane_splat(c: &[glam::Vec4; 3], lane: usize) -> [F8; 3] {
 /// take those ends, and every comparison after is monotone too. A box one ray's own test
 /// (`BoxRay::enter`) enters is thus entered here, at no later a distance.
 pub(super) struct Interval {
-    /// Per axis, the near and far plane arrays (as `BoxRay::near` / `far`, shared).
+    /// Per axis, the near and far plane arrays (indices: `BoxRay::near` / `far` over 32).
     near: [usize; 3],
     far: [usize; 3],
     /// The origin coordinate giving the least near distance, and the greatest far one.
@@ -135,15 +135,15 @@ impl Interval {
             let r = &rays[i.min(rays.len() - 1)];
             for a in 0..3 {
                 origin[a][i] = r.origin[a];
-                inv[a][i] = r.inv_dir[a];
-                down[a] |= ((r.near[a] >= 3) as u32) << i;
+                inv[a][i] = -r.neg_inv[a];
+                down[a] |= (r.goes_down(a) as u32) << i;
             }
         }
         Interval::from_lanes(&origin, &inv, down)
     }
 
     /// From a packet's rays in lanes (`PACKET` of them; lanes past the packet repeat a ray of
-    /// it): origins, inverse directions (`BoxRay::inv_dir`'s) and per axis the lanes going
+    /// it): origins, inverse directions (`1 / dir` as `BoxRay::new` takes it) and per axis the lanes going
     /// down it. `None` where the rays' directions differ in sign along an axis.
     #[inline(always)]
     fn from_lanes(origin: &[[f32; PACKET]; 3], inv: &[[f32; PACKET]; 3], down: [u32; 3]) -> Option<Interval> {
@@ -278,11 +278,12 @@ impl BvhAccel {
         let interval = Interval::from_lanes(&origin, &inv, down);
         // Each ray's own box test, for packets that go different ways (built only for them).
         let boxes: Option<[BoxRay; PACKET]> = interval.is_none().then(|| {
-            std::array::from_fn(|i| BoxRay {
-                origin: [origin[0][i], origin[1][i], origin[2][i]],
-                inv_dir: [inv[0][i], inv[1][i], inv[2][i]],
-                near: std::array::from_fn(|a| (down[a] >> i & 1) as usize * 3 + a),
-                far: std::array::from_fn(|a| (down[a] >> i & 1 == 0) as usize * 3 + a),
+            std::array::from_fn(|i| {
+                BoxRay::from_parts(
+                    [origin[0][i], origin[1][i], origin[2][i]],
+                    [inv[0][i], inv[1][i], inv[2][i]],
+                    std::array::from_fn(|a| down[a] >> i & 1 != 0),
+                )
             })
         });
         let origin: [F8; 3] = load3(origin);
