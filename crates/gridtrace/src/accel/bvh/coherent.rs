@@ -65,15 +65,65 @@ pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
     let d0 = first.dir;
     // cos(8 degrees): camera rays of neighbouring pixels are well within it; the nodes near the
     // leaves of rays further apart than that are mostly different.
-    const COS: f32 = 0.990;
     let near = 0.02 * extent;
     let len0_sq = d0.length_squared();
-    rays.iter().all(|r| {
+    let close = |r: &Ray| {
         let dot = r.dir.dot(d0);
         dot > 0.0
-            && dot * dot >= COS * COS * r.dir.length_squared() * len0_sq
+            && dot * dot >= COHERENT_COS * COHERENT_COS * r.dir.length_squared() * len0_sq
             && (r.origin - first.origin).length_squared() <= near * near
-    })
+    };
+    #[cfg(target_arch = "x86_64")]
+    if let (Ok(group), true) = (<&[Ray; PACKET]>::try_from(rays), crate::accel::simd::has_avx2()) {
+        // The last ray alone first: incoherent groups (random rays) almost all fail there.
+        // Without it random rays cost 11 instructions a ray more (990 against 979,
+        // cachegrind); with it eye and camera rays 6 more (366 against 360 for eye rays).
+        // SAFETY: the CPU has AVX2, checked just above.
+        return close(&group[PACKET - 1]) && unsafe { coherent_avx2(group, extent) };
+    }
+    rays.iter().all(close)
+}
+
+/// The cone of `coherent`: cos(8 degrees).
+const COHERENT_COS: f32 = 0.990;
+
+/// `coherent` for a whole packet in AVX2, the eight rays one per lane: the same operations in
+/// the same order (glam's `dot` is `(x * x') + (y * y')) + z * z'`; Rust fuses nothing), so
+/// the same answer. Eye rays 383 -> 360 instructions a ray and camera rays 488 -> 464 against
+/// the scalar test ray by ray (cachegrind, Stanford Bunny); which route a group takes only ever
+/// changes speed, never an answer, anyway.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn coherent_avx2(rays: &[Ray; PACKET], extent: f32) -> bool {
+    use std::arch::x86_64::*;
+    let lanes = |f: fn(&Ray) -> f32| {
+        _mm256_setr_ps(f(&rays[0]), f(&rays[1]), f(&rays[2]), f(&rays[3]), f(&rays[4]), f(&rays[5]), f(&rays[6]), f(&rays[7]))
+    };
+    let (dx, dy, dz) = (lanes(|r| r.dir.x), lanes(|r| r.dir.y), lanes(|r| r.dir.z));
+    let (d0, o0) = (rays[0].dir, rays[0].origin);
+    let dot3 = |(ax, ay, az): (__m256, __m256, __m256), (bx, by, bz): (__m256, __m256, __m256)| {
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz))
+    };
+    let d = (dx, dy, dz);
+    let dot = dot3(d, (_mm256_set1_ps(d0.x), _mm256_set1_ps(d0.y), _mm256_set1_ps(d0.z)));
+    let cone = _mm256_mul_ps(
+        _mm256_mul_ps(_mm256_set1_ps(COHERENT_COS * COHERENT_COS), dot3(d, d)),
+        _mm256_set1_ps(d0.length_squared()),
+    );
+    let o = (
+        _mm256_sub_ps(lanes(|r| r.origin.x), _mm256_set1_ps(o0.x)),
+        _mm256_sub_ps(lanes(|r| r.origin.y), _mm256_set1_ps(o0.y)),
+        _mm256_sub_ps(lanes(|r| r.origin.z), _mm256_set1_ps(o0.z)),
+    );
+    let near = 0.02 * extent;
+    let ok = _mm256_and_ps(
+        _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GT_OQ>(dot, _mm256_setzero_ps()),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(dot, dot), cone),
+        ),
+        _mm256_cmp_ps::<_CMP_LE_OQ>(dot3(o, o), _mm256_set1_ps(near * near)),
+    );
+    _mm256_movemask_ps(ok) == 0xFF
 }
 
 /// Whether the queries may take the packet route: yes, unless the environment sets
