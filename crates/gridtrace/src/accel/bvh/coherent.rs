@@ -97,12 +97,24 @@ const COHERENT_COS: f32 = 0.990;
 fn coherent_avx2(rays: &[Ray; PACKET], extent: f32) -> bool {
     use std::arch::x86_64::*;
     let lanes = |f: fn(&Ray) -> f32| {
-        _mm256_setr_ps(f(&rays[0]), f(&rays[1]), f(&rays[2]), f(&rays[3]), f(&rays[4]), f(&rays[5]), f(&rays[6]), f(&rays[7]))
+        _mm256_setr_ps(
+            f(&rays[0]),
+            f(&rays[1]),
+            f(&rays[2]),
+            f(&rays[3]),
+            f(&rays[4]),
+            f(&rays[5]),
+            f(&rays[6]),
+            f(&rays[7]),
+        )
     };
     let (dx, dy, dz) = (lanes(|r| r.dir.x), lanes(|r| r.dir.y), lanes(|r| r.dir.z));
     let (d0, o0) = (rays[0].dir, rays[0].origin);
     let dot3 = |(ax, ay, az): (__m256, __m256, __m256), (bx, by, bz): (__m256, __m256, __m256)| {
-        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz))
+        _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
+            _mm256_mul_ps(az, bz),
+        )
     };
     let d = (dx, dy, dz);
     let dot = dot3(d, (_mm256_set1_ps(d0.x), _mm256_set1_ps(d0.y), _mm256_set1_ps(d0.z)));
