@@ -65,15 +65,77 @@ pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
     let d0 = first.dir;
     // cos(8 degrees): camera rays of neighbouring pixels are well within it; the nodes near the
     // leaves of rays further apart than that are mostly different.
-    const COS: f32 = 0.990;
     let near = 0.02 * extent;
     let len0_sq = d0.length_squared();
-    rays.iter().all(|r| {
+    let close = |r: &Ray| {
         let dot = r.dir.dot(d0);
         dot > 0.0
-            && dot * dot >= COS * COS * r.dir.length_squared() * len0_sq
+            && dot * dot >= COHERENT_COS * COHERENT_COS * r.dir.length_squared() * len0_sq
             && (r.origin - first.origin).length_squared() <= near * near
-    })
+    };
+    #[cfg(target_arch = "x86_64")]
+    if let (Ok(group), true) = (<&[Ray; PACKET]>::try_from(rays), crate::accel::simd::has_avx2()) {
+        // The last ray alone first: incoherent groups (random rays) almost all fail there.
+        // Without it random rays cost 11 instructions a ray more (990 against 979,
+        // cachegrind); with it eye and camera rays 6 more (366 against 360 for eye rays).
+        // SAFETY: the CPU has AVX2, checked just above.
+        return close(&group[PACKET - 1]) && unsafe { coherent_avx2(group, extent) };
+    }
+    rays.iter().all(close)
+}
+
+/// The cone of `coherent`: cos(8 degrees).
+const COHERENT_COS: f32 = 0.990;
+
+/// `coherent` for a whole packet in AVX2, the eight rays one per lane: the same operations in
+/// the same order (glam's `dot` is `(x * x') + (y * y')) + z * z'`; Rust fuses nothing), so
+/// the same answer. Eye rays 383 -> 360 instructions a ray and camera rays 488 -> 464 against
+/// the scalar test ray by ray (cachegrind, Stanford Bunny); which route a group takes only ever
+/// changes speed, never an answer, anyway.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn coherent_avx2(rays: &[Ray; PACKET], extent: f32) -> bool {
+    use std::arch::x86_64::*;
+    let lanes = |f: fn(&Ray) -> f32| {
+        _mm256_setr_ps(
+            f(&rays[0]),
+            f(&rays[1]),
+            f(&rays[2]),
+            f(&rays[3]),
+            f(&rays[4]),
+            f(&rays[5]),
+            f(&rays[6]),
+            f(&rays[7]),
+        )
+    };
+    let (dx, dy, dz) = (lanes(|r| r.dir.x), lanes(|r| r.dir.y), lanes(|r| r.dir.z));
+    let (d0, o0) = (rays[0].dir, rays[0].origin);
+    let dot3 = |(ax, ay, az): (__m256, __m256, __m256), (bx, by, bz): (__m256, __m256, __m256)| {
+        _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
+            _mm256_mul_ps(az, bz),
+        )
+    };
+    let d = (dx, dy, dz);
+    let dot = dot3(d, (_mm256_set1_ps(d0.x), _mm256_set1_ps(d0.y), _mm256_set1_ps(d0.z)));
+    let cone = _mm256_mul_ps(
+        _mm256_mul_ps(_mm256_set1_ps(COHERENT_COS * COHERENT_COS), dot3(d, d)),
+        _mm256_set1_ps(d0.length_squared()),
+    );
+    let o = (
+        _mm256_sub_ps(lanes(|r| r.origin.x), _mm256_set1_ps(o0.x)),
+        _mm256_sub_ps(lanes(|r| r.origin.y), _mm256_set1_ps(o0.y)),
+        _mm256_sub_ps(lanes(|r| r.origin.z), _mm256_set1_ps(o0.z)),
+    );
+    let near = 0.02 * extent;
+    let ok = _mm256_and_ps(
+        _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GT_OQ>(dot, _mm256_setzero_ps()),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(dot, dot), cone),
+        ),
+        _mm256_cmp_ps::<_CMP_LE_OQ>(dot3(o, o), _mm256_set1_ps(near * near)),
+    );
+    _mm256_movemask_ps(ok) == 0xFF
 }
 
 /// Whether the queries may take the packet route: yes, unless the environment sets
@@ -114,7 +176,7 @@ fn lane_splat(c: &[glam::Vec4; 3], lane: usize) -> [F8; 3] {
 /// take those ends, and every comparison after is monotone too. A box one ray's own test
 /// (`BoxRay::enter`) enters is thus entered here, at no later a distance.
 pub(super) struct Interval {
-    /// Per axis, the near and far plane arrays (as `BoxRay::near` / `far`, shared).
+    /// Per axis, the near and far plane arrays (indices: `BoxRay::near` / `far` over 32).
     near: [usize; 3],
     far: [usize; 3],
     /// The origin coordinate giving the least near distance, and the greatest far one.
@@ -135,15 +197,15 @@ impl Interval {
             let r = &rays[i.min(rays.len() - 1)];
             for a in 0..3 {
                 origin[a][i] = r.origin[a];
-                inv[a][i] = r.inv_dir[a];
-                down[a] |= ((r.near[a] >= 3) as u32) << i;
+                inv[a][i] = -r.neg_inv[a];
+                down[a] |= (r.goes_down(a) as u32) << i;
             }
         }
         Interval::from_lanes(&origin, &inv, down)
     }
 
     /// From a packet's rays in lanes (`PACKET` of them; lanes past the packet repeat a ray of
-    /// it): origins, inverse directions (`BoxRay::inv_dir`'s) and per axis the lanes going
+    /// it): origins, inverse directions (`1 / dir` as `BoxRay::new` takes it) and per axis the lanes going
     /// down it. `None` where the rays' directions differ in sign along an axis.
     #[inline(always)]
     fn from_lanes(origin: &[[f32; PACKET]; 3], inv: &[[f32; PACKET]; 3], down: [u32; 3]) -> Option<Interval> {
@@ -278,11 +340,12 @@ impl BvhAccel {
         let interval = Interval::from_lanes(&origin, &inv, down);
         // Each ray's own box test, for packets that go different ways (built only for them).
         let boxes: Option<[BoxRay; PACKET]> = interval.is_none().then(|| {
-            std::array::from_fn(|i| BoxRay {
-                origin: [origin[0][i], origin[1][i], origin[2][i]],
-                inv_dir: [inv[0][i], inv[1][i], inv[2][i]],
-                near: std::array::from_fn(|a| (down[a] >> i & 1) as usize * 3 + a),
-                far: std::array::from_fn(|a| (down[a] >> i & 1 == 0) as usize * 3 + a),
+            std::array::from_fn(|i| {
+                BoxRay::from_parts(
+                    [origin[0][i], origin[1][i], origin[2][i]],
+                    [inv[0][i], inv[1][i], inv[2][i]],
+                    std::array::from_fn(|a| down[a] >> i & 1 != 0),
+                )
             })
         });
         let origin: [F8; 3] = load3(origin);
