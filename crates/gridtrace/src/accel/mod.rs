@@ -123,14 +123,7 @@ impl Structure {
     /// and `pc`, which share every array), so nothing is built. An error for a kind of another
     /// structure, which needs a build (`PreparedScene::with_accel`).
     pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
-        if kind.structure_name() != self.name() {
-            return Err(Error::InvalidInput(format!(
-                "accel '{}' asked of a scene prepared with a {}: prepare it for '{}'",
-                kind.name(),
-                self.name(),
-                kind.name()
-            )));
-        }
+        kind.check_walks(self.name(), "scene prepared")?;
         if let Structure::Grid(g) = self {
             g.stepping = match kind {
                 AccelKind::ProximityCloud => Stepping::ProximityJumps,

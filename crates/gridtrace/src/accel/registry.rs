@@ -173,6 +173,20 @@ impl AccelKind {
         self.entry().structure
     }
 
+    /// An error unless this kind walks `structure` (the registry's `structure` column): the one
+    /// check of every switch of traversal (`set_traversal` on the CPU's structure and on a GPU's
+    /// upload); `what` names the scene in the message ("scene prepared").
+    pub fn check_walks(self, structure: &str, what: &str) -> crate::Result<()> {
+        if self.structure_name() == structure {
+            return Ok(());
+        }
+        Err(crate::Error::InvalidInput(format!(
+            "accel '{}' asked of a {what} with a {structure}: prepare the scene for '{}'",
+            self.name(),
+            self.name()
+        )))
+    }
+
     /// Every accepted spelling with its kind: names first, then aliases.
     pub fn spellings() -> impl Iterator<Item = (&'static str, AccelKind)> {
         let names = ENTRIES.iter().map(|e| (e.name, e.kind));

@@ -292,14 +292,7 @@ impl GpuRenderer {
     /// `grid` and `pc`, which differ only in a uniform), so nothing is uploaded. An error for a
     /// kind of another structure, which needs a scene prepared and uploaded for it.
     pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
-        let uploaded = self.scene.spec().structure;
-        if kind.structure_name() != uploaded {
-            return Err(Error::InvalidInput(format!(
-                "accel '{}' asked of a GPU scene uploaded with a {uploaded}: prepare the scene for '{}'",
-                kind.name(),
-                kind.name()
-            )));
-        }
+        kind.check_walks(self.scene.spec().structure, "GPU scene uploaded")?;
         self.kind = kind;
         Ok(())
     }
