@@ -14,7 +14,9 @@ use gridtrace::AccelParams;
 use std::path::PathBuf;
 
 use gridtrace::accel::{AccelKind, Hit, Ray, Structure, TraversalCounters};
-use gridtrace::gpu::layout::{GpuBvh8Node, GpuBvhNode, GpuTri};
+use gridtrace::gpu::layout::GpuTri;
+use gridtrace::gpu::walks::bvh::binary::GpuBvhNode;
+use gridtrace::gpu::walks::bvh::wide8::GpuBvh8Node;
 use gridtrace::gpu::walks::bvh::wide8::{self, Wide8, Wide8Work};
 use rayon::prelude::*;
 

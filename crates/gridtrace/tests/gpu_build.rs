@@ -18,7 +18,7 @@ use glam::Vec3;
 use gridtrace::accel::grid::proximity::chebyshev_distance_transform;
 use gridtrace::accel::tri_box::triangle_overlaps_box;
 use gridtrace::accel::{Grid, GridLattice, Resolution, TriAccel};
-use gridtrace::gpu::constants::{MAX_CELLS_PER_TRI, SORT_MAX_REFS};
+use gridtrace::gpu::walks::grid::build::{MAX_CELLS_PER_TRI, SORT_MAX_REFS};
 use gridtrace::gpu::{GpuContext, GpuGrid};
 use gridtrace::scene::builtin;
 use gridtrace::testing::{flat_scene, long_strip, skip_gpu, triangle_soup};

@@ -6,35 +6,49 @@ use std::mem::{offset_of, size_of};
 
 use gridtrace::accel::{Cell, IrrCell};
 use gridtrace::gpu::bindings::{self, Access};
-use gridtrace::gpu::constants::{WGSL_CONSTANTS, WgslConst, wgsl_prelude};
+use gridtrace::gpu::constants::WgslConst;
 use gridtrace::gpu::layout::{
-    BatchUniform, GpuBvh8Node, GpuBvhNode, GpuHit, GpuMaterial, GpuTri, IndirectArgs, PassUniform, RayRec,
-    SceneUniform, TriShade,
+    BatchUniform, GpuHit, GpuMaterial, GpuTri, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
 };
+use gridtrace::gpu::walks::bvh::binary::GpuBvhNode;
+use gridtrace::gpu::walks::bvh::wide8::GpuBvh8Node;
+use gridtrace::gpu::walks::{wgsl_constants, wgsl_prelude};
 use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
 
-fn module() -> naga::Module {
-    naga::front::wgsl::parse_str(&shaders::common_source()).expect("common.wgsl parses")
+/// Every module the tracer compiles (each walk's in its own: walks of different structures may
+/// define the same names).
+fn modules() -> Vec<naga::Module> {
+    shaders::all_modules()
+        .iter()
+        .map(|(name, src)| naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{name}: {e}")))
+        .collect()
 }
 
-/// (size, [(field, offset)]) of a WGSL struct.
-fn wgsl_struct(m: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
-    for (_, ty) in m.types.iter() {
-        if ty.name.as_deref() == Some(name)
-            && let naga::TypeInner::Struct { members, span } = &ty.inner
-        {
-            return (
-                *span,
-                members
-                    .iter()
-                    .map(|mb| (mb.name.clone().unwrap_or_default(), mb.offset))
-                    .collect(),
-            );
+/// (size, [(field, offset)]) of a WGSL struct, the same in every module of `ms` that declares it.
+fn wgsl_struct(ms: &[naga::Module], name: &str) -> (u32, Vec<(String, u32)>) {
+    let mut found: Option<(u32, Vec<(String, u32)>)> = None;
+    for m in ms {
+        for (_, ty) in m.types.iter() {
+            if ty.name.as_deref() == Some(name)
+                && let naga::TypeInner::Struct { members, span } = &ty.inner
+            {
+                let this = (
+                    *span,
+                    members
+                        .iter()
+                        .map(|mb| (mb.name.clone().unwrap_or_default(), mb.offset))
+                        .collect::<Vec<_>>(),
+                );
+                match &found {
+                    Some(first) => assert_eq!(first, &this, "{name} differs between modules"),
+                    None => found = Some(this),
+                }
+            }
         }
     }
-    panic!("struct {name} not found in common.wgsl");
+    found.unwrap_or_else(|| panic!("struct {name} not found in any module"))
 }
 
 macro_rules! check {
@@ -50,14 +64,9 @@ macro_rules! check {
 /// checked the same way, in every build kernel's module.
 #[test]
 fn grid_build_structs_match_rust() {
-    use gridtrace::gpu::layout::GridBuildUniform;
-    for kernel in [
-        shaders::BUILD_REFS,
-        shaders::BUILD_SCAN,
-        shaders::BUILD_SORT,
-        shaders::BUILD_DISTANCE,
-    ] {
-        let m = naga::front::wgsl::parse_str(&shaders::build_module_source(kernel)).expect("build kernel parses");
+    use gridtrace::gpu::walks::grid::build::{GridBuildUniform, KERNEL_SOURCES, module_source};
+    for kernel in KERNEL_SOURCES {
+        let m = [naga::front::wgsl::parse_str(&module_source(kernel)).expect("build kernel parses")];
         check!(m, Cell, "Cell", [start, count, dist]);
         check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
         check!(
@@ -86,7 +95,7 @@ fn grid_build_structs_match_rust() {
 
 #[test]
 fn wgsl_structs_match_rust() {
-    let m = module();
+    let m = modules();
     check!(m, Cell, "Cell", [start, count, dist]);
     check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
     check!(m, TriShade, "TriShade", [n0, n1, n2, material]);
@@ -150,12 +159,16 @@ fn wgsl_structs_match_rust() {
 /// The check itself must catch a mismatch.
 #[test]
 fn mismatch_is_detected() {
-    let src = shaders::common_source().replace(
+    let (_, grid) = shaders::all_modules()
+        .into_iter()
+        .find(|(name, _)| name == "closest point [grid]")
+        .unwrap();
+    let src = grid.replace(
         "struct Cell { start: u32, count: u32, dist: u32 }",
         "struct Cell { count: u32, start: u32, dist: u32 }",
     );
-    assert_ne!(src, shaders::common_source());
-    let m = naga::front::wgsl::parse_str(&src).unwrap();
+    assert_ne!(src, grid);
+    let m = [naga::front::wgsl::parse_str(&src).unwrap()];
     let r = std::panic::catch_unwind(|| check!(m, Cell, "Cell", [start, count, dist]));
     assert!(r.is_err());
 }
@@ -206,7 +219,7 @@ fn subgroup_append_modules_validate() {
 /// constant the module lacks.
 fn constant_mismatches(m: &naga::Module) -> Vec<String> {
     let mut problems = Vec::new();
-    for (name, want) in WGSL_CONSTANTS {
+    for (name, want) in wgsl_constants() {
         let Some((_, c)) = m.constants.iter().find(|(_, c)| c.name.as_deref() == Some(name)) else {
             problems.push(format!("{name}: not declared in WGSL"));
             continue;
@@ -232,8 +245,6 @@ fn constant_mismatches(m: &naga::Module) -> Vec<String> {
 /// constant is the Rust constant's, exactly.
 #[test]
 fn wgsl_constants_match_rust() {
-    let problems = constant_mismatches(&module());
-    assert!(problems.is_empty(), "{problems:#?}");
     for (name, src) in shaders::all_modules() {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         let problems = constant_mismatches(&m);
@@ -245,10 +256,10 @@ fn wgsl_constants_match_rust() {
 #[test]
 fn altered_constant_is_reported() {
     let prelude = wgsl_prelude();
-    let bary = WGSL_CONSTANTS
-        .iter()
+    let bary = wgsl_constants()
+        .into_iter()
         .find_map(|(n, v)| match (n, v) {
-            (&"BARY_EPS", WgslConst::F32(v)) => Some(*v),
+            ("BARY_EPS", WgslConst::F32(v)) => Some(v),
             _ => None,
         })
         .unwrap();
@@ -279,7 +290,7 @@ fn altered_constant_is_reported() {
 /// definition of a shared number cannot creep back into the shaders.
 #[test]
 fn redeclared_constant_fails() {
-    for (name, _) in WGSL_CONSTANTS {
+    for (name, _) in wgsl_constants() {
         let src = format!("{}\nconst {name}: u32 = 1u;\n", shaders::module_source(shaders::SHADE));
         let e = naga::front::wgsl::parse_str(&src).expect_err(name);
         assert!(

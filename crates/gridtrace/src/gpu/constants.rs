@@ -1,18 +1,15 @@
-//! Numbers the kernels and the host must agree on, defined once here. The WGSL side never types
-//! them: [`wgsl_prelude`] prints them as `const` declarations that are prepended to every kernel
-//! module (see `shaders::module_source`), so a kernel that re-declares one fails to compile, and
-//! `tests/gpu_layout.rs` checks naga's values against [`WGSL_CONSTANTS`] bit for bit.
+//! Numbers the kernels and the host must agree on: the ones every kernel shares, defined once
+//! here ([`SHARED`]); each structure's own are beside its walk (`WalkSpec::constants`). The
+//! WGSL side never types them: `walks::wgsl_prelude` prints them all (through [`prelude_of`]) as
+//! `const` declarations that are prepended to every kernel module (see
+//! `shaders::module_source`), so a kernel that re-declares one fails to compile, and
+//! `tests/gpu_layout.rs` checks naga's values against `walks::wgsl_constants` bit for bit.
 
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-use super::variants::SHORT_STACK_MAX;
-use super::walks::bvh::binary::{LEAF_BIT, LEAF_COUNT_SHIFT, LEAF_FIRST_MAX, STACK_DONE};
 use crate::accel::AccelKind;
-use crate::accel::bvh;
-use crate::accel::grid::proximity;
-use crate::accel::irregular;
-use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_PAD, SLACK_ULPS};
+use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_ULPS};
 use crate::render::Mode;
 
 /// Counter slots of the `counters` array (atomic u32s). Slots 0 and 1 are the two ray queues'
@@ -49,21 +46,6 @@ pub fn max_groups_x() -> u32 {
 pub fn set_max_groups_x(n: u32) {
     GROUPS_X_LIMIT.store(n.clamp(1, MAX_GROUPS_X), Ordering::Relaxed);
 }
-/// Elements one workgroup of the GPU grid build's scan sums (256 invocations, 4 each); the
-/// host sizes the scan's levels by it.
-pub const SCAN_BLOCK: u32 = 1024;
-/// Cells one triangle may span in the GPU grid build; a grid with a larger triangle is built
-/// on the CPU instead. One invocation walks a triangle's cells, and lavapipe (Mesa's llvmpipe)
-/// stops an invocation's loops after 65535 iterations in total, silently: measured, a triangle
-/// over 64,000 cells got only its first 22,000 or so. A quarter of that budget leaves room;
-/// at the automatic resolution only floor-like triangles of million-triangle scenes come near.
-pub const MAX_CELLS_PER_TRI: u32 = 16384;
-/// Longest line of cells the GPU distance transform takes (about three loop iterations per
-/// cell; see `MAX_CELLS_PER_TRI`). The automatic resolution stays under 1024.
-pub const MAX_GPU_LINE: u32 = 16384;
-/// Cells with more references keep the GPU placing order (insertion sort is quadratic: 256
-/// references take at most 32,640 steps, within the budget above).
-pub const SORT_MAX_REFS: u32 = 256;
 /// `GpuHit::tri` of a miss.
 pub const MISS: u32 = u32::MAX;
 
@@ -85,15 +67,13 @@ pub const fn accel_code(accel: AccelKind) -> u32 {
     matches!(accel, AccelKind::ProximityCloud) as u32
 }
 
-/// Invocations per workgroup of the grid build's scan kernels (`build/scan.wgsl`'s `partial`
-/// array); the other kernels have `WORKGROUP`.
-pub const SCAN_GROUP: u32 = 256;
-// A scan block is four elements per invocation of a workgroup (`build/scan.wgsl`).
-const _: () = assert!(SCAN_BLOCK == 4 * SCAN_GROUP);
-
-/// Entries of the GPU BVH walk's stack: the CPU builder's bound on the tree's depth (`STACK`),
-/// so that no tree can overflow it.
-pub const BVH_STACK: u32 = bvh::STACK as u32;
+/// Workgroups for `n` items, `per_group` to a workgroup, as a 2-D dispatch of at most
+/// `MAX_GROUPS_X` (`max_groups_x()`) in x (so under WebGPU's 65535 per dimension).
+pub(crate) fn dispatch_groups(n: u32, per_group: u32) -> (u32, u32) {
+    let g = n.div_ceil(per_group);
+    let x = g.min(max_groups_x());
+    (x, if x == 0 { 0 } else { g.div_ceil(x) })
+}
 
 /// A constant's value as WGSL will see it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -102,9 +82,10 @@ pub enum WgslConst {
     F32(f32),
 }
 
-/// Every constant of the WGSL prelude, by WGSL name. The triangle test's slack constants are
-/// `TriAccel::intersect`'s own, so both backends accept the same hits.
-pub const WGSL_CONSTANTS: [(&str, WgslConst); 37] = [
+/// The constants every kernel shares, by WGSL name (each structure's are its
+/// `WalkSpec::constants`). The triangle test's slack constants are `TriAccel::intersect`'s own,
+/// so both backends accept the same hits.
+pub const SHARED: [(&str, WgslConst); 18] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -123,39 +104,20 @@ pub const WGSL_CONSTANTS: [(&str, WgslConst); 37] = [
     ("MAX_SLACK", WgslConst::F32(MAX_SLACK)),
     ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),
     ("PARALLEL_COS2", WgslConst::F32(PARALLEL_COS2)),
-    ("BVH_STACK", WgslConst::U32(BVH_STACK)),
-    ("SHORT_STACK_MAX", WgslConst::U32(SHORT_STACK_MAX as u32)),
-    ("LEAF_BIT", WgslConst::U32(LEAF_BIT)),
-    ("LEAF_COUNT_SHIFT", WgslConst::U32(LEAF_COUNT_SHIFT)),
-    ("LEAF_FIRST_MAX", WgslConst::U32(LEAF_FIRST_MAX)),
-    ("STACK_DONE", WgslConst::U32(STACK_DONE)),
-    ("DIR_TINY", WgslConst::F32(bvh::DIR_TINY)),
-    ("FAR_SCALE", WgslConst::F32(bvh::FAR_SCALE)),
-    ("T_SLOP", WgslConst::F32(bvh::T_SLOP)),
-    ("IRR_LEVEL_BITS", WgslConst::U32(irregular::LEVEL_BITS)),
-    ("IRR_COORD_BITS", WgslConst::U32(irregular::COORD_BITS)),
-    ("IRR_COORD_MASK", WgslConst::U32(irregular::COORD_MASK)),
-    ("JUMP_CAP", WgslConst::U32(crate::accel::grid::dda::JUMP_CAP)),
-    ("SCAN_GROUP", WgslConst::U32(SCAN_GROUP)),
-    ("SLACK_PAD", WgslConst::F32(SLACK_PAD)),
-    ("SCAN_BLOCK", WgslConst::U32(SCAN_BLOCK)),
-    ("DIST_FAR", WgslConst::U32(proximity::FAR)),
-    ("MAX_CELLS_PER_TRI", WgslConst::U32(MAX_CELLS_PER_TRI)),
-    ("SORT_MAX_REFS", WgslConst::U32(SORT_MAX_REFS)),
 ];
 
 /// One WGSL literal that denotes exactly `v`: Rust's `{:?}` prints the shortest decimal that
 /// parses back to the same f32, and the `f` suffix makes WGSL parse it as an f32 directly (no
 /// detour through an abstract float that could round twice).
-fn f32_literal(v: f32) -> String {
+pub(crate) fn f32_literal(v: f32) -> String {
     assert!(v.is_finite(), "WGSL has no literal for {v}");
     format!("{v:?}f")
 }
 
-/// The WGSL declarations of [`WGSL_CONSTANTS`], one `const NAME: type = value;` a line.
-pub fn wgsl_prelude() -> String {
-    let mut s = String::from("// Generated from src/gpu/constants.rs: do not declare these names in WGSL.\n");
-    for (name, value) in WGSL_CONSTANTS {
+/// The WGSL declarations of `constants`, one `const NAME: type = value;` a line.
+pub fn prelude_of(constants: &[(&str, WgslConst)]) -> String {
+    let mut s = String::from("// Generated from src/gpu (constants.rs and each walk's): do not declare these names in WGSL.\n");
+    for &(name, value) in constants {
         let value = match name {
             "MAX_GROUPS_X" => WgslConst::U32(max_groups_x()),
             _ => value,
@@ -167,30 +129,4 @@ pub fn wgsl_prelude() -> String {
         };
     }
     s
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The printed f32s read back as the same bits (naga's own reading is checked in
-    /// tests/gpu_layout.rs).
-    #[test]
-    fn f32_literals_round_trip() {
-        for (name, value) in WGSL_CONSTANTS {
-            if let WgslConst::F32(v) = value {
-                let text = f32_literal(v);
-                let back: f32 = text.trim_end_matches('f').parse().unwrap();
-                assert_eq!(back.to_bits(), v.to_bits(), "{name}: {text}");
-            }
-        }
-    }
-
-    #[test]
-    fn names_are_unique() {
-        let mut names: Vec<&str> = WGSL_CONSTANTS.iter().map(|(n, _)| *n).collect();
-        names.sort_unstable();
-        names.dedup();
-        assert_eq!(names.len(), WGSL_CONSTANTS.len());
-    }
 }

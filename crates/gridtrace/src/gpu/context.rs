@@ -401,3 +401,20 @@ impl PendingRead {
         Ok((out, phases))
     }
 }
+
+/// Checks every scene array (`(name, bytes)`) against the device's per-binding limits before
+/// anything is allocated: a scene too large for the device is an error that names the array and
+/// the limit, not a validation panic or a lost device.
+pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, adapter: &str) -> Result<()> {
+    let max_binding = max_binding_bytes(limits);
+    for &(name, bytes) in arrays {
+        if bytes > max_binding {
+            return Err(Error::Gpu(format!(
+                "scene array '{name}' needs {bytes} bytes; the device allows {max_binding} per storage buffer \
+                 (limit max_storage_buffer_binding_size / max_buffer_size on '{adapter}')"
+            )));
+        }
+    }
+    Ok(())
+}
+

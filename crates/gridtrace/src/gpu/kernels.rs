@@ -11,7 +11,7 @@ use super::bindings::{
     self, Access, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP,
     PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP,
 };
-use super::constants::{WORKGROUP, max_groups_x};
+use super::constants::{WORKGROUP, dispatch_groups};
 use super::context::GpuContext;
 use super::layout::IndirectArgs;
 use super::shaders;
@@ -181,14 +181,6 @@ fn spec_of(kernel: Kernel) -> &'static KernelSpec {
 /// in indirect.wgsl.
 fn dispatch_size(n: u32) -> (u32, u32) {
     dispatch_groups(n, WORKGROUP)
-}
-
-/// Workgroups for `n` items, `per_group` to a workgroup, as a 2-D dispatch of at most
-/// `MAX_GROUPS_X` (`max_groups_x()`) in x (so under WebGPU's 65535 per dimension).
-pub(super) fn dispatch_groups(n: u32, per_group: u32) -> (u32, u32) {
-    let g = n.div_ceil(per_group);
-    let x = g.min(max_groups_x());
-    (x, if x == 0 { 0 } else { g.div_ceil(x) })
 }
 
 /// One structure's walking pipelines (traverse, its heat variant, occlusion and its closest-hit
@@ -534,8 +526,8 @@ mod tests {
         assert_eq!(dispatch_size(WORKGROUP + 1), (2, 1));
         let (x, y) = dispatch_size(u32::MAX);
         assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * WORKGROUP as u64 >= u32::MAX as u64);
-        // The grid build's scan: a workgroup per 1024 cells of 2^26.
-        let block = crate::gpu::constants::SCAN_BLOCK;
+        // The grid build's scan: a workgroup per 1024 cells (its `SCAN_BLOCK`) of 2^26.
+        let block = 1024;
         let (x, y) = dispatch_groups(1 << 26, block);
         assert!(x <= 65535 && y <= 65535 && x as u64 * y as u64 * block as u64 >= 1 << 26);
     }

@@ -17,7 +17,8 @@
 //!   that records a kernel's pass;
 //! - `bindings`: the bind group tables; `layout`: the structs the kernels share with the host;
 //!   `constants`: the numbers they share, printed into every module as a WGSL prelude;
-//! - `walks`: each structure's GPU side (its arrays, lattice and walk file, `shaders/walks/`);
+//! - `walks`: each structure's GPU side, a folder each (its arrays, lattice, constants, node
+//!   layouts, walk file, and the grid's device build, `walks/grid/build/`);
 //!   `scene`: the scene's upload (the BVH's two GPU layouts, each with a CPU mirror of its
 //!   walk, are in `walks/bvh/`);
 //!   `renderer`: `GpuRenderer` and its work buffers;
@@ -28,16 +29,13 @@
 //!   closest-point batches (each structure's `NAME_closest_point` search);
 //! - `timing`: timestamp queries and per-stage milliseconds; `host_phases`: the host's side of
 //!   the wall time;
-//! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results;
-//! - `grid_build`: the grid and its proximity cloud built on the GPU (`shaders/build/`), for
-//!   meshes that move.
+//! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results.
 
 mod batch_buffers;
 pub mod bindings;
 pub mod constants;
 mod context;
 mod device_image;
-mod grid_build;
 mod host_phases;
 mod kernels;
 pub mod layout;
@@ -55,11 +53,11 @@ mod wavefront;
 
 pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;
-pub use grid_build::{GpuBuildStats, GpuGrid};
+pub use walks::grid::build::{GpuBuildStats, GpuGrid};
 pub use points::GpuClosestPoints;
 pub use queries::{Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, TriHit, WireSource, gpu_hit, unpack_bits};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
-pub use scene::check_scene_fits;
+pub use context::check_scene_fits;
 pub use timing::{GpuQueryStats, GpuTimings, HostPhases};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.

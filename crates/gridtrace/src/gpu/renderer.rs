@@ -9,13 +9,14 @@ use std::time::Instant;
 use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
 use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
 use super::context::{GpuContext, max_binding_bytes};
-use super::grid_build::{GpuBuildStats, GpuGrid};
+use super::walks::grid::build::GpuBuildStats;
+use super::walks::{self, DeviceBuilder};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, GpuTri, IndirectArgs, PassUniform, RayRec};
 use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{GpuQueryStats, StageTimer, Timestamps};
 use super::variants::GpuVariants;
-use crate::accel::{AccelKind, GridLattice};
+use crate::accel::AccelKind;
 use crate::render::{Ablation, Mode};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
 use crate::{Error, Result};
@@ -121,8 +122,9 @@ pub struct GpuRenderer {
     pub(super) last_query: GpuQueryStats,
     /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).
     max_tile_pixels: u32,
-    /// The grid the GPU builds when the mesh moves (`update_vertices`), once it has.
-    device_grid: Option<GpuGrid>,
+    /// The structure's builder on the device, for a structure the GPU rebuilds when the mesh
+    /// moves (`update_vertices`), once it has.
+    device_builder: Option<DeviceBuilder>,
     /// The traversal its walks run: the uploaded scene's (`Accel::kind`), or what
     /// `set_traversal` switched it to.
     pub(super) kind: AccelKind,
@@ -204,7 +206,7 @@ impl GpuRenderer {
             batches: Default::default(),
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
-            device_grid: None,
+            device_builder: None,
         };
         // A scene whose grid was left to the GPU: build it now.
         if prepared.accel.structure_stale {
@@ -214,9 +216,10 @@ impl GpuRenderer {
     }
 
     /// The scene's vertices moved (`PreparedScene::update_vertices`): uploads the new triangles
-    /// and normals, and brings the structure up to date: a grid is built here on the device
-    /// (`GpuGrid`; with the scene's `RebuildOn::Device` the CPU never builds it), any other
-    /// structure, which the CPU updated, is uploaded again. The triangles must be the ones
+    /// and normals, and brings the structure up to date: a structure with a device build (the
+    /// grid's, `walks::rebuild_on_device`; with the scene's `RebuildOn::Device` the CPU never
+    /// builds it) is built here on the device, any other structure, which the CPU updated, is
+    /// uploaded again. The triangles must be the ones
     /// this renderer was made with, moved.
     pub fn update_vertices(&mut self, scene: &PreparedScene) -> Result<GpuUpdateStats> {
         let tris = &scene.accel.tris;
@@ -241,35 +244,25 @@ impl GpuRenderer {
         q.write_buffer(&self.scene.tris, 0, bytemuck::cast_slice(&GpuTri::all(tris)));
         q.write_buffer(&self.scene.tri_shade, 0, bytemuck::cast_slice(&tri_shade(scene)));
         stats.upload_ms = t0.elapsed().as_secs_f64() * 1e3;
-        // The grid's own resolution: an automatic one sizes the cells for the moved bounds.
-        let resolution = scene.accel.grid().map(|g| g.resolution).unwrap_or_default();
-        let lattice = GridLattice::new(tris, resolution)?;
-        let grid = match &mut self.device_grid {
-            Some(g) => g,
-            None => self.device_grid.insert(GpuGrid::new(self.ctx.clone())?),
-        };
-        let build = grid.build(&self.scene.tris, tris, &lattice)?;
+        let built = walks::rebuild_on_device(&mut self.device_builder, &self.ctx, &self.scene.tris, scene)?;
         // The structure's bind group names the old buffers when the build made new ones.
         let dev = &self.ctx.device;
-        self.scene.replace_array(dev, "cells", &grid.cells);
-        self.scene.replace_array(dev, "refs", &grid.refs);
+        for &(name, buffer) in &built.arrays {
+            self.scene.replace_array(dev, name, buffer);
+        }
         let c = &mut self.scene.consts;
-        c.bounds_min = lattice.bounds.min.to_array();
-        c.bounds_max = lattice.bounds.max.to_array();
-        c.dims = lattice.dims.to_array();
-        c.cell_size = lattice.cell_size.to_array();
-        c.inv_cell_size = lattice.inv_cell_size.to_array();
+        built.lattice.write_to(c);
         c.ray_epsilon = scene.ray_epsilon;
         // Queries read the uniform as it is (frames rewrite it with their light count).
         self.ctx
             .queue
             .write_buffer(&self.scene.uniform, 0, bytemuck::bytes_of(&self.scene.consts));
-        for (name, bytes) in grid.memory() {
+        for (name, bytes) in built.memory {
             if let Some(e) = self.scene.bytes.iter_mut().find(|e| e.0 == name) {
                 e.1 = bytes;
             }
         }
-        stats.build = Some(build);
+        stats.build = Some(built.stats);
         Ok(stats)
     }
 

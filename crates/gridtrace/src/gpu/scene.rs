@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
-use super::context::{GpuContext, max_binding_bytes};
+use super::context::{GpuContext, check_scene_fits};
 use super::kernels::{Kernels, WalkPipelines};
 use super::layout::{GpuMaterial, GpuTri, SceneUniform, TriShade};
 use super::variants::GpuVariants;
@@ -28,22 +28,6 @@ pub(crate) fn tri_shade(scene: &PreparedScene) -> Vec<TriShade> {
             material: m,
         })
         .collect()
-}
-
-/// Checks every scene array (`(name, bytes)`) against the device's per-binding limits before
-/// anything is allocated: a scene too large for the device is an error that names the array and
-/// the limit, not a validation panic or a lost device.
-pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, adapter: &str) -> Result<()> {
-    let max_binding = max_binding_bytes(limits);
-    for &(name, bytes) in arrays {
-        if bytes > max_binding {
-            return Err(Error::Gpu(format!(
-                "scene array '{name}' needs {bytes} bytes; the device allows {max_binding} per storage buffer \
-                 (limit max_storage_buffer_binding_size / max_buffer_size on '{adapter}')"
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// The scene's buffers on the device.
@@ -83,7 +67,7 @@ impl SceneBuffers {
     /// walk `variants` choose.
     pub fn upload(ctx: &GpuContext, scene: &PreparedScene, variants: &GpuVariants) -> Result<SceneBuffers> {
         let dev = &ctx.device;
-        let walk = upload_of(scene, variants)?;
+        let walk = upload_of(scene, variants.bvh_walk())?;
         let tri_shade = tri_shade(scene);
         let materials: Vec<GpuMaterial> = scene
             .materials
@@ -139,23 +123,15 @@ impl SceneBuffers {
         let structure_group = structure_group(dev, &pipelines, &structure, tlas.as_ref());
         let [tris, tri_shade, materials] = shared.map(|(n, d)| storage(dev, n, d));
 
-        let l = walk.lattice;
-        let consts = SceneUniform {
-            bounds_min: l.bounds.min.to_array(),
+        let mut consts = SceneUniform {
             ray_epsilon: scene.ray_epsilon,
-            bounds_max: l.bounds.max.to_array(),
             n_lights: 0,
-            cell_size: l.cell_size.to_array(),
             n_tris: scene.accel.tris.len() as u32,
-            inv_cell_size: l.inv_cell_size.to_array(),
-            _pad0: 0,
-            dims: l.dims.to_array(),
-            shift: l.shift,
             background: scene.background.to_array(),
-            _pad2: 0,
             ambient: scene.ambient.to_array(),
-            _pad3: 0,
+            ..bytemuck::Zeroable::zeroed()
         };
+        walk.lattice.write_to(&mut consts);
         let uniform = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("scene uniform"),
             size: std::mem::size_of::<SceneUniform>() as u64,

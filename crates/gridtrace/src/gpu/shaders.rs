@@ -5,7 +5,7 @@
 //! search uses) and the scene's walk file with three generated lines naming its entry points
 //! `walk_closest`, `walk_any` and `walk_closest_point`, then the kernel's own file.
 
-use super::constants::wgsl_prelude;
+use super::walks::wgsl_prelude;
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
 /// The queue appends of ray generation and shading (`appends=per_ray|workgroup`).
@@ -42,27 +42,6 @@ pub const KERNELS: [(&str, &str); 9] = [
 /// The prelude and `common.wgsl`: every declaration all kernels share.
 pub fn shared_source() -> String {
     format!("{}\n{}", wgsl_prelude(), COMMON)
-}
-
-/// The shared source and every walk's files (not a module a device compiles: the walks bind
-/// the same group, each for its own pipelines), each file once; the short-stack files are left
-/// out (they define the same functions as the private stacks'). The layout tests parse it to
-/// check every struct the host shares with the kernels.
-pub fn common_source() -> String {
-    let mut files: Vec<&str> = Vec::new();
-    for w in super::walks::WALKS.iter().filter(|w| !w.short_stack) {
-        for f in w.wgsl {
-            if !files.contains(f) {
-                files.push(f);
-            }
-        }
-    }
-    let enable = if super::walks::WALKS.iter().any(|w| w.tlas.is_some()) {
-        RAY_QUERY_ENABLE
-    } else {
-        ""
-    };
-    format!("{enable}{}\n{}\n{}", shared_source(), CLOSEST_TRI, files.join("\n"))
 }
 
 /// The directive a walk that traces by ray query (`WalkSpec::tlas`) needs: WGSL wants it
@@ -120,17 +99,4 @@ pub fn all_modules() -> Vec<(String, String)> {
         }
     }
     out
-}
-
-/// The GPU grid build's shared file and kernels (`grid_build/`): their own bindings, so their
-/// modules are the prelude, `build/common.wgsl` and the kernel, without the tracer's files.
-pub const BUILD_COMMON: &str = include_str!("shaders/build/common.wgsl");
-pub const BUILD_REFS: &str = include_str!("shaders/build/refs.wgsl");
-pub const BUILD_SCAN: &str = include_str!("shaders/build/scan.wgsl");
-pub const BUILD_SORT: &str = include_str!("shaders/build/sort.wgsl");
-pub const BUILD_DISTANCE: &str = include_str!("shaders/build/distance.wgsl");
-
-/// The whole module of one grid-build kernel.
-pub fn build_module_source(kernel: &str) -> String {
-    format!("{}\n{}\n{}", wgsl_prelude(), BUILD_COMMON, kernel)
 }

@@ -4,7 +4,7 @@
 //!
 //! It is also the proof of the structure contract: it was added as this file, one registry
 //! entry (`registry.rs`) and one arm of `Structure`; its GPU side is its walk file
-//! (`gpu/shaders/walks/brute.wgsl`) and `gpu/walks/brute.rs` with one entry of `WALKS`.
+//! (`gpu/walks/brute/brute.wgsl`) and `gpu/walks/brute/mod.rs` with one entry of `WALKS`.
 
 use crate::Result;
 use crate::accel::AccelParams;

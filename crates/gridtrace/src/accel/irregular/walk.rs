@@ -1,5 +1,5 @@
 //! The irregular grid's traversal: look up the cell under the ray, test its triangles, leave
-//! its grown box in one step. `gpu/shaders/walks/irregular.wgsl` is the same walk, step for step.
+//! its grown box in one step. `gpu/walks/irregular/irregular.wgsl` is the same walk, step for step.
 //!
 //! Why it terminates and misses nothing, in floating point:
 //! - The next voxel is not found by evaluating the exit point and rounding (the point lies on

@@ -54,29 +54,8 @@
 use std::fmt;
 use std::str::FromStr;
 
-/// The BVH's GPU layout (`bvh=`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum BvhLayout {
-    /// Two-child nodes with both boxes (64 bytes).
-    #[default]
-    Binary,
-    /// Ylitie et al.'s 8-wide compressed nodes (80 bytes).
-    Wide8,
-}
-
-/// Where the BVH walk keeps its stack (`stack=`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum BvhStack {
-    /// A private array of `BVH_STACK` entries.
-    Private,
-    /// A ring of this many entries in workgroup memory, with the parent-link fallback.
-    Short(u8),
-}
-
-/// Entries of `stack=short`.
-pub const SHORT_STACK_DEFAULT: u8 = 8;
-/// Most entries a short stack may have (the workgroup array is this deep).
-pub const SHORT_STACK_MAX: u8 = 16;
+// The BVH's two keys take values of its own (`walks/bvh`).
+pub use super::walks::bvh::{BvhLayout, BvhStack, BvhWalk, SHORT_STACK_DEFAULT, SHORT_STACK_MAX};
 
 /// Which pixels a workgroup's eye rays start from (`order=`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -334,6 +313,14 @@ impl Default for GpuVariants {
 }
 
 impl GpuVariants {
+    /// The BVH walk its `bvh` and `stack` keys choose (what `walks` reads of the variants).
+    pub fn bvh_walk(&self) -> BvhWalk {
+        BvhWalk {
+            layout: self.bvh,
+            stack: self.stack,
+        }
+    }
+
     /// Every key set to `value_of` its row: the rows set every field, so the starting value
     /// does not show (a test checks it).
     fn from_table(value_of: impl Fn(&VariantSpec) -> &'static str) -> GpuVariants {

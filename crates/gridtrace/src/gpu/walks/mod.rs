@@ -1,31 +1,39 @@
-//! Each structure's GPU side: its arrays (group 1 of the walking kernels, in binding order), its
-//! lattice fields of the scene uniform, and its WGSL walk (`shaders/walks/NAME.wgsl`, which
-//! declares those arrays and defines `NAME_closest`, `NAME_any` and `NAME_closest_point`). The
+//! Each structure's GPU side, a folder each (`walks/NAME/`): its arrays (group 1 of the walking
+//! kernels, in binding order), its lattice fields of the scene uniform, its WGSL constants and
+//! node layouts, the variants that apply to it alone, its device build if it has one (the
+//! grid's `grid/build/`), and its WGSL walk (`NAME/NAME.wgsl`, which declares those arrays and
+//! defines `NAME_closest`, `NAME_any` and `NAME_closest_point`). The
 //! kernels never name a structure: traverse, occlusion and closest point call `walk_closest`,
 //! `walk_any` and `walk_closest_point`, three lines generated per structure
 //! (`WalkSpec::entry_points`), and each structure gets its own pipelines of them,
 //! compiled when a scene of it is first uploaded (`Kernels::walk`).
 //!
-//! Adding a structure's GPU side: a walk file, a file here with its `WalkSpec` and its upload,
-//! one entry of `WALKS` and one arm of `upload_of` (and of `device_structure` for a walk by
-//! ray query, whose structure the device builds: `hwrt`).
+//! Adding a structure's GPU side: a folder here with its walk file, its `WalkSpec` and its
+//! upload, one entry of `WALKS` and one arm of `upload_of` (and of `device_structure` for a walk
+//! by ray query, whose structure the device builds: `hwrt`).
 
 mod brute;
 pub mod bvh;
-mod grid;
+pub mod grid;
 mod hwrt;
 mod irregular;
 
 use std::borrow::Cow;
+use std::sync::Arc;
 
 use glam::{UVec3, Vec3};
 
-use crate::Result;
 use crate::accel::{Aabb, Structure};
 use crate::gpu::bindings::STRUCTURE_ARRAYS_MAX;
+use crate::gpu::constants::{self, WgslConst};
 use crate::gpu::context::GpuContext;
-use crate::gpu::variants::GpuVariants;
+use crate::gpu::layout::SceneUniform;
 use crate::scene::PreparedScene;
+use crate::{Error, Result};
+
+/// The closest-point ring search over a lattice, for the walks whose structure is one (the grid's
+/// cells, the irregular grid's top cells): each defines the cell it calls, `point_ring_cell`.
+const POINT_RING: &str = include_str!("point_ring.wgsl");
 
 /// What the GPU needs to know of a structure before any scene: its walk and its arrays' names.
 #[derive(Debug)]
@@ -43,21 +51,21 @@ pub struct WalkSpec {
     /// Group 1's arrays in binding order: the name reports use (`GpuRenderer::memory`) and the
     /// WGSL variable's name.
     pub arrays: &'static [(&'static str, &'static str)],
-    /// Whether a moved mesh's structure is rebuilt on the device (`gpu::grid_build`: the
+    /// Whether a moved mesh's structure is rebuilt on the device (`grid/build/`: the
     /// uniform grid's); the others are updated on the CPU and uploaded again.
     pub device_build: bool,
     /// The most triangles the walk can take on a software adapter, whose shader loops end
     /// after 65,535 iterations (`None`: no limit; every other walk's loops are bounded by
     /// cells or nodes, far below it).
     pub software_max_tris: Option<u32>,
-    /// Keeps its stack in workgroup memory (`stack=short`): its stack file defines the same
-    /// functions as the private stack's, so the two never share a module.
-    pub short_stack: bool,
     /// The WGSL name of a top-level acceleration structure the walk traces by ray query
     /// (`hwrt`), bound in group 1 after the arrays (binding `arrays.len()`) and built on the
     /// device at upload (`device_structure`); its modules start with `enable wgpu_ray_query;`
     /// and need a device with ray queries. `None` for the software walks.
     pub tlas: Option<&'static str>,
+    /// The structure's own WGSL constants, by WGSL name: they join the prelude of every module
+    /// (`wgsl_prelude`), so its walk and its device build read the host's values.
+    pub constants: &'static [(&'static str, WgslConst)],
 }
 
 impl WalkSpec {
@@ -99,6 +107,26 @@ const _: () = {
     }
 };
 
+/// Every WGSL constant: the shared ones (`constants::SHARED`), then each walk's, each name once
+/// (walks of one structure share their list; `tests` check that no name has two values).
+pub fn wgsl_constants() -> Vec<(&'static str, WgslConst)> {
+    let mut all: Vec<(&'static str, WgslConst)> = constants::SHARED.to_vec();
+    for w in WALKS {
+        for &(name, value) in w.constants {
+            if !all.iter().any(|&(n, _)| n == name) {
+                all.push((name, value));
+            }
+        }
+    }
+    all
+}
+
+/// The WGSL declarations of every constant, prepended to every module (the tracer's kernels and
+/// the grid build's): a module that re-declares one fails to compile.
+pub fn wgsl_prelude() -> String {
+    constants::prelude_of(&wgsl_constants())
+}
+
 /// Whether the structure named `structure` traces by ray query (`WalkSpec::tlas`): it runs
 /// only on an adapter with ray queries (`GpuContext::ray_query`).
 pub fn needs_ray_queries(structure: &str) -> bool {
@@ -114,7 +142,8 @@ pub struct Lattice {
     /// World-space size of one cell or voxel per axis, and its reciprocal.
     pub cell_size: Vec3,
     pub inv_cell_size: Vec3,
-    /// Irregular grid: `IrregularGrid::shift`.
+    /// A two-level lattice's top cells are `2^shift` cells on a side (the irregular grid's top
+    /// cells over its virtual voxels); 0 for one level.
     pub shift: u32,
 }
 
@@ -131,6 +160,18 @@ impl Lattice {
     }
 }
 
+impl Lattice {
+    /// Writes the lattice into the scene uniform's fields (the others are left as they are).
+    pub(crate) fn write_to(&self, u: &mut SceneUniform) {
+        u.bounds_min = self.bounds.min.to_array();
+        u.bounds_max = self.bounds.max.to_array();
+        u.dims = self.dims.to_array();
+        u.cell_size = self.cell_size.to_array();
+        u.inv_cell_size = self.inv_cell_size.to_array();
+        u.shift = self.shift;
+    }
+}
+
 /// A scene's structure as the GPU takes it: which walk, its arrays (bytes, in `spec.arrays`
 /// order) and its lattice.
 pub struct WalkUpload<'a> {
@@ -139,15 +180,15 @@ pub struct WalkUpload<'a> {
     pub lattice: Lattice,
 }
 
-/// The one place the GPU backend reads `scene.accel.structure`; `variants` choose the BVH's
-/// layout and stack (the other structures have one walk each).
-pub fn upload_of<'a>(scene: &'a PreparedScene, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
+/// The one place the GPU backend reads `scene.accel.structure`; the variants choose the BVH's
+/// layout and stack (`bvh_walk`; the other structures have one walk each).
+pub fn upload_of(scene: &PreparedScene, bvh_walk: bvh::BvhWalk) -> Result<WalkUpload<'_>> {
     let upload = match &scene.accel.structure {
         Structure::Grid(g) => grid::upload(g),
-        Structure::Bvh(b) => bvh::upload(b, &scene.accel.tris, scene.accel.bounds(), variants)?,
+        Structure::Bvh(b) => bvh::upload(b, &scene.accel.tris, scene.accel.bounds(), bvh_walk)?,
         Structure::Irregular(g) => irregular::upload(g),
         Structure::Brute(_) => brute::upload(scene.accel.bounds()),
-        Structure::Hwrt(h) => hwrt::upload(h, &scene.accel.tris, scene.accel.bounds(), variants)?,
+        Structure::Hwrt(h) => hwrt::upload(h, &scene.accel.tris, scene.accel.bounds())?,
     };
     debug_assert_eq!(upload.arrays.len(), upload.spec.arrays.len());
     Ok(upload)
@@ -160,6 +201,48 @@ pub(crate) fn device_structure(ctx: &GpuContext, scene: &PreparedScene) -> Resul
         Structure::Hwrt(_) => Some(hwrt::build_on_device(ctx, &scene.accel.tris)?),
         _ => None,
     })
+}
+
+/// A structure that the device rebuilds when its mesh moves (`WalkSpec::device_build`), kept
+/// between builds with its pipelines and buffers.
+pub(crate) enum DeviceBuilder {
+    Grid(grid::build::GpuGrid),
+}
+
+/// What a rebuild on the device left: the arrays to bind in place of the uploaded ones (by
+/// their `WalkSpec::arrays` label), the new lattice, the bytes of each array, and the build's
+/// own figures.
+pub(crate) struct DeviceBuilt<'a> {
+    pub arrays: Vec<(&'static str, &'a wgpu::Buffer)>,
+    pub lattice: Lattice,
+    pub memory: Vec<(&'static str, u64)>,
+    pub stats: grid::build::GpuBuildStats,
+}
+
+/// Rebuilds the scene's structure on `ctx`'s device over its moved triangles (`gpu_tris`, the
+/// scene's triangles as uploaded), with `builder` (made on first use): the one place the
+/// renderer's updates read which structure it has. An error for a structure without a device
+/// build (`WalkSpec::device_build`), which the CPU updates and the renderer uploads again.
+pub(crate) fn rebuild_on_device<'b>(
+    builder: &'b mut Option<DeviceBuilder>,
+    ctx: &Arc<GpuContext>,
+    gpu_tris: &wgpu::Buffer,
+    scene: &PreparedScene,
+) -> Result<DeviceBuilt<'b>> {
+    match &scene.accel.structure {
+        Structure::Grid(g) => {
+            let builder = match builder {
+                Some(b) => b,
+                None => builder.insert(DeviceBuilder::Grid(grid::build::GpuGrid::new(ctx.clone())?)),
+            };
+            let DeviceBuilder::Grid(gpu_grid) = builder;
+            grid::rebuild_on_device(gpu_grid, gpu_tris, &scene.accel.tris, g.resolution)
+        }
+        other => Err(Error::Gpu(format!(
+            "structure '{}' has no build on the device; it is updated on the CPU and uploaded",
+            other.kind().name()
+        ))),
+    }
 }
 
 /// A top-level acceleration structure on the device, with what it cost.
@@ -182,6 +265,36 @@ mod tests {
 
     /// The budget is no larger than the walks need: a larger one would refuse adapters that
     /// can run every walk.
+    /// The printed f32s read back as the same bits (naga's own reading is checked in
+    /// tests/gpu_layout.rs).
+    #[test]
+    fn f32_literals_round_trip() {
+        for (name, value) in wgsl_constants() {
+            if let WgslConst::F32(v) = value {
+                let text = constants::f32_literal(v);
+                let back: f32 = text.trim_end_matches('f').parse().unwrap();
+                assert_eq!(back.to_bits(), v.to_bits(), "{name}: {text}");
+            }
+        }
+    }
+
+    /// A name two lists declare has one value (the prelude keeps the first).
+    #[test]
+    fn a_name_has_one_value() {
+        let lists = std::iter::once(&constants::SHARED[..]).chain(WALKS.iter().map(|w| w.constants));
+        let mut seen: Vec<(&str, WgslConst)> = Vec::new();
+        for list in lists {
+            for &(name, value) in list {
+                match seen.iter().find(|(n, _)| *n == name) {
+                    Some(&(_, v)) => assert_eq!(v, value, "{name}"),
+                    None => seen.push((name, value)),
+                }
+            }
+        }
+        let all = wgsl_constants();
+        assert_eq!(all.len(), seen.len());
+    }
+
     #[test]
     fn the_largest_walk_uses_the_whole_array_budget() {
         let most = WALKS.iter().map(|w| w.arrays.len()).max();

@@ -1,7 +1,7 @@
 //! The BVH as the GPU walks it by default (`bvh=binary`): the CPU's binary SAH tree
 //! (`accel::bvh::Bvh`, the tree the eight-wide CPU nodes are collapsed from) re-laid as
 //! two-child nodes (`GpuBvhNode`), and its stack entries. The traversal is
-//! `shaders/walks/bvh.wgsl`; the 8-wide compressed layout is `wide8.rs`.
+//! `bvh.wgsl` here; the 8-wide compressed layout is `wide8.rs`.
 //!
 //! Why a binary node and not the CPU's eight-wide one: a GPU thread tests its node's boxes one
 //! after another, so a wide node buys fewer fetches but not fewer box tests, and eight slots
@@ -10,12 +10,33 @@
 //! the builder makes. The other candidates (4/8-wide, compressed wide nodes) are for
 //! when a real GPU can measure them (docs/benchmarks.md says what was measured where).
 
+use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
 use crate::accel::bvh::{Bvh, BvhNode, DIR_TINY, FAR_SCALE, STACK, T_SLOP};
 use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
-use crate::gpu::layout::GpuBvhNode;
 use crate::{Error, Result};
+
+/// A node of the BVH the GPU walks (64 bytes): a binary node holding both children's boxes, so
+/// that one node fetch tests both and the ray descends into the nearer (Aila and Laine 2009).
+/// The boxes are interleaved as their layout has it, `xy01` = child 0's x and y slabs,
+/// `xy11` = child 1's, `z01` = both z slabs, so every field is one 16-byte load.
+/// `child[k]` is a stack entry (`encode_leaf` below): an inner node's
+/// index, or a leaf's triangle range.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GpuBvhNode {
+    /// Child 0: lo.x, hi.x, lo.y, hi.y.
+    pub xy0: [f32; 4],
+    /// Child 1: lo.x, hi.x, lo.y, hi.y.
+    pub xy1: [f32; 4],
+    /// lo.z, hi.z of child 0, then of child 1.
+    pub z01: [f32; 4],
+    /// The children as stack entries, then the node's position in its parent (`parent << 1 |
+    /// slot`, `STACK_DONE` at the root: only the short stack's climb reads it); the last word
+    /// is unused.
+    pub child: [u32; 4],
+}
 
 /// A stack entry (and a node's child): an inner node's index, or, with `LEAF_BIT` set, a
 /// leaf: `count - 1` in bits 27..30 and the first of its triangles (an index into the leaf-order
@@ -141,7 +162,7 @@ impl GpuBvhNode {
     }
 }
 
-/// The walk of `shaders/walks/bvh.wgsl` on the CPU, step for step: the same box test, visiting order
+/// The walk of `bvh.wgsl` on the CPU, step for step: the same box test, visiting order
 /// and stack. It is the layout's oracle where no GPU is (unit tests), and it counts the work of
 /// the GPU's walk (`counters.cell()` per node, `tri_test()` per triangle) for the benchmarks,
 /// which the CPU's eight-wide BVH cannot tell. `ANY`: stop at the first hit.

@@ -5,7 +5,7 @@
 //! them in the order `slot ^ octant`, its inner children consecutive and its leaves' triangle
 //! indices consecutive. 80 bytes a node against the binary layout's 64 for two children.
 //!
-//! The walk is `shaders/walks/bvh8.wgsl`; `walk` below is the same walk on the CPU, step for
+//! The walk is `bvh8.wgsl`; `walk` below is the same walk on the CPU, step for
 //! step: the tests' oracle for the encoding and the benchmarks' counter of its work.
 //!
 //! Departures from the paper, and why: a leaf here keeps the CPU tree's leaves (up to eight
@@ -14,18 +14,33 @@
 //! and offset; triangles are tested when their leaf is reached rather than gathered into
 //! triangle groups; and each node carries its parent's position for the short stack's climb.
 
+use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
 use crate::accel::bvh::{BvhAccel, DIR_TINY, FAR_SCALE, STACK, T_SLOP, WIDTH, WideNode};
 use crate::accel::triangle::TriAccel4;
 use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
-use crate::gpu::layout::GpuBvh8Node;
 use crate::gpu::walks::bvh::binary::STACK_DONE;
 use crate::{Error, Result};
 
 /// Nodes a tree may have: a stack group is `node << 8 | mask`, and must stay below
 /// `STACK_DONE`.
 pub const MAX_NODES: usize = (1 << 24) - 1;
+
+/// An 8-wide compressed BVH node (`bvh=wide8`; `Bvh8Node` in `bvh8.wgsl`, which says
+/// what each word holds; built here). 80 bytes.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+pub struct GpuBvh8Node {
+    /// The origin's bits (xyz) and the scale exponents and inner mask (w).
+    pub p_e: [u32; 4],
+    /// First child node, first triangle, leaf counts (a nibble per slot), parent position.
+    pub info: [u32; 4],
+    /// Quantized planes, a byte per slot: lo x, lo y | lo z, hi x | hi y, hi z.
+    pub q0: [u32; 4],
+    pub q1: [u32; 4],
+    pub q2: [u32; 4],
+}
 
 /// The GPU's wide tree: nodes (node 0 the root) and the triangle indices in leaf order.
 #[derive(Debug, Clone)]
@@ -288,7 +303,7 @@ fn hits(n: &GpuBvh8Node, o: Vec3, inv: Vec3, t_min: f32, t_box: f32, oct: usize)
     mask
 }
 
-/// The walk of `shaders/walks/bvh8.wgsl` (private stack) on the CPU, step for step: node
+/// The walk of `bvh8.wgsl` (private stack) on the CPU, step for step: node
 /// groups, octant order, the same box test. `counters.cell()` per node whose boxes are tested,
 /// `tri_test()` per triangle; `work` counts node fetches. `ANY`: stop at the first hit.
 pub fn walk<const ANY: bool, C: Counters>(

@@ -1,5 +1,5 @@
 //! `hwrt` on the GPU: rays traced by the GPU's ray-tracing hardware through wgpu's ray queries
-//! (`shaders/walks/hwrt.wgsl`), over acceleration structures the device builds at upload
+//! (`hwrt.wgsl`), over acceleration structures the device builds at upload
 //! (`build.rs`: one bottom-level structure over the triangles, one top-level structure with one
 //! instance). Closest-point queries have no ray query: they walk the BVH that `accel::hwrt`
 //! keeps, with the BVH's own walk (binary nodes, private stack), whose arrays are this walk's
@@ -9,21 +9,17 @@ mod build;
 
 pub use build::build_on_device;
 
-use super::{WalkSpec, WalkUpload, bvh};
+use super::bvh::{self, BvhLayout, BvhStack, BvhWalk};
+use super::{WalkSpec, WalkUpload};
 use crate::Result;
 use crate::accel::hwrt::Hwrt;
 use crate::accel::{Aabb, TriAccel};
-use crate::gpu::variants::{BvhLayout, BvhStack, GpuVariants};
 
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "hwrt",
     name: "hwrt",
     // The BVH's walk for the closest points, then the ray queries.
-    wgsl: &[
-        include_str!("../../shaders/walks/bvh.wgsl"),
-        include_str!("../../shaders/walks/bvh_stack_private.wgsl"),
-        include_str!("../../shaders/walks/hwrt.wgsl"),
-    ],
+    wgsl: &[bvh::BINARY, bvh::BINARY_PRIVATE, include_str!("hwrt.wgsl")],
     prefix: "hwrt",
     arrays: bvh::SPEC.arrays,
     // Rebuilt at each upload (a moved mesh is uploaded again): see `build.rs`.
@@ -31,18 +27,17 @@ pub const SPEC: WalkSpec = WalkSpec {
     tlas: Some("hwrt_tlas"),
     // The driver's walk has no shader loop of ours; the closest-point walk is bounded by nodes.
     software_max_tris: None,
-    short_stack: false,
+    constants: bvh::SPEC.constants,
 };
 
 /// The BVH's arrays for the closest points, in the layout `SPEC`'s BVH walk reads whatever the
 /// variants say (`bvh=` and `stack=` choose the BVH structure's walk, not this one's).
-pub fn upload<'a>(h: &'a Hwrt, tris: &[TriAccel], bounds: Aabb, variants: &GpuVariants) -> Result<WalkUpload<'a>> {
-    let binary_private = GpuVariants {
-        bvh: BvhLayout::Binary,
+pub fn upload<'a>(h: &'a Hwrt, tris: &[TriAccel], bounds: Aabb) -> Result<WalkUpload<'a>> {
+    let binary_private = BvhWalk {
+        layout: BvhLayout::Binary,
         stack: BvhStack::Private,
-        ..*variants
     };
-    let mut up = bvh::upload(&h.bvh, tris, bounds, &binary_private)?;
+    let mut up = bvh::upload(&h.bvh, tris, bounds, binary_private)?;
     up.spec = &SPEC;
     Ok(up)
 }

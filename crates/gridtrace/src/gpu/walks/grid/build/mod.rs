@@ -4,7 +4,7 @@
 //! reference list, ascending within a cell), so the same traversal kernels walk it, and a test
 //! compares the two builds cell by cell.
 //!
-//! Stages, each a kernel in `shaders/build/`:
+//! Stages, each a kernel in this folder (`*.wgsl`):
 //! 1. `count` (per triangle): every cell the triangle overlaps (the CPU's exact test, on the
 //!    same lattice, `GridLattice`) gets one more reference, by an atomic add;
 //! 2. `scan`: exclusive prefix sums of the counts give the cells' `start`s and the total;
@@ -32,19 +32,68 @@ use std::time::Instant;
 
 use wgpu::util::DeviceExt;
 
+use bytemuck::{Pod, Zeroable};
+
 mod pipelines;
 
 pub(crate) use pipelines::BuildKernels;
+pub use pipelines::{KERNEL_SOURCES, module_source};
 use pipelines::{STAGES, Stage};
 
-use super::constants::{MAX_CELLS_PER_TRI, MAX_GPU_LINE, SCAN_BLOCK, SCAN_GROUP, WORKGROUP};
-use super::context::GpuContext;
-use super::kernels::dispatch_groups;
-use super::layout::{GpuTri, GridBuildUniform};
-use super::scene::check_scene_fits;
-use super::timing::{GpuTimings, StageTimer, Timestamps};
+use crate::gpu::constants::{WORKGROUP, dispatch_groups};
+use crate::gpu::context::{GpuContext, check_scene_fits};
+use crate::gpu::layout::GpuTri;
+use crate::gpu::timing::{GpuTimings, StageTimer, Timestamps};
 use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
 use crate::{Error, Result};
+
+/// Elements one workgroup of the GPU grid build's scan sums (256 invocations, 4 each); the
+/// host sizes the scan's levels by it.
+pub const SCAN_BLOCK: u32 = 1024;
+/// Cells one triangle may span in the GPU grid build; a grid with a larger triangle is built
+/// on the CPU instead. One invocation walks a triangle's cells, and lavapipe (Mesa's llvmpipe)
+/// stops an invocation's loops after 65535 iterations in total, silently: measured, a triangle
+/// over 64,000 cells got only its first 22,000 or so. A quarter of that budget leaves room;
+/// at the automatic resolution only floor-like triangles of million-triangle scenes come near.
+pub const MAX_CELLS_PER_TRI: u32 = 16384;
+/// Longest line of cells the GPU distance transform takes (about three loop iterations per
+/// cell; see `MAX_CELLS_PER_TRI`). The automatic resolution stays under 1024.
+pub const MAX_GPU_LINE: u32 = 16384;
+/// Cells with more references keep the GPU placing order (insertion sort is quadratic: 256
+/// references take at most 32,640 steps, within the budget above).
+pub const SORT_MAX_REFS: u32 = 256;
+/// Invocations per workgroup of the grid build's scan kernels (`scan.wgsl`'s `partial`
+/// array); the other kernels have `WORKGROUP`.
+pub const SCAN_GROUP: u32 = 256;
+// A scan block is four elements per invocation of a workgroup (`scan.wgsl`).
+const _: () = assert!(SCAN_BLOCK == 4 * SCAN_GROUP);
+
+/// The uniform of one GPU grid-build dispatch (`common.wgsl` here): the lattice, the
+/// sizes, and the scan level or distance axis it works on. 80 bytes, one per 256-byte slot.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GridBuildUniform {
+    pub bounds_min: [f32; 3],
+    pub n_tris: u32,
+    pub cell_size: [f32; 3],
+    pub n_cells: u32,
+    pub inv_cell_size: [f32; 3],
+    /// Slots of the references buffer; a build that needs more is run again, larger.
+    pub refs_capacity: u32,
+    pub margin: [f32; 3],
+    /// Distance transform: the axis of this pass (0 = x).
+    pub axis: u32,
+    pub dims: [u32; 3],
+    /// Elements of this scan level, or lines of this distance pass.
+    pub n: u32,
+    /// Scan: where this level's elements (`in_offset`) and block totals (`out_offset`) are in
+    /// the sums buffer.
+    pub in_offset: u32,
+    pub out_offset: u32,
+    /// Scan: 1 on the top level, whose single block total is the number of references.
+    pub last: u32,
+    pub _pad0: u32,
+}
 
 /// Bytes between two dispatches' parameters (dynamic uniform offsets must be multiples of the
 /// device's alignment; 256 is WebGPU's largest).

@@ -1,5 +1,5 @@
 //! Brute force on the GPU: no arrays of its own (it reads the shared triangles); the walk is
-//! `shaders/walks/brute.wgsl`.
+//! `brute.wgsl`.
 
 use super::{Lattice, WalkSpec, WalkUpload};
 use crate::accel::Aabb;
@@ -7,14 +7,14 @@ use crate::accel::Aabb;
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "brute",
     name: "brute",
-    wgsl: &[include_str!("../shaders/walks/brute.wgsl")],
+    wgsl: &[include_str!("brute.wgsl")],
     prefix: "brute",
     arrays: &[],
     device_build: false,
     tlas: None,
     // Four triangles a loop iteration (brute.wgsl) times llvmpipe's 65,535 iterations.
-    short_stack: false,
     software_max_tris: Some(4 * 65_535),
+    constants: &[],
 };
 
 pub fn upload(bounds: Aabb) -> WalkUpload<'static> {

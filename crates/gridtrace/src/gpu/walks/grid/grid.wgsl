@@ -146,15 +146,20 @@ fn grid_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
 // fill margin (`point_cell_margin`), and pruning is strict, so every triangle as near as the
 // best is measured and the tie rule decides as on the CPU.
 
-// Measures the triangles of cell `cc` if its grown box may hold something nearer than `best`.
-// Returns how many cells a row may advance: an empty cell's proximity distance with `pc` (the
-// cells that close are empty too), else 1.
-fn grid_point_cell(l: PointLattice, p: vec3<f32>, cc: vec3<i32>, use_pc: bool,
+// Whether this closest-point search jumps with the proximity cloud (`pc`): set once per point by
+// `grid_closest_point`, read by the ring search's cells.
+var<private> grid_point_pc: bool;
+
+// The ring search's cell (`lattice_point_ring`, point_ring.wgsl): measures the triangles of
+// cell `cc` if its grown box may hold something nearer than `best`. Returns how many cells a row
+// may advance: an empty cell's proximity distance with `pc` (the cells that close are empty
+// too), else 1.
+fn point_ring_cell(l: PointLattice, p: vec3<f32>, cc: vec3<i32>,
                    best: ptr<function, GpuHit>, work: ptr<function, u32>) -> i32 {
     *work += 1u;
     let cell = cells[cell_index(cc)];
     if (cell.count == 0u) {
-        if (use_pc) { return i32(clamp(cell.dist, 1u, scene.dims.x)); }
+        if (grid_point_pc) { return i32(clamp(cell.dist, 1u, scene.dims.x)); }
         return 1;
     }
     let lo = l.min + vec3<f32>(cc) * l.cell;
@@ -166,49 +171,15 @@ fn grid_point_cell(l: PointLattice, p: vec3<f32>, cc: vec3<i32>, use_pc: bool,
     return 1;
 }
 
-// Ring `r` around cell `c`, clipped to the grid: the rows of its two z faces and two y faces
-// along x (clipped to the ball of the best distance), and the two cells of its x faces in the
-// other rows.
-fn grid_point_ring(l: PointLattice, p: vec3<f32>, c: vec3<i32>, r: i32, use_pc: bool,
-                   best: ptr<function, GpuHit>, work: ptr<function, u32>) {
-    let lo = max(c - r, vec3<i32>(0));
-    let hi = min(c + r, l.dims - 1);
-    for (var z = lo.z; z <= hi.z; z++) {
-        let dz = lattice_slab_dist(l, p, 2, z);
-        if (dz * dz > (*best).t) { continue; }
-        for (var y = lo.y; y <= hi.y; y++) {
-            let dy = lattice_slab_dist(l, p, 1, y);
-            let yz = dz * dz + dy * dy;
-            if (yz > (*best).t) { continue; }
-            if (abs(z - c.z) == r || abs(y - c.y) == r) {
-                var x = lo.x;
-                while (x <= hi.x) {
-                    let dx = lattice_slab_dist(l, p, 0, x);
-                    if (dx * dx + yz > (*best).t) {
-                        // Past the point, every later cell of the row is farther still.
-                        if (l.min.x + f32(x) * l.cell.x > p.x) { break; }
-                        x += 1;
-                        continue;
-                    }
-                    x += grid_point_cell(l, p, vec3<i32>(x, y, z), use_pc, best, work);
-                }
-            } else {
-                if (c.x - r >= 0) { grid_point_cell(l, p, vec3<i32>(c.x - r, y, z), use_pc, best, work); }
-                if (c.x + r < l.dims.x) { grid_point_cell(l, p, vec3<i32>(c.x + r, y, z), use_pc, best, work); }
-            }
-        }
-    }
-}
-
 // The nearest point to `p`; mirrors Grid::closest_point (the same answer, tie rule included).
 fn grid_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(inf(), MISS, 0.0, 0.0);
     let dims = vec3<i32>(scene.dims);
     let l = PointLattice(scene.bounds_min, scene.cell_size, dims, point_cell_margin(scene.cell_size));
     let c = clamp(world_to_grid(p), vec3<i32>(0), dims - 1);
-    let use_pc = pass_.accel == ACCEL_PC;
+    grid_point_pc = pass_.accel == ACCEL_PC;
     var r = 0;
-    if (use_pc) {
+    if (grid_point_pc) {
         let d = cells[cell_index(c)].dist;
         // FAR (u32::MAX): no cell holds a triangle.
         if (d == MISS) { return best; }
@@ -220,7 +191,7 @@ fn grid_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
         if (r > last_ring) { break; }
         // Strict: a ring that may hold something as near as the best is still searched.
         if (lattice_ring_bound(l, p, c, r, out2) > best.t) { break; }
-        grid_point_ring(l, p, c, r, use_pc, &best, work);
+        lattice_point_ring(l, p, c, r, &best, work);
         r += 1;
     }
     return best;

@@ -225,35 +225,11 @@ fn irr_point_top(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<functio
     }
 }
 
-// Ring `r` of top cells around top cell `c`, clipped to the lattice: the rows of its z and y
-// faces along x (clipped to the ball of the best distance), the two cells of its x faces in
-// the other rows.
-fn irr_point_ring(l: PointLattice, p: vec3<f32>, c: vec3<i32>, r: i32, best: ptr<function, GpuHit>, work: ptr<function, u32>) {
-    let lo = max(c - r, vec3<i32>(0));
-    let hi = min(c + r, l.dims - 1);
-    for (var z = lo.z; z <= hi.z; z++) {
-        let dz = lattice_slab_dist(l, p, 2, z);
-        if (dz * dz > (*best).t) { continue; }
-        for (var y = lo.y; y <= hi.y; y++) {
-            let dy = lattice_slab_dist(l, p, 1, y);
-            let yz = dz * dz + dy * dy;
-            if (yz > (*best).t) { continue; }
-            if (abs(z - c.z) == r || abs(y - c.y) == r) {
-                for (var x = lo.x; x <= hi.x; x++) {
-                    let dx = lattice_slab_dist(l, p, 0, x);
-                    if (dx * dx + yz > (*best).t) {
-                        // Past the point, every later cell of the row is farther still.
-                        if (l.min.x + f32(x) * l.cell.x > p.x) { break; }
-                        continue;
-                    }
-                    irr_point_top(l, p, vec3<i32>(x, y, z), best, work);
-                }
-            } else {
-                if (c.x - r >= 0) { irr_point_top(l, p, vec3<i32>(c.x - r, y, z), best, work); }
-                if (c.x + r < l.dims.x) { irr_point_top(l, p, vec3<i32>(c.x + r, y, z), best, work); }
-            }
-        }
-    }
+// The ring search's cell (`lattice_point_ring`, point_ring.wgsl): a top cell, searched whole;
+// the row goes on to the next.
+fn point_ring_cell(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<function, GpuHit>, work: ptr<function, u32>) -> i32 {
+    irr_point_top(l, p, tc, best, work);
+    return 1;
 }
 
 // The nearest point to `p`; the answer of IrregularGrid::closest_point, tie rule included.
@@ -272,7 +248,7 @@ fn irr_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
     for (var r = 0; r <= last_ring; r++) {
         // Strict: a ring that may hold something as near as the best is still searched.
         if (lattice_ring_bound(l, p, c, r, out2) > best.t) { break; }
-        irr_point_ring(l, p, c, r, &best, work);
+        lattice_point_ring(l, p, c, r, &best, work);
     }
     return best;
 }

@@ -3,9 +3,23 @@
 
 use std::mem::size_of;
 
-use super::super::layout::GridBuildUniform;
-use super::super::shaders;
+use super::GridBuildUniform;
 use crate::{Error, Result};
+
+/// The build's shared file: its own bindings and structs (the kernels do not include the
+/// tracer's `common.wgsl`).
+const COMMON: &str = include_str!("common.wgsl");
+const REFS: &str = include_str!("refs.wgsl");
+const SCAN: &str = include_str!("scan.wgsl");
+const SORT: &str = include_str!("sort.wgsl");
+const DISTANCE: &str = include_str!("distance.wgsl");
+/// Every kernel file of the build (the layout tests parse each module).
+pub const KERNEL_SOURCES: [&str; 4] = [REFS, SCAN, SORT, DISTANCE];
+
+/// The whole module of one grid-build kernel: the prelude, `common.wgsl` and the kernel.
+pub fn module_source(kernel: &str) -> String {
+    format!("{}\n{}\n{}", crate::gpu::walks::wgsl_prelude(), COMMON, kernel)
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Stage {
@@ -33,56 +47,56 @@ pub(super) const STAGES: [StageSpec; 8] = [
     StageSpec {
         stage: Stage::Count,
         name: "count",
-        source: shaders::BUILD_REFS,
+        source: REFS,
         entry: "main",
         overrides: &[],
     },
     StageSpec {
         stage: Stage::Place,
         name: "place",
-        source: shaders::BUILD_REFS,
+        source: REFS,
         entry: "main",
         overrides: &[("PLACE", 1.0)],
     },
     StageSpec {
         stage: Stage::ScanCells,
         name: "scan",
-        source: shaders::BUILD_SCAN,
+        source: SCAN,
         entry: "scan",
         overrides: &[("CELLS", 1.0)],
     },
     StageSpec {
         stage: Stage::ScanSums,
         name: "scan",
-        source: shaders::BUILD_SCAN,
+        source: SCAN,
         entry: "scan",
         overrides: &[],
     },
     StageSpec {
         stage: Stage::AddCells,
         name: "scan",
-        source: shaders::BUILD_SCAN,
+        source: SCAN,
         entry: "add",
         overrides: &[("CELLS", 1.0)],
     },
     StageSpec {
         stage: Stage::AddSums,
         name: "scan",
-        source: shaders::BUILD_SCAN,
+        source: SCAN,
         entry: "add",
         overrides: &[],
     },
     StageSpec {
         stage: Stage::Sort,
         name: "sort",
-        source: shaders::BUILD_SORT,
+        source: SORT,
         entry: "main",
         overrides: &[],
     },
     StageSpec {
         stage: Stage::Distance,
         name: "distance",
-        source: shaders::BUILD_DISTANCE,
+        source: DISTANCE,
         entry: "main",
         overrides: &[],
     },
@@ -138,7 +152,7 @@ impl BuildKernels {
                 debug_assert_eq!(s.stage as usize, i);
                 let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some(s.name),
-                    source: wgpu::ShaderSource::Wgsl(shaders::build_module_source(s.source).into()),
+                    source: wgpu::ShaderSource::Wgsl(module_source(s.source).into()),
                 });
                 dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some(s.name),

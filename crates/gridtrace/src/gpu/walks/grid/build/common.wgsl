@@ -1,4 +1,4 @@
-// Shared declarations of the GPU grid build's kernels (src/gpu/grid_build/): its parameters,
+// Shared declarations of the GPU grid build's kernels (src/gpu/walks/grid/build/): its parameters,
 // its bindings, and the cell assignment. Every build module is the constant prelude, this file,
 // then the kernel's own file.
 //

@@ -1,13 +1,23 @@
 //! The irregular grid on the GPU, uploaded as the CPU builds it; the walk is
-//! `shaders/walks/irregular.wgsl`.
+//! `irregular.wgsl`.
 
 use super::{Lattice, WalkSpec, WalkUpload, bytes};
 use crate::accel::IrregularGrid;
+use crate::accel::irregular::{COORD_BITS, COORD_MASK, LEVEL_BITS};
+use crate::gpu::constants::WgslConst;
+
+/// The walk's WGSL constants (in the prelude of every module): how a top cell's entry packs
+/// its level and a cell's coordinates.
+const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
+    ("IRR_LEVEL_BITS", WgslConst::U32(LEVEL_BITS)),
+    ("IRR_COORD_BITS", WgslConst::U32(COORD_BITS)),
+    ("IRR_COORD_MASK", WgslConst::U32(COORD_MASK)),
+];
 
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "irregular",
     name: "irregular",
-    wgsl: &[include_str!("../shaders/walks/irregular.wgsl")],
+    wgsl: &[include_str!("irregular.wgsl"), super::POINT_RING],
     prefix: "irr",
     arrays: &[
         ("irr_entries", "irr_entries"),
@@ -17,8 +27,8 @@ pub const SPEC: WalkSpec = WalkSpec {
     ],
     device_build: false,
     tlas: None,
-    short_stack: false,
     software_max_tris: None,
+    constants: WGSL_CONSTANTS,
 };
 
 pub fn upload(g: &IrregularGrid) -> WalkUpload<'_> {
