@@ -89,7 +89,11 @@ pub fn ablation_study(plan: &AblationPlan, log: &mut dyn FnMut(&str)) -> Result<
                 .scene
                 .prepare_for(accel, &bs.params_for(accel, plan.paper_grids, plan.grid))?;
             let mut gpu = match plan.gpu {
-                Some(ctx) => Some(GpuRenderer::new(ctx.clone(), &scene)?),
+                Some(ctx) => Some(GpuRenderer::new(
+                    ctx.clone(),
+                    &scene,
+                    &gridtrace::gpu::GpuVariants::default(),
+                )?),
                 None => None,
             };
             let mut targets: Vec<(&str, Target)> = Vec::new();

@@ -360,10 +360,10 @@ pub fn run_matrix(
         }
         if let Some(ctx) = &gpu {
             // One renderer per structure uploaded: the grid's (grid, pc) and each other one's.
-            let mut grid_gpu = GpuRenderer::with_variants(ctx.clone(), &prepared, &cfg.gpu_variants)?;
+            let mut grid_gpu = GpuRenderer::new(ctx.clone(), &prepared, &cfg.gpu_variants)?;
             let mut own_gpu: Vec<(AccelKind, GpuRenderer)> = Vec::new();
             for (k, s) in own.iter().filter(|(k, _)| !k.uses_grid()) {
-                own_gpu.push((*k, GpuRenderer::with_variants(ctx.clone(), s, &cfg.gpu_variants)?));
+                own_gpu.push((*k, GpuRenderer::new(ctx.clone(), s, &cfg.gpu_variants)?));
             }
             let mut largest = 0u64;
             for &(w, h) in &cfg.resolutions {

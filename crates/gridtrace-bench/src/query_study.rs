@@ -124,7 +124,11 @@ pub fn query_study(
                 runs.push(("cpu", times, hits[0]));
             }
             if let Some(ctx) = gpu {
-                let mut r = gridtrace::gpu::GpuRenderer::new(ctx.clone(), tm.prepared())?;
+                let mut r = gridtrace::gpu::GpuRenderer::new(
+                    ctx.clone(),
+                    tm.prepared(),
+                    &gridtrace::gpu::GpuVariants::default(),
+                )?;
                 let ray_vec: Vec<Ray> = o
                     .iter()
                     .zip(&d)

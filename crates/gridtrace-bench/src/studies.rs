@@ -212,7 +212,7 @@ pub fn scaling(
     let mut pixel_mesh = None;
     // On the GPU each mesh is uploaded once and timed at every size asked of it.
     let upload = |prepared: &gridtrace::scene::PreparedScene| {
-        gpu.map(|ctx| gridtrace::gpu::GpuRenderer::new(ctx.clone(), prepared))
+        gpu.map(|ctx| gridtrace::gpu::GpuRenderer::new(ctx.clone(), prepared, &gridtrace::gpu::GpuVariants::default()))
             .transpose()
     };
     let time = |prepared: &gridtrace::scene::PreparedScene,

@@ -30,12 +30,10 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             a.fps
         )));
     }
-    let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.accel_args.accel_for(
-        gridtrace::backend::traced_on(ctx.as_deref()),
-        gridtrace::Work::Animate,
-        &mut notes,
-    );
+    let (placement, mut notes) = gridtrace::Placement::open(a.backend, Default::default())?;
+    let accel = a
+        .accel_args
+        .accel_for(placement.traced_on(), gridtrace::Work::Animate, &mut notes);
     let t0 = Instant::now();
     let scene = crate::common::prepare(&anim.scene, name, accel, &a.accel_args)?;
     println!(
@@ -44,7 +42,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    match &ctx {
+    match &placement.device {
         Some(ctx) => {
             println!("backend gpu: {}", ctx.describe());
             if ctx.is_software() {
@@ -53,7 +51,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         }
         None => println!("backend {}", gridtrace::backend::describe_cpu()),
     }
-    let mut tracer = Tracer::open(scene, ctx.as_ref(), a.backend, &mut notes)?;
+    let mut tracer = Tracer::open(scene, &placement, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");
     }

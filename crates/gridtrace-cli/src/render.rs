@@ -146,12 +146,10 @@ fn open_tracer(
     scene: &gridtrace::Scene,
     name: &str,
 ) -> gridtrace::Result<(gridtrace::Tracer, gridtrace::AccelKind)> {
-    let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.accel_args.accel_for(
-        gridtrace::backend::traced_on(ctx.as_deref()),
-        gridtrace::Work::Render,
-        &mut notes,
-    );
+    let (placement, mut notes) = gridtrace::Placement::open(a.backend, a.gpu.gpu_variant)?;
+    let accel = a
+        .accel_args
+        .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
     let t_build = Instant::now();
     let prepared = crate::common::prepare(scene, name, accel, &a.accel_args)?;
     let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
@@ -162,7 +160,7 @@ fn open_tracer(
         crate::common::describe_structure(&prepared.accel)
     );
     println!("build   {build_ms:.1} ms");
-    let renderer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
+    let renderer = gridtrace::Tracer::open(prepared, &placement, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");
     }

@@ -327,12 +327,12 @@ fn render<'py>(
             if let Some(t) = target {
                 s.camera.target = t.into();
             }
-            let (ctx, mut notes) = backend.open_device()?;
-            let (accel, _why) = spec.resolve(gridtrace::backend::traced_on(ctx.as_deref()), gridtrace::Work::Render);
+            let (placement, mut notes) = gridtrace::Placement::open(backend, variants)?;
+            let (accel, _why) = spec.resolve(placement.traced_on(), gridtrace::Work::Render);
             let prepared = s.prepare_for(accel, &spec.params)?;
             let opts = RenderOptions::new(width, height, mode).with_pixels(PixelFormat::Srgb8);
             let (camera, lights) = (prepared.camera, prepared.lights.clone());
-            let mut tracer = gridtrace::Tracer::open_variants(prepared, ctx.as_ref(), backend, &variants, &mut notes)?;
+            let mut tracer = gridtrace::Tracer::open(prepared, &placement, &mut notes)?;
             let mut frame = tracer.render(&camera, &lights, &opts)?;
             // The image goes to Python as bytes; the figures stay.
             let image = std::mem::replace(&mut frame.image, gridtrace::Image::new(1, 1));

@@ -19,7 +19,7 @@ fn main() -> gridtrace::Result<()> {
     let scene = mesh_scene(mesh, false).prepare_for(AccelKind::Bvh, &AccelParams::NONE)?;
     let ctx = std::sync::Arc::new(GpuContext::new()?);
     println!("adapter {}", ctx.describe());
-    let mut gpu = GpuRenderer::new(ctx, &scene)?;
+    let mut gpu = GpuRenderer::new(ctx, &scene, &gridtrace::gpu::GpuVariants::default())?;
     let b = scene.accel.bounds();
     let (centre, radius) = (b.center(), b.extent().length());
     // A deterministic spread of origins on a sphere (a golden-angle spiral), each aimed at

@@ -112,34 +112,71 @@ impl Backend {
             TracedOn::Cpu
         }
     }
+}
 
-    /// The scene uploaded to the device `ctx` that this backend opened (`open_device`), or
-    /// `None` to trace it on the CPU: with `auto`, a scene the GPU cannot hold (over its buffer
-    /// limits) is traced on the CPU, with a note; with `gpu` that is an error that says so.
-    pub fn upload(
-        self,
-        ctx: Arc<GpuContext>,
-        scene: &PreparedScene,
-        notes: &mut Vec<String>,
-    ) -> Result<Option<GpuRenderer>> {
-        self.upload_with(ctx, scene, &GpuVariants::default(), notes)
+/// Where work is traced, decided once and carried whole: the backend asked for, the device it
+/// opened (`None`: the CPU) and the GPU variants the kernels are compiled with. Frames
+/// (`Tracer::open`), the CLI, the viewer and Python's `render` place their work through it.
+#[derive(Clone, Default)]
+pub struct Placement {
+    pub backend: Backend,
+    /// The device `backend` opened (`Backend::open_device`); `None`: the CPU.
+    pub device: Option<Arc<GpuContext>>,
+    /// The GPU kernels and layouts (`--gpu-variant`), where the work runs on a GPU.
+    pub variants: GpuVariants,
+}
+
+impl Placement {
+    /// Opens the device `backend` asks for (`Backend::open_device`), with notes for the user on
+    /// every choice that was not the one asked for.
+    pub fn open(backend: Backend, variants: GpuVariants) -> Result<(Placement, Vec<String>)> {
+        let (device, notes) = backend.open_device()?;
+        Ok((
+            Placement {
+                backend,
+                device,
+                variants,
+            },
+            notes,
+        ))
     }
 
-    /// `upload` with the GPU kernels and layouts `variants` choose.
-    pub fn upload_with(
-        self,
-        ctx: Arc<GpuContext>,
-        scene: &PreparedScene,
-        variants: &GpuVariants,
-        notes: &mut Vec<String>,
-    ) -> Result<Option<GpuRenderer>> {
+    /// `backend` on a device the caller opened, with the default GPU variants.
+    pub fn on_device(backend: Backend, device: Arc<GpuContext>) -> Placement {
+        Placement {
+            backend,
+            device: Some(device),
+            variants: GpuVariants::default(),
+        }
+    }
+
+    /// Everything on the CPU.
+    pub fn cpu() -> Placement {
+        Placement {
+            backend: Backend::Cpu,
+            ..Placement::default()
+        }
+    }
+
+    /// Where its work runs, as `AccelChoice::resolve` weighs it.
+    pub fn traced_on(&self) -> TracedOn {
+        traced_on(self.device.as_deref())
+    }
+
+    /// The scene uploaded to the device, or `None` to trace it on the CPU (no device, or, with
+    /// `auto`, a scene the GPU cannot hold: over its buffer limits, or a structure without a
+    /// GPU walk, with a note); with `gpu` the latter are errors that say so.
+    pub fn upload(&self, scene: &PreparedScene, notes: &mut Vec<String>) -> Result<Option<GpuRenderer>> {
+        let Some(ctx) = &self.device else {
+            return Ok(None);
+        };
         let kind = scene.accel.structure_name();
         if !crate::accel::registry::ENTRIES
             .iter()
             .any(|e| e.structure == kind && e.gpu)
         {
             let why = format!("'{kind}' has no GPU walk");
-            return match self {
+            return match self.backend {
                 Backend::Auto => {
                     notes.push(format!("{why}; using the CPU"));
                     Ok(None)
@@ -150,9 +187,9 @@ impl Backend {
             };
         }
         let cpu_traces = scene.accel.check_cpu_kind().is_ok();
-        match GpuRenderer::with_variants(ctx, scene, variants) {
+        match GpuRenderer::new(ctx.clone(), scene, &self.variants) {
             Ok(gpu) => Ok(Some(gpu)),
-            Err(e) if self == Backend::Auto && cpu_traces => {
+            Err(e) if self.backend == Backend::Auto && cpu_traces => {
                 notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
                 Ok(None)
             }
@@ -288,30 +325,12 @@ pub struct Update {
 }
 
 impl Tracer {
-    /// The scene traced on `ctx` (a device `backend` opened with `Backend::open_device`;
-    /// `None`: the CPU). With `auto` a scene the device cannot hold (over its buffer limits, or
-    /// a structure without a GPU walk) goes to the CPU, with a note (`Backend::upload`).
-    pub fn open(
-        scene: PreparedScene,
-        ctx: Option<&Arc<GpuContext>>,
-        backend: Backend,
-        notes: &mut Vec<String>,
-    ) -> Result<Tracer> {
-        Tracer::open_variants(scene, ctx, backend, &GpuVariants::default(), notes)
-    }
-
-    /// `open`, with the GPU variants `variants` (`--gpu-variant`) where it traces on a GPU.
-    pub fn open_variants(
-        scene: PreparedScene,
-        ctx: Option<&Arc<GpuContext>>,
-        backend: Backend,
-        variants: &GpuVariants,
-        notes: &mut Vec<String>,
-    ) -> Result<Tracer> {
-        let gpu = match ctx {
-            Some(ctx) => backend.upload_with(ctx.clone(), &scene, variants, notes)?,
-            None => None,
-        };
+    /// The scene traced where `placement` says: on its device, or the CPU without one. With
+    /// `auto` a scene the device cannot hold (over its buffer limits, or a structure without a
+    /// GPU walk) goes to the CPU, with a note (`Placement::upload`).
+    pub fn open(scene: PreparedScene, placement: &Placement, notes: &mut Vec<String>) -> Result<Tracer> {
+        let gpu = placement.upload(&scene, notes)?;
+        let backend = placement.backend;
         if gpu.is_none() {
             // A structure only a GPU traces (`hwrt`) is refused here, before any frame.
             scene.accel.check_cpu_kind().map_err(|e| match backend {
@@ -330,10 +349,11 @@ impl Tracer {
         })
     }
 
-    /// Opens the device `backend` asks for and the scene on it: `open_device`, then `open`.
+    /// Opens the device `backend` asks for and the scene on it, with the default GPU
+    /// variants: `Placement::open`, then `open`.
     pub fn open_with(backend: Backend, scene: PreparedScene) -> Result<(Tracer, Vec<String>)> {
-        let (ctx, mut notes) = backend.open_device()?;
-        let tracer = Tracer::open(scene, ctx.as_ref(), backend, &mut notes)?;
+        let (placement, mut notes) = Placement::open(backend, GpuVariants::default())?;
+        let tracer = Tracer::open(scene, &placement, &mut notes)?;
         Ok((tracer, notes))
     }
 

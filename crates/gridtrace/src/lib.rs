@@ -19,7 +19,7 @@ pub mod testing;
 pub mod util;
 
 pub use accel::{Accel, AccelChoice, AccelKind, AccelParams, AccelSpec, Hit, Ray, Resolution, TracedOn, Work};
-pub use backend::{Backend, Frame, Rendered, Tracer};
+pub use backend::{Backend, Frame, Placement, Rendered, Tracer};
 pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};
 pub use frames::{FramesOptions, FramesStats};

@@ -118,7 +118,7 @@ fn gpu_frames_equal_fresh_cpu_renders() {
         .chain(hwrt)
     {
         let mut scene = anim.scene.prepare_for(accel, &AccelParams::NONE).unwrap();
-        let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &gridtrace::gpu::GpuVariants::default()).unwrap();
         for &t in &TIMES {
             scene.update_vertices(&anim.positions_at(t), RebuildOn::Device).unwrap();
             let up = gpu.update_vertices(&scene).unwrap();

@@ -185,7 +185,8 @@ fn gpu_edges_and_vertices_do_not_leak() {
             .into_iter()
             .filter(|s| kinds.iter().any(|&k| s.accel.structure_name() == k.structure_name()))
             .map(|s| {
-                let g = gridtrace::gpu::GpuRenderer::new(ctx.clone(), &s).unwrap();
+                let g =
+                    gridtrace::gpu::GpuRenderer::new(ctx.clone(), &s, &gridtrace::gpu::GpuVariants::default()).unwrap();
                 (s, g)
             })
             .collect();

@@ -173,7 +173,9 @@ fn no_shadow_acne_at_grazing_light() {
         )];
         if std::env::var_os("GRIDTRACE_SKIP_GPU").is_none() {
             let ctx = gridtrace::gpu::GpuContext::new().expect("GPU adapter");
-            let mut gpu = gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &p).unwrap();
+            let mut gpu =
+                gridtrace::gpu::GpuRenderer::new(std::sync::Arc::new(ctx), &p, &gridtrace::gpu::GpuVariants::default())
+                    .unwrap();
             let opts = RenderOptions::new(w, h, Mode::Shadow);
             images.push(("gpu", gpu.render(&p.camera, &p.lights, &opts).unwrap().0));
         }

@@ -23,7 +23,10 @@ fn renderer(scene: &PreparedScene) -> Option<GpuRenderer> {
     let ctx =
         GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
     eprintln!("adapter: {}", ctx.describe());
-    Some(GpuRenderer::new(std::sync::Arc::new(ctx), scene).expect("upload scene"))
+    Some(
+        GpuRenderer::new(std::sync::Arc::new(ctx), scene, &gridtrace::gpu::GpuVariants::default())
+            .expect("upload scene"),
+    )
 }
 
 /// Same hit or miss; t within a relative 1e-4 (the GPU compiler may fuse multiply-adds);
@@ -813,7 +816,7 @@ fn bands_equal_rows_of_the_frame() {
 /// is given, as on a machine with a GPU.)
 #[test]
 fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
-    use gridtrace::Backend;
+    use gridtrace::{Backend, Placement};
     let _g = GPU_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     if std::env::var_os("GRIDTRACE_SKIP_GPU").is_some() {
         return;
@@ -826,7 +829,9 @@ fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
         .unwrap();
     for backend in [Backend::Auto, Backend::Gpu] {
         let mut notes = Vec::new();
-        let up = backend.upload(ctx.clone(), &small, &mut notes).unwrap();
+        let up = Placement::on_device(backend, ctx.clone())
+            .upload(&small, &mut notes)
+            .unwrap();
         assert!(up.is_some() && notes.is_empty(), "{backend:?}: {notes:?}");
     }
     let cells = 300 * 300 * 160 * 12;
@@ -838,14 +843,16 @@ fn backend_sends_a_scene_the_device_cannot_hold_to_the_cpu() {
         .prepare_for(AccelKind::Grid, &Resolution::Fixed([300, 300, 160]).into())
         .unwrap();
     let mut notes = Vec::new();
-    let up = Backend::Auto.upload(ctx.clone(), &big, &mut notes).unwrap();
+    let up = Placement::on_device(Backend::Auto, ctx.clone())
+        .upload(&big, &mut notes)
+        .unwrap();
     assert!(up.is_none(), "auto kept a scene over the limit on the device");
     assert!(
         notes.len() == 1 && notes[0].contains("'cells'") && notes[0].contains("using the CPU"),
         "{notes:?}"
     );
-    let e = Backend::Gpu
-        .upload(ctx, &big, &mut Vec::new())
+    let e = Placement::on_device(Backend::Gpu, ctx)
+        .upload(&big, &mut Vec::new())
         .err()
         .expect("gpu refuses it")
         .to_string();

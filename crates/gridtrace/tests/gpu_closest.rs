@@ -251,7 +251,7 @@ fn check_mesh(name: &str, mesh: &Mesh, ctx: &Arc<GpuContext>, n: usize, seed: u6
             if !applies {
                 continue;
             }
-            let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, var).unwrap();
+            let mut gpu = GpuRenderer::new(ctx.clone(), &scene, var).unwrap();
             compare(&format!("{name}, {} ({var})", kind.name()), &scene, &mut gpu, &pts);
         }
     }
@@ -315,7 +315,7 @@ fn coincident_copies_keep_the_smaller_index() {
             variants.push("bvh=wide8".parse().unwrap());
         }
         for var in variants {
-            let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
+            let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &var).unwrap();
             let what = format!("two knots, {} ({var})", kind.name());
             compare(&what, &scene, &mut gpu, &pts);
             let got = gpu.closest_points(&scene.accel.tris, &pts).unwrap();
@@ -345,8 +345,8 @@ fn chunked_and_empty_batches() {
         let pts = points(&scene.accel.tris, None, 2500, 8);
         assert!(pts.len() > 2000);
         let tris = &scene.accel.tris;
-        let mut whole = GpuRenderer::new(ctx.clone(), &scene).unwrap();
-        let mut chunked = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let mut whole = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
+        let mut chunked = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
         chunked.set_max_tile_pixels(1000);
         let (a, b) = (
             whole.closest_points_counted(tris, &pts).unwrap(),

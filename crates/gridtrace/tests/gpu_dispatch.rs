@@ -33,8 +33,8 @@ fn two_d_dispatches_equal_one_d() {
     let rays = ray_set(&grid.accel, 5000, 3);
     for accel in gridtrace::testing::gpu_kinds(&one_d) {
         let prepared = scene.prepare_for(accel, &AccelParams::NONE).unwrap();
-        let mut a = GpuRenderer::new(one_d.clone(), &prepared).unwrap();
-        let mut b = GpuRenderer::new(two_d.clone(), &prepared).unwrap();
+        let mut a = GpuRenderer::new(one_d.clone(), &prepared, &gridtrace::gpu::GpuVariants::default()).unwrap();
+        let mut b = GpuRenderer::new(two_d.clone(), &prepared, &gridtrace::gpu::GpuVariants::default()).unwrap();
         for mode in [Mode::Cast, Mode::Shadow, Mode::Trace, Mode::Heat] {
             let opts = RenderOptions::new(64, 48, mode);
             let (ia, sa) = a.render(&prepared.camera, &prepared.lights, &opts).unwrap();

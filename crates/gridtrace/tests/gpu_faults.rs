@@ -13,7 +13,7 @@ use gridtrace::accel::Resolution;
 use gridtrace::gpu::{Fault, GpuContext};
 use gridtrace::scene::builtin;
 use gridtrace::testing::skip_gpu;
-use gridtrace::{Backend, Error, Mode, RenderOptions, Tracer};
+use gridtrace::{Backend, Error, Mode, Placement, RenderOptions, Tracer};
 
 fn ctx() -> Arc<GpuContext> {
     Arc::new(GpuContext::new().expect("a GPU adapter (lavapipe in CI)"))
@@ -31,7 +31,12 @@ fn auto_hands_a_lost_device_to_the_cpu() {
         let ctx = ctx();
         let mut notes = Vec::new();
         // `open` with a device given: the software adapter is used as a GPU would be.
-        let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Auto, &mut notes).unwrap();
+        let mut tracer = Tracer::open(
+            scene.clone(),
+            &Placement::on_device(Backend::Auto, ctx.clone()),
+            &mut notes,
+        )
+        .unwrap();
         assert!(tracer.gpu().is_some());
         let (camera, lights) = (scene.camera, scene.lights.clone());
         assert!(tracer.render(&camera, &lights, &opts).unwrap().gpu.is_some());
@@ -59,7 +64,12 @@ fn gpu_backend_reports_the_fault() {
     let opts = RenderOptions::new(48, 32, Mode::Cast);
     let ctx = ctx();
     let mut notes = Vec::new();
-    let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Gpu, &mut notes).unwrap();
+    let mut tracer = Tracer::open(
+        scene.clone(),
+        &Placement::on_device(Backend::Gpu, ctx.clone()),
+        &mut notes,
+    )
+    .unwrap();
     ctx.inject_fault(Fault::DeviceLost);
     for _ in 0..2 {
         // A lost device stays lost: every later frame says so too.
@@ -69,7 +79,12 @@ fn gpu_backend_reports_the_fault() {
         }
     }
     let ctx = self::ctx();
-    let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Gpu, &mut notes).unwrap();
+    let mut tracer = Tracer::open(
+        scene.clone(),
+        &Placement::on_device(Backend::Gpu, ctx.clone()),
+        &mut notes,
+    )
+    .unwrap();
     ctx.inject_fault(Fault::OutOfMemory);
     match tracer.render(&scene.camera, &scene.lights, &opts) {
         Err(Error::Gpu(m)) => assert!(m.contains("Out of Memory"), "{m}"),
@@ -89,7 +104,12 @@ fn auto_update_after_a_lost_device() {
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let ctx = ctx();
     let mut notes = Vec::new();
-    let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Auto, &mut notes).unwrap();
+    let mut tracer = Tracer::open(
+        scene.clone(),
+        &Placement::on_device(Backend::Auto, ctx.clone()),
+        &mut notes,
+    )
+    .unwrap();
     ctx.inject_fault(Fault::DeviceLost);
     // The vertices, from the triangles that use them, moved along x.
     let mut moved = vec![glam::Vec3::ZERO; scene.normals.len()];

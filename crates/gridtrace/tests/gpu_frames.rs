@@ -14,7 +14,7 @@ use gridtrace::accel::AccelKind;
 use gridtrace::gpu::{DeviceImage, Fault, GpuContext};
 use gridtrace::scene::{Camera, PointLight, PreparedScene, builtin};
 use gridtrace::testing::skip_gpu;
-use gridtrace::{Backend, FramesOptions, Image, Mode, PixelFormat, RenderOptions, Rendered, Tracer};
+use gridtrace::{Backend, FramesOptions, Image, Mode, PixelFormat, Placement, RenderOptions, Rendered, Tracer};
 
 fn ctx() -> Arc<GpuContext> {
     Arc::new(GpuContext::new().expect("a GPU adapter (lavapipe in CI)"))
@@ -79,7 +79,12 @@ fn frames_in_flight_equal_frames_one_by_one() {
         .unwrap();
     let ctx = ctx();
     let mut notes = Vec::new();
-    let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Gpu, &mut notes).unwrap();
+    let mut tracer = Tracer::open(
+        scene.clone(),
+        &Placement::on_device(Backend::Gpu, ctx.clone()),
+        &mut notes,
+    )
+    .unwrap();
     let views = views(&scene, 5);
     let (w, h) = (48u32, 40u32);
     for (mode, pixels) in [
@@ -157,7 +162,12 @@ fn a_fault_hands_the_frames_in_flight_to_the_cpu() {
         .unwrap();
     let ctx = ctx();
     let mut notes = Vec::new();
-    let mut tracer = Tracer::open(scene.clone(), Some(&ctx), Backend::Auto, &mut notes).unwrap();
+    let mut tracer = Tracer::open(
+        scene.clone(),
+        &Placement::on_device(Backend::Auto, ctx.clone()),
+        &mut notes,
+    )
+    .unwrap();
     assert!(tracer.gpu().is_some());
     let views = views(&scene, 6);
     let opts = RenderOptions::new(32, 24, Mode::Shadow);

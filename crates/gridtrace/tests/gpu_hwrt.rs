@@ -15,7 +15,7 @@ use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::query::{QueryOptions, TraceMesh};
 use gridtrace::scene::builtin;
 use gridtrace::testing::{gpu_runs, ray_set, skip_gpu};
-use gridtrace::{Backend, Tracer};
+use gridtrace::{Backend, Placement, Tracer};
 
 fn hwrt_scene() -> gridtrace::PreparedScene {
     builtin::knot_box()
@@ -27,7 +27,7 @@ fn hwrt_scene() -> gridtrace::PreparedScene {
 /// queries that are not ray queries (closest points) answer by its BVH.
 #[test]
 fn hwrt_on_the_cpu_is_an_error() {
-    let e = Tracer::open(hwrt_scene(), None, Backend::Cpu, &mut Vec::new())
+    let e = Tracer::open(hwrt_scene(), &Placement::cpu(), &mut Vec::new())
         .err()
         .expect("hwrt refused on the CPU")
         .to_string();
@@ -115,7 +115,7 @@ fn an_adapter_without_ray_queries_refuses_hwrt() {
     let name = ctx.info.name.clone();
     let ctx = Arc::new(ctx);
     assert!(ctx.describe().contains("no ray queries"));
-    let e = GpuRenderer::new(ctx.clone(), &hwrt_scene())
+    let e = GpuRenderer::new(ctx.clone(), &hwrt_scene(), &gridtrace::gpu::GpuVariants::default())
         .err()
         .expect("refused")
         .to_string();
@@ -124,10 +124,14 @@ fn an_adapter_without_ray_queries_refuses_hwrt() {
         "{e}"
     );
     for backend in [Backend::Gpu, Backend::Auto] {
-        let e = Tracer::open(hwrt_scene(), Some(&ctx), backend, &mut Vec::new())
-            .err()
-            .unwrap_or_else(|| panic!("{backend:?}: hwrt without ray queries must be refused"))
-            .to_string();
+        let e = Tracer::open(
+            hwrt_scene(),
+            &Placement::on_device(backend, ctx.clone()),
+            &mut Vec::new(),
+        )
+        .err()
+        .unwrap_or_else(|| panic!("{backend:?}: hwrt without ray queries must be refused"))
+        .to_string();
         assert!(e.contains(&name) && e.contains("ray queries"), "{backend:?}: {e}");
     }
 }
@@ -146,7 +150,7 @@ fn hits_name_the_cpus_triangle_and_barycentrics() {
         return;
     }
     let scene = hwrt_scene();
-    let mut gpu = GpuRenderer::new(ctx, &scene).unwrap();
+    let mut gpu = GpuRenderer::new(ctx, &scene, &gridtrace::gpu::GpuVariants::default()).unwrap();
     // Rays are drawn from a grid's cells over the same triangles.
     let grid = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let rays = ray_set(&grid.accel, 20_000, 11);

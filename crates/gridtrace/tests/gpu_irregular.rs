@@ -411,7 +411,7 @@ fn other_build_parameters() {
             .unwrap(),
             ..mesh.prepared().clone()
         };
-        let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &gridtrace::gpu::GpuVariants::default()).unwrap();
         let rays = rays_for(&scene.accel, 30_000, 7 + i as u64);
         check(name, &scene.accel, &mut gpu, &rays);
     }

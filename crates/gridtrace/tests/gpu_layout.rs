@@ -10,10 +10,10 @@ use gridtrace::gpu::constants::WgslConst;
 use gridtrace::gpu::layout::{
     BatchUniform, GpuHit, GpuMaterial, GpuTri, IndirectArgs, PassUniform, RayRec, SceneUniform, TriShade,
 };
+use gridtrace::gpu::shaders;
 use gridtrace::gpu::walks::bvh::binary::GpuBvhNode;
 use gridtrace::gpu::walks::bvh::wide8::GpuBvh8Node;
 use gridtrace::gpu::walks::{wgsl_constants, wgsl_prelude};
-use gridtrace::gpu::shaders;
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
 

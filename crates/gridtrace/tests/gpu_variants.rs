@@ -75,7 +75,7 @@ fn subgroup_appends_need_the_adapters_subgroups() {
         return;
     }
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
-    let e = GpuRenderer::with_variants(ctx.clone(), &scene, &v("appends=subgroup"))
+    let e = GpuRenderer::new(ctx.clone(), &scene, &v("appends=subgroup"))
         .err()
         .expect("refused");
     let e = e.to_string();
@@ -142,10 +142,10 @@ fn variants_render_the_default_images() {
                 // box checks its kernels with every variant.
                 continue;
             }
-            let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+            let mut base = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
             let mut checked = 0;
             for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
-                let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
+                let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &var).unwrap();
                 assert_eq!(gpu.variants(), var);
                 let walk_changed = structure == "bvh"
                     && (var.bvh != GpuVariants::default().bvh || var.stack != GpuVariants::default().stack);
@@ -188,8 +188,8 @@ fn tiles_order_across_tile_boundaries() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
     let ctx = context();
     let scene = builtin::knot_box().prepare(Resolution::default()).unwrap();
-    let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
-    let mut tiles = GpuRenderer::with_variants(ctx.clone(), &scene, &v("order=tiles,appends=workgroup")).unwrap();
+    let mut base = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
+    let mut tiles = GpuRenderer::new(ctx.clone(), &scene, &v("order=tiles,appends=workgroup")).unwrap();
     let opts = RenderOptions::new(1100, 960, Mode::Cast);
     const { assert!(1100 * 960 > gridtrace::gpu::MAX_TILE_PIXELS && !gridtrace::gpu::MAX_TILE_PIXELS.is_multiple_of(1100)) };
     let want = render(&mut base, &scene, &opts);
@@ -211,13 +211,13 @@ fn variants_give_the_default_hits() {
     let rays = ray_set(&grid, 40_000, 0x5EED);
     for (kind, scene) in per_structure(&ctx, &scene) {
         let structure = kind.structure_name();
-        let mut base = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let mut base = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
         let want = base.intersect(&rays, 0.0, f32::INFINITY).unwrap();
         let want_any = base.occluded(&rays, 0.0, f32::INFINITY).unwrap();
         let hits = want.iter().filter(|h| h.is_hit()).count();
         assert!(hits > rays.len() / 10, "{structure}: the rays must hit");
         for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
-            let mut gpu = GpuRenderer::with_variants(ctx.clone(), &scene, &var).unwrap();
+            let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &var).unwrap();
             let got = gpu.intersect(&rays, 0.0, f32::INFINITY).unwrap();
             let got_any = gpu.occluded(&rays, 0.0, f32::INFINITY).unwrap();
             let what = format!("{structure} {}", var.changes());

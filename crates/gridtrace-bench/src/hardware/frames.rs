@@ -112,7 +112,7 @@ pub fn cpu_reference(accel: AccelKind) -> AccelKind {
 
 /// A renderer of `prepared` with the GPU variants `variant`.
 pub fn open_gpu(ctx: &Arc<GpuContext>, prepared: &PreparedScene, variant: &GpuVariants) -> Result<GpuRenderer> {
-    GpuRenderer::with_variants(ctx.clone(), prepared, variant)
+    GpuRenderer::new(ctx.clone(), prepared, variant)
 }
 
 /// The variants that change anything for `accel`'s structure: the default, and each one that

@@ -31,13 +31,7 @@ impl App {
             None => {
                 let t0 = Instant::now();
                 let scene = crate::common::prepare(&self.src, &self.name, self.accel, &self.accel_args)?;
-                let tracer = Tracer::open_variants(
-                    scene,
-                    self.ctx.as_ref(),
-                    self.backend,
-                    &self.gpu_variants,
-                    &mut self.notes,
-                )?;
+                let tracer = Tracer::open(scene, &self.placement, &mut self.notes)?;
                 eprintln!(
                     "{} prepared in {:.0} ms; tracing on {}",
                     structure,
@@ -230,13 +224,7 @@ impl App {
         match result {
             Ok(l) => {
                 let mut notes = Vec::new();
-                let tracer = match Tracer::open_variants(
-                    l.prepared,
-                    self.ctx.as_ref(),
-                    self.backend,
-                    &self.gpu_variants,
-                    &mut notes,
-                ) {
+                let tracer = match Tracer::open(l.prepared, &self.placement, &mut notes) {
                     Ok(t) => t,
                     Err(e) => return self.loaded(path, Err(e)),
                 };

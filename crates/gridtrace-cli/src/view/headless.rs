@@ -13,7 +13,7 @@ use std::time::Instant;
 use glam::{Quat, Vec3};
 use gridtrace::gpu::DeviceImage;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{FramesOptions, Mode, PixelFormat, RenderOptions};
+use gridtrace::{FramesOptions, Mode, PixelFormat, Placement, RenderOptions};
 
 use super::ViewArgs;
 use crate::render::orbit;
@@ -34,12 +34,10 @@ fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Ve
 }
 
 pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
-    let (ctx, mut notes) = a.backend.open_device()?;
-    let accel = a.accel_args.accel_for(
-        gridtrace::backend::traced_on(ctx.as_deref()),
-        gridtrace::Work::Render,
-        &mut notes,
-    );
+    let (placement, mut notes) = Placement::open(a.backend, a.gpu.gpu_variant)?;
+    let accel = a
+        .accel_args
+        .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
     let t0 = Instant::now();
     let scene = crate::common::prepare(&src, name, accel, &a.accel_args)?;
     println!(
@@ -48,7 +46,7 @@ pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let mut tracer = Tracer::open_variants(scene, ctx.as_ref(), a.backend, &a.gpu.gpu_variant, &mut notes)?;
+    let mut tracer = Tracer::open(scene, &placement, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");
     }

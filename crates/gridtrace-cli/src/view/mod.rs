@@ -34,10 +34,9 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use clap::builder::TypedValueParser;
 use glam::Vec3;
-use gridtrace::gpu::GpuContext;
 use gridtrace::scene::animated::Animation;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{AccelKind, Backend, Mode, PixelFormat, RenderOptions, Rendered};
+use gridtrace::{AccelKind, Backend, Mode, PixelFormat, Placement, RenderOptions, Rendered};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
@@ -135,14 +134,17 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     // window system's display, so that the window can be presented from it (present.rs).
     let event_loop = EventLoop::new().map_err(|e| window_error("opening the event loop", e))?;
     let display = event_loop.owned_display_handle();
-    let (ctx, mut notes) = a
+    let (device, mut notes) = a
         .backend
         .open_device_with(|| wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display)))?;
-    let accel = a.accel_args.accel_for(
-        gridtrace::backend::traced_on(ctx.as_deref()),
-        gridtrace::Work::Render,
-        &mut notes,
-    );
+    let placement = Placement {
+        backend: a.backend,
+        device,
+        variants: a.gpu.gpu_variant,
+    };
+    let accel = a
+        .accel_args
+        .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
     for n in &notes {
         eprintln!("note: {n}");
     }
@@ -151,9 +153,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
         name,
         src,
         accel_args: a.accel_args.clone(),
-        backend: a.backend,
-        gpu_variants: a.gpu.gpu_variant,
-        ctx,
+        placement,
         notes,
         tracers: Vec::new(),
         accel,
@@ -241,11 +241,9 @@ struct App {
     name: String,
     src: Scene,
     accel_args: AccelArgs,
-    backend: Backend,
-    /// `--gpu-variant`: the kernels of every tracer on the GPU.
-    gpu_variants: gridtrace::gpu::GpuVariants,
-    /// The device every structure's tracer shares (`None`: the CPU).
-    ctx: Option<Arc<GpuContext>>,
+    /// Where every structure's tracer traces: the device they share (`None`: the CPU) and
+    /// `--gpu-variant`'s kernels.
+    placement: Placement,
     notes: Vec<String>,
     /// Opened tracers by the structure they trace (`AccelKind::structure_name`), with the
     /// animation time their vertices are at.

@@ -14,7 +14,7 @@ impl ApplicationHandler for App {
             Ok(w) => Arc::new(w),
             Err(e) => return self.fail(el, window_error("opening a window", e)),
         };
-        match present::Presenter::new(el, window.clone(), self.ctx.as_ref()) {
+        match present::Presenter::new(el, window.clone(), self.placement.device.as_ref()) {
             Ok(p) => {
                 self.notes.extend(p.note.clone());
                 self.egui = Some(egui_winit::State::new(

@@ -116,7 +116,8 @@ pub(crate) fn f32_literal(v: f32) -> String {
 
 /// The WGSL declarations of `constants`, one `const NAME: type = value;` a line.
 pub fn prelude_of(constants: &[(&str, WgslConst)]) -> String {
-    let mut s = String::from("// Generated from src/gpu (constants.rs and each walk's): do not declare these names in WGSL.\n");
+    let mut s =
+        String::from("// Generated from src/gpu (constants.rs and each walk's): do not declare these names in WGSL.\n");
     for &(name, value) in constants {
         let value = match name {
             "MAX_GROUPS_X" => WgslConst::U32(max_groups_x()),

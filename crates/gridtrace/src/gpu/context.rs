@@ -417,4 +417,3 @@ pub fn check_scene_fits(arrays: &[(&'static str, u64)], limits: &wgpu::Limits, a
     }
     Ok(())
 }
-

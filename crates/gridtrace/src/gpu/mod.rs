@@ -51,15 +51,15 @@ pub mod variants;
 pub mod walks;
 mod wavefront;
 
+pub use context::check_scene_fits;
 pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;
-pub use walks::grid::build::{GpuBuildStats, GpuGrid};
 pub use points::GpuClosestPoints;
 pub use queries::{Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, TriHit, WireSource, gpu_hit, unpack_bits};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
-pub use context::check_scene_fits;
 pub use timing::{GpuQueryStats, GpuTimings, HostPhases};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.
 pub use walks::bvh::binary as bvh;
+pub use walks::grid::build::{GpuBuildStats, GpuGrid};
 pub use wavefront::{FrameInFlight, GpuRenderStats, PrepareParts};

@@ -9,13 +9,13 @@ use std::time::Instant;
 use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
 use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
 use super::context::{GpuContext, max_binding_bytes};
-use super::walks::grid::build::GpuBuildStats;
-use super::walks::{self, DeviceBuilder};
 use super::kernels::{Kernels, PassRecorder};
 use super::layout::{GpuHit, GpuTri, IndirectArgs, PassUniform, RayRec};
 use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{GpuQueryStats, StageTimer, Timestamps};
 use super::variants::GpuVariants;
+use super::walks::grid::build::GpuBuildStats;
+use super::walks::{self, DeviceBuilder};
 use crate::accel::AccelKind;
 use crate::render::{Ablation, Mode};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
@@ -142,19 +142,11 @@ pub struct GpuUpdateStats {
 }
 
 impl GpuRenderer {
-    /// Uploads the scene (grid, references, triangles, shading data, materials) once; compiles
-    /// the kernels unless an earlier renderer on `ctx` did. Today's kernels: the default
-    /// `GpuVariants`.
-    pub fn new(ctx: Arc<GpuContext>, prepared: &PreparedScene) -> Result<GpuRenderer> {
-        GpuRenderer::with_variants(ctx, prepared, &GpuVariants::default())
-    }
-
-    /// `new` with the kernels and layouts `variants` choose (same images and hits, other speed).
-    pub fn with_variants(
-        ctx: Arc<GpuContext>,
-        prepared: &PreparedScene,
-        variants: &GpuVariants,
-    ) -> Result<GpuRenderer> {
+    /// Uploads the scene (grid, references, triangles, shading data, materials) once, in the
+    /// kernels and layouts `variants` choose (same images and hits, other speed:
+    /// `GpuVariants::default()` is today's); compiles the kernels unless an earlier renderer on
+    /// `ctx` did.
+    pub fn new(ctx: Arc<GpuContext>, prepared: &PreparedScene, variants: &GpuVariants) -> Result<GpuRenderer> {
         let dev = &ctx.device;
         let scene = SceneBuffers::upload(&ctx, prepared, variants)?;
         let uniform = |label: &str, size: u64| {
@@ -547,10 +539,10 @@ mod tests {
         };
         let ctx = Arc::new(ctx);
         let scene = builtin::knot_box().prepare(crate::Resolution::default()).unwrap();
-        let a = GpuRenderer::new(ctx.clone(), &scene).unwrap();
-        let b = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+        let a = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
+        let b = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
         assert!(Arc::ptr_eq(&a.kernels, &b.kernels));
-        let other = GpuRenderer::new(Arc::new(GpuContext::new().unwrap()), &scene).unwrap();
+        let other = GpuRenderer::new(Arc::new(GpuContext::new().unwrap()), &scene, &GpuVariants::default()).unwrap();
         assert!(!Arc::ptr_eq(&a.kernels, &other.kernels));
     }
 }

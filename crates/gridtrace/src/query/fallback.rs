@@ -57,7 +57,7 @@ impl TraceMesh {
     #[doc(hidden)]
     pub fn adopt_device_for_auto(&self, ctx: Arc<GpuContext>) -> Result<()> {
         let d = format!("gpu: {}", ctx.describe());
-        let r = GpuRenderer::with_variants(ctx, &self.scene, &self.gpu_variants)?;
+        let r = GpuRenderer::new(ctx, &self.scene, &self.gpu_variants)?;
         self.gpu
             .set(Ok((Mutex::new(r), d)))
             .map_err(|_| Error::InvalidInput("this mesh has opened its GPU already".into()))?;

@@ -213,7 +213,7 @@ impl TraceMesh {
         let opened = self.gpu.get_or_init(|| {
             let ctx = GpuContext::new().map_err(|e| e.to_string())?;
             let d = format!("gpu: {}", ctx.describe());
-            GpuRenderer::with_variants(Arc::new(ctx), &self.scene, &self.gpu_variants)
+            GpuRenderer::new(Arc::new(ctx), &self.scene, &self.gpu_variants)
                 .map(|r| (Mutex::new(r), d))
                 .map_err(|e| e.to_string())
         });

@@ -5,8 +5,8 @@ pub mod build;
 
 use super::{DeviceBuilt, Lattice, WalkSpec, WalkUpload, bytes};
 use crate::Result;
-use crate::accel::{Grid, GridLattice, Resolution, TriAccel};
 use crate::accel::triangle::SLACK_PAD;
+use crate::accel::{Grid, GridLattice, Resolution, TriAccel};
 use crate::gpu::constants::WgslConst;
 
 /// The walk's and the device build's WGSL constants (in the prelude of every module).

@@ -40,11 +40,11 @@ pub(crate) use pipelines::BuildKernels;
 pub use pipelines::{KERNEL_SOURCES, module_source};
 use pipelines::{STAGES, Stage};
 
+use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
 use crate::gpu::constants::{WORKGROUP, dispatch_groups};
 use crate::gpu::context::{GpuContext, check_scene_fits};
 use crate::gpu::layout::GpuTri;
 use crate::gpu::timing::{GpuTimings, StageTimer, Timestamps};
-use crate::accel::{Cell, Grid, GridLattice, Resolution, TriAccel};
 use crate::{Error, Result};
 
 /// Elements one workgroup of the GPU grid build's scan sums (256 invocations, 4 each); the
