@@ -162,7 +162,9 @@ impl IrregularGrid {
     }
 
     /// The packet walk: closest hits, or (`ANY`) any hit per ray, which ends that ray's walk
-    /// and its tests at once, as `any_in` does.
+    /// and its tests at once, as `any_in` does. A round takes the cell of the first ray still
+    /// walking: its rays test the cell's triangles together (`test_cell_lanes`) and step to
+    /// their next voxels together (`next_voxels`, `move_lanes`).
     #[inline(always)]
     fn walk_lanes<const N: usize, L: Lanes<N>, const ANY: bool, C: Counters>(
         &self,
@@ -180,11 +182,62 @@ impl IrregularGrid {
             t: t_max[i],
             ..Hit::MISS
         });
-        // Unused lanes hold a ray along +x at the origin and never walk.
+        let (mut l, mut cell_of, mut walking) = self.start_lanes::<N, L>(rays, t_min, &t_max);
+        let lattice = VoxelLanes {
+            bounds_min: splat3(self.bounds.min.to_array()),
+            voxel_size: splat3(self.voxel_size.to_array()),
+            inv_voxel_size: splat3(self.inv_voxel_size.to_array()),
+            dims: splat3(self.voxel_dims().as_vec3().to_array()),
+        };
+        while walking != 0 {
+            let id = cell_of[walking.trailing_zeros() as usize];
+            let mut round = 0u32;
+            for i in bits(walking) {
+                if cell_of[i] == id {
+                    round |= 1 << i;
+                }
+            }
+            for i in bits(round) {
+                counters[i].cell();
+            }
+            let cell = self.cell(id);
+            let lo: [L; 3] = splat3([cell.min[0] as f32, cell.min[1] as f32, cell.min[2] as f32]);
+            let hi: [L; 3] = splat3([cell.max[0] as f32, cell.max[1] as f32, cell.max[2] as f32]);
+            let t_faces = face_ts(&l, &lo, &hi, &lattice);
+            let t_exit = min_lanes(min_lanes(t_faces[0], t_faces[1]), t_faces[2]);
+            let mut finished = 0u32;
+            if cell.count > 0 {
+                let refs = &self.refs[cell.start as usize..(cell.start + cell.count) as usize];
+                finished |= test_cell_lanes::<N, L, ANY, C>(tris, refs, round, t_min, &l, t_exit, &mut best, counters);
+            }
+            finished |= t_exit.ge(l.t_leave).bits();
+            let (next, leaves) = next_voxels(&l, &t_faces, t_exit, &lo, &hi, &lattice);
+            finished |= leaves.bits();
+            self.move_lanes(
+                &mut l,
+                next,
+                round & !finished,
+                round & finished,
+                &mut walking,
+                &mut cell_of,
+            );
+        }
+        best.map(|h| if h.tri == u32::MAX { Hit::MISS } else { h })
+    }
+
+    /// The packet's rays as lanes at their first voxels (`cursor`), with each walking ray's
+    /// cell and the rays that walk (bit i for `rays[i]`; a ray that misses the box does not).
+    /// Unused lanes hold a ray along +x at the origin and never walk.
+    #[inline(always)]
+    fn start_lanes<const N: usize, L: Lanes<N>>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &[f32; N],
+    ) -> (Walkers<N, L>, [u32; N], u32) {
         let (mut origin, mut dir, mut inv, mut v) = ([[0.0; N]; 3], [[0.0; N]; 3], [[1.0; N]; 3], [[0.0; N]; 3]);
         dir[0] = [1.0; N];
         let (mut up, mut down, mut t_leave, mut budget) = ([0u32; 3], [0u32; 3], [0.0; N], [0u32; N]);
-        // Each walking ray's current cell, and the rays still walking (bit i for rays[i]).
         let mut cell_of = [u32::MAX; N];
         let mut walking = 0u32;
         for (i, ray) in rays.iter().enumerate() {
@@ -205,7 +258,7 @@ impl IrregularGrid {
                 walking |= 1 << i;
             }
         }
-        let mut l = Walkers::<N, L> {
+        let walkers = Walkers {
             origin: load3(origin),
             dir: load3(dir),
             inv: load3(inv),
@@ -224,119 +277,153 @@ impl IrregularGrid {
             t_leave: L::from_array(t_leave),
             budget,
         };
-        let bounds_min = splat3(self.bounds.min.to_array());
-        let voxel_size = splat3(self.voxel_size.to_array());
-        let inv_voxel_size = splat3(self.inv_voxel_size.to_array());
-        let dims = splat3(self.voxel_dims().as_vec3().to_array());
-        while walking != 0 {
-            let id = cell_of[walking.trailing_zeros() as usize];
-            let mut round = 0u32;
-            for i in bits(walking) {
-                if cell_of[i] == id {
-                    round |= 1 << i;
-                }
-            }
-            for i in bits(round) {
-                counters[i].cell();
-            }
-            let cell = self.cell(id);
-            let lo: [L; 3] = splat3([cell.min[0] as f32, cell.min[1] as f32, cell.min[2] as f32]);
-            let hi: [L; 3] = splat3([cell.max[0] as f32, cell.max[1] as f32, cell.max[2] as f32]);
-            // `face_t`: the parameter of the grown box's face ahead on each axis.
-            let mut t_faces = [L::INFINITY; 3];
-            for a in 0..3 {
-                let k = L::select(l.up[a], hi[a], lo[a]);
-                let t = (bounds_min[a] + k * voxel_size[a] - l.origin[a]) * l.inv[a];
-                t_faces[a] = L::select(l.up[a] | l.down[a], t, L::INFINITY);
-            }
-            let t_exit = min_lanes(min_lanes(t_faces[0], t_faces[1]), t_faces[2]);
-            let mut finished = 0u32;
-            if cell.count > 0 {
-                // A lane's tests reach up to its closest hit so far (`t_max` until one, and for
-                // any hits, whose first hit ends them). Lanes outside the round test up to
-                // `t_min`, which no hit passes (`t > t_min` and `t < t_min` cannot both hold),
-                // so they keep their hits.
-                let mut testing = round;
-                let mut limit = L::select(L::Mask::from_bits(round), t_of(&best), L::splat(t_min));
-                for &tri in &self.refs[cell.start as usize..(cell.start + cell.count) as usize] {
-                    for i in bits(testing) {
-                        counters[i].tri_test();
-                    }
-                    let t = &tris[tri as usize];
-                    let corners = (&splat3(t.v0), &splat3(t.e1), &splat3(t.e2));
-                    let h = intersect_lanes(corners, &l.origin, &l.dir, t_min, limit);
-                    let hits = h.mask() & testing;
-                    if hits != 0 {
-                        let mut limits = limit.to_array();
-                        for k in bits(hits) {
-                            best[k] = h.lane(k).on(tri);
-                            if ANY {
-                                // As `any_in`: the first hit ends this ray's tests and its walk.
-                                testing &= !(1 << k);
-                                limits[k] = t_min;
-                            } else {
-                                // The test passed `t < limit[k]`, this ray's closest hit so far:
-                                // as in `closest_in`, a later triangle replaces an earlier one
-                                // only if nearer.
-                                limits[k] = best[k].t;
-                            }
-                        }
-                        limit = L::from_array(limits);
-                    }
-                    if testing == 0 {
-                        break;
-                    }
-                }
-                // As `intersect`: a hit is final inside the (grown) cell, checked after a
-                // non-empty cell.
-                finished |= if ANY {
-                    round & !testing
-                } else {
-                    bits_hit(&best) & t_of::<N, L>(&best).le(min_lanes(t_exit, l.t_leave)).bits()
-                };
-            }
-            finished |= t_exit.ge(l.t_leave).bits();
-            // `advance`: into the voxel just past the exit face (`walk.rs` says why so).
-            let past1 = t_faces[1].lt(t_faces[0]);
-            let nearer = L::select(past1, t_faces[1], t_faces[0]);
-            let past2 = t_faces[2].lt(nearer);
-            let on_axis = [!(past1 | past2), past1 & !past2, past2];
-            let mut next = l.v;
-            let mut leaves = L::Mask::from_bits(0);
-            for a in 0..3 {
-                let p = l.origin[a] + l.dir[a] * t_exit;
-                // The exit point's voxel clamped into the box: clamping before truncating gives
-                // what truncating (saturating, NaN to 0) then clamping does, NaN to `lo`.
-                let x = (p - bounds_min[a]) * inv_voxel_size[a];
-                let x = L::select(x.is_nan(), lo[a], x);
-                let inside = L::select(x.lt(lo[a]), lo[a], x);
-                let top = hi[a] - L::ONE;
-                let inside = L::select(inside.gt(top), top, inside).trunc_small();
-                let ahead = L::select(l.up[a], inside.max(l.v[a]), inside.min(l.v[a]));
-                let across = L::select(l.up[a], hi[a], lo[a] - L::ONE);
-                next[a] = L::select(on_axis[a], across, L::select(l.up[a] | l.down[a], ahead, l.v[a]));
-                leaves = leaves | (on_axis[a] & (across.lt(L::ZERO) | across.ge(dims[a])));
-            }
-            finished |= leaves.bits();
-            let moving = round & !finished;
-            let move_lanes = L::Mask::from_bits(moving);
-            for (v, next) in l.v.iter_mut().zip(next) {
-                *v = L::select(move_lanes, next, *v);
-            }
-            walking &= !(round & finished);
-            let voxels = [l.v[0].to_array(), l.v[1].to_array(), l.v[2].to_array()];
-            for i in bits(moving) {
-                l.budget[i] -= 1;
-                if l.budget[i] == 0 {
-                    walking &= !(1 << i);
-                } else {
-                    let v = [voxels[0][i] as i32, voxels[1][i] as i32, voxels[2][i] as i32];
-                    cell_of[i] = self.voxel_map[self.slot(v)];
-                }
+        (walkers, cell_of, walking)
+    }
+
+    /// Moves the rays of `moving` into their `next` voxels and out of the walk those of
+    /// `finished`, or that ran out of budget; a ray that moves gets its new cell.
+    #[inline(always)]
+    fn move_lanes<const N: usize, L: Lanes<N>>(
+        &self,
+        l: &mut Walkers<N, L>,
+        next: [L; 3],
+        moving: u32,
+        finished: u32,
+        walking: &mut u32,
+        cell_of: &mut [u32; N],
+    ) {
+        let move_lanes = L::Mask::from_bits(moving);
+        for (v, next) in l.v.iter_mut().zip(next) {
+            *v = L::select(move_lanes, next, *v);
+        }
+        *walking &= !finished;
+        let voxels = [l.v[0].to_array(), l.v[1].to_array(), l.v[2].to_array()];
+        for i in bits(moving) {
+            l.budget[i] -= 1;
+            if l.budget[i] == 0 {
+                *walking &= !(1 << i);
+            } else {
+                let v = [voxels[0][i] as i32, voxels[1][i] as i32, voxels[2][i] as i32];
+                cell_of[i] = self.voxel_map[self.slot(v)];
             }
         }
-        best.map(|h| if h.tri == u32::MAX { Hit::MISS } else { h })
     }
+}
+
+/// The virtual voxels' lattice in lanes (every lane the same).
+struct VoxelLanes<L> {
+    bounds_min: [L; 3],
+    voxel_size: [L; 3],
+    inv_voxel_size: [L; 3],
+    dims: [L; 3],
+}
+
+/// `face_t` lane by lane: the parameter of the grown box `lo..hi` (voxels) face ahead on each
+/// axis; infinity on an axis the ray does not move along.
+#[inline(always)]
+fn face_ts<const N: usize, L: Lanes<N>>(
+    l: &Walkers<N, L>,
+    lo: &[L; 3],
+    hi: &[L; 3],
+    lattice: &VoxelLanes<L>,
+) -> [L; 3] {
+    let mut t_faces = [L::INFINITY; 3];
+    for a in 0..3 {
+        let k = L::select(l.up[a], hi[a], lo[a]);
+        let t = (lattice.bounds_min[a] + k * lattice.voxel_size[a] - l.origin[a]) * l.inv[a];
+        t_faces[a] = L::select(l.up[a] | l.down[a], t, L::INFINITY);
+    }
+    t_faces
+}
+
+/// Tests a cell's triangles (`refs`) against the rays of `round`, keeping each ray's closest
+/// hit in `best` (`ANY`: its first, which ends its tests); returns the rays of the round that
+/// are done (as `intersect`: a hit is final inside the grown cell, checked after a non-empty
+/// cell).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn test_cell_lanes<const N: usize, L: Lanes<N>, const ANY: bool, C: Counters>(
+    tris: &[TriAccel],
+    refs: &[u32],
+    round: u32,
+    t_min: f32,
+    l: &Walkers<N, L>,
+    t_exit: L,
+    best: &mut [Hit; N],
+    counters: &mut [C],
+) -> u32 {
+    // A lane's tests reach up to its closest hit so far (`t_max` until one, and for any hits,
+    // whose first hit ends them). Lanes outside the round test up to `t_min`, which no hit
+    // passes (`t > t_min` and `t < t_min` cannot both hold), so they keep their hits.
+    let mut testing = round;
+    let mut limit = L::select(L::Mask::from_bits(round), t_of(best), L::splat(t_min));
+    for &tri in refs {
+        for i in bits(testing) {
+            counters[i].tri_test();
+        }
+        let t = &tris[tri as usize];
+        let corners = (&splat3(t.v0), &splat3(t.e1), &splat3(t.e2));
+        let h = intersect_lanes(corners, &l.origin, &l.dir, t_min, limit);
+        let hits = h.mask() & testing;
+        if hits != 0 {
+            let mut limits = limit.to_array();
+            for k in bits(hits) {
+                best[k] = h.lane(k).on(tri);
+                if ANY {
+                    // As `any_in`: the first hit ends this ray's tests and its walk.
+                    testing &= !(1 << k);
+                    limits[k] = t_min;
+                } else {
+                    // The test passed `t < limit[k]`, this ray's closest hit so far: as in
+                    // `closest_in`, a later triangle replaces an earlier one only if nearer.
+                    limits[k] = best[k].t;
+                }
+            }
+            limit = L::from_array(limits);
+        }
+        if testing == 0 {
+            break;
+        }
+    }
+    if ANY {
+        round & !testing
+    } else {
+        bits_hit(best) & t_of::<N, L>(best).le(min_lanes(t_exit, l.t_leave)).bits()
+    }
+}
+
+/// `advance` lane by lane: the voxel just past the exit face (`walk.rs` says why so), and the
+/// lanes whose exit leaves the lattice.
+#[inline(always)]
+fn next_voxels<const N: usize, L: Lanes<N>>(
+    l: &Walkers<N, L>,
+    t_faces: &[L; 3],
+    t_exit: L,
+    lo: &[L; 3],
+    hi: &[L; 3],
+    lattice: &VoxelLanes<L>,
+) -> ([L; 3], L::Mask) {
+    let past1 = t_faces[1].lt(t_faces[0]);
+    let nearer = L::select(past1, t_faces[1], t_faces[0]);
+    let past2 = t_faces[2].lt(nearer);
+    let on_axis = [!(past1 | past2), past1 & !past2, past2];
+    let mut next = l.v;
+    let mut leaves = L::Mask::from_bits(0);
+    for a in 0..3 {
+        let p = l.origin[a] + l.dir[a] * t_exit;
+        // The exit point's voxel clamped into the box: clamping before truncating gives what
+        // truncating (saturating, NaN to 0) then clamping does, NaN to `lo`.
+        let x = (p - lattice.bounds_min[a]) * lattice.inv_voxel_size[a];
+        let x = L::select(x.is_nan(), lo[a], x);
+        let inside = L::select(x.lt(lo[a]), lo[a], x);
+        let top = hi[a] - L::ONE;
+        let inside = L::select(inside.gt(top), top, inside).trunc_small();
+        let ahead = L::select(l.up[a], inside.max(l.v[a]), inside.min(l.v[a]));
+        let across = L::select(l.up[a], hi[a], lo[a] - L::ONE);
+        next[a] = L::select(on_axis[a], across, L::select(l.up[a] | l.down[a], ahead, l.v[a]));
+        leaves = leaves | (on_axis[a] & (across.lt(L::ZERO) | across.ge(lattice.dims[a])));
+    }
+    (next, leaves)
 }
 
 /// The hits' `t`, a lane each.
