@@ -120,7 +120,7 @@ impl QueryScene {
 
     /// The structure's nearest point for each point (an error when it is stale).
     fn closest(&self, m: &Merged, points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
-        let Some(accel) = m.accel() else {
+        let Some(mesh) = m.mesh.as_ref() else {
             return Ok(points
                 .iter()
                 .map(|p| {
@@ -132,12 +132,9 @@ impl QueryScene {
                 })
                 .collect());
         };
-        match m.mesh.as_ref() {
-            // Where the backend traces on a GPU (as `cast_rays`), the GPU's search (or the
-            // CPU's, if `auto` found no GPU).
-            Some(mesh) if self.opts.backend.traces_on_gpu() => mesh.closest_points(points),
-            _ => crate::accel::closest::closest_points(accel, points),
-        }
+        // The mesh decides where (as `cast_rays`): the GPU's search where the backend traces on
+        // one, else (or if `auto` found no GPU) the CPU's.
+        mesh.closest_points(points)
     }
 }
 

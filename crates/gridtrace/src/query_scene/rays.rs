@@ -78,9 +78,8 @@ impl QueryScene {
             cpu_rays::cast(&m, mesh, rays, &mut out);
             Ok(out)
         };
-        if !self.opts.backend.traces_on_gpu() {
-            return on_cpu();
-        }
+        // The mesh decides where its queries run (`TraceMesh::on_backend`), by the scene's
+        // backend, as it does for its own.
         mesh.on_gpu_or_cpu(
             |gpu| {
                 // Every entry is written below (a miss's uv and normal are these zeros).
@@ -135,9 +134,8 @@ impl QueryScene {
             cpu_rays::occluded(mesh, rays, t_near, t_far, &mut out);
             Ok(out)
         };
-        if !self.opts.backend.traces_on_gpu() {
-            return on_cpu();
-        }
+        // The mesh decides where its queries run (`TraceMesh::on_backend`), by the scene's
+        // backend, as it does for its own.
         mesh.on_gpu_or_cpu(
             |gpu| {
                 let mut out = vec![false; rays.len()];
