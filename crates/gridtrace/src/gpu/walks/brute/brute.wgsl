@@ -1,12 +1,12 @@
 // No structure: every triangle against every ray (accel/brute/). The oracle on the GPU, and the
-// proof that a structure's GPU side is its own walk file plus one Rust file (gpu/walks/brute.rs).
+// proof that a structure's GPU side is its own walk file plus one Rust file (gpu/walks/brute/mod.rs).
 // It binds nothing of its own.
 //
 // Four triangles per loop iteration, written out: Mesa's llvmpipe (lavapipe) ends a shader
 // invocation's loops after 65,535 iterations in all (a guard against endless loops), and a loop
 // of one triangle per iteration never tested the Stanford Bunny's last 3,915 triangles (the
 // edge-leak test caught it). Four a turn reach 262,140 triangles there; the upload refuses
-// more on a software adapter (`gpu/walks/brute.rs`). Hardware has no such cap.
+// more on a software adapter (`gpu/walks/brute/mod.rs`). Hardware has no such cap.
 
 fn brute_test(i: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, best: ptr<function, GpuHit>) {
     if (i < scene.n_tris) {

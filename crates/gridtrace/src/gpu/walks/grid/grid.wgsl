@@ -1,6 +1,6 @@
 // The uniform grid's walk: Amanatides-Woo 3D-DDA over `cells`, with proximity-cloud jumps when
 // the pass says `pc` (`pass_.accel == ACCEL_PC`); mirrors accel/grid/dda.rs. Group 1 holds the
-// grid's arrays (gpu/walks/grid.rs uploads them in this order).
+// grid's arrays (gpu/walks/grid/mod.rs uploads them in this order).
 
 struct Cell { start: u32, count: u32, dist: u32 }
 

@@ -22,7 +22,7 @@
 // this is the Rust layout: 16 bytes, one load. `irr_cell` unpacks it.
 struct IrrCell { bounds: vec3<u32>, start: u32 }
 
-// Group 1 as gpu/walks/irregular.rs uploads it: one entry per top cell (`begin << IRR_LEVEL_BITS
+// Group 1 as gpu/walks/irregular/mod.rs uploads it: one entry per top cell (`begin << IRR_LEVEL_BITS
 // | level`), the voxel map of every top cell, the cells, and their triangle lists.
 @group(1) @binding(0) var<storage, read> irr_entries: array<u32>;
 @group(1) @binding(1) var<storage, read> irr_voxels: array<u32>;
