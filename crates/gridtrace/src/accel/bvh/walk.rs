@@ -295,15 +295,8 @@ impl Walk {
             #[cfg(target_arch = "x86_64")]
             if AVX {
                 // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                let next = unsafe {
-                    self.r
-                        .descend_avx2(n, self.t_min, self.t_box, &mut self.stack, &mut self.sp)
-                };
-                if let Some(next) = next {
-                    self.current = next;
-                    return false;
-                }
-                return self.pop();
+                let sp = unsafe { self.r.descend_avx2(n, self.t_min, self.t_box, &mut self.stack, self.sp) };
+                return self.pop_from(sp);
             }
             // The entered children, nearest on top: popped first, just below.
             let out = (&mut self.stack[self.sp..self.sp + WIDTH])
@@ -353,15 +346,28 @@ impl Walk {
     /// returns true (the walk is done) when none is left.
     #[inline(always)]
     fn pop(&mut self) -> bool {
-        while self.sp > 0 {
-            self.sp -= 1;
-            // SAFETY: entries below `sp` were written by a push.
-            let p = unsafe { self.stack[self.sp].assume_init() };
+        self.pop_from(self.sp)
+    }
+
+    /// `pop` with the stack's top at `sp` (a node step's new top, in a register): `sp` is
+    /// written back once, not on each entry passed over, and read unchecked (an index the
+    /// compiler cannot bound cost a compare and a branch per entry).
+    #[inline(always)]
+    fn pop_from(&mut self, mut sp: usize) -> bool {
+        debug_assert!(sp <= STACK_LEN);
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: entries below the top were written by a push, within the stack
+            // (`sp <= STACK_LEN`: the walk's pushes index the stack checked, or, two at a time,
+            // within `(WIDTH - 1) * depth + 2 < STACK_LEN`, `descend_avx2`).
+            let p = unsafe { self.stack.get_unchecked(sp).assume_init() };
             if p.t_enter <= self.t_box {
+                self.sp = sp;
                 self.current = p;
                 return false;
             }
         }
+        self.sp = 0;
         true
     }
 }
