@@ -221,8 +221,20 @@ impl BoxRay {
         stack: &mut [MaybeUninit<Pending>],
         sp: usize,
     ) -> usize {
+        use std::arch::x86_64::*;
         // SAFETY: the CPU has AVX2 (the contract).
-        let (t, mask) = unsafe { self.enter_avx2(n, t_min, t_max) };
+        let (t_enter, entered) = unsafe { self.enter_avx2_packed(n, t_min, t_max) };
+        // Per slot the entry distance's bits and `m = max(bits, 0) | 7`, the nearness below (in
+        // AVX, 3 instructions for all eight; per child picked, a conditional move and more).
+        let (mut t, mut m) = ([0u32; WIDTH], [0u32; WIDTH]);
+        // SAFETY: the CPU has AVX2 (the contract); `t` and `m` are eight u32s each.
+        let mask = unsafe {
+            let bits = _mm256_castps_si256(t_enter);
+            let near = _mm256_or_si256(_mm256_max_epi32(bits, _mm256_setzero_si256()), _mm256_set1_epi32(7));
+            _mm256_storeu_si256(t.as_mut_ptr() as *mut __m256i, bits);
+            _mm256_storeu_si256(m.as_mut_ptr() as *mut __m256i, near);
+            _mm256_movemask_ps(entered) as u32
+        };
         let rest = mask & mask.wrapping_sub(1);
         if rest & rest.wrapping_sub(1) != 0 {
             let out = (&mut stack[sp..sp + WIDTH]).try_into().expect("WIDTH entries");
@@ -234,21 +246,23 @@ impl BoxRay {
         let k1 = if rest != 0 { rest.trailing_zeros() as usize & (WIDTH - 1) } else { k0 };
         // Each entry as the eight bytes of a `Pending` (`child`, then `t_enter`), picked as a
         // value (a conditional move), not by its index (a second load after the compare).
-        let entry = |k: usize| u64::from(n.child[k].0) | u64::from(t[k].to_bits()) << 32;
+        let entry = |k: usize| u64::from(n.child[k].0) | u64::from(t[k]) << 32;
         let (e0, e1) = (entry(k0), entry(k1));
         // `order_key(t[k0]) > order_key(t[k1])` (k0 the nearer) without the keys: with
         // `m = max(bits, 0)`, below 2^31, `0x7FFF_FFFF - m` is `m`'s complement in 31 bits, so
         // the key's high bits order as `m | 7` reversed, and `k0 <= k1` loses the ties.
-        let m = |e: u64| ((e >> 32) as i32).max(0) as u32 | 7;
-        let k0_nearer = m(e0) < m(e1);
-        debug_assert_eq!(
-            k0_nearer && k0 != k1,
-            order_key(t[k0], true, k0) > order_key(t[k1], true, k1)
-        );
+        let k0_nearer = m[k0] < m[k1];
+        debug_assert_eq!(k0_nearer && k0 != k1, {
+            let t = |k: usize| f32::from_bits(t[k]);
+            order_key(t(k0), true, k0) > order_key(t(k1), true, k1)
+        });
         let (near, far) = if k0_nearer { (e0, e1) } else { (e1, e0) };
-        assert!(sp + 2 <= stack.len(), "room for two entries");
-        // SAFETY: two entries from `sp` are within `stack` (checked just above); `Pending` is
-        // `repr(C)`, a `u32` then an `f32` (little-endian: the low half, then the high one).
+        debug_assert!(sp + 2 <= stack.len(), "room for two entries");
+        // SAFETY: two entries from `sp` are within `stack`: the entries pending are the
+        // siblings of the nodes above the one visited, at most WIDTH - 1 a level of a tree
+        // less than `STACK` levels deep, and the walks' stacks hold `(WIDTH - 1) * STACK +
+        // WIDTH` (`STACK_LEN`); `Pending` is `repr(C)`, a `u32` then an `f32` (little-endian:
+        // the low half, then the high one).
         unsafe {
             let at = stack.as_mut_ptr().add(sp) as *mut u64;
             at.write_unaligned(far);
@@ -266,8 +280,8 @@ impl BoxRay {
         std::arch::x86_64::_mm256_movemask_ps(entered) as u32
     }
 
-    /// `enter` in AVX instructions, the same bits.
-    #[cfg(target_arch = "x86_64")]
+    /// `enter` in AVX instructions, the same bits (the tests' view of `enter_avx2_packed`).
+    #[cfg(all(test, target_arch = "x86_64"))]
     #[target_feature(enable = "avx2")]
     #[inline]
     pub(super) fn enter_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {

@@ -48,6 +48,20 @@ impl BvhAccel {
             // SAFETY: the CPU has AVX2, checked just above.
             return unsafe { self.interleaved_avx2::<ANY>(rays, t_min, t_max, finish) };
         }
+        self.interleaved_portable::<ANY>(rays, t_min, t_max, finish)
+    }
+
+    /// The batch traversal without AVX2, out of line as `interleaved_avx2` is: inlined, its
+    /// loop made the callers' own code (`traced`: the packets' answers) compile differently
+    /// with each change to the walk, by up to 9 instructions a camera ray.
+    #[inline(never)]
+    fn interleaved_portable<'r, const ANY: bool>(
+        &self,
+        rays: impl Iterator<Item = (usize, &'r Ray)>,
+        t_min: f32,
+        t_max: f32,
+        finish: impl FnMut(usize, &Walk),
+    ) {
         self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
     }
 
