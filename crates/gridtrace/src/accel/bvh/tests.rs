@@ -203,6 +203,46 @@ fn avx_push_equals_portable_and_sorts_far_to_near() {
     assert!(several > 1000, "nodes with several entered children: {several}");
 }
 
+/// The single walk's node step (`descend_avx2`: one or two children picked without the sort)
+/// leaves the stack as pushing every entered child would: the same entries, in the same order,
+/// the same top. Some rounds with a negative `t_min` (entry distances below zero, which
+/// `order_key` orders as zero, by slot).
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn descend_equals_the_full_push() {
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: the node step is not used here");
+        return;
+    }
+    let mut rng = crate::util::Rng::new(0xD35C);
+    let mut seen = [0usize; 4];
+    for round in 0..40_000 {
+        let (node, ray, t_min, t_max) = random_node_and_ray(&mut rng, round);
+        let t_min = if round % 7 == 6 { -1.0 } else { t_min };
+        let r = BoxRay::new(&ray);
+        let blank = MaybeUninit::new(Pending {
+            child: ChildRef(u32::MAX),
+            t_enter: f32::NAN,
+        });
+        let (mut a, mut b) = ([blank; 2 * WIDTH], [blank; 2 * WIDTH]);
+        let base = round % 5;
+        let n = r.push_entered(&node, t_min, t_max, (&mut a[base..base + WIDTH]).try_into().unwrap());
+        // SAFETY: the CPU has AVX2, checked above.
+        let top = unsafe { r.descend_avx2(&node, t_min, t_max, &mut b, base) };
+        assert_eq!(top, base + n, "round {round}: the top");
+        // SAFETY: the entries below the top were written by both.
+        let entries = |p: &[MaybeUninit<Pending>]| {
+            p.iter()
+                .map(|p| unsafe { p.assume_init() })
+                .map(|p| (p.child.0, p.t_enter.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(entries(&a[base..top]), entries(&b[base..top]), "round {round}: entries");
+        seen[n.min(3)] += 1;
+    }
+    assert!(seen.iter().all(|&c| c > 1000), "rounds by children entered (0, 1, 2, more): {seen:?}");
+}
+
 /// The AVX box test gives the portable one's entry distances and mask bit for bit: random
 /// boxes (some flat, some points, some slots empty, some around a common point) against
 /// random rays, some parallel to an axis, with and without limits on t.

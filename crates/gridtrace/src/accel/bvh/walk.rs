@@ -11,7 +11,7 @@ use crate::accel::{Counters, Hit, NoCounters, Ray};
 
 use super::BvhAccel;
 use super::box_test::{BoxRay, Pending, T_SLOP};
-use super::build::{LEAF_BLOCK, STACK};
+use super::build::{LEAF_BLOCK, MAX_LEAF, STACK};
 use super::wide::{ChildRef, WIDTH};
 
 impl BvhAccel {
@@ -48,6 +48,20 @@ impl BvhAccel {
             // SAFETY: the CPU has AVX2, checked just above.
             return unsafe { self.interleaved_avx2::<ANY>(rays, t_min, t_max, finish) };
         }
+        self.interleaved_portable::<ANY>(rays, t_min, t_max, finish)
+    }
+
+    /// The batch traversal without AVX2, out of line as `interleaved_avx2` is: inlined, its
+    /// loop made the callers' own code (`traced`: the packets' answers) compile differently
+    /// with each change to the walk, by up to 9 instructions a camera ray.
+    #[inline(never)]
+    fn interleaved_portable<'r, const ANY: bool>(
+        &self,
+        rays: impl Iterator<Item = (usize, &'r Ray)>,
+        t_min: f32,
+        t_max: f32,
+        finish: impl FnMut(usize, &Walk),
+    ) {
         self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
     }
 
@@ -66,9 +80,13 @@ impl BvhAccel {
     /// The batch schedule (as `interleave.rs`'s, written out for the ray walks): `LANES`
     /// walks, one step each in turn, a finished one refilled with the next ray at once. While
     /// rays are left every lane is live, so the steady loop tests no lane state: no `Option`
-    /// per lane, and the walk's address a pointer stepped along the array (the shared
-    /// `interleave` spent about 5 instructions a step on that, 7 steps a random ray). The
-    /// last rays, fewer than `LANES`, finish in `drain`.
+    /// per lane (the shared `interleave` spent about 5 instructions a step on that, 7 steps a
+    /// random ray). The last rays, fewer than `LANES`, finish in `drain`. Four or sixteen
+    /// lanes ran as fast as eight (random rays on the Stanford Bunny, whose tree stays in the
+    /// last-level cache: the walks wait on mispredicted branches more than on memory).
+    /// Finishing and refilling a lane in a function out of line (a call a ray; the rays'
+    /// iterator and the output then hold no registers in the loop) saved 46 instructions a
+    /// random ray but cost camera rays 8 (`traced`'s packet answers no longer unrolled).
     #[inline(always)]
     pub(super) fn interleaved_body<'r, const ANY: bool, const AVX: bool>(
         &self,
@@ -90,21 +108,23 @@ impl BvhAccel {
             live |= 1 << k;
         }
         if live == (1 << LANES) - 1 {
-            'steady: loop {
-                for k in 0..LANES {
-                    let w = &mut walks[k];
-                    if w.step::<ANY, AVX, _>(self, &mut NoCounters) {
-                        finish(item[k], w);
-                        let Some((i, r)) = rays.next() else {
-                            // This lane is done; the others go on in `drain`.
-                            live &= !(1 << k);
-                            break 'steady;
-                        };
-                        w.reset(r, t_min, t_max);
-                        item[k] = i;
-                    }
-                    self.prefetch(&w.current);
+            // The lanes in turn, the index wrapped by `(k + 1) % LANES` (5 instructions a step)
+            // rather than a nested `for k in 0..LANES` restarted (8).
+            let mut k = 0;
+            loop {
+                let w = &mut walks[k];
+                if w.step::<ANY, AVX, _>(self, &mut NoCounters) {
+                    finish(item[k], w);
+                    let Some((i, r)) = rays.next() else {
+                        // This lane is done; the others go on in `drain`.
+                        live &= !(1 << k);
+                        break;
+                    };
+                    w.reset(r, t_min, t_max);
+                    item[k] = i;
                 }
+                self.prefetch(&w.current);
+                k = (k + 1) % LANES;
             }
         }
         self.drain::<ANY, AVX>(&mut walks, &item, live, finish);
@@ -178,9 +198,10 @@ pub(super) const STACK_LEN: usize = (WIDTH - 1) * STACK + WIDTH;
 /// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
 /// interleave rays).
 pub(super) struct Walk {
-    /// The origin and direction in every lane, for the four-triangle test.
-    pub(super) origin: [Vec4; 3],
-    pub(super) dir: [Vec4; 3],
+    /// The direction, for the four-triangle test (the origin is `r.origin`). Each component
+    /// is broadcast to the test's four lanes where it is used, one load either way: stored as
+    /// lanes, it cost 12 instructions a ray to set up (6 broadcasts, 6 stores).
+    pub(super) dir: [f32; 3],
     pub(super) r: BoxRay,
     pub(super) t_min: f32,
     /// Closest hit so far (or `t_max`): triangles are tested up to it.
@@ -203,8 +224,7 @@ impl Walk {
     /// Starts `ray` over, keeping the (uninitialised) stack where it is.
     #[inline(always)]
     pub(super) fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
-        self.origin = ray.origin.to_array().map(Vec4::splat);
-        self.dir = ray.dir.to_array().map(Vec4::splat);
+        self.dir = ray.dir.to_array();
         self.r = BoxRay::new(ray);
         self.t_min = t_min;
         self.t_far = t_max;
@@ -229,8 +249,7 @@ impl Walk {
         // reference is made, except `stack`, an array of `MaybeUninit`, for which any contents
         // are valid.
         unsafe {
-            (&raw mut (*w).origin).write(ray.origin.to_array().map(Vec4::splat));
-            (&raw mut (*w).dir).write(ray.dir.to_array().map(Vec4::splat));
+            (&raw mut (*w).dir).write(ray.dir.to_array());
             (&raw mut (*w).r).write(BoxRay::new(ray));
             (&raw mut (*w).t_min).write(t_min);
             (&raw mut (*w).t_far).write(t_max);
@@ -247,8 +266,7 @@ impl Walk {
 
     pub(super) fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
         Walk {
-            origin: ray.origin.to_array().map(Vec4::splat),
-            dir: ray.dir.to_array().map(Vec4::splat),
+            dir: ray.dir.to_array(),
             r: BoxRay::new(ray),
             t_min,
             t_far: t_max,
@@ -279,36 +297,14 @@ impl Walk {
             for _ in 0..count {
                 counters.tri_test();
             }
+            // A leaf is one block or two (`MAX_LEAF`): the second tested behind a branch that
+            // is rarely taken (1.01 blocks a leaf visit, random rays on the Stanford Bunny) rather
+            // than as a loop over the blocks, whose count, bounds and exit cost about 10
+            // instructions a leaf.
+            const _: () = assert!(MAX_LEAF <= 2 * LEAF_BLOCK);
             let start = cur.child.index() as usize;
-            for b in start..start + count.div_ceil(LEAF_BLOCK as u32) as usize {
-                let block = &accel.blocks[b];
-                let tri = (&block.v0, &block.e1, &block.e2);
-                let far = Vec4::splat(self.t_far);
-                let h = intersect_lanes_cull::<4, Vec4, true>(tri, &self.origin, &self.dir, self.t_min, far);
-                let mask = h.mask();
-                // Most blocks are missed by every lane; the test has already branched on
-                // that (`intersect_lanes_cull`), so the branch here is taken the same way.
-                if mask == 0 {
-                    continue;
-                }
-                // The closest lane, the first of equals: the same hit as testing the triangles
-                // one by one, each kept only if strictly closer (every hit lane has
-                // `t < t_far`).
-                let t = Vec4::select(h.hit, h.t, Vec4::INFINITY);
-                let t_min_lane = t.min_element();
-                let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & mask).trailing_zeros() as usize & 3;
-                self.t_far = t_min_lane;
-                self.best = Hit {
-                    t: t_min_lane,
-                    tri: (LEAF_BLOCK * b + k) as u32,
-                    u: h.u[k],
-                    v: h.v[k],
-                };
-                if ANY {
-                    return true;
-                }
-                // The hit's input index is looked up when the ray is done.
-                prefetch(accel.lane_prims.as_ptr().wrapping_add(self.best.tri as usize) as *const i8);
+            if self.block::<ANY>(accel, start) || (count > LEAF_BLOCK as u32 && self.block::<ANY>(accel, start + 1)) {
+                return true;
             }
             self.t_box = self.t_far * T_SLOP;
         } else {
@@ -317,15 +313,8 @@ impl Walk {
             #[cfg(target_arch = "x86_64")]
             if AVX {
                 // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                let next = unsafe {
-                    self.r
-                        .descend_avx2(n, self.t_min, self.t_box, &mut self.stack, &mut self.sp)
-                };
-                if let Some(next) = next {
-                    self.current = next;
-                    return false;
-                }
-                return self.pop();
+                let sp = unsafe { self.r.descend_avx2(n, self.t_min, self.t_box, &mut self.stack, self.sp) };
+                return self.pop_from(sp);
             }
             // The entered children, nearest on top: popped first, just below.
             let out = (&mut self.stack[self.sp..self.sp + WIDTH])
@@ -336,19 +325,67 @@ impl Walk {
         self.pop()
     }
 
+    /// Tests the leaf block `b` for a hit closer than `t_far` and keeps it; returns true where
+    /// `ANY` and a hit was found (the walk is done).
+    #[inline(always)]
+    fn block<const ANY: bool>(&mut self, accel: &BvhAccel, b: usize) -> bool {
+        let block = &accel.blocks[b];
+        let tri = (&block.v0, &block.e1, &block.e2);
+        let far = Vec4::splat(self.t_far);
+        let (origin, dir) = (self.r.origin.map(Vec4::splat), self.dir.map(Vec4::splat));
+        let h = intersect_lanes_cull::<4, Vec4, true>(tri, &origin, &dir, self.t_min, far);
+        let mask = h.mask();
+        // Most blocks are missed by every lane; the test has already branched on that
+        // (`intersect_lanes_cull`), so the branch here is taken the same way.
+        if mask == 0 {
+            return false;
+        }
+        // The closest lane, the first of equals: the same hit as testing the triangles one by
+        // one, each kept only if strictly closer (every hit lane has `t < t_far`).
+        let t = Vec4::select(h.hit, h.t, Vec4::INFINITY);
+        let t_min_lane = t.min_element();
+        let k = (t.cmpeq(Vec4::splat(t_min_lane)).bitmask() & mask).trailing_zeros() as usize & 3;
+        self.t_far = t_min_lane;
+        self.best = Hit {
+            t: t_min_lane,
+            tri: (LEAF_BLOCK * b + k) as u32,
+            u: h.u[k],
+            v: h.v[k],
+        };
+        if ANY {
+            return true;
+        }
+        // The hit's input index is looked up when the ray is done.
+        prefetch(accel.lane_prims.as_ptr().wrapping_add(self.best.tri as usize) as *const i8);
+        false
+    }
+
     /// Pops the nearest pending entry that can still hold a closer hit into `current`;
     /// returns true (the walk is done) when none is left.
     #[inline(always)]
     fn pop(&mut self) -> bool {
-        while self.sp > 0 {
-            self.sp -= 1;
-            // SAFETY: entries below `sp` were written by a push.
-            let p = unsafe { self.stack[self.sp].assume_init() };
+        self.pop_from(self.sp)
+    }
+
+    /// `pop` with the stack's top at `sp` (a node step's new top, in a register): `sp` is
+    /// written back once, not on each entry passed over, and read unchecked (an index the
+    /// compiler cannot bound cost a compare and a branch per entry).
+    #[inline(always)]
+    fn pop_from(&mut self, mut sp: usize) -> bool {
+        debug_assert!(sp <= STACK_LEN);
+        while sp > 0 {
+            sp -= 1;
+            // SAFETY: entries below the top were written by a push, within the stack
+            // (`sp <= STACK_LEN`: the walk's pushes index the stack checked, or, two at a time,
+            // within `(WIDTH - 1) * depth + 2 < STACK_LEN`, `descend_avx2`).
+            let p = unsafe { self.stack.get_unchecked(sp).assume_init() };
             if p.t_enter <= self.t_box {
+                self.sp = sp;
                 self.current = p;
                 return false;
             }
         }
+        self.sp = 0;
         true
     }
 }
