@@ -71,7 +71,9 @@ fn main() -> gridtrace::Result<()> {
             TriAccel::new(a, b, c)
         })
         .collect();
-    let cpu_passes: Option<usize> = std::env::var("BVH_QUALITY_CPU_TIME").ok().map(|n| n.parse().expect("a number of passes"));
+    let cpu_passes: Option<usize> = std::env::var("BVH_QUALITY_CPU_TIME")
+        .ok()
+        .map(|n| n.parse().expect("a number of passes"));
     let batch_only = std::env::var_os("BVH_QUALITY_BATCH_ONLY").is_some() || cpu_passes.is_some();
     let mut build_ms = f64::INFINITY;
     let mut accel = None;

@@ -244,7 +244,11 @@ impl BoxRay {
         }
         // No child: lane 0, written but not counted. One: both entries are it.
         let k0 = mask.trailing_zeros() as usize & (WIDTH - 1);
-        let k1 = if rest != 0 { rest.trailing_zeros() as usize & (WIDTH - 1) } else { k0 };
+        let k1 = if rest != 0 {
+            rest.trailing_zeros() as usize & (WIDTH - 1)
+        } else {
+            k0
+        };
         // Each entry as the eight bytes of a `Pending` (`child`, then `t_enter`), picked as a
         // value (a conditional move), not by its index (a second load after the compare).
         let entry = |k: usize| u64::from(n.child[k].0) | u64::from(t[k]) << 32;

@@ -293,22 +293,26 @@ impl BvhAccel {
     }
 
     /// Walks up to `PACKET` rays (`rays.len()`, at least one) as one packet: closest hits with
-    /// `t_min < t < t_max[i]`, or with `ANY` whether there is one.
+    /// `t_min < t < t_max[i]`, or with `ANY` whether there is one. A node's entered children go
+    /// on the packet's stack (`push_children`), a leaf's triangles are tested against its rays
+    /// (`test_leaf`), and the walk goes on with the nearest pending child some ray can still
+    /// use (`pop_live`).
     ///
     /// # Safety
     /// The CPU must have AVX2 (`simd::has_avx2`).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[inline]
     pub(super) unsafe fn walk_coherent<const ANY: bool>(
         &self,
         rays: &[Ray],
         t_min: f32,
         t_max: [f32; PACKET],
     ) -> PacketAnswers {
-        use std::arch::x86_64::*;
         let n = rays.len();
         debug_assert!((1..=PACKET).contains(&n));
         let all = (1u32 << n) - 1;
+        use std::arch::x86_64::*;
         // Lanes past `n` repeat ray 0; they are in no mask, and their triangle tests run up
         // to `t_min`, which no hit passes.
         let ray = |i: usize| &rays[if i < n { i } else { 0 }];
@@ -348,19 +352,26 @@ impl BvhAccel {
                 )
             })
         });
-        let origin: [F8; 3] = load3(origin);
-        let dir: [F8; 3] = load3(dir);
-        let mut best: [Hit; PACKET] = std::array::from_fn(|i| Hit {
-            t: t_max[i],
-            ..Hit::MISS
-        });
-        // Per ray: boxes are searched up to `t_box` (its single walk's `t_far * T_SLOP`);
-        // triangles are tested up to `limit`: `t_max`, then just past the closest hit so far,
-        // so that a triangle at the same `t` is seen (a tie) rather than passed over.
-        let mut t_box: [f32; PACKET] = std::array::from_fn(|i| t_max[i] * T_SLOP);
-        let mut limit = t_max;
-        let mut tie_t = [f32::NAN; PACKET];
-        let mut live = all;
+        // Borrowed, not moved: eight `BoxRay`s moved into a struct were a 512-byte copy a packet.
+        let p = PacketRays {
+            origin: load3(origin),
+            dir: load3(dir),
+            interval: interval.as_ref(),
+            boxes: boxes.as_ref(),
+        };
+        let mut s = PacketSearch {
+            best: std::array::from_fn(|i| Hit {
+                t: t_max[i],
+                ..Hit::MISS
+            }),
+            // Per ray: boxes are searched up to `t_box` (its single walk's `t_far * T_SLOP`);
+            // triangles are tested up to `limit`: `t_max`, then just past the closest hit so
+            // far, so that a triangle at the same `t` is seen (a tie) rather than passed over.
+            t_box: std::array::from_fn(|i| t_max[i] * T_SLOP),
+            limit: t_max,
+            tie_t: [f32::NAN; PACKET],
+            live: all,
+        };
         let mut stack: [MaybeUninit<Entry>; STACK_LEN] = [const { MaybeUninit::uninit() }; STACK_LEN];
         let mut sp = 0;
         let mut cur = Entry {
@@ -368,156 +379,246 @@ impl BvhAccel {
             rays: all,
             t_enter: t_min,
         };
-        'walk: loop {
+        loop {
             let count = cur.child.count();
             if count == 0 {
                 let node = &self.nodes[cur.child.index() as usize];
-                let mut entered = 0u64;
-                let mut union = 0u32;
-                let mut t_near = _mm256_set1_ps(f32::INFINITY);
-                if let Some(iv) = &interval {
-                    // One test for the packet: every ray its own test would let in is let in.
-                    let mut reach = f32::NEG_INFINITY;
-                    for r in bits(cur.rays) {
-                        reach = reach.max(t_box[r]);
-                    }
-                    let (t_enter, hit) = iv.enter(node, t_min, reach);
-                    t_near = _mm256_blendv_ps(t_near, t_enter, hit);
-                    union = _mm256_movemask_ps(hit) as u32;
-                } else if let Some(boxes) = &boxes {
-                    for r in bits(cur.rays) {
-                        // (A safe call: this function is compiled for AVX2 too.)
-                        let (t_enter, hit) = boxes[r].enter_avx2_packed(node, t_min, t_box[r]);
-                        t_near = _mm256_min_ps(t_near, _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t_enter, hit));
-                        let m = _mm256_movemask_ps(hit) as u32;
-                        union |= m;
-                        entered |= (m as u64) << (8 * r);
-                    }
-                }
-                if union != 0 {
-                    let by_child = transpose8(entered);
-                    // The entered children farthest first (`order_key`, as `push_entered_avx2`):
-                    // the nearest ends on top of the stack.
-                    let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-                    let t_bits = _mm256_max_epi32(_mm256_castps_si256(t_near), _mm256_setzero_si256());
-                    let hit_key = _mm256_or_si256(
-                        _mm256_and_si256(
-                            _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), t_bits),
-                            _mm256_set1_epi32(!7),
-                        ),
-                        slot,
-                    );
-                    let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
-                    let in_union = _mm256_cmpeq_epi32(
-                        _mm256_and_si256(
-                            _mm256_set1_epi32(union as i32),
-                            _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
-                        ),
-                        _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
-                    );
-                    let key = _mm256_blendv_epi8(miss_key, hit_key, in_union);
-                    let mut order = [0u32; WIDTH];
-                    let mut t_near_k = [0f32; WIDTH];
-                    // SAFETY: AVX2 (the contract); both arrays hold eight 32-bit values.
-                    unsafe {
-                        _mm256_storeu_si256(order.as_mut_ptr() as *mut __m256i, sort8_avx2(key));
-                        _mm256_storeu_ps(t_near_k.as_mut_ptr(), t_near);
-                    }
-                    for &key in &order[..union.count_ones() as usize] {
-                        let k = (key & 7) as usize;
-                        stack[sp] = MaybeUninit::new(Entry {
-                            child: node.child[k],
-                            rays: if interval.is_some() {
-                                cur.rays
-                            } else {
-                                (by_child >> (8 * k)) as u32 & 0xFF
-                            },
-                            t_enter: t_near_k[k],
-                        });
-                        sp += 1;
-                    }
-                }
+                // SAFETY: AVX2 (the contract).
+                sp = unsafe { p.push_children(node, cur.rays, t_min, &s.t_box, &mut stack, sp) };
             } else {
                 let first = cur.child.index() as usize;
-                let mut testing = cur.rays;
-                for k in 0..count as usize {
-                    let block = &self.blocks[first + k / LEAF_BLOCK];
-                    let lane = k % LEAF_BLOCK;
-                    let tri = (
-                        &lane_splat(&block.v0, lane),
-                        &lane_splat(&block.e1, lane),
-                        &lane_splat(&block.e2, lane),
-                    );
-                    let lim = F8::select(
-                        <F8 as Lanes<8>>::Mask::from_bits(testing),
-                        F8::from_array(limit),
-                        F8::splat(t_min),
-                    );
-                    let h = intersect_lanes_cull::<8, F8, true>(tri, &origin, &dir, t_min, lim);
-                    let hits = h.mask() & testing;
-                    if hits == 0 {
-                        continue;
-                    }
-                    let (t, u, v) = (h.t.to_array(), h.u.to_array(), h.v.to_array());
-                    let id = (LEAF_BLOCK * (first + k / LEAF_BLOCK) + lane) as u32;
-                    for r in bits(hits) {
-                        if ANY {
-                            best[r] = Hit {
-                                t: t[r],
-                                tri: id,
-                                u: u[r],
-                                v: v[r],
-                            };
-                            live &= !(1 << r);
-                            testing &= !(1 << r);
-                        } else if t[r] < best[r].t {
-                            best[r] = Hit {
-                                t: t[r],
-                                tri: id,
-                                u: u[r],
-                                v: v[r],
-                            };
-                            // A hit has `t > t_min >= 0`: finite and positive, so the next
-                            // float up is the next bit pattern.
-                            limit[r] = f32::from_bits(t[r].to_bits() + 1);
-                            t_box[r] = t[r] * T_SLOP;
-                        } else {
-                            tie_t[r] = t[r];
-                        }
-                    }
-                    if ANY && live == 0 {
-                        break 'walk;
-                    }
-                }
-            }
-            // The nearest pending child that one of its rays can still hit something in.
-            loop {
-                if sp == 0 {
-                    break 'walk;
-                }
-                sp -= 1;
-                // SAFETY: entries below `sp` were written by a push.
-                let e = unsafe { stack[sp].assume_init() };
-                // SAFETY: AVX2 (the contract); `t_box` holds eight f32s.
-                let reach = unsafe {
-                    _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(
-                        _mm256_set1_ps(e.t_enter),
-                        _mm256_loadu_ps(t_box.as_ptr()),
-                    )) as u32
-                };
-                let rays = e.rays & live & reach;
-                if rays != 0 {
-                    cur = Entry { rays, ..e };
+                // SAFETY: AVX2 (the contract).
+                let done = unsafe { self.test_leaf::<ANY>(&p, first, count as usize, cur.rays, t_min, &mut s) };
+                if done {
                     break;
                 }
+            }
+            // SAFETY: AVX2 (the contract).
+            match unsafe { pop_live(&stack, &mut sp, s.live, &s.t_box) } {
+                Some(e) => cur = e,
+                None => break,
             }
         }
         let mut redo = 0;
         if !ANY {
             for r in 0..n {
-                redo |= ((best[r].is_hit() && tie_t[r] == best[r].t) as u32) << r;
+                redo |= ((s.best[r].is_hit() && s.tie_t[r] == s.best[r].t) as u32) << r;
             }
         }
-        PacketAnswers { best, redo }
+        PacketAnswers { best: s.best, redo }
     }
+
+    /// A leaf's triangles (`count` from block `first`) against the rays of `rays` still
+    /// testing: each closest hit so far (its `limit` just past it, so that an equal `t` is
+    /// seen as a tie, `tie_t`) or, with `ANY`, the first, which ends the ray. Whether every ray
+    /// is done (`ANY` only).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 (always inlined into the AVX2 walk).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn test_leaf<const ANY: bool>(
+        &self,
+        p: &PacketRays,
+        first: usize,
+        count: usize,
+        rays: u32,
+        t_min: f32,
+        s: &mut PacketSearch,
+    ) -> bool {
+        let mut testing = rays;
+        for k in 0..count {
+            let block = &self.blocks[first + k / LEAF_BLOCK];
+            let lane = k % LEAF_BLOCK;
+            let tri = (
+                &lane_splat(&block.v0, lane),
+                &lane_splat(&block.e1, lane),
+                &lane_splat(&block.e2, lane),
+            );
+            let lim = F8::select(
+                <F8 as Lanes<8>>::Mask::from_bits(testing),
+                F8::from_array(s.limit),
+                F8::splat(t_min),
+            );
+            let h = intersect_lanes_cull::<8, F8, true>(tri, &p.origin, &p.dir, t_min, lim);
+            let hits = h.mask() & testing;
+            if hits == 0 {
+                continue;
+            }
+            let (t, u, v) = (h.t.to_array(), h.u.to_array(), h.v.to_array());
+            let id = (LEAF_BLOCK * (first + k / LEAF_BLOCK) + lane) as u32;
+            for r in bits(hits) {
+                if ANY {
+                    s.best[r] = Hit {
+                        t: t[r],
+                        tri: id,
+                        u: u[r],
+                        v: v[r],
+                    };
+                    s.live &= !(1 << r);
+                    testing &= !(1 << r);
+                } else if t[r] < s.best[r].t {
+                    s.best[r] = Hit {
+                        t: t[r],
+                        tri: id,
+                        u: u[r],
+                        v: v[r],
+                    };
+                    // A hit has `t > t_min >= 0`: finite and positive, so the next float up
+                    // is the next bit pattern.
+                    s.limit[r] = f32::from_bits(t[r].to_bits() + 1);
+                    s.t_box[r] = t[r] * T_SLOP;
+                } else {
+                    s.tie_t[r] = t[r];
+                }
+            }
+            if ANY && s.live == 0 {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// What a packet walk knows of its rays' answers so far.
+struct PacketSearch {
+    best: [Hit; PACKET],
+    /// Per ray, how far boxes are searched (its single walk's `t_far * T_SLOP`).
+    t_box: [f32; PACKET],
+    /// Per ray, how far triangles are tested: `t_max`, then just past the closest hit.
+    limit: [f32; PACKET],
+    /// Per ray, the `t` of a triangle that tied its closest hit so far (NaN: none).
+    tie_t: [f32; PACKET],
+    /// The rays still walking (any-hit queries drop a ray at its first hit).
+    live: u32,
+}
+
+/// A packet's rays in lanes, and its box test: one for the packet where the rays go the same
+/// way on every axis (`Interval`), else each ray's own (`BoxRay`).
+struct PacketRays<'a> {
+    origin: [F8; 3],
+    dir: [F8; 3],
+    interval: Option<&'a Interval>,
+    boxes: Option<&'a [BoxRay; PACKET]>,
+}
+
+impl PacketRays<'_> {
+    /// Pushes the children of `node` that the rays of `rays` enter at `stack[sp..]`, farthest
+    /// first (`order_key`, as `push_entered_avx2`: the nearest ends on top), each with the
+    /// rays that entered it and their least entry distance; returns the new top.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 (always inlined into the AVX2 walk).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn push_children(
+        &self,
+        node: &WideNode,
+        rays: u32,
+        t_min: f32,
+        t_box: &[f32; PACKET],
+        stack: &mut [MaybeUninit<Entry>; STACK_LEN],
+        mut sp: usize,
+    ) -> usize {
+        use std::arch::x86_64::*;
+        let mut entered = 0u64;
+        let mut union = 0u32;
+        // SAFETY (every intrinsic below): AVX2 (the contract); the arrays hold eight 32-bit
+        // values.
+        unsafe {
+            let mut t_near = _mm256_set1_ps(f32::INFINITY);
+            if let Some(iv) = self.interval {
+                // One test for the packet: every ray its own test would let in is let in.
+                let mut reach = f32::NEG_INFINITY;
+                for r in bits(rays) {
+                    reach = reach.max(t_box[r]);
+                }
+                let (t_enter, hit) = iv.enter(node, t_min, reach);
+                t_near = _mm256_blendv_ps(t_near, t_enter, hit);
+                union = _mm256_movemask_ps(hit) as u32;
+            } else if let Some(boxes) = self.boxes {
+                for r in bits(rays) {
+                    let (t_enter, hit) = boxes[r].enter_avx2_packed(node, t_min, t_box[r]);
+                    t_near = _mm256_min_ps(t_near, _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t_enter, hit));
+                    let m = _mm256_movemask_ps(hit) as u32;
+                    union |= m;
+                    entered |= (m as u64) << (8 * r);
+                }
+            }
+            if union == 0 {
+                return sp;
+            }
+            let by_child = transpose8(entered);
+            let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let t_bits = _mm256_max_epi32(_mm256_castps_si256(t_near), _mm256_setzero_si256());
+            let hit_key = _mm256_or_si256(
+                _mm256_and_si256(
+                    _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), t_bits),
+                    _mm256_set1_epi32(!7),
+                ),
+                slot,
+            );
+            let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
+            let in_union = _mm256_cmpeq_epi32(
+                _mm256_and_si256(
+                    _mm256_set1_epi32(union as i32),
+                    _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
+                ),
+                _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
+            );
+            let key = _mm256_blendv_epi8(miss_key, hit_key, in_union);
+            let mut order = [0u32; WIDTH];
+            let mut t_near_k = [0f32; WIDTH];
+            _mm256_storeu_si256(order.as_mut_ptr() as *mut __m256i, sort8_avx2(key));
+            _mm256_storeu_ps(t_near_k.as_mut_ptr(), t_near);
+            for &key in &order[..union.count_ones() as usize] {
+                let k = (key & 7) as usize;
+                stack[sp] = MaybeUninit::new(Entry {
+                    child: node.child[k],
+                    rays: if self.interval.is_some() {
+                        rays
+                    } else {
+                        (by_child >> (8 * k)) as u32 & 0xFF
+                    },
+                    t_enter: t_near_k[k],
+                });
+                sp += 1;
+            }
+        }
+        sp
+    }
+}
+
+/// The nearest pending child that one of its rays can still hit something in (`live`, and
+/// within its search distance `t_box`), popped with those rays; `None` when none is left.
+///
+/// # Safety
+/// The CPU must have AVX2 (always inlined into the AVX2 walk).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn pop_live(
+    stack: &[MaybeUninit<Entry>; STACK_LEN],
+    sp: &mut usize,
+    live: u32,
+    t_box: &[f32; PACKET],
+) -> Option<Entry> {
+    use std::arch::x86_64::*;
+    while *sp > 0 {
+        *sp -= 1;
+        // SAFETY: entries below `sp` were written by a push.
+        let e = unsafe { stack[*sp].assume_init() };
+        // SAFETY: AVX2 (the contract); `t_box` holds eight f32s.
+        let reach = unsafe {
+            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(
+                _mm256_set1_ps(e.t_enter),
+                _mm256_loadu_ps(t_box.as_ptr()),
+            )) as u32
+        };
+        let rays = e.rays & live & reach;
+        if rays != 0 {
+            return Some(Entry { rays, ..e });
+        }
+    }
+    None
 }

@@ -240,7 +240,10 @@ fn descend_equals_the_full_push() {
         assert_eq!(entries(&a[base..top]), entries(&b[base..top]), "round {round}: entries");
         seen[n.min(3)] += 1;
     }
-    assert!(seen.iter().all(|&c| c > 1000), "rounds by children entered (0, 1, 2, more): {seen:?}");
+    assert!(
+        seen.iter().all(|&c| c > 1000),
+        "rounds by children entered (0, 1, 2, more): {seen:?}"
+    );
 }
 
 /// The AVX box test gives the portable one's entry distances and mask bit for bit: random
