@@ -130,7 +130,17 @@ impl Placement {
     /// Opens the device `backend` asks for (`Backend::open_device`), with notes for the user on
     /// every choice that was not the one asked for.
     pub fn open(backend: Backend, variants: GpuVariants) -> Result<(Placement, Vec<String>)> {
-        let (device, notes) = backend.open_device()?;
+        Placement::open_with(backend, variants, wgpu::InstanceDescriptor::new_without_display_handle)
+    }
+
+    /// `open`, the device's instance made from `desc()` (`Backend::open_device_with`): the
+    /// viewer's knows the window's display, so that it can present from the tracer's device.
+    pub fn open_with(
+        backend: Backend,
+        variants: GpuVariants,
+        desc: impl FnOnce() -> wgpu::InstanceDescriptor,
+    ) -> Result<(Placement, Vec<String>)> {
+        let (device, notes) = backend.open_device_with(desc)?;
         Ok((
             Placement {
                 backend,

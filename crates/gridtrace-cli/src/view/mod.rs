@@ -134,14 +134,9 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     // window system's display, so that the window can be presented from it (present.rs).
     let event_loop = EventLoop::new().map_err(|e| window_error("opening the event loop", e))?;
     let display = event_loop.owned_display_handle();
-    let (device, mut notes) = a
-        .backend
-        .open_device_with(|| wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display)))?;
-    let placement = Placement {
-        backend: a.backend,
-        device,
-        variants: a.gpu.gpu_variant,
-    };
+    let (placement, mut notes) = Placement::open_with(a.backend, a.gpu.gpu_variant, || {
+        wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display))
+    })?;
     let accel = a
         .accel_args
         .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
