@@ -161,17 +161,7 @@ impl BoxRay {
     ) -> usize {
         use std::arch::x86_64::*;
         let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
-        let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        let bits = _mm256_max_epi32(_mm256_castps_si256(t_enter), _mm256_setzero_si256());
-        let hit_key = _mm256_or_si256(
-            _mm256_and_si256(
-                _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), bits),
-                _mm256_set1_epi32(!7),
-            ),
-            slot,
-        );
-        let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
-        let key = _mm256_blendv_epi8(miss_key, hit_key, _mm256_castps_si256(entered));
+        let key = order_keys_avx2(t_enter, _mm256_castps_si256(entered));
         let order = _mm256_and_si256(sort8_avx2(key), _mm256_set1_epi32(7));
         let t = _mm256_castps_si256(_mm256_permutevar8x32_ps(t_enter, order));
         // SAFETY: `child` is eight u32s (an unaligned load needs nothing more).
@@ -356,6 +346,29 @@ pub(super) const fn bitonic_mask(k: usize, j: usize) -> i32 {
         i += 1;
     }
     mask
+}
+
+/// `order_key` of a node's eight slots in AVX2, the same bits: `t_enter` the slots' entry
+/// distances, `entered` all bits set in the lanes of the slots entered.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn order_keys_avx2(
+    t_enter: std::arch::x86_64::__m256,
+    entered: std::arch::x86_64::__m256i,
+) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let bits = _mm256_max_epi32(_mm256_castps_si256(t_enter), _mm256_setzero_si256());
+    let hit_key = _mm256_or_si256(
+        _mm256_and_si256(
+            _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), bits),
+            _mm256_set1_epi32(!7),
+        ),
+        slot,
+    );
+    let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
+    _mm256_blendv_epi8(miss_key, hit_key, entered)
 }
 
 /// Sorts eight u32s, ascending, without a branch: the six layers of the bitonic network, each

@@ -34,7 +34,7 @@ use crate::accel::{Hit, PACKET, Ray};
 use crate::util::set_bits as bits;
 
 use super::BvhAccel;
-use super::box_test::{BoxRay, DIR_TINY, FAR_SCALE, T_SLOP, sort8_avx2};
+use super::box_test::{BoxRay, DIR_TINY, FAR_SCALE, T_SLOP, order_keys_avx2, sort8_avx2};
 use super::build::LEAF_BLOCK;
 use super::walk::STACK_LEN;
 use super::wide::{ChildRef, WIDTH, WideNode};
@@ -550,16 +550,6 @@ impl PacketRays<'_> {
                 return sp;
             }
             let by_child = transpose8(entered);
-            let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-            let t_bits = _mm256_max_epi32(_mm256_castps_si256(t_near), _mm256_setzero_si256());
-            let hit_key = _mm256_or_si256(
-                _mm256_and_si256(
-                    _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), t_bits),
-                    _mm256_set1_epi32(!7),
-                ),
-                slot,
-            );
-            let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
             let in_union = _mm256_cmpeq_epi32(
                 _mm256_and_si256(
                     _mm256_set1_epi32(union as i32),
@@ -567,7 +557,7 @@ impl PacketRays<'_> {
                 ),
                 _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
             );
-            let key = _mm256_blendv_epi8(miss_key, hit_key, in_union);
+            let key = order_keys_avx2(t_near, in_union);
             let mut order = [0u32; WIDTH];
             let mut t_near_k = [0f32; WIDTH];
             _mm256_storeu_si256(order.as_mut_ptr() as *mut __m256i, sort8_avx2(key));
