@@ -356,6 +356,7 @@ fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeMesh>()?;
     m.add_class::<scene::NativeScene>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(threads::_last_threads, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The registry's names, with "auto" first: what `accel=` accepts (aliases aside).
     let accels: Vec<&str> = std::iter::once("auto")

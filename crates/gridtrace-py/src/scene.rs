@@ -243,25 +243,33 @@ impl NativeScene {
         Ok(o.into_pyarray(py))
     }
 
+    #[pyo3(signature = (rays, nthreads = 0))]
     fn count_intersections<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
+        nthreads: usize,
     ) -> PyResult<Bound<'py, PyArray1<i32>>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
-        let c = py.detach(|| self.read().count_intersections(r)).map_err(to_py)?;
+        let c = py
+            .detach(|| on_threads(nthreads, || self.read().count_intersections(r)))?
+            .map_err(to_py)?;
         // Open3D's dtype (int32): a ray crossing two billion faces is not a case.
         let c: Vec<i32> = c.into_iter().map(|c| c.min(i32::MAX as u32) as i32).collect();
         Ok(c.into_pyarray(py))
     }
 
+    #[pyo3(signature = (rays, nthreads = 0))]
     fn list_intersections<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
+        nthreads: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
-        let l = py.detach(|| self.read().list_intersections(r)).map_err(to_py)?;
+        let l = py
+            .detach(|| on_threads(nthreads, || self.read().list_intersections(r)))?
+            .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("ray_splits", l.ray_splits.into_pyarray(py))?;
         d.set_item("ray_ids", l.ray_ids.into_pyarray(py))?;
@@ -293,23 +301,27 @@ impl NativeScene {
     }
 
     /// `what`: "distance", "signed_distance", "occupancy" or "winding_number".
+    #[pyo3(signature = (what, points, nthreads = 0))]
     fn point_values<'py>(
         &self,
         py: Python<'py>,
         what: &str,
         points: PyReadonlyArray2<'py, f32>,
+        nthreads: usize,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
         let p = rows::<f32, 3>(&points, "query_points")?;
         let v = py
             .detach(|| {
-                let s = self.read();
-                match what {
-                    "distance" => s.compute_distance(p),
-                    "signed_distance" => s.compute_signed_distance(p),
-                    "occupancy" => s.compute_occupancy(p),
-                    _ => s.winding_numbers(p),
-                }
-            })
+                on_threads(nthreads, || {
+                    let s = self.read();
+                    match what {
+                        "distance" => s.compute_distance(p),
+                        "signed_distance" => s.compute_signed_distance(p),
+                        "occupancy" => s.compute_occupancy(p),
+                        _ => s.winding_numbers(p),
+                    }
+                })
+            })?
             .map_err(to_py)?;
         Ok(v.into_pyarray(py))
     }

@@ -4,14 +4,29 @@
 //! cost more than a small batch.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
+/// The size of the pool the last call's work ran on, as rayon saw it from inside: what
+/// `_last_threads()` reports, so the tests can check that every query passes its `nthreads` on.
+static LAST_THREADS: AtomicUsize = AtomicUsize::new(0);
+
+/// `_last_threads()`: the number of threads the last query's work could use.
+#[pyfunction]
+pub(crate) fn _last_threads() -> usize {
+    LAST_THREADS.load(Ordering::Relaxed)
+}
+
 /// Runs `f` on `threads` threads (0: all cores), in the calling thread's stead.
 pub(crate) fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> PyResult<R> {
+    let f = || {
+        LAST_THREADS.store(rayon::current_num_threads(), Ordering::Relaxed);
+        f()
+    };
     if threads == 0 {
         return Ok(f());
     }

@@ -335,6 +335,39 @@ def test_concurrent_queries_from_threads():
     assert not errors, errors
 
 
+def test_every_query_runs_on_the_threads_it_is_given():
+    """Each query's ``nthreads`` reaches the pool its work runs on (rayon's count seen from
+    inside, ``_last_threads``), and 1, 2 and all threads give the same answers."""
+    from gridtrace import _gridtrace
+
+    s, _, _ = build("bvh")
+    rays = random_rays(5000, seed=7).astype(np.float32)
+    pts = rays[:, :3].copy()
+    queries = {
+        "cast_rays": lambda n: s.cast_rays(rays, nthreads=n)["t_hit"],
+        "test_occlusions": lambda n: s.test_occlusions(rays, nthreads=n),
+        "count_intersections": lambda n: s.count_intersections(rays, nthreads=n),
+        "list_intersections": lambda n: s.list_intersections(rays, nthreads=n)["t_hit"],
+        "compute_closest_points": lambda n: s.compute_closest_points(pts, nthreads=n)["points"],
+        "compute_distance": lambda n: s.compute_distance(pts, nthreads=n),
+        "compute_signed_distance": lambda n: s.compute_signed_distance(pts, nthreads=n),
+        "compute_occupancy": lambda n: s.compute_occupancy(pts, nthreads=n),
+        "compute_winding_number": lambda n: s.compute_winding_number(pts, nthreads=n),
+    }
+    v, f = cube()
+    m = gridtrace.Mesh(v, f, accel="bvh", backend="cpu")
+    queries["Mesh.intersect"] = lambda n: m.intersect(rays[:, :3], rays[:, 3:], threads=n).t
+    queries["Mesh.occluded"] = lambda n: m.occluded(rays[:, :3], rays[:, 3:], threads=n)
+    for name, q in queries.items():
+        answers = []
+        for n in (1, 2, 3):
+            answers.append(q(n))
+            assert _gridtrace._last_threads() == n, f"{name}(nthreads={n}) ran on {_gridtrace._last_threads()}"
+        answers.append(q(0))
+        for a in answers[1:]:
+            assert np.array_equal(a, answers[0], equal_nan=True), name
+
+
 def test_pickle_round_trip():
     s, _, _ = build("grid")
     s.remove(1)

@@ -203,7 +203,7 @@ class Scene:
         an edge or vertex shared by several faces counts each face it hits there (as Open3D),
         so the parity is no reliable inside test: use ``compute_occupancy``."""
         flat, lead = _batch(rays, "rays", 6)
-        call = lambda r: {"c": self._native.count_intersections(r)}  # noqa: E731
+        call = lambda r: {"c": self._native.count_intersections(r, int(nthreads))}  # noqa: E731
         return _chunked(flat, call)["c"].reshape(lead)
 
     def list_intersections(self, rays, nthreads: int = 0) -> Dict[str, np.ndarray]:
@@ -214,7 +214,7 @@ class Scene:
         flat, _ = _batch(rays, "rays", 6)
         parts = []
         for s in range(0, max(len(flat), 1), CHUNK):
-            part = self._native.list_intersections(_f32(flat[s : s + CHUNK]))
+            part = self._native.list_intersections(_f32(flat[s : s + CHUNK]), int(nthreads))
             part["ray_ids"] = part["ray_ids"] + np.uint32(s)
             parts.append(part)
         if len(parts) == 1:
@@ -238,7 +238,7 @@ class Scene:
 
     def compute_distance(self, query_points, nthreads: int = 0) -> np.ndarray:
         """The distance from each point to the scene (float32 ``[...]``)."""
-        return self._values("distance", query_points)
+        return self._values("distance", query_points, nthreads)
 
     def compute_signed_distance(self, query_points, nthreads: int = 0, nsamples: int = 1) -> np.ndarray:
         """The distance, negative inside. Inside is decided by the generalised winding number of
@@ -247,20 +247,21 @@ class Scene:
         surface (outward normals ``(v1 - v0) x (v2 - v0)``); for open meshes a point counts as
         inside where the surface wraps it more than half way round. On the surface the sign is
         whatever rounding gives (the distance is ~0)."""
-        return self._values("signed_distance", query_points)
+        return self._values("signed_distance", query_points, nthreads)
 
     def compute_occupancy(self, query_points, nthreads: int = 0, nsamples: int = 1) -> np.ndarray:
         """1.0 inside, 0.0 outside (float32 ``[...]``; inside as for ``compute_signed_distance``),
         NaN for a point that is not finite."""
-        return self._values("occupancy", query_points)
+        return self._values("occupancy", query_points, nthreads)
 
-    def compute_winding_number(self, query_points) -> np.ndarray:
-        """The generalised winding number of all faces at each point (float32 ``[...]``)."""
-        return self._values("winding_number", query_points)
+    def compute_winding_number(self, query_points, nthreads: int = 0) -> np.ndarray:
+        """The generalised winding number of all faces at each point (float32 ``[...]``).
+        ``nthreads``: CPU threads (0: all cores)."""
+        return self._values("winding_number", query_points, nthreads)
 
-    def _values(self, what: str, query_points) -> np.ndarray:
+    def _values(self, what: str, query_points, nthreads: int) -> np.ndarray:
         flat, lead = _batch(query_points, "query_points", 3)
-        call = lambda p: {"v": self._native.point_values(what, p)}  # noqa: E731
+        call = lambda p: {"v": self._native.point_values(what, p, int(nthreads))}  # noqa: E731
         return _chunked(flat, call)["v"].reshape(lead)
 
     # -- pickling -------------------------------------------------------------------------
