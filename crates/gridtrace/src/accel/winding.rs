@@ -62,7 +62,9 @@ pub fn winding_numbers(tris: &[TriAccel], points: &[[f32; 3]]) -> Vec<f32> {
     points
         .par_iter()
         .with_min_len(64)
-        .map(|p| tree.winding_number(tris, Vec3::from(*p)))
+        .map_init(Vec::new, |stack, p| {
+            tree.winding_number_with(tris, Vec3::from(*p), stack)
+        })
         .collect()
 }
 

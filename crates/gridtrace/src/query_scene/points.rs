@@ -149,6 +149,8 @@ fn winding_numbers(m: &Merged, points: &[[f32; 3]]) -> Vec<f32> {
     points
         .par_iter()
         .with_min_len(64)
-        .map(|p| tree.winding_number(m.tris(), Vec3::from(*p)))
+        .map_init(Vec::new, |stack, p| {
+            tree.winding_number_with(m.tris(), Vec3::from(*p), stack)
+        })
         .collect()
 }

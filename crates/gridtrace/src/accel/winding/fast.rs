@@ -91,6 +91,15 @@ impl FastWinding {
     /// The winding number of `p` with respect to `tris` (the triangles given to `build`), to
     /// the accuracy of the far-field terms (module notes); NaN for a point that is not finite.
     pub fn winding_number(&self, tris: &[TriAccel], p: Vec3) -> f32 {
+        self.winding_number_with(tris, p, &mut Vec::new())
+    }
+
+    /// `winding_number` with the caller's stack, kept between points: a batch's worker reuses
+    /// one (`map_init`). A fresh stack per point cost three allocations and frees a point, and
+    /// on two threads the allocator's locks held the batch to 1.1-1.6x its one-thread speed
+    /// (perf, 200,000 points at the Stanford Bunny: 12% of samples in malloc, free and
+    /// realloc, 11% in the kernel's futex wake-ups); with the stack kept, 2.0x.
+    pub fn winding_number_with(&self, tris: &[TriAccel], p: Vec3, stack: &mut Vec<usize>) -> f32 {
         assert_eq!(tris.len(), self.triangles, "the triangles the tree was built over");
         if !p.is_finite() {
             return f32::NAN;
@@ -100,7 +109,8 @@ impl FastWinding {
         }
         let pd = p.as_dvec3();
         let mut sum = 0.0f64;
-        let mut stack = vec![0usize];
+        stack.clear();
+        stack.push(0);
         while let Some(i) = stack.pop() {
             let m = &self.moments[i];
             let to = m.center - pd;
