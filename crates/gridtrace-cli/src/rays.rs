@@ -101,6 +101,9 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let (mut done, mut hits) = (0u64, 0u64);
     // Each pass's tracing time, summed over the file's chunks.
     let mut pass_s = vec![0.0; a.reps as usize];
+    // The answers, one buffer kept over passes and chunks (`intersect_rays_into`): a caller
+    // tracing batch after batch keeps its memory mapped.
+    let (mut found, mut occ) = (Vec::new(), Vec::new());
     // The GPU batches' own figures, summed over the file's chunks.
     let mut gpu = gridtrace::gpu::GpuQueryStats::default();
     while done < n {
@@ -131,20 +134,18 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
             ));
         }
         if a.occluded {
-            let mut occ = Vec::new();
             for s in pass_s.iter_mut() {
                 let t0 = Instant::now();
-                occ = mesh.occluded_rays(&rays, a.tmin, a.tmax)?;
+                mesh.occluded_rays_into(mesh.backend(), &rays, a.tmin, a.tmax, &mut occ)?;
                 *s += t0.elapsed().as_secs_f64();
             }
             hits += occ.par_iter().filter(|o| **o).count() as u64;
             let out: Vec<u8> = occ.par_iter().map(|&o| o as u8).collect();
             output.write_all(&out).map_err(write_err)?;
         } else {
-            let mut found = Vec::new();
             for s in pass_s.iter_mut() {
                 let t0 = Instant::now();
-                found = mesh.intersect_rays_answering(mesh.backend(), &rays, a.tmin, a.tmax, !a.no_uv)?;
+                mesh.intersect_rays_into(mesh.backend(), &rays, a.tmin, a.tmax, !a.no_uv, &mut found)?;
                 *s += t0.elapsed().as_secs_f64();
             }
             // Records written in parallel into a zeroed buffer (fresh pages, first touched by

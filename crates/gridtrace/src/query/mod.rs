@@ -310,7 +310,7 @@ fn locked(gpu: &Mutex<GpuRenderer>) -> MutexGuard<'_, GpuRenderer> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::accel::{NoCounters, Ray, brute_force_intersect};
+    use crate::accel::{Hit, NoCounters, Ray, brute_force_intersect};
     use crate::testing::triangle_soup;
 
     /// Empty, single and broadcast batches, on every backend and structure: every pair of
@@ -447,6 +447,49 @@ mod tests {
                 }
             }
             assert!(hit_count > 500, "{} hits only", hit_count);
+        }
+    }
+
+    /// `intersect_rays_into` and `occluded_rays_into` reuse a buffer holding a former batch's
+    /// answers (longer, then shorter, then longer again than the batch): each time the answers
+    /// equal a fresh call's, on the CPU and on the GPU.
+    #[test]
+    fn reused_answer_buffers_equal_fresh_answers() {
+        let (vertices, faces, origins, dirs) = soup(true);
+        let rays: Vec<Ray> = origins
+            .iter()
+            .zip(&dirs)
+            .map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d)))
+            .collect();
+        let on_gpu = crate::gpu::GpuContext::new().is_ok();
+        let backends = [Backend::Cpu, Backend::Gpu]
+            .into_iter()
+            .filter(|&b| b == Backend::Cpu || on_gpu);
+        for backend in backends {
+            let opts = QueryOptions {
+                accel: AccelKind::Bvh.into(),
+                backend,
+                ..Default::default()
+            };
+            let mesh = TraceMesh::from_arrays(&vertices, &faces, &opts).unwrap();
+            let (mut hits, mut occ) = (vec![Hit::MISS; 7000], vec![true; 7000]);
+            for len in [5000, 1200, 3000] {
+                let batch = &rays[..len];
+                mesh.intersect_rays_into(backend, batch, 0.0, 1.5, true, &mut hits)
+                    .unwrap();
+                mesh.occluded_rays_into(backend, batch, 0.0, 1.5, &mut occ).unwrap();
+                let fresh = mesh.intersect_rays_with(backend, batch, 0.0, 1.5).unwrap();
+                let fresh_occ = mesh.occluded_rays_with(backend, batch, 0.0, 1.5).unwrap();
+                assert_eq!(hits.len(), len, "{backend:?}");
+                assert!(
+                    hits.iter()
+                        .zip(&fresh)
+                        .all(|(a, b)| (a.t, a.tri, a.u, a.v) == (b.t, b.tri, b.u, b.v)),
+                    "{backend:?}: {len} rays into a reused buffer"
+                );
+                assert_eq!(occ, fresh_occ, "{backend:?}: {len} rays");
+                assert!(fresh.iter().filter(|h| h.is_hit()).count() > len / 10, "{backend:?}");
+            }
         }
     }
 
