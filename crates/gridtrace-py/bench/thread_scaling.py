@@ -26,6 +26,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 import gridtrace  # noqa: E402
+from camera_rays import camera  # noqa: E402  (beside this file)
 from gridtrace import Scene  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
@@ -41,16 +42,8 @@ def random_rays(lo, hi, n, seed=5):
 
 
 def camera_rays(lo, hi, res):
-    c, r = (lo + hi) / 2, np.linalg.norm(hi - lo)
-    eye = c + np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0]) * 1.1 * r
-    ahead = (c - eye) / np.linalg.norm(c - eye)
-    right = np.cross(ahead, [0.0, 1.0, 0.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, ahead)
-    half = np.tan(np.radians(20.0))
-    s = (np.arange(res) + 0.5) / res * 2 - 1
-    x, y = np.meshgrid(s * half, -s * half)
-    d = (ahead + x[..., None] * right + y[..., None] * up).reshape(-1, 3)
+    """camera_rays.py's pinhole camera (beside this file) as `[origin, direction]` rows."""
+    eye, d = camera(lo, hi, res)
     return np.concatenate([np.broadcast_to(eye, d.shape), d], axis=1).astype(np.float32)
 
 

@@ -138,29 +138,17 @@ impl TraceMesh {
     }
 
     pub fn intersect_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
-        self.intersect_rays_answering(backend, rays, t_min, t_max, true)
-    }
-
-    /// `intersect_rays_with`, with the barycentrics only if `uv`: without them a GPU batch
-    /// brings back 8 bytes a ray instead of 16, and every hit's `u`, `v` are 0.
-    pub fn intersect_rays_answering(
-        &self,
-        backend: Backend,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        uv: bool,
-    ) -> Result<Vec<Hit>> {
         let mut out = Vec::new();
-        self.intersect_rays_into(backend, rays, t_min, t_max, uv, &mut out)?;
+        self.intersect_rays_into(backend, rays, t_min, t_max, true, &mut out)?;
         Ok(out)
     }
 
-    /// `intersect_rays_answering` into `out` (cleared first, then one hit per ray), reusing its
-    /// memory: a caller that traces batch after batch (a sensor's frames, a benchmark's passes)
-    /// keeps one buffer, whose pages are then already mapped. A fresh 16 MB answer for 1M rays
-    /// costs about 1,900 page faults a batch (perf stat), which the workers take inside the
-    /// traced time.
+    /// `intersect_rays_with` into `out` (cleared first, then one hit per ray), with the
+    /// barycentrics only if `uv` (without them a GPU batch brings back 8 bytes a ray instead of
+    /// 16, and every hit's `u`, `v` are 0). It reuses `out`'s memory: a caller that traces batch
+    /// after batch (a sensor's frames, a benchmark's passes) keeps one buffer, whose pages are
+    /// then already mapped. A fresh 16 MB answer for 1M rays costs about 1,900 page faults a
+    /// batch (perf stat), which the workers take inside the traced time.
     pub fn intersect_rays_into(
         &self,
         backend: Backend,
