@@ -23,7 +23,7 @@ struct Cli {
     command: Command,
     /// CPU threads for the work (ray batches, renders, builds); default: one per core. To
     /// measure scaling, or to share the machine.
-    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=gridtrace::util::MAX_THREADS as i64))]
     threads: Option<u16>,
 }
 

@@ -229,6 +229,12 @@ fn bad_input_gives_located_errors() {
     );
     let (ok, text) = gridtrace(&["info", dir.join("missing.ply").to_str().unwrap()]);
     assert!(!ok && text.contains("missing.ply"), "{text}");
+    // Thread counts out of range are refused before any work (100,000 used to start that many
+    // threads and sit for minutes).
+    for bad in ["0", "100000", "1025"] {
+        let (ok, text) = gridtrace(&["--threads", bad, "info"]);
+        assert!(!ok && text.contains(&format!("'{bad}' for '--threads")), "{text}");
+    }
 }
 
 /// A reader that leaves early (`gridtrace render ... | head -1`) ends the tool quietly, as it

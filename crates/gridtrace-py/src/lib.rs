@@ -358,6 +358,7 @@ fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(threads::_last_threads, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("MAX_THREADS", gridtrace::util::MAX_THREADS)?;
     // The registry's names, with "auto" first: what `accel=` accepts (aliases aside).
     let accels: Vec<&str> = std::iter::once("auto")
         .chain(gridtrace::accel::registry::ENTRIES.iter().map(|e| e.name))

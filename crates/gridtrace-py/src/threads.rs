@@ -30,6 +30,12 @@ pub(crate) fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) 
     if threads == 0 {
         return Ok(f());
     }
+    if threads > gridtrace::util::MAX_THREADS {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "threads={threads}: at most {} (0: every core)",
+            gridtrace::util::MAX_THREADS
+        )));
+    }
     static POOLS: OnceLock<Mutex<HashMap<usize, Arc<ThreadPool>>>> = OnceLock::new();
     let pool = {
         let mut pools = POOLS

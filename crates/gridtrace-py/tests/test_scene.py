@@ -368,6 +368,36 @@ def test_every_query_runs_on_the_threads_it_is_given():
             assert np.array_equal(a, answers[0], equal_nan=True), name
 
 
+def test_thread_counts_out_of_range_are_refused_at_once():
+    """Negative counts, counts over ``MAX_THREADS`` (100,000 used to start that many threads
+    and sit for minutes) and non-integers raise before any work, naming the argument, also for
+    an empty batch."""
+    from gridtrace import _gridtrace
+
+    s, _, _ = build("bvh")
+    v, f = cube()
+    m = gridtrace.Mesh(v, f, accel="bvh", backend="cpu")
+    rays = random_rays(10).astype(np.float32)
+    too_many = _gridtrace.MAX_THREADS + 1
+    for bad in (-1, too_many, 100_000):
+        with pytest.raises(ValueError, match=f"nthreads must be 0 .*got {bad}"):
+            s.cast_rays(rays, nthreads=bad)
+        with pytest.raises(ValueError, match="nthreads"):
+            s.compute_distance(np.zeros((0, 3)), nthreads=bad)
+        with pytest.raises(ValueError, match="nthreads"):
+            s.list_intersections(rays, nthreads=bad)
+        with pytest.raises(ValueError, match=f"threads must be 0 .*got {bad}"):
+            m.intersect(rays[:, :3], rays[:, 3:], threads=bad)
+        with pytest.raises(ValueError, match="threads"):
+            m.occluded(rays[:, :3], rays[:, 3:], threads=bad)
+    with pytest.raises(TypeError):
+        s.test_occlusions(rays, nthreads=1.5)
+    # The native layer holds the same bound for a direct caller.
+    with pytest.raises(ValueError, match=f"threads={too_many}: at most"):
+        s._native.cast_rays(rays, too_many)
+    assert s.cast_rays(rays, nthreads=_gridtrace.MAX_THREADS)["t_hit"].shape == (10,)
+
+
 def test_pickle_round_trip():
     s, _, _ = build("grid")
     s.remove(1)

@@ -1,5 +1,11 @@
 //! Small shared utilities.
 
+/// The most CPU threads a caller may ask for (`--threads`, Python's `threads=` and
+/// `nthreads=`): far above any machine's cores, so oversubscribing to measure stays possible,
+/// while a slip such as 100000 is refused at once. Asked for 100,000, the thread pool starts
+/// that many OS threads, each with its stack, and the call sat for minutes like a hang.
+pub const MAX_THREADS: usize = 1024;
+
 /// A tiny deterministic PRNG (SplitMix64) for tests, benchmarks and procedural scenes, so
 /// results are reproducible without pulling a random-number crate into the library.
 #[derive(Debug, Clone)]

@@ -61,7 +61,7 @@ from ._gridtrace import ACCEL_PARAMS as _ACCEL_PARAMS  # noqa: E402
 from ._gridtrace import GPU_VARIANTS as _GPU_VARIANTS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
-from .scene import INVALID_ID, Scene, _params_of_state  # noqa: E402
+from .scene import INVALID_ID, Scene, _params_of_state, _threads  # noqa: E402
 
 # `gridtrace.trimesh` after a plain `import gridtrace`, as the README writes it. Importing it
 # costs nothing: it is pure Python over `Scene` and does not import trimesh itself (an optional
@@ -260,7 +260,7 @@ class Mesh:
         """
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
-        return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend, int(threads)))
+        return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend, _threads(threads, "threads")))
 
     def occluded(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None, threads: int = 0) -> np.ndarray:
         """Whether each ray hits anything with ``t_min < t < t_max`` (boolean array). Coherent rays
@@ -268,7 +268,7 @@ class Mesh:
         threads (0: all cores)."""
         o, d = _rays(origins, directions)
         t_min, t_max = _interval(t_min, t_max)
-        return self._native.occluded(o, d, t_min, t_max, backend or self._backend, int(threads))
+        return self._native.occluded(o, d, t_min, t_max, backend or self._backend, _threads(threads, "threads"))
 
 
 def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: int = 512, mode: str = "shadow", accel: str = "auto", backend: str = "auto", eye: Optional[Sequence[float]] = None, target: Optional[Sequence[float]] = None, gpu_variant: str = "", stats: bool = False, accel_params: str = ""):

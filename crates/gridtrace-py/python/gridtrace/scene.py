@@ -14,11 +14,13 @@ for such rays instead: the README's "NaN and infinity").
 from __future__ import annotations
 
 import math
+import operator
 from os import PathLike
 from typing import Dict, Optional, Union
 
 import numpy as np
 
+from ._gridtrace import MAX_THREADS as _MAX_THREADS
 from ._gridtrace import NativeScene as _NativeScene
 
 #: Geometry and primitive id of a miss (Open3D's ``RaycastingScene.INVALID_ID``).
@@ -27,6 +29,14 @@ INVALID_ID = 0xFFFFFFFF
 #: Rays or points handed to the native code at a time: the float32 copies and the per-call
 #: temporaries stay bounded (about 100 MB) however large the batch.
 CHUNK = 1 << 22
+
+
+def _threads(n, name: str = "nthreads") -> int:
+    """A thread count as the native code takes it: 0 (every core) up to ``MAX_THREADS``."""
+    k = operator.index(n)
+    if not 0 <= k <= _MAX_THREADS:
+        raise ValueError(f"{name} must be 0 (every core) to {_MAX_THREADS}, got {n}")
+    return k
 
 
 def _batch(a, name: str, width: int):
@@ -185,25 +195,28 @@ class Scene:
         ``t_hit`` ``[...]`` float32, ``geometry_ids`` and ``primitive_ids`` ``[...]`` uint32,
         ``primitive_uvs`` ``[..., 2]`` and ``primitive_normals`` ``[..., 3]`` float32.
         ``nthreads``: CPU threads (0: all cores), as Open3D's."""
+        k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
-        return _shaped(_chunked(flat, lambda r: self._native.cast_rays(r, int(nthreads))), lead)
+        return _shaped(_chunked(flat, lambda r: self._native.cast_rays(r, k)), lead)
 
     def test_occlusions(self, rays, tnear: float = 0.0, tfar: float = math.inf, nthreads: int = 0) -> np.ndarray:
         """Whether each ray hits anything with ``tnear < t < tfar``: a bool array ``[...]``.
         ``nthreads``: CPU threads (0: all cores)."""
+        k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
         tnear, tfar = float(tnear), float(tfar)
         if math.isnan(tnear) or math.isnan(tfar) or tnear < 0 or tnear > tfar:
             raise ValueError(f"need 0 <= tnear <= tfar, got tnear={tnear}, tfar={tfar}")
-        call = lambda r: {"o": self._native.test_occlusions(r, tnear, tfar, int(nthreads))}  # noqa: E731
+        call = lambda r: {"o": self._native.test_occlusions(r, tnear, tfar, k)}  # noqa: E731
         return _chunked(flat, call)["o"].reshape(lead)
 
     def count_intersections(self, rays, nthreads: int = 0) -> np.ndarray:
         """How many faces each ray hits with ``t > 0``: an int32 array ``[...]``. A ray through
         an edge or vertex shared by several faces counts each face it hits there (as Open3D),
         so the parity is no reliable inside test: use ``compute_occupancy``."""
+        k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
-        call = lambda r: {"c": self._native.count_intersections(r, int(nthreads))}  # noqa: E731
+        call = lambda r: {"c": self._native.count_intersections(r, k)}  # noqa: E731
         return _chunked(flat, call)["c"].reshape(lead)
 
     def list_intersections(self, rays, nthreads: int = 0) -> Dict[str, np.ndarray]:
@@ -211,10 +224,11 @@ class Scene:
         offsets: ray ``i``'s hits are entries ``ray_splits[i]:ray_splits[i + 1]``, rays in the
         flattened order of ``rays``), ``ray_ids``, ``geometry_ids``, ``primitive_ids``,
         ``primitive_uvs`` ``(M, 2)`` and ``t_hit``."""
+        k = _threads(nthreads)
         flat, _ = _batch(rays, "rays", 6)
         parts = []
         for s in range(0, max(len(flat), 1), CHUNK):
-            part = self._native.list_intersections(_f32(flat[s : s + CHUNK]), int(nthreads))
+            part = self._native.list_intersections(_f32(flat[s : s + CHUNK]), k)
             part["ray_ids"] = part["ray_ids"] + np.uint32(s)
             parts.append(part)
         if len(parts) == 1:
@@ -233,8 +247,9 @@ class Scene:
         """The nearest point of the scene to each point (``[..., 3]``): ``points`` ``[..., 3]``,
         ``geometry_ids``, ``primitive_ids``, ``primitive_uvs`` ``[..., 2]``,
         ``primitive_normals`` ``[..., 3]``. ``nthreads``: CPU threads (0: all cores)."""
+        k = _threads(nthreads)
         flat, lead = _batch(query_points, "query_points", 3)
-        return _shaped(_chunked(flat, lambda p: self._native.compute_closest_points(p, int(nthreads))), lead)
+        return _shaped(_chunked(flat, lambda p: self._native.compute_closest_points(p, k)), lead)
 
     def compute_distance(self, query_points, nthreads: int = 0) -> np.ndarray:
         """The distance from each point to the scene (float32 ``[...]``)."""
@@ -260,8 +275,9 @@ class Scene:
         return self._values("winding_number", query_points, nthreads)
 
     def _values(self, what: str, query_points, nthreads: int) -> np.ndarray:
+        k = _threads(nthreads)
         flat, lead = _batch(query_points, "query_points", 3)
-        call = lambda p: {"v": self._native.point_values(what, p, int(nthreads))}  # noqa: E731
+        call = lambda p: {"v": self._native.point_values(what, p, k)}  # noqa: E731
         return _chunked(flat, call)["v"].reshape(lead)
 
     # -- pickling -------------------------------------------------------------------------
