@@ -98,7 +98,7 @@ impl FastWinding {
     /// one (`map_init`). A fresh stack per point cost three allocations and frees a point, and
     /// on two threads the allocator's locks held the batch to 1.1-1.6x its one-thread speed
     /// (perf, 200,000 points at the Stanford Bunny: 12% of samples in malloc, free and
-    /// realloc, 11% in the kernel's futex wake-ups); with the stack kept, 2.0x.
+    /// realloc, 11% in the kernel's futex wake-ups); with the stack kept, 1.8-2.0x.
     pub fn winding_number_with(&self, tris: &[TriAccel], p: Vec3, stack: &mut Vec<usize>) -> f32 {
         assert_eq!(tris.len(), self.triangles, "the triangles the tree was built over");
         if !p.is_finite() {
