@@ -378,6 +378,7 @@ def test_thread_counts_out_of_range_are_refused_at_once():
     v, f = cube()
     m = gridtrace.Mesh(v, f, accel="bvh", backend="cpu")
     rays = random_rays(10).astype(np.float32)
+    assert gridtrace.MAX_THREADS == _gridtrace.MAX_THREADS >= 64
     too_many = _gridtrace.MAX_THREADS + 1
     for bad in (-1, too_many, 100_000):
         with pytest.raises(ValueError, match=f"nthreads must be 0 .*got {bad}"):

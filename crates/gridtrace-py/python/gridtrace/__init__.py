@@ -60,6 +60,7 @@ from ._gridtrace import ACCELS as _ACCELS  # noqa: E402
 from ._gridtrace import ACCEL_PARAMS as _ACCEL_PARAMS  # noqa: E402
 from ._gridtrace import GPU_VARIANTS as _GPU_VARIANTS  # noqa: E402
 from ._gridtrace import __version__  # noqa: E402
+from ._gridtrace import MAX_THREADS  # noqa: E402
 from ._gridtrace import render as _render  # noqa: E402
 from .scene import INVALID_ID, Scene, _params_of_state, _threads  # noqa: E402
 
@@ -81,7 +82,7 @@ ACCEL_PARAMS: dict = dict(_ACCEL_PARAMS)
 #: ``None``: every structure) and ``help``.
 GPU_VARIANTS: dict = dict(_GPU_VARIANTS)
 
-__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "ACCELS", "ACCEL_PARAMS", "GPU_VARIANTS", "__version__", "trimesh"]
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "MAX_THREADS", "ACCELS", "ACCEL_PARAMS", "GPU_VARIANTS", "__version__", "trimesh"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)

@@ -19,6 +19,8 @@ class _GpuVariantSpec(TypedDict):
 
 GPU_VARIANTS: dict[str, _GpuVariantSpec]
 MISS: np.uint32
+#: The most CPU threads ``threads=`` / ``nthreads=`` take (0 is every core).
+MAX_THREADS: int
 ArrayLike = Union[np.ndarray, Sequence[float], Sequence[Sequence[float]]]
 
 class Hits(NamedTuple):
