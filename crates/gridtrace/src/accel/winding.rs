@@ -14,7 +14,6 @@
 //! triangle and is the oracle the tests hold it to.
 
 use glam::{DVec3, Vec3};
-use rayon::prelude::*;
 
 use super::closest::closest_points;
 use super::{Accel, TriAccel};
@@ -58,14 +57,7 @@ pub fn winding_number_brute(tris: &[TriAccel], p: Vec3) -> f32 {
 /// Winding numbers of a batch of points, on all cores, through a `FastWinding` built for the
 /// batch (O(n log n) over the triangles, then about O(log n) a point away from the surface).
 pub fn winding_numbers(tris: &[TriAccel], points: &[[f32; 3]]) -> Vec<f32> {
-    let tree = FastWinding::build(tris);
-    points
-        .par_iter()
-        .with_min_len(64)
-        .map_init(Vec::new, |stack, p| {
-            tree.winding_number_with(tris, Vec3::from(*p), stack)
-        })
-        .collect()
+    FastWinding::build(tris).winding_numbers(tris, points)
 }
 
 /// Whether a winding number says inside (`> 0.5`, see the module notes).

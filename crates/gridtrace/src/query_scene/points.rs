@@ -145,12 +145,5 @@ fn winding_numbers(m: &Merged, points: &[[f32; 3]]) -> Vec<f32> {
             .map(|p| if Vec3::from(*p).is_finite() { 0.0 } else { f32::NAN })
             .collect();
     }
-    let tree = m.winding();
-    points
-        .par_iter()
-        .with_min_len(64)
-        .map_init(Vec::new, |stack, p| {
-            tree.winding_number_with(m.tris(), Vec3::from(*p), stack)
-        })
-        .collect()
+    m.winding().winding_numbers(m.tris(), points)
 }
