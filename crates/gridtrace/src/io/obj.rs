@@ -38,12 +38,28 @@ pub fn parse(data: &[u8], path: &Path, mtl: &dyn Fn(&str) -> Option<Vec<u8>>) ->
         mat_ids: HashMap::new(),
         mtllibs: Vec::new(),
         face: Vec::new(),
+        binary_line: None,
     };
     for (line_no, line) in logical_lines(data) {
         p.line(line_no, &line)?;
     }
+    if p.triangles.is_empty() {
+        return Err(p.why_no_triangles(data));
+    }
     p.into_mesh(mtl)
 }
+
+/// Formats whose files are taken for OBJ when renamed, by their first bytes, for the error that
+/// says what the file is instead.
+const MAGIC: [(&[u8], &str); 7] = [
+    (b"\x89PNG", "a PNG image"),
+    (b"\xFF\xD8\xFF", "a JPEG image"),
+    (b"glTF", "a binary glTF (.glb)"),
+    (b"ply", "a PLY mesh (.ply)"),
+    (b"OFF", "an OFF mesh (.off)"),
+    (b"PK\x03\x04", "a zip archive"),
+    (b"\x1F\x8B", "a gzip archive"),
+];
 
 struct Parser<'p> {
     path: &'p Path,
@@ -62,6 +78,8 @@ struct Parser<'p> {
     mtllibs: Vec<String>,
     /// Scratch for one face: (position, normal or NONE).
     face: Vec<(u32, u32)>,
+    /// The first line (outside comments) that is not text: invalid UTF-8 or a NUL byte.
+    binary_line: Option<usize>,
 }
 
 /// Splits into lines (`\n`, optional `\r`), joining `\`-continued lines. Yields the 1-based number
@@ -92,12 +110,50 @@ impl Parser<'_> {
         Error::parse(self.path, Location::Line(line), msg)
     }
 
+    /// The error for a file that gave no face: what it holds instead (binary data, vertices
+    /// only, nothing OBJ at all), where `finish` alone would say "no triangles". Unknown
+    /// keywords and lines that are not text are skipped while parsing (OBJ files carry many
+    /// statements we do not read), so a renamed image parses to nothing; this says why.
+    fn why_no_triangles(&self, data: &[u8]) -> Error {
+        // What the first bytes say the file is, when it is a format people rename by mistake.
+        let looks = MAGIC
+            .iter()
+            .find(|(magic, _)| data.starts_with(magic))
+            .map_or(String::new(), |(_, what)| format!("; it starts as {what} does"));
+        let (location, msg) = if let Some(line) = self.binary_line {
+            (
+                Location::Line(line),
+                format!(
+                    "not an OBJ text file: binary data, no faces read{looks} (an OBJ mesh is text \
+                     with 'v X Y Z' and 'f I J K' lines)"
+                ),
+            )
+        } else if self.positions.is_empty() {
+            (
+                Location::Whole,
+                format!("no 'v' (vertex) or 'f' (face) lines: not a Wavefront OBJ mesh{looks}"),
+            )
+        } else {
+            (
+                Location::Whole,
+                format!(
+                    "{} but no 'f' (face) lines: no triangles",
+                    count_of(self.positions.len(), "vertex")
+                ),
+            )
+        };
+        Error::parse(self.path, location, msg)
+    }
+
     fn line(&mut self, n: usize, raw: &[u8]) -> Result<()> {
         // Comments may hold anything; only the part before `#` must be text.
         let raw = match raw.iter().position(|&b| b == b'#') {
             Some(i) => &raw[..i],
             None => raw,
         };
+        if self.binary_line.is_none() && (raw.contains(&0) || std::str::from_utf8(raw).is_err()) {
+            self.binary_line = Some(n);
+        }
         let text = match std::str::from_utf8(raw) {
             Ok(t) => std::borrow::Cow::Borrowed(t),
             Err(_) => {
@@ -358,6 +414,26 @@ mod tests {
         let e = err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n");
         assert!(e.contains("(1 normal defined so far)"), "{e}");
         assert!(!e.contains("vertexs") && !e.contains("normals"), "{e}");
+    }
+
+    /// A file that gives no face says what it holds instead, where it was found out.
+    #[test]
+    fn no_faces_says_what_the_file_is() {
+        let png = b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0\0\x10";
+        let e = err(png);
+        assert!(
+            e.contains("bad.obj:line 1") && e.contains("binary data") && e.contains("a PNG image"),
+            "{e}"
+        );
+        let e = err(b"# comment\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
+        assert!(e.contains("3 vertices but no 'f' (face) lines"), "{e}");
+        let e = err(b"ply\nformat ascii 1.0\nend_header\n");
+        assert!(
+            e.contains("no 'v' (vertex) or 'f' (face) lines") && e.contains("a PLY mesh"),
+            "{e}"
+        );
+        // Binary bytes in a comment or an ignored line do not matter when the faces are there.
+        assert!(obj("# \u{0}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").is_ok());
     }
 
     #[test]

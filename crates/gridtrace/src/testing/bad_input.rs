@@ -46,6 +46,8 @@ fn tri_f32() -> Vec<u8> {
 fn obj_cases() -> Vec<BadFile> {
     vec![
         bad("empty.obj", b"", ""),
+        // A PNG renamed .obj: binary from its first line.
+        bad("image.obj", b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR", "line 1"),
         bad("truncated.obj", b"v 0 0 0\nv 1 0 0\nv 0 1", "line 3"),
         bad("index-range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "line 4"),
         bad("index-zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "line 4"),
