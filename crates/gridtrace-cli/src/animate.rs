@@ -105,9 +105,10 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             v.sort_by(f64::total_cmp);
             v[v.len() / 2]
         };
+        // Named as the table numbers the frames (from 0), the last included.
         println!(
-            "median of frames 1..{}: geometry {:.2} ms, build {:.2} ms, trace {:.2} ms [{} {} {}x{}]",
-            rows.len(),
+            "median of frames 1-{}: geometry {:.2} ms, build {:.2} ms, trace {:.2} ms [{} {} {}x{}]",
+            rows.len() - 1,
             median(0),
             median(1),
             median(2),

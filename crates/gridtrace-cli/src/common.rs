@@ -1,6 +1,6 @@
 //! Options shared by several commands: choosing the scene and the grid.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
@@ -41,6 +41,21 @@ impl AccelArgs {
             .clone()
             .with_params(&self.accel_params)
             .map_err(gridtrace::Error::InvalidInput)
+    }
+
+    /// `--accel` with `--accel-params` read as the structure will read them when it builds
+    /// (`Structure::check_params`), before any work: `main` makes an error here a usage error
+    /// (exit status 2), as clap's own are, not a failure of the run.
+    pub fn check(&self) -> Result<(), String> {
+        let message = |e: gridtrace::Error| match e {
+            gridtrace::Error::InvalidInput(m) => m,
+            e => e.to_string(),
+        };
+        let spec = self.spec().map_err(message)?;
+        match spec.choice {
+            AccelChoice::Kind(kind) => gridtrace::accel::Structure::check_params(kind, &spec.params).map_err(message),
+            AccelChoice::Auto => Ok(()),
+        }
     }
 
     /// The traversal `--accel` names, or `auto`'s pick for `work` traced where `traced_on`
@@ -205,15 +220,69 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
+/// `--res`: WxH or N, each side from 1 to the tracers' largest (`MAX_IMAGE_SIDE`), refused
+/// here rather than after the scene is built.
 pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
+    use gridtrace::render::MAX_IMAGE_SIDE;
     let parts: Vec<&str> = s.split(['x', 'X']).collect();
     let nums: Result<Vec<u32>, _> = parts.iter().map(|p| p.trim().parse::<u32>()).collect();
-    match nums.as_deref() {
-        Ok([n]) if *n > 0 => Ok((*n, *n)),
-        Ok([w, h]) if *w > 0 && *h > 0 => Ok((*w, *h)),
-        Ok([_] | [_, _]) => Err(format!("image size must be positive in both directions, got '{s}'")),
-        _ => Err(format!("expected WxH or N (N x N) in pixels, got '{s}'")),
+    let (w, h) = match nums.as_deref() {
+        Ok([n]) if *n > 0 => (*n, *n),
+        Ok([w, h]) if *w > 0 && *h > 0 => (*w, *h),
+        Ok([_] | [_, _]) => return Err(format!("image size must be positive in both directions, got '{s}'")),
+        _ => return Err(format!("expected WxH or N (N x N) in pixels, got '{s}'")),
+    };
+    if w.max(h) > MAX_IMAGE_SIDE {
+        return Err(format!(
+            "image size {w}x{h} is too large: at most {MAX_IMAGE_SIDE} pixels a side ({MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE})"
+        ));
     }
+    Ok((w, h))
+}
+
+/// An output file's folder exists and the path is not a folder itself: checked when the
+/// arguments are read, so a run of minutes is not lost to a typo at the end. The message leaves
+/// the path to the caller (clap names the value it refuses).
+pub fn check_output_path(path: &Path) -> Result<(), String> {
+    if path.is_dir() {
+        return Err("is a directory, not a file".into());
+    }
+    let folder = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !folder.is_dir() {
+        return Err(format!(
+            "the folder {} does not exist (make it first)",
+            folder.display()
+        ));
+    }
+    Ok(())
+}
+
+/// `-o`: an image whose format its extension names (`.png`, or another this build encodes, such
+/// as `.jpg`), in a folder that exists; both checked before any work.
+pub fn parse_image_output(s: &str) -> Result<PathBuf, String> {
+    let path = PathBuf::from(s);
+    check_output_path(&path)?;
+    if !image::ImageFormat::from_path(&path).is_ok_and(|f| f.writing_enabled()) {
+        let formats: Vec<&str> = image::ImageFormat::all()
+            .filter(|f| f.writing_enabled())
+            .filter_map(|f| f.extensions_str().first().copied())
+            .collect();
+        return Err(format!(
+            "the image format follows the extension; this build writes .{}",
+            formats.join(", .")
+        ));
+    }
+    Ok(path)
+}
+
+/// An output file (not an image: `rays --hits-out`) in a folder that exists.
+pub fn parse_output(s: &str) -> Result<PathBuf, String> {
+    let path = PathBuf::from(s);
+    check_output_path(&path)?;
+    Ok(path)
 }
 
 pub use gridtrace::util::fmt_bytes;

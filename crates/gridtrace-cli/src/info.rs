@@ -14,7 +14,7 @@ pub struct InfoArgs {
     #[arg(long)]
     with_floor: bool,
     #[command(flatten)]
-    accel_args: AccelArgs,
+    pub(crate) accel_args: AccelArgs,
 }
 
 pub fn run(a: InfoArgs) -> gridtrace::Result<()> {

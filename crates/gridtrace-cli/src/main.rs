@@ -9,7 +9,7 @@ mod rays;
 mod render;
 mod view;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 #[derive(Parser)]
 #[command(
@@ -23,7 +23,7 @@ struct Cli {
     command: Command,
     /// CPU threads for the work (ray batches, renders, builds); default: one per core. To
     /// measure scaling, or to share the machine.
-    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=gridtrace::util::MAX_THREADS as i64))]
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=gridtrace::util::MAX_THREADS as i64), allow_hyphen_values = true)]
     threads: Option<u16>,
 }
 
@@ -115,6 +115,21 @@ fn main() {
     restore_sigpipe();
     ensure_runtime_dir();
     let cli = Cli::parse();
+    // Build parameters are read by each structure (the library's registry knows no keys), so
+    // clap cannot check them; they are checked here, before any work, and refused as clap
+    // refuses other bad arguments: its message form and exit status 2.
+    let accel = match &cli.command {
+        Command::Render(a) => Some(&a.accel_args),
+        Command::Info(a) => Some(&a.accel_args),
+        Command::Rays(a) => Some(&a.accel_args),
+        Command::View(a) => Some(&a.accel_args),
+        Command::Bench(_) => None,
+    };
+    if let Some(Err(e)) = accel.map(|a| a.check()) {
+        Cli::command()
+            .error(clap::error::ErrorKind::ValueValidation, format!("--accel: {e}"))
+            .exit();
+    }
     if let Some(n) = cli.threads {
         // Before any parallel work: the global pool is built once, on first use.
         if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.into()).build_global() {

@@ -6,7 +6,8 @@
 //! u32` (8 bytes: a GPU then brings back 8 bytes a ray instead of 16); with `--occluded`, one
 //! byte per ray (1 = occluded; the GPU brings back one bit). Both files are streamed in
 //! chunks, so memory stays bounded. On the GPU the rays go up as they are in the file, 24
-//! bytes each; the bytes each way are printed, also per ray.
+//! bytes each; the bytes each way are printed, also per ray. `--make camera|random` writes a
+//! ray file for a mesh instead (the auto-framed view's eye rays, or incoherent ones).
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -18,13 +19,14 @@ use gridtrace::query::{CHUNK, QueryOptions, TraceMesh};
 use gridtrace::{Error, Ray};
 use rayon::prelude::*;
 
-use crate::common::{AccelArgs, Backend, GpuFigures, GpuVariantArgs, backend_parser, print_gpu_figures};
+use crate::common::{AccelArgs, Backend, GpuFigures, GpuVariantArgs, backend_parser, parse_output, print_gpu_figures};
 
 #[derive(Args)]
 pub struct RaysArgs {
     /// The mesh (OBJ, PLY, glTF/GLB, STL, OFF).
     mesh: PathBuf,
-    /// Ray file: float32 records ox oy oz dx dy dz.
+    /// Ray file: little-endian float32 records ox oy oz dx dy dz (24 bytes a ray); --make
+    /// writes one.
     #[arg(long)]
     rays: PathBuf,
     /// Hits count only for t > TMIN (t in units of each ray's direction length).
@@ -46,19 +48,78 @@ pub struct RaysArgs {
     #[command(flatten)]
     gpu: GpuVariantArgs,
     #[command(flatten)]
-    accel_args: AccelArgs,
+    pub(crate) accel_args: AccelArgs,
     /// Trace every chunk of rays this many times in a row (the answers of the last are
     /// written) and report the median pass: warm figures, as `embree_rays --reps` reports
     /// its own (a single pass of a small file also times the threads' start and the first
     /// touch of fresh memory).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100), allow_hyphen_values = true)]
     reps: u32,
-    /// Output file.
-    #[arg(long)]
-    hits_out: PathBuf,
+    /// Output file (its folder must exist; checked before any work).
+    #[arg(long, value_parser = parse_output, required_unless_present = "make")]
+    hits_out: Option<PathBuf>,
+    /// Write a ray file into --rays instead of tracing one: `camera`, the eye rays of the
+    /// mesh's auto-framed view (as `render --mesh` frames it), row by row of a square image of
+    /// at least --count pixels; or `random`, incoherent rays from a sphere of one bounding-box
+    /// diagonal around the mesh aimed at random points of its box (the benchmarks' ray queries).
+    #[arg(long, value_enum, value_name = "KIND")]
+    make: Option<MakeRays>,
+    /// With --make: how many rays.
+    #[arg(long, default_value_t = 1_000_000, requires = "make", allow_hyphen_values = true,
+          value_parser = clap::value_parser!(u32).range(1..=MAX_MADE_RAYS))]
+    count: u32,
+}
+
+/// The ray sets `--make` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MakeRays {
+    Camera,
+    Random,
+}
+
+/// `--count`'s bound: the rays are made in memory (24 bytes each, 0.24 GB at the bound) before
+/// they are written.
+const MAX_MADE_RAYS: i64 = 10_000_000;
+
+/// `--make`: a ray file of `--count` rays of the kind asked for, at `--rays`.
+fn make_rays(a: &RaysArgs, kind: MakeRays) -> gridtrace::Result<()> {
+    crate::common::check_output_path(&a.rays)
+        .map_err(|e| Error::InvalidInput(format!("--rays {}: {e}", a.rays.display())))?;
+    let mesh = gridtrace::io::load_mesh(&a.mesh)?;
+    let n = a.count as usize;
+    let rays: Vec<[f32; 6]> = match kind {
+        MakeRays::Camera => gridtrace_bench::hardware::camera_rays(&mesh, n)
+            .iter()
+            .map(|r| [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z])
+            .collect(),
+        MakeRays::Random => {
+            let bounds = gridtrace::accel::Aabb::from_points(&mesh.positions);
+            let (o, d) = gridtrace_bench::query_study::incoherent_rays(bounds, n, 7);
+            o.iter()
+                .zip(&d)
+                .map(|(o, d)| [o[0], o[1], o[2], d[0], d[1], d[2]])
+                .collect()
+        }
+    };
+    let bytes: Vec<u8> = rays.iter().flatten().flat_map(|f| f.to_le_bytes()).collect();
+    std::fs::write(&a.rays, bytes).map_err(|e| Error::io(&a.rays, e))?;
+    let what = match kind {
+        MakeRays::Camera => "camera",
+        MakeRays::Random => "random",
+    };
+    println!(
+        "wrote   {}: {n} {what} rays of {}, 24 bytes each (ox oy oz dx dy dz, little-endian float32)",
+        a.rays.display(),
+        a.mesh.display()
+    );
+    Ok(())
 }
 
 pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
+    if let Some(kind) = a.make {
+        return make_rays(&a, kind);
+    }
+    let hits_out = a.hits_out.clone().expect("clap requires --hits-out without --make");
     // Checked here, before any work: the CPU query path does not check the interval itself, and
     // a negative --tmin would silently report hits behind the origins.
     if a.tmin.is_nan() || a.tmax.is_nan() || a.tmin < 0.0 || a.tmin > a.tmax {
@@ -67,7 +128,16 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
             a.tmin, a.tmax
         )));
     }
-    let size = std::fs::metadata(&a.rays).map_err(|e| Error::io(&a.rays, e))?.len();
+    let meta = std::fs::metadata(&a.rays).map_err(|e| Error::io(&a.rays, e))?;
+    // As `render` says of a folder given for a mesh (a folder's size, 4096, means nothing here).
+    if meta.is_dir() {
+        return Err(Error::parse(
+            &a.rays,
+            gridtrace::Location::Whole,
+            "is a directory, not a ray file (float32 records ox oy oz dx dy dz)",
+        ));
+    }
+    let size = meta.len();
     if size % 24 != 0 {
         return Err(Error::parse(
             &a.rays,
@@ -95,8 +165,8 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     println!("accel   {}", mesh.accel().name());
     println!("backend {}", mesh.device());
     let mut input = BufReader::new(File::open(&a.rays).map_err(|e| Error::io(&a.rays, e))?);
-    let mut output = BufWriter::new(File::create(&a.hits_out).map_err(|e| Error::io(&a.hits_out, e))?);
-    let write_err = |e| Error::io(&a.hits_out, e);
+    let mut output = BufWriter::new(File::create(&hits_out).map_err(|e| Error::io(&hits_out, e))?);
+    let write_err = |e| Error::io(&hits_out, e);
     let mut buf = vec![0u8; CHUNK * 24];
     let (mut done, mut hits) = (0u64, 0u64);
     // Each pass's tracing time, summed over the file's chunks.
@@ -198,7 +268,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     if gpu.round_trips > 0 {
         print_gpu_batches(&gpu);
     }
-    println!("wrote   {}", a.hits_out.display());
+    println!("wrote   {}", hits_out.display());
     Ok(())
 }
 

@@ -12,8 +12,8 @@ use gridtrace::{FramesOptions, FramesStats, Mode, PixelFormat, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::common::{
-    AccelArgs, Backend, GpuFigures, GpuVariantArgs, SceneArgs, backend_parser, mode_parser, parse_res, parse_vec3,
-    print_gpu_figures,
+    AccelArgs, Backend, GpuFigures, GpuVariantArgs, SceneArgs, backend_parser, mode_parser, parse_image_output,
+    parse_res, parse_vec3, print_gpu_figures,
 };
 
 // Every number and x,y,z option takes `allow_hyphen_values`: without it clap reads
@@ -60,12 +60,12 @@ pub struct RenderArgs {
     stats: bool,
     /// Frames to render (the first is written): the first frame's time and the median and best
     /// of the rest are reported, so the figure compares with `bench` (warm, not one cold frame).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100_000), allow_hyphen_values = true)]
     pub frames: u32,
     /// With --frames: frames the GPU may have in flight. 2 (the default) prepares and submits
     /// frame N+1 before it reads back frame N; 1 traces them one by one. The CPU makes frames one
     /// by one (each takes every core).
-    #[arg(long, default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT, value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize))]
+    #[arg(long, default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT, value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize), allow_hyphen_values = true)]
     pub in_flight: usize,
     /// Move the camera along a circle around its target over the frames (about the up axis,
     /// one turn in all): the paper's dynamic camera.
@@ -78,13 +78,14 @@ pub struct RenderArgs {
     #[arg(long)]
     pub animate: bool,
     /// With --animate: frames per second of animation time.
-    #[arg(long, default_value_t = 30.0, requires = "animate")]
+    #[arg(long, default_value_t = 30.0, requires = "animate", allow_hyphen_values = true)]
     pub fps: f32,
     /// With --animate: also write every frame as DIR/frame_0000.png, ...
     #[arg(long, value_name = "DIR", requires = "animate")]
     pub sequence: Option<PathBuf>,
-    /// Output PNG.
-    #[arg(short, long, default_value = "gridtrace.png")]
+    /// Output image: PNG, or JPEG for a .jpg or .jpeg name (the extension names the format).
+    /// Checked before any work, with the folder it goes into.
+    #[arg(short, long, default_value = "gridtrace.png", value_parser = parse_image_output)]
     pub output: PathBuf,
 }
 

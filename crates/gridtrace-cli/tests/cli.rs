@@ -466,6 +466,53 @@ fn negative_values_reach_every_number_and_vector_option() {
             owned(&["bench", "--quick", "--res", "-64"]),
             Some("invalid value '-64' for '--res"),
         ),
+        // Counts below their least: the value's own error, never clap's tip to write `-- -5`
+        // (which makes -5 the scene file).
+        (
+            "render --frames",
+            render(&["--frames", "-5"]),
+            Some("invalid value '-5' for '--frames <FRAMES>': -5 is not in 1..=100000"),
+        ),
+        (
+            "render --in-flight",
+            render(&["--frames", "2", "--in-flight", "-1"]),
+            Some("invalid value '-1' for '--in-flight"),
+        ),
+        (
+            "render --fps",
+            owned(&["render", "--animate", "--fps", "-30", "-o", png]),
+            Some("--fps must be positive, got -30"),
+        ),
+        (
+            "view --frames",
+            owned(&["view", "--headless", "--frames", "-5"]),
+            Some("invalid value '-5' for '--frames"),
+        ),
+        (
+            "view --scale",
+            owned(&["view", "--scale", "-1"]),
+            Some("invalid value '-1' for '--scale"),
+        ),
+        (
+            "view --budget-ms",
+            owned(&["view", "--budget-ms", "-30"]),
+            Some("--budget-ms must be positive, got -30"),
+        ),
+        (
+            "--threads",
+            owned(&["--threads", "-1", "info"]),
+            Some("invalid value '-1' for '--threads"),
+        ),
+        (
+            "rays --reps",
+            owned(&["rays", obj, "--rays", rays, "--hits-out", hits, "--reps", "-2"]),
+            Some("invalid value '-2' for '--reps"),
+        ),
+        (
+            "rays --count",
+            owned(&["rays", obj, "--rays", rays, "--make", "random", "--count", "-2"]),
+            Some("invalid value '-2' for '--count"),
+        ),
     ];
     let mut failures = Vec::new();
     for (what, args, want_err) in cases {
@@ -961,4 +1008,245 @@ fn rays_on_the_gpu_answer_as_on_the_cpu_and_report_the_batch() {
             );
         }
     }
+}
+
+/// Runs the `gridtrace` binary; its exit status and its stdout then stderr.
+fn gridtrace_status(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
+        .args(args)
+        .output()
+        .expect("run gridtrace");
+    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.code(), text)
+}
+
+/// What a new user runs into, refused before any work and in words that say what is wrong:
+/// argument errors exit 2 (clap's status) without a line of work printed ("scene ..."), a
+/// renamed image says it is not OBJ text, a folder given for rays says it is a folder.
+#[test]
+fn mistakes_are_refused_before_any_work_in_plain_words() {
+    let dir = scratch("mistakes");
+    let png = dir.join("n.png");
+    let png = png.to_str().unwrap();
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--scene", "knot-box", "--backend", "cpu"];
+        args.extend_from_slice(extra);
+        gridtrace_status(&args)
+    };
+    let missing = dir.join("no-such-folder").join("x.png");
+    let hits = dir.join("hits.bin");
+    // (what, arguments, the words the error must hold)
+    let cases: Vec<(&str, (Option<i32>, String), &str)> = vec![
+        (
+            "a size above the tracers' largest",
+            render(&["--res", "100000x100000", "-o", png]),
+            "image size 100000x100000 is too large: at most 16384 pixels a side",
+        ),
+        (
+            "-o into a missing folder",
+            render(&["-o", missing.to_str().unwrap()]),
+            "/no-such-folder does not exist (make it first)",
+        ),
+        (
+            "-o a folder",
+            render(&["-o", dir.to_str().unwrap()]),
+            "is a directory, not a file",
+        ),
+        (
+            "-o a format no encoder writes",
+            render(&["-o", dir.join("x.tiff").to_str().unwrap()]),
+            "x.tiff' for '--output <OUTPUT>': the image format follows the extension; this build writes .",
+        ),
+        (
+            "--frames below 1",
+            render(&["--frames", "-5", "-o", png]),
+            "invalid value '-5' for '--frames <FRAMES>': -5 is not in 1..=100000",
+        ),
+        (
+            "a bad grid parameter",
+            render(&["--accel", "grid:res=0x1x1", "-o", png]),
+            "accel parameter 'res=0x1x1' of 'grid': grid resolution must be",
+        ),
+        (
+            "a key the structure does not read",
+            render(&["--accel", "bvh", "--accel-params", "res=4", "-o", png]),
+            "'res=4': unknown key ('bvh' takes no parameters)",
+        ),
+        (
+            "rays --hits-out into a missing folder",
+            gridtrace_status(&[
+                "rays",
+                "x.obj",
+                "--rays",
+                "r.bin",
+                "--hits-out",
+                missing.to_str().unwrap(),
+            ]),
+            "/no-such-folder does not exist (make it first)",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (what, (code, text), want) in cases {
+        if code != Some(2) || !text.contains(want) || text.contains("scene knot-box") || text.contains("-- -") {
+            failures.push(format!("{what}: want exit 2 and '{want}', got {code:?}:\n{text}"));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+
+    // A PNG renamed .obj: not OBJ text, where that was seen, and what it looks like.
+    let fake = dir.join("image.obj");
+    std::fs::write(&fake, b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0\0\x10\0\0\0\x10\x08\x02").unwrap();
+    let (code, text) = gridtrace_status(&["info", fake.to_str().unwrap()]);
+    assert!(
+        code == Some(1)
+            && text.contains("image.obj:line 1: not an OBJ text file: binary data")
+            && text.contains("it starts as a PNG image does"),
+        "{code:?}: {text}"
+    );
+    // A folder given as the ray file: "is a directory", as render says of a folder for a mesh
+    // (its size, 4096 bytes, is no count of rays).
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, TET_OBJ).unwrap();
+    let (code, text) = gridtrace_status(&[
+        "rays",
+        obj.to_str().unwrap(),
+        "--rays",
+        dir.to_str().unwrap(),
+        "--hits-out",
+        hits.to_str().unwrap(),
+    ]);
+    assert!(
+        code == Some(1) && text.contains("is a directory, not a ray file") && !text.contains("4096"),
+        "{code:?}: {text}"
+    );
+    // `-o o.jpg` writes a JPEG, as --help says it does.
+    let jpg = dir.join("o.jpg");
+    let (code, text) = render(&["--res", "8", "-o", jpg.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{text}");
+    assert_eq!(std::fs::read(&jpg).unwrap()[..3], [0xFF, 0xD8, 0xFF], "a JPEG");
+    let (_, help) = gridtrace_status(&["render", "--help"]);
+    assert!(
+        help.contains("Output image: PNG, or JPEG for a .jpg or .jpeg name"),
+        "{help}"
+    );
+}
+
+/// `rays --make` writes ray files the `rays` command reads: `random` from a sphere of one
+/// bounding-box diagonal around the mesh, aimed into its box; `camera` from one eye (the
+/// auto-framed view's), onto the mesh.
+#[test]
+fn rays_make_writes_ray_files() {
+    let dir = scratch("make-rays");
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, TET_OBJ).unwrap();
+    let obj = obj.to_str().unwrap();
+    let read = |path: &std::path::Path| -> Vec<[f32; 6]> {
+        let bytes = std::fs::read(path).unwrap();
+        assert_eq!(bytes.len() % 24, 0);
+        bytes
+            .chunks(24)
+            .map(|r| std::array::from_fn(|k| f32::from_le_bytes(r[4 * k..4 * k + 4].try_into().unwrap())))
+            .collect()
+    };
+    // The tetrahedron's box is [0, 1]^3: centre 0.5, diagonal sqrt(3).
+    let random = dir.join("random.bin");
+    let (code, text) = gridtrace_status(&[
+        "rays",
+        obj,
+        "--make",
+        "random",
+        "--count",
+        "500",
+        "--rays",
+        random.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("500 random rays"), "{text}");
+    let rays = read(&random);
+    assert_eq!(rays.len(), 500);
+    for r in &rays {
+        let o = [r[0] - 0.5, r[1] - 0.5, r[2] - 0.5];
+        let dist = (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt();
+        assert!((dist - 3f32.sqrt()).abs() < 1e-4, "origin {r:?} at {dist}");
+        // Aimed at a point of the box: the ray's line passes through it (slab test).
+        let (mut t0, mut t1) = (f32::NEG_INFINITY, f32::INFINITY);
+        for k in 0..3 {
+            let (a, b) = ((0.0 - r[k]) / r[k + 3], (1.0 - r[k]) / r[k + 3]);
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+        assert!(t0 <= t1 + 1e-5 && t1 > 0.0, "ray {r:?} misses the box");
+    }
+    let camera = dir.join("camera.bin");
+    let (code, text) = gridtrace_status(&[
+        "rays",
+        obj,
+        "--make",
+        "camera",
+        "--count",
+        "64",
+        "--rays",
+        camera.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{text}");
+    let cam = read(&camera);
+    assert_eq!(cam.len(), 64);
+    assert!(cam.iter().all(|r| r[..3] == cam[0][..3]), "one eye");
+    // Both files traced: camera rays hit the mesh they frame, some random rays hit and some
+    // miss (the box's far corner is empty).
+    let trace = |rays: &std::path::Path| {
+        let out = rays.with_extension("hits");
+        let (code, text) = gridtrace_status(&[
+            "rays",
+            obj,
+            "--backend",
+            "cpu",
+            "--rays",
+            rays.to_str().unwrap(),
+            "--hits-out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, Some(0), "{text}");
+        let bytes = std::fs::read(out).unwrap();
+        bytes
+            .chunks(16)
+            .map(|h| u32::from_le_bytes(h[4..8].try_into().unwrap()) != u32::MAX)
+            .collect::<Vec<bool>>()
+    };
+    let hit = trace(&camera);
+    assert!(hit.iter().any(|h| *h), "no camera ray hits the mesh it frames");
+    let hit = trace(&random);
+    let n = hit.iter().filter(|h| **h).count();
+    assert!(n > 0 && n < 500, "{n} of 500 random rays hit");
+}
+
+/// `render --animate` names the frames its median covers as its table numbers them (from 0).
+#[test]
+fn animate_median_names_the_table_frames() {
+    let dir = scratch("animate");
+    let (code, text) = gridtrace_status(&[
+        "render",
+        "--animate",
+        "--scene",
+        "bouncing-spheres",
+        "--frames",
+        "3",
+        "--res",
+        "8",
+        "--backend",
+        "cpu",
+        "--accel",
+        "bvh",
+        "-o",
+        dir.join("a.png").to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{text}");
+    let frames: Vec<u32> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("frame "))
+        .skip(1)
+        .map_while(|l| l.split_whitespace().next()?.parse().ok())
+        .collect();
+    assert_eq!(frames, [0, 1, 2], "{text}");
+    assert!(text.contains("median of frames 1-2:"), "{text}");
 }

@@ -118,6 +118,10 @@ impl Ablation {
     }
 }
 
+/// The largest image side, in pixels, the tracers take (`RenderOptions::validate`); front ends
+/// refuse larger sizes before any work with it (`gridtrace render --res`).
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
 impl RenderOptions {
     pub fn new(width: u32, height: u32, mode: Mode) -> Self {
         RenderOptions {
@@ -152,9 +156,9 @@ impl RenderOptions {
     }
 
     pub fn validate(&self) -> crate::Result<()> {
-        if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
+        if self.width == 0 || self.height == 0 || self.width > MAX_IMAGE_SIDE || self.height > MAX_IMAGE_SIDE {
             return Err(crate::Error::InvalidInput(format!(
-                "image size {}x{} must be between 1x1 and 16384x16384",
+                "image size {}x{} must be between 1x1 and {MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE}",
                 self.width, self.height
             )));
         }

@@ -32,7 +32,7 @@ use crate::{Machine, scenes};
 
 pub use builds::BuildRow;
 pub use frames::FrameRow;
-pub use rays::RayRow;
+pub use rays::{RayRow, camera_rays};
 
 /// What one suite run covers.
 #[derive(Debug, Clone, Serialize)]

@@ -54,7 +54,7 @@ pub struct ViewArgs {
     #[command(flatten)]
     scene: SceneArgs,
     #[command(flatten)]
-    accel_args: AccelArgs,
+    pub(crate) accel_args: AccelArgs,
     /// The first mode: cast, shadow, trace or heat (keys 1-4 switch).
     #[arg(long, default_value = "shadow", value_parser = mode_parser())]
     mode: Mode,
@@ -68,13 +68,15 @@ pub struct ViewArgs {
     gpu: GpuVariantArgs,
     /// Trace 1/2^N of the window's pixels a side (0-3; keys [ and ] change it): speed for
     /// sharpness.
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=MAX_SCALE_STEPS as i64))]
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=MAX_SCALE_STEPS as i64), allow_hyphen_values = true)]
     scale: u32,
     /// Milliseconds of tracing per presented frame: a frame that takes longer is traced in
     /// bands over several, with a coarse preview first, and input is handled between them.
-    #[arg(long, default_value_t = 30.0, value_name = "MS")]
+    #[arg(long, default_value_t = 30.0, value_name = "MS", allow_hyphen_values = true)]
     budget_ms: f64,
-    /// Replay actions from this file, then exit (see `gridtrace view` in the README).
+    /// Replay actions from this file, one a line (key 2, drag DX DY, zoom N, screenshot F.png,
+    /// ...: the README's "The viewer"; an example in examples/view-script.txt), then exit. The
+    /// window opens as without a script: it needs a display (or xvfb-run -a).
     #[arg(long, conflicts_with = "headless")]
     script: Option<PathBuf>,
     /// No window: trace --frames frames along a camera orbit with the lights circling the other
@@ -82,7 +84,7 @@ pub struct ViewArgs {
     #[arg(long)]
     headless: bool,
     /// With --headless: frames to trace.
-    #[arg(long, default_value_t = 60, requires = "headless", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    #[arg(long, default_value_t = 60, requires = "headless", value_parser = clap::value_parser!(u32).range(1..=100_000), allow_hyphen_values = true)]
     frames: u32,
     /// With --headless: bring every GPU frame to the host (as `render` does) instead of leaving
     /// it on the device as the window presents it.
@@ -91,7 +93,7 @@ pub struct ViewArgs {
     /// With --headless: frames the GPU may have in flight. 2 (the default) prepares and
     /// submits frame N+1 before it waits for frame N; 1 traces them one by one.
     #[arg(long, requires = "headless", default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT,
-          value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize))]
+          value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize), allow_hyphen_values = true)]
     in_flight: usize,
     /// With --headless: move the camera round its orbit (one turn over the frames); without
     /// it the view stays and only the lights move.
@@ -100,7 +102,7 @@ pub struct ViewArgs {
 }
 
 /// The largest image the tracers take per side (`RenderOptions::validate`).
-const MAX_SIDE: u32 = 16384;
+const MAX_SIDE: u32 = gridtrace::render::MAX_IMAGE_SIDE;
 /// Animation time per presented frame in scripts (wall time otherwise), so scripted runs of
 /// animated scenes repeat exactly.
 const SCRIPT_FRAME_S: f32 = 1.0 / 30.0;

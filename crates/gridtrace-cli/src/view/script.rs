@@ -1,5 +1,7 @@
 //! `gridtrace view --script FILE`: timed input replayed from a file, one action a line, for tests
-//! and demos. Each line becomes the `Action` the same input from a person would.
+//! and demos. Each line becomes the `Action` the same input from a person would. The window
+//! opens as without a script, so it needs a display (or `xvfb-run`). An example:
+//! examples/view-script.txt; the format is also in the README ("The viewer").
 //!
 //! ```text
 //! # comments and blank lines are ignored
@@ -125,6 +127,24 @@ pub fn parse(text: &str) -> Result<Vec<Action>, (usize, String)> {
 mod tests {
     use super::*;
     use gridtrace::Mode;
+
+    /// The example script the README runs (examples/view-script.txt) parses, and shows what
+    /// its comments say: two screenshots, a capture, the overlay's text, then quit.
+    #[test]
+    fn the_shipped_example_parses() {
+        let actions = parse(include_str!("../../../../examples/view-script.txt")).unwrap();
+        for want in [
+            Action::SetMode(Mode::Shadow),
+            Action::SetMode(Mode::Trace),
+            Action::Screenshot("view-shadow.png".into()),
+            Action::Screenshot("view-trace.png".into()),
+            Action::Capture("view-window.png".into()),
+            Action::OverlayText("view-overlay.txt".into()),
+        ] {
+            assert!(actions.contains(&want), "{want:?} missing from {actions:?}");
+        }
+        assert_eq!(actions.last(), Some(&Action::Quit));
+    }
 
     #[test]
     fn parses_and_names_bad_lines() {

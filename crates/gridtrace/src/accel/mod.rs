@@ -91,6 +91,18 @@ impl Structure {
         Ok(s)
     }
 
+    /// Reads `params` as the structure `kind` walks reads them when it builds (the same
+    /// functions), without building: front ends refuse a bad key or value with their other
+    /// argument errors, before a mesh is loaded (`gridtrace render --accel grid:res=0`).
+    pub fn check_params(kind: AccelKind, params: &AccelParams) -> Result<()> {
+        match kind.structure_name() {
+            "grid" => Grid::resolution_from(params).map(drop),
+            "irregular" => IrregularParams::from_params(params).map(drop),
+            name @ ("bvh" | "brute" | "hwrt") => params.read(name, &[], |_, _| Ok(())),
+            other => unreachable!("registry names structure '{other}', which Structure::check_params lacks"),
+        }
+    }
+
     fn build_structure(kind: AccelKind, tris: &[TriAccel], params: &AccelParams) -> Result<Structure> {
         Ok(match kind.structure_name() {
             "grid" => Structure::Grid(AccelStructure::build(tris, params)?),

@@ -18,15 +18,22 @@ impl From<Resolution> for AccelParams {
     }
 }
 
-impl AccelStructure for Grid {
-    /// One key: `res`, the cell counts (`Resolution`'s forms: auto, auto:LAMBDA, N, AxBxC).
-    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Grid> {
+impl Grid {
+    /// The grid's one key of `params`, `res` (`Resolution`'s forms); the default without it.
+    pub fn resolution_from(params: &AccelParams) -> Result<Resolution> {
         let mut resolution = Resolution::default();
         params.read("grid", &["res"], |_, v| {
             resolution = v.parse()?;
             Ok(())
         })?;
-        Grid::build(tris, resolution)
+        Ok(resolution)
+    }
+}
+
+impl AccelStructure for Grid {
+    /// One key: `res`, the cell counts (`Resolution`'s forms: auto, auto:LAMBDA, N, AxBxC).
+    fn build(tris: &[TriAccel], params: &AccelParams) -> Result<Grid> {
+        Grid::build(tris, Grid::resolution_from(params)?)
     }
 
     fn params(&self) -> AccelParams {
