@@ -7,7 +7,13 @@
 # 2.17's symbols whatever glibc the build machine has: no container. One abi3 wheel serves
 # CPython 3.9 and later.
 #
-#   scripts/build-wheel.sh [OUT_DIR]     default: target/wheels (or $CARGO_TARGET_DIR/wheels)
+#   scripts/build-wheel.sh [OUT_DIR]     default: target/wheels/manylinux2014-ARCH
+#                                        (ARCH: x86_64 or aarch64; under $CARGO_TARGET_DIR if set)
+#
+# The folder holds one wheel: an older build's gridtrace wheel for the same machine is removed,
+# so `pip install target/wheels/manylinux2014-x86_64/gridtrace-*.whl` names exactly one. (Not
+# target/wheels itself: `pip install ./crates/gridtrace-py` leaves its own linux_x86_64 wheel
+# there, maturin's build directory, and pip refuses two gridtrace wheels at once.)
 #
 # Needs Rust and python3. The build tools come from PyPI into .venv/ (made if missing) unless
 # they are there already: maturin and ziglang (zig, the linker). Prints the wheel's path and
@@ -16,11 +22,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
 target="${CARGO_TARGET_DIR:-$root/target}"
-out="${1:-$target/wheels}"
 
 # The oldest glibc the binaries may need: manylinux2014's.
 glibc=2.17
 arch=$(uname -m)
+out="${1:-$target/wheels/manylinux2014-$arch}"
 triple="$arch-unknown-linux-gnu"
 
 tmp=$(mktemp -d)
@@ -94,6 +100,12 @@ fi
 
 mkdir -p "$out"
 dest="$out/$(basename "$whl")"
+# One wheel per machine in the folder: older builds' (other versions) go.
+for old in "$out"/gridtrace-*_"$arch".whl; do
+    if [ "$old" != "$dest" ]; then
+        rm -f "$old"
+    fi
+done
 mv -f "$whl" "$dest"
 if [ -n "${WHEEL_PATH_FILE:-}" ]; then
     printf '%s\n' "$dest" >"$WHEEL_PATH_FILE"

@@ -19,13 +19,27 @@ case "$cargo_cli" in /*) ;; *) cargo_cli="$root/$cargo_cli" ;; esac
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-WHEEL_PATH_FILE="$tmp/wheel-path" ./scripts/build-wheel.sh "$tmp/wheels"
+# The folders as a user's target/ has them after `pip install ./crates/gridtrace-py` (maturin's
+# linux_x86_64 wheel in wheels/) and an older build (another version in the manylinux folder):
+# the README's `pip install` glob must still name one wheel, the new one.
+arch=$(uname -m)
+wheels="$tmp/wheels/manylinux2014-$arch"
+mkdir -p "$wheels"
+touch "$tmp/wheels/gridtrace-0.0.1-cp39-abi3-linux_$arch.whl"
+touch "$wheels/gridtrace-0.0.1-cp39-abi3-manylinux_2_17_$arch.manylinux2014_$arch.whl"
+WHEEL_PATH_FILE="$tmp/wheel-path" ./scripts/build-wheel.sh "$wheels"
 whl=$(cat "$tmp/wheel-path")
+shopt -s nullglob
+matched=("$wheels"/gridtrace-*.whl)
+shopt -u nullglob
+if [ "${#matched[@]}" -ne 1 ] || [ "${matched[0]}" != "$whl" ]; then
+    echo "test-wheel: the README's glob matches ${#matched[@]} wheels (${matched[*]}), want only $whl" >&2
+    exit 1
+fi
 
 # The platform tag: in the name, and earned (auditwheel reads every ELF file in the wheel, the
 # tool among them). auditwheel goes into .venv/ beside the build tools.
 glibc=2.17
-arch=$(uname -m)
 case "$(basename "$whl")" in
 *manylinux_2_17_"$arch"*) ;;
 *)
