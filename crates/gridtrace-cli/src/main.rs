@@ -119,16 +119,18 @@ fn main() {
     // clap cannot check them; they are checked here, before any work, and refused as clap
     // refuses other bad arguments: its message form and exit status 2.
     let accel = match &cli.command {
-        Command::Render(a) => Some(&a.accel_args),
-        Command::Info(a) => Some(&a.accel_args),
-        Command::Rays(a) => Some(&a.accel_args),
-        Command::View(a) => Some(&a.accel_args),
+        Command::Render(a) => Some(("render", &a.accel_args)),
+        Command::Info(a) => Some(("info", &a.accel_args)),
+        Command::Rays(a) => Some(("rays", &a.accel_args)),
+        Command::View(a) => Some(("view", &a.accel_args)),
         Command::Bench(_) => None,
     };
-    if let Some(Err(e)) = accel.map(|a| a.check()) {
-        Cli::command()
-            .error(clap::error::ErrorKind::ValueValidation, format!("--accel: {e}"))
-            .exit();
+    if let Some((name, Err(e))) = accel.map(|(name, a)| (name, a.check())) {
+        // The subcommand's own usage line under the message, as clap prints for its errors.
+        let mut cmd = Cli::command();
+        cmd.build();
+        let sub = cmd.find_subcommand_mut(name).expect("a subcommand of Cli");
+        sub.error(clap::error::ErrorKind::ValueValidation, e).exit();
     }
     if let Some(n) = cli.threads {
         // Before any parallel work: the global pool is built once, on first use.

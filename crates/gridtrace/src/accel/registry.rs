@@ -420,6 +420,40 @@ mod tests {
         }
     }
 
+    /// `Structure::check_params` (the CLI's check before any work) refuses exactly what a
+    /// build refuses, for every traversal: the same keys and values, good and bad.
+    #[test]
+    fn checking_parameters_agrees_with_building() {
+        use crate::accel::{Structure, TriAccel};
+        use glam::Vec3;
+        let tris = [TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y)];
+        let cases = [
+            "",
+            "res=4",
+            "res=2x3x4",
+            "res=auto:2",
+            "res=0x1x1",
+            "res=x",
+            "top=0.5,cell=2",
+            "top=-1",
+            "merge=a",
+            "alpha=1,expand=2",
+            "bogus=1",
+        ];
+        let mut refused = 0;
+        for k in AccelKind::ALL {
+            for case in cases {
+                let p: AccelParams = case.parse().unwrap();
+                let checked = Structure::check_params(k, &p).map_err(|e| e.to_string());
+                let built = Structure::build(k, &tris, &p).map(drop).map_err(|e| e.to_string());
+                assert_eq!(checked, built, "{k:?} '{case}'");
+                refused += checked.is_err() as usize;
+            }
+        }
+        // Both outcomes seen: every structure refuses "bogus=1" and takes "".
+        assert!(refused >= AccelKind::ALL.len() && refused < AccelKind::ALL.len() * cases.len());
+    }
+
     #[test]
     fn every_kind_has_one_entry_and_every_spelling_parses_to_it() {
         for k in AccelKind::ALL {

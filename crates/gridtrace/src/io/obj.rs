@@ -128,10 +128,12 @@ impl Parser<'_> {
                      with 'v X Y Z' and 'f I J K' lines)"
                 ),
             )
+        } else if data.iter().all(u8::is_ascii_whitespace) {
+            (Location::Whole, "empty file: no triangles".to_string())
         } else if self.positions.is_empty() {
             (
                 Location::Whole,
-                format!("no 'v' (vertex) or 'f' (face) lines: not a Wavefront OBJ mesh{looks}"),
+                format!("no 'v' (vertex) or 'f' (face) lines, so no triangles: not a Wavefront OBJ mesh{looks}"),
             )
         } else {
             (
@@ -432,6 +434,7 @@ mod tests {
             e.contains("no 'v' (vertex) or 'f' (face) lines") && e.contains("a PLY mesh"),
             "{e}"
         );
+        assert!(err(b" \n\n").contains("empty file: no triangles"));
         // Binary bytes in a comment or an ignored line do not matter when the faces are there.
         assert!(obj("# \u{0}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").is_ok());
     }
