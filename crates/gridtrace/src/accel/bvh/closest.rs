@@ -115,7 +115,7 @@ fn tri_box_near_mask(block: &TriAccel4, p: Vec3, dist_sq: f32) -> u32 {
     let mut scale = Vec4::ZERO;
     for a in 0..3 {
         let v0 = block.v0[a];
-        let (v1, v2) = (v0 + block.e1[a], v0 + block.e2[a]);
+        let (v1, v2) = (block.v1[a], block.v2[a]);
         let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
         let pa = Vec4::splat(p[a]);
         let d = (lo - pa).max(pa - hi).max(Vec4::ZERO);
