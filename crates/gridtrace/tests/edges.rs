@@ -283,3 +283,35 @@ fn gpu_edges_and_vertices_do_not_leak() {
     }
     assert!(total >= 700_000);
 }
+
+/// The near-miss family (`testing::near_miss_rays`) on the GPU, every structure with our own
+/// triangle test (`hwrt`'s is the driver's): no hit 1e-6 or more beside an edge head-on (1e-5
+/// grazing), a hit as close inside, and `t = 0` for a ray starting on the triangle. WGSL has
+/// no f64: this checks that its exact zeros (`edge_fn`) decide these as the CPU does.
+#[test]
+fn gpu_near_misses_miss_and_near_hits_hit() {
+    if std::env::var_os("GRIDTRACE_SKIP_GPU").is_some() {
+        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
+        return;
+    }
+    let (vertices, faces) = gridtrace::testing::soup_arrays(&[gridtrace::testing::unit_triangle()]);
+    let rays = gridtrace::testing::near_miss_rays();
+    let plain: Vec<Ray> = rays.iter().map(|m| m.ray).collect();
+    let ctx = gridtrace::gpu::GpuContext::new()
+        .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
+    let kinds: Vec<AccelKind> = gridtrace::testing::gpu_kinds(&ctx)
+        .into_iter()
+        .filter(|k| k.name() != "hwrt")
+        .collect();
+    assert!(kinds.len() >= 4, "{kinds:?}");
+    for kind in kinds {
+        let mesh = gridtrace::testing::gpu_mesh(&vertices, &faces, kind);
+        let hits = mesh.intersect_rays(&plain, 0.0, f32::INFINITY).unwrap();
+        for (m, h) in rays.iter().zip(&hits) {
+            assert_eq!(h.is_hit(), m.hits, "GPU {}: {m:?} got {h:?}", kind.name());
+            if let Some(t) = m.t {
+                assert_eq!(h.t, t, "GPU {}: {m:?}", kind.name());
+            }
+        }
+    }
+}

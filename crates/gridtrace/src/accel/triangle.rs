@@ -753,110 +753,32 @@ mod tests {
         );
     }
 
-    /// The unit right triangle in z = 0, its three edges as (a point at fraction 0, the edge's
-    /// direction, the in-plane normal pointing out of the triangle).
-    fn unit_triangle() -> (TriAccel, [(Vec3, Vec3, Vec3); 3]) {
-        let tri = TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y);
-        let h = std::f32::consts::FRAC_1_SQRT_2;
-        let edges = [
-            (Vec3::ZERO, Vec3::X, -Vec3::Y),
-            (Vec3::ZERO, Vec3::Y, -Vec3::X),
-            (Vec3::X, Vec3::new(-1.0, 1.0, 0.0), Vec3::new(h, h, 0.0)),
-        ];
-        (tri, edges)
-    }
-
-    /// Points beside the unit triangle's edges, `gap` outside (or inside, negative), at 19
-    /// fractions along each edge (not at its ends, where an inside point would be outside
-    /// the next edge).
-    fn beside_edges(gap: f32) -> Vec<(Vec3, Vec3)> {
-        let (_, edges) = unit_triangle();
-        let mut out = Vec::new();
-        for (start, along, normal) in edges {
-            for i in 1..20 {
-                out.push((start + along * (i as f32 / 20.0) + normal * gap, along));
-            }
-        }
-        out
-    }
-
-    /// Whether the scalar test and the four-lane test (a ray per lane) hit.
-    fn hits(tri: &TriAccel, origin: Vec3, dir: Vec3, t_min: f32) -> bool {
-        let scalar = tri.intersect(origin, dir, t_min, f32::INFINITY);
-        let four = TriAccel4::splat(tri).intersect(
-            &origin.to_array().map(Vec4::splat),
-            &dir.to_array().map(Vec4::splat),
-            t_min,
-            f32::INFINITY,
-        );
-        assert_eq!(scalar.is_some(), four.mask() == 0xf, "{origin} {dir}");
-        scalar.is_some()
-    }
-
-    /// No false hits: head-on rays (along the normal, from either side, 1 and 1e4 units away)
-    /// aimed at points outside an edge by 1e-6 or more miss; aimed inside by 1e-6 or more
-    /// they hit. The Möller-Trumbore test with its barycentric slack hit at 1e-6 from 1 unit
-    /// and up to 1e-3 from 1e4.
+    /// No false hits, no misses inside (`testing::near_miss_rays`: head-on rays 1e-6 or more
+    /// beside an edge from 1 and 1e4 units, grazing ones at 1e-3 rad 1e-5 or more beside), and
+    /// a ray starting on the triangle hits at `t = 0`, but not with `t_min` above 0: the scalar
+    /// test and the four lanes alike. Möller-Trumbore with its barycentric slack hit at 1e-6
+    /// outside from 1 unit, and up to 1e-3 from 1e4 or grazing.
     #[test]
-    fn head_on_rays_beside_an_edge_hit_only_inside() {
-        let (tri, _) = unit_triangle();
-        for gap in [1e-6, 3e-6, 1e-5, 1e-4, 1e-3] {
-            for away in [1.0, 1e4] {
-                for side in [1.0, -1.0] {
-                    for (target, _) in beside_edges(gap) {
-                        let origin = target + Vec3::Z * (side * away);
-                        assert!(
-                            !hits(&tri, origin, Vec3::Z * -side, 0.0),
-                            "gap {gap}, {away} away: {target}"
-                        );
-                    }
-                    for (target, _) in beside_edges(-gap) {
-                        let origin = target + Vec3::Z * (side * away);
-                        assert!(
-                            hits(&tri, origin, Vec3::Z * -side, 0.0),
-                            "inside {gap}, {away} away: {target}"
-                        );
-                    }
-                }
+    fn near_misses_miss_and_near_hits_hit() {
+        let tri = crate::testing::unit_triangle();
+        let rays = crate::testing::near_miss_rays();
+        for m in &rays {
+            let (o, d) = (m.ray.origin, m.ray.dir);
+            let scalar = tri.intersect(o, d, 0.0, f32::INFINITY);
+            let four = TriAccel4::splat(&tri).intersect(
+                &o.to_array().map(Vec4::splat),
+                &d.to_array().map(Vec4::splat),
+                0.0,
+                f32::INFINITY,
+            );
+            assert_eq!(scalar.is_some(), m.hits, "{m:?}: {scalar:?}");
+            assert_eq!(four.mask(), if m.hits { 0xf } else { 0 }, "{m:?}");
+            if let Some(t) = m.t {
+                assert_eq!(scalar.map(|h| h.t), Some(t), "{m:?}");
+                assert!(tri.intersect(o, d, 1e-30, f32::INFINITY).is_none(), "{m:?}");
             }
         }
-    }
-
-    /// Rays grazing the plane at 1e-3 rad, running along an edge (its direction in the plane
-    /// the edge's), aimed at points beside it: 1e-5 or more outside miss, 1e-5 or more inside
-    /// hit. (A grazing ray that crosses an edge's line passes within `gap * 1e-3` of the
-    /// triangle, below the rounding of unit coordinates, so the gap is measured along.)
-    #[test]
-    fn grazing_rays_along_an_edge_hit_only_inside() {
-        let (tri, _) = unit_triangle();
-        let angle: f32 = 1e-3;
-        for gap in [1e-5, 1e-4, 1e-3] {
-            for away in [1.0, 100.0] {
-                for (target, along) in beside_edges(gap) {
-                    let dir = along.normalize() * angle.cos() - Vec3::Z * angle.sin();
-                    assert!(!hits(&tri, target - dir * away, dir, 0.0), "gap {gap}: {target}");
-                }
-                for (target, along) in beside_edges(-gap) {
-                    let dir = along.normalize() * angle.cos() - Vec3::Z * angle.sin();
-                    assert!(hits(&tri, target - dir * away, dir, 0.0), "inside {gap}: {target}");
-                }
-            }
-        }
-    }
-
-    /// A ray that starts on the triangle hits it at `t = t_min = 0` (Embree's and Open3D's
-    /// rule), whichever way it leaves; with `t_min` above 0 it does not.
-    #[test]
-    fn a_ray_starting_on_the_surface_hits_at_zero() {
-        let (tri, _) = unit_triangle();
-        for origin in [Vec3::new(0.25, 0.25, 0.0), Vec3::new(0.5, 0.0, 0.0), Vec3::ZERO] {
-            for dir in [Vec3::new(0.1, 0.2, -1.0), Vec3::new(-0.3, 0.1, 1.0), Vec3::Z] {
-                let h = tri.intersect(origin, dir, 0.0, f32::INFINITY).expect("a hit at 0");
-                assert_eq!(h.t, 0.0, "{origin} {dir}");
-                assert!(hits(&tri, origin, dir, 0.0));
-                assert!(!hits(&tri, origin, dir, 1e-30));
-            }
-        }
+        assert!(rays.len() > 1500, "{} rays", rays.len());
     }
 
     /// Watertight at shared edges and vertices, by construction: a fan of triangles around a
