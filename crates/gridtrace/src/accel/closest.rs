@@ -218,7 +218,7 @@ pub fn closest_point_brute(tris: &[TriAccel], p: Vec3) -> ClosestPoint {
 
 /// Whether triangle `t`'s box may hold a point within `dist_sq` of `p` (ties included): false
 /// only when it is certainly farther, so a triangle it drops could not beat a best at
-/// `dist_sq`. The box comes from vertices rebuilt as `v0 + e` (rounded) and is widened by a
+/// `dist_sq`. The box comes from the stored vertices and is widened by a
 /// rounding bound of the coordinates involved (16 ulps of the largest), as the BVH's leaf test
 /// (`bvh/closest.rs`).
 #[inline(always)]

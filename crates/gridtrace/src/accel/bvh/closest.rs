@@ -4,7 +4,7 @@
 //! so the nearest is opened first and finds a good bound early; a popped entry farther than the
 //! (since improved) best is dropped unopened.
 //!
-//! The boxes are the triangles' boxes padded by the triangle test's slack (`padded_boxes`), so
+//! The boxes are the triangles' boxes padded for the triangle test (`padded_boxes`), so
 //! a box's distance is a true lower bound on its triangles' computed distances. Pruning is
 //! strict (`>`): an equally near triangle is still tested and the tie rule (smallest index,
 //! `accel::closest`) decides as brute force does. The blocks hold the triangles in leaf order;
@@ -105,7 +105,7 @@ impl BvhAccel {
 }
 
 /// The lanes of `block` whose triangle's box may hold a point within `dist_sq` of `p`, bit `k`
-/// for lane `k`. The box comes from vertices rebuilt as `v0 + e` (rounded), and the test must
+/// for lane `k`. The box comes from the stored vertices, and the test must
 /// never drop a triangle whose *computed* distance is at most `dist_sq` (ties included), so
 /// it is widened: a lane is dropped only when its box is farther than the best distance by
 /// more than a rounding bound of the coordinates involved (16 ulps of the largest).
