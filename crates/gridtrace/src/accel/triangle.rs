@@ -235,7 +235,11 @@ impl TriAccel {
             return None;
         }
         let inv_det = 1.0 / det;
-        let t = (e[0] * p[0][2] + e[1] * p[1][2] + e[2] * p[2][2]) * (ray.sz * inv_det);
+        // `+ 0.0` turns a -0 (a ray starting on the triangle: depths of 0 times negative edge
+        // functions) into +0, so that a hit at t = 0 has one representation: the BVH's block
+        // test takes the least t by value (`min_element`), where -0 and +0 tie and either could
+        // come back, and the walks must answer bit for bit alike.
+        let t = (e[0] * p[0][2] + e[1] * p[1][2] + e[2] * p[2][2]) * (ray.sz * inv_det) + 0.0;
         if !(t >= t_min && t < t_max) {
             return None;
         }
@@ -361,6 +365,16 @@ impl<const N: usize, L: Lanes<N>> LaneRay<N, L> {
             dir_len2: dot_lanes(dir, dir),
             dir_z2: L::ZERO,
         };
+        // Coherent rays (a camera's packet) mostly share their axes: then they are picked by
+        // indexing, as for one ray (`splat`), not by two selects per coordinate.
+        let all = (1u32 << N) - 1;
+        let (on_x, on_y) = (z_is_x.bits(), z_is_y.bits());
+        r.uniform = match (on_x, on_y) {
+            (x, 0) if x == all => Some([1, 2, 0]),
+            (0, y) if y == all => Some([2, 0, 1]),
+            (0, 0) => Some([0, 1, 2]),
+            _ => None,
+        };
         r.origin = r.permute(origin);
         let d = r.permute(dir);
         r.sz = L::ONE / d[2];
@@ -446,7 +460,7 @@ pub fn intersect_lanes_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
     let pos = e[0].gt(L::ZERO) | e[1].gt(L::ZERO) | e[2].gt(L::ZERO);
     let det = e[0] + e[1] + e[2];
     let inv_det = L::ONE / det;
-    let t = (e[0] * p[0][2] + e[1] * p[1][2] + e[2] * p[2][2]) * (ray.sz * inv_det);
+    let t = (e[0] * p[0][2] + e[1] * p[1][2] + e[2] * p[2][2]) * (ray.sz * inv_det) + L::ZERO;
     let mut ok = !(neg & pos) & det.ne(L::ZERO) & t.ge(L::splat(t_min)) & t.lt(t_max);
     let (u, v) = (e[1] * inv_det, e[2] * inv_det);
     if CULL && ok.bits() == 0 {
@@ -774,7 +788,9 @@ mod tests {
             assert_eq!(scalar.is_some(), m.hits, "{m:?}: {scalar:?}");
             assert_eq!(four.mask(), if m.hits { 0xf } else { 0 }, "{m:?}");
             if let Some(t) = m.t {
-                assert_eq!(scalar.map(|h| h.t), Some(t), "{m:?}");
+                // +0 exactly (never -0), in every lane too.
+                assert_eq!(scalar.map(|h| h.t.to_bits()), Some(t.to_bits()), "{m:?}");
+                assert!((0..4).all(|k| four.lane(k).t.to_bits() == t.to_bits()), "{m:?}");
                 assert!(tri.intersect(o, d, 1e-30, f32::INFINITY).is_none(), "{m:?}");
             }
         }

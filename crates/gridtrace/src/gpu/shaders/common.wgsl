@@ -154,7 +154,8 @@ fn intersect_tri(tri: GpuTri, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32
     let det = e0 + e1 + e2;
     if (det == 0.0) { return vec4<f32>(0.0); }
     let inv_det = 1.0 / det;
-    let t = (e0 * p0.z + e1 * p1.z + e2 * p2.z) * (sz * inv_det);
+    // + 0.0: a hit at t = 0 as +0, never -0 (TriAccel::intersect).
+    let t = (e0 * p0.z + e1 * p1.z + e2 * p2.z) * (sz * inv_det) + 0.0;
     if (!(t >= t_min && t < t_max)) { return vec4<f32>(0.0); }
     // Grazing rays (TriAccel::intersect): det / 2 = n . d / d[kz].
     let n = cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
