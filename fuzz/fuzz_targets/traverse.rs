@@ -4,7 +4,6 @@
 //! are either on a coarse lattice (exact ties with cell boundaries) or arbitrary finite floats.
 #![no_main]
 use glam::Vec3;
-use gridtrace::accel::triangle::MAX_SLACK;
 use gridtrace::accel::{AccelKind, NoCounters, Ray, Resolution, TriAccel, brute_force_intersect};
 use gridtrace::testing::AllAccels;
 use libfuzzer_sys::fuzz_target;
@@ -78,8 +77,8 @@ fn run(b: &mut Bytes) -> Option<()> {
         }
         let r = Ray::new(o, d);
         let want = brute_force_intersect(&all.grid.tris, &r, 0.0, f32::INFINITY);
-        if want.is_hit() && all.grid.tris[want.tri as usize].barycentric_error_bound(r.origin, r.dir) > MAX_SLACK {
-            // Möller-Trumbore's answer is rounding noise here (see docs/robustness.md).
+        if want.is_hit() && all.grid.tris[want.tri as usize].grazing_cos(r.dir) < 1e-4 {
+            // A graze this close can put the hit outside the padded boxes (`TriAccel::grazing_cos`).
             continue;
         }
         for kind in AccelKind::ALL {

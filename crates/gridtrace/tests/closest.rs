@@ -39,7 +39,7 @@ fn surface_points(tris: &[TriAccel], seed: u64) -> Vec<[f32; 3]> {
         let s = rng.next_f32();
         let (u, v) = (rng.next_f32() * 0.5, rng.next_f32() * 0.5);
         let n = t.normal().normalize_or_zero();
-        let face = a + Vec3::from(t.e1) * u + Vec3::from(t.e2) * v;
+        let face = a + (b - a) * u + (c - a) * v;
         out.extend([
             a,
             b,

@@ -98,7 +98,7 @@ fn points(tris: &[TriAccel], grid: Option<(Vec3, Vec3, [u32; 3])>, n: usize, see
         let [a, b, c] = t.vertices();
         let s = rng.next_f32();
         let (u, v) = (rng.next_f32() * 0.5, rng.next_f32() * 0.5);
-        let face = a + Vec3::from(t.e1) * u + Vec3::from(t.e2) * v;
+        let face = a + (b - a) * u + (c - a) * v;
         let normal = t.normal().normalize_or_zero();
         out.extend([
             a,

@@ -68,7 +68,7 @@ fn grid_build_structs_match_rust() {
     for kernel in KERNEL_SOURCES {
         let m = [naga::front::wgsl::parse_str(&module_source(kernel)).expect("build kernel parses")];
         check!(m, Cell, "Cell", [start, count, dist]);
-        check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
+        check!(m, GpuTri, "GpuTri", [v0, _pad0, v1, _pad1, v2, _pad2]);
         check!(
             m,
             GridBuildUniform,
@@ -97,7 +97,7 @@ fn grid_build_structs_match_rust() {
 fn wgsl_structs_match_rust() {
     let m = modules();
     check!(m, Cell, "Cell", [start, count, dist]);
-    check!(m, GpuTri, "GpuTri", [v0, _pad0, e1, _pad1, e2, _pad2]);
+    check!(m, GpuTri, "GpuTri", [v0, _pad0, v1, _pad1, v2, _pad2]);
     check!(m, TriShade, "TriShade", [n0, n1, n2, material]);
     check!(m, GpuMaterial, "GpuMaterial", [diffuse, reflectivity]);
     check!(m, PointLight, "PointLight", [position, _pad0, intensity, _pad1]);
@@ -259,7 +259,7 @@ fn altered_constant_is_reported() {
     let bary = wgsl_constants()
         .into_iter()
         .find_map(|(n, v)| match (n, v) {
-            ("BARY_EPS", WgslConst::F32(v)) => Some(v),
+            ("PARALLEL_COS2", WgslConst::F32(v)) => Some(v),
             _ => None,
         })
         .unwrap();
@@ -270,8 +270,8 @@ fn altered_constant_is_reported() {
             "const WORKGROUP: u32 = 65u;".to_string(),
         ),
         (
-            format!("const BARY_EPS: f32 = {bary:?}f;"),
-            format!("const BARY_EPS: f32 = {next_up:?}f;"),
+            format!("const PARALLEL_COS2: f32 = {bary:?}f;"),
+            format!("const PARALLEL_COS2: f32 = {next_up:?}f;"),
         ),
     ] {
         assert!(prelude.contains(&line), "prelude lacks {line}:\n{prelude}");

@@ -124,8 +124,7 @@ pub struct TriPoint {
 #[inline(always)]
 pub fn closest_on_triangle(t: &TriAccel, p: Vec3) -> TriPoint {
     let a = Vec3::from(t.v0);
-    let ab = Vec3::from(t.e1);
-    let ac = Vec3::from(t.e2);
+    let (ab, ac) = t.edges();
     let ap = p - a;
     let d1 = ab.dot(ap);
     let d2 = ac.dot(ap);
@@ -219,13 +218,13 @@ pub fn closest_point_brute(tris: &[TriAccel], p: Vec3) -> ClosestPoint {
 
 /// Whether triangle `t`'s box may hold a point within `dist_sq` of `p` (ties included): false
 /// only when it is certainly farther, so a triangle it drops could not beat a best at
-/// `dist_sq`. The box comes from vertices rebuilt as `v0 + e` (rounded) and is widened by a
+/// `dist_sq`. The box comes from the stored vertices and is widened by a
 /// rounding bound of the coordinates involved (16 ulps of the largest), as the BVH's leaf test
 /// (`bvh/closest.rs`).
 #[inline(always)]
 pub(crate) fn tri_box_within(t: &TriAccel, p: Vec3, dist_sq: f32) -> bool {
     let v0 = Vec3::from(t.v0);
-    let (v1, v2) = (v0 + Vec3::from(t.e1), v0 + Vec3::from(t.e2));
+    let (v1, v2) = (Vec3::from(t.v1), Vec3::from(t.v2));
     let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
     let d = (lo - p).max(p - hi).max(Vec3::ZERO);
     let scale = lo.abs().max(hi.abs()).max(p.abs()).max_element();
@@ -312,11 +311,12 @@ mod tests {
             for i in 0..=n {
                 for j in 0..=n - i {
                     let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
-                    let q = Vec3::from(t.v0) + Vec3::from(t.e1) * u + Vec3::from(t.e2) * v;
+                    let (e1, e2) = t.edges();
+                    let q = Vec3::from(t.v0) + e1 * u + e2 * v;
                     sampled = sampled.min((p - q).length());
                 }
             }
-            let h = (Vec3::from(t.e1).length() + Vec3::from(t.e2).length()) / n as f32;
+            let h = (t.edges().0.length() + t.edges().1.length()) / n as f32;
             let d = got.dist_sq.sqrt();
             assert!(d <= sampled + 1e-5, "{i}: {d} > sampled {sampled}");
             assert!(d >= sampled - h - 1e-5, "{i}: {d} < sampled {sampled} - {h}");

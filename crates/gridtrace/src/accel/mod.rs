@@ -47,7 +47,7 @@ pub use ray::{Counters, Hit, NoCounters, Ray, TraversalCounters};
 pub use registry::{AccelChoice, AccelEntry, AccelKind, AccelSpec, TracedOn, Work};
 pub use resolution::{DEFAULT_LAMBDA, MAX_CELLS, Resolution, dims_str};
 pub use simd::PACKET;
-pub use triangle::{LaneHits, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};
+pub use triangle::{LaneHits, LaneRay, ShearedRay, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};
 
 use crate::{Error, Result};
 

@@ -30,10 +30,7 @@ pub use fast::{BETA, FastWinding};
 /// the winding number sums thousands of them.
 pub fn solid_angle(t: &TriAccel, p: Vec3) -> f64 {
     let pd = p.as_dvec3();
-    let v0 = Vec3::from(t.v0).as_dvec3();
-    let a = v0 - pd;
-    let b = a + Vec3::from(t.e1).as_dvec3();
-    let c = a + Vec3::from(t.e2).as_dvec3();
+    let [a, b, c] = t.vertices().map(|v| v.as_dvec3() - pd);
     solid_angle_at_origin(a, b, c)
 }
 

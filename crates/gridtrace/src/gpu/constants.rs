@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use crate::accel::AccelKind;
-use crate::accel::triangle::{BARY_EPS, MAX_SLACK, PARALLEL_COS2, SLACK_ULPS};
+use crate::accel::triangle::PARALLEL_COS2;
 use crate::render::Mode;
 
 /// Counter slots of the `counters` array (atomic u32s). Slots 0 and 1 are the two ray queues'
@@ -85,7 +85,7 @@ pub enum WgslConst {
 /// The constants every kernel shares, by WGSL name (each structure's are its
 /// `WalkSpec::constants`). The triangle test's slack constants are `TriAccel::intersect`'s own,
 /// so both backends accept the same hits.
-pub const SHARED: [(&str, WgslConst); 18] = [
+pub const SHARED: [(&str, WgslConst); 15] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -99,9 +99,6 @@ pub const SHARED: [(&str, WgslConst); 18] = [
     ("MISS", WgslConst::U32(MISS)),
     ("WORKGROUP", WgslConst::U32(WORKGROUP)),
     ("MAX_GROUPS_X", WgslConst::U32(MAX_GROUPS_X)),
-    ("BARY_EPS", WgslConst::F32(BARY_EPS)),
-    ("SLACK_ULPS", WgslConst::F32(SLACK_ULPS)),
-    ("MAX_SLACK", WgslConst::F32(MAX_SLACK)),
     ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),
     ("PARALLEL_COS2", WgslConst::F32(PARALLEL_COS2)),
 ];

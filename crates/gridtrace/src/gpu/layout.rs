@@ -22,7 +22,7 @@ pub struct GpuMaterial {
     pub reflectivity: f32,
 }
 
-/// A triangle as the GPU reads it: `TriAccel`'s vertex and two edges, each padded to 16 bytes
+/// A triangle as the GPU reads it: `TriAccel`'s three vertices, each padded to 16 bytes
 /// (48 bytes, where `TriAccel` packs 36). A GPU loads an aligned 16-byte group in one access; a
 /// 36-byte record is nine 4-byte loads through its index, and every third triangle straddles
 /// a 32-byte sector more. The pads are zero.
@@ -31,9 +31,9 @@ pub struct GpuMaterial {
 pub struct GpuTri {
     pub v0: [f32; 3],
     pub _pad0: u32,
-    pub e1: [f32; 3],
+    pub v1: [f32; 3],
     pub _pad1: u32,
-    pub e2: [f32; 3],
+    pub v2: [f32; 3],
     pub _pad2: u32,
 }
 
@@ -42,9 +42,9 @@ impl GpuTri {
         GpuTri {
             v0: t.v0,
             _pad0: 0,
-            e1: t.e1,
+            v1: t.v1,
             _pad1: 0,
-            e2: t.e2,
+            v2: t.v2,
             _pad2: 0,
         }
     }

@@ -105,7 +105,8 @@ impl WireSource for PointRows<'_> {
 /// The CPU's answer for the GPU's triangle and barycentrics at `p`: the point and its squared
 /// distance computed as `closest_on_triangle` computes them.
 fn answer(t: &TriAccel, h: GpuHit, p: Vec3) -> ClosestPoint {
-    let point = Vec3::from(t.v0) + Vec3::from(t.e1) * h.u + Vec3::from(t.e2) * h.v;
+    let (e1, e2) = t.edges();
+    let point = Vec3::from(t.v0) + e1 * h.u + e2 * h.v;
     ClosestPoint {
         point,
         dist_sq: (p - point).length_squared(),

@@ -423,3 +423,84 @@ pub fn gpu_mesh(vertices: &[[f32; 3]], faces: &[[u32; 3]], accel: AccelKind) -> 
 
 /// The image tests' tolerance measure (`render::differing_pixels`).
 pub use crate::render::differing_pixels;
+
+/// A ray of `near_miss_rays` and what the triangle test must answer for it.
+#[derive(Debug, Clone, Copy)]
+pub struct NearMiss {
+    pub ray: Ray,
+    /// Whether it must hit the unit triangle (aimed inside) or miss it (aimed outside).
+    pub hits: bool,
+    /// Where it must hit, when it starts on the triangle (`t = 0`).
+    pub t: Option<f32>,
+}
+
+/// The unit right triangle (0,0,0), (1,0,0), (0,1,0) that `near_miss_rays` are aimed at.
+pub fn unit_triangle() -> TriAccel {
+    TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y)
+}
+
+/// Rays at `unit_triangle` that a watertight test without slack answers exactly (issue: no
+/// false hits):
+/// - head-on (along the normal, from either side, 1 and 1e4 units away), aimed at points 19
+///   fractions along each edge, outside by 1e-6 to 1e-3 (must miss) or inside by as much
+///   (must hit);
+/// - grazing the plane at 1e-3 rad, running along an edge, from 1 and 100 units back, aimed
+///   1e-5 to 1e-3 outside (miss) or inside (hit). (A grazing ray that crosses an edge's line
+///   passes within `gap * 1e-3` of the triangle, below the rounding of unit coordinates, so the
+///   gap is taken across the ray's way);
+/// - rays starting on the triangle (inside, on an edge, at a vertex), leaving either side:
+///   hit at `t = 0`.
+pub fn near_miss_rays() -> Vec<NearMiss> {
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    // Each edge: a point at fraction 0, its direction, the in-plane normal pointing out.
+    let edges = [
+        (Vec3::ZERO, Vec3::X, -Vec3::Y),
+        (Vec3::ZERO, Vec3::Y, -Vec3::X),
+        (Vec3::X, Vec3::new(-1.0, 1.0, 0.0), Vec3::new(h, h, 0.0)),
+    ];
+    // Points `gap` outside the edges (inside where negative), not at their ends, where an
+    // inside point would be outside the next edge.
+    let beside = |gap: f32| {
+        edges.iter().flat_map(move |&(start, along, normal)| {
+            (1..20).map(move |i| (start + along * (i as f32 / 20.0) + normal * gap, along))
+        })
+    };
+    let mut out = Vec::new();
+    for gap in [1e-6f32, 3e-6, 1e-5, 1e-4, 1e-3] {
+        for away in [1.0, 1e4] {
+            for side in [1.0, -1.0] {
+                for (sign, hits) in [(1.0, false), (-1.0, true)] {
+                    for (target, _) in beside(sign * gap) {
+                        let ray = Ray::new(target + Vec3::Z * (side * away), Vec3::Z * -side);
+                        out.push(NearMiss { ray, hits, t: None });
+                    }
+                }
+            }
+        }
+    }
+    let angle: f32 = 1e-3;
+    for gap in [1e-5f32, 1e-4, 1e-3] {
+        for away in [1.0, 100.0] {
+            for (sign, hits) in [(1.0, false), (-1.0, true)] {
+                for (target, along) in beside(sign * gap) {
+                    let dir = along.normalize() * angle.cos() - Vec3::Z * angle.sin();
+                    out.push(NearMiss {
+                        ray: Ray::new(target - dir * away, dir),
+                        hits,
+                        t: None,
+                    });
+                }
+            }
+        }
+    }
+    for origin in [Vec3::new(0.25, 0.25, 0.0), Vec3::new(0.5, 0.0, 0.0), Vec3::ZERO] {
+        for dir in [Vec3::new(0.1, 0.2, -1.0), Vec3::new(-0.3, 0.1, 1.0), Vec3::Z] {
+            out.push(NearMiss {
+                ray: Ray::new(origin, dir),
+                hits: true,
+                t: Some(0.0),
+            });
+        }
+    }
+    out
+}

@@ -58,7 +58,7 @@ pub(crate) const DIR_TINY: f32 = 1e-30;
 /// BVH Ray Traversal", JCGT 2013). A ray that touches a box is never reported as missing it.
 pub(crate) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
 
-/// Boxes are searched up to this factor past the current `t_far`. Möller-Trumbore's t is exact
+/// Boxes are searched up to this factor past the current `t_far`. The triangle test's t is exact
 /// only up to rounding that grows as the ray grazes the triangle's plane: the crossing point of
 /// a ray at a small angle to a plane is ill-conditioned along the ray. Seen in the traversal
 /// tests: a hit reported at t = 0.99892 on a triangle whose (padded) box the ray enters only at

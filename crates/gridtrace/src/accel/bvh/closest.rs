@@ -4,7 +4,7 @@
 //! so the nearest is opened first and finds a good bound early; a popped entry farther than the
 //! (since improved) best is dropped unopened.
 //!
-//! The boxes are the triangles' boxes padded by the triangle test's slack (`padded_boxes`), so
+//! The boxes are the triangles' boxes padded for the triangle test (`padded_boxes`), so
 //! a box's distance is a true lower bound on its triangles' computed distances. Pruning is
 //! strict (`>`): an equally near triangle is still tested and the tie rule (smallest index,
 //! `accel::closest`) decides as brute force does. The blocks hold the triangles in leaf order;
@@ -105,7 +105,7 @@ impl BvhAccel {
 }
 
 /// The lanes of `block` whose triangle's box may hold a point within `dist_sq` of `p`, bit `k`
-/// for lane `k`. The box comes from vertices rebuilt as `v0 + e` (rounded), and the test must
+/// for lane `k`. The box comes from the stored vertices, and the test must
 /// never drop a triangle whose *computed* distance is at most `dist_sq` (ties included), so
 /// it is widened: a lane is dropped only when its box is farther than the best distance by
 /// more than a rounding bound of the coordinates involved (16 ulps of the largest).
@@ -115,7 +115,7 @@ fn tri_box_near_mask(block: &TriAccel4, p: Vec3, dist_sq: f32) -> u32 {
     let mut scale = Vec4::ZERO;
     for a in 0..3 {
         let v0 = block.v0[a];
-        let (v1, v2) = (v0 + block.e1[a], v0 + block.e2[a]);
+        let (v1, v2) = (block.v1[a], block.v2[a]);
         let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
         let pa = Vec4::splat(p[a]);
         let d = (lo - pa).max(pa - hi).max(Vec4::ZERO);

@@ -29,7 +29,7 @@
 use std::mem::MaybeUninit;
 
 use crate::accel::lanes::{F8, Lanes, Mask, load3, splat3};
-use crate::accel::triangle::intersect_lanes_cull;
+use crate::accel::triangle::{LaneRay, intersect_lanes_cull};
 use crate::accel::{Hit, PACKET, Ray};
 use crate::util::set_bits as bits;
 
@@ -354,8 +354,7 @@ impl BvhAccel {
         });
         // Borrowed, not moved: eight `BoxRay`s moved into a struct were a 512-byte copy a packet.
         let p = PacketRays {
-            origin: load3(origin),
-            dir: load3(dir),
+            tri_ray: LaneRay::new(&load3(origin), &load3(dir)),
             interval: interval.as_ref(),
             boxes: boxes.as_ref(),
         };
@@ -433,15 +432,15 @@ impl BvhAccel {
             let lane = k % LEAF_BLOCK;
             let tri = (
                 &lane_splat(&block.v0, lane),
-                &lane_splat(&block.e1, lane),
-                &lane_splat(&block.e2, lane),
+                &lane_splat(&block.v1, lane),
+                &lane_splat(&block.v2, lane),
             );
             let lim = F8::select(
                 <F8 as Lanes<8>>::Mask::from_bits(testing),
                 F8::from_array(s.limit),
                 F8::splat(t_min),
             );
-            let h = intersect_lanes_cull::<8, F8, true>(tri, &p.origin, &p.dir, t_min, lim);
+            let h = intersect_lanes_cull::<8, F8, true>(tri, &p.tri_ray, t_min, lim);
             let hits = h.mask() & testing;
             if hits == 0 {
                 continue;
@@ -497,8 +496,8 @@ struct PacketSearch {
 /// A packet's rays in lanes, and its box test: one for the packet where the rays go the same
 /// way on every axis (`Interval`), else each ray's own (`BoxRay`).
 struct PacketRays<'a> {
-    origin: [F8; 3],
-    dir: [F8; 3],
+    /// The rays prepared for the watertight triangle test, once per packet.
+    tri_ray: LaneRay<8, F8>,
     interval: Option<&'a Interval>,
     boxes: Option<&'a [BoxRay; PACKET]>,
 }

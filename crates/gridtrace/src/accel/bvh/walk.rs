@@ -6,7 +6,7 @@ use std::mem::MaybeUninit;
 use glam::{Vec3, Vec4};
 
 use crate::accel::simd::{has_avx2, prefetch};
-use crate::accel::triangle::intersect_lanes_cull;
+use crate::accel::triangle::{LaneRay, ShearedRay, intersect_lanes_cull};
 use crate::accel::{Counters, Hit, NoCounters, Ray};
 
 use super::BvhAccel;
@@ -198,10 +198,10 @@ pub(super) const STACK_LEN: usize = (WIDTH - 1) * STACK + WIDTH;
 /// One ray's traversal, resumable one node or leaf at a time (so the batch queries can
 /// interleave rays).
 pub(super) struct Walk {
-    /// The direction, for the four-triangle test (the origin is `r.origin`). Each component
-    /// is broadcast to the test's four lanes where it is used, one load either way: stored as
-    /// lanes, it cost 12 instructions a ray to set up (6 broadcasts, 6 stores).
-    pub(super) dir: [f32; 3],
+    /// The ray in the watertight triangle test's frame, prepared once per ray. Each component
+    /// is broadcast to the test's four lanes where it is used (`LaneRay::splat`), one load
+    /// either way: stored as lanes, the direction cost 12 instructions a ray to set up.
+    pub(super) sheared: ShearedRay,
     pub(super) r: BoxRay,
     pub(super) t_min: f32,
     /// Closest hit so far (or `t_max`): triangles are tested up to it.
@@ -224,7 +224,7 @@ impl Walk {
     /// Starts `ray` over, keeping the (uninitialised) stack where it is.
     #[inline(always)]
     pub(super) fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
-        self.dir = ray.dir.to_array();
+        self.sheared = ShearedRay::new(ray.origin, ray.dir);
         self.r = BoxRay::new(ray);
         self.t_min = t_min;
         self.t_far = t_max;
@@ -249,7 +249,7 @@ impl Walk {
         // reference is made, except `stack`, an array of `MaybeUninit`, for which any contents
         // are valid.
         unsafe {
-            (&raw mut (*w).dir).write(ray.dir.to_array());
+            (&raw mut (*w).sheared).write(ShearedRay::new(ray.origin, ray.dir));
             (&raw mut (*w).r).write(BoxRay::new(ray));
             (&raw mut (*w).t_min).write(t_min);
             (&raw mut (*w).t_far).write(t_max);
@@ -266,7 +266,7 @@ impl Walk {
 
     pub(super) fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
         Walk {
-            dir: ray.dir.to_array(),
+            sheared: ShearedRay::new(ray.origin, ray.dir),
             r: BoxRay::new(ray),
             t_min,
             t_far: t_max,
@@ -330,10 +330,10 @@ impl Walk {
     #[inline(always)]
     fn block<const ANY: bool>(&mut self, accel: &BvhAccel, b: usize) -> bool {
         let block = &accel.blocks[b];
-        let tri = (&block.v0, &block.e1, &block.e2);
+        let tri = (&block.v0, &block.v1, &block.v2);
         let far = Vec4::splat(self.t_far);
-        let (origin, dir) = (self.r.origin.map(Vec4::splat), self.dir.map(Vec4::splat));
-        let h = intersect_lanes_cull::<4, Vec4, true>(tri, &origin, &dir, self.t_min, far);
+        let ray = LaneRay::splat(&self.sheared);
+        let h = intersect_lanes_cull::<4, Vec4, true>(tri, &ray, self.t_min, far);
         let mask = h.mask();
         // Most blocks are missed by every lane; the test has already branched on that
         // (`intersect_lanes_cull`), so the branch here is taken the same way.

@@ -28,13 +28,15 @@ use super::IrregularGrid;
 use glam::Vec4;
 
 use crate::accel::lanes::{Lanes, Mask, load3, splat3};
-use crate::accel::{Counters, Hit, NoCounters, PACKET, Ray, TriAccel, intersect_lanes};
+use crate::accel::{Counters, Hit, LaneRay, NoCounters, PACKET, Ray, TriAccel, intersect_lanes};
 use crate::util::set_bits as bits;
 
 /// The rays of a packet and where they are, a ray per lane.
 struct Walkers<const N: usize, L: Lanes<N>> {
     origin: [L; 3],
     dir: [L; 3],
+    /// The rays prepared for the watertight triangle test, once per packet.
+    tri_ray: LaneRay<N, L>,
     inv: [L; 3],
     /// Lanes whose ray moves up / down along each axis (neither: it does not move on it).
     up: [L::Mask; 3],
@@ -258,9 +260,11 @@ impl IrregularGrid {
                 walking |= 1 << i;
             }
         }
+        let (origin, dir) = (load3(origin), load3(dir));
         let walkers = Walkers {
-            origin: load3(origin),
-            dir: load3(dir),
+            tri_ray: LaneRay::new(&origin, &dir),
+            origin,
+            dir,
             inv: load3(inv),
             // Not `map` with a closure: closures do not inherit `#[target_feature]` (`splat3`).
             up: [
@@ -354,7 +358,7 @@ fn test_cell_lanes<const N: usize, L: Lanes<N>, const ANY: bool, C: Counters>(
 ) -> u32 {
     // A lane's tests reach up to its closest hit so far (`t_max` until one, and for any hits,
     // whose first hit ends them). Lanes outside the round test up to `t_min`, which no hit
-    // passes (`t > t_min` and `t < t_min` cannot both hold), so they keep their hits.
+    // passes (`t >= t_min` and `t < t_min` cannot both hold), so they keep their hits.
     let mut testing = round;
     let mut limit = L::select(L::Mask::from_bits(round), t_of(best), L::splat(t_min));
     for &tri in refs {
@@ -362,8 +366,8 @@ fn test_cell_lanes<const N: usize, L: Lanes<N>, const ANY: bool, C: Counters>(
             counters[i].tri_test();
         }
         let t = &tris[tri as usize];
-        let corners = (&splat3(t.v0), &splat3(t.e1), &splat3(t.e2));
-        let h = intersect_lanes(corners, &l.origin, &l.dir, t_min, limit);
+        let corners = (&splat3(t.v0), &splat3(t.v1), &splat3(t.v2));
+        let h = intersect_lanes(corners, &l.tri_ray, t_min, limit);
         let hits = h.mask() & testing;
         if hits != 0 {
             let mut limits = limit.to_array();

@@ -40,8 +40,8 @@ fn tri_along(q: vec3<f32>, d: vec3<f32>) -> f32 {
 // the point reported.
 fn closest_on_tri(t: GpuTri, p: vec3<f32>) -> vec3<f32> {
     let a = t.v0;
-    let ab = t.e1;
-    let ac = t.e2;
+    let ab = t.v1 - t.v0;
+    let ac = t.v2 - t.v0;
     let ap = p - a;
     let uv = tri_region(ap, ab, ac);
     let q = p - (a + ab * uv.x + ac * uv.y);

@@ -8,7 +8,7 @@
 // so that they match the packed Rust layouts.
 
 // `layout::GpuTri`: `TriAccel`'s vertex and edges in 16-byte groups (one load each).
-struct GpuTri { v0: vec3<f32>, _pad0: u32, e1: vec3<f32>, _pad1: u32, e2: vec3<f32>, _pad2: u32 }
+struct GpuTri { v0: vec3<f32>, _pad0: u32, v1: vec3<f32>, _pad1: u32, v2: vec3<f32>, _pad2: u32 }
 struct TriShade { n0: array<f32, 3>, n1: array<f32, 3>, n2: array<f32, 3>, material: u32 }
 struct GpuMaterial { diffuse: vec3<f32>, reflectivity: f32 }
 struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1: f32 }
@@ -101,7 +101,6 @@ fn shadow_len() -> u32 {
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }
-fn l1(v: vec3<f32>) -> f32 { return abs(v.x) + abs(v.y) + abs(v.z); }
 fn inf() -> f32 { return bitcast<f32>(0x7f800000u); }
 
 // Invocation index in a 2-D grid of 64-wide workgroups (dispatches may exceed 65535 groups in x).
@@ -109,36 +108,60 @@ fn flat_index(wg: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return (wg.y * nwg.x + wg.x) * WORKGROUP + lid;
 }
 
-// Two-sided Möller-Trumbore on stored edges; mirrors TriAccel::intersect. Returns t, u, v in
-// xyz and w = 1 for a hit with t_min < t < t_max.
+// One edge function of the watertight test (see intersect_tri): twice the signed area of the
+// sheared edge (a, b) with the ray's point (0, 0). WGSL has no f64 and lets the compiler fuse
+// a product into the subtraction, which would make `a.x * b.y - a.y * b.x` round differently
+// from its mirror `b.x * a.y - b.y * a.x` (the other triangle at a shared edge computes the
+// mirror). So both orders are computed and subtracted: whatever the compiler fuses inside
+// each, swapping a and b swaps the two operands of the last subtraction (which has no product
+// left to fuse), and the result is exactly negated. That is what watertightness needs: the two
+// triangles at a shared edge get exactly opposite values, and an exact 0 in both. A 0 is not
+// refined as on the CPU (no f64): it counts as on the edge, so a ray whose products round
+// together at an edge or vertex can hit there, never leak (the neighbours see the same 0).
+fn edge_fn(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return (a.x * b.y - a.y * b.x) - (b.x * a.y - b.y * a.x);
+}
+
+// A vertex relative to the ray's origin, in the ray's frame: the axes permuted so that the
+// direction's largest component is z (k), then sheared so that the ray is the point (0, 0).
+fn shear_vertex(a: vec3<f32>, k: vec3<u32>, sx: f32, sy: f32) -> vec3<f32> {
+    return vec3<f32>(a[k.x] - sx * a[k.z], a[k.y] - sy * a[k.z], a[k.z]);
+}
+
+// The watertight ray/triangle test (Woop, Benthin, Wald 2013), two-sided; mirrors
+// TriAccel::intersect but for the exact zeros (edge_fn). Returns t, u, v in xyz and w = 1 for
+// a hit with t_min <= t < t_max.
 fn intersect_tri(tri: GpuTri, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec4<f32> {
-    let e1 = tri.e1;
-    let e2 = tri.e2;
-    let p = cross(d, e2);
-    let det = dot(e1, p);
+    let ad = abs(d);
+    var kz = 2u;
+    if (ad.x > ad.y) {
+        if (ad.x > ad.z) { kz = 0u; }
+    } else if (ad.y > ad.z) {
+        kz = 1u;
+    }
+    let k = vec3<u32>((kz + 1u) % 3u, (kz + 2u) % 3u, kz);
+    let sz = 1.0 / d[kz];
+    let sx = d[k.x] * sz;
+    let sy = d[k.y] * sz;
+    let p0 = shear_vertex(tri.v0 - o, k, sx, sy);
+    let p1 = shear_vertex(tri.v1 - o, k, sx, sy);
+    let p2 = shear_vertex(tri.v2 - o, k, sx, sy);
+    // Twice the CPU's edge functions (edge_fn); the factor cancels in u, v and t.
+    let e0 = edge_fn(p1, p2);
+    let e1 = edge_fn(p2, p0);
+    let e2 = edge_fn(p0, p1);
+    if ((e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0)) { return vec4<f32>(0.0); }
+    let det = e0 + e1 + e2;
     if (det == 0.0) { return vec4<f32>(0.0); }
     let inv_det = 1.0 / det;
-    let s = o - tri.v0;
-    // Widest slack first, then the rounding-error bound near edges (TriAccel::intersect).
-    let loose = BARY_EPS + MAX_SLACK;
-    let u = dot(s, p) * inv_det;
-    if (!(u >= -loose && u <= 1.0 + loose)) { return vec4<f32>(0.0); }
-    let q = cross(s, e1);
-    let v = dot(d, q) * inv_det;
-    if (v < -loose || u + v > 1.0 + 2.0 * loose) { return vec4<f32>(0.0); }
-    if (u < -BARY_EPS || u > 1.0 + BARY_EPS || v < -BARY_EPS || u + v > 1.0 + BARY_EPS) {
-        let s1 = l1(s);
-        let a1 = l1(e1);
-        let b1 = l1(e2);
-        let scale = SLACK_ULPS * F32_EPSILON * l1(d) * abs(inv_det);
-        let tol_u = BARY_EPS + min(scale * b1 * (s1 + a1), MAX_SLACK);
-        let tol_v = BARY_EPS + min(scale * a1 * (s1 + b1), MAX_SLACK);
-        if (u < -tol_u || u > 1.0 + tol_u || v < -tol_v || u + v > 1.0 + tol_u + tol_v) { return vec4<f32>(0.0); }
-    }
-    let t = dot(e2, q) * inv_det;
-    if (!(t > t_min && t < t_max)) { return vec4<f32>(0.0); }
-    if (det * det <= PARALLEL_COS2 * dot(e1, e1) * dot(p, p)) { return vec4<f32>(0.0); }
-    return vec4<f32>(t, u, v, 1.0);
+    // + 0.0: a hit at t = 0 as +0, never -0 (TriAccel::intersect).
+    let t = (e0 * p0.z + e1 * p1.z + e2 * p2.z) * (sz * inv_det) + 0.0;
+    if (!(t >= t_min && t < t_max)) { return vec4<f32>(0.0); }
+    // Grazing rays (TriAccel::intersect): det / 2 = n . d / d[kz].
+    let n = cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+    let half = 0.5 * det * d[kz];
+    if (half * half <= PARALLEL_COS2 * dot(n, n) * dot(d, d)) { return vec4<f32>(0.0); }
+    return vec4<f32>(t, e1 * inv_det, e2 * inv_det, 1.0);
 }
 
 // Ray/box slab clip; mirrors Aabb::clip (axes with d == 0 handled apart: no 0 * inf).

@@ -6,7 +6,7 @@ struct Surface { p: vec3<f32>, ng: vec3<f32>, ns: vec3<f32> }
 
 fn surface_at(o: vec3<f32>, d: vec3<f32>, h: GpuHit) -> Surface {
     let tri = tris[h.tri];
-    var ng = normalize(cross(tri.e1, tri.e2));
+    var ng = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     let sh = tri_shade[h.tri];
     let w = 1.0 - h.u - h.v;
     var ns = v3(sh.n0) * w + v3(sh.n1) * h.u + v3(sh.n2) * h.v;

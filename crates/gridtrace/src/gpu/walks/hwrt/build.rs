@@ -35,13 +35,7 @@ pub fn build_on_device(ctx: &GpuContext, tris: &[TriAccel]) -> Result<DeviceStru
             ctx.info.name, limits.max_blas_primitive_count
         )));
     }
-    let vertices: Vec<[f32; 3]> = tris
-        .iter()
-        .flat_map(|t| {
-            let v0 = glam::Vec3::from(t.v0);
-            [v0, v0 + glam::Vec3::from(t.e1), v0 + glam::Vec3::from(t.e2)].map(|v| v.to_array())
-        })
-        .collect();
+    let vertices: Vec<[f32; 3]> = tris.iter().flat_map(|t| [t.v0, t.v1, t.v2]).collect();
     let input_bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
     if input_bytes > limits.max_buffer_size {
         return Err(Error::Gpu(format!(

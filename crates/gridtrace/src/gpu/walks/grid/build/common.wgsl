@@ -18,7 +18,7 @@ struct GridBuildUniform {
 }
 struct Cell { start: u32, count: u32, dist: u32 }
 // `layout::GpuTri`, as the tracer reads it.
-struct GpuTri { v0: vec3<f32>, _pad0: u32, e1: vec3<f32>, _pad1: u32, e2: vec3<f32>, _pad2: u32 }
+struct GpuTri { v0: vec3<f32>, _pad0: u32, v1: vec3<f32>, _pad1: u32, v2: vec3<f32>, _pad2: u32 }
 
 @group(0) @binding(0) var<uniform> P: GridBuildUniform;
 @group(0) @binding(1) var<storage, read> tris: array<GpuTri>;
@@ -40,7 +40,7 @@ fn max3(v: vec3<f32>) -> f32 {
 struct Verts { a: vec3<f32>, b: vec3<f32>, c: vec3<f32> }
 fn tri_vertices(i: u32) -> Verts {
     let t = tris[i];
-    return Verts(t.v0, t.v0 + t.e1, t.v0 + t.e2);
+    return Verts(t.v0, t.v1, t.v2);
 }
 
 // The triangle's cell range (inclusive) and its grown margin, as `overlap_pairs` computes them.
