@@ -300,14 +300,17 @@ impl NativeScene {
         Ok(d)
     }
 
-    /// `what`: "distance", "signed_distance", "occupancy" or "winding_number".
-    #[pyo3(signature = (what, points, nthreads = 0))]
+    /// `what`: "distance", "signed_distance", "occupancy" or "winding_number"; `accuracy`: the
+    /// winding numbers' (libigl's beta; `QueryScene::compute_signed_distance_at`), unused by
+    /// "distance".
+    #[pyo3(signature = (what, points, nthreads = 0, accuracy = gridtrace::accel::winding::BETA))]
     fn point_values<'py>(
         &self,
         py: Python<'py>,
         what: &str,
         points: PyReadonlyArray2<'py, f32>,
         nthreads: usize,
+        accuracy: f64,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
         let p = rows::<f32, 3>(&points, "query_points")?;
         let v = py
@@ -316,9 +319,9 @@ impl NativeScene {
                     let s = self.read();
                     match what {
                         "distance" => s.compute_distance(p),
-                        "signed_distance" => s.compute_signed_distance(p),
-                        "occupancy" => s.compute_occupancy(p),
-                        _ => s.winding_numbers(p),
+                        "signed_distance" => s.compute_signed_distance_at(p, accuracy),
+                        "occupancy" => s.compute_occupancy_at(p, accuracy),
+                        _ => s.winding_numbers_at(p, accuracy),
                     }
                 })
             })?

@@ -255,29 +255,39 @@ class Scene:
         """The distance from each point to the scene (float32 ``[...]``)."""
         return self._values("distance", query_points, nthreads)
 
-    def compute_signed_distance(self, query_points, nthreads: int = 0, nsamples: int = 1) -> np.ndarray:
+    def compute_signed_distance(
+        self, query_points, nthreads: int = 0, nsamples: int = 1, accuracy: float = 2.0
+    ) -> np.ndarray:
         """The distance, negative inside. Inside is decided by the generalised winding number of
         all faces (> 0.5), not by ray parity as Open3D (``nsamples`` is accepted for its
         signature and not needed): exact for closed, consistently oriented meshes away from the
         surface (outward normals ``(v1 - v0) x (v2 - v0)``); for open meshes a point counts as
         inside where the surface wraps it more than half way round. On the surface the sign is
-        whatever rounding gives (the distance is ~0)."""
-        return self._values("signed_distance", query_points, nthreads)
+        whatever rounding gives (the distance is ~0). ``accuracy``: the winding numbers' (as
+        ``compute_winding_number``)."""
+        return self._values("signed_distance", query_points, nthreads, accuracy)
 
-    def compute_occupancy(self, query_points, nthreads: int = 0, nsamples: int = 1) -> np.ndarray:
+    def compute_occupancy(
+        self, query_points, nthreads: int = 0, nsamples: int = 1, accuracy: float = 2.0
+    ) -> np.ndarray:
         """1.0 inside, 0.0 outside (float32 ``[...]``; inside as for ``compute_signed_distance``),
-        NaN for a point that is not finite."""
-        return self._values("occupancy", query_points, nthreads)
+        NaN for a point that is not finite. ``accuracy`` as for ``compute_winding_number``."""
+        return self._values("occupancy", query_points, nthreads, accuracy)
 
-    def compute_winding_number(self, query_points, nthreads: int = 0) -> np.ndarray:
+    def compute_winding_number(self, query_points, nthreads: int = 0, accuracy: float = 2.0) -> np.ndarray:
         """The generalised winding number of all faces at each point (float32 ``[...]``).
-        ``nthreads``: CPU threads (0: all cores)."""
-        return self._values("winding_number", query_points, nthreads)
+        ``nthreads``: CPU threads (0: all cores). ``accuracy``: libigl's beta (Barill et al.
+        2018): a group of faces farther than ``accuracy`` times its radius is summed as one
+        dipole; larger is more accurate and slower, ``inf`` is the exact sum (docs/robustness.md
+        gives the error measured at each)."""
+        return self._values("winding_number", query_points, nthreads, accuracy)
 
-    def _values(self, what: str, query_points, nthreads: int) -> np.ndarray:
+    def _values(self, what: str, query_points, nthreads: int, accuracy: float = 2.0) -> np.ndarray:
         k = _threads(nthreads)
+        # Checked by the native side (an error naming `accuracy`).
+        accuracy = float(accuracy)
         flat, lead = _batch(query_points, "query_points", 3)
-        call = lambda p: {"v": self._native.point_values(what, p, k)}  # noqa: E731
+        call = lambda p: {"v": self._native.point_values(what, p, k, accuracy)}  # noqa: E731
         return _chunked(flat, call)["v"].reshape(lead)
 
     # -- pickling -------------------------------------------------------------------------

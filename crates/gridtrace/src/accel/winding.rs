@@ -20,7 +20,7 @@ use super::{Accel, TriAccel};
 use crate::Result;
 
 mod fast;
-pub use fast::{BETA, FastWinding};
+pub use fast::{BETA, FastWinding, check_accuracy};
 
 /// The signed solid angle triangle `t` subtends at `p`, in steradians, positive where `p` is on
 /// the side `e1 x e2` points away from. Van Oosterom and Strackee (1983):

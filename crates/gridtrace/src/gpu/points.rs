@@ -30,6 +30,12 @@ pub struct GpuClosestPoints {
     /// Cells or nodes visited plus triangles measured, per point (0 for a point that was not
     /// finite: it was not searched).
     pub work: Vec<u32>,
+    /// Loop iterations of the search, per point, as the lattice searches (grid, proximity cloud,
+    /// irregular grid) count them (`point_steps` in the WGSL; 0 for the other walks and for a
+    /// point that was not searched). llvmpipe before Mesa 25 silently ends an invocation's
+    /// loops after 65,535 iterations in all: a search that needs more gives a wrong answer
+    /// there, which the tests guard against by holding this count under that budget.
+    pub steps: Vec<u32>,
 }
 
 impl GpuRenderer {
@@ -45,6 +51,7 @@ impl GpuRenderer {
         let mut out = GpuClosestPoints {
             closest: Vec::with_capacity(points.len()),
             work: Vec::with_capacity(points.len()),
+            steps: Vec::with_capacity(points.len()),
         };
         // One pipelined batch (`queries.rs`): the points go up as 12 bytes each, and come back
         // as the answers, then the work the kernel wrote to each item's accumulation texel.
@@ -56,18 +63,19 @@ impl GpuRenderer {
                 let ChunkAnswers::Points { hits, work } = answers else {
                     return;
                 };
-                let work = work.iter().map(|a| a[0] as u32);
-                for ((p, h), w) in points[first..].iter().zip(hits).zip(work) {
+                let work = work.iter().map(|a| (a[0] as u32, a[1] as u32));
+                for ((p, h), (w, steps)) in points[first..].iter().zip(hits).zip(work) {
                     let p = Vec3::from(*p);
-                    let (c, w) = if !p.is_finite() {
-                        (ClosestPoint::INVALID, 0)
+                    let (c, w, steps) = if !p.is_finite() {
+                        (ClosestPoint::INVALID, 0, 0)
                     } else if h.tri == MISS || h.tri as usize >= tris.len() {
-                        (ClosestPoint::NONE, w)
+                        (ClosestPoint::NONE, w, steps)
                     } else {
-                        (answer(&tris[h.tri as usize], *h, p), w)
+                        (answer(&tris[h.tri as usize], *h, p), w, steps)
                     };
                     out.closest.push(c);
                     out.work.push(w);
+                    out.steps.push(steps);
                 }
             },
         )?;

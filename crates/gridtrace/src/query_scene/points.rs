@@ -24,7 +24,7 @@ use super::merged::Merged;
 use super::{INVALID_ID, QueryScene};
 use crate::Result;
 use crate::accel::closest::ClosestPoint;
-use crate::accel::winding::is_inside;
+use crate::accel::winding::{BETA, check_accuracy, is_inside};
 
 /// Nearest points, one entry per query point (Open3D's `compute_closest_points` keys). A
 /// point with a non-finite coordinate, or any point of an empty scene: a NaN point, ids
@@ -86,11 +86,19 @@ impl QueryScene {
         Ok(self.closest(&m, points)?.iter().map(ClosestPoint::distance).collect())
     }
 
-    /// The distance, negative inside (module notes: winding number > 0.5).
+    /// The distance, negative inside (module notes: winding number > 0.5), at the default
+    /// accuracy (`accel::winding::BETA`).
     pub fn compute_signed_distance(&self, points: &[[f32; 3]]) -> Result<Vec<f32>> {
+        self.compute_signed_distance_at(points, BETA)
+    }
+
+    /// `compute_signed_distance` with the winding numbers' `accuracy` (libigl's beta: larger is
+    /// more accurate, `inf` exact; `accel::winding::check_accuracy`).
+    pub fn compute_signed_distance_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let accuracy = check_accuracy(accuracy)?;
         let m = self.merged()?;
         let closest = self.closest(&m, points)?;
-        let winding = winding_numbers(&m, points);
+        let winding = winding_numbers(&m, points, accuracy);
         Ok(closest
             .iter()
             .zip(winding)
@@ -100,8 +108,14 @@ impl QueryScene {
 
     /// 1 inside, 0 outside (module notes), NaN for a point that is not finite.
     pub fn compute_occupancy(&self, points: &[[f32; 3]]) -> Result<Vec<f32>> {
+        self.compute_occupancy_at(points, BETA)
+    }
+
+    /// `compute_occupancy` with the winding numbers' `accuracy` (as `compute_signed_distance_at`).
+    pub fn compute_occupancy_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let accuracy = check_accuracy(accuracy)?;
         let m = self.merged()?;
-        Ok(winding_numbers(&m, points)
+        Ok(winding_numbers(&m, points, accuracy)
             .into_iter()
             .map(|w| match w {
                 w if w.is_nan() => f32::NAN,
@@ -114,8 +128,14 @@ impl QueryScene {
     /// The generalised winding number of the scene's faces at each point (NaN for a point that
     /// is not finite; 0 everywhere in an empty scene).
     pub fn winding_numbers(&self, points: &[[f32; 3]]) -> Result<Vec<f32>> {
+        self.winding_numbers_at(points, BETA)
+    }
+
+    /// `winding_numbers` with an `accuracy` (as `compute_signed_distance_at`).
+    pub fn winding_numbers_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let accuracy = check_accuracy(accuracy)?;
         let m = self.merged()?;
-        Ok(winding_numbers(&m, points))
+        Ok(winding_numbers(&m, points, accuracy))
     }
 
     /// The structure's nearest point for each point (an error when it is stale).
@@ -138,12 +158,12 @@ impl QueryScene {
     }
 }
 
-fn winding_numbers(m: &Merged, points: &[[f32; 3]]) -> Vec<f32> {
+fn winding_numbers(m: &Merged, points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
     if m.tris().is_empty() {
         return points
             .iter()
             .map(|p| if Vec3::from(*p).is_finite() { 0.0 } else { f32::NAN })
             .collect();
     }
-    m.winding().winding_numbers(m.tris(), points)
+    m.winding().winding_numbers_at(m.tris(), points, accuracy)
 }

@@ -22,8 +22,21 @@ use super::solid_angle;
 use crate::accel::{Aabb, Bvh, TriAccel};
 
 /// A node is summed as a dipole when the point is farther than `BETA` times its radius (the
-/// paper's accuracy parameter; 2 is its default).
+/// paper's accuracy parameter; 2 is its default, and the queries' default `accuracy`).
 pub const BETA: f64 = 2.0;
+
+/// Checks an `accuracy` (the paper's beta): a number above 0, `inf` for the exact sum. An error
+/// naming the argument otherwise (0, negative or NaN would open no node, or every node by
+/// accident of a comparison with NaN).
+pub fn check_accuracy(accuracy: f64) -> crate::Result<f64> {
+    if accuracy > 0.0 {
+        Ok(accuracy)
+    } else {
+        Err(crate::Error::InvalidInput(format!(
+            "accuracy must be above 0 (libigl's beta: 2 is the default, larger is more accurate, inf is exact); got {accuracy}"
+        )))
+    }
+}
 
 /// One node's far-field data.
 #[derive(Debug, Clone, Copy)]
@@ -92,17 +105,25 @@ impl FastWinding {
     /// The winding number of `p` with respect to `tris` (the triangles given to `build`), to
     /// the accuracy of the far-field terms (module notes); NaN for a point that is not finite.
     pub fn winding_number(&self, tris: &[TriAccel], p: Vec3) -> f32 {
-        self.winding_number_with(tris, p, &mut Vec::new())
+        self.winding_number_with(tris, p, BETA, &mut Vec::new())
     }
 
-    /// The winding numbers of a batch of points, on all cores: each worker keeps one stack
-    /// (`winding_number_with`).
+    /// The winding numbers of a batch of points, on all cores, at the default accuracy
+    /// (`BETA`): `winding_numbers_at`.
     pub fn winding_numbers(&self, tris: &[TriAccel], points: &[[f32; 3]]) -> Vec<f32> {
+        self.winding_numbers_at(tris, points, BETA)
+    }
+
+    /// The winding numbers of a batch of points, on all cores, a node summed as a dipole where
+    /// the point is farther than `accuracy` times its radius (`check_accuracy`; `inf`: never, the
+    /// exact sum of every triangle's solid angle). Each worker keeps one stack
+    /// (`winding_number_with`).
+    pub fn winding_numbers_at(&self, tris: &[TriAccel], points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
         points
             .par_iter()
             .with_min_len(64)
             .map_init(Vec::new, |stack, p| {
-                self.winding_number_with(tris, Vec3::from(*p), stack)
+                self.winding_number_with(tris, Vec3::from(*p), accuracy, stack)
             })
             .collect()
     }
@@ -112,7 +133,8 @@ impl FastWinding {
     /// on two threads the allocator's locks held the batch to 1.1-1.6x its one-thread speed
     /// (perf, 200,000 points at the Stanford Bunny: 12% of samples in malloc, free and
     /// realloc, 11% in the kernel's futex wake-ups); with the stack kept, 1.8-2.0x.
-    pub fn winding_number_with(&self, tris: &[TriAccel], p: Vec3, stack: &mut Vec<usize>) -> f32 {
+    /// `accuracy` as `winding_numbers_at` takes it.
+    pub fn winding_number_with(&self, tris: &[TriAccel], p: Vec3, accuracy: f64, stack: &mut Vec<usize>) -> f32 {
         assert_eq!(tris.len(), self.triangles, "the triangles the tree was built over");
         if !p.is_finite() {
             return f32::NAN;
@@ -128,7 +150,9 @@ impl FastWinding {
             let m = &self.moments[i];
             let to = m.center - pd;
             let d2 = to.length_squared();
-            if d2 > (BETA * m.radius).powi(2) {
+            // With `accuracy` infinite the bound is infinite (or NaN for a node of radius 0,
+            // which compares false too): every node is opened and the sum is exact.
+            if d2 > (accuracy * m.radius).powi(2) {
                 sum += m.area.dot(to) / (d2 * d2.sqrt());
                 continue;
             }

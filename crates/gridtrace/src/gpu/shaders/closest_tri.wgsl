@@ -88,6 +88,11 @@ fn point_offer(best: ptr<function, GpuHit>, tri: u32, p: vec3<f32>) {
     }
 }
 
+// Loop iterations of this invocation's closest-point search, counted by the lattice searches
+// (`walks/point_ring.wgsl` and the cells they search; 0 for the other walks) and written to
+// the answer's work texel (`y`), so that tests hold them under llvmpipe's loop budget.
+var<private> point_steps: u32;
+
 // Squared distance from `p` to the box [lo, hi] (0 inside).
 fn point_box_dist_sq(p: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
     let d = max(max(lo - p, p - hi), vec3<f32>(0.0));

@@ -31,7 +31,7 @@ use crate::gpu::layout::SceneUniform;
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
 
-/// The closest-point ring search over a lattice, for the walks whose structure is one (the grid's
+/// The closest-point search over a lattice (rings, then the ball), for the walks whose structure is one (the grid's
 /// cells, the irregular grid's top cells): each defines the cell it calls, `point_ring_cell`.
 const POINT_RING: &str = include_str!("point_ring.wgsl");
 

@@ -137,35 +137,29 @@ fn grid_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
 
 // ---- Closest points (accel/grid/closest.rs, accel/closest/shells.rs) ----
 //
-// The cells in growing Chebyshev rings around the point's cell (clamped into the grid), each
-// ring's rows along x clipped to the ball of the best distance so far, until no cell of the next
-// ring can hold anything nearer (`lattice_ring_bound`, closest_tri.wgsl). With the proximity
-// cloud (`pc`) the search starts at the ring the point's cell's distance names (the rings
-// inside it are empty) and a row jumps over the empty cells an empty cell's distance vouches
-// for; the plain grid visits every cell of every ring. Bounds and cell boxes are grown by the
-// fill margin (`point_cell_margin`), and pruning is strict, so every triangle as near as the
-// best is measured and the tie rule decides as on the CPU.
+// The nearest point to `p`, by the lattice search of point_ring.wgsl, as Grid::closest_point
+// searches: the point's cell's proximity distance `d` says the rings inside ring `d` are empty,
+// so the search starts there, and a row jumps over the empty cells an empty cell's distance
+// vouches for. Both grid structures: the plain grid's cells carry the distances too (its ray
+// walk alone ignores them). Bounds and cell boxes are grown by the fill margin
+// (`point_cell_margin`), and pruning is strict, so every triangle as near as the best is
+// measured and the tie rule decides as on the CPU.
 
-// Whether this closest-point search jumps with the proximity cloud (`pc`): set once per point by
-// `grid_closest_point`, read by the ring search's cells.
-var<private> grid_point_pc: bool;
-
-// The ring search's cell (`lattice_point_ring`, point_ring.wgsl): measures the triangles of
+// The lattice search's cell (`lattice_point_search`, point_ring.wgsl): measures the triangles of
 // cell `cc` if its grown box may hold something nearer than `best`. Returns how many cells a row
-// may advance: an empty cell's proximity distance with `pc` (the cells that close are empty
-// too), else 1.
+// may advance: an empty cell's proximity distance (the cells that close are empty too), else 1.
 fn point_ring_cell(l: PointLattice, p: vec3<f32>, cc: vec3<i32>,
                    best: ptr<function, GpuHit>, work: ptr<function, u32>) -> i32 {
     *work += 1u;
     let cell = cells[cell_index(cc)];
     if (cell.count == 0u) {
-        if (grid_point_pc) { return i32(clamp(cell.dist, 1u, scene.dims.x)); }
-        return 1;
+        return i32(clamp(cell.dist, 1u, scene.dims.x));
     }
     let lo = l.min + vec3<f32>(cc) * l.cell;
     if (point_box_dist_sq(p, lo - l.margin, lo + l.cell + l.margin) > (*best).t) { return 1; }
     for (var i = cell.start; i < cell.start + cell.count; i++) {
         *work += 1u;
+        point_steps += 1u;
         point_offer(best, grid_refs[i], p);
     }
     return 1;
@@ -176,23 +170,10 @@ fn grid_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(inf(), MISS, 0.0, 0.0);
     let dims = vec3<i32>(scene.dims);
     let l = PointLattice(scene.bounds_min, scene.cell_size, dims, point_cell_margin(scene.cell_size));
-    let c = clamp(world_to_grid(p), vec3<i32>(0), dims - 1);
-    grid_point_pc = pass_.accel == ACCEL_PC;
-    var r = 0;
-    if (grid_point_pc) {
-        let d = cells[cell_index(c)].dist;
-        // FAR (u32::MAX): no cell holds a triangle.
-        if (d == MISS) { return best; }
-        r = i32(min(d, u32(dims.x + dims.y + dims.z)));
-    }
-    let out2 = lattice_out2(l, p);
-    let last_ring = lattice_last_ring(l, c);
-    loop {
-        if (r > last_ring) { break; }
-        // Strict: a ring that may hold something as near as the best is still searched.
-        if (lattice_ring_bound(l, p, c, r, out2) > best.t) { break; }
-        lattice_point_ring(l, p, c, r, &best, work);
-        r += 1;
-    }
+    let c = lattice_cell_of(l, p);
+    let d = cells[cell_index(c)].dist;
+    // FAR (u32::MAX): no cell holds a triangle.
+    if (d == MISS) { return best; }
+    lattice_point_search(l, p, c, i32(min(d, u32(dims.x + dims.y + dims.z))), &best, work);
     return best;
 }

@@ -163,30 +163,33 @@ fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
 // ---- Closest points (accel/irregular/closest.rs) ----
 //
 // By its cells, as the CPU searches them: the top cells (a uniform lattice, `dims >> shift`)
-// in growing Chebyshev rings around the point's top cell, each ring's rows along x clipped to
-// the ball of the best distance so far, until the next ring's lower bound exceeds it
-// (`lattice_ring_bound`, closest_tri.wgsl). A top cell whose box is near enough is searched
-// through its voxel map (`2^level` entries per axis, each naming the merged cell covering it),
-// row by row, each row clipped to the ball; an entry naming the cell the previous entry named
-// is skipped (merged cells repeat along x), and a cell's triangles are measured only if its
-// grown box may hold something nearer. A merged cell spanning several top cells is met once
+// searched by `lattice_point_search` (point_ring.wgsl): rings around the point's top cell until
+// one holds a triangle, then the top cells of the ball of the best distance. A top cell whose
+// box is near enough is searched through its voxel map (`2^level` entries per axis, each naming
+// the merged cell covering it), the slabs and rows the ball's box spans, each row clipped to
+// the ball; the entries a merged cell covers after the first are skipped (merged cells repeat
+// along x; the row goes on from the cell's end), and a cell's triangles are measured only if
+// its grown box may hold something nearer. A merged cell spanning several top cells is met once
 // per top cell: its box test repeats, never an answer. Boxes and bounds are grown by twice the
 // top cells' fill margin (`point_cell_margin`: at least the voxels' margin the cells were
 // filled with); pruning is strict, so ties are all measured and the tie rule decides.
 
 // Measures the triangles of cell `id` if its grown box, widened by `margin`, may hold
-// something nearer than `best`.
-fn irr_point_cell(id: u32, p: vec3<f32>, margin: vec3<f32>, best: ptr<function, GpuHit>, work: ptr<function, u32>) {
+// something nearer than `best`. Returns the cell's end on x (its box's high voxel plane): the
+// voxel-map entries before it on the row name this cell too.
+fn irr_point_cell(id: u32, p: vec3<f32>, margin: vec3<f32>, best: ptr<function, GpuHit>, work: ptr<function, u32>) -> u32 {
     *work += 1u;
     let cell = irr_cell(id);
-    if (cell.count == 0u) { return; }
+    if (cell.count == 0u) { return cell.max.x; }
     let lo = scene.bounds_min + vec3<f32>(cell.min) * scene.cell_size - margin;
     let hi = scene.bounds_min + vec3<f32>(cell.max) * scene.cell_size + margin;
-    if (point_box_dist_sq(p, lo, hi) > (*best).t) { return; }
+    if (point_box_dist_sq(p, lo, hi) > (*best).t) { return cell.max.x; }
     for (var i = cell.start; i < cell.start + cell.count; i++) {
         *work += 1u;
+        point_steps += 1u;
         point_offer(best, irr_refs[i], p);
     }
+    return cell.max.x;
 }
 
 // Top cell `tc` of the top lattice `l`, if its box may hold something nearer than `best`: its
@@ -200,11 +203,24 @@ fn irr_point_top(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<functio
     let entry = irr_entries[tcu.x + t.x * (tcu.y + t.y * tcu.z)];
     let level = entry & ((1u << IRR_LEVEL_BITS) - 1u);
     let begin = entry >> IRR_LEVEL_BITS;
+    // One cell (empty space, most top cells): no loops (iterations count, point_ring.wgsl).
+    if (level == 0u) {
+        irr_point_cell(irr_voxels[begin], p, l.margin, best, work);
+        return;
+    }
     let n = i32(1u << level);
     let sub = PointLattice(lo, l.cell / f32(n), vec3<i32>(n), l.margin);
-    for (var z = 0; z < n; z++) {
+    // Only the slabs and rows the ball's box spans: every row of every top cell searched would
+    // be `4^level` loop iterations a top cell, most of them outside the ball (point_ring.wgsl
+    // says why iterations count on a software adapter).
+    let reach = vec3<f32>(sqrt((*best).t)) + l.margin;
+    let first = lattice_cell_of(sub, p - reach);
+    let last = lattice_cell_of(sub, p + reach);
+    for (var z = first.z; z <= last.z; z++) {
+        point_steps += 1u;
         let dz = lattice_slab_dist(sub, p, 2, z);
-        for (var y = 0; y < n; y++) {
+        for (var y = first.y; y <= last.y; y++) {
+            point_steps += 1u;
             let dy = lattice_slab_dist(sub, p, 1, y);
             let rest = (*best).t - dz * dz - dy * dy;
             if (!(rest >= 0.0)) { continue; }
@@ -212,21 +228,19 @@ fn irr_point_top(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<functio
             let x0 = lattice_cell_of(sub, vec3<f32>(p.x - half, p.y, p.z)).x;
             let x1 = lattice_cell_of(sub, vec3<f32>(p.x + half, p.y, p.z)).x;
             let row = begin + (u32(y) << level) + (u32(z) << (2u * level));
-            var previous = MISS;
-            for (var x = x0; x <= x1; x++) {
-                let id = irr_voxels[row + u32(x)];
-                // Merged cells repeat along the row.
-                if (id != previous) {
-                    previous = id;
-                    irr_point_cell(id, p, l.margin, best, work);
-                }
+            var x = x0;
+            while (x <= x1) {
+                point_steps += 1u;
+                // A merged cell covers the entries up to its end: the row goes on from there.
+                let end = irr_point_cell(irr_voxels[row + u32(x)], p, l.margin, best, work);
+                x = max(x + 1, i32((end - (tcu.x << scene.shift)) >> (scene.shift - level)));
             }
         }
     }
 }
 
-// The ring search's cell (`lattice_point_ring`, point_ring.wgsl): a top cell, searched whole;
-// the row goes on to the next.
+// The lattice search's cell (`lattice_point_search`, point_ring.wgsl): a top cell, searched
+// whole; the row goes on to the next.
 fn point_ring_cell(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<function, GpuHit>, work: ptr<function, u32>) -> i32 {
     irr_point_top(l, p, tc, best, work);
     return 1;
@@ -243,12 +257,6 @@ fn irr_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {
     // The point's voxel (as the ray walks map a point), then its top cell.
     let voxel = clamp(world_to_grid(p), vec3<i32>(0), vec3<i32>(scene.dims) - 1);
     let c = min(voxel >> vec3<u32>(s), top_dims - 1);
-    let out2 = lattice_out2(l, p);
-    let last_ring = lattice_last_ring(l, c);
-    for (var r = 0; r <= last_ring; r++) {
-        // Strict: a ring that may hold something as near as the best is still searched.
-        if (lattice_ring_bound(l, p, c, r, out2) > best.t) { break; }
-        lattice_point_ring(l, p, c, r, &best, work);
-    }
+    lattice_point_search(l, p, c, 0, &best, work);
     return best;
 }
