@@ -145,6 +145,47 @@ def test_rays_against_numpy_brute_force(accel):
 
 
 @pytest.mark.parametrize("accel", STRUCTURES)
+def test_open3d_rule_at_edges_and_vertices(accel):
+    """Open3D's rule: a hit with the geometry and t of the previous one kept is skipped. Its own
+    test's rays (cube() is split as Open3D's create_box: the first goes through the diagonals of
+    the bottom and the top) count [2, 1, 0], not [4, 2, 0]; then rays through every vertex and
+    edge midpoint of the cube: each list has no two neighbours of one geometry at one t, and
+    every count is its list's length (counts come from another walk)."""
+    s = Scene(accel=accel, backend="cpu")
+    s.add_triangles(*cube())
+    rays = np.array([[0.5, 0.5, -1, 0, 0, 1], [0.5, 0.5, 0.5, 0, 0, 1], [10, 10, 10, 1, 0, 0]], np.float32)
+    assert s.count_intersections(rays).tolist() == [2, 1, 0]
+    lists = s.list_intersections(rays)
+    assert lists["t_hit"].tolist() == [1.0, 2.0, 0.5] and lists["ray_splits"].tolist() == [0, 2, 3, 3]
+    s.add_triangles(*cube())  # a second geometry on the first: hits of two geometries at one t
+    assert s.count_intersections(rays).tolist() == [4, 2, 0]
+    assert s.list_intersections(rays)["geometry_ids"].tolist() == [0, 1, 0, 1, 0, 1]
+    v, f = cube()
+    targets = np.concatenate([v, (v[f] + v[np.roll(f, 1, axis=1)]).reshape(-1, 3) / 2])
+    rng = np.random.default_rng(4)
+    o = rng.uniform(-2, 3, (len(targets) * 8, 3))
+    rays = np.hstack([o, np.tile(targets, (8, 1)) - o]).astype(np.float32)
+    counts, lists = s.count_intersections(rays), s.list_intersections(rays)
+    assert np.array_equal(np.diff(lists["ray_splits"].astype(np.int64)), counts)
+    same = (lists["ray_ids"][1:] == lists["ray_ids"][:-1]) & (lists["geometry_ids"][1:] == lists["geometry_ids"][:-1])
+    assert not (same & (lists["t_hit"][1:] == lists["t_hit"][:-1])).any()
+    assert (counts >= 2).sum() > len(rays) // 4
+
+
+def test_a_ray_starting_on_a_face():
+    """A ray from a point of the cube's bottom up, and one from the top down: today both hit
+    only the far side (hits count with t > 0). Follow-up (issue #53, the triangle test): Open3D
+    also counts the face the ray starts on (t == tnear == 0); once the triangle test accepts
+    t == t_min, the expected answers here become t = [0, 1] and counts of 2."""
+    s = Scene(backend="cpu")
+    s.add_triangles(*cube())
+    rays = np.array([[0.3, 0.6, 0, 0, 0, 1], [0.3, 0.6, 1, 0, 0, -1]], np.float32)
+    assert s.cast_rays(rays)["t_hit"].tolist() == [1.0, 1.0]
+    assert s.count_intersections(rays).tolist() == [1, 1]
+    assert s.list_intersections(rays)["t_hit"].tolist() == [1.0, 1.0]
+
+
+@pytest.mark.parametrize("accel", STRUCTURES)
 def test_points_against_numpy_brute_force(accel):
     s, tris, names = build(accel)
     rng = np.random.default_rng(3)

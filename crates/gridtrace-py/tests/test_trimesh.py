@@ -81,3 +81,50 @@ def test_the_one_line_and_rebuild_on_change():
     assert np.allclose(sorted(loc[:, 2]), [-1, 1], atol=1e-2)
     mesh.apply_translation([10, 0, 0])  # the intersector sees the moved mesh
     assert mesh.contains([[0, 0, 0], [10, 0, 0]]).tolist() == [False, True]
+
+
+def test_one_hit_per_point_through_edges_and_vertices():
+    """A cylinder's caps are fans of faces: rays along its axis on a 16 x 16 lattice, 32 of them
+    through the fans' edges, each hit exactly twice (trimesh's Embree engine's answer), with or
+    without locations; and rays through opposite vertices of an icosphere (each shared by five
+    or six faces): two hits, at the vertices."""
+    mesh = trimesh.creation.cylinder(radius=1.0, height=4.0, sections=32)
+    ours = gridtrace.trimesh.RayMeshIntersector(mesh, backend="cpu")
+    xy = np.linspace(-0.6, 0.6, 16)
+    o = np.array([[x, y, -5.0] for x in xy for y in xy])
+    d = np.tile([0.0, 0.0, 1.0], (len(o), 1))
+    _, ray = ours.intersects_id(o, d)
+    assert np.bincount(ray, minlength=len(o)).tolist() == [2] * len(o)
+    loc, ray, _ = ours.intersects_location(o, d)
+    assert np.bincount(ray, minlength=len(o)).tolist() == [2] * len(o)
+    assert np.allclose(np.abs(loc[:, 2]), 2.0, rtol=0, atol=1e-12)
+    assert ours.intersects_count(o, d).tolist() == [2] * len(o)
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    v = sphere.vertices[:40]
+    assert np.allclose(sphere.vertices[np.argmin(sphere.vertices @ v.T, axis=0)], -v)
+    loc, ray, _ = gridtrace.trimesh.RayMeshIntersector(sphere, backend="cpu").intersects_location(2 * v, -v)
+    assert np.bincount(ray, minlength=len(v)).tolist() == [2] * len(v)
+    assert np.allclose(loc[0::2], v, atol=1e-12) and np.allclose(loc[1::2], -v, atol=1e-12)
+
+
+def test_a_small_box_far_away():
+    """A 1 mm box from 10,000 units away: entry and exit 1 mm apart (float32 t alone is 1.5 mm
+    off there, and merging hits closer than 1e-6 of the origin's distance made them one), the
+    locations within 1e-6 of the exact ones and of trimesh's own engine's."""
+    mesh = trimesh.creation.box(extents=[1e-3, 1e-3, 1e-3])
+    ours = gridtrace.trimesh.RayMeshIntersector(mesh, backend="cpu")
+    # Down the axis (through the diagonals of the top and the bottom), and off it.
+    o = np.array([[0.0, 0.0, 1e4], [1e-4, -3e-4, 1e4], [1e4, 2e-4, 1e-4]])
+    d = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])
+    loc, ray, _ = ours.intersects_location(o, d)
+    assert ray.tolist() == [0, 0, 1, 1, 2, 2]
+    exact = np.array([[0, 0, 5e-4], [0, 0, -5e-4], [1e-4, -3e-4, 5e-4], [1e-4, -3e-4, -5e-4],
+                      [5e-4, 2e-4, 1e-4], [-5e-4, 2e-4, 1e-4]])
+    assert np.abs(loc - exact).max() < 1e-6
+    # trimesh's engine on the rays off the faces' diagonals (through a diagonal it names both
+    # faces, at locations a rounding apart).
+    want_loc, want_ray, _ = Reference(mesh).intersects_location(o[1:], d[1:])
+    want = want_loc[np.lexsort(((want_loc * d[1:][want_ray]).sum(axis=1), want_ray))]
+    assert np.abs(loc[2:] - want).max() < 1e-6
+    one_tri, one_ray, one_loc = ours.intersects_id(o, d, multiple_hits=False, return_locations=True)
+    assert one_ray.tolist() == [0, 1, 2] and np.abs(one_loc - exact[0::2]).max() < 1e-6

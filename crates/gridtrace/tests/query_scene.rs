@@ -148,6 +148,9 @@ fn rays_equal_brute_force_on_every_structure() {
                 let mut all = Vec::new();
                 all_hits_brute(&r.tris, &ray, 0.0, f32::INFINITY, &mut all);
                 all.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
+                // Open3D's rule: a hit with the geometry and `t` of the previous one kept is
+                // skipped (`dedup_by` compares with the last one kept).
+                all.dedup_by(|h, kept| h.t == kept.t && r.names[h.tri as usize].0 == r.names[kept.tri as usize].0);
                 (
                     brute_force_intersect(&r.tris, &ray, 0.0, f32::INFINITY),
                     brute_force_occluded(&r.tris, &ray, 0.0, 1.5),

@@ -249,7 +249,9 @@ class Mesh:
         return self._native.device(backend or self._backend)
 
     def intersect(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None, threads: int = 0) -> Hits:
-        """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max``.
+        """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max`` (this
+        interface's rule; ``Scene`` follows Open3D's: hits with ``t > 0``, and for its counts and
+        lists a hit with the geometry and ``t`` of the previous one skipped).
 
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
         a single point (3,) used for every ray. Directions need not be normalised. A ray with a NaN

@@ -211,16 +211,22 @@ class Scene:
         return _chunked(flat, call)["o"].reshape(lead)
 
     def count_intersections(self, rays, nthreads: int = 0) -> np.ndarray:
-        """How many faces each ray hits with ``t > 0``: an int32 array ``[...]``. A ray through
-        an edge or vertex shared by several faces counts each face it hits there (as Open3D),
-        so the parity is no reliable inside test: use ``compute_occupancy``."""
+        """How many hits each ray has with ``t > 0`` under Open3D's rule: an int32 array
+        ``[...]``, the length of each ray's ``list_intersections`` list. The rule (Open3D's):
+        hits nearest first, a hit with the same geometry and the same ``t`` as the previous one
+        skipped, so a ray through an edge two faces of a mesh share counts it once when both
+        faces give the same ``t`` (the diagonal of a box's side: Open3D's test). Faces met at
+        ``t`` a rounding apart both count, as in Open3D, so the parity is no reliable inside
+        test: use ``compute_occupancy``. Open3D also counts a hit at ``t = 0`` (a ray starting
+        on a surface); this does not yet."""
         k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
         call = lambda r: {"c": self._native.count_intersections(r, k)}  # noqa: E731
         return _chunked(flat, call)["c"].reshape(lead)
 
     def list_intersections(self, rays, nthreads: int = 0) -> Dict[str, np.ndarray]:
-        """Every hit of each ray with ``t > 0``, nearest first: ``ray_splits`` (``n + 1``
+        """Every hit of each ray with ``t > 0`` under Open3D's rule (``count_intersections``),
+        nearest first, equal ``t`` by geometry id and then face: ``ray_splits`` (``n + 1``
         offsets: ray ``i``'s hits are entries ``ray_splits[i]:ray_splits[i + 1]``, rays in the
         flattened order of ``rays``), ``ray_ids``, ``geometry_ids``, ``primitive_ids``,
         ``primitive_uvs`` ``(M, 2)`` and ``t_hit``."""

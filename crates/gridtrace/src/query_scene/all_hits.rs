@@ -1,16 +1,22 @@
 //! Every hit along each ray (`count_intersections`, `list_intersections`), on the CPU's
 //! cores, through the structure's all-hits walk (`AccelStructure::all_hits`).
 //!
-//! **What counts.** Every face the ray hits with `t > 0`, each once, with the library's
-//! triangle test, exactly brute force's set (the tests hold every structure to it). The test
-//! widens a face's bounds by a rounding-error bound so that no ray slips between two faces;
-//! for a ray grazing a face, or a small face seen from far away, that bound reaches 1e-3 of
-//! the face, so a ray passing through or near an edge counts both faces there. Open3D counts
-//! what Embree's watertight test reports, which is one face at an edge: on the Stanford Bunny
-//! 1.2% of incoherent rays count one more here than in Open3D (all of them with two hits at
-//! equal `t` on neighbouring faces). The parity of the count is therefore no inside test; the
-//! signed distance and occupancy here do not use it (they use the winding number,
-//! `points.rs`).
+//! **What counts: Open3D's rule.** Every face the ray hits with `t > 0` (the library's
+//! triangle test, exactly brute force's set), nearest first (equal `t`: by geometry id, then
+//! face), except that a hit with the same geometry and the same `t` (bit for bit) as the
+//! previous hit kept is skipped. That is the rule of Open3D's `RaycastingScene` (its Embree
+//! filter callback skips a hit whose geometry equals the previous counted hit's and whose
+//! primitive or `t` does too; a face is reported once here, so only the `t` part can apply).
+//! A ray through the diagonal shared by two faces of a box therefore counts the box's side
+//! once, as Open3D's own test expects. Open3D's "previous" is Embree's traversal order, which
+//! is not ordered by `t`; here it is the previous hit nearest first, so the answer does not
+//! depend on the structure's walk and the count is always the list's length. Two faces of one
+//! geometry met at `t` values a rounding apart (an edge crossed where the two faces' `t` differ
+//! in the last bit, or where the triangle test's rounding-error bound lets a ray grazing an
+//! edge hit both) both count, as in Open3D; the parity of a count is therefore no inside test
+//! (signed distance and occupancy here use the winding number, `points.rs`). Hits of different
+//! geometries at the same `t` all count. `TraceMesh` and Python's `Mesh` answer closest hits
+//! only (`t_min < t < t_max`, every face, no rule to apply).
 
 use rayon::prelude::*;
 
@@ -42,8 +48,8 @@ const BATCH: usize = 256;
 const COUNT_BATCH: usize = 1024;
 
 impl QueryScene {
-    /// How many faces each ray hits with `t > 0` (Open3D's `count_intersections`; see the
-    /// module notes for shared edges). Bad rays count 0.
+    /// How many faces each ray hits with `t > 0` under Open3D's rule (the module notes): the
+    /// length of each ray's `list_intersections` list. Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
         let m = self.merged()?;
         let mut out = vec![0u32; rays.len()];
@@ -54,15 +60,23 @@ impl QueryScene {
         out.par_chunks_mut(COUNT_BATCH)
             .zip(rays.par_chunks(COUNT_BATCH))
             .for_each_init(
-                || Vec::with_capacity(COUNT_BATCH),
-                |made, (o, r)| {
+                || (Vec::with_capacity(COUNT_BATCH), Vec::new()),
+                |(made, hits), (o, r)| {
                     let bad = make_into(r, made);
                     accel.count_hits_batch(made, 0.0, f32::INFINITY, o);
-                    if bad {
-                        for (o, q) in o.iter_mut().zip(r) {
-                            if ray_of(q).is_none() {
-                                *o = 0;
-                            }
+                    // The counting walk keeps no hit's t or geometry, which the rule needs.
+                    // Only a ray with two hits or more can hold a tie, so those rays are
+                    // listed again under the rule: the same answer on every structure without
+                    // a second copy of each walk. Its price is a list walk for those rays, and
+                    // on rays that cross a closed mesh that is most rays that hit it; counting
+                    // ties inside the BVH's counting walk would win that back (not measured).
+                    for (o, q) in o.iter_mut().zip(r) {
+                        if *o >= 2 {
+                            hits.clear();
+                            ray_hits(&m, q, hits);
+                            *o = hits.len() as u32;
+                        } else if bad && ray_of(q).is_none() {
+                            *o = 0;
                         }
                     }
                 },
@@ -70,7 +84,8 @@ impl QueryScene {
         Ok(out)
     }
 
-    /// Every hit of each ray with `t > 0` (Open3D's `list_intersections`).
+    /// Every hit of each ray with `t > 0` under Open3D's rule (the module notes), nearest
+    /// first (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
         let m = self.merged()?;
         if m.mesh.is_some() {
@@ -87,10 +102,6 @@ impl QueryScene {
                 for r in r {
                     let from = hits.len();
                     ray_hits(&m, r, &mut hits);
-                    let mine = &mut hits[from..];
-                    // Nearest first; ties by merged face, which orders by geometry id and then
-                    // face (kept faces keep the merged order).
-                    mine.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
                     counts.push((hits.len() - from) as u32);
                 }
                 (b * BATCH, counts, hits)
@@ -124,11 +135,132 @@ impl QueryScene {
     }
 }
 
-/// Appends the hits of one ray (none for a bad ray or an empty scene).
+/// Appends the hits of one ray under Open3D's rule, nearest first (none for a bad ray or an
+/// empty scene).
 #[inline]
 fn ray_hits(m: &Merged, r: &[f32; 6], out: &mut Vec<Hit>) {
     let (Some(mesh), Some(ray)) = (m.mesh.as_ref(), ray_of(r)) else {
         return;
     };
+    let from = out.len();
     mesh.prepared().accel.all_hits(&ray, 0.0, f32::INFINITY, out);
+    open3d_rule(m, out, from);
+}
+
+/// Sorts `hits[from..]` (one ray's) nearest first, equal `t` by merged face (so by geometry id,
+/// then face: kept faces keep the merged order), and drops each hit whose geometry and `t`
+/// equal those of the previous hit kept (Open3D's rule, the module notes). Equal `t` are
+/// neighbours after the sort, and so are the faces of one geometry among them, so comparing
+/// with the previous hit kept drops every tie within a geometry.
+fn open3d_rule(m: &Merged, hits: &mut Vec<Hit>, from: usize) {
+    let mine = &mut hits[from..];
+    if mine.len() < 2 {
+        return;
+    }
+    mine.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
+    let mut kept = from;
+    let mut last_geometry = m.name(hits[from].tri).0;
+    for k in from + 1..hits.len() {
+        let geometry = m.name(hits[k].tri).0;
+        if hits[k].t == hits[kept].t && geometry == last_geometry {
+            continue;
+        }
+        kept += 1;
+        hits[kept] = hits[k];
+        last_geometry = geometry;
+    }
+    hits.truncate(kept + 1);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::AccelKind;
+    use crate::query::{Backend, QueryOptions};
+
+    /// The unit cube as Open3D's `create_box` makes it: each side two faces split along a
+    /// diagonal (vertex `4x + 2y + z` at `(x, y, z)`), outward normals.
+    fn cube() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let v = (0..8u32)
+            .map(|i| [(i >> 2) as f32, ((i >> 1) & 1) as f32, (i & 1) as f32])
+            .collect();
+        let f = vec![
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ];
+        (v, f)
+    }
+
+    /// Open3D's own test rays: up through the diagonals of the bottom and the top (both
+    /// faces of each side hit at one `t`), the same from the centre, and a miss.
+    const RAYS: [[f32; 6]; 3] = [
+        [0.5, 0.5, -1.0, 0.0, 0.0, 1.0],
+        [0.5, 0.5, 0.5, 0.0, 0.0, 1.0],
+        [10.0, 10.0, 10.0, 1.0, 0.0, 0.0],
+    ];
+
+    fn scene(kind: AccelKind, copies: usize) -> QueryScene {
+        let mut s = QueryScene::new(QueryOptions {
+            accel: kind.into(),
+            backend: Backend::Cpu,
+            ..Default::default()
+        });
+        let (v, f) = cube();
+        for _ in 0..copies {
+            s.add_triangles(v.clone(), f.clone(), None).unwrap();
+        }
+        s
+    }
+
+    #[test]
+    fn a_ray_through_a_shared_diagonal_counts_the_side_once_as_open3d() {
+        for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().cpu) {
+            let s = scene(kind, 1);
+            // Both faces of the bottom are hit at t = 1 (and of the top at t = 2): without the
+            // rule these rays count [4, 2, 0].
+            let mut all = Vec::new();
+            let ray = ray_of(&RAYS[0]).unwrap();
+            s.merged()
+                .unwrap()
+                .accel()
+                .unwrap()
+                .all_hits(&ray, 0.0, f32::INFINITY, &mut all);
+            assert!(
+                all.len() > 2,
+                "{}: {} hits, no tie for the rule to skip",
+                kind.name(),
+                all.len()
+            );
+            assert_eq!(s.count_intersections(&RAYS).unwrap(), vec![2, 1, 0], "{}", kind.name());
+            let l = s.list_intersections(&RAYS).unwrap();
+            assert_eq!(l.t_hit, vec![1.0, 2.0, 0.5], "{}", kind.name());
+            assert_eq!(l.ray_splits, vec![0, 2, 3, 3]);
+            assert_eq!(l.ray_ids, vec![0, 0, 1]);
+            assert_eq!(l.geometry_ids, vec![0, 0, 0]);
+            // The face kept of a tie is the lower-numbered: the bottom's (8, 9) and the top's
+            // (10, 11) faces.
+            assert_eq!(l.primitive_ids, vec![8, 10, 10], "{}", kind.name());
+        }
+    }
+
+    #[test]
+    fn hits_of_different_geometries_at_one_t_all_count() {
+        for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().cpu) {
+            let s = scene(kind, 2);
+            assert_eq!(s.count_intersections(&RAYS).unwrap(), vec![4, 2, 0], "{}", kind.name());
+            let l = s.list_intersections(&RAYS).unwrap();
+            assert_eq!(l.t_hit, vec![1.0, 1.0, 2.0, 2.0, 0.5, 0.5], "{}", kind.name());
+            assert_eq!(l.geometry_ids, vec![0, 1, 0, 1, 0, 1], "{}", kind.name());
+        }
+    }
 }
