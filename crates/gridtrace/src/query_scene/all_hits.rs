@@ -45,6 +45,9 @@ impl QueryScene {
     /// How many faces each ray hits with `t > 0` (Open3D's `count_intersections`; see the
     /// module notes for shared edges). Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
+        if self.hits_path(&Default::default())?.is_some() {
+            return self.count_intersections_with(rays, &Default::default());
+        }
         let m = self.merged()?;
         let mut out = vec![0u32; rays.len()];
         let Some(accel) = m.accel() else {
@@ -72,6 +75,9 @@ impl QueryScene {
 
     /// Every hit of each ray with `t > 0` (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
+        if self.hits_path(&Default::default())?.is_some() {
+            return self.list_intersections_with(rays, &Default::default());
+        }
         let m = self.merged()?;
         if m.mesh.is_some() {
             m.accel().map_or(Ok(()), |a| a.check_current())?;
