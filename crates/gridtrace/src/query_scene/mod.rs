@@ -160,6 +160,7 @@ impl QueryScene {
     /// next `add_triangles` returns; `meshes` are (vertices, faces), each once; `instances` are
     /// (id, index into `meshes`, transform, mask), so that instances of one mesh share it again.
     /// An id twice or not below `next_id`, or a mesh index out of range, is an error.
+    #[allow(clippy::type_complexity)]
     pub fn from_parts(
         opts: QueryOptions,
         next_id: u32,

@@ -106,7 +106,7 @@ impl TopLevel {
     /// boxes past it are skipped.
     #[inline]
     pub fn walk(&self, origin: Vec3, dir: Vec3, t_min: f32, mut t_max: f32, mut visit: impl FnMut(u32, f32) -> f32) {
-        if self.nodes.is_empty() || !(t_min <= t_max) {
+        if self.nodes.is_empty() || t_max.is_nan() || t_max < t_min {
             return;
         }
         let inv_dir = dir.recip();
@@ -122,7 +122,8 @@ impl TopLevel {
                 let first = node.first as usize;
                 for &i in &self.items[first..first + node.count as usize] {
                     t_max = visit(i, t_max);
-                    if !(t_min <= t_max) {
+                    // `-inf` (an any-hit query is done) or a hit before `t_min`: stop.
+                    if t_max.is_nan() || t_max < t_min {
                         return;
                     }
                 }
