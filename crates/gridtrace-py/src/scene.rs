@@ -9,12 +9,14 @@ use std::path::PathBuf;
 use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 use glam::Mat4;
-use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use gridtrace::query_scene::{Geometry, QueryScene};
+use gridtrace::query_scene::{InstanceOf, PerRay, QueryScene, RayOptions};
 
 use crate::{on_threads, options, to_py};
 
@@ -48,11 +50,84 @@ fn transform(t: Option<PyReadonlyArray2<'_, f32>>) -> PyResult<Option<Mat4>> {
             t.shape()
         )));
     }
-    let r: [[f32; 4]; 4] = [rows[0], rows[1], rows[2], rows[3]];
-    Ok(Some(Mat4::from_cols_array_2d(&r).transpose()))
+    Ok(Some(mat4_of_rows([rows[0], rows[1], rows[2], rows[3]])))
+}
+
+/// A row-major 4x4 (numpy's) as glam's.
+fn mat4_of_rows(r: [[f32; 4]; 4]) -> Mat4 {
+    Mat4::from_cols_array_2d(&r).transpose()
+}
+
+/// A per-ray value as Python passes it: a number, or a 1-D array (checked for length and dtype
+/// by the Python side, which names the argument).
+enum PerRayArg<'py, T: numpy::Element> {
+    All(T),
+    Each(PyReadonlyArray1<'py, T>),
+}
+
+impl<'py, T: numpy::Element + Copy> PerRayArg<'py, T> {
+    fn extract(
+        ob: &Bound<'py, PyAny>,
+        what: &str,
+        scalar: impl FnOnce(&Bound<'py, PyAny>) -> Option<T>,
+    ) -> PyResult<Self> {
+        if let Ok(a) = ob.extract::<PyReadonlyArray1<'py, T>>() {
+            return Ok(PerRayArg::Each(a));
+        }
+        scalar(ob)
+            .map(PerRayArg::All)
+            .ok_or_else(|| PyValueError::new_err(format!("{what} must be a number or a 1-D array of the right dtype")))
+    }
+
+    fn get(&self, what: &str) -> PyResult<PerRay<'_, T>> {
+        Ok(match self {
+            PerRayArg::All(v) => PerRay::All(*v),
+            PerRayArg::Each(a) => PerRay::Each(
+                a.as_slice()
+                    .map_err(|_| PyValueError::new_err(format!("{what} must be C-contiguous")))?,
+            ),
+        })
+    }
+}
+
+/// The interval and mask arguments of a ray query.
+struct RayArgs<'py> {
+    tnear: PerRayArg<'py, f32>,
+    tfar: PerRayArg<'py, f32>,
+    mask: PerRayArg<'py, u32>,
+}
+
+impl<'py> RayArgs<'py> {
+    /// The arguments as given; `None`: the default (`0`, `inf`, every bit).
+    fn extract(
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        mask: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Self> {
+        Ok(RayArgs {
+            tnear: tnear.map_or(Ok(PerRayArg::All(0.0)), |t| {
+                PerRayArg::extract(t, "tnear", |o| o.extract::<f32>().ok())
+            })?,
+            tfar: tfar.map_or(Ok(PerRayArg::All(f32::INFINITY)), |t| {
+                PerRayArg::extract(t, "tfar", |o| o.extract::<f32>().ok())
+            })?,
+            mask: mask.map_or(Ok(PerRayArg::All(u32::MAX)), |m| {
+                PerRayArg::extract(m, "mask", |o| o.extract::<u32>().ok())
+            })?,
+        })
+    }
+
+    fn options(&self) -> PyResult<RayOptions<'_>> {
+        Ok(RayOptions {
+            t_near: self.tnear.get("tnear")?,
+            t_far: self.tfar.get("tfar")?,
+            mask: self.mask.get("mask")?,
+        })
+    }
 }
 
 fn key_error(id: u32) -> PyErr {
+    // The same words as the library's error for an unknown id.
     PyKeyError::new_err(format!("unknown geometry id {id}"))
 }
 
@@ -88,38 +163,35 @@ impl NativeScene {
         })
     }
 
-    /// Rebuilds a scene from `parts()` (unpickling).
+    /// Rebuilds a scene from `parts()` (unpickling): each mesh once, each geometry as (id,
+    /// mesh index, 4x4 transform, mask).
     #[staticmethod]
-    #[pyo3(signature = (accel, accel_params, backend, next_id, geometries, gpu_variant = ""))]
-    #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (accel, accel_params, backend, next_id, meshes, instances, gpu_variant = ""))]
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
     fn from_parts(
         py: Python<'_>,
         accel: &str,
         accel_params: &str,
         backend: &str,
         next_id: u32,
-        geometries: Vec<(
-            u32,
-            PyReadonlyArray2<'_, f32>,
-            PyReadonlyArray2<'_, u32>,
-            PyReadonlyArray2<'_, f32>,
-        )>,
+        meshes: Vec<(PyReadonlyArray2<'_, f32>, PyReadonlyArray2<'_, u32>)>,
+        instances: Vec<(u32, usize, PyReadonlyArray2<'_, f32>, u32)>,
         gpu_variant: &str,
     ) -> PyResult<Self> {
         let opts = options(accel, accel_params, backend, gpu_variant)?;
-        let mut parts = Vec::with_capacity(geometries.len());
-        for (id, v, f, t) in &geometries {
-            parts.push((
-                *id,
-                Geometry {
-                    vertices: rows::<f32, 3>(v, "vertices")?.to_vec(),
-                    faces: rows::<u32, 3>(f, "faces")?.to_vec(),
-                    transform: transform(Some(t.clone()))?.unwrap_or(Mat4::IDENTITY),
-                },
+        let mut m = Vec::with_capacity(meshes.len());
+        for (v, f) in &meshes {
+            m.push((
+                rows::<f32, 3>(v, "vertices")?.to_vec(),
+                rows::<u32, 3>(f, "faces")?.to_vec(),
             ));
         }
+        let mut inst = Vec::with_capacity(instances.len());
+        for (id, k, t, mask) in &instances {
+            inst.push((*id, *k, transform(Some(t.clone()))?.unwrap_or(Mat4::IDENTITY), *mask));
+        }
         let scene = py
-            .detach(move || QueryScene::from_parts(opts, next_id, parts))
+            .detach(move || QueryScene::from_parts(opts, next_id, m, inst))
             .map_err(to_py)?;
         Ok(NativeScene {
             inner: RwLock::new(scene),
@@ -167,26 +239,97 @@ impl NativeScene {
         })
     }
 
-    /// (next_id, [(id, vertices, faces, transform)]): what pickling keeps.
+    /// (next_id, [(vertices, faces)], [(id, mesh index, transform, mask)]): what pickling
+    /// keeps, each mesh once however many geometries place it.
     #[allow(clippy::type_complexity)]
     fn parts<'py>(
         &self,
         py: Python<'py>,
-    ) -> PyResult<(u32, Vec<(u32, Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)>)> {
+    ) -> PyResult<(
+        u32,
+        Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+        Vec<(u32, usize, Bound<'py, PyAny>, u32)>,
+    )> {
         let s = self.read();
-        let mut out = Vec::new();
-        for id in s.ids() {
-            let g = s.geometry(id).expect("listed ids exist");
-            let faces: Vec<u32> = g.faces.iter().flatten().copied().collect();
-            let t: Vec<[f32; 4]> = g.transform.transpose().to_cols_array_2d().to_vec();
-            out.push((
-                id,
-                rows_out(py, g.vertices.clone())?,
-                faces.into_pyarray(py).reshape([g.faces.len(), 3])?.into_any(),
-                rows_out(py, t)?,
+        let (meshes, instances) = s.parts();
+        let mut m = Vec::with_capacity(meshes.len());
+        for mesh in meshes {
+            let faces: Vec<u32> = mesh.faces.iter().flatten().copied().collect();
+            m.push((
+                rows_out(py, mesh.vertices.clone())?,
+                faces.into_pyarray(py).reshape([mesh.faces.len(), 3])?.into_any(),
             ));
         }
-        Ok((s.next_id(), out))
+        let mut inst = Vec::with_capacity(instances.len());
+        for (id, k, t, mask) in instances {
+            let t: Vec<[f32; 4]> = t.transpose().to_cols_array_2d().to_vec();
+            inst.push((id, k, rows_out(py, t)?, mask));
+        }
+        Ok((s.next_id(), m, inst))
+    }
+
+    /// A new geometry placing the mesh of geometry `of` (shared, with its structure).
+    fn add_instance(&self, py: Python<'_>, of: u32, transform: PyReadonlyArray2<'_, f32>, mask: u32) -> PyResult<u32> {
+        let t = self::transform(Some(transform))?;
+        py.detach(|| {
+            let mut s = self.write();
+            if !s.contains(of) {
+                return Err(key_error(of));
+            }
+            s.add_instance(InstanceOf::Geometry(of), t, mask).map_err(to_py)
+        })
+    }
+
+    /// Moves geometries `ids[k]` to `transforms[k]` ((K, 4, 4) row-major), all or none.
+    fn set_transforms(
+        &self,
+        py: Python<'_>,
+        ids: PyReadonlyArray1<'_, u32>,
+        transforms: PyReadonlyArray3<'_, f32>,
+    ) -> PyResult<()> {
+        let ids = ids
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("ids must be C-contiguous"))?;
+        let shape = transforms.shape();
+        if shape[1..] != [4, 4] || shape[0] != ids.len() {
+            return Err(PyValueError::new_err(format!(
+                "transforms must have shape ({}, 4, 4), got {shape:?}",
+                ids.len()
+            )));
+        }
+        let flat = transforms
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("transforms must be C-contiguous"))?;
+        let m: Vec<Mat4> = bytemuck::cast_slice::<f32, [[f32; 4]; 4]>(flat)
+            .iter()
+            .map(|r| mat4_of_rows(*r))
+            .collect();
+        py.detach(|| {
+            let mut s = self.write();
+            if let Some(&id) = ids.iter().find(|&&id| !s.contains(id)) {
+                return Err(key_error(id));
+            }
+            s.set_transforms(ids, &m).map_err(to_py)
+        })
+    }
+
+    fn set_mask(&self, py: Python<'_>, id: u32, mask: u32) -> PyResult<()> {
+        py.detach(|| {
+            let mut s = self.write();
+            if !s.contains(id) {
+                return Err(key_error(id));
+            }
+            s.set_mask(id, mask).map_err(to_py)
+        })
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.read().memory_bytes()
+    }
+
+    /// Bottom levels and merged meshes built so far (tests: a move builds none).
+    fn structure_builds(&self) -> usize {
+        self.read().structure_builds()
     }
 
     fn ids(&self) -> Vec<u32> {
@@ -207,16 +350,21 @@ impl NativeScene {
     }
 
     /// `nthreads`: CPU threads (0: all cores), as Open3D's.
-    #[pyo3(signature = (rays, nthreads = 0))]
+    #[pyo3(signature = (rays, nthreads = 0, tnear = None, tfar = None, mask = None))]
     fn cast_rays<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
         nthreads: usize,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        mask: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
+        let args = RayArgs::extract(tnear, tfar, mask)?;
+        let o = args.options()?;
         let h = py
-            .detach(|| on_threads(nthreads, || self.read().cast_rays(r)))?
+            .detach(|| on_threads(nthreads, || self.read().cast_rays_with(r, &o)))?
             .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("t_hit", h.t_hit.into_pyarray(py))?;
@@ -227,48 +375,61 @@ impl NativeScene {
         Ok(d)
     }
 
-    #[pyo3(signature = (rays, tnear, tfar, nthreads = 0))]
+    #[pyo3(signature = (rays, tnear = None, tfar = None, nthreads = 0, mask = None))]
     fn test_occlusions<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
-        tnear: f32,
-        tfar: f32,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
         nthreads: usize,
+        mask: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
+        let args = RayArgs::extract(tnear, tfar, mask)?;
+        let opts = args.options()?;
         let o = py
-            .detach(|| on_threads(nthreads, || self.read().test_occlusions(r, tnear, tfar)))?
+            .detach(|| on_threads(nthreads, || self.read().test_occlusions_with(r, &opts)))?
             .map_err(to_py)?;
         Ok(o.into_pyarray(py))
     }
 
-    #[pyo3(signature = (rays, nthreads = 0))]
+    #[pyo3(signature = (rays, nthreads = 0, tnear = None, tfar = None, mask = None))]
     fn count_intersections<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
         nthreads: usize,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        mask: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<i32>>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
+        let args = RayArgs::extract(tnear, tfar, mask)?;
+        let o = args.options()?;
         let c = py
-            .detach(|| on_threads(nthreads, || self.read().count_intersections(r)))?
+            .detach(|| on_threads(nthreads, || self.read().count_intersections_with(r, &o)))?
             .map_err(to_py)?;
         // Open3D's dtype (int32): a ray crossing two billion faces is not a case.
         let c: Vec<i32> = c.into_iter().map(|c| c.min(i32::MAX as u32) as i32).collect();
         Ok(c.into_pyarray(py))
     }
 
-    #[pyo3(signature = (rays, nthreads = 0))]
+    #[pyo3(signature = (rays, nthreads = 0, tnear = None, tfar = None, mask = None))]
     fn list_intersections<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
         nthreads: usize,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        mask: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let r = rows::<f32, 6>(&rays, "rays")?;
+        let args = RayArgs::extract(tnear, tfar, mask)?;
+        let o = args.options()?;
         let l = py
-            .detach(|| on_threads(nthreads, || self.read().list_intersections(r)))?
+            .detach(|| on_threads(nthreads, || self.read().list_intersections_with(r, &o)))?
             .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("ray_splits", l.ray_splits.into_pyarray(py))?;

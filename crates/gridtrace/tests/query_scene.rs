@@ -1,4 +1,6 @@
-//! `QueryScene` against brute force over the same world-space triangles, on every structure:
+//! `QueryScene` against brute force over the same triangles, on every structure (the rays over
+//! each geometry's own-space triangles with the ray carried in as the two levels carry it, the
+//! points over the world-space ones):
 //! closest hits, occlusion, counts and lists of all hits, closest points and distances, the
 //! signed distance's sign and occupancy against the brute-force winding number (closed meshes,
 //! away from the surface). Scenes of several geometries with transforms, open and closed
@@ -6,14 +8,14 @@
 //! faces; bad rays and points; changes (remove, update_vertices) against a fresh scene; and
 //! cast_rays / test_occlusions on the GPU against the CPU.
 
-use glam::{Mat4, Quat, Vec3};
+use glam::{Mat4, Quat, Vec3, Vec4};
 use gridtrace::Mesh;
 use gridtrace::accel::closest::closest_point_brute;
 use gridtrace::accel::contract::all_hits_brute;
 use gridtrace::accel::winding::winding_number_brute;
 use gridtrace::accel::{AccelKind, Hit, Ray, TriAccel, brute_force_intersect, brute_force_occluded};
 use gridtrace::query::{Backend, QueryOptions};
-use gridtrace::query_scene::{Geometry, INVALID_ID, QueryScene};
+use gridtrace::query_scene::{Geometry, INVALID_ID, InstanceOf, PerRay, QueryScene, RayOptions};
 use gridtrace::scene::procedural;
 use gridtrace::testing::skip_gpu;
 use gridtrace::util::Rng;
@@ -24,6 +26,8 @@ use rayon::prelude::*;
 struct Reference {
     tris: Vec<TriAccel>,
     names: Vec<(u32, u32)>,
+    /// Each geometry with its non-degenerate own-space faces, named: what the two levels walk.
+    local: Vec<(Geometry, Vec<TriAccel>, Vec<(u32, u32)>)>,
     /// Whether each geometry (by position in `geoms`) is closed.
     closed_only: bool,
 }
@@ -72,9 +76,20 @@ fn scene_of(geoms: &[Geom], opts: QueryOptions) -> QueryScene {
 fn reference(geoms: &[Geom]) -> Reference {
     let mut tris = Vec::new();
     let mut names = Vec::new();
+    let mut local = Vec::new();
     for (id, (v, f, t)) in geoms.iter().enumerate() {
         // The same world vertices the scene computes (the same glam call, so the same bits).
-        let world = Geometry::new(v.clone(), f.clone(), *t).unwrap().world_vertices();
+        let g = Geometry::new(v.clone(), f.clone(), *t).unwrap();
+        let world = g.world_vertices();
+        let (mut lt, mut ln) = (Vec::new(), Vec::new());
+        for (k, face) in f.iter().enumerate() {
+            let [a, b, c] = face.map(|i| Vec3::from(v[i as usize]));
+            if (b - a).cross(c - a).length_squared() > 0.0 {
+                lt.push(TriAccel::new(a, b, c));
+                ln.push((id as u32, k as u32));
+            }
+        }
+        local.push((g, lt, ln));
         for (k, face) in f.iter().enumerate() {
             let [a, b, c] = face.map(|i| Vec3::from(world[i as usize]));
             if (b - a).cross(c - a).length_squared() > 0.0 {
@@ -86,6 +101,7 @@ fn reference(geoms: &[Geom]) -> Reference {
     Reference {
         tris,
         names,
+        local,
         closed_only: geoms.len() == 2,
     }
 }
@@ -145,17 +161,28 @@ fn rays_equal_brute_force_on_every_structure() {
         .map(|q| match ray(q) {
             None => (Hit::MISS, false, Vec::new()),
             Some(ray) => {
-                let mut all = Vec::new();
-                all_hits_brute(&r.tris, &ray, 0.0, f32::INFINITY, &mut all);
+                // Hits name (geometry, face) by `tri` = geometry * 2^20 + face.
+                let (mut all, mut best, mut occluded) = (Vec::new(), Hit::MISS, false);
+                for (g, tris, names) in &r.local {
+                    let q = g.ray_to_local(&ray);
+                    let name = |h: Hit| Hit {
+                        tri: (names[h.tri as usize].0 << 20) | names[h.tri as usize].1,
+                        ..h
+                    };
+                    let mut hits = Vec::new();
+                    all_hits_brute(tris, &q, 0.0, f32::INFINITY, &mut hits);
+                    all.extend(hits.into_iter().map(name));
+                    let h = brute_force_intersect(tris, &q, 0.0, best.t);
+                    if h.is_hit() && h.t < best.t {
+                        best = name(h);
+                    }
+                    occluded |= brute_force_occluded(tris, &q, 0.0, 1.5);
+                }
                 all.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
                 // Open3D's rule: a hit with the geometry and `t` of the previous one kept is
-                // skipped (`dedup_by` compares with the last one kept).
-                all.dedup_by(|h, kept| h.t == kept.t && r.names[h.tri as usize].0 == r.names[kept.tri as usize].0);
-                (
-                    brute_force_intersect(&r.tris, &ray, 0.0, f32::INFINITY),
-                    brute_force_occluded(&r.tris, &ray, 0.0, 1.5),
-                    all,
-                )
+                // skipped (`dedup_by` compares with the last one kept; `tri >> 20` is the geometry).
+                all.dedup_by(|h, kept| h.t == kept.t && h.tri >> 20 == kept.tri >> 20);
+                (best, occluded, all)
             }
         })
         .collect();
@@ -190,14 +217,7 @@ fn rays_equal_brute_force_on_every_structure() {
                 .collect();
             let expect: Vec<(u32, u32, u32, [f32; 2])> = want_all
                 .iter()
-                .map(|h| {
-                    (
-                        h.t.to_bits(),
-                        r.names[h.tri as usize].0,
-                        r.names[h.tri as usize].1,
-                        [h.u, h.v],
-                    )
-                })
+                .map(|h| (h.t.to_bits(), h.tri >> 20, h.tri & 0xFFFFF, [h.u, h.v]))
                 .collect();
             assert_eq!(got, expect, "{what}: list");
             if !want.is_hit() {
@@ -209,21 +229,24 @@ fn rays_equal_brute_force_on_every_structure() {
                 continue;
             }
             // The same t as brute force; the face named is one brute force hits at that t
-            // (equal t on a shared edge may name either), with its uv and world normal.
+            // (equal t on a shared edge may name either), with its uv and world normal (the
+            // world face's, within the rounding of the two ways to it).
             assert_eq!(hits.t_hit[i], want.t, "{what}: t");
-            let k = r
-                .names
+            let name = (hits.geometry_ids[i], hits.primitive_ids[i]);
+            let (g, tris, names) = &r.local[name.0 as usize];
+            let k = names
                 .iter()
-                .position(|&n| n == (hits.geometry_ids[i], hits.primitive_ids[i]))
+                .position(|&n| n == name)
                 .unwrap_or_else(|| panic!("{what}: names a face brute force does not have"));
-            let q = ray(&rays[i]).unwrap();
-            let h = r.tris[k]
+            let q = g.ray_to_local(&ray(&rays[i]).unwrap());
+            let h = tris[k]
                 .intersect(q.origin, q.dir, 0.0, f32::INFINITY)
                 .expect("the named face is hit");
             assert_eq!((h.t, [h.u, h.v]), (hits.t_hit[i], hits.primitive_uvs[i]), "{what}: uv");
-            let n = r.tris[k].normal().normalize();
+            let w = r.names.iter().position(|&n| n == name).unwrap();
+            let n = r.tris[w].normal().normalize();
             assert!(
-                Vec3::from(hits.primitive_normals[i]).abs_diff_eq(n, 1e-6),
+                Vec3::from(hits.primitive_normals[i]).abs_diff_eq(n, 1e-5),
                 "{what}: normal"
             );
         }
@@ -532,4 +555,305 @@ fn gpu_rays_equal_cpu() {
         let allowed = if driver { rays.len() / 100 } else { rays.len() / 200 };
         assert!(differ < allowed.max(1), "{}: {differ} occlusions differ", kind.name());
     }
+}
+
+/// 100 instances of two small meshes under random rotations, scales (uneven ones and mirrors
+/// among them) and translations, each with a mask of one of four bits.
+fn instanced(opts: QueryOptions, seed: u64) -> (QueryScene, Vec<(Vec<[f32; 3]>, Vec<[u32; 3]>)>) {
+    let mut rng = Rng::new(seed);
+    let meshes = vec![
+        arrays(&procedural::icosphere(Vec3::ZERO, 0.6, 1)),
+        arrays(&procedural::torus_knot(2, 3, 0.15, 24, 5)),
+    ];
+    let mut s = QueryScene::new(opts);
+    let first = [
+        s.add_triangles(meshes[0].0.clone(), meshes[0].1.clone(), None).unwrap(),
+        s.add_triangles(meshes[1].0.clone(), meshes[1].1.clone(), None).unwrap(),
+    ];
+    for i in 0..100u32 {
+        let axis = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize_or(Vec3::Z);
+        let mut scale = Vec3::splat(rng.range(0.4, 2.0));
+        if i % 3 == 0 {
+            scale *= Vec3::new(1.0, rng.range(0.5, 1.5), rng.range(0.5, 1.5));
+        }
+        if i % 7 == 0 {
+            scale.x = -scale.x;
+        }
+        let m = Mat4::from_scale_rotation_translation(
+            scale,
+            Quat::from_axis_angle(axis, rng.range(0.0, 6.28)),
+            Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0)),
+        );
+        let mask = 1 << rng.below(4);
+        let id = s
+            .add_instance(InstanceOf::Geometry(first[(i % 2) as usize]), Some(m), mask)
+            .unwrap();
+        assert_eq!(id, i + 2);
+    }
+    // The two geometries placed first served only as the instances' source: removed, their
+    // meshes live on in the instances.
+    s.remove(first[0]).unwrap();
+    s.remove(first[1]).unwrap();
+    (s, meshes)
+}
+
+/// The world-space triangles of the geometries whose mask shares a bit with `mask`, as one
+/// mesh (a scene of one geometry: no instance, no transform), and each face's (id, face).
+fn flat(scene: &QueryScene, mask: u32, opts: QueryOptions) -> (QueryScene, Vec<(u32, u32)>) {
+    let (mut v, mut f, mut names) = (Vec::new(), Vec::new(), Vec::new());
+    for id in scene.ids() {
+        let g = scene.geometry(id).unwrap();
+        if g.mask() & mask == 0 {
+            continue;
+        }
+        let base = v.len() as u32;
+        v.extend(g.world_vertices());
+        for (k, face) in g.faces().iter().enumerate() {
+            f.push(face.map(|x| x + base));
+            names.push((id, k as u32));
+        }
+    }
+    let mut s = QueryScene::new(opts);
+    s.add_triangles(v, f, None).unwrap();
+    (s, names)
+}
+
+/// The two levels answer every ray query as the same scene merged flat, on every structure the
+/// CPU traces, with random per-ray intervals and masks: t within 1e-5 relative, the same
+/// geometry and face but where faces tie at equal t (shared edges; counted and bounded), counts
+/// equal but at rays grazing an edge (the own-space and world-space tests round apart; counted
+/// and bounded). The flat mesh's world vertices are rounded to float once more than the two
+/// levels' own-space ones, which moves a face by up to an ulp of its coordinates: for a ray
+/// that meets a face at a grazing angle that is more than 1e-5 of `t`, so such hits are held
+/// to 1e-4 of the scene's size along the ray instead (counted and bounded).
+#[test]
+fn instances_answer_as_the_scene_merged_flat() {
+    let mut rng = Rng::new(11);
+    let n = 1500;
+    let mut rays = Vec::with_capacity(n);
+    for _ in 0..n {
+        let o = Vec3::new(rng.range(-14.0, 14.0), rng.range(-14.0, 14.0), rng.range(-14.0, 14.0));
+        let target = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0));
+        let d = (target - o) * rng.range(0.05, 2.0);
+        rays.push([o.x, o.y, o.z, d.x, d.y, d.z]);
+    }
+    let t_near: Vec<f32> = (0..n)
+        .map(|i| if i % 4 == 0 { 0.0 } else { rng.range(0.0, 0.5) })
+        .collect();
+    // Some rays with t_far < t_near: they see nothing.
+    let t_far: Vec<f32> = (0..n)
+        .map(|i| match i % 5 {
+            0 => f32::INFINITY,
+            1 => t_near[i] * 0.5,
+            _ => t_near[i] + rng.range(0.0, 3.0),
+        })
+        .collect();
+    for kind in kinds() {
+        let (scene, _) = instanced(cpu(kind), 3);
+        let mut compared = 0;
+        let (mut ties, mut edges, mut grazing) = (0, 0, 0);
+        for mask in [1u32, 2, 4 | 8, u32::MAX] {
+            let (flat, names) = flat(&scene, mask, cpu(kind));
+            let o = RayOptions {
+                t_near: PerRay::Each(&t_near),
+                t_far: PerRay::Each(&t_far),
+                mask: PerRay::All(mask),
+            };
+            let o_flat = RayOptions {
+                mask: PerRay::All(u32::MAX),
+                ..o
+            };
+            let (a, b) = (
+                scene.cast_rays_with(&rays, &o).unwrap(),
+                flat.cast_rays_with(&rays, &o_flat).unwrap(),
+            );
+            let (ca, cb) = (
+                scene.count_intersections_with(&rays, &o).unwrap(),
+                flat.count_intersections_with(&rays, &o_flat).unwrap(),
+            );
+            let (oa, ob) = (
+                scene.test_occlusions_with(&rays, &o).unwrap(),
+                flat.test_occlusions_with(&rays, &o_flat).unwrap(),
+            );
+            let (la, lb) = (
+                scene.list_intersections_with(&rays, &o).unwrap(),
+                flat.list_intersections_with(&rays, &o_flat).unwrap(),
+            );
+            for i in 0..n {
+                let what = format!("{} mask {mask} ray {i}", kind.name());
+                if t_near[i] > t_far[i] {
+                    assert_eq!(
+                        (a.t_hit[i], ca[i], oa[i]),
+                        (f32::INFINITY, 0, false),
+                        "{what}: empty interval"
+                    );
+                }
+                if ca[i] != cb[i] {
+                    edges += 1;
+                    continue;
+                }
+                assert_eq!(oa[i], ob[i], "{what}: occluded");
+                let close = |x: f32, y: f32| x == y || (x - y).abs() <= 1e-5 * x.abs().max(y.abs());
+                // 1e-4 of the scene (16 wide) along this ray, in units of its direction.
+                let length = Vec3::from_slice(&rays[i][3..]).length();
+                let near = |x: f32, y: f32| close(x, y) || (x - y).abs() * length <= 16e-4;
+                if !close(a.t_hit[i], b.t_hit[i]) {
+                    grazing += 1;
+                }
+                assert!(
+                    near(a.t_hit[i], b.t_hit[i]),
+                    "{what}: t {} vs {}",
+                    a.t_hit[i],
+                    b.t_hit[i]
+                );
+                let (s, e) = (la.ray_splits[i] as usize, la.ray_splits[i + 1] as usize);
+                assert_eq!(e - s, ca[i] as usize, "{what}: list and count");
+                let sb = lb.ray_splits[i] as usize;
+                for k in 0..e - s {
+                    assert!(near(la.t_hit[s + k], lb.t_hit[sb + k]), "{what}: hit {k}");
+                }
+                if b.t_hit[i].is_finite() {
+                    compared += 1;
+                    let want = names[b.primitive_ids[i] as usize];
+                    if (a.geometry_ids[i], a.primitive_ids[i]) != want {
+                        ties += 1;
+                    } else {
+                        assert!(
+                            Vec3::from(a.primitive_normals[i]).abs_diff_eq(Vec3::from(b.primitive_normals[i]), 1e-4),
+                            "{what}: normal"
+                        );
+                    }
+                }
+            }
+        }
+        eprintln!(
+            "{}: {compared} hits compared, {ties} named another face at a tie, {grazing} t beyond 1e-5 \
+             (grazing), {edges} counts apart",
+            kind.name()
+        );
+        assert!(compared > 900, "{}: only {compared} hits", kind.name());
+        assert!(
+            ties * 100 <= compared && grazing * 100 <= compared && edges * 200 <= 4 * n,
+            "{}: {ties} ties, {grazing} grazing, {edges} edges",
+            kind.name()
+        );
+    }
+}
+
+/// Moving instances builds no structure over triangles (only the top level), and the moved
+/// scene answers as a scene built fresh with the new transforms, bit for bit.
+#[test]
+fn moves_build_no_mesh_structure() {
+    let (mut scene, _) = instanced(cpu(AccelKind::Bvh), 5);
+    let mut rng = Rng::new(2);
+    let rays: Vec<[f32; 6]> = (0..500)
+        .map(|_| {
+            [
+                rng.range(-9.0, 9.0),
+                rng.range(-9.0, 9.0),
+                -20.0,
+                rng.range(-0.2, 0.2),
+                rng.range(-0.2, 0.2),
+                1.0,
+            ]
+        })
+        .collect();
+    scene.cast_rays(&rays).unwrap();
+    assert_eq!(
+        scene.structure_builds(),
+        2,
+        "one structure a mesh, shared by 50 instances each"
+    );
+    let ids: Vec<u32> = (2..102).collect();
+    for step in 0..3 {
+        let moved: Vec<Mat4> = ids
+            .iter()
+            .map(|&id| {
+                Mat4::from_translation(Vec3::new(0.1 * step as f32, 0.0, 0.05))
+                    * scene.geometry(id).unwrap().transform()
+            })
+            .collect();
+        scene.set_transforms(&ids, &moved).unwrap();
+        scene.set_mask(7, 0).unwrap();
+        let hits = scene.cast_rays(&rays).unwrap();
+        scene.count_intersections(&rays).unwrap();
+        scene.test_occlusions(&rays, 0.0, 30.0).unwrap();
+        assert_eq!(scene.structure_builds(), 2, "step {step}: a move built a structure");
+        let (meshes, instances) = scene.parts();
+        let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
+        let fresh = QueryScene::from_parts(cpu(AccelKind::Bvh), scene.next_id(), meshes, instances).unwrap();
+        assert_eq!(hits, fresh.cast_rays(&rays).unwrap(), "step {step}");
+        assert!(hits.geometry_ids.iter().all(|&g| g != 7), "masked out");
+    }
+    // One structure a mesh, however many instances; about 100 bytes of records an instance.
+    let two_meshes = scene.memory_bytes();
+    for _ in 0..1000 {
+        scene.add_instance(InstanceOf::Geometry(2), None, 1).unwrap();
+    }
+    scene.cast_rays(&rays[..1]).unwrap();
+    assert_eq!(scene.structure_builds(), 2);
+    let per_instance = (scene.memory_bytes() - two_meshes) / 1000;
+    assert!(per_instance <= 256, "{per_instance} bytes an instance");
+}
+
+/// Bad transforms, ids and per-ray arguments are errors naming them, and change nothing.
+#[test]
+fn instance_errors_name_the_culprit_and_change_nothing() {
+    let (mut scene, _) = instanced(cpu(AccelKind::Bvh), 9);
+    let before = scene.geometry(5).unwrap().transform();
+    let mut nan = Mat4::IDENTITY;
+    nan.x_axis.y = f32::NAN;
+    for (bad, words) in [
+        (nan, "non-finite"),
+        (Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0)), "cannot be inverted"),
+        (
+            Mat4::from_cols(Vec4::X, Vec4::Y, Vec4::Z, Vec4::new(0.0, 0.0, 0.0, 2.0)),
+            "not affine",
+        ),
+    ] {
+        let e = scene
+            .set_transforms(&[5, 6], &[Mat4::from_translation(Vec3::X), bad])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("geometry 6") && e.contains(words), "{e}");
+        assert_eq!(
+            scene.geometry(5).unwrap().transform(),
+            before,
+            "a bad batch moved geometry 5"
+        );
+        let e = scene
+            .add_instance(InstanceOf::Geometry(3), Some(bad), 1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("new instance") && e.contains(words), "{e}");
+    }
+    let e = scene
+        .set_transforms(&[5, 999], &[Mat4::IDENTITY; 2])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown geometry id 999"), "{e}");
+    assert_eq!(scene.geometry(5).unwrap().transform(), before);
+    let e = scene.set_mask(999, 1).unwrap_err().to_string();
+    assert!(e.contains("unknown geometry id 999"), "{e}");
+    let e = scene
+        .add_instance(InstanceOf::Geometry(999), None, 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown geometry id 999"), "{e}");
+    assert_eq!(scene.next_id(), 102, "nothing was added");
+    let rays = [[0.0, 0.0, -20.0, 0.0, 0.0, 1.0]; 3];
+    let short = [0.0f32; 2];
+    let o = RayOptions {
+        t_far: PerRay::Each(&short),
+        ..Default::default()
+    };
+    let e = scene.cast_rays_with(&rays, &o).unwrap_err().to_string();
+    assert!(e.contains("tfar has 2 entries for 3 rays"), "{e}");
+    let near = [0.0, f32::NAN, 0.0];
+    let o = RayOptions {
+        t_near: PerRay::Each(&near),
+        ..Default::default()
+    };
+    let e = scene.count_intersections_with(&rays, &o).unwrap_err().to_string();
+    assert!(e.contains("tnear[1] = NaN"), "{e}");
 }

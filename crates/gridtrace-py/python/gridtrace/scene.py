@@ -56,15 +56,16 @@ def _f32(a: np.ndarray) -> np.ndarray:
 
 
 def _chunked(flat: np.ndarray, call) -> Dict[str, np.ndarray]:
-    """Runs ``call`` on ``CHUNK`` rows at a time into preallocated outputs (one row per input
-    row); a single call (no copy for float32 C-ordered input) when the batch is small."""
+    """Runs ``call(rows, first)`` on ``CHUNK`` rows at a time (``first``: the index of the first
+    row) into preallocated outputs (one row per input row); a single call (no copy for float32
+    C-ordered input) when the batch is small."""
     n = len(flat)
-    first = call(_f32(flat[:CHUNK]))
+    first = call(_f32(flat[:CHUNK]), 0)
     if n <= CHUNK:
         return first
     out = {k: np.empty((n,) + v.shape[1:], v.dtype) for k, v in first.items()}
     for s in range(0, n, CHUNK):
-        part = first if s == 0 else call(_f32(flat[s : s + CHUNK]))
+        part = first if s == 0 else call(_f32(flat[s : s + CHUNK]), s)
         for k, v in part.items():
             out[k][s : s + len(v)] = v
     return out
@@ -81,6 +82,76 @@ def _mat4(transform) -> Optional[np.ndarray]:
     if t.shape != (4, 4) or t.dtype.kind not in "fiu":
         raise ValueError(f"transform must be a (4, 4) numeric array, got shape {t.shape} dtype {t.dtype}")
     return _f32(t)
+
+
+def _mat4s(transforms, k: int) -> np.ndarray:
+    """``transforms`` ``(K, 4, 4)`` or ``(K, 3, 4)`` (the last row ``0 0 0 1`` implied) as
+    float32 ``(K, 4, 4)``; ValueError naming the argument otherwise."""
+    t = np.asarray(transforms)
+    if t.dtype.kind not in "fiu" or t.ndim != 3 or t.shape[0] != k or t.shape[1:] not in ((4, 4), (3, 4)):
+        raise ValueError(f"transforms must be a numeric ({k}, 4, 4) or ({k}, 3, 4) array, got shape {t.shape} dtype {t.dtype}")
+    if t.shape[1] == 3:
+        full = np.zeros((k, 4, 4), np.float32)
+        full[:, :3] = t
+        full[:, 3, 3] = 1.0
+        t = full
+    return np.require(t, dtype=np.float32, requirements="CA")
+
+
+def _mask(mask, name: str = "mask") -> int:
+    """A uint32 mask as an int; TypeError for a float, ValueError out of range."""
+    if isinstance(mask, (float, np.floating)) or (isinstance(mask, np.ndarray) and mask.dtype.kind not in "iu"):
+        raise TypeError(f"{name} must be an unsigned 32-bit integer, got {type(mask).__name__} {mask!r}")
+    m = operator.index(mask)
+    if not 0 <= m <= 0xFFFFFFFF:
+        raise ValueError(f"{name} must be 0 to 0xFFFFFFFF, got {mask}")
+    return m
+
+
+class _RayArgs:
+    """``tnear``, ``tfar`` and ``mask`` of a ray query, checked: each a scalar or one value per
+    ray (an array of the rays' leading shape, or ``(N,)``), sliced per chunk."""
+
+    def __init__(self, n: int, lead, tnear, tfar, mask, open3d_interval: bool = False):
+        self.tnear = self._floats(tnear, n, lead, "tnear")
+        self.tfar = self._floats(tfar, n, lead, "tfar")
+        if np.ndim(mask) == 0 and not isinstance(mask, np.ndarray):
+            self.mask = _mask(mask)
+        else:
+            m = np.asarray(mask)
+            if m.dtype.kind not in "iu":
+                raise TypeError(f"mask must be an unsigned integer array (uint32), got dtype {m.dtype}: a float mask is refused, not cast")
+            self._shape(m, n, lead, "mask")
+            if m.size and (m.min() < 0 or m.max() > 0xFFFFFFFF):
+                raise ValueError("mask values must be 0 to 0xFFFFFFFF")
+            self.mask = np.ascontiguousarray(m.reshape(-1), dtype=np.uint32)
+        if open3d_interval and isinstance(self.tnear, float) and isinstance(self.tfar, float):
+            # Open3D's rule for test_occlusions' scalars; elsewhere tnear > tfar is a miss.
+            if self.tnear > self.tfar:
+                raise ValueError(f"need tnear <= tfar, got tnear={self.tnear}, tfar={self.tfar}")
+
+    @staticmethod
+    def _shape(a: np.ndarray, n: int, lead, name: str):
+        if a.shape != tuple(lead) and a.shape != (n,):
+            raise ValueError(f"{name} must be a scalar or have the rays' shape {tuple(lead)}, got {a.shape}")
+
+    @classmethod
+    def _floats(cls, v, n: int, lead, name: str):
+        if np.ndim(v) == 0:
+            x = float(v)
+            if math.isnan(x) or (name == "tnear" and x < 0):
+                raise ValueError(f"{name} must be {'>= 0' if name == 'tnear' else 'a number'}, got {x}")
+            return x
+        a = np.asarray(v)
+        if a.dtype.kind not in "fiu":
+            raise ValueError(f"{name} must be a float array, got dtype {a.dtype}")
+        cls._shape(a, n, lead, name)
+        return np.ascontiguousarray(a.reshape(-1), dtype=np.float32)
+
+    def part(self, s: int, k: int):
+        """The arguments of rays ``s .. s + k``."""
+        cut = lambda v: v if not isinstance(v, np.ndarray) else v[s : s + k]  # noqa: E731
+        return cut(self.tnear), cut(self.tfar), cut(self.mask)
 
 
 def _params_of_state(params) -> tuple:
@@ -109,10 +180,19 @@ class Scene:
     (``compute_closest_points``, ``compute_distance``, the distance of
     ``compute_signed_distance``) run on the GPU when the backend traces there, with the CPU's
     answers within float32 rounding (where two faces are equally near either may be named); the
-    others, and the inside/outside sign (winding numbers), on the CPU's cores. Changes (``add_triangles``, ``remove``, ``update_vertices``) are
-    cheap: the next query rebuilds what they touched. Queries release the GIL and may be called
-    from several threads at once on one scene. Scenes pickle (meshes, transforms, ids and
-    parameters; the structure is rebuilt on first use after loading).
+    others, and the inside/outside sign (winding numbers), on the CPU's cores.
+
+    Every geometry is an instance of a mesh: ``add_instance`` places a mesh once more, sharing its
+    triangles and its structure (built once, in the mesh's own space); ``set_transform(s)`` and
+    ``set_mask`` change an instance and rebuild only the BVH over the instances' boxes. On the
+    CPU the ray queries walk these two levels, with a ray carried into an instance's space
+    without normalising its direction (so ``t`` is the same ``t``); each ray may have its own
+    ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU, ray queries with one
+    interval that see every geometry, and on every backend the point queries, run on the
+    instances merged into one mesh, rebuilt by the next such query after a change. Queries
+    release the GIL and may be called from several threads at once on one scene. Scenes pickle
+    (each mesh once, instances with transforms and masks, ids and parameters; structures are
+    rebuilt on first use after loading).
     """
 
     INVALID_ID = INVALID_ID
@@ -120,6 +200,9 @@ class Scene:
     def __init__(self, accel: str = "auto", backend: str = "auto", accel_params: str = "", gpu_variant: str = ""):
         self._params = (accel, accel_params, backend, gpu_variant)
         self._native = _NativeScene(accel, accel_params, backend, gpu_variant)
+        # id(Mesh) -> (that Mesh, the geometry first placing it): later add_instance calls with
+        # the same Mesh share that geometry's mesh.
+        self._mesh_ids = {}
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -152,10 +235,64 @@ class Scene:
         """Removes a geometry; ``KeyError`` for an unknown id."""
         self._native.remove(_id(geometry_id))
 
+    def add_instance(self, mesh, transform=None, mask=0xFFFFFFFF) -> int:
+        """Places a mesh once more; returns the new geometry's id. ``mesh`` is a geometry id
+        already in the scene (its mesh is shared) or a :class:`gridtrace.Mesh` (added on first
+        use; later instances of the same ``Mesh`` object share that copy). Instances of one mesh
+        share its triangles and its structure, built once in the mesh's own space; only their
+        transforms, masks and the top-level BVH over their boxes are per instance.
+        ``transform``: a (4, 4) or (3, 4) affine, invertible matrix (identity if ``None``);
+        ``mask``: uint32, seen by rays whose mask shares a bit with it. ``ValueError`` for a
+        bad transform (naming the new instance), ``KeyError`` for an unknown id."""
+        t = np.eye(4, dtype=np.float32) if transform is None else _mat4s(np.asarray(transform)[None], 1)[0]
+        m = _mask(mask)
+        if isinstance(mesh, (int, np.integer)):
+            return self._native.add_instance(_id(mesh), t, m)
+        if not (hasattr(mesh, "vertices") and hasattr(mesh, "faces")):
+            raise TypeError(f"mesh must be a gridtrace.Mesh or a geometry id, got {type(mesh).__name__}")
+        known = self._mesh_ids.get(id(mesh))
+        if known is not None and known[0] is mesh and known[1] in self._native.ids():
+            return self._native.add_instance(known[1], t, m)
+        gid = self.add_triangles(mesh.vertices, mesh.faces, t)
+        if m != 0xFFFFFFFF:
+            self._native.set_mask(gid, m)
+        self._mesh_ids[id(mesh)] = (mesh, gid)
+        return gid
+
+    def set_transform(self, geometry_id: int, transform) -> None:
+        """Moves a geometry: ``transform`` a (4, 4) or (3, 4) affine, invertible matrix. Only
+        the top level is rebuilt; no mesh structure. ``KeyError`` for an unknown id,
+        ``ValueError`` naming the geometry for a bad matrix (nothing changes then)."""
+        self.set_transforms([geometry_id], np.asarray(transform)[None])
+
+    def set_transforms(self, ids, transforms) -> None:
+        """Moves geometries ``ids`` ``(K,)`` to ``transforms`` ``(K, 4, 4)`` or ``(K, 3, 4)``,
+        all or none: an unknown id (``KeyError``) or a matrix that is not finite, affine and
+        invertible (``ValueError`` naming the geometry) changes nothing. Only the top level is
+        rebuilt (about a millisecond for 1,000 instances); no mesh structure."""
+        i = np.asarray(ids)
+        if i.ndim != 1 or i.dtype.kind not in "iu":
+            raise ValueError(f"ids must be a 1-D integer array, got shape {i.shape} dtype {i.dtype}")
+        if i.size and (i.min() < 0 or i.max() >= INVALID_ID):
+            bad = i[(i < 0) | (i >= INVALID_ID)][0]
+            raise KeyError(f"unknown geometry id {bad}")
+        self._native.set_transforms(np.ascontiguousarray(i, dtype=np.uint32), _mat4s(transforms, len(i)))
+
+    def set_mask(self, geometry_id: int, mask: int) -> None:
+        """Sets a geometry's 32-bit mask (rays whose mask shares no bit with it pass it by).
+        ``TypeError`` for a float, ``KeyError`` for an unknown id."""
+        self._native.set_mask(_id(geometry_id), _mask(mask))
+
+    def memory_bytes(self) -> int:
+        """Bytes the scene holds: each mesh once with its structure (once built), the
+        geometries' records and the top level, and the merged mesh if a point query built one."""
+        return self._native.memory_bytes()
+
     def update_vertices(self, geometry_id: int, vertices) -> None:
         """Moves a geometry's vertices (its own space; as many as it has, same order; faces and
-        transform stay). ``KeyError`` for an unknown id, ``ValueError`` for a wrong shape or a
-        non-finite coordinate (nothing changes then)."""
+        transform stay); a geometry that shared its mesh with others gets a copy of its own.
+        ``KeyError`` for an unknown id, ``ValueError`` for a wrong shape or a non-finite
+        coordinate (nothing changes then)."""
         v = np.asarray(vertices)
         if v.ndim != 2 or v.shape[1] != 3 or v.dtype.kind not in "fiu":
             raise ValueError(f"vertices must be a numeric (N, 3) array, got shape {v.shape} dtype {v.dtype}")
@@ -165,9 +302,10 @@ class Scene:
         """``(vertices, faces, transform)`` of a geometry as it was given (its own space);
         ``KeyError`` for an unknown id."""
         i = _id(geometry_id)
-        for gid, v, f, t in self._native.parts()[1]:
+        _, meshes, instances = self._native.parts()
+        for gid, k, t, _mask in instances:
             if gid == i:
-                return v, f, t
+                return meshes[k][0], meshes[k][1], t
         raise KeyError(f"unknown geometry id {geometry_id}")
 
     @property
@@ -190,51 +328,62 @@ class Scene:
 
     # -- rays -----------------------------------------------------------------------------
 
-    def cast_rays(self, rays, nthreads: int = 0) -> Dict[str, np.ndarray]:
-        """The closest hit of each ray (``rays``: ``[..., 6]``) with ``t > 0``: a dict of
-        ``t_hit`` ``[...]`` float32, ``geometry_ids`` and ``primitive_ids`` ``[...]`` uint32,
-        ``primitive_uvs`` ``[..., 2]`` and ``primitive_normals`` ``[..., 3]`` float32.
-        ``nthreads``: CPU threads (0: all cores), as Open3D's."""
+    def cast_rays(self, rays, nthreads: int = 0, tnear=0.0, tfar=math.inf, mask=0xFFFFFFFF) -> Dict[str, np.ndarray]:
+        """The closest hit of each ray (``rays``: ``[..., 6]``) with ``tnear < t < tfar`` among the
+        geometries its mask sees: a dict of ``t_hit`` ``[...]`` float32, ``geometry_ids`` and
+        ``primitive_ids`` ``[...]`` uint32, ``primitive_uvs`` ``[..., 2]`` and
+        ``primitive_normals`` ``[..., 3]`` float32. ``nthreads``: CPU threads (0: all cores), as
+        Open3D's. ``tnear``, ``tfar`` (floats) and ``mask`` (uint32) are each a scalar or one
+        per ray (an array of the rays' leading shape); a ray sees a geometry when
+        ``ray_mask & geometry_mask != 0``, and a ray with ``tnear > tfar`` sees nothing. The
+        defaults give every hit with ``t > 0``."""
         k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
-        return _shaped(_chunked(flat, lambda r: self._native.cast_rays(r, k)), lead)
+        a = _RayArgs(len(flat), lead, tnear, tfar, mask)
+        return _shaped(_chunked(flat, lambda r, s: self._native.cast_rays(r, k, *a.part(s, len(r)))), lead)
 
-    def test_occlusions(self, rays, tnear: float = 0.0, tfar: float = math.inf, nthreads: int = 0) -> np.ndarray:
-        """Whether each ray hits anything with ``tnear < t < tfar``: a bool array ``[...]``.
-        ``nthreads``: CPU threads (0: all cores)."""
+    def test_occlusions(self, rays, tnear=0.0, tfar=math.inf, nthreads: int = 0, mask=0xFFFFFFFF) -> np.ndarray:
+        """Whether each ray hits anything with ``tnear < t < tfar`` among the geometries its
+        mask sees: a bool array ``[...]``. ``tnear``, ``tfar`` and ``mask`` as for
+        ``cast_rays`` (scalars: Open3D's, where ``tnear > tfar`` is an error). ``nthreads``: CPU
+        threads (0: all cores)."""
         k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
-        tnear, tfar = float(tnear), float(tfar)
-        if math.isnan(tnear) or math.isnan(tfar) or tnear < 0 or tnear > tfar:
-            raise ValueError(f"need 0 <= tnear <= tfar, got tnear={tnear}, tfar={tfar}")
-        call = lambda r: {"o": self._native.test_occlusions(r, tnear, tfar, k)}  # noqa: E731
+        a = _RayArgs(len(flat), lead, tnear, tfar, mask, open3d_interval=True)
+        call = lambda r, s: {"o": self._native.test_occlusions(r, *a.part(s, len(r))[:2], k, a.part(s, len(r))[2])}  # noqa: E731
         return _chunked(flat, call)["o"].reshape(lead)
 
-    def count_intersections(self, rays, nthreads: int = 0) -> np.ndarray:
-        """How many hits each ray has with ``t > 0`` under Open3D's rule: an int32 array
-        ``[...]``, the length of each ray's ``list_intersections`` list. The rule (Open3D's):
-        hits nearest first, a hit with the same geometry and the same ``t`` as the previous one
-        skipped, so a ray through an edge two faces of a mesh share counts it once when both
-        faces give the same ``t`` (the diagonal of a box's side: Open3D's test). Faces met at
-        ``t`` a rounding apart both count, as in Open3D, so the parity is no reliable inside
-        test: use ``compute_occupancy``. Open3D also counts a hit at ``t = 0`` (a ray starting
-        on a surface); this does not yet."""
+    def count_intersections(self, rays, nthreads: int = 0, tnear=0.0, tfar=math.inf, mask=0xFFFFFFFF) -> np.ndarray:
+        """How many hits each ray has with ``tnear <= t < tfar`` among the geometries its mask
+        sees (``tnear``, ``tfar``, ``mask`` as for ``cast_rays``), under Open3D's rule: an int32
+        array ``[...]``, the length of each ray's ``list_intersections`` list. The rule
+        (Open3D's): hits nearest first, a hit with the same geometry and the same ``t`` as the
+        previous one kept is skipped, so a ray through an edge two faces of a mesh share counts
+        it once when both faces give the same ``t`` (the diagonal of a box's side: Open3D's
+        test). Faces met at ``t`` a rounding apart both count, as in Open3D, so the parity is no
+        reliable inside test: use ``compute_occupancy``. A ray that starts on a surface counts
+        it (``t = tnear``), as Open3D does."""
         k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
-        call = lambda r: {"c": self._native.count_intersections(r, k)}  # noqa: E731
+        a = _RayArgs(len(flat), lead, tnear, tfar, mask)
+        call = lambda r, s: {"c": self._native.count_intersections(r, k, *a.part(s, len(r)))}  # noqa: E731
         return _chunked(flat, call)["c"].reshape(lead)
 
-    def list_intersections(self, rays, nthreads: int = 0) -> Dict[str, np.ndarray]:
-        """Every hit of each ray with ``t > 0`` under Open3D's rule (``count_intersections``),
-        nearest first, equal ``t`` by geometry id and then face: ``ray_splits`` (``n + 1``
-        offsets: ray ``i``'s hits are entries ``ray_splits[i]:ray_splits[i + 1]``, rays in the
-        flattened order of ``rays``), ``ray_ids``, ``geometry_ids``, ``primitive_ids``,
-        ``primitive_uvs`` ``(M, 2)`` and ``t_hit``."""
+    def list_intersections(self, rays, nthreads: int = 0, tnear=0.0, tfar=math.inf, mask=0xFFFFFFFF) -> Dict[str, np.ndarray]:
+        """Every hit of each ray with ``tnear <= t < tfar`` among the geometries its mask sees
+        (``tnear``, ``tfar``, ``mask`` as for ``cast_rays``) under Open3D's rule
+        (``count_intersections``), nearest first, equal ``t`` by geometry id and then face:
+        ``ray_splits`` (``n + 1`` offsets: ray ``i``'s hits are entries
+        ``ray_splits[i]:ray_splits[i + 1]``, rays in the flattened order of ``rays``),
+        ``ray_ids``, ``geometry_ids``, ``primitive_ids``, ``primitive_uvs`` ``(M, 2)`` and
+        ``t_hit``."""
         k = _threads(nthreads)
-        flat, _ = _batch(rays, "rays", 6)
+        flat, lead = _batch(rays, "rays", 6)
+        a = _RayArgs(len(flat), lead, tnear, tfar, mask)
         parts = []
         for s in range(0, max(len(flat), 1), CHUNK):
-            part = self._native.list_intersections(_f32(flat[s : s + CHUNK]), k)
+            r = _f32(flat[s : s + CHUNK])
+            part = self._native.list_intersections(r, k, *a.part(s, len(r)))
             part["ray_ids"] = part["ray_ids"] + np.uint32(s)
             parts.append(part)
         if len(parts) == 1:
@@ -255,7 +404,7 @@ class Scene:
         ``primitive_normals`` ``[..., 3]``. ``nthreads``: CPU threads (0: all cores)."""
         k = _threads(nthreads)
         flat, lead = _batch(query_points, "query_points", 3)
-        return _shaped(_chunked(flat, lambda p: self._native.compute_closest_points(p, k)), lead)
+        return _shaped(_chunked(flat, lambda p, _s: self._native.compute_closest_points(p, k)), lead)
 
     def compute_distance(self, query_points, nthreads: int = 0) -> np.ndarray:
         """The distance from each point to the scene (float32 ``[...]``)."""
@@ -293,24 +442,30 @@ class Scene:
         # Checked by the native side (an error naming `accuracy`).
         accuracy = float(accuracy)
         flat, lead = _batch(query_points, "query_points", 3)
-        call = lambda p: {"v": self._native.point_values(what, p, k, accuracy)}  # noqa: E731
+        call = lambda p, _s: {"v": self._native.point_values(what, p, k, accuracy)}  # noqa: E731
         return _chunked(flat, call)["v"].reshape(lead)
 
     # -- pickling -------------------------------------------------------------------------
 
     def __getstate__(self):
-        next_id, geometries = self._native.parts()
-        return {"params": self._params, "next_id": next_id, "geometries": geometries}
+        next_id, meshes, instances = self._native.parts()
+        return {"params": self._params, "next_id": next_id, "meshes": meshes, "instances": instances}
 
     def __setstate__(self, state):
         self._params = _params_of_state(state["params"])
+        self._mesh_ids = {}
         accel, accel_params, backend, gpu_variant = self._params
+        if "geometries" in state:
+            # Pickles made before instances: a mesh per geometry, every mask all ones.
+            meshes = [(v, f) for _, v, f, _ in state["geometries"]]
+            instances = [(i, k, t, 0xFFFFFFFF) for k, (i, _, _, t) in enumerate(state["geometries"])]
+        else:
+            meshes, instances = state["meshes"], state["instances"]
         # Serialisers (Dask's among them) may hand arrays back as views of a buffer: make them
         # the C-ordered arrays the native side reads.
-        geometries = [
-            (int(i), _f32(v), np.require(f, dtype=np.uint32, requirements="CA"), _f32(t)) for i, v, f, t in state["geometries"]
-        ]
-        self._native = _NativeScene.from_parts(accel, accel_params, backend, int(state["next_id"]), geometries, gpu_variant)
+        meshes = [(_f32(v), np.require(f, dtype=np.uint32, requirements="CA")) for v, f in meshes]
+        instances = [(int(i), int(k), _f32(t), int(m)) for i, k, t, m in instances]
+        self._native = _NativeScene.from_parts(accel, accel_params, backend, int(state["next_id"]), meshes, instances, gpu_variant)
 
     def __repr__(self) -> str:
         return f"gridtrace.Scene({len(self.geometry_ids)} geometries, {self.triangle_count} triangles, accel={self._params[0]!r}, backend={self._params[2]!r})"

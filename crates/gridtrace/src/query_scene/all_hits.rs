@@ -51,6 +51,9 @@ impl QueryScene {
     /// How many faces each ray hits with `t > 0` under Open3D's rule (the module notes): the
     /// length of each ray's `list_intersections` list. Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
+        if self.hits_path(&Default::default())?.is_some() {
+            return self.count_intersections_with(rays, &Default::default());
+        }
         let m = self.merged()?;
         let mut out = vec![0u32; rays.len()];
         let Some(accel) = m.accel() else {
@@ -87,6 +90,9 @@ impl QueryScene {
     /// Every hit of each ray with `t > 0` under Open3D's rule (the module notes), nearest
     /// first (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
+        if self.hits_path(&Default::default())?.is_some() {
+            return self.list_intersections_with(rays, &Default::default());
+        }
         let m = self.merged()?;
         if m.mesh.is_some() {
             m.accel().map_or(Ok(()), |a| a.check_current())?;
@@ -148,26 +154,31 @@ fn ray_hits(m: &Merged, r: &[f32; 6], out: &mut Vec<Hit>) {
 }
 
 /// Sorts `hits[from..]` (one ray's) nearest first, equal `t` by merged face (so by geometry id,
-/// then face: kept faces keep the merged order), and drops each hit whose geometry and `t`
-/// equal those of the previous hit kept (Open3D's rule, the module notes). Equal `t` are
-/// neighbours after the sort, and so are the faces of one geometry among them, so comparing
-/// with the previous hit kept drops every tie within a geometry.
+/// then face: kept faces keep the merged order), and applies Open3D's rule (`skip_ties`).
 fn open3d_rule(m: &Merged, hits: &mut Vec<Hit>, from: usize) {
-    let mine = &mut hits[from..];
-    if mine.len() < 2 {
+    hits[from..].sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
+    skip_ties(hits, from, |h| (h.t, m.name(h.tri).0));
+}
+
+/// Open3D's rule over one ray's hits `hits[from..]`, sorted nearest first with equal `t` by
+/// geometry: drops each hit whose `t` and geometry (`key`) equal those of the previous hit
+/// kept (the module notes). Equal `t` are neighbours after the sort, and so are the faces of
+/// one geometry among them, so comparing with the previous hit kept drops every tie within a
+/// geometry. The merged path and the two levels (`instanced_rays.rs`) both answer through it.
+pub(super) fn skip_ties<H: Copy>(hits: &mut Vec<H>, from: usize, key: impl Fn(&H) -> (f32, u32)) {
+    if hits.len() - from < 2 {
         return;
     }
-    mine.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
     let mut kept = from;
-    let mut last_geometry = m.name(hits[from].tri).0;
+    let mut last = key(&hits[from]);
     for k in from + 1..hits.len() {
-        let geometry = m.name(hits[k].tri).0;
-        if hits[k].t == hits[kept].t && geometry == last_geometry {
+        let this = key(&hits[k]);
+        if this == last {
             continue;
         }
         kept += 1;
         hits[kept] = hits[k];
-        last_geometry = geometry;
+        last = this;
     }
     hits.truncate(kept + 1);
 }

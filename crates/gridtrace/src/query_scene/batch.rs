@@ -6,6 +6,7 @@ use glam::Vec3;
 use super::INVALID_ID;
 use crate::accel::Ray;
 use crate::accel::huge::advise_huge_pages_within;
+use crate::{Error, Result};
 
 /// Closest hits, one entry per ray (Open3D's `cast_rays` keys). A miss: `t_hit = inf`, ids
 /// `INVALID_ID`, uv and normal zero.
@@ -77,3 +78,86 @@ pub(crate) const STAND_IN: Ray = Ray {
     origin: Vec3::ZERO,
     dir: Vec3::X,
 };
+
+/// One value for every ray of a batch, or one each.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PerRay<'a, T> {
+    All(T),
+    Each(&'a [T]),
+}
+
+impl<T: Copy> PerRay<'_, T> {
+    #[inline(always)]
+    fn at(&self, i: usize) -> T {
+        match self {
+            PerRay::All(v) => *v,
+            PerRay::Each(v) => v[i],
+        }
+    }
+}
+
+/// What each ray of a query sees: hits with `t_near < t < t_far`, of geometries whose mask
+/// shares a bit with the ray's (`ray_mask & geometry_mask != 0`: Embree's, OptiX's and
+/// Vulkan's rule). A ray with `t_near > t_far` sees nothing (Embree's rule). The default is
+/// what the queries without options see: `0 < t < inf`, every geometry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayOptions<'a> {
+    pub t_near: PerRay<'a, f32>,
+    pub t_far: PerRay<'a, f32>,
+    pub mask: PerRay<'a, u32>,
+}
+
+impl Default for RayOptions<'_> {
+    fn default() -> Self {
+        RayOptions {
+            t_near: PerRay::All(0.0),
+            t_far: PerRay::All(f32::INFINITY),
+            mask: PerRay::All(u32::MAX),
+        }
+    }
+}
+
+impl RayOptions<'_> {
+    /// An error naming the argument (and the ray) for arrays of another length than `rays`,
+    /// a NaN bound or a negative `t_near` (the walks count `t` from the origin on).
+    pub fn check(&self, rays: usize) -> Result<()> {
+        fn len<T>(p: &PerRay<'_, T>, rays: usize, what: &str) -> Result<()> {
+            match p {
+                PerRay::Each(v) if v.len() != rays => Err(Error::InvalidInput(format!(
+                    "{what} has {} entries for {rays} rays",
+                    v.len()
+                ))),
+                _ => Ok(()),
+            }
+        }
+        len(&self.t_near, rays, "tnear")?;
+        len(&self.t_far, rays, "tfar")?;
+        len(&self.mask, rays, "mask")?;
+        let bad = |p: &PerRay<'_, f32>, ok: fn(f32) -> bool, what: &str, want: &str| -> Result<()> {
+            let at = match p {
+                PerRay::All(v) => (!ok(*v)).then(|| (what.to_string(), *v)),
+                PerRay::Each(v) => v.iter().position(|&x| !ok(x)).map(|i| (format!("{what}[{i}]"), v[i])),
+            };
+            match at {
+                Some((name, v)) => Err(Error::InvalidInput(format!("{name} = {v}: {want}"))),
+                None => Ok(()),
+            }
+        };
+        bad(&self.t_near, |x| x >= 0.0, "tnear", "need a number >= 0")?;
+        bad(&self.t_far, |x| !x.is_nan(), "tfar", "need a number (inf for no bound)")
+    }
+
+    /// `(t_near, t_far, mask)` of ray `i`.
+    #[inline(always)]
+    pub fn of(&self, i: usize) -> (f32, f32, u32) {
+        (self.t_near.at(i), self.t_far.at(i), self.mask.at(i))
+    }
+
+    /// `(t_near, t_far, mask)` when every ray has the same.
+    pub fn uniform(&self) -> Option<(f32, f32, u32)> {
+        match (self.t_near, self.t_far, self.mask) {
+            (PerRay::All(n), PerRay::All(f), PerRay::All(m)) => Some((n, f, m)),
+            _ => None,
+        }
+    }
+}

@@ -32,7 +32,7 @@ pub(super) fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
 
 /// Closest hits of `rays` into `out`: `t` and the ids written for every ray, uv and normal for
 /// hits only (a miss keeps the zeros of `RayHits::zeroed`).
-pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut RayHits) {
+pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], (t_near, t_far): (f32, f32), out: &mut RayHits) {
     let accel = &mesh.prepared().accel;
     (
         out.t_hit.par_chunks_mut(BATCH),
@@ -47,7 +47,7 @@ pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], out: &mut Ra
             || Vec::with_capacity(BATCH),
             |made, (t, g, p, uv, n, r)| {
                 let bad = make_into(r, made);
-                accel.intersect_batch_each(made, 0.0, f32::INFINITY, |i, hit, normal| {
+                accel.intersect_batch_each(made, t_near, t_far, |i, hit, normal| {
                     if hit.is_hit() {
                         let (id, prim) = m.name(hit.tri);
                         t[i] = hit.t;

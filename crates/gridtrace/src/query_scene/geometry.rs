@@ -1,29 +1,43 @@
-//! One geometry of a `QueryScene`: its triangles in its own space, the 4x4 transform that
-//! places them in the world, and the checks that name what is wrong with bad input.
+//! One geometry of a `QueryScene`: an instance of a mesh. The mesh (triangles in its own space,
+//! and its structure, built once: the bottom level) may be shared by many instances; each
+//! instance has its own 4x4 affine transform to world space (its inverse kept, to carry rays
+//! into the mesh's space), a 32-bit mask, and the checks that name what is wrong with bad input.
 
-use glam::{Mat4, Vec3};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
 
+use glam::{Affine3A, Mat3, Mat4, Vec3, Vec4};
+
+use crate::accel::{Aabb, Ray};
+use crate::query::{Backend, QueryOptions, TraceMesh};
 use crate::{Error, Result};
 
-/// A geometry as it was given: vertices in its own space, faces (indices into them) and the
-/// transform to world space.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Geometry {
+/// A mesh as it was given (vertices in its own space, faces indexing them), shared by the
+/// instances that place it (`Arc`), with its structure built on first use.
+pub struct SceneMesh {
     pub vertices: Vec<[f32; 3]>,
     pub faces: Vec<[u32; 3]>,
-    pub transform: Mat4,
+    /// The vertices' box in the mesh's own space.
+    bounds: Aabb,
+    /// The bottom level: the structure over the mesh's own-space triangles, on the CPU
+    /// (`None`: no face with non-zero area, so nothing to hit). Built once, whatever moves.
+    bottom: OnceLock<Option<TraceMesh>>,
 }
 
-impl Geometry {
-    /// Checks and keeps a geometry: finite vertices, faces in range, a finite transform whose
-    /// world-space vertices are finite too. Errors name the argument and the place.
-    pub fn new(vertices: Vec<[f32; 3]>, faces: Vec<[u32; 3]>, transform: Option<Mat4>) -> Result<Geometry> {
-        let transform = transform.unwrap_or(Mat4::IDENTITY);
-        if !transform.is_finite() {
-            return Err(Error::InvalidInput(format!(
-                "transform has a non-finite entry: {transform}"
-            )));
-        }
+impl std::fmt::Debug for SceneMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SceneMesh")
+            .field("vertices", &self.vertices.len())
+            .field("faces", &self.faces.len())
+            .field("built", &self.bottom.get().is_some())
+            .finish()
+    }
+}
+
+impl SceneMesh {
+    /// Checks and keeps a mesh: finite vertices, faces in range. Errors name the argument and
+    /// the place.
+    pub fn new(vertices: Vec<[f32; 3]>, faces: Vec<[u32; 3]>) -> Result<SceneMesh> {
         check_vertices(&vertices, "vertices")?;
         let n = vertices.len() as u64;
         if let Some(i) = faces.iter().position(|f| f.iter().any(|&k| k as u64 >= n)) {
@@ -32,48 +46,231 @@ impl Geometry {
                 faces[i]
             )));
         }
-        let g = Geometry {
+        let bounds = vertices.iter().fold(Aabb::EMPTY, |b, &v| b.grow(Vec3::from(v)));
+        Ok(SceneMesh {
             vertices,
             faces,
-            transform,
+            bounds,
+            bottom: OnceLock::new(),
+        })
+    }
+
+    /// The bottom level, built now (counted in `builds`) if it is not yet. Its structure is the
+    /// scene's (`opts.accel`), built for the CPU whatever the scene's backend: the two-level
+    /// walk is the CPU's (the GPU's ray queries still run on the merged mesh, `merged.rs`).
+    pub(crate) fn bottom(&self, opts: &QueryOptions, builds: &AtomicUsize) -> Result<Option<&TraceMesh>> {
+        if let Some(b) = self.bottom.get() {
+            return Ok(b.as_ref());
+        }
+        let own = &self.vertices;
+        let built = if self.faces.iter().all(|&f| is_degenerate(own, f)) {
+            None
+        } else {
+            let cpu = QueryOptions {
+                backend: Backend::Cpu,
+                ..opts.clone()
+            };
+            builds.fetch_add(1, Ordering::Relaxed);
+            Some(TraceMesh::from_arrays(own, &self.faces, &cpu)?)
         };
-        // A large transform can overflow a finite vertex to infinity.
-        check_vertices(&g.world_vertices(), "vertices after the transform")?;
-        Ok(g)
+        // Queries that build take the scene's two-level lock (`QueryScene::two_level`), so no
+        // other build of this mesh raced this one; `set` failing would only drop a copy.
+        let _ = self.bottom.set(built);
+        Ok(self.bottom.get().and_then(|b| b.as_ref()))
+    }
+
+    /// The bottom level if it was built.
+    pub(crate) fn built(&self) -> Option<&TraceMesh> {
+        self.bottom.get().and_then(|b| b.as_ref())
+    }
+
+    /// Bytes held: the arrays as given and, once built, the structure and its triangles.
+    pub fn memory_bytes(&self) -> usize {
+        let given = std::mem::size_of_val(self.vertices.as_slice()) + std::mem::size_of_val(self.faces.as_slice());
+        let built = self.built().map_or(0, |m| {
+            let p = m.prepared();
+            p.accel.memory().iter().map(|(_, b)| b).sum::<usize>()
+        });
+        given + built
+    }
+}
+
+/// A geometry: an instance of a mesh, placed by an affine transform, seen by rays whose mask
+/// shares a bit with its own.
+#[derive(Debug, Clone)]
+pub struct Geometry {
+    mesh: Arc<SceneMesh>,
+    /// Own space to world space (affine, invertible: checked).
+    transform: Mat4,
+    mask: u32,
+}
+
+impl Geometry {
+    /// Checks and keeps a geometry: finite vertices, faces in range, a finite affine
+    /// invertible transform whose world-space vertices are finite too. Errors name the
+    /// argument and the place.
+    pub fn new(vertices: Vec<[f32; 3]>, faces: Vec<[u32; 3]>, transform: Option<Mat4>) -> Result<Geometry> {
+        let mesh = Arc::new(SceneMesh::new(vertices, faces)?);
+        Geometry::place(mesh, transform.unwrap_or(Mat4::IDENTITY), u32::MAX, "transform")
+    }
+
+    /// `mesh` placed by `transform` with `mask`; `what` names the transform in errors (the
+    /// instance it is for).
+    pub fn place(mesh: Arc<SceneMesh>, transform: Mat4, mask: u32, what: &str) -> Result<Geometry> {
+        check_transform(&transform, &mesh.bounds, what)?;
+        Ok(Geometry { mesh, transform, mask })
+    }
+
+    /// The same mesh placed by `transform` instead (checked as `place` checks it; `what` names
+    /// it in errors).
+    pub fn moved(&self, transform: Mat4, what: &str) -> Result<Geometry> {
+        Geometry::place(self.mesh.clone(), transform, self.mask, what)
+    }
+
+    pub fn mesh(&self) -> &Arc<SceneMesh> {
+        &self.mesh
+    }
+
+    pub fn vertices(&self) -> &[[f32; 3]] {
+        &self.mesh.vertices
+    }
+
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.mesh.faces
+    }
+
+    /// Own space to world space.
+    pub fn transform(&self) -> Mat4 {
+        self.transform
+    }
+
+    pub fn mask(&self) -> u32 {
+        self.mask
+    }
+
+    pub(crate) fn set_mask(&mut self, mask: u32) {
+        self.mask = mask;
+    }
+
+    /// World to own space: the transform's inverse (the two levels keep it with each
+    /// instance, `two_level.rs`; computed here the same way, so the same bits).
+    pub fn to_local(&self) -> Affine3A {
+        Affine3A::from_mat4(self.transform).inverse()
+    }
+
+    /// A world-space ray in the mesh's own space: origin and direction through the inverse,
+    /// the direction not normalised, so that a point at `t` along one is the point at the same
+    /// `t` along the other (hits keep their `t`, and intervals mean the same in both spaces).
+    #[inline]
+    pub fn ray_to_local(&self, ray: &Ray) -> Ray {
+        carry(&self.to_local(), ray)
+    }
+
+    /// The world-space box of the mesh (its own box's corners through the transform).
+    pub fn world_bounds(&self) -> Aabb {
+        world_box(&self.transform, &self.mesh.bounds)
     }
 
     /// The vertices in world space.
     pub fn world_vertices(&self) -> Vec<[f32; 3]> {
         if self.transform == Mat4::IDENTITY {
-            return self.vertices.clone();
+            return self.mesh.vertices.clone();
         }
-        self.vertices
+        self.mesh
+            .vertices
             .iter()
             .map(|&v| self.transform.transform_point3(Vec3::from(v)).to_array())
             .collect()
     }
 
     /// Replaces the vertices (as many as before; the faces stay), checked as `new` checks
-    /// them. On an error nothing changes.
+    /// them. The geometry gets a mesh of its own (other instances of its mesh stay as they
+    /// were). On an error nothing changes.
     pub fn set_vertices(&mut self, vertices: Vec<[f32; 3]>) -> Result<()> {
-        if vertices.len() != self.vertices.len() {
+        if vertices.len() != self.mesh.vertices.len() {
             return Err(Error::InvalidInput(format!(
                 "vertices has {} rows; the geometry has {} vertices (faces stay, so the count must too)",
                 vertices.len(),
-                self.vertices.len()
+                self.mesh.vertices.len()
             )));
         }
-        check_vertices(&vertices, "vertices")?;
-        let old = std::mem::replace(&mut self.vertices, vertices);
-        if let Err(e) = check_vertices(&self.world_vertices(), "vertices after the transform") {
-            self.vertices = old;
-            return Err(e);
-        }
+        let mesh = Arc::new(SceneMesh::new(vertices, self.mesh.faces.clone())?);
+        *self = Geometry::place(mesh, self.transform, self.mask, "transform")?;
         Ok(())
     }
 }
 
-fn check_vertices(vertices: &[[f32; 3]], what: &str) -> Result<()> {
+/// `ray` through `to_local` (see `Geometry::ray_to_local`).
+#[inline(always)]
+pub(crate) fn carry(to_local: &Affine3A, ray: &Ray) -> Ray {
+    Ray::new(
+        to_local.transform_point3(ray.origin),
+        to_local.transform_vector3(ray.dir),
+    )
+}
+
+/// The matrix that takes an own-space geometric normal `(v1 - v0) x (v2 - v0)` to the world
+/// space one of the transformed face: the cofactor matrix `det(A) A^-T` of the linear part
+/// `A`. The inverse-transpose alone would flip the normal of a mirroring transform
+/// (`det < 0`), where the world face's winding, and so its normal, flips with it.
+pub(crate) fn normal_to_world(to_local: &Affine3A) -> Mat3 {
+    let inv = Mat3::from(to_local.matrix3);
+    // det(A^-1) = 1 / det(A): the sign is what matters, the length is normalised after.
+    inv.transpose() * inv.determinant().signum()
+}
+
+/// Whether `transform` is finite, affine and invertible, with an inverse that is finite, and
+/// keeps `bounds` finite; an error naming `what` otherwise.
+fn check_transform(transform: &Mat4, bounds: &Aabb, what: &str) -> Result<()> {
+    if !transform.is_finite() {
+        return Err(Error::InvalidInput(format!(
+            "{what} has a non-finite entry: {transform}"
+        )));
+    }
+    if transform.row(3) != Vec4::W {
+        return Err(Error::InvalidInput(format!(
+            "{what} is not affine: its last row is {} (want 0 0 0 1)",
+            transform.row(3)
+        )));
+    }
+    // A large transform can overflow a finite vertex to infinity (every vertex lies in the
+    // box, so finite corners keep every vertex finite).
+    if !bounds.is_empty() {
+        let b = world_box(transform, bounds);
+        if !(b.min.is_finite() && b.max.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "vertices after the {what} are not finite (box {:?} .. {:?})",
+                b.min, b.max
+            )));
+        }
+    }
+    let affine = Affine3A::from_mat4(*transform);
+    let det = affine.matrix3.determinant();
+    let inverse = affine.inverse();
+    if det == 0.0 || !det.is_finite() || !inverse.is_finite() {
+        return Err(Error::InvalidInput(format!(
+            "{what} cannot be inverted (determinant {det}): {transform}"
+        )));
+    }
+    Ok(())
+}
+
+/// The world box of an own-space box: its eight corners through `transform`.
+fn world_box(transform: &Mat4, b: &Aabb) -> Aabb {
+    if b.is_empty() {
+        return Aabb::EMPTY;
+    }
+    (0..8).fold(Aabb::EMPTY, |acc, k| {
+        let c = Vec3::new(
+            if k & 1 == 0 { b.min.x } else { b.max.x },
+            if k & 2 == 0 { b.min.y } else { b.max.y },
+            if k & 4 == 0 { b.min.z } else { b.max.z },
+        );
+        acc.grow(transform.transform_point3(c))
+    })
+}
+
+pub(crate) fn check_vertices(vertices: &[[f32; 3]], what: &str) -> Result<()> {
     match vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
         Some(i) => Err(Error::InvalidInput(format!(
             "{what}[{i}] = {:?} is not finite",
@@ -83,7 +280,7 @@ fn check_vertices(vertices: &[[f32; 3]], what: &str) -> Result<()> {
     }
 }
 
-/// Whether a world-space face has zero area: the faces the ray queries drop (`TraceMesh`).
+/// Whether a face has zero area: the faces the ray queries drop (`TraceMesh`).
 pub(crate) fn is_degenerate(world: &[[f32; 3]], f: [u32; 3]) -> bool {
     let [a, b, c] = f.map(|k| Vec3::from(world[k as usize]));
     // The complement of `TraceMesh::from_mesh`'s test (`> 0.0`), NaN (an overflowing cross

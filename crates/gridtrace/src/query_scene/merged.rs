@@ -54,15 +54,15 @@ impl Merged {
             let base = u32::try_from(first_vertex)
                 .map_err(|_| Error::InvalidInput(format!("the scene has more than {} vertices", u32::MAX)))?;
             world.extend(g.world_vertices());
-            faces.extend(g.faces.iter().map(|f| f.map(|k| k + base)));
-            let first_face = u32::try_from(faces.len() - g.faces.len())
+            faces.extend(g.faces().iter().map(|f| f.map(|k| k + base)));
+            let first_face = u32::try_from(faces.len() - g.faces().len())
                 .map_err(|_| Error::InvalidInput(format!("the scene has more than {} faces", u32::MAX)))?;
             spans.push(Span {
                 id,
                 first_vertex,
-                vertices: g.vertices.len(),
+                vertices: g.vertices().len(),
                 first_face,
-                faces: g.faces.len() as u32,
+                faces: g.faces().len() as u32,
             });
         }
         let degenerate: Vec<bool> = faces.iter().map(|&f| is_degenerate(&world, f)).collect();
@@ -109,6 +109,18 @@ impl Merged {
         self.world = moved;
         self.winding = OnceLock::new();
         Ok(true)
+    }
+
+    /// Bytes held: the world-space arrays and the mesh's structure with its triangles.
+    pub fn memory_bytes(&self) -> usize {
+        let arrays = std::mem::size_of_val(self.world.as_slice())
+            + std::mem::size_of_val(self.faces.as_slice())
+            + self.degenerate.len()
+            + std::mem::size_of_val(self.spans.as_slice());
+        arrays
+            + self
+                .accel()
+                .map_or(0, |a| a.memory().iter().map(|(_, b)| b).sum::<usize>())
     }
 
     /// The structure the CPU queries walk, when there is one.

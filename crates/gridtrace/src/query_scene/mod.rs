@@ -39,12 +39,26 @@
 //! Rays with a non-finite component or a zero direction miss (they are no error here, unlike
 //! `TraceMesh`); points with a non-finite coordinate get NaN distances and `INVALID_ID`.
 //!
-//! **Changes** are cheap: they mark the merged mesh stale, and the next query rebuilds it
-//! (`merged.rs`), except `update_vertices` on a built scene, which moves the vertices of the
-//! built mesh (the BVH refits) when that gives what a rebuild would.
+//! **Two levels.** Each geometry is an instance: a mesh (its triangles in its own space, shared
+//! by every instance of it: `add_instance`), a 4x4 affine transform, a 32-bit mask. On the CPU
+//! the ray queries walk two levels (`two_level.rs`): each mesh's own structure, built once in
+//! its own space, under a BVH over the instances' world boxes (`top_level.rs`); a ray is carried
+//! into an instance's space with its direction not normalised, so `t` is the same `t` in both.
+//! Moving instances (`set_transform`, `set_transforms`) or changing masks rebuilds the top
+//! level only. Every ray query takes each ray's interval and mask (`RayOptions`: the `_with`
+//! forms).
+//!
+//! **The merged path.** Where the backend traces on a GPU, the ray queries whose rays all share
+//! one interval and see every geometry still run on one world-space mesh of every geometry's
+//! triangles (`merged.rs`), as do the point queries on every backend (closest points,
+//! distances, signed distances, occupancy, winding numbers): a change marks it stale and the
+//! next such query rebuilds it, except `update_vertices` on a built scene, which moves the
+//! vertices of the built mesh (the BVH refits) when that gives what a rebuild would. The GPU's
+//! own walk of the two levels is a later step.
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use glam::Mat4;
@@ -56,16 +70,22 @@ mod all_hits;
 mod batch;
 mod cpu_rays;
 mod geometry;
+mod instanced_rays;
+mod instances;
 mod merged;
 mod points;
 mod rays;
+mod top_level;
+mod two_level;
 
 pub use all_hits::Intersections;
-pub use batch::RayHits;
-pub use geometry::Geometry;
+pub use batch::{PerRay, RayHits, RayOptions};
+pub use geometry::{Geometry, SceneMesh};
+pub use instances::InstanceOf;
 pub use points::ClosestPoints;
 
 use merged::Merged;
+use two_level::TwoLevel;
 
 /// The id of no geometry and no primitive (a miss): Open3D's `INVALID_ID`.
 pub const INVALID_ID: u32 = u32::MAX;
@@ -78,6 +98,11 @@ pub struct QueryScene {
     next_id: u32,
     /// The merged mesh; `None` when a change made it stale (the next query rebuilds it).
     merged: Mutex<Option<Arc<Merged>>>,
+    /// The two levels' records and top level; `None` when a change made them stale.
+    two_level: Mutex<Option<Arc<TwoLevel>>>,
+    /// Structures built over triangles so far: bottom levels and merged meshes (for tests:
+    /// a move must build none).
+    builds: AtomicUsize,
 }
 
 impl QueryScene {
@@ -89,6 +114,8 @@ impl QueryScene {
             geometries: BTreeMap::new(),
             next_id: 0,
             merged: Mutex::new(None),
+            two_level: Mutex::new(None),
+            builds: AtomicUsize::new(0),
         }
     }
 
@@ -108,6 +135,11 @@ impl QueryScene {
         transform: Option<Mat4>,
     ) -> Result<u32> {
         let g = Geometry::new(vertices, faces, transform)?;
+        self.push(g)
+    }
+
+    /// Adds `g` under the next id.
+    fn push(&mut self, g: Geometry) -> Result<u32> {
         let id = self.next_id;
         self.next_id = id
             .checked_add(1)
@@ -125,25 +157,67 @@ impl QueryScene {
     }
 
     /// Rebuilds a scene from its parts, ids kept (for deserialising): `next_id` is the id the
-    /// next `add_triangles` returns. An id twice or not below `next_id` is an error.
-    pub fn from_parts(opts: QueryOptions, next_id: u32, geometries: Vec<(u32, Geometry)>) -> Result<QueryScene> {
+    /// next `add_triangles` returns; `meshes` are (vertices, faces), each once; `instances` are
+    /// (id, index into `meshes`, transform, mask), so that instances of one mesh share it again.
+    /// An id twice or not below `next_id`, or a mesh index out of range, is an error.
+    #[allow(clippy::type_complexity)]
+    pub fn from_parts(
+        opts: QueryOptions,
+        next_id: u32,
+        meshes: Vec<(Vec<[f32; 3]>, Vec<[u32; 3]>)>,
+        instances: Vec<(u32, usize, Mat4, u32)>,
+    ) -> Result<QueryScene> {
         let mut scene = QueryScene::new(opts);
         scene.next_id = next_id;
-        for (id, g) in geometries {
+        let meshes = meshes
+            .into_iter()
+            .map(|(v, f)| SceneMesh::new(v, f).map(Arc::new))
+            .collect::<Result<Vec<_>>>()?;
+        for (id, mesh, transform, mask) in instances {
             if id >= next_id || scene.geometries.contains_key(&id) {
                 return Err(Error::InvalidInput(format!(
                     "geometry id {id} is repeated or not below the next id {next_id}"
                 )));
             }
-            let g = Geometry::new(g.vertices, g.faces, Some(g.transform))?;
+            let m = meshes.get(mesh).ok_or_else(|| {
+                Error::InvalidInput(format!("geometry {id} names mesh {mesh}; there are {}", meshes.len()))
+            })?;
+            let g = Geometry::place(m.clone(), transform, mask, &format!("transform of geometry {id}"))?;
             scene.insert(id, g);
         }
         Ok(scene)
     }
 
+    /// The scene's parts (`from_parts` takes them back): each mesh once, and each geometry as
+    /// (id, index into the meshes, transform, mask).
+    #[allow(clippy::type_complexity)]
+    pub fn parts(&self) -> (Vec<&SceneMesh>, Vec<(u32, usize, Mat4, u32)>) {
+        let mut meshes: Vec<&SceneMesh> = Vec::new();
+        let mut index = std::collections::HashMap::new();
+        let instances = self
+            .geometries
+            .iter()
+            .map(|(&id, g)| {
+                let k = *index.entry(Arc::as_ptr(g.mesh())).or_insert_with(|| {
+                    meshes.push(g.mesh().as_ref());
+                    meshes.len() - 1
+                });
+                (id, k, g.transform(), g.mask())
+            })
+            .collect();
+        (meshes, instances)
+    }
+
     fn insert(&mut self, id: u32, g: Geometry) {
         self.geometries.insert(id, g);
+        self.stale();
+    }
+
+    /// Marks what a change to the geometries makes stale: the merged mesh and the two levels'
+    /// top (the bottom levels belong to the meshes and stay).
+    fn stale(&mut self) {
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        *self.two_level.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
     }
 
     /// The id the next `add_triangles` returns.
@@ -169,7 +243,7 @@ impl QueryScene {
     /// Removes geometry `id`; an unknown id is an error naming it.
     pub fn remove(&mut self, id: u32) -> Result<()> {
         self.geometries.remove(&id).ok_or_else(|| unknown(id))?;
-        *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        self.stale();
         Ok(())
     }
 
@@ -181,6 +255,8 @@ impl QueryScene {
         let g = self.geometries.get_mut(&id).ok_or_else(|| unknown(id))?;
         g.set_vertices(vertices)?;
         let world = g.world_vertices();
+        // The geometry has a mesh of its own now: its bottom level is built on the next query.
+        *self.two_level.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         let slot = self.merged.get_mut().unwrap_or_else(|p| p.into_inner());
         // In place only when no query holds the merged mesh (`Arc` unique).
         let updated = match slot.as_mut().and_then(Arc::get_mut) {
@@ -195,7 +271,7 @@ impl QueryScene {
 
     /// Triangles in the scene (all faces, zero-area ones included).
     pub fn triangle_count(&self) -> usize {
-        self.geometries.values().map(|g| g.faces.len()).sum()
+        self.geometries.values().map(|g| g.faces().len()).sum()
     }
 
     /// The merged mesh, built now if a change made it stale. Concurrent queries share it; the
@@ -206,8 +282,40 @@ impl QueryScene {
             return Ok(m.clone());
         }
         let m = Arc::new(Merged::build(&self.geometries, &self.opts)?);
+        self.builds.fetch_add(1, Ordering::Relaxed);
         *slot = Some(m.clone());
         Ok(m)
+    }
+
+    /// The two levels, their top rebuilt now if a change made it stale (and any mesh's bottom
+    /// level built that has none yet).
+    fn two_level(&self) -> Result<Arc<TwoLevel>> {
+        let mut slot = self.two_level.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(t) = slot.as_ref() {
+            return Ok(t.clone());
+        }
+        let t = Arc::new(TwoLevel::build(&self.geometries, &self.opts, &self.builds)?);
+        *slot = Some(t.clone());
+        Ok(t)
+    }
+
+    /// Where a ray query with `o` runs: `None` on the merged mesh (a backend that traces on a
+    /// GPU, rays that share one interval and see every geometry), else on the CPU's two levels.
+    fn ray_path(&self, o: &RayOptions) -> Result<Option<Arc<TwoLevel>>> {
+        let merged_answers = self.opts.backend.traces_on_gpu()
+            && o.uniform().is_some_and(|(t_near, t_far, mask)| {
+                t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
+            });
+        if merged_answers {
+            return Ok(None);
+        }
+        self.two_level().map(Some)
+    }
+
+    /// Structures built over triangles so far by this scene: each mesh's bottom level (once,
+    /// however many instances share it) and each merged mesh. For tests: a move builds none.
+    pub fn structure_builds(&self) -> usize {
+        self.builds.load(Ordering::Relaxed)
     }
 
     /// Where the ray queries run: "cpu (N threads)" or the GPU adapter (builds the scene).
@@ -226,6 +334,6 @@ impl QueryScene {
     }
 }
 
-fn unknown(id: u32) -> Error {
+pub(crate) fn unknown(id: u32) -> Error {
     Error::InvalidInput(format!("unknown geometry id {id}"))
 }

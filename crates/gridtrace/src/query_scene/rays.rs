@@ -10,8 +10,10 @@ use rayon::prelude::*;
 
 use super::INVALID_ID;
 use super::QueryScene;
-use super::batch::{RayHits, STAND_IN, ray_of};
+use super::batch::PerRay;
+use super::batch::{RayHits, RayOptions, STAND_IN, ray_of};
 use super::cpu_rays;
+use super::instanced_rays;
 use super::merged::Merged;
 use crate::accel::Hit;
 use crate::gpu::{Answer, ChunkAnswers, WireSource, gpu_hit, unpack_bits};
@@ -68,6 +70,21 @@ pub(crate) fn check_interval(t_near: f32, t_far: f32) -> Result<()> {
 impl QueryScene {
     /// The closest hit of each ray with `t > 0` (Open3D's `cast_rays`).
     pub fn cast_rays(&self, rays: &[[f32; 6]]) -> Result<RayHits> {
+        self.cast_rays_with(rays, &RayOptions::default())
+    }
+
+    /// The closest hit of each ray within its interval among the geometries its mask sees
+    /// (`RayOptions`).
+    pub fn cast_rays_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<RayHits> {
+        o.check(rays.len())?;
+        if let Some(two) = self.ray_path(o)? {
+            two.check_cpu(true)?;
+            let mut out = RayHits::zeroed(rays.len());
+            instanced_rays::cast(&two, rays, o, &mut out);
+            return Ok(out);
+        }
+        // The merged path: one interval for every ray (`ray_path`).
+        let (t_near, t_far, _) = o.uniform().expect("the merged path takes one interval");
         let m = self.merged()?;
         let Some(mesh) = m.mesh.as_ref() else {
             return Ok(RayHits::misses(rays.len()));
@@ -75,7 +92,7 @@ impl QueryScene {
         let on_cpu = || {
             mesh.prepared().accel.check_cpu_traces()?;
             let mut out = RayHits::zeroed(rays.len());
-            cpu_rays::cast(&m, mesh, rays, &mut out);
+            cpu_rays::cast(&m, mesh, rays, (t_near, t_far), &mut out);
             Ok(out)
         };
         // The mesh decides where its queries run (`TraceMesh::on_backend`), by the scene's
@@ -85,35 +102,30 @@ impl QueryScene {
                 // Every entry is written below (a miss's uv and normal are these zeros).
                 let mut out = RayHits::zeroed(rays.len());
                 let source = RowRays { rows: rays };
-                gpu.cast(
-                    &source,
-                    (0.0, f32::INFINITY),
-                    Answer::Hits { uv: true },
-                    |first, answers| {
-                        let ChunkAnswers::HitsUv(hits) = answers else {
-                            return;
-                        };
-                        let end = first + hits.len();
-                        (
-                            &mut out.t_hit[first..end],
-                            &mut out.geometry_ids[first..end],
-                            &mut out.primitive_ids[first..end],
-                            &mut out.primitive_uvs[first..end],
-                            &mut out.primitive_normals[first..end],
-                        )
-                            .into_par_iter()
-                            .zip((hits, &rays[first..end]))
-                            .with_min_len(1024)
-                            .for_each(|((t, g, p, uv, n), (h, r))| {
-                                let h = gpu_hit(*h);
-                                if h.is_hit() && ray_of(r).is_some() {
-                                    write_hit(&m, &h, t, g, p, uv, n);
-                                } else {
-                                    (*t, *g, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
-                                }
-                            });
-                    },
-                )?;
+                gpu.cast(&source, (t_near, t_far), Answer::Hits { uv: true }, |first, answers| {
+                    let ChunkAnswers::HitsUv(hits) = answers else {
+                        return;
+                    };
+                    let end = first + hits.len();
+                    (
+                        &mut out.t_hit[first..end],
+                        &mut out.geometry_ids[first..end],
+                        &mut out.primitive_ids[first..end],
+                        &mut out.primitive_uvs[first..end],
+                        &mut out.primitive_normals[first..end],
+                    )
+                        .into_par_iter()
+                        .zip((hits, &rays[first..end]))
+                        .with_min_len(1024)
+                        .for_each(|((t, g, p, uv, n), (h, r))| {
+                            let h = gpu_hit(*h);
+                            if h.is_hit() && ray_of(r).is_some() {
+                                write_hit(&m, &h, t, g, p, uv, n);
+                            } else {
+                                (*t, *g, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
+                            }
+                        });
+                })?;
                 Ok(out)
             },
             on_cpu,
@@ -124,6 +136,25 @@ impl QueryScene {
     /// its defaults are `0` and `inf`).
     pub fn test_occlusions(&self, rays: &[[f32; 6]], t_near: f32, t_far: f32) -> Result<Vec<bool>> {
         check_interval(t_near, t_far)?;
+        let o = RayOptions {
+            t_near: PerRay::All(t_near),
+            t_far: PerRay::All(t_far),
+            ..Default::default()
+        };
+        self.test_occlusions_with(rays, &o)
+    }
+
+    /// Whether each ray hits anything within its interval among the geometries its mask sees
+    /// (`RayOptions`).
+    pub fn test_occlusions_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Vec<bool>> {
+        o.check(rays.len())?;
+        if let Some(two) = self.ray_path(o)? {
+            two.check_cpu(true)?;
+            let mut out = vec![false; rays.len()];
+            instanced_rays::occluded(&two, rays, o, &mut out);
+            return Ok(out);
+        }
+        let (t_near, t_far, _) = o.uniform().expect("the merged path takes one interval");
         let m = self.merged()?;
         let Some(mesh) = m.mesh.as_ref() else {
             return Ok(vec![false; rays.len()]);
