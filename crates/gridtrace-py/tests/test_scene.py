@@ -173,16 +173,17 @@ def test_open3d_rule_at_edges_and_vertices(accel):
 
 
 def test_a_ray_starting_on_a_face():
-    """A ray from a point of the cube's bottom up, and one from the top down: today both hit
-    only the far side (hits count with t > 0). Follow-up (issue #53, the triangle test): Open3D
-    also counts the face the ray starts on (t == tnear == 0); once the triangle test accepts
-    t == t_min, the expected answers here become t = [0, 1] and counts of 2."""
+    """A ray from a point of the cube's bottom up, and one from the top down: each hits the face
+    it starts on at t = tnear = 0 (as Open3D, Embree and trimesh report it) and the far side at
+    t = 1; a tnear just above 0 skips the face the ray starts on."""
     s = Scene(backend="cpu")
     s.add_triangles(*cube())
     rays = np.array([[0.3, 0.6, 0, 0, 0, 1], [0.3, 0.6, 1, 0, 0, -1]], np.float32)
-    assert s.cast_rays(rays)["t_hit"].tolist() == [1.0, 1.0]
-    assert s.count_intersections(rays).tolist() == [1, 1]
-    assert s.list_intersections(rays)["t_hit"].tolist() == [1.0, 1.0]
+    assert s.cast_rays(rays)["t_hit"].tolist() == [0.0, 0.0]
+    assert s.count_intersections(rays).tolist() == [2, 2]
+    assert s.list_intersections(rays)["t_hit"].tolist() == [0.0, 1.0, 0.0, 1.0]
+    assert s.cast_rays(rays, tnear=1e-4)["t_hit"].tolist() == [1.0, 1.0]
+    assert s.count_intersections(rays, tnear=1e-4).tolist() == [1, 1]
 
 
 @pytest.mark.parametrize("accel", STRUCTURES)

@@ -249,8 +249,8 @@ class Mesh:
         return self._native.device(backend or self._backend)
 
     def intersect(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None, threads: int = 0) -> Hits:
-        """Closest hit of each ray ``origin + t * direction`` with ``t_min < t < t_max`` (this
-        interface's rule; ``Scene`` follows Open3D's: hits with ``t > 0``, and for its counts and
+        """Closest hit of each ray ``origin + t * direction`` with ``t_min <= t < t_max`` (this
+        interface's rule; ``Scene`` follows Open3D's: hits with ``t >= 0``, and for its counts and
         lists a hit with the geometry and ``t`` of the previous one skipped).
 
         ``origins`` and ``directions`` are (N, 3) arrays of any float or integer dtype; either may be
@@ -266,7 +266,7 @@ class Mesh:
         return Hits(*self._native.intersect(o, d, t_min, t_max, backend or self._backend, _threads(threads, "threads")))
 
     def occluded(self, origins: ArrayLike, directions: ArrayLike, t_min: float = 0.0, t_max: float = math.inf, backend: Optional[str] = None, threads: int = 0) -> np.ndarray:
-        """Whether each ray hits anything with ``t_min < t < t_max`` (boolean array). Coherent rays
+        """Whether each ray hits anything with ``t_min <= t < t_max`` (boolean array). Coherent rays
         in order go faster through the irregular grid, as for ``intersect``. ``threads``: CPU
         threads (0: all cores)."""
         o, d = _rays(origins, directions)

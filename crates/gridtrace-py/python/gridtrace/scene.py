@@ -329,21 +329,21 @@ class Scene:
     # -- rays -----------------------------------------------------------------------------
 
     def cast_rays(self, rays, nthreads: int = 0, tnear=0.0, tfar=math.inf, mask=0xFFFFFFFF) -> Dict[str, np.ndarray]:
-        """The closest hit of each ray (``rays``: ``[..., 6]``) with ``tnear < t < tfar`` among the
+        """The closest hit of each ray (``rays``: ``[..., 6]``) with ``tnear <= t < tfar`` among the
         geometries its mask sees: a dict of ``t_hit`` ``[...]`` float32, ``geometry_ids`` and
         ``primitive_ids`` ``[...]`` uint32, ``primitive_uvs`` ``[..., 2]`` and
         ``primitive_normals`` ``[..., 3]`` float32. ``nthreads``: CPU threads (0: all cores), as
         Open3D's. ``tnear``, ``tfar`` (floats) and ``mask`` (uint32) are each a scalar or one
         per ray (an array of the rays' leading shape); a ray sees a geometry when
         ``ray_mask & geometry_mask != 0``, and a ray with ``tnear > tfar`` sees nothing. The
-        defaults give every hit with ``t > 0``."""
+        defaults give every hit with ``t >= 0``."""
         k = _threads(nthreads)
         flat, lead = _batch(rays, "rays", 6)
         a = _RayArgs(len(flat), lead, tnear, tfar, mask)
         return _shaped(_chunked(flat, lambda r, s: self._native.cast_rays(r, k, *a.part(s, len(r)))), lead)
 
     def test_occlusions(self, rays, tnear=0.0, tfar=math.inf, nthreads: int = 0, mask=0xFFFFFFFF) -> np.ndarray:
-        """Whether each ray hits anything with ``tnear < t < tfar`` among the geometries its
+        """Whether each ray hits anything with ``tnear <= t < tfar`` among the geometries its
         mask sees: a bool array ``[...]``. ``tnear``, ``tfar`` and ``mask`` as for
         ``cast_rays`` (scalars: Open3D's, where ``tnear > tfar`` is an error). ``nthreads``: CPU
         threads (0: all cores)."""

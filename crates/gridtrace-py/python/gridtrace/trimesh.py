@@ -7,7 +7,7 @@ after which ``mesh.ray.intersects_location(...)``, ``mesh.contains(points)`` and
 in trimesh that casts rays goes through gridtrace. Pure Python over :class:`gridtrace.Scene`;
 trimesh itself is needed only for the mesh (it is an optional dependency of gridtrace).
 
-Answers as trimesh's engines give them: hits count with ``t > 0`` (trimesh's numpy engine also
+Answers as trimesh's engines give them: hits count with ``t >= 0`` (trimesh's numpy engine also
 accepts points up to 1e-6 behind the origin); locations are computed in float64, where the ray
 meets the plane of the face hit, from trimesh's own float64 vertices (as both of trimesh's engines
 do; gridtrace traces in float32, whose ``t`` alone would put a point 10,000 units away a

@@ -1,7 +1,7 @@
 //! Every hit along each ray (`count_intersections`, `list_intersections`), on the CPU's
 //! cores, through the structure's all-hits walk (`AccelStructure::all_hits`).
 //!
-//! **What counts: Open3D's rule.** Every face the ray hits with `t > 0` (the library's
+//! **What counts: Open3D's rule.** Every face the ray hits with `t >= 0` (the library's
 //! triangle test, exactly brute force's set), nearest first (equal `t`: by geometry id, then
 //! face), except that a hit with the same geometry and the same `t` (bit for bit) as the
 //! previous hit kept is skipped. That is the rule of Open3D's `RaycastingScene` (its Embree
@@ -16,7 +16,7 @@
 //! edge hit both) both count, as in Open3D; the parity of a count is therefore no inside test
 //! (signed distance and occupancy here use the winding number, `points.rs`). Hits of different
 //! geometries at the same `t` all count. `TraceMesh` and Python's `Mesh` answer closest hits
-//! only (`t_min < t < t_max`, every face, no rule to apply).
+//! only (`t_min <= t < t_max`, every face, no rule to apply).
 
 use rayon::prelude::*;
 
@@ -48,7 +48,7 @@ const BATCH: usize = 256;
 const COUNT_BATCH: usize = 1024;
 
 impl QueryScene {
-    /// How many faces each ray hits with `t > 0` under Open3D's rule (the module notes): the
+    /// How many faces each ray hits with `t >= 0` under Open3D's rule (the module notes): the
     /// length of each ray's `list_intersections` list. Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
         if self.hits_path(&Default::default())?.is_some() {
@@ -87,7 +87,7 @@ impl QueryScene {
         Ok(out)
     }
 
-    /// Every hit of each ray with `t > 0` under Open3D's rule (the module notes), nearest
+    /// Every hit of each ray with `t >= 0` under Open3D's rule (the module notes), nearest
     /// first (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
         if self.hits_path(&Default::default())?.is_some() {

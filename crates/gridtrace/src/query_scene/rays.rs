@@ -68,7 +68,7 @@ pub(crate) fn check_interval(t_near: f32, t_far: f32) -> Result<()> {
 }
 
 impl QueryScene {
-    /// The closest hit of each ray with `t > 0` (Open3D's `cast_rays`).
+    /// The closest hit of each ray with `t >= 0` (Open3D's `cast_rays`).
     pub fn cast_rays(&self, rays: &[[f32; 6]]) -> Result<RayHits> {
         self.cast_rays_with(rays, &RayOptions::default())
     }
