@@ -61,10 +61,10 @@ pub trait AccelStructure: Sized {
         Ok(vec![("structure".into(), self.summary())])
     }
 
-    /// Closest hit with `t_min < t < t_max`, `Hit::MISS` for none.
+    /// Closest hit with `t_min <= t < t_max`, `Hit::MISS` for none.
     fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit;
 
-    /// Whether anything is hit with `t_min < t < t_max` (stops at the first hit found).
+    /// Whether anything is hit with `t_min <= t < t_max` (stops at the first hit found).
     fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool;
 
     /// Closest hits of up to `PACKET` coherent rays (a 4x2 block of pixels), each counted into
@@ -134,7 +134,7 @@ pub trait AccelStructure: Sized {
         }
     }
 
-    /// Every hit with `t_min < t < t_max`, each triangle at most once, appended to `out` in no
+    /// Every hit with `t_min <= t < t_max`, each triangle at most once, appended to `out` in no
     /// particular order (count and list queries: `query_scene`). A ray through an edge or a
     /// vertex shared by several triangles hits each of them that the triangle test accepts
     /// (`TriAccel::intersect` widens its bounds so that at least one does). Default: every
@@ -145,7 +145,7 @@ pub trait AccelStructure: Sized {
         all_hits_brute(tris, ray, t_min, t_max, out)
     }
 
-    /// How many triangles each ray of a batch hits with `t_min < t < t_max`, into `out`
+    /// How many triangles each ray of a batch hits with `t_min <= t < t_max`, into `out`
     /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists. On this thread. Default:
     /// `all_hits` ray by ray; a structure overrides it with a walk that counts without listing.
     fn count_hits_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {

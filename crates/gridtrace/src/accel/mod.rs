@@ -316,14 +316,14 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::info_lines(s, &self.tris))
     }
 
-    /// Closest hit with `t_min < t < t_max`, by the traversal the structure serves (`kind`: the
+    /// Closest hit with `t_min <= t < t_max`, by the traversal the structure serves (`kind`: the
     /// grid's `grid` and `pc` differ only in how they cross empty space).
     #[inline]
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         dispatch!(&self.structure, s => AccelStructure::intersect(s, &self.tris, ray, t_min, t_max, counters))
     }
 
-    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
+    /// Any hit with `t_min <= t < t_max` (shadow rays): stops at the first one found.
     #[inline]
     pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         dispatch!(&self.structure, s => AccelStructure::occluded(s, &self.tris, ray, t_min, t_max, counters))
@@ -346,7 +346,7 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::intersect_packet(s, &self.tris, rays, t_min, t_max, counters))
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (the
+    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]` (the
     /// shadow rays of a 4x2 block towards one light), each counted into its own `counters[i]`:
     /// the same answers and counts as `occluded` ray by ray. False past `rays.len()`.
     #[inline]
@@ -383,14 +383,14 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, out))
     }
 
-    /// Every hit with `t_min < t < t_max`, each triangle once, appended to `out` in no
+    /// Every hit with `t_min <= t < t_max`, each triangle once, appended to `out` in no
     /// particular order (`AccelStructure::all_hits`).
     #[inline]
     pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
         dispatch!(&self.structure, s => AccelStructure::all_hits(s, &self.tris, ray, t_min, t_max, out))
     }
 
-    /// How many triangles each ray of a batch hits with `t_min < t < t_max` (`out[i]` for
+    /// How many triangles each ray of a batch hits with `t_min <= t < t_max` (`out[i]` for
     /// `rays[i]`; `AccelStructure::count_hits_batch`): the number of hits `all_hits` lists.
     pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         assert_eq!(rays.len(), out.len(), "one count per ray");

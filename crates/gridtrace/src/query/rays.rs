@@ -15,7 +15,7 @@ use crate::accel::{Hit, Ray};
 use crate::gpu::{Answer, ChunkAnswers, GpuRenderer};
 
 impl TraceMesh {
-    /// Closest hits for rays `origins[i] + t * dirs[i]` with `t_min < t < t_max`. Either array
+    /// Closest hits for rays `origins[i] + t * dirs[i]` with `t_min <= t < t_max`. Either array
     /// may have length 1 and is then used for every ray.
     pub fn intersect(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<Hits> {
         self.intersect_with(self.backend, origins, dirs, t_min, t_max)
@@ -97,7 +97,7 @@ impl TraceMesh {
         }
     }
 
-    /// Whether anything is hit with `t_min < t < t_max`, per ray (broadcasting as `intersect`).
+    /// Whether anything is hit with `t_min <= t < t_max`, per ray (broadcasting as `intersect`).
     pub fn occluded(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
         self.occluded_with(self.backend, origins, dirs, t_min, t_max)
     }

@@ -26,7 +26,7 @@ use crate::accel::{Hit, Ray};
 const CAPACITY: usize = STACK * (WIDTH - 1) + 1;
 
 impl BvhAccel {
-    /// Every hit with `t_min < t < t_max`, appended to `out`; `tri` indexes the triangles the
+    /// Every hit with `t_min <= t < t_max`, appended to `out`; `tri` indexes the triangles the
     /// BVH was built over.
     pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
         if self.blocks.is_empty() {
@@ -68,7 +68,7 @@ impl BvhAccel {
 }
 
 impl BvhAccel {
-    /// How many triangles each ray of a batch hits with `t_min < t < t_max`, into `out`
+    /// How many triangles each ray of a batch hits with `t_min <= t < t_max`, into `out`
     /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists, by the same walk (the same
     /// box test, so the same leaves; the same triangle test, so the same hits), without listing
     /// them. `COUNT_LANES` rays are walked interleaved, each step prefetching what its ray

@@ -293,7 +293,7 @@ impl BvhAccel {
     }
 
     /// Walks up to `PACKET` rays (`rays.len()`, at least one) as one packet: closest hits with
-    /// `t_min < t < t_max[i]`, or with `ANY` whether there is one. A node's entered children go
+    /// `t_min <= t < t_max[i]`, or with `ANY` whether there is one. A node's entered children go
     /// on the packet's stack (`push_children`), a leaf's triangles are tested against its rays
     /// (`test_leaf`), and the walk goes on with the nearest pending child some ray can still
     /// use (`pop_live`).
@@ -464,7 +464,7 @@ impl BvhAccel {
                         u: u[r],
                         v: v[r],
                     };
-                    // A hit has `t > t_min >= 0`: finite and positive, so the next float up
+                    // A hit has `t >= t_min >= 0`, finite, and +0 for zero (`triangle.rs`), so the next float up
                     // is the next bit pattern.
                     s.limit[r] = f32::from_bits(t[r].to_bits() + 1);
                     s.t_box[r] = t[r] * T_SLOP;

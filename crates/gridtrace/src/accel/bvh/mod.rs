@@ -91,7 +91,7 @@ impl BvhAccel {
         }
     }
 
-    /// Closest hit with `t_min < t < t_max`; `tri` indexes the triangles given to `build`.
+    /// Closest hit with `t_min <= t < t_max`; `tri` indexes the triangles given to `build`.
     /// `counters.cell()` counts nodes visited.
     pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
         let mut w = Walk::new(ray, t_min, t_max);
@@ -99,7 +99,7 @@ impl BvhAccel {
         self.result(&w.best)
     }
 
-    /// Any hit with `t_min < t < t_max`.
+    /// Any hit with `t_min <= t < t_max`.
     pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
         let mut w = Walk::new(ray, t_min, t_max);
         self.walk::<true, C>(&mut w, counters);

@@ -39,7 +39,7 @@ impl BvhAccel {
         hits
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]`, each
+    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]`, each
     /// counted into its own `counters[i]`: the same answers and counts as `occluded` ray by ray.
     /// False past `rays.len()`.
     pub fn occluded_packet<C: Counters>(

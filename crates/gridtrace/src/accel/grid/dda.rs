@@ -25,7 +25,7 @@ pub enum Stepping {
 }
 
 impl Grid {
-    /// Closest hit with `t_min < t < t_max`.
+    /// Closest hit with `t_min <= t < t_max`.
     pub fn intersect<C: Counters>(
         &self,
         tris: &[TriAccel],
@@ -49,7 +49,7 @@ impl Grid {
         if best.tri == u32::MAX { Hit::MISS } else { best }
     }
 
-    /// Any hit with `t_min < t < t_max` (shadow rays): stops at the first one found.
+    /// Any hit with `t_min <= t < t_max` (shadow rays): stops at the first one found.
     pub fn occluded<C: Counters>(
         &self,
         tris: &[TriAccel],

@@ -43,7 +43,7 @@ impl Grid {
         best.map(|h| if h.tri == u32::MAX { Hit::MISS } else { h })
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]`, each
+    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]`, each
     /// counted into its own `counters[i]`: the same answers and counts as `occluded` ray by ray.
     /// False past `rays.len()`.
     #[allow(clippy::too_many_arguments)]

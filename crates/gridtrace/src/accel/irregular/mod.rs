@@ -334,7 +334,7 @@ impl IrregularGrid {
         ]
     }
 
-    /// Closest hit with `t_min < t < t_max`.
+    /// Closest hit with `t_min <= t < t_max`.
     pub fn intersect<C: Counters>(
         &self,
         tris: &[TriAccel],
@@ -352,7 +352,7 @@ impl IrregularGrid {
         if best.tri == u32::MAX { Hit::MISS } else { best }
     }
 
-    /// Any hit with `t_min < t < t_max`.
+    /// Any hit with `t_min <= t < t_max`.
     pub fn occluded<C: Counters>(
         &self,
         tris: &[TriAccel],

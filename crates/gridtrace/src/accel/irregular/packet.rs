@@ -54,7 +54,7 @@ fn min_lanes<const N: usize, L: Lanes<N>>(a: L, b: L) -> L {
 }
 
 impl IrregularGrid {
-    /// Closest hits with `t_min < t < t_max` of up to `PACKET` rays (`rays.len()`), each
+    /// Closest hits with `t_min <= t < t_max` of up to `PACKET` rays (`rays.len()`), each
     /// counted into its own `counters[i]`: the same hits and counts as `intersect` ray by ray,
     /// faster when the rays are coherent. The hits past `rays.len()` are misses.
     pub fn intersect_packet<C: Counters>(
@@ -68,7 +68,7 @@ impl IrregularGrid {
         self.walk_packet::<false, C>(tris, rays, t_min, [t_max; PACKET], counters, false)
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min < t < t_max[i]` (shadow
+    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]` (shadow
     /// rays towards a light, each with its own distance): the same answers and counts as
     /// `occluded` ray by ray. Past `rays.len()`: false.
     pub fn occluded_packet<C: Counters>(

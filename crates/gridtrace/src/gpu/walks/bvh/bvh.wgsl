@@ -81,7 +81,7 @@ fn bvh_descend(entry_in: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_box: f
     return entry;
 }
 
-// Closest hit with t_min < t < t_max; mirrors BvhAccel::intersect. `work` gets the cost (nodes
+// Closest hit with t_min <= t < t_max; mirrors BvhAccel::intersect. `work` gets the cost (nodes
 // visited + triangle tests) when COUNT_WORK is set.
 fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
@@ -106,7 +106,7 @@ fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
     return best;
 }
 
-// Any hit with t_min < t < t_max; mirrors BvhAccel::occluded.
+// Any hit with t_min <= t < t_max; mirrors BvhAccel::occluded.
 fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     let inv = bvh_inv_dir(d);
     var st = bvh_stack_new();

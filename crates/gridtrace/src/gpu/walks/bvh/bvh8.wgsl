@@ -80,7 +80,7 @@ fn bvh8_tris_below(counts: u32, slot: u32) -> u32 {
     return (pairs * 0x01010101u) >> 24u;
 }
 
-// The walk, closest hit or (`any`) the first hit found, with t_min < t < t_max. A group is
+// The walk, closest hit or (`any`) the first hit found, with t_min <= t < t_max. A group is
 // `node << 8 | mask`: the node and its children still to visit (`bvh8_hits`' order). Choosing
 // among a node's children needs only its `info` and inner-child mask (20 of its 80 bytes):
 // the whole node is read when the walk enters it (its boxes are tested), and only those words

@@ -86,7 +86,7 @@ fn dda_advance(s: ptr<function, Dda>, cell: Cell, t_exit: f32, use_pc: bool) -> 
     return true;
 }
 
-// Closest hit with t_min < t < t_max; mirrors GridAccel::intersect. `work` gets the cost
+// Closest hit with t_min <= t < t_max; mirrors GridAccel::intersect. `work` gets the cost
 // (cells visited + triangle tests) when COUNT_WORK is set.
 fn closest_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
@@ -111,7 +111,7 @@ fn closest_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool,
     return best;
 }
 
-// Any hit with t_min < t < t_max; mirrors GridAccel::occluded.
+// Any hit with t_min <= t < t_max; mirrors GridAccel::occluded.
 fn any_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, use_pc: bool) -> bool {
     var s: Dda;
     if (!dda_start(&s, o, d, t_min, t_max)) { return false; }

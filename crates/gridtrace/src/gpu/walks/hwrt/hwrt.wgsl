@@ -15,7 +15,7 @@
 @group(1) @binding(3) var hwrt_tlas: acceleration_structure;
 
 // Vulkan requires 0 <= tmin <= tmax and finite origins and directions; the tracer's
-// intervals are open (t_min < t < t_max), the driver's closed: the bounds themselves differ
+// intervals are open (t_min <= t < t_max), the driver's closed: the bounds themselves differ
 // only for a hit at exactly t_min or t_max.
 fn hwrt_ray(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, flags: u32) -> RayDesc {
     let lo = max(t_min, 0.0);
@@ -29,7 +29,7 @@ fn hwrt_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fu
     rayQueryInitialize(&rq, hwrt_tlas, hwrt_ray(o, d, t_min, t_max, RAY_FLAG_FORCE_OPAQUE));
     while (rayQueryProceed(&rq)) {}
     let h = rayQueryGetCommittedIntersection(&rq);
-    if (h.kind != RAY_QUERY_INTERSECTION_TRIANGLE || !(h.t > t_min && h.t < t_max)) {
+    if (h.kind != RAY_QUERY_INTERSECTION_TRIANGLE || !(h.t >= t_min && h.t < t_max)) {
         return GpuHit(inf(), MISS, 0.0, 0.0);
     }
     return GpuHit(h.t, h.primitive_index, h.barycentrics.x, h.barycentrics.y);
@@ -42,7 +42,7 @@ fn hwrt_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
         hwrt_ray(o, d, t_min, t_max, RAY_FLAG_FORCE_OPAQUE | RAY_FLAG_TERMINATE_ON_FIRST_HIT));
     while (rayQueryProceed(&rq)) {}
     let h = rayQueryGetCommittedIntersection(&rq);
-    return h.kind == RAY_QUERY_INTERSECTION_TRIANGLE && h.t > t_min && h.t < t_max;
+    return h.kind == RAY_QUERY_INTERSECTION_TRIANGLE && h.t >= t_min && h.t < t_max;
 }
 
 fn hwrt_closest_point(p: vec3<f32>, work: ptr<function, u32>) -> GpuHit {

@@ -119,7 +119,7 @@ fn irr_advance(w: ptr<function, IrrWalk>, cell: IrrBox, t_faces: vec3<f32>) -> b
     return true;
 }
 
-// Closest hit with t_min < t < t_max; mirrors IrregularGrid::intersect. `work` gets the cost
+// Closest hit with t_min <= t < t_max; mirrors IrregularGrid::intersect. `work` gets the cost
 // (cells visited + triangle tests) when COUNT_WORK is set, as the CPU's counters count it.
 fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
@@ -146,7 +146,7 @@ fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
     return best;
 }
 
-// Any hit with t_min < t < t_max; mirrors IrregularGrid::occluded.
+// Any hit with t_min <= t < t_max; mirrors IrregularGrid::occluded.
 fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     var w: IrrWalk;
     if (!irr_start(&w, o, d, t_min, t_max)) { return false; }
