@@ -1,8 +1,9 @@
 """A simulated LiDAR scan of a scene of several meshes, written as a point cloud (PLY).
 
-A spinning scanner with 64 lasers (vertical angles -25..+15 degrees) and 2048 steps a turn casts
-131,072 rays from 1.2 m above the ground in one batch (``Scene.cast_rays``, Open3D's names);
-the hits become points, coloured by which geometry they hit, with the range as a property.
+A Velodyne HDL-64E (``gridtrace.Lidar.preset("hdl64")``: 64 beams, +2..-24.33 degrees, 2048 steps a
+turn here) scans 131,072 rays from 1.2 m above the ground with ``Scene.scan``, which makes each ray
+where it is traced (no array of rays); the returns become points, coloured by which geometry they
+hit, with the range as a property.
 The scene: a ground plane, and the Stanford Bunny, Dragon and Armadillo (from
 ``../shared/data/meshes`` when present, scaled to about a metre and placed around the scanner
 by 4x4 transforms), or built-in boxes where the files are missing.
@@ -61,13 +62,11 @@ def build_scene(mesh_dir):
     return scene, names
 
 
-def scan_rays(lasers=64, steps=2048, height=1.2):
-    elevation = np.radians(np.linspace(-25.0, 15.0, lasers))
-    azimuth = np.linspace(0, 2 * np.pi, steps, endpoint=False)
-    el, az = np.meshgrid(elevation, azimuth, indexing="ij")
-    d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
-    o = np.broadcast_to([0.0, 0.0, height], d.shape)
-    return np.concatenate([o, d], axis=-1).astype(np.float32)  # (lasers, steps, 6)
+def sensor_pose(height=1.2):
+    """Sensor-to-world: the scanner's axes (x forward, z up) on the world's, `height` above z = 0."""
+    pose = np.eye(4)
+    pose[2, 3] = height
+    return pose
 
 
 def write_ply(path, xyz, rgb, rng):
@@ -92,14 +91,16 @@ def main():
     ap.add_argument("--noise", type=float, default=0.0, help="range noise, metres (1 sigma)")
     args = ap.parse_args()
     scene, names = build_scene(args.meshes)
-    rays = scan_rays()
-    ans = scene.cast_rays(rays)
+    lidar = gridtrace.Lidar.preset("hdl64", azimuth_steps=2048)
+    ans = scene.scan(lidar, sensor_pose(), outputs=("range", "points", "geometry_ids"))
     hit = ans["geometry_ids"] != gridtrace.INVALID_ID
-    t = ans["t_hit"][hit]
+    t = ans["range"][hit]
+    xyz = ans["points"][hit]
     if args.noise:
-        t = t + np.random.default_rng(0).normal(0, args.noise, t.shape).astype(np.float32)
-    r = rays[hit]
-    xyz = r[:, :3] + t[:, None] * r[:, 3:]  # directions are unit: t is the range in metres
+        noise = np.random.default_rng(0).normal(0, args.noise, t.shape).astype(np.float32)
+        # Along the beam: the unit direction from the sensor to the point.
+        beam = (xyz - sensor_pose()[:3, 3]) / t[:, None]
+        t, xyz = t + noise, xyz + noise[:, None] * beam
     palette = np.array([[128, 128, 128], [230, 80, 60], [60, 160, 230], [90, 200, 90], [220, 200, 60]], np.uint8)
     rgb = palette[np.minimum(ans["geometry_ids"][hit], len(palette) - 1)]
     write_ply(args.out, xyz, rgb, t)

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 mod scene;
+mod sensor;
 mod stats;
 mod threads;
 
@@ -355,6 +356,9 @@ fn render<'py>(
 fn _gridtrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeMesh>()?;
     m.add_class::<scene::NativeScene>()?;
+    m.add_class::<sensor::NativeSensor>()?;
+    m.add_function(wrap_pyfunction!(sensor::create_rays_pinhole, m)?)?;
+    m.add_function(wrap_pyfunction!(sensor::create_rays_pinhole_fov, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(threads::_last_threads, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

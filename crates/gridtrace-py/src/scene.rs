@@ -349,6 +349,24 @@ impl NativeScene {
         py.detach(|| self.read().accel_name()).map_err(to_py)
     }
 
+    /// `Scene.scan`: `sensor` from each pose of `pose` (flat `(E * 4, 4)`), rays made where
+    /// they are traced (`crate::sensor::scan`).
+    #[pyo3(signature = (sensor, pose, pose_end, outputs, points_frame, nthreads = 0))]
+    #[allow(clippy::too_many_arguments)]
+    fn scan<'py>(
+        &self,
+        py: Python<'py>,
+        sensor: PyRef<'py, crate::sensor::NativeSensor>,
+        pose: PyReadonlyArray2<'py, f32>,
+        pose_end: Option<PyReadonlyArray2<'py, f32>>,
+        outputs: Vec<String>,
+        points_frame: &str,
+        nthreads: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let scene = self.read();
+        crate::sensor::scan(py, &scene, &sensor, pose, pose_end, outputs, points_frame, nthreads)
+    }
+
     /// `nthreads`: CPU threads (0: all cores), as Open3D's.
     #[pyo3(signature = (rays, nthreads = 0, tnear = None, tfar = None, mask = None))]
     fn cast_rays<'py>(

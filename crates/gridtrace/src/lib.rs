@@ -14,6 +14,7 @@ pub mod query;
 pub mod query_scene;
 pub mod render;
 pub mod scene;
+pub mod sensor;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 pub mod util;

@@ -68,6 +68,8 @@ from .scene import INVALID_ID, Scene, _params_of_state, _threads  # noqa: E402
 # costs nothing: it is pure Python over `Scene` and does not import trimesh itself (an optional
 # dependency, needed only for the mesh objects a user hands it).
 from . import trimesh  # noqa: E402
+from . import sensor  # noqa: E402
+from .sensor import Camera, Lidar  # noqa: E402
 
 #: The structures ``accel=`` accepts, ``"auto"`` first (from the library's registry).
 ACCELS: tuple = tuple(_ACCELS)
@@ -82,7 +84,7 @@ ACCEL_PARAMS: dict = dict(_ACCEL_PARAMS)
 #: ``None``: every structure) and ``help``.
 GPU_VARIANTS: dict = dict(_GPU_VARIANTS)
 
-__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "MAX_THREADS", "ACCELS", "ACCEL_PARAMS", "GPU_VARIANTS", "__version__", "trimesh"]
+__all__ = ["Mesh", "Hits", "Scene", "INVALID_ID", "render", "MISS", "MAX_THREADS", "ACCELS", "ACCEL_PARAMS", "GPU_VARIANTS", "__version__", "trimesh", "sensor", "Camera", "Lidar"]
 
 #: Triangle index of a miss.
 MISS = np.uint32(0xFFFFFFFF)

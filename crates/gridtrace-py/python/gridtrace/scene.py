@@ -328,6 +328,29 @@ class Scene:
 
     # -- rays -----------------------------------------------------------------------------
 
+    def scan(self, sensor, pose, pose_end=None, outputs=("range",), points_frame: str = "world",
+             nthreads: int = 0) -> Dict[str, np.ndarray]:
+        """Scans the scene with a :class:`gridtrace.Camera` or :class:`gridtrace.Lidar` from
+        ``pose`` (sensor-to-world, ``(4, 4)`` or a batch ``(E, 4, 4)``: a leading ``E`` on every
+        output), its rays made where they are traced. ``pose_end`` (same shape): a rolling scan,
+        each column's pose slerped from ``pose`` to ``pose_end``. ``outputs``: any of ``range``,
+        ``depth`` (camera z-depth), ``points`` (``points_frame`` ``"world"`` or ``"sensor"``),
+        ``geometry_ids``, ``primitive_ids``, ``normals``, ``incidence``; each ``(rows, cols, ...)``.
+        No return within ``[min_range, max_range]``: range ``inf``, ids ``INVALID_ID``, points NaN,
+        normals and incidence 0. See ``gridtrace.sensor``."""
+        from .sensor import scan
+
+        return scan(self._native, sensor, pose, pose_end, outputs, points_frame, _threads(nthreads))
+
+    @staticmethod
+    def create_rays_pinhole(*args, **kwargs) -> np.ndarray:
+        """Open3D's static ray maker, both forms: ``(intrinsic_matrix, extrinsic_matrix, width_px,
+        height_px)`` and ``(fov_deg, center, eye, up, width_px, height_px)``; ``(height_px,
+        width_px, 6)`` float32 as Open3D returns (``gridtrace.sensor.create_rays_pinhole``)."""
+        from .sensor import create_rays_pinhole
+
+        return create_rays_pinhole(*args, **kwargs)
+
     def cast_rays(self, rays, nthreads: int = 0, tnear=0.0, tfar=math.inf, mask=0xFFFFFFFF) -> Dict[str, np.ndarray]:
         """The closest hit of each ray (``rays``: ``[..., 6]``) with ``tnear <= t < tfar`` among the
         geometries its mask sees: a dict of ``t_hit`` ``[...]`` float32, ``geometry_ids`` and
