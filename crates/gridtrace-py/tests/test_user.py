@@ -203,7 +203,8 @@ def test_nan_rule_scene_answers_as_open3d(backend):
     assert np.isinf(ans["t_hit"][bad]).all()
     assert (ans["geometry_ids"][bad] == gridtrace.INVALID_ID).all()
     assert (ans["primitive_ids"][bad] == gridtrace.INVALID_ID).all()
-    np.testing.assert_allclose(ans["t_hit"][[0, -1]], [3.0, 3.0])
+    # float32 t: the watertight test's t is a ratio of sheared depths, within an ulp or two.
+    np.testing.assert_allclose(ans["t_hit"][[0, -1]], [3.0, 3.0], rtol=1e-6)
     assert ans["primitive_ids"][[0, -1]].tolist() == [0, 0]
     assert s.test_occlusions(rays).tolist() == [True] + [False] * len(BAD_RAYS) + [True]
     assert s.count_intersections(rays).tolist() == [2] + [0] * len(BAD_RAYS) + [2]

@@ -30,8 +30,18 @@ fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
 /// GPU closest and any hits equal brute force over the mesh's own (kept) triangles: same hit
 /// or miss, t within a relative 1e-4 (the GPU compiler may fuse multiply-adds). Any hit is
 /// asked twice: unbounded, and with t_max halfway to the closest hit (must be false). At most
-/// `rays / 10,000` rays through exact edges may round either way (as in tests/gpu.rs).
+/// `rays / 10,000` rays may disagree otherwise (as in tests/gpu.rs).
+///
+/// A hit or miss on a triangle's own boundary is excused: the adversarial rays aim at edges
+/// and vertices, and where no neighbour shares the edge (one lone triangle, the rim of the
+/// plane) the watertight test's answer there is the rounding of its inputs. The CPU decides an
+/// exactly-zero edge function in f64; WGSL has no f64, and its f32 edge function rounds either
+/// way (docs/robustness.md). Excused: the answer that hit has a barycentric coordinate within
+/// `EDGE_BARY` of 0. Hits inside triangles must agree; leaks between neighbours are
+/// tests/edges.rs's.
 fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
+    const EDGE_BARY: f32 = 1e-5;
+    let on_boundary = |h: &Hit| h.is_hit() && h.u.min(h.v).min(1.0 - h.u - h.v) <= EDGE_BARY;
     let tris = &mesh.prepared().accel.tris;
     let want: Vec<Hit> = rays
         .par_iter()
@@ -42,12 +52,26 @@ fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
         .unwrap();
     let occ = mesh.occluded_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY).unwrap();
     let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
-    let bad: Vec<usize> = (0..rays.len())
-        .filter(|&i| {
-            let (w, g) = (&want[i], &got[i]);
-            w.is_hit() != g.is_hit() || (w.is_hit() && !close(w.t, g.t)) || occ[i] != w.is_hit()
-        })
-        .collect();
+    let (mut bad, mut excused) = (Vec::new(), 0usize);
+    for i in 0..rays.len() {
+        let (w, g) = (&want[i], &got[i]);
+        if w.is_hit() == g.is_hit() && (!w.is_hit() || close(w.t, g.t)) && occ[i] == w.is_hit() {
+            continue;
+        }
+        let hit_or_miss_differs = w.is_hit() != g.is_hit() || occ[i] != w.is_hit();
+        let t_agrees = !(w.is_hit() && g.is_hit()) || close(w.t, g.t);
+        if hit_or_miss_differs && t_agrees && (on_boundary(w) || on_boundary(g)) {
+            excused += 1;
+        } else {
+            bad.push(i);
+        }
+    }
+    // The excuse must stay an exception (a GPU test that misses every edge would pass it).
+    assert!(
+        excused <= rays.len() / 100,
+        "{name}: {excused} of {} rays disagree on a triangle's boundary",
+        rays.len()
+    );
     let allowed = rays.len() / 10_000;
     assert!(
         bad.len() <= allowed,
@@ -78,7 +102,11 @@ fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
         assert!(wrong <= allowed, "{name}: {wrong} bounded any-hit results disagree");
     }
     let hits = want.iter().filter(|h| h.is_hit()).count();
-    eprintln!("{name}: {} rays, {hits} hits, {} disagree", rays.len(), bad.len());
+    eprintln!(
+        "{name}: {} rays, {hits} hits, {} disagree, {excused} on a boundary",
+        rays.len(),
+        bad.len()
+    );
     assert!(hits > 0, "{name}: the ray set must hit something");
 }
 
