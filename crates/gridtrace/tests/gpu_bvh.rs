@@ -11,7 +11,9 @@ use glam::Vec3;
 use gridtrace::Backend;
 use gridtrace::accel::{Accel, AccelKind, Hit, Ray, TriAccel, brute_force_intersect, brute_force_occluded};
 use gridtrace::query::TraceMesh;
-use gridtrace::testing::{flat_scene, gpu_mesh, long_strip, ray_set, skip_gpu, soup_arrays, triangle_soup};
+use gridtrace::testing::{
+    flat_scene, gpu_disagreements, gpu_mesh, long_strip, ray_set, skip_gpu, soup_arrays, triangle_soup,
+};
 use rayon::prelude::*;
 
 static GPU_LOCK: Mutex<()> = Mutex::new(());
@@ -28,20 +30,11 @@ fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
 }
 
 /// GPU closest and any hits equal brute force over the mesh's own (kept) triangles: same hit
-/// or miss, t within a relative 1e-4 (the GPU compiler may fuse multiply-adds). Any hit is
-/// asked twice: unbounded, and with t_max halfway to the closest hit (must be false). At most
-/// `rays / 10,000` rays may disagree otherwise (as in tests/gpu.rs).
-///
-/// A hit or miss on a triangle's own boundary is excused: the adversarial rays aim at edges
-/// and vertices, and where no neighbour shares the edge (one lone triangle, the rim of the
-/// plane) the watertight test's answer there is the rounding of its inputs. The CPU decides an
-/// exactly-zero edge function in f64; WGSL has no f64, and its f32 edge function rounds either
-/// way (docs/robustness.md). Excused: the answer that hit has a barycentric coordinate within
-/// `EDGE_BARY` of 0. Hits inside triangles must agree; leaks between neighbours are
-/// tests/edges.rs's.
+/// or miss, t within a relative 1e-4 (`testing::gpu_disagreements`, which also excuses a
+/// hit-or-miss disagreement on a triangle's own boundary, at most 1% of the rays here). Any
+/// hit is asked twice: unbounded, and with t_max halfway to the closest hit (must be false).
+/// At most `rays / 10,000` rays may disagree otherwise (as in tests/gpu.rs).
 fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
-    const EDGE_BARY: f32 = 1e-5;
-    let on_boundary = |h: &Hit| h.is_hit() && h.u.min(h.v).min(1.0 - h.u - h.v) <= EDGE_BARY;
     let tris = &mesh.prepared().accel.tris;
     let want: Vec<Hit> = rays
         .par_iter()
@@ -51,21 +44,7 @@ fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
         .intersect_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY)
         .unwrap();
     let occ = mesh.occluded_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY).unwrap();
-    let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
-    let (mut bad, mut excused) = (Vec::new(), 0usize);
-    for i in 0..rays.len() {
-        let (w, g) = (&want[i], &got[i]);
-        if w.is_hit() == g.is_hit() && (!w.is_hit() || close(w.t, g.t)) && occ[i] == w.is_hit() {
-            continue;
-        }
-        let hit_or_miss_differs = w.is_hit() != g.is_hit() || occ[i] != w.is_hit();
-        let t_agrees = !(w.is_hit() && g.is_hit()) || close(w.t, g.t);
-        if hit_or_miss_differs && t_agrees && (on_boundary(w) || on_boundary(g)) {
-            excused += 1;
-        } else {
-            bad.push(i);
-        }
-    }
+    let (bad, excused) = gpu_disagreements(&want, &got, &occ);
     // The excuse must stay an exception (a GPU test that misses every edge would pass it).
     assert!(
         excused <= rays.len() / 100,

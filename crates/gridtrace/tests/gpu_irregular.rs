@@ -23,7 +23,10 @@ use gridtrace::accel::{
 use gridtrace::gpu::{GpuContext, GpuRenderer};
 use gridtrace::query::{QueryOptions, TraceMesh};
 use gridtrace::scene::PreparedScene;
-use gridtrace::testing::{flat_scene, gpu_mesh, long_strip, ray_set, skip_gpu, soup_arrays, triangle_soup};
+use gridtrace::testing::{
+    flat_scene, gpu_disagreements, gpu_mesh, long_strip, on_triangle_boundary, ray_set, skip_gpu, soup_arrays,
+    triangle_soup,
+};
 use gridtrace::util::Rng;
 use rayon::prelude::*;
 
@@ -170,12 +173,13 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
     assert_eq!((got.len(), occ.len()), (rays.len(), rays.len()));
     let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
     let allowed = rays.len() / 10_000;
-    let bad: Vec<usize> = (0..rays.len())
-        .filter(|&i| {
-            let (w, g) = (&want[i], &got[i]);
-            w.is_hit() != g.is_hit() || (w.is_hit() && !close(w.t, g.t)) || occ[i] != w.is_hit()
-        })
-        .collect();
+    // Hit-or-miss on a triangle's own boundary excused, at most 1% (`gpu_disagreements`).
+    let (bad, excused) = gpu_disagreements(&want, &got, &occ);
+    assert!(
+        excused <= rays.len() / 100,
+        "{name}: {excused} of {} GPU rays disagree on a triangle's boundary",
+        rays.len()
+    );
     assert!(
         bad.len() <= allowed,
         "{name}: {} of {} GPU rays disagree with brute force; first: {:?}",
@@ -190,12 +194,14 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
     let same_walk = |i: usize| {
         let (c, g) = (&cpu[i], &got[i]);
         if c.is_hit() != g.is_hit() {
-            return false;
+            // On a triangle's own boundary: counted in `excused` above (the CPU's walk answers
+            // as brute force).
+            return on_triangle_boundary(c) || on_triangle_boundary(g);
         }
         if !c.is_hit() {
             return true;
         }
-        let on_edge = c.u.min(c.v).min(1.0 - c.u - c.v) < 1e-5;
+        let on_edge = on_triangle_boundary(c);
         close(c.t, g.t)
             && (c.tri == g.tri
                 || on_edge

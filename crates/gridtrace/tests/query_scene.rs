@@ -499,7 +499,7 @@ fn gpu_rays_equal_cpu() {
         // aimed exactly at shared vertices and edges through (17 of these 2,003, 2026-11-27);
         // counted, printed, held to 1%.
         let driver = !kind.entry().cpu;
-        let mut driver_leaks = 0;
+        let (mut driver_leaks, mut boundary) = (0, 0);
         for (i, q) in rays.iter().enumerate() {
             // GPU arithmetic may fuse multiply-adds: t within rounding; the face named may be
             // another of those at equal t (rays aimed at vertices and edges), but it must be one
@@ -508,6 +508,27 @@ fn gpu_rays_equal_cpu() {
             if driver && !close(c.t_hit[i], g.t_hit[i]) {
                 driver_leaks += 1;
                 continue;
+            }
+            // A ray aimed at a silhouette's edge or vertex: the nearer answer's hit lies on its
+            // face's own boundary, where the CPU's watertight test (exact zeros in f64) and the
+            // GPU's (f32) may round either way (`testing::on_triangle_boundary`); counted,
+            // held to 1%.
+            if !close(c.t_hit[i], g.t_hit[i]) {
+                let (near, uv) = if c.t_hit[i] < g.t_hit[i] {
+                    (c.t_hit[i], c.primitive_uvs[i])
+                } else {
+                    (g.t_hit[i], g.primitive_uvs[i])
+                };
+                let h = Hit {
+                    t: near,
+                    tri: 0,
+                    u: uv[0],
+                    v: uv[1],
+                };
+                if gridtrace::testing::on_triangle_boundary(&h) {
+                    boundary += 1;
+                    continue;
+                }
             }
             assert!(
                 close(c.t_hit[i], g.t_hit[i]),
@@ -538,9 +559,14 @@ fn gpu_rays_equal_cpu() {
             kind.name()
         );
         eprintln!(
-            "{}: {driver_leaks} of {} rays answered otherwise by the driver",
+            "{}: {driver_leaks} of {} rays answered otherwise by the driver, {boundary} on a face's boundary",
             kind.name(),
             rays.len()
+        );
+        assert!(
+            boundary * 100 <= rays.len(),
+            "{}: {boundary} rays answered otherwise on a face's boundary",
+            kind.name()
         );
         assert!(
             driver_leaks * 100 <= rays.len(),
