@@ -174,7 +174,7 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
     let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
     let allowed = rays.len() / 10_000;
     // Hit-or-miss on a triangle's own boundary excused, at most 1% (`gpu_disagreements`).
-    let (bad, excused) = gpu_disagreements(&want, &got, &occ);
+    let (bad, excused) = gpu_disagreements(rays, &want, &got, &occ);
     assert!(
         excused <= rays.len() / 100,
         "{name}: {excused} of {} GPU rays disagree on a triangle's boundary",

@@ -499,7 +499,7 @@ fn gpu_rays_equal_cpu() {
         // aimed exactly at shared vertices and edges through (17 of these 2,003, 2026-11-27);
         // counted, printed, held to 1%.
         let driver = !kind.entry().cpu;
-        let (mut driver_leaks, mut boundary) = (0, 0);
+        let (mut driver_leaks, mut boundary, mut two_level_rounding) = (0, 0, 0);
         for (i, q) in rays.iter().enumerate() {
             // GPU arithmetic may fuse multiply-adds: t within rounding; the face named may be
             // another of those at equal t (rays aimed at vertices and edges), but it must be one
@@ -509,23 +509,30 @@ fn gpu_rays_equal_cpu() {
                 driver_leaks += 1;
                 continue;
             }
-            // A ray aimed at a silhouette's edge or vertex: the nearer answer's hit lies on its
-            // face's own boundary, where the CPU's watertight test (exact zeros in f64) and the
-            // GPU's (f32) may round either way (`testing::on_triangle_boundary`); counted,
-            // held to 1%.
+            // The GPU walks the geometries merged flat in world space, the CPU the two levels
+            // (each ray carried into its mesh's space): the two round the geometry apart. Where
+            // they differ, the GPU is held to brute force over the same flat triangles; a ray
+            // aimed at a silhouette's edge or vertex may still go either way there, when the
+            // nearer hit lies on its face's own boundary (f64 exact zeros on the CPU, f32 on
+            // the GPU: `testing::on_triangle_boundary`). Both counted, held to 1%.
             if !close(c.t_hit[i], g.t_hit[i]) {
-                let (near, uv) = if c.t_hit[i] < g.t_hit[i] {
-                    (c.t_hit[i], c.primitive_uvs[i])
+                let flat = ray(q).map_or(Hit::MISS, |q| brute_force_intersect(&r.tris, &q, 0.0, f32::INFINITY));
+                if close(flat.t, g.t_hit[i]) {
+                    two_level_rounding += 1;
+                    continue;
+                }
+                let uv = g.primitive_uvs[i];
+                let nearer = if flat.t < g.t_hit[i] {
+                    flat
                 } else {
-                    (g.t_hit[i], g.primitive_uvs[i])
+                    Hit {
+                        t: g.t_hit[i],
+                        tri: 0,
+                        u: uv[0],
+                        v: uv[1],
+                    }
                 };
-                let h = Hit {
-                    t: near,
-                    tri: 0,
-                    u: uv[0],
-                    v: uv[1],
-                };
-                if gridtrace::testing::on_triangle_boundary(&h) {
+                if gridtrace::testing::on_triangle_boundary(&nearer) {
                     boundary += 1;
                     continue;
                 }
@@ -559,13 +566,15 @@ fn gpu_rays_equal_cpu() {
             kind.name()
         );
         eprintln!(
-            "{}: {driver_leaks} of {} rays answered otherwise by the driver, {boundary} on a face's boundary",
+            "{}: {driver_leaks} of {} rays answered otherwise by the driver, {boundary} on a face's \
+             boundary, {two_level_rounding} as brute force over the flat triangles",
             kind.name(),
             rays.len()
         );
         assert!(
-            boundary * 100 <= rays.len(),
-            "{}: {boundary} rays answered otherwise on a face's boundary",
+            boundary * 100 <= rays.len() && two_level_rounding * 100 <= rays.len(),
+            "{}: {boundary} rays answered otherwise on a face's boundary, {two_level_rounding} \
+             apart from the two levels",
             kind.name()
         );
         assert!(

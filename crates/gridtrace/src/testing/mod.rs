@@ -351,7 +351,7 @@ impl AllAccels {
 
 /// The rays on which GPU closest hits (`got`) and any hits (`occ`) disagree with brute force
 /// (`want`), as `(bad, excused)`: `bad` the indices that disagree (hit or miss, or `t` beyond
-/// a relative 1e-4: the GPU compiler may fuse multiply-adds), `excused` how many disagree only
+/// rounding: the GPU compiler may fuse multiply-adds), `excused` how many disagree only
 /// in hit-or-miss on a triangle's own boundary.
 ///
 /// Why the excuse: the adversarial ray sets aim at edges and vertices, and where no neighbour
@@ -361,12 +361,28 @@ impl AllAccels {
 /// edge-aimed rays on one triangle on lavapipe. Excused: the answer that hit has a barycentric
 /// coordinate within 1e-5 of 0. Hits inside triangles must agree; leaks between neighbours are
 /// tests/edges.rs's. Callers bound `excused` so that a walk missing every edge still fails.
-pub fn gpu_disagreements(want: &[crate::accel::Hit], got: &[crate::accel::Hit], occ: &[bool]) -> (Vec<usize>, usize) {
-    let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1e-6);
+pub fn gpu_disagreements(
+    rays: &[Ray],
+    want: &[crate::accel::Hit],
+    got: &[crate::accel::Hit],
+    occ: &[bool],
+) -> (Vec<usize>, usize) {
+    // t agrees within 1e-4 relative, or within 16 ulps of the coordinates over the direction's
+    // length: the watertight test's t is a difference of sheared depths, whose absolute
+    // rounding follows the coordinates' size, not t's (a ray starting 1e-4 from a triangle at
+    // 0.4 gets t = 1.1366e-4 on the CPU and 1.1364e-4 on the GPU).
+    let close = |r: &Ray, a: f32, b: f32| {
+        let size = r
+            .origin
+            .abs()
+            .max_element()
+            .max((r.origin + a * r.dir).abs().max_element());
+        (a - b).abs() <= (1e-4 * a.abs().max(b.abs())).max(16.0 * f32::EPSILON * size / r.dir.length())
+    };
     let (mut bad, mut excused) = (Vec::new(), 0);
     for (i, ((w, g), &o)) in want.iter().zip(got).zip(occ).enumerate() {
         let hit_or_miss_differs = w.is_hit() != g.is_hit() || o != w.is_hit();
-        let t_agrees = !(w.is_hit() && g.is_hit()) || close(w.t, g.t);
+        let t_agrees = !(w.is_hit() && g.is_hit()) || close(&rays[i], w.t, g.t);
         if !hit_or_miss_differs && t_agrees {
             continue;
         }
