@@ -367,22 +367,10 @@ pub fn gpu_disagreements(
     got: &[crate::accel::Hit],
     occ: &[bool],
 ) -> (Vec<usize>, usize) {
-    // t agrees within 1e-4 relative, or within 16 ulps of the coordinates over the direction's
-    // length: the watertight test's t is a difference of sheared depths, whose absolute
-    // rounding follows the coordinates' size, not t's (a ray starting 1e-4 from a triangle at
-    // 0.4 gets t = 1.1366e-4 on the CPU and 1.1364e-4 on the GPU).
-    let close = |r: &Ray, a: f32, b: f32| {
-        let size = r
-            .origin
-            .abs()
-            .max_element()
-            .max((r.origin + a * r.dir).abs().max_element());
-        (a - b).abs() <= (1e-4 * a.abs().max(b.abs())).max(16.0 * f32::EPSILON * size / r.dir.length())
-    };
     let (mut bad, mut excused) = (Vec::new(), 0);
     for (i, ((w, g), &o)) in want.iter().zip(got).zip(occ).enumerate() {
         let hit_or_miss_differs = w.is_hit() != g.is_hit() || o != w.is_hit();
-        let t_agrees = !(w.is_hit() && g.is_hit()) || close(&rays[i], w.t, g.t);
+        let t_agrees = !(w.is_hit() && g.is_hit()) || t_close(&rays[i], w.t, g.t);
         if !hit_or_miss_differs && t_agrees {
             continue;
         }
@@ -393,6 +381,20 @@ pub fn gpu_disagreements(
         }
     }
     (bad, excused)
+}
+
+/// Whether two answers' `t` for ray `r` agree as the CPU's and the GPU's triangle tests can:
+/// within 1e-4 relative (the GPU compiler may fuse multiply-adds), or within 16 ulps of the
+/// coordinates over the direction's length. The watertight test's t is a difference of sheared
+/// depths, whose absolute rounding follows the coordinates' size, not t's: a ray starting 1e-4
+/// from a triangle at 0.4 gets t = 1.1366e-4 on the CPU and 1.1364e-4 on the GPU.
+pub fn t_close(r: &Ray, a: f32, b: f32) -> bool {
+    let size = r
+        .origin
+        .abs()
+        .max_element()
+        .max((r.origin + a * r.dir).abs().max_element());
+    a == b || (a - b).abs() <= (1e-4 * a.abs().max(b.abs())).max(16.0 * f32::EPSILON * size / r.dir.length())
 }
 
 /// Whether `h` is a hit with a barycentric coordinate within 1e-5 of 0: on its triangle's own
