@@ -113,9 +113,26 @@ impl QueryScene {
                 (b * BATCH, counts, hits)
             })
             .collect();
+        Ok(Intersections::join(rays.len(), parts, |h| {
+            let (id, prim) = m.name(h.tri);
+            (id, prim, [h.u, h.v], h.t)
+        }))
+    }
+}
+
+impl Intersections {
+    /// The lists of `rays` rays from the workers' parts, in ray order: each part is (its first
+    /// ray, each of its rays' hit count, their hits in ray order), and `name` gives a hit's
+    /// (geometry id, primitive id, uv, t). The merged path and the two levels
+    /// (`instanced_rays.rs`) both answer through it.
+    pub(super) fn join<H>(
+        rays: usize,
+        parts: Vec<(usize, Vec<u32>, Vec<H>)>,
+        name: impl Fn(&H) -> (u32, u32, [f32; 2], f32),
+    ) -> Intersections {
         let total: usize = parts.iter().map(|p| p.2.len()).sum();
         let mut out = Intersections {
-            ray_splits: Vec::with_capacity(rays.len() + 1),
+            ray_splits: Vec::with_capacity(rays + 1),
             ray_ids: Vec::with_capacity(total),
             geometry_ids: Vec::with_capacity(total),
             primitive_ids: Vec::with_capacity(total),
@@ -127,17 +144,17 @@ impl QueryScene {
             let mut hits = hits.iter();
             for (k, &c) in counts.iter().enumerate() {
                 for h in hits.by_ref().take(c as usize) {
-                    let (id, prim) = m.name(h.tri);
+                    let (id, prim, uv, t) = name(h);
                     out.ray_ids.push((first + k) as u32);
                     out.geometry_ids.push(id);
                     out.primitive_ids.push(prim);
-                    out.primitive_uvs.push([h.u, h.v]);
-                    out.t_hit.push(h.t);
+                    out.primitive_uvs.push(uv);
+                    out.t_hit.push(t);
                 }
                 out.ray_splits.push(out.t_hit.len() as u32);
             }
         }
-        Ok(out)
+        out
     }
 }
 

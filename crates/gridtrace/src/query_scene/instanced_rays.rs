@@ -148,28 +148,5 @@ fn list(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions) -> Intersections {
             (b * LIST_BATCH, counts, hits)
         })
         .collect();
-    let total: usize = parts.iter().map(|p| p.2.len()).sum();
-    let mut out = Intersections {
-        ray_splits: Vec::with_capacity(rays.len() + 1),
-        ray_ids: Vec::with_capacity(total),
-        geometry_ids: Vec::with_capacity(total),
-        primitive_ids: Vec::with_capacity(total),
-        primitive_uvs: Vec::with_capacity(total),
-        t_hit: Vec::with_capacity(total),
-    };
-    out.ray_splits.push(0);
-    for (first, counts, hits) in parts {
-        let mut hits = hits.iter();
-        for (k, &c) in counts.iter().enumerate() {
-            for h in hits.by_ref().take(c as usize) {
-                out.ray_ids.push((first + k) as u32);
-                out.geometry_ids.push(h.id);
-                out.primitive_ids.push(h.prim);
-                out.primitive_uvs.push([h.u, h.v]);
-                out.t_hit.push(h.t);
-            }
-            out.ray_splits.push(out.t_hit.len() as u32);
-        }
-    }
-    out
+    Intersections::join(rays.len(), parts, |h| (h.id, h.prim, [h.u, h.v], h.t))
 }
