@@ -12,14 +12,8 @@ fn main() -> gridtrace::Result<()> {
     let path = args.get(1).expect("usage: hit_accuracy MESH [RAYS]");
     let n: usize = args.get(2).map_or(1_000_000, |s| s.parse().expect("a ray count"));
     let mesh = gridtrace::io::load_mesh(std::path::Path::new(path))?;
-    let tris: Vec<TriAccel> = mesh
-        .triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-            TriAccel::new(a, b, c)
-        })
-        .collect();
+    // The triangles a scene traces (zero-area ones dropped: they are never hit).
+    let tris = TriAccel::from_mesh(&mesh);
     let accel = BvhAccel::build(&tris);
     let (lo, hi) = mesh
         .positions
