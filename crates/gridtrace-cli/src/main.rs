@@ -7,6 +7,7 @@ mod common;
 mod info;
 mod rays;
 mod render;
+mod scan;
 mod view;
 
 use clap::{CommandFactory, Parser, Subcommand};
@@ -36,6 +37,9 @@ enum Command {
     Info(info::InfoArgs),
     /// Cast rays from a file at a mesh and write the hits to a file.
     Rays(rays::RaysArgs),
+    /// Scan a scene with a LiDAR or a depth camera: the point cloud as PLY, the range image as
+    /// PNG; --frames N --orbit times scans from a moving pose.
+    Scan(scan::ScanArgs),
     /// Benchmark the paper's scenes and modes (and grid sweeps, scaling, proximity clouds).
     Bench(bench::BenchArgs),
     /// Fly around a scene in a window: drag to orbit, wheel to zoom, 1-4 modes, G structure.
@@ -123,6 +127,7 @@ fn main() {
         Command::Info(a) => Some(("info", &a.accel_args)),
         Command::Rays(a) => Some(("rays", &a.accel_args)),
         Command::View(a) => Some(("view", &a.accel_args)),
+        Command::Scan(a) => Some(("scan", &a.accel_args)),
         Command::Bench(_) => None,
     };
     if let Some((name, Err(e))) = accel.map(|(name, a)| (name, a.check())) {
@@ -145,6 +150,7 @@ fn main() {
         Command::Render(a) => render::run(a),
         Command::Info(a) => info::run(a),
         Command::Rays(a) => rays::run(a),
+        Command::Scan(a) => scan::run(a),
         Command::Bench(a) => bench::run(a),
         Command::View(a) => view::run(a),
     };

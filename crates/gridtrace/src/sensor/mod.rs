@@ -4,12 +4,14 @@
 //! worker threads a chunk at a time, so that no `(N, 6)` ray array is ever made for rays that a
 //! pose and a table describe completely (issue 54).
 
+mod beam_file;
 mod camera;
 mod lidar;
 mod pose;
 mod presets;
 mod scan;
 
+pub use beam_file::{load_beam_table, parse_beam_table};
 pub use camera::{Camera, create_rays_pinhole, create_rays_pinhole_fov};
 pub use lidar::Lidar;
 pub use pose::{Pose, check_pose};
