@@ -26,6 +26,9 @@
 //! translate = [0, 0, 0]                # optional; applied as translate * rotate * scale
 //! rotate = [0, 90, 0]                  # optional, degrees about x, then y, then z
 //! scale = 1.0                          # optional, a number or [x, y, z]
+//! copies = [{ translate = [2, 0, 0] }, { translate = [4, 0, 0], rotate = [0, 45, 0] }]
+//!                                      # optional: the object placed once per entry, each
+//!                                      # entry's transform after the object's own
 //! ```
 //! Shapes take `radius`/`level` (icosphere), `min`/`max`/`subdiv` (box, room), `size`/`subdiv`
 //! (plane), `p`/`q`/`tube`/`rings`/`sides` (torus-knot); `builtin = "knot-box"` imports a whole
@@ -116,7 +119,42 @@ struct ObjectDef {
     tube: Option<f32>,
     rings: Option<u32>,
     sides: Option<u32>,
+    copies: Option<Vec<PlacementDef>>,
 }
+
+/// A transform: `translate * rotate * scale`, each optional (an object's, or one of its
+/// `copies`).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlacementDef {
+    translate: Option<[f32; 3]>,
+    rotate: Option<[f32; 3]>,
+    scale: Option<Rgb>,
+}
+
+impl PlacementDef {
+    /// The matrix, or `None` when an entry is not finite.
+    fn matrix(&self) -> Option<Mat4> {
+        let scale = self.scale.as_ref().map(Rgb::vec).unwrap_or(Vec3::ONE);
+        let rot = self.rotate.map(Vec3::from).unwrap_or(Vec3::ZERO);
+        let xf = Mat4::from_scale_rotation_translation(
+            scale,
+            Quat::from_euler(
+                EulerRot::ZYX,
+                rot.z.to_radians(),
+                rot.y.to_radians(),
+                rot.x.to_radians(),
+            ),
+            Vec3::from(self.translate.unwrap_or([0.0; 3])),
+        );
+        xf.is_finite().then_some(xf)
+    }
+}
+
+/// Triangles the copies of one object may make in all: a typo in `copies` (or a big mesh copied
+/// many times) is refused before memory is spent, not after. 64M triangles are 1.5 GB of
+/// merged vertices and indices, beyond any GPU buffer gridtrace asks for.
+const MAX_COPIED_TRIANGLES: usize = 64 << 20;
 
 /// Reads and parses a scene file; meshes are found relative to its folder.
 pub fn load_scene(path: &Path) -> Result<Scene> {
@@ -202,21 +240,29 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             ),
             None => None,
         };
-        let scale = o.scale.as_ref().map(Rgb::vec).unwrap_or(Vec3::ONE);
-        let rot = o.rotate.map(Vec3::from).unwrap_or(Vec3::ZERO);
-        let xf = Mat4::from_scale_rotation_translation(
-            scale,
-            Quat::from_euler(
-                EulerRot::ZYX,
-                rot.z.to_radians(),
-                rot.y.to_radians(),
-                rot.x.to_radians(),
-            ),
-            Vec3::from(o.translate.unwrap_or([0.0; 3])),
-        );
-        if !xf.is_finite() {
-            return Err(err("non-finite transform (translate, rotate or scale)".into()));
-        }
+        let own = PlacementDef {
+            translate: o.translate,
+            rotate: o.rotate,
+            scale: o.scale.as_ref().map(|r| Rgb::Rgb(r.vec().to_array())),
+        };
+        let xf = own
+            .matrix()
+            .ok_or_else(|| err("non-finite transform (translate, rotate or scale)".into()))?;
+        let copies = match &o.copies {
+            None => vec![Mat4::IDENTITY],
+            Some(c) if c.is_empty() => return Err(err("'copies' is empty: give at least one placement".into())),
+            Some(c) => c
+                .iter()
+                .enumerate()
+                .map(|(k, p)| {
+                    p.matrix().ok_or_else(|| {
+                        err(format!(
+                            "copies[{k}]: non-finite transform (translate, rotate or scale)"
+                        ))
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?,
+        };
         let given = [o.mesh.is_some(), o.shape.is_some(), o.builtin.is_some()]
             .iter()
             .filter(|b| **b)
@@ -250,7 +296,25 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
                 other => return Err(err(format!("unknown shape '{other}'"))),
             }
         };
-        scene.add_mesh(mesh, xf, material);
+        if mesh.triangles.len().saturating_mul(copies.len()) > MAX_COPIED_TRIANGLES {
+            return Err(err(format!(
+                "{} copies of {} triangles are more than {MAX_COPIED_TRIANGLES} triangles",
+                copies.len(),
+                mesh.triangles.len()
+            )));
+        }
+        // The mesh is read (or made) once; each copy adds its triangles placed by its own
+        // transform after the object's. The renderer traces one merged structure over them.
+        let last = copies.len() - 1;
+        let mut mesh = Some(mesh);
+        for (k, copy) in copies.iter().enumerate() {
+            let m = if k == last {
+                mesh.take().expect("moved once")
+            } else {
+                mesh.clone().expect("kept")
+            };
+            scene.add_mesh(m, *copy * xf, material.clone());
+        }
     }
     if scene.mesh.triangles.is_empty() {
         return Err(Error::parse(
@@ -300,6 +364,42 @@ scale = 3
             0.25
         );
         assert!(s.mesh.positions[..42].iter().all(|p| (p.y - 1.0).abs() <= 1.0 + 1e-6));
+    }
+
+    #[test]
+    fn copies_place_one_object_many_times() {
+        let head = "[camera]\neye = [0, 1, 4]\ntarget = [0, 0, 0]\n";
+        let copied = format!(
+            "{head}[[object]]\nshape = \"icosphere\"\nlevel = 1\nscale = 0.5\n\
+             copies = [{{ translate = [2, 0, 0] }}, {{ translate = [0, 3, 0], rotate = [0, 90, 0] }}]\n"
+        );
+        let apart = format!(
+            "{head}[[object]]\nshape = \"icosphere\"\nlevel = 1\nscale = 0.5\ntranslate = [2, 0, 0]\n\
+             [[object]]\nshape = \"icosphere\"\nlevel = 1\nscale = 0.5\ntranslate = [0, 3, 0]\nrotate = [0, 90, 0]\n"
+        );
+        let a = parse_scene(copied.as_bytes(), Path::new("c.toml")).unwrap();
+        let b = parse_scene(apart.as_bytes(), Path::new("a.toml")).unwrap();
+        assert_eq!(a.mesh.triangles, b.mesh.triangles);
+        assert_eq!(a.mesh.triangles.len(), 160);
+        for (p, q) in a.mesh.positions.iter().zip(&b.mesh.positions) {
+            assert!((*p - *q).length() < 1e-6, "{p} {q}");
+        }
+        let err = |extra: &str| {
+            let text = format!("{head}\n[[object]]\nshape = \"plane\"\n{extra}\n");
+            parse_scene(text.as_bytes(), Path::new("s.toml"))
+                .unwrap_err()
+                .to_string()
+        };
+        let e = err("copies = []");
+        assert!(e.contains("s.toml:line 5") && e.contains("'copies' is empty"), "{e}");
+        let e = err("copies = [{ translate = [1, 0, 0] }, { scale = [1, nan, 1] }]");
+        assert!(e.contains("copies[1]: non-finite"), "{e}");
+        let e = err("copies = [{ translat = [1, 0, 0] }]");
+        assert!(e.contains("s.toml:line 7") && e.contains("translat"), "{e}");
+        let e = err(
+            "subdiv = 1024\ncopies = [{}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}]",
+        );
+        assert!(e.contains("33 copies of 2097152 triangles are more than"), "{e}");
     }
 
     #[test]
