@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use super::all_hits::{Intersections, skip_ties};
 use super::batch::{RayHits, RayOptions, ray_of};
+use super::streamed_rays::{self, STREAM_MAX_INSTANCES};
 use super::two_level::{NamedHit, TwoLevel};
 use super::{INVALID_ID, QueryScene};
 use crate::Result;
@@ -55,6 +56,12 @@ const LIST_BATCH: usize = 256;
 
 /// Closest hits into `out` (every entry written).
 pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut RayHits) {
+    // One interval and mask for every ray, few instances: the batch walks (`streamed_rays.rs`).
+    if let Some(shared) = o.uniform()
+        && two.instance_count() <= STREAM_MAX_INSTANCES
+    {
+        return streamed_rays::cast(two, rays, shared, out);
+    }
     (
         out.t_hit.par_chunks_mut(BATCH),
         out.geometry_ids.par_chunks_mut(BATCH),
@@ -85,6 +92,11 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut 
 
 /// Whether each ray hits anything, into `out`.
 pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut [bool]) {
+    if let Some(shared) = o.uniform()
+        && two.instance_count() <= STREAM_MAX_INSTANCES
+    {
+        return streamed_rays::occluded(two, rays, shared, out);
+    }
     out.par_chunks_mut(BATCH)
         .zip(rays.par_chunks(BATCH))
         .enumerate()

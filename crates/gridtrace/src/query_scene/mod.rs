@@ -75,6 +75,7 @@ mod instances;
 mod merged;
 mod points;
 mod rays;
+mod streamed_rays;
 mod top_level;
 mod two_level;
 

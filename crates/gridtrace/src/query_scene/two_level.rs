@@ -141,17 +141,57 @@ impl TwoLevel {
             }
         });
         let p = self.placed.get(who)?;
+        let n_local = self.mesh_of(p).prepared().accel.tris[best.tri as usize].normal();
+        Some(self.named(who as u32, &best, n_local))
+    }
+
+    /// A bottom-level hit `hit` of instance `i` on a face of own-space geometric normal
+    /// `n_local` (any length) in world terms: its id, the face's index within its mesh, and
+    /// the world-space unit normal.
+    #[inline]
+    pub fn named(&self, i: u32, hit: &Hit, n_local: Vec3) -> (NamedHit, Vec3) {
+        let p = &self.placed[i as usize];
         let mesh = self.mesh_of(p);
-        let n_local = mesh.prepared().accel.tris[best.tri as usize].normal();
         let n = (normal_to_world(&p.to_local) * n_local).normalize();
-        let hit = NamedHit {
-            t: best.t,
+        let named = NamedHit {
+            t: hit.t,
             id: p.id,
-            prim: mesh.original_index(best.tri),
-            u: best.u,
-            v: best.v,
+            prim: mesh.original_index(hit.tri),
+            u: hit.u,
+            v: hit.v,
         };
-        Some((hit, n))
+        (named, n)
+    }
+
+    /// The structure of instance `i`'s mesh.
+    #[inline]
+    pub fn accel_of(&self, i: u32) -> &crate::accel::Accel {
+        &self.mesh_of(&self.placed[i as usize]).prepared().accel
+    }
+
+    /// Hands `visit` each instance whose mask shares a bit with `mask` and whose box `ray`
+    /// crosses within `[t_near, t_far]`, in no particular order (the streamed walk,
+    /// `streamed_rays.rs`, then walks each instance's rays together).
+    #[inline]
+    pub fn instances_on(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32, mut visit: impl FnMut(u32)) {
+        if let [only] = self.placed.as_slice() {
+            // One instance: its box need not be tested (its mesh's walk clips to its own).
+            if only.mask & mask != 0 {
+                visit(0);
+            }
+            return;
+        }
+        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_max| {
+            if self.placed[i as usize].mask & mask != 0 {
+                visit(i);
+            }
+            t_max
+        });
+    }
+
+    /// How many instances the scene places.
+    pub fn instance_count(&self) -> usize {
+        self.placed.len()
     }
 
     /// Whether anything with `t_near < t < t_far` is hit among instances whose mask shares a
@@ -213,10 +253,11 @@ impl TwoLevel {
     }
 }
 
-/// A world box widened by a thousandth of its largest side: the triangle test accepts hits a
-/// rounding-error bound outside a face (up to 1e-3 of the face for grazing rays,
-/// `all_hits.rs`), and the world box, made from the own-space box's corners in float, may
-/// round inwards. Every face is no larger than its mesh's box, so this bound covers both.
+/// A world box widened by a thousandth of its largest side: the world box, made from the
+/// own-space box's corners in float, may round inwards, and the ray carried into the instance
+/// rounds apart from the world ray, so a hit on the own-space box's surface may lie a few ulps
+/// outside the world box. 1e-3 is far more than both (it was sized for the slack the triangle
+/// test had before the watertight test, and costs the walk nothing measurable).
 fn padded(b: Aabb) -> Aabb {
     let pad = Vec3::splat(b.extent().max_element() * 1e-3 + f32::MIN_POSITIVE);
     Aabb {
