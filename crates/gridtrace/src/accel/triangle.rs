@@ -451,7 +451,12 @@ pub fn intersect_lanes_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
     let ef = |a: &Lanes3<L>, b: &Lanes3<L>| a[0] * b[1] - a[1] * b[0];
     let mut e = [ef(&p[1], &p[2]), ef(&p[2], &p[0]), ef(&p[0], &p[1])];
     // `edge_functions`' exact fallback, for the (rare) lanes where some but not all are 0.
-    let zero = e.map(|x| !x.ne(L::ZERO));
+    // Written out, not `e.map(|x| ...)`: a closure does not inherit `#[target_feature]`, so in
+    // the AVX2 packet walk that closure's comparisons were calls (`_mm256_cmp_ps`,
+    // `_mm256_xor_ps` and `array::map` out of line), about 260 instructions an eight-lane
+    // triangle test: eye rays 893 -> 673 instructions a ray, camera 1,424 -> 1,037
+    // (cachegrind, docs/benchmarks.md).
+    let zero = [!e[0].ne(L::ZERO), !e[1].ne(L::ZERO), !e[2].ne(L::ZERO)];
     let refine = (zero[0] | zero[1] | zero[2]) & !(zero[0] & zero[1] & zero[2]);
     if refine.bits() != 0 {
         e = refine_lanes(&p, e, refine.bits());
