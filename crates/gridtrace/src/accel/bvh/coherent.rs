@@ -29,7 +29,7 @@
 use std::mem::MaybeUninit;
 
 use crate::accel::lanes::{F8, Lanes, Mask, load3, splat3};
-use crate::accel::triangle::{LaneRay, intersect_lanes_cull};
+use crate::accel::triangle::{LaneRay, SharedFrame, intersect_frame_cull, intersect_lanes_cull};
 use crate::accel::{Hit, PACKET, Ray};
 use crate::util::set_bits as bits;
 
@@ -353,8 +353,10 @@ impl BvhAccel {
             })
         });
         // Borrowed, not moved: eight `BoxRay`s moved into a struct were a 512-byte copy a packet.
+        let tri_ray = LaneRay::new(&load3(origin), &load3(dir));
         let p = PacketRays {
-            tri_ray: LaneRay::new(&load3(origin), &load3(dir)),
+            frame: tri_ray.shared_frame(),
+            tri_ray,
             interval: interval.as_ref(),
             boxes: boxes.as_ref(),
         };
@@ -427,20 +429,40 @@ impl BvhAccel {
         s: &mut PacketSearch,
     ) -> bool {
         let mut testing = rays;
+        // The current block's triangles in the packet's shared frame (`p.frame`).
+        let mut rel = [[[0.0; 4]; 3]; 3];
         for k in 0..count {
             let block = &self.blocks[first + k / LEAF_BLOCK];
             let lane = k % LEAF_BLOCK;
-            let tri = (
-                &lane_splat(&block.v0, lane),
-                &lane_splat(&block.v1, lane),
-                &lane_splat(&block.v2, lane),
-            );
             let lim = F8::select(
                 <F8 as Lanes<8>>::Mask::from_bits(testing),
                 F8::from_array(s.limit),
                 F8::splat(t_min),
             );
-            let h = intersect_lanes_cull::<8, F8, true>(tri, &p.tri_ray, t_min, lim);
+            let h = match p.frame {
+                Some(f) => {
+                    // A pinhole's packet: the shear's translation once for the eight rays, and
+                    // for four triangles at a time.
+                    if lane == 0 {
+                        rel = f.translate4(block);
+                    }
+                    let corner = |c: &[[f32; 4]; 3]| [c[0][lane], c[1][lane], c[2][lane]];
+                    let splat = [
+                        splat3(corner(&rel[0])),
+                        splat3(corner(&rel[1])),
+                        splat3(corner(&rel[2])),
+                    ];
+                    intersect_frame_cull::<8, F8, true>(splat, || block.lane(lane), &p.tri_ray, t_min, lim)
+                }
+                None => {
+                    let tri = (
+                        &lane_splat(&block.v0, lane),
+                        &lane_splat(&block.v1, lane),
+                        &lane_splat(&block.v2, lane),
+                    );
+                    intersect_lanes_cull::<8, F8, true>(tri, &p.tri_ray, t_min, lim)
+                }
+            };
             let hits = h.mask() & testing;
             if hits == 0 {
                 continue;
@@ -498,6 +520,8 @@ struct PacketSearch {
 struct PacketRays<'a> {
     /// The rays prepared for the watertight triangle test, once per packet.
     tri_ray: LaneRay<8, F8>,
+    /// Their shared frame, where they start at one point and share their axes.
+    frame: Option<SharedFrame>,
     interval: Option<&'a Interval>,
     boxes: Option<&'a [BoxRay; PACKET]>,
 }
