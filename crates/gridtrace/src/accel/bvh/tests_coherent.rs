@@ -294,7 +294,7 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
 #[test]
 fn interval_test_is_conservative_ray_by_ray() {
     use super::box_test::BoxRay;
-    use super::coherent::Interval;
+    use super::interval::Interval;
     if !has_avx2() {
         eprintln!("no AVX2 on this CPU: the packet walk does not run here");
         return;
