@@ -416,8 +416,58 @@ impl<const N: usize, L: Lanes<N>> LaneRay<N, L> {
     #[inline(always)]
     fn shear(&self, p: &Lanes3<L>) -> Lanes3<L> {
         let q = self.permute(p);
-        let a = [q[0] - self.origin[0], q[1] - self.origin[1], q[2] - self.origin[2]];
+        self.shear_xy(&[q[0] - self.origin[0], q[1] - self.origin[1], q[2] - self.origin[2]])
+    }
+
+    /// The shear's second step, on a vertex already permuted and less the origin.
+    #[inline(always)]
+    fn shear_xy(&self, a: &Lanes3<L>) -> Lanes3<L> {
         [a[0] - self.sx * a[2], a[1] - self.sy * a[2], a[2]]
+    }
+
+    /// The frame every lane shares, where all lanes have the same axes and bit-identical
+    /// origins (a pinhole camera's packet); `None` otherwise.
+    #[inline(always)]
+    pub fn shared_frame(&self) -> Option<SharedFrame> {
+        let axes = self.uniform?;
+        let o = [
+            self.origin[0].to_array(),
+            self.origin[1].to_array(),
+            self.origin[2].to_array(),
+        ];
+        let same = |c: &[f32; N]| c.iter().all(|x| x.to_bits() == c[0].to_bits());
+        (same(&o[0]) && same(&o[1]) && same(&o[2])).then_some(SharedFrame {
+            axes,
+            origin: [o[0][0], o[1][0], o[2][0]],
+        })
+    }
+}
+
+/// The axes and origin of a `LaneRay` whose lanes share them (`LaneRay::shared_frame`): the
+/// first step of the shear (permute, subtract the origin) is then the same for every lane and
+/// is done once per block of four triangles (`translate4`), instead of once per lane and triangle. The same IEEE
+/// operations on the same values, so the same bits (`intersect_frame_cull`).
+#[derive(Debug, Clone, Copy)]
+pub struct SharedFrame {
+    axes: [usize; 3],
+    origin: [f32; 3],
+}
+
+impl SharedFrame {
+    /// A block's four triangles moved into the frame, four at a time (SSE): per corner, per
+    /// axis of the frame, the four triangles' coordinates less the origin's.
+    #[inline(always)]
+    pub fn translate4(&self, block: &TriAccel4) -> [[[f32; 4]; 3]; 3] {
+        let [kx, ky, kz] = self.axes;
+        let o = self.origin;
+        let corner = |c: &[Vec4; 3]| {
+            [
+                (c[kx] - Vec4::splat(o[0])).to_array(),
+                (c[ky] - Vec4::splat(o[1])).to_array(),
+                (c[kz] - Vec4::splat(o[2])).to_array(),
+            ]
+        };
+        [corner(&block.v0), corner(&block.v1), corner(&block.v2)]
     }
 }
 
@@ -448,10 +498,71 @@ pub fn intersect_lanes_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
     t_max: L,
 ) -> LaneHits<N, L> {
     let p = [ray.shear(v0), ray.shear(v1), ray.shear(v2)];
+    let (h, det) = sheared_lanes(&p, ray, t_min, t_max);
+    if CULL && h.hit.bits() == 0 {
+        return h;
+    }
+    // Grazing rays (see `TriAccel::intersect`).
+    let n = cross_lanes(&sub_lanes(v1, v0), &sub_lanes(v2, v0));
+    not_grazing(h, det, dot_lanes(&n, &n), ray)
+}
+
+/// `intersect_lanes_cull` for one triangle against every lane of a ray whose lanes share their
+/// frame (`LaneRay::shared_frame`): `rel` are the triangle's vertices moved into it
+/// (`SharedFrame::translate4`) and splatted. The same `LaneHits`, bit for bit: the per-lane
+/// shear starts from the same translated values, and the grazing test's normal is the
+/// triangle's own (`tri`, asked for only when some lane hits: `TriAccel::normal`, the
+/// operations of `cross_lanes` and `dot_lanes`), in scalar.
+#[inline(always)]
+pub fn intersect_frame_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
+    rel: [Lanes3<L>; 3],
+    tri: impl FnOnce() -> TriAccel,
+    ray: &LaneRay<N, L>,
+    t_min: f32,
+    t_max: L,
+) -> LaneHits<N, L> {
+    let p = [ray.shear_xy(&rel[0]), ray.shear_xy(&rel[1]), ray.shear_xy(&rel[2])];
+    let (h, det) = sheared_lanes(&p, ray, t_min, t_max);
+    if CULL && h.hit.bits() == 0 {
+        return h;
+    }
+    not_grazing(h, det, L::splat(tri().normal().length_squared()), ray)
+}
+
+/// `h` less the lanes whose ray grazes the triangle's plane (`TriAccel::intersect`'s relative
+/// determinant test): `det` the lanes' determinants, `n_len2` the squared normal.
+#[inline(always)]
+fn not_grazing<const N: usize, L: Lanes<N>>(
+    h: LaneHits<N, L>,
+    det: L,
+    n_len2: L,
+    ray: &LaneRay<N, L>,
+) -> LaneHits<N, L> {
+    let grazing = (det * det * ray.dir_z2).le(L::splat(PARALLEL_COS2) * n_len2 * ray.dir_len2);
+    LaneHits {
+        hit: h.hit & !grazing,
+        ..h
+    }
+}
+
+/// The lanes' test on sheared vertices `p` (`ShearedRay::shear`), up to the grazing test: the
+/// hits by edge functions and distance, and the determinants.
+#[inline(always)]
+fn sheared_lanes<const N: usize, L: Lanes<N>>(
+    p: &[Lanes3<L>; 3],
+    ray: &LaneRay<N, L>,
+    t_min: f32,
+    t_max: L,
+) -> (LaneHits<N, L>, L) {
     let ef = |a: &Lanes3<L>, b: &Lanes3<L>| a[0] * b[1] - a[1] * b[0];
     let mut e = [ef(&p[1], &p[2]), ef(&p[2], &p[0]), ef(&p[0], &p[1])];
     // `edge_functions`' exact fallback, for the (rare) lanes where some but not all are 0.
-    let zero = e.map(|x| !x.ne(L::ZERO));
+    // Written out, not `e.map(|x| ...)`: a closure does not inherit `#[target_feature]`, so in
+    // the AVX2 packet walk that closure's comparisons were calls (`_mm256_cmp_ps`,
+    // `_mm256_xor_ps` and `array::map` out of line), about 260 instructions an eight-lane
+    // triangle test: eye rays 893 -> 673 instructions a ray, camera 1,424 -> 1,037
+    // (cachegrind, docs/benchmarks.md).
+    let zero = [!e[0].ne(L::ZERO), !e[1].ne(L::ZERO), !e[2].ne(L::ZERO)];
     let refine = (zero[0] | zero[1] | zero[2]) & !(zero[0] & zero[1] & zero[2]);
     if refine.bits() != 0 {
         e = refine_lanes(&p, e, refine.bits());
@@ -461,16 +572,9 @@ pub fn intersect_lanes_cull<const N: usize, L: Lanes<N>, const CULL: bool>(
     let det = e[0] + e[1] + e[2];
     let inv_det = L::ONE / det;
     let t = (e[0] * p[0][2] + e[1] * p[1][2] + e[2] * p[2][2]) * (ray.sz * inv_det) + L::ZERO;
-    let mut ok = !(neg & pos) & det.ne(L::ZERO) & t.ge(L::splat(t_min)) & t.lt(t_max);
+    let ok = !(neg & pos) & det.ne(L::ZERO) & t.ge(L::splat(t_min)) & t.lt(t_max);
     let (u, v) = (e[1] * inv_det, e[2] * inv_det);
-    if CULL && ok.bits() == 0 {
-        return LaneHits { hit: ok, t, u, v };
-    }
-    // Grazing rays (see `TriAccel::intersect`).
-    let n = cross_lanes(&sub_lanes(v1, v0), &sub_lanes(v2, v0));
-    let n_len2 = dot_lanes(&n, &n);
-    ok = ok & !(det * det * ray.dir_z2).le(L::splat(PARALLEL_COS2) * n_len2 * ray.dir_len2);
-    LaneHits { hit: ok, t, u, v }
+    (LaneHits { hit: ok, t, u, v }, det)
 }
 
 /// `edge_functions_f64` for the lanes in `lanes` (bits), the others' `e` kept.
@@ -684,6 +788,8 @@ mod tests {
     /// the scalar test gives for its ray, four lanes (SSE) and, where the CPU has AVX2, eight
     /// (AVX). Triangles of three sizes, near the origin and far from it; rays at edges,
     /// vertices and interiors from 1 to 100,000 triangle sizes away, grazing ones included.
+    /// Every other round the lanes share lane 0's origin (a pinhole's packet), and where they
+    /// share their axes too the shared-frame test (`intersect_frame_cull`) gives the same bits.
     #[test]
     fn a_ray_per_lane_equals_the_scalar_test() {
         rays_per_lane::<4, Vec4>();
@@ -706,7 +812,7 @@ mod tests {
         let point = |rng: &mut Rng, scale: f32| {
             Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)) * scale
         };
-        let (mut hits, mut edge_hits, mut limited) = (0, 0, 0);
+        let (mut hits, mut edge_hits, mut limited, mut framed) = (0, 0, 0, 0);
         for round in 0..10_000 {
             let scale = [1.0, 1e-3, 1e3][round % 3];
             let offset = point(&mut rng, [0.0, 10.0, 1e4][round / 3 % 3]);
@@ -729,7 +835,11 @@ mod tests {
                 on_edge[k] = wv == 0.0;
                 let target = a + (b - a) * wu + (c - a) * wv;
                 let away = scale * 10f32.powf(rng.range(0.0, 5.0));
-                let o = target + point(&mut rng, 1.0).normalize_or(Vec3::X) * away;
+                let mut o = target + point(&mut rng, 1.0).normalize_or(Vec3::X) * away;
+                // Every other round a pinhole's packet: every lane from lane 0's origin.
+                if round % 2 == 1 && k > 0 {
+                    o = Vec3::new(origin[0][0], origin[1][0], origin[2][0]);
+                }
                 let d = (target - o) * rng.range(0.1, 10.0);
                 for ax in 0..3 {
                     origin[ax][k] = o[ax];
@@ -744,6 +854,28 @@ mod tests {
             let corners = (&splat3(tri.v0), &splat3(tri.v1), &splat3(tri.v2));
             let ray = LaneRay::new(&load3(origin), &load3(dir));
             let got = intersect_lanes::<N, L>(corners, &ray, 0.0, L::from_array(t_max));
+            // Lanes sharing their frame: the translation once for all (the packet walk's route
+            // for a pinhole's packets) gives the same bits.
+            assert_eq!(ray.shared_frame().is_some(), round % 2 == 1 && ray.uniform.is_some());
+            if let Some(frame) = ray.shared_frame() {
+                let [c0, c1, c2] = frame.translate4(&TriAccel4::splat(&tri));
+                // (Written out: a closure's `splat3` would not be compiled for AVX.)
+                let rel = [
+                    splat3([c0[0][0], c0[1][0], c0[2][0]]),
+                    splat3([c1[0][0], c1[1][0], c1[2][0]]),
+                    splat3([c2[0][0], c2[1][0], c2[2][0]]),
+                ];
+                let framed_hits = intersect_frame_cull::<N, L, false>(rel, || tri, &ray, 0.0, L::from_array(t_max));
+                for k in 0..N {
+                    let want = (got.mask() >> k & 1 == 1).then(|| got.lane(k));
+                    let lane = (framed_hits.mask() >> k & 1 == 1).then(|| framed_hits.lane(k));
+                    assert!(
+                        same_bits(want, lane),
+                        "{N} lanes, round {round} lane {k}: {want:?}, framed {lane:?}"
+                    );
+                }
+                framed += 1;
+            }
             for k in 0..N {
                 let o = Vec3::new(origin[0][k], origin[1][k], origin[2][k]);
                 let d = Vec3::new(dir[0][k], dir[1][k], dir[2][k]);
@@ -762,8 +894,8 @@ mod tests {
         // Hits, hits on edges and rays stopped by their own limit all occur.
         let rays = 10_000 * N as u32;
         assert!(
-            hits > rays / 2 && edge_hits > rays / 8 && limited > rays / 50,
-            "{N} lanes: {hits} hits, {edge_hits} on edges, {limited} cut by t_max, of {rays}"
+            hits > rays / 2 && edge_hits > rays / 8 && limited > rays / 50 && framed > 2_000,
+            "{N} lanes: {hits} hits, {edge_hits} on edges, {limited} cut by t_max, of {rays}; {framed} rounds framed"
         );
     }
 

@@ -29,13 +29,14 @@
 use std::mem::MaybeUninit;
 
 use crate::accel::lanes::{F8, Lanes, Mask, load3, splat3};
-use crate::accel::triangle::{LaneRay, intersect_lanes_cull};
+use crate::accel::triangle::{LaneRay, SharedFrame, intersect_frame_cull, intersect_lanes_cull};
 use crate::accel::{Hit, PACKET, Ray};
 use crate::util::set_bits as bits;
 
 use super::BvhAccel;
-use super::box_test::{BoxRay, DIR_TINY, FAR_SCALE, T_SLOP, order_keys_avx2, sort8_avx2};
+use super::box_test::{BoxRay, DIR_TINY, T_SLOP, order_keys_avx2, sort8_avx2};
 use super::build::LEAF_BLOCK;
+use super::interval::Interval;
 use super::walk::STACK_LEN;
 use super::wide::{ChildRef, WIDTH, WideNode};
 
@@ -167,119 +168,6 @@ fn lane_splat(c: &[glam::Vec4; 3], lane: usize) -> [F8; 3] {
     splat3([c[0][lane], c[1][lane], c[2][lane]])
 }
 
-/// The box test of a whole packet whose rays go the same way along each axis (the same near
-/// and far planes): interval arithmetic over the rays' origins and inverse directions (Wald
-/// et al. 2006's interval culling, Reshetov et al. 2005's frusta). Conservative exactly, not
-/// just in real numbers: the slab distance `(plane - o) * inv` is computed with one subtract
-/// and one multiply, each rounding monotonically, so over the packet it is least (most) at an
-/// end of the origins' range and an end of the inverse directions' range; the bounds below
-/// take those ends, and every comparison after is monotone too. A box one ray's own test
-/// (`BoxRay::enter`) enters is thus entered here, at no later a distance.
-pub(super) struct Interval {
-    /// Per axis, the near and far plane arrays (indices: `BoxRay::near` / `far` over 32).
-    near: [usize; 3],
-    far: [usize; 3],
-    /// The origin coordinate giving the least near distance, and the greatest far one.
-    o_near: [f32; 3],
-    o_far: [f32; 3],
-    inv_lo: [f32; 3],
-    inv_hi: [f32; 3],
-}
-
-impl Interval {
-    /// `None` where the rays' directions differ in sign along an axis.
-    #[cfg(test)]
-    pub(super) fn new(rays: &[BoxRay]) -> Option<Interval> {
-        let mut origin = [[0.0; PACKET]; 3];
-        let mut inv = [[0.0; PACKET]; 3];
-        let mut down = [0u32; 3];
-        for i in 0..PACKET {
-            let r = &rays[i.min(rays.len() - 1)];
-            for a in 0..3 {
-                origin[a][i] = r.origin[a];
-                inv[a][i] = -r.neg_inv[a];
-                down[a] |= (r.goes_down(a) as u32) << i;
-            }
-        }
-        Interval::from_lanes(&origin, &inv, down)
-    }
-
-    /// From a packet's rays in lanes (`PACKET` of them; lanes past the packet repeat a ray of
-    /// it): origins, inverse directions (`1 / dir` as `BoxRay::new` takes it) and per axis the lanes going
-    /// down it. `None` where the rays' directions differ in sign along an axis.
-    #[inline(always)]
-    fn from_lanes(origin: &[[f32; PACKET]; 3], inv: &[[f32; PACKET]; 3], down: [u32; 3]) -> Option<Interval> {
-        const ALL: u32 = (1 << PACKET) - 1;
-        if down.iter().any(|&m| m != 0 && m != ALL) {
-            return None;
-        }
-        let lo = |v: &[f32; PACKET]| v.iter().fold(f32::INFINITY, |a, &b| a.min(b));
-        let hi = |v: &[f32; PACKET]| v.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-        let mut iv = Interval {
-            near: [0, 1, 2],
-            far: [3, 4, 5],
-            o_near: [0.0; 3],
-            o_far: [0.0; 3],
-            inv_lo: [0.0; 3],
-            inv_hi: [0.0; 3],
-        };
-        for a in 0..3 {
-            // Going up the axis a slab distance falls as the origin rises; going down, it
-            // rises with it. (As `BoxRay`: the high planes are the near ones going down.)
-            let up = down[a] == 0;
-            (iv.near[a], iv.far[a]) = if up { (a, 3 + a) } else { (3 + a, a) };
-            let (o_lo, o_hi) = (lo(&origin[a]), hi(&origin[a]));
-            (iv.o_near[a], iv.o_far[a]) = if up { (o_hi, o_lo) } else { (o_lo, o_hi) };
-            (iv.inv_lo[a], iv.inv_hi[a]) = (lo(&inv[a]), hi(&inv[a]));
-        }
-        Some(iv)
-    }
-
-    /// Entry distances (lower bounds over the rays) into the node's boxes within
-    /// `[t_min, t_max]`, `t_max` the greatest of the rays' search distances, and the entered
-    /// lanes.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
-        use std::arch::x86_64::*;
-        let mut t_enter = _mm256_set1_ps(t_min);
-        let mut t_exit = _mm256_set1_ps(f32::INFINITY);
-        for a in 0..3 {
-            // SAFETY: `near` and `far` index the six plane arrays (as `BoxRay`'s), each eight
-            // f32s (an unaligned load needs nothing more).
-            let (near, far) = unsafe {
-                let planes = n.planes.as_ptr() as *const [f32; WIDTH];
-                (
-                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
-                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
-                )
-            };
-            let (lo, hi) = (_mm256_set1_ps(self.inv_lo[a]), _mm256_set1_ps(self.inv_hi[a]));
-            let dn = _mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a]));
-            let df = _mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a]));
-            let t_near = _mm256_min_ps(_mm256_mul_ps(dn, lo), _mm256_mul_ps(dn, hi));
-            let t_far = _mm256_max_ps(_mm256_mul_ps(df, lo), _mm256_mul_ps(df, hi));
-            t_enter = _mm256_max_ps(t_enter, t_near);
-            t_exit = _mm256_min_ps(t_exit, t_far);
-        }
-        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
-        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
-    }
-
-    /// `enter` as arrays, for the tests.
-    #[cfg(test)]
-    #[target_feature(enable = "avx2")]
-    pub(super) fn enter_for_test(&self, n: &WideNode, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
-        use std::arch::x86_64::*;
-        let (t, m) = self.enter(n, t_min, t_max);
-        let mut out = [0.0; WIDTH];
-        // SAFETY: `out` holds eight f32s.
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t) };
-        (out, _mm256_movemask_ps(m) as u32)
-    }
-}
-
 #[cfg(test)]
 pub(super) use crate::util::set_bits as bit_iter;
 
@@ -353,8 +241,10 @@ impl BvhAccel {
             })
         });
         // Borrowed, not moved: eight `BoxRay`s moved into a struct were a 512-byte copy a packet.
+        let tri_ray = LaneRay::new(&load3(origin), &load3(dir));
         let p = PacketRays {
-            tri_ray: LaneRay::new(&load3(origin), &load3(dir)),
+            frame: tri_ray.shared_frame(),
+            tri_ray,
             interval: interval.as_ref(),
             boxes: boxes.as_ref(),
         };
@@ -427,20 +317,40 @@ impl BvhAccel {
         s: &mut PacketSearch,
     ) -> bool {
         let mut testing = rays;
+        // The current block's triangles in the packet's shared frame (`p.frame`).
+        let mut rel = [[[0.0; 4]; 3]; 3];
         for k in 0..count {
             let block = &self.blocks[first + k / LEAF_BLOCK];
             let lane = k % LEAF_BLOCK;
-            let tri = (
-                &lane_splat(&block.v0, lane),
-                &lane_splat(&block.v1, lane),
-                &lane_splat(&block.v2, lane),
-            );
             let lim = F8::select(
                 <F8 as Lanes<8>>::Mask::from_bits(testing),
                 F8::from_array(s.limit),
                 F8::splat(t_min),
             );
-            let h = intersect_lanes_cull::<8, F8, true>(tri, &p.tri_ray, t_min, lim);
+            let h = match p.frame {
+                Some(f) => {
+                    // A pinhole's packet: the shear's translation once for the eight rays, and
+                    // for four triangles at a time.
+                    if lane == 0 {
+                        rel = f.translate4(block);
+                    }
+                    let corner = |c: &[[f32; 4]; 3]| [c[0][lane], c[1][lane], c[2][lane]];
+                    let splat = [
+                        splat3(corner(&rel[0])),
+                        splat3(corner(&rel[1])),
+                        splat3(corner(&rel[2])),
+                    ];
+                    intersect_frame_cull::<8, F8, true>(splat, || block.lane(lane), &p.tri_ray, t_min, lim)
+                }
+                None => {
+                    let tri = (
+                        &lane_splat(&block.v0, lane),
+                        &lane_splat(&block.v1, lane),
+                        &lane_splat(&block.v2, lane),
+                    );
+                    intersect_lanes_cull::<8, F8, true>(tri, &p.tri_ray, t_min, lim)
+                }
+            };
             let hits = h.mask() & testing;
             if hits == 0 {
                 continue;
@@ -498,6 +408,8 @@ struct PacketSearch {
 struct PacketRays<'a> {
     /// The rays prepared for the watertight triangle test, once per packet.
     tri_ray: LaneRay<8, F8>,
+    /// Their shared frame, where they start at one point and share their axes.
+    frame: Option<SharedFrame>,
     interval: Option<&'a Interval>,
     boxes: Option<&'a [BoxRay; PACKET]>,
 }

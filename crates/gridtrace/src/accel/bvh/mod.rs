@@ -26,6 +26,8 @@ mod closest;
 #[cfg(target_arch = "x86_64")]
 mod coherent;
 mod interleave;
+#[cfg(target_arch = "x86_64")]
+mod interval;
 mod packet;
 mod refit;
 mod structure;

@@ -294,7 +294,7 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
 #[test]
 fn interval_test_is_conservative_ray_by_ray() {
     use super::box_test::BoxRay;
-    use super::coherent::Interval;
+    use super::interval::Interval;
     if !has_avx2() {
         eprintln!("no AVX2 on this CPU: the packet walk does not run here");
         return;
@@ -336,5 +336,78 @@ fn interval_test_is_conservative_ray_by_ray() {
     assert!(
         checked > 50_000 && entered > 50_000,
         "{checked} rays, {entered} boxes entered"
+    );
+}
+
+/// The near-miss family (`testing::near_miss_rays`) as a pinhole's packets through the packet
+/// walk, which then takes the shared-frame route (`triangle::SharedFrame`): eight rays from one
+/// origin 1 or 1e4 units above or below the unit triangle, each aimed at a point 1e-6 to 1e-3
+/// outside an edge (all must miss) or as far inside (all must hit); and rays starting on the
+/// triangle, a packet per origin (hit at `t = 0`). Every answer is also the single walk's, bit
+/// for bit.
+#[test]
+fn pinhole_packets_near_edges_miss_and_hit_as_aimed() {
+    if !has_avx2() {
+        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+        return;
+    }
+    let unit = crate::testing::unit_triangle();
+    // The unit triangle among two others, so that the walk has a leaf of several triangles.
+    let moved = |by: Vec3| {
+        let [a, b, c] = unit.vertices();
+        TriAccel::new(a + by, b + by, c + by)
+    };
+    let accel = BvhAccel::build(&[moved(Vec3::new(3.0, 0.0, 0.0)), unit, moved(Vec3::new(0.0, 3.0, 0.0))]);
+    let unit_id = 1;
+    let rays = crate::testing::near_miss_rays();
+    // Head-on rays name their aim point (x, y on the plane) and their side and distance.
+    let mut groups: std::collections::BTreeMap<(bool, i32, bool), Vec<Vec3>> = Default::default();
+    for m in rays
+        .iter()
+        .filter(|m| m.t.is_none() && m.ray.dir.x == 0.0 && m.ray.dir.y == 0.0)
+    {
+        let o = m.ray.origin;
+        groups
+            .entry((m.hits, o.z as i32, o.z > 0.0))
+            .or_default()
+            .push(Vec3::new(o.x, o.y, 0.0));
+    }
+    let (mut packets, mut rays_in) = (0, 0);
+    for ((hits, z, _), targets) in &groups {
+        let origin = Vec3::new(0.3, 0.3, *z as f32);
+        for aims in targets.chunks(PACKET) {
+            let packet: Vec<Ray> = aims.iter().map(|&t| Ray::new(origin, t - origin)).collect();
+            let (got, blocked, _) = forced(&accel, &packet, 0.0, [f32::INFINITY; PACKET]);
+            for (k, ray) in packet.iter().enumerate() {
+                assert_eq!(got[k].is_hit(), *hits, "ray {ray:?} (aimed {}): {:?}", aims[k], got[k]);
+                assert_eq!(blocked[k], *hits, "ray {ray:?}: any hit");
+                if *hits {
+                    assert_eq!(got[k].tri, unit_id, "ray {ray:?}");
+                }
+            }
+            check(&accel, &packet, 0.0, [f32::INFINITY; PACKET], "near-miss packet");
+            packets += 1;
+            rays_in += packet.len();
+        }
+    }
+    // Rays starting on the triangle: one packet per origin, each ray hitting at +0.
+    let mut starts: std::collections::BTreeMap<[u32; 3], Vec<Ray>> = Default::default();
+    for m in rays.iter().filter(|m| m.t.is_some()) {
+        starts
+            .entry(m.ray.origin.to_array().map(f32::to_bits))
+            .or_default()
+            .push(m.ray);
+    }
+    for packet in starts.values() {
+        let (got, _, _) = forced(&accel, packet, 0.0, [f32::INFINITY; PACKET]);
+        for (k, h) in got.iter().enumerate() {
+            assert_eq!((h.tri, h.t.to_bits()), (unit_id, 0), "ray {:?}", packet[k]);
+        }
+        check(&accel, packet, 0.0, [f32::INFINITY; PACKET], "start packet");
+        packets += 1;
+    }
+    assert!(
+        packets > 100 && rays_in > 1000,
+        "{packets} packets, {rays_in} head-on rays"
     );
 }
