@@ -184,7 +184,7 @@ fn dispatch_size(n: u32) -> (u32, u32) {
 }
 
 /// One structure's walking pipelines (traverse, its heat variant, occlusion and its closest-hit
-/// ablation, closest point) and the layout of its group 1.
+/// ablation, and closest point where the walk searches points) and the layout of its group 1.
 pub(crate) struct WalkPipelines {
     pub spec: &'static WalkSpec,
     /// Layout of group 1: the structure's arrays, in `spec.arrays` order.
@@ -216,20 +216,20 @@ pub(crate) struct Kernels {
 #[derive(Default)]
 struct KernelSets(Mutex<HashMap<GpuVariants, Arc<Kernels>>>);
 
-/// Compiles `specs` (those `walking` selects) into pipelines with `layout`; `source` gives each
+/// Compiles the kernels `include` selects into pipelines with `layout`; `source` gives each
 /// kernel's module. Validation errors are returned, not raised on the device.
 fn compile(
     dev: &wgpu::Device,
     variants: &GpuVariants,
     layout_of: impl Fn(&KernelSpec) -> wgpu::PipelineLayout,
     source: impl Fn(&KernelSpec) -> String,
-    walking: bool,
+    include: impl Fn(&KernelSpec) -> bool,
 ) -> Result<Vec<Option<wgpu::ComputePipeline>>> {
     let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
     let pipelines = SPECS
         .iter()
         .map(|s| {
-            (s.walks == walking).then(|| {
+            include(s).then(|| {
                 let desc = wgpu::ShaderModuleDescriptor {
                     label: Some(s.label),
                     source: wgpu::ShaderSource::Wgsl(source(s).into()),
@@ -351,7 +351,7 @@ impl Kernels {
                 Group1::Batch => layout(&[Some(&frame_layout), Some(&batch_layout)]),
             },
             |s| shaders::module_source_for(s.source, variants),
-            false,
+            |s| !s.walks,
         )?;
         Ok(Kernels {
             variants: *variants,
@@ -405,7 +405,8 @@ impl Kernels {
             &self.variants,
             |_| pipeline_layout.clone(),
             |s| shaders::walk_module_source(s.source, spec),
-            true,
+            // The closest-point kernel only with a walk that searches points.
+            |s| s.walks && (spec.points() || s.kernel != Kernel::ClosestPoint),
         )?;
         let w = Arc::new(WalkPipelines {
             spec,

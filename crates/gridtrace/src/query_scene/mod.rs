@@ -70,6 +70,7 @@ mod all_hits;
 mod batch;
 mod cpu_rays;
 mod geometry;
+mod gpu_rays;
 mod instanced_rays;
 mod instances;
 mod merged;
@@ -81,6 +82,7 @@ mod two_level;
 pub use all_hits::Intersections;
 pub use batch::{PerRay, RayHits, RayOptions};
 pub use geometry::{Geometry, SceneMesh};
+pub use gpu_rays::GpuUploads;
 pub use instances::InstanceOf;
 pub use points::ClosestPoints;
 
@@ -103,6 +105,20 @@ pub struct QueryScene {
     /// Structures built over triangles so far: bottom levels and merged meshes (for tests:
     /// a move must build none).
     builds: AtomicUsize,
+    /// The two levels on the GPU, once a GPU ray query ran on them (`gpu_rays.rs`); kept
+    /// across moves, which upload its top level alone.
+    gpu: Mutex<Option<gpu_rays::GpuTwoLevel>>,
+}
+
+/// Where a ray query runs (`QueryScene::ray_path`).
+pub(crate) enum RayPath {
+    /// The merged mesh (a backend that traces on a GPU, a structure the GPU does not carry
+    /// under a top level, rays that share one interval and see every geometry).
+    Merged,
+    /// The CPU's two levels.
+    Cpu(Arc<TwoLevel>),
+    /// The GPU's two levels (`gpu_rays.rs`).
+    Gpu(Arc<TwoLevel>),
 }
 
 impl QueryScene {
@@ -116,6 +132,7 @@ impl QueryScene {
             merged: Mutex::new(None),
             two_level: Mutex::new(None),
             builds: AtomicUsize::new(0),
+            gpu: Mutex::new(None),
         }
     }
 
@@ -217,6 +234,7 @@ impl QueryScene {
     /// top (the bottom levels belong to the meshes and stay).
     fn stale(&mut self) {
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        // The GPU's renderer stays: the next query uploads what changed (`gpu_rays.rs`).
         *self.two_level.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
     }
 
@@ -299,17 +317,35 @@ impl QueryScene {
         Ok(t)
     }
 
-    /// Where a ray query with `o` runs: `None` on the merged mesh (a backend that traces on a
-    /// GPU, rays that share one interval and see every geometry), else on the CPU's two levels.
-    fn ray_path(&self, o: &RayOptions) -> Result<Option<Arc<TwoLevel>>> {
-        let merged_answers = self.opts.backend.traces_on_gpu()
-            && o.uniform().is_some_and(|(t_near, t_far, mask)| {
-                t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
-            });
-        if merged_answers {
-            return Ok(None);
+    /// Where a ray query with `o` runs, decided here alone: with a backend that traces on a GPU,
+    /// on the GPU's two levels where it carries the meshes' structure (`gpu_carries`: the BVH
+    /// and brute force), else on the merged mesh where the rays share one interval and see
+    /// every geometry, else on the CPU's two levels; on the CPU's two levels with the CPU.
+    fn ray_path(&self, o: &RayOptions) -> Result<RayPath> {
+        if !self.opts.backend.traces_on_gpu() {
+            return self.two_level().map(RayPath::Cpu);
         }
-        self.two_level().map(Some)
+        let two = self.two_level()?;
+        if self.gpu_carries(&two) {
+            return Ok(RayPath::Gpu(two));
+        }
+        let merged_answers = o.uniform().is_some_and(|(t_near, t_far, mask)| {
+            t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
+        });
+        Ok(if merged_answers {
+            RayPath::Merged
+        } else {
+            RayPath::Cpu(two)
+        })
+    }
+
+    /// The query `on_gpu` on the GPU's two levels; under `auto`, a GPU that fails leaves the
+    /// query to the CPU's (`on_cpu`), as the merged mesh's queries do (`TraceMesh`).
+    fn gpu_or_cpu<T>(&self, on_gpu: impl FnOnce() -> Result<T>, on_cpu: impl FnOnce() -> Result<T>) -> Result<T> {
+        match on_gpu() {
+            Err(Error::Gpu(_)) if self.opts.backend == crate::query::Backend::Auto => on_cpu(),
+            r => r,
+        }
     }
 
     /// Structures built over triangles so far by this scene: each mesh's bottom level (once,

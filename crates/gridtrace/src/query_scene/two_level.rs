@@ -140,18 +140,36 @@ impl TwoLevel {
                 t_max
             }
         });
-        let p = self.placed.get(who)?;
+        (who < self.placed.len()).then(|| self.name(who, &best))
+    }
+
+    /// A hit `h` of instance `who`'s mesh (its own triangle index) in world terms: the
+    /// instance's id, the face's index among the mesh's faces as given, and the world-space
+    /// unit normal.
+    #[inline]
+    pub fn name(&self, who: usize, h: &Hit) -> (NamedHit, Vec3) {
+        let p = &self.placed[who];
         let mesh = self.mesh_of(p);
-        let n_local = mesh.prepared().accel.tris[best.tri as usize].normal();
+        let n_local = mesh.prepared().accel.tris[h.tri as usize].normal();
         let n = (normal_to_world(&p.to_local) * n_local).normalize();
         let hit = NamedHit {
-            t: best.t,
+            t: h.t,
             id: p.id,
-            prim: mesh.original_index(best.tri),
-            u: best.u,
-            v: best.v,
+            prim: mesh.original_index(h.tri),
+            u: h.u,
+            v: h.v,
         };
-        Some((hit, n))
+        (hit, n)
+    }
+
+    /// Each mesh once (`Placed::mesh` indexes it), with its structure.
+    pub fn meshes(&self) -> impl Iterator<Item = (&Arc<SceneMesh>, &crate::accel::Accel)> {
+        self.meshes.iter().map(|m| (m, &self.bottom(m).prepared().accel))
+    }
+
+    /// The top level over `placed` (their indices in its leaves).
+    pub fn top(&self) -> &super::top_level::TopLevel {
+        &self.top
     }
 
     /// Whether anything with `t_near < t < t_far` is hit among instances whose mask shares a

@@ -20,7 +20,7 @@ struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1
 struct RayRec { origin: vec3<f32>, pixel: u32, dir: vec3<f32>, t_max: f32, weight: vec3<f32>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
 // A ray batch's constants (batch.wgsl; BatchUniform on the host).
-struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32 }
+struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32, mask: u32, _pad0: u32, _pad1: u32, _pad2: u32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,
@@ -97,6 +97,27 @@ fn queue_len(slot: u32) -> u32 {
 fn shadow_len() -> u32 {
     if (compacted()) { return atomicLoad(&counters[SLOT_SHADOW]); }
     return pass_.tile_pixels * scene.n_lights;
+}
+
+// A queued ray's mask: it sees an instance of a scene of two levels when `mask & the
+// instance's mask != 0` (gpu/walks/two_level/top_level.wgsl). A batch ray carries it in its
+// weight's y and z as two 16-bit halves, exact in f32 (batch.wgsl), since a batch ray's weight
+// is only its occlusion flag (x); the tracer's own rays carry throughput there and walk one
+// level, which drops the mask (`WalkSpec::entry_points`).
+fn ray_mask(r: RayRec) -> u32 { return u32(r.weight.y) | (u32(r.weight.z) << 16u); }
+
+// Where one mesh's structure lies in the arrays its walk reads: `first` and `count` are the
+// structure's own (the BVH: its root node, `count` unused; brute force: its first triangle and
+// how many). A scene of one mesh walks it with `first` 0; a scene of two levels keeps each
+// instance's in its record (gpu/walks/two_level/).
+struct MeshHeader { first: u32, count: u32 }
+
+// 1 / d with zero components replaced by +-DIR_TINY first (BoxRay::new): the slabs never
+// compute 0 * inf, and a box beside a parallel ray gets an entry beyond 1e20.
+fn safe_inv_dir(d: vec3<f32>) -> vec3<f32> {
+    let sign_bits = bitcast<vec3<u32>>(d) & vec3<u32>(0x80000000u);
+    let tiny = bitcast<vec3<f32>>(sign_bits | vec3<u32>(bitcast<u32>(DIR_TINY)));
+    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(DIR_TINY));
 }
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
