@@ -13,7 +13,7 @@ use gridtrace::gpu::layout::{
 use gridtrace::gpu::shaders;
 use gridtrace::gpu::walks::bvh::binary::GpuBvhNode;
 use gridtrace::gpu::walks::bvh::wide8::GpuBvh8Node;
-use gridtrace::gpu::walks::two_level::TopRec;
+use gridtrace::gpu::walks::two_level::{LatticeRow, TopRec};
 use gridtrace::gpu::walks::{wgsl_constants, wgsl_prelude};
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
@@ -111,6 +111,12 @@ fn wgsl_structs_match_rust() {
         [stride, to_shadow, t_min, t_max, mask, _pad0, _pad1, _pad2]
     );
     check!(m, TopRec, "TopRec", [a, b, c, w]);
+    check!(
+        m,
+        LatticeRow,
+        "Lattice",
+        [lo, first_cell, hi, first_tri, cell, shift, inv_cell, _pad0, dims, _pad1]
+    );
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
     check!(m, GpuBvh8Node, "Bvh8Node", [p_e, info, q0, q1, q2]);
     check!(m, IrrCell, "IrrCell", [bounds, start]);

@@ -919,7 +919,8 @@ fn top_nodes(n: u32) -> u32 {
 }
 
 /// The GPU's two levels (lavapipe in CI) answer as the CPU's, for each structure the GPU
-/// carries under a top level (the BVH, brute force): 100 instances under random rotations,
+/// carries under a top level (the BVH, brute force, the grid with and without proximity
+/// clouds): 100 instances under random rotations,
 /// uneven scales and mirrors, random masks and intervals per ray. t within 1e-5 relative, or
 /// within the CPU's and GPU's triangle tests' rounding (`testing::t_close`: counted,
 /// bounded); the same instance and face but where the hit lies on its face's boundary
@@ -975,7 +976,12 @@ fn gpu_two_levels_equal_cpu_two_levels() {
     };
     let stand_in = Ray::new(Vec3::ZERO, Vec3::X);
     let ray_list: Vec<Ray> = rays.iter().map(|q| ray(q).unwrap_or(stand_in)).collect();
-    for kind in [AccelKind::Bvh, AccelKind::Brute] {
+    for kind in [
+        AccelKind::Bvh,
+        AccelKind::Brute,
+        AccelKind::Grid,
+        AccelKind::ProximityCloud,
+    ] {
         let gpu = QueryOptions {
             accel: kind.into(),
             backend: Backend::Gpu,
@@ -1115,5 +1121,31 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                 after.mesh_bytes
             );
         }
+        // An instance more of a mesh already there: the top level grows (a new buffer), the
+        // meshes stay.
+        let before = on_gpu.gpu_uploads().unwrap();
+        let added = on_gpu
+            .add_instance(
+                InstanceOf::Geometry(ids[0]),
+                Some(Mat4::from_translation(Vec3::splat(0.5))),
+                1,
+            )
+            .unwrap();
+        let g = on_gpu.cast_rays_with(&rays, &each).unwrap();
+        let after = on_gpu.gpu_uploads().unwrap();
+        assert_eq!((after.mesh_uploads, after.top_records), (1, 101), "{}", kind.name());
+        assert_eq!(
+            after.written_bytes - before.written_bytes,
+            64 * (top_nodes(101) + 101) as u64
+        );
+        let (meshes, instances) = on_gpu.parts();
+        let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
+        let fresh = QueryScene::from_parts(gpu.clone(), on_gpu.next_id(), meshes, instances).unwrap();
+        assert_eq!(
+            g,
+            fresh.cast_rays_with(&rays, &each).unwrap(),
+            "{}: added {added}",
+            kind.name()
+        );
     }
 }

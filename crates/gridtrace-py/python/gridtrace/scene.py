@@ -187,9 +187,11 @@ class Scene:
     ``set_mask`` change an instance and rebuild only the BVH over the instances' boxes. On the
     CPU the ray queries walk these two levels, with a ray carried into an instance's space
     without normalising its direction (so ``t`` is the same ``t``); each ray may have its own
-    ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU, ray queries with one
-    interval that see every geometry, and on every backend the point queries, run on the
-    instances merged into one mesh, rebuilt by the next such query after a change. Queries
+    ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU the ray queries walk the
+    two levels there too with the BVH and brute force (a move uploads the top level alone);
+    with the other structures the ray queries with one interval that see every geometry, and on
+    every backend the point queries, run on the instances merged into one mesh, rebuilt by the
+    next such query after a change. Queries
     release the GIL and may be called from several threads at once on one scene. Scenes pickle
     (each mesh once, instances with transforms and masks, ids and parameters; structures are
     rebuilt on first use after loading).

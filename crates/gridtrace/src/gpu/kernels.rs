@@ -252,12 +252,17 @@ fn compile(
                     //   checked by the layout tests and the mirror walks), BVH children name
                     //   nodes that exist, and the stacks' pushes are guarded by their depth
                     //   (private: `sp < BVH_STACK`; short: a ring index `% SHORT_STACK`, at most
-                    //   SHORT_STACK_MAX, times WORKGROUP plus the lane);
+                    //   SHORT_STACK_MAX, times WORKGROUP plus the lane); the top level of two
+                    //   levels (`walks/two_level/`) reads its nodes and the records its leaves
+                    //   name, and hands the bottom walk a header the upload wrote (a mesh's
+                    //   root, or its triangles' range within `tris`), its stack guarded by
+                    //   `sp < TOP_STACK`;
                     // - the counters are indexed by the prelude's slot constants, the materials
                     //   by the scene's own material ids, the lights below `n_lights`;
                     // - every loop is bounded: the DDA by the grid's cells, the BVH walks by
                     //   their nodes (each entered at most once per ray), the light loops by
-                    //   `n_lights`, the closest-point searches by the grid's rings (clamped
+                    //   `n_lights`, the top level's walk by its nodes (each entered at most
+                    //   once) and its leaves' records, the closest-point searches by the grid's rings (clamped
                     //   into its dims, every step at least one cell), the tree's nodes (each
                     //   entered at most once; their stacks guarded by `sp < BVH_STACK`) or the
                     //   irregular grid's rings of top cells and voxel-map rows (clamped into

@@ -44,8 +44,9 @@ impl QueryScene {
 
     /// Moves geometries `ids[k]` to `transforms[k]`, all or none: an unknown id, or a transform
     /// that is not finite, affine and invertible, is an error naming the geometry, and changes
-    /// nothing. The two levels' top is rebuilt (the meshes' structures stay); the merged mesh
-    /// (GPU rays, point queries) is rebuilt by the next query that uses it.
+    /// nothing. The two levels' top is rebuilt (the meshes' structures stay; on the GPU the
+    /// next ray query uploads the top level alone); the merged mesh (point queries, the GPU
+    /// rays of structures the GPU walks merged) is rebuilt by the next query that uses it.
     pub fn set_transforms(&mut self, ids: &[u32], transforms: &[Mat4]) -> Result<()> {
         if ids.len() != transforms.len() {
             return Err(Error::InvalidInput(format!(

@@ -48,13 +48,18 @@
 //! level only. Every ray query takes each ray's interval and mask (`RayOptions`: the `_with`
 //! forms).
 //!
-//! **The merged path.** Where the backend traces on a GPU, the ray queries whose rays all share
-//! one interval and see every geometry still run on one world-space mesh of every geometry's
-//! triangles (`merged.rs`), as do the point queries on every backend (closest points,
-//! distances, signed distances, occupancy, winding numbers): a change marks it stale and the
-//! next such query rebuilds it, except `update_vertices` on a built scene, which moves the
-//! vertices of the built mesh (the BVH refits) when that gives what a rebuild would. The GPU's
-//! own walk of the two levels is a later step.
+//! **On the GPU** (`gpu_rays.rs`): where the backend traces on a GPU and the meshes' structure is
+//! the BVH or brute force, closest hits and occlusion walk the two levels there too
+//! (`gpu::walks::two_level`): each mesh's structure uploaded once, a move uploads the top level
+//! alone (`gpu_uploads` reports the bytes).
+//!
+//! **The merged path.** Where the backend traces on a GPU and the structure is another (the
+//! grids, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
+//! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
+//! do the point queries on every backend (closest points, distances, signed distances,
+//! occupancy, winding numbers): a change marks it stale and the next such query rebuilds it,
+//! except `update_vertices` on a built scene, which moves the vertices of the built mesh (the
+//! BVH refits) when that gives what a rebuild would. `ray_path` is where that is decided.
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -112,7 +112,7 @@ impl WalkSpec {
 
 /// Every GPU walk: each structure's default first, then the BVH's variants
 /// (`gpu::variants`), then the walks of two levels (`two_level`).
-pub const WALKS: [&WalkSpec; 11] = [
+pub const WALKS: [&WalkSpec; 12] = [
     &grid::SPEC,
     &bvh::SPEC,
     &irregular::SPEC,
@@ -124,6 +124,7 @@ pub const WALKS: [&WalkSpec; 11] = [
     &two_level::BVH,
     &two_level::BVH_SHORT,
     &two_level::BRUTE,
+    &two_level::GRID,
 ];
 
 // Every walk's arrays fit what a device is asked to allow for them (a walk with more fails to

@@ -11,10 +11,11 @@
 //! its arrays can hold several meshes one after another (a mesh's entries offset by its part's
 //! start), and `bottom_levels` below concatenates them and makes each mesh's header; then one
 //! `WalkSpec` here (its arrays, then `TOP_LEVEL_ARRAY`) and one arm of `walk_for`. Carried
-//! today: the BVH (binary nodes, either stack) and brute force. Not yet: the grids (grid, pc,
-//! irregular: their lattice is the scene uniform's, one per scene; their header would name a
-//! row of per-mesh lattices), the BVH's 8-wide layout, and `hwrt` (the driver's instances):
-//! `walk_for` answers `None` for them and the scene's GPU rays stay on its merged mesh.
+//! today: the BVH (binary nodes, either stack), brute force and the uniform grid (grid, pc:
+//! its lattice, one per scene in the scene uniform for one level, is a row of a table here,
+//! which the mesh's header names). Not yet: the irregular grid, the BVH's 8-wide layout, and
+//! `hwrt` (the driver's instances): `walk_for` answers `None` for them and the scene's GPU
+//! rays stay on its merged mesh.
 //!
 //! A move (`QueryScene::set_transforms`, `set_mask`) uploads the top level alone: 64 bytes a
 //! node and 64 an instance (`TopRec`); the meshes' arrays stay on the device.
@@ -23,7 +24,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Affine3A;
 
 use super::bvh::{self, BvhLayout, BvhStack, BvhWalk};
-use super::{WalkSpec, brute};
+use super::{WalkSpec, brute, grid};
 use crate::accel::bvh::Bvh;
 use crate::accel::{Accel, AccelKind, Structure};
 use crate::gpu::constants::WgslConst;
@@ -72,6 +73,49 @@ pub const BVH_SHORT: WalkSpec = WalkSpec {
     ..BVH
 };
 
+/// The meshes' uniform grids (plain or with proximity clouds: the pass says which) under the
+/// top level: their cells and references one mesh after another, their lattices in a table
+/// (`LatticeRow`) whose row a mesh's header names, their triangles in the shared `tris`.
+pub const GRID: WalkSpec = WalkSpec {
+    structure: "grid",
+    name: "grid (two levels)",
+    wgsl: &[
+        grid::SPEC.wgsl[0],
+        super::POINT_RING,
+        include_str!("grid_rows.wgsl"),
+        TOP_LEVEL,
+    ],
+    prefix: "top",
+    arrays: &[
+        grid::SPEC.arrays[0],
+        grid::SPEC.arrays[1],
+        ("lattices", "grid_lattices"),
+        TOP_LEVEL_ARRAY,
+    ],
+    device_build: false,
+    tlas: None,
+    software_max_tris: None,
+    constants: WGSL_CONSTANTS,
+    bottom: Some("grid"),
+};
+
+/// A row of the grids' lattice table (`Lattice` in common.wgsl): one mesh's grid's box, cell
+/// size, dims, and where its cells and triangles start in the shared arrays.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct LatticeRow {
+    pub lo: [f32; 3],
+    pub first_cell: u32,
+    pub hi: [f32; 3],
+    pub first_tri: u32,
+    pub cell: [f32; 3],
+    pub shift: u32,
+    pub inv_cell: [f32; 3],
+    pub _pad0: u32,
+    pub dims: [u32; 3],
+    pub _pad1: u32,
+}
+
 /// Every mesh's triangles, brute force, under the top level: no arrays of its own (the shared
 /// triangles, `tris`, hold every mesh's, one after another).
 pub const BRUTE: WalkSpec = WalkSpec {
@@ -97,6 +141,7 @@ pub fn walk_for(structure: &Structure, walk: BvhWalk) -> Option<&'static WalkSpe
         (Structure::Bvh(_), BvhLayout::Binary, BvhStack::Private) => Some(&BVH),
         (Structure::Bvh(_), BvhLayout::Binary, BvhStack::Short(_)) => Some(&BVH_SHORT),
         (Structure::Brute(_), _, _) => Some(&BRUTE),
+        (Structure::Grid(_), _, _) => Some(&GRID),
         _ => None,
     }
 }
@@ -175,6 +220,53 @@ pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLe
             spec,
             kind,
             arrays: Vec::new(),
+            tris,
+            headers,
+            tri_counts,
+        }));
+    }
+    if matches!(first.structure, Structure::Grid(_)) {
+        let (mut cells, mut refs, mut rows, mut tris) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (k, m) in meshes.iter().enumerate() {
+            let Structure::Grid(g) = &m.structure else {
+                unreachable!("walk_for named the grid's walk for every mesh");
+            };
+            let first_tri = u32::try_from(tris.len()).map_err(|_| too_many())?;
+            let first_ref = u32::try_from(refs.len()).map_err(|_| too_many())?;
+            // Every offset entry below fits (the counts after this mesh do).
+            u32::try_from(tris.len() + m.tris.len()).map_err(|_| too_many())?;
+            u32::try_from(refs.len() + g.refs.len()).map_err(|_| too_many())?;
+            let first_cell = u32::try_from(cells.len()).map_err(|_| too_many())?;
+            rows.push(LatticeRow {
+                lo: g.bounds.min.to_array(),
+                first_cell,
+                hi: g.bounds.max.to_array(),
+                first_tri,
+                cell: g.cell_size.to_array(),
+                shift: 0,
+                inv_cell: g.inv_cell_size.to_array(),
+                _pad0: 0,
+                dims: g.dims.to_array(),
+                _pad1: 0,
+            });
+            headers.push([k as u32, 0]);
+            // A cell's references start where the mesh's do; a reference names a triangle of
+            // the shared `tris`.
+            cells.extend(g.cells.iter().map(|c| crate::accel::Cell {
+                start: c.start + first_ref,
+                ..*c
+            }));
+            refs.extend(g.refs.iter().map(|&r| r + first_tri));
+            tris.extend(GpuTri::all(&m.tris));
+        }
+        return Ok(Some(BottomLevels {
+            spec,
+            kind,
+            arrays: vec![
+                bytemuck::cast_slice(&cells).to_vec(),
+                bytemuck::cast_slice(&refs).to_vec(),
+                bytemuck::cast_slice(&rows).to_vec(),
+            ],
             tris,
             headers,
             tri_counts,
@@ -301,5 +393,70 @@ impl TopLevel {
     /// Bytes of the array (what a move uploads).
     pub fn bytes(&self) -> u64 {
         size_of_val(self.recs.as_slice()) as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::Aabb;
+    use crate::util::Rng;
+    use glam::Vec3;
+
+    /// A BVH over `n` random boxes.
+    fn tree(n: usize, seed: u64) -> Bvh {
+        let mut rng = Rng::new(seed);
+        let centers: Vec<Vec3> = (0..n)
+            .map(|_| Vec3::new(rng.range(-5.0, 5.0), rng.range(-5.0, 5.0), rng.range(-5.0, 5.0)))
+            .collect();
+        let boxes: Vec<Aabb> = centers
+            .iter()
+            .map(|&c| Aabb {
+                min: c - 0.3,
+                max: c + 0.3,
+            })
+            .collect();
+        Bvh::build(&boxes, &centers)
+    }
+
+    /// Trees laid one after another (`offset_entries`): from each tree's root the walk reaches
+    /// exactly its own leaves, each of its items once (the leaves' firsts moved by its leaf
+    /// base), through its own nodes only, whose parent links name where the walk came from.
+    #[test]
+    fn trees_one_after_another_keep_to_their_part() {
+        let trees = [tree(1, 1), tree(2, 2), tree(37, 3), tree(500, 4)];
+        let (mut all, mut roots, mut items) = (Vec::new(), Vec::new(), Vec::new());
+        for t in &trees {
+            let mut own = binary::gpu_nodes(t).unwrap();
+            let (node_base, leaf_base) = (all.len() as u32, items.len() as u32);
+            binary::offset_entries(&mut own, node_base, leaf_base).unwrap();
+            roots.push((node_base, node_base + own.len() as u32, leaf_base));
+            all.extend(own);
+            items.extend_from_slice(&t.prims);
+        }
+        for (t, &(root, end, leaf_base)) in trees.iter().zip(&roots) {
+            let mut seen = Vec::new();
+            let mut todo = vec![(root, binary::STACK_DONE)];
+            while let Some((node, parent)) = todo.pop() {
+                assert!((root..end).contains(&node), "node {node} outside {root}..{end}");
+                let n = &all[node as usize];
+                assert_eq!(n.child[2], parent, "node {node}'s parent link");
+                for k in 0..2 {
+                    let e = n.child[k];
+                    match binary::decode_leaf(e) {
+                        _ if e == binary::STACK_DONE => {}
+                        Some((first, count)) => {
+                            assert!(first >= leaf_base && first + count <= leaf_base + t.prims.len() as u32);
+                            seen.extend_from_slice(&items[first as usize..(first + count) as usize]);
+                        }
+                        None => todo.push((e, (node << 1) | k as u32)),
+                    }
+                }
+            }
+            seen.sort_unstable();
+            let mut want = t.prims.clone();
+            want.sort_unstable();
+            assert_eq!(seen, want);
+        }
     }
 }
