@@ -188,7 +188,8 @@ class Scene:
     CPU the ray queries walk these two levels, with a ray carried into an instance's space
     without normalising its direction (so ``t`` is the same ``t``); each ray may have its own
     ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU the ray queries walk the
-    two levels there too with the BVH and brute force (a move uploads the top level alone);
+    two levels there too with the BVH, the grid (and pc) and brute force (a move uploads the top
+    level alone);
     with the other structures the ray queries with one interval that see every geometry, and on
     every backend the point queries, run on the instances merged into one mesh, rebuilt by the
     next such query after a change. Queries

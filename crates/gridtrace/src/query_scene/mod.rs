@@ -49,12 +49,12 @@
 //! forms).
 //!
 //! **On the GPU** (`gpu_rays.rs`): where the backend traces on a GPU and the meshes' structure is
-//! the BVH or brute force, closest hits and occlusion walk the two levels there too
+//! the BVH, the grid (or pc) or brute force, closest hits and occlusion walk the two levels there too
 //! (`gpu::walks::two_level`): each mesh's structure uploaded once, a move uploads the top level
 //! alone (`gpu_uploads` reports the bytes).
 //!
 //! **The merged path.** Where the backend traces on a GPU and the structure is another (the
-//! grids, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
+//! irregular grid, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
 //! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
 //! do the point queries on every backend (closest points, distances, signed distances,
 //! occupancy, winding numbers): a change marks it stale and the next such query rebuilds it,
@@ -323,8 +323,8 @@ impl QueryScene {
     }
 
     /// Where a ray query with `o` runs, decided here alone: with a backend that traces on a GPU,
-    /// on the GPU's two levels where it carries the meshes' structure (`gpu_carries`: the BVH
-    /// and brute force), else on the merged mesh where the rays share one interval and see
+    /// on the GPU's two levels where it carries the meshes' structure (`gpu_carries`: the BVH,
+    /// the grid and brute force), else on the merged mesh where the rays share one interval and see
     /// every geometry, else on the CPU's two levels; on the CPU's two levels with the CPU.
     fn ray_path(&self, o: &RayOptions) -> Result<RayPath> {
         if !self.opts.backend.traces_on_gpu() {
