@@ -1005,7 +1005,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
             let (bad, ex) = gridtrace::testing::gpu_disagreements(&ray_list, &as_hits(&c), &as_hits(&g), &occ);
             assert!(bad.is_empty(), "{}: rays {bad:?} disagree", kind.name());
             excused += ex;
-            for i in 0..n {
+            for (i, r) in ray_list.iter().enumerate() {
                 if !(c.t_hit[i].is_finite() && g.t_hit[i].is_finite()) {
                     continue;
                 }
@@ -1013,7 +1013,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                 let (a, b) = (c.t_hit[i], g.t_hit[i]);
                 if (a - b).abs() > 1e-5 * a.abs().max(b.abs()) {
                     assert!(
-                        gridtrace::testing::t_close(&ray_list[i], a, b),
+                        gridtrace::testing::t_close(r, a, b),
                         "{} ray {i}: t {a} vs {b}",
                         kind.name()
                     );

@@ -190,11 +190,12 @@ impl QueryScene {
     /// (`two_level::walk_for`: the BVH, the grid and brute force today).
     pub(super) fn gpu_carries(&self, two: &TwoLevel) -> bool {
         let walk = self.opts.gpu_variants.bvh_walk();
+        let mut specs = two.meshes().map(|(_, a)| two_level::walk_for(&a.structure, walk));
+        // One walk for every mesh (`bottom_levels` lays out meshes of one structure).
+        let first = specs.next().flatten();
         self.opts.backend.traces_on_gpu()
             && !two.placed.is_empty()
-            && two
-                .meshes()
-                .all(|(_, a)| two_level::walk_for(&a.structure, walk).is_some())
+            && first.is_some_and(|f| specs.all(|s| s.is_some_and(|s| std::ptr::eq(s, f))))
     }
 
     /// What the scene's GPU holds and has written; `None` before its first GPU ray query.
