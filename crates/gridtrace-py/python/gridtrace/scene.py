@@ -291,6 +291,15 @@ class Scene:
         geometries' records and the top level, and the merged mesh if a point query built one."""
         return self._native.memory_bytes()
 
+    def gpu_uploads(self):
+        """What the GPU's two levels hold and have written, or ``None`` before their first ray
+        query (a GPU backend with the BVH, the grid, pc or brute force): a dict of
+        ``mesh_bytes`` (the meshes' structures on the device), ``mesh_uploads`` (once, and
+        again only after a mesh was added or removed), ``top_nodes`` and ``top_records`` (the
+        top level: 64 bytes each, all a move uploads) and ``written_bytes`` (every byte
+        written to the scene's arrays so far)."""
+        return self._native.gpu_uploads()
+
     def update_vertices(self, geometry_id: int, vertices) -> None:
         """Moves a geometry's vertices (its own space; as many as it has, same order; faces and
         transform stay); a geometry that shared its mesh with others gets a copy of its own.
