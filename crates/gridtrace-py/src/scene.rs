@@ -332,6 +332,21 @@ impl NativeScene {
         self.read().structure_builds()
     }
 
+    /// What the GPU's two levels hold and have written (a dict), or None before their first
+    /// ray query (`QueryScene::gpu_uploads`).
+    fn gpu_uploads<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        let Some(u) = self.read().gpu_uploads() else {
+            return Ok(None);
+        };
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("mesh_bytes", u.mesh_bytes)?;
+        d.set_item("mesh_uploads", u.mesh_uploads)?;
+        d.set_item("top_nodes", u.top_nodes)?;
+        d.set_item("top_records", u.top_records)?;
+        d.set_item("written_bytes", u.written_bytes)?;
+        Ok(Some(d))
+    }
+
     fn ids(&self) -> Vec<u32> {
         self.read().ids().collect()
     }

@@ -2,6 +2,7 @@
 masks; pickling with shared meshes; bad input named. Answers are held to the same scene merged
 flat (one mesh of all world-space triangles)."""
 
+import os
 import pickle
 
 import numpy as np
@@ -174,3 +175,36 @@ def test_bad_input_is_named_and_changes_nothing(scene_and_flat):
     with pytest.raises(ValueError, match=r"tnear\[1\]"):
         s.count_intersections(rays, tnear=np.array([0, np.nan, 0], np.float32))
     assert s.geometry_ids == ids
+
+
+def _top_nodes(n):
+    """GPU nodes of the top level over n instances: one a median split of more than two."""
+    inner = lambda k: 0 if k <= 2 else 1 + inner(k // 2) + inner(k - k // 2)
+    return max(inner(n), 1)
+
+
+@pytest.mark.parametrize("accel", ["bvh", "grid"])
+def test_gpu_moves_upload_the_top_level_alone(accel):
+    """backend="gpu": the instances walk the GPU's two levels; a move writes the top level's
+    nodes and records alone (64 bytes each: ``gpu_uploads``), and the answers stay the CPU's."""
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        pytest.skip("GRIDTRACE_SKIP_GPU is set")
+    rng = np.random.default_rng(6)
+    v, f = _sphere()
+    mesh = gridtrace.Mesh(v, f, backend="cpu")
+    g, c = gridtrace.Scene(accel=accel, backend="gpu"), gridtrace.Scene(accel=accel, backend="cpu")
+    ts = _random_transforms(rng, 40)
+    ids = [(g.add_instance(mesh, t), c.add_instance(mesh, t))[0] for t in ts]
+    rays = _rays(rng, 2000)
+    assert g.gpu_uploads() is None
+    _assert_t_close(g.cast_rays(rays)["t_hit"], c.cast_rays(rays)["t_hit"], rays)
+    before = g.gpu_uploads()
+    assert before["mesh_uploads"] == 1 and before["top_records"] == 40
+    moved = _random_transforms(rng, 40)
+    g.set_transforms(np.array(ids), moved)
+    c.set_transforms(np.array(ids), moved)
+    a, b = g.cast_rays(rays, mask=1), c.cast_rays(rays, mask=1)
+    _assert_t_close(a["t_hit"], b["t_hit"], rays)
+    after = g.gpu_uploads()
+    assert after["mesh_uploads"] == 1 and after["mesh_bytes"] == before["mesh_bytes"]
+    assert after["written_bytes"] - before["written_bytes"] == 64 * (_top_nodes(40) + 40)

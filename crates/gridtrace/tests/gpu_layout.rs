@@ -13,6 +13,7 @@ use gridtrace::gpu::layout::{
 use gridtrace::gpu::shaders;
 use gridtrace::gpu::walks::bvh::binary::GpuBvhNode;
 use gridtrace::gpu::walks::bvh::wide8::GpuBvh8Node;
+use gridtrace::gpu::walks::two_level::{LatticeRow, TopRec};
 use gridtrace::gpu::walks::{wgsl_constants, wgsl_prelude};
 use gridtrace::scene::{CameraFrame, PointLight};
 use wgpu::naga;
@@ -103,7 +104,19 @@ fn wgsl_structs_match_rust() {
     check!(m, PointLight, "PointLight", [position, _pad0, intensity, _pad1]);
     check!(m, RayRec, "RayRec", [origin, pixel, dir, t_max, weight, t_min]);
     check!(m, GpuHit, "GpuHit", [t, tri, u, v]);
-    check!(m, BatchUniform, "BatchUniform", [stride, to_shadow, t_min, t_max]);
+    check!(
+        m,
+        BatchUniform,
+        "BatchUniform",
+        [stride, to_shadow, t_min, t_max, mask, _pad0, _pad1, _pad2]
+    );
+    check!(m, TopRec, "TopRec", [a, b, c, w]);
+    check!(
+        m,
+        LatticeRow,
+        "Lattice",
+        [lo, first_cell, hi, first_tri, cell, shift, inv_cell, _pad0, dims, _pad1]
+    );
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
     check!(m, GpuBvh8Node, "Bvh8Node", [p_e, info, q0, q1, q2]);
     check!(m, IrrCell, "IrrCell", [bounds, start]);
@@ -179,7 +192,12 @@ fn mismatch_is_detected() {
 #[test]
 fn kernels_validate() {
     let modules = shaders::all_modules();
-    assert_eq!(modules.len(), 6 + 3 * gridtrace::gpu::walks::WALKS.len());
+    // Traverse and occlusion per walk, closest point per walk that searches points.
+    let walking: usize = gridtrace::gpu::walks::WALKS
+        .iter()
+        .map(|w| 2 + w.points() as usize)
+        .sum();
+    assert_eq!(modules.len(), 6 + walking);
     for (name, src) in modules {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())

@@ -187,9 +187,12 @@ class Scene:
     ``set_mask`` change an instance and rebuild only the BVH over the instances' boxes. On the
     CPU the ray queries walk these two levels, with a ray carried into an instance's space
     without normalising its direction (so ``t`` is the same ``t``); each ray may have its own
-    ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU, ray queries with one
-    interval that see every geometry, and on every backend the point queries, run on the
-    instances merged into one mesh, rebuilt by the next such query after a change. Queries
+    ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU the ray queries walk the
+    two levels there too with the BVH, the grid (and pc) and brute force (a move uploads the top
+    level alone);
+    with the other structures the ray queries with one interval that see every geometry, and on
+    every backend the point queries, run on the instances merged into one mesh, rebuilt by the
+    next such query after a change. Queries
     release the GIL and may be called from several threads at once on one scene. Scenes pickle
     (each mesh once, instances with transforms and masks, ids and parameters; structures are
     rebuilt on first use after loading).
@@ -287,6 +290,15 @@ class Scene:
         """Bytes the scene holds: each mesh once with its structure (once built), the
         geometries' records and the top level, and the merged mesh if a point query built one."""
         return self._native.memory_bytes()
+
+    def gpu_uploads(self):
+        """What the GPU's two levels hold and have written, or ``None`` before their first ray
+        query (a GPU backend with the BVH, the grid, pc or brute force): a dict of
+        ``mesh_bytes`` (the meshes' structures on the device), ``mesh_uploads`` (once, and
+        again only after a mesh was added or removed), ``top_nodes`` and ``top_records`` (the
+        top level: 64 bytes each, all a move uploads) and ``written_bytes`` (every byte
+        written to the scene's arrays so far)."""
+        return self._native.gpu_uploads()
 
     def update_vertices(self, geometry_id: int, vertices) -> None:
         """Moves a geometry's vertices (its own space; as many as it has, same order; faces and

@@ -290,7 +290,15 @@ impl GpuContext {
                 submission_index: index,
                 timeout: Some(GPU_TIMEOUT),
             })
-            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+            .map_err(|e| {
+                // A submission that failed validation is never run, so the wait fails: the
+                // validation error says why.
+                let why = self
+                    .check_errors()
+                    .err()
+                    .map_or_else(String::new, |v| format!(" ({v})"));
+                Error::Gpu(format!("waiting for the GPU failed: {e}{why}"))
+            })?;
         self.check_errors()
     }
 

@@ -184,7 +184,7 @@ fn dispatch_size(n: u32) -> (u32, u32) {
 }
 
 /// One structure's walking pipelines (traverse, its heat variant, occlusion and its closest-hit
-/// ablation, closest point) and the layout of its group 1.
+/// ablation, and closest point where the walk searches points) and the layout of its group 1.
 pub(crate) struct WalkPipelines {
     pub spec: &'static WalkSpec,
     /// Layout of group 1: the structure's arrays, in `spec.arrays` order.
@@ -216,20 +216,20 @@ pub(crate) struct Kernels {
 #[derive(Default)]
 struct KernelSets(Mutex<HashMap<GpuVariants, Arc<Kernels>>>);
 
-/// Compiles `specs` (those `walking` selects) into pipelines with `layout`; `source` gives each
+/// Compiles the kernels `include` selects into pipelines with `layout`; `source` gives each
 /// kernel's module. Validation errors are returned, not raised on the device.
 fn compile(
     dev: &wgpu::Device,
     variants: &GpuVariants,
     layout_of: impl Fn(&KernelSpec) -> wgpu::PipelineLayout,
     source: impl Fn(&KernelSpec) -> String,
-    walking: bool,
+    include: impl Fn(&KernelSpec) -> bool,
 ) -> Result<Vec<Option<wgpu::ComputePipeline>>> {
     let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
     let pipelines = SPECS
         .iter()
         .map(|s| {
-            (s.walks == walking).then(|| {
+            include(s).then(|| {
                 let desc = wgpu::ShaderModuleDescriptor {
                     label: Some(s.label),
                     source: wgpu::ShaderSource::Wgsl(source(s).into()),
@@ -252,12 +252,17 @@ fn compile(
                     //   checked by the layout tests and the mirror walks), BVH children name
                     //   nodes that exist, and the stacks' pushes are guarded by their depth
                     //   (private: `sp < BVH_STACK`; short: a ring index `% SHORT_STACK`, at most
-                    //   SHORT_STACK_MAX, times WORKGROUP plus the lane);
+                    //   SHORT_STACK_MAX, times WORKGROUP plus the lane); the top level of two
+                    //   levels (`walks/two_level/`) reads its nodes and the records its leaves
+                    //   name, and hands the bottom walk a header the upload wrote (a mesh's
+                    //   root, or its triangles' range within `tris`), its stack guarded by
+                    //   `sp < TOP_STACK`;
                     // - the counters are indexed by the prelude's slot constants, the materials
                     //   by the scene's own material ids, the lights below `n_lights`;
                     // - every loop is bounded: the DDA by the grid's cells, the BVH walks by
                     //   their nodes (each entered at most once per ray), the light loops by
-                    //   `n_lights`, the closest-point searches by the grid's rings (clamped
+                    //   `n_lights`, the top level's walk by its nodes (each entered at most
+                    //   once) and its leaves' records, the closest-point searches by the grid's rings (clamped
                     //   into its dims, every step at least one cell), the tree's nodes (each
                     //   entered at most once; their stacks guarded by `sp < BVH_STACK`) or the
                     //   irregular grid's rings of top cells and voxel-map rows (clamped into
@@ -351,7 +356,7 @@ impl Kernels {
                 Group1::Batch => layout(&[Some(&frame_layout), Some(&batch_layout)]),
             },
             |s| shaders::module_source_for(s.source, variants),
-            false,
+            |s| !s.walks,
         )?;
         Ok(Kernels {
             variants: *variants,
@@ -405,7 +410,8 @@ impl Kernels {
             &self.variants,
             |_| pipeline_layout.clone(),
             |s| shaders::walk_module_source(s.source, spec),
-            true,
+            // The closest-point kernel only with a walk that searches points.
+            |s| s.walks && (spec.points() || s.kernel != Kernel::ClosestPoint),
         )?;
         let w = Arc::new(WalkPipelines {
             spec,

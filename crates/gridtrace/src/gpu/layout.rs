@@ -133,8 +133,8 @@ pub struct PassUniform {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct BatchUniform {
-    /// Floats a wire ray: 6 (origin, direction; the interval below for every ray) or 8
-    /// (origin, t_min, direction, t_max).
+    /// Words a wire ray: 6 (origin, direction; the interval and mask below for every ray), 8
+    /// (origin, t_min, direction, t_max; the mask below) or 9 (those and the ray's mask).
     pub stride: u32,
     /// 1: the rays go to the shadow queue and the answers are occlusion bits; 0: queue A and
     /// closest hits.
@@ -142,6 +142,11 @@ pub struct BatchUniform {
     /// The interval of every ray when `stride` is 6.
     pub t_min: f32,
     pub t_max: f32,
+    /// The mask of every ray when `stride` is 6 or 8 (`ray_mask` in common.wgsl).
+    pub mask: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// Arguments of the two indirect dispatches the `indirect` kernel writes: workgroups (x, y, z)

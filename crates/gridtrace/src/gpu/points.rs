@@ -15,7 +15,7 @@ use glam::Vec3;
 
 use super::constants::MISS;
 use super::layout::GpuHit;
-use super::queries::{ChunkAnswers, Query, WireSource};
+use super::queries::{Bounds, ChunkAnswers, Query, WireSource};
 use super::renderer::GpuRenderer;
 use crate::accel::TriAccel;
 use crate::accel::closest::ClosestPoint;
@@ -57,7 +57,10 @@ impl GpuRenderer {
         // as the answers, then the work the kernel wrote to each item's accumulation texel.
         self.batch(
             &PointRows { points },
-            (0.0, f32::INFINITY),
+            Bounds {
+                interval: (0.0, f32::INFINITY),
+                mask: u32::MAX,
+            },
             Query::ClosestPoint,
             |first, answers| {
                 let ChunkAnswers::Points { hits, work } = answers else {

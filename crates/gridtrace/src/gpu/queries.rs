@@ -2,8 +2,9 @@
 //! caller, or the nearest point (`closest point`, `points.rs`) for points, at the bus's speed.
 //!
 //! - **The wire.** Rays go up in the caller's own layout (`WireSource`): 24 bytes a ray
-//!   (origin, direction; one interval for the batch: Open3D's rows, the `rays` file, `Ray`
-//!   slices) or 32 (origin, t_min, direction, t_max), 12 a point; the device expands them into
+//!   (origin, direction; one interval and mask for the batch: Open3D's rows, the `rays` file,
+//!   `Ray` slices), 32 (origin, t_min, direction, t_max) or 36 (and the ray's mask: a scene of
+//!   two levels with per-ray intervals and masks), 12 a point; the device expands them into
 //!   the walks' 48-byte queue records (`batch.wgsl`). Only the answers asked for come down:
 //!   (t, triangle) 8 bytes a ray, with u, v 16, occlusion one bit. Before, every ray went up as
 //!   a 48-byte record and came down as 16 (closest) or 48 (occlusion) bytes: 64 MB of bus
@@ -52,8 +53,9 @@ pub trait WireSource: Sync {
     fn is_empty(&self) -> bool {
         self.len() == 0
     }
-    /// Floats an item on the wire: 3 (a point), 6 (origin, direction; the batch's interval)
-    /// or 8 (origin, t_min, direction, t_max).
+    /// Words an item on the wire: 3 (a point), 6 (origin, direction; the batch's interval and
+    /// mask), 8 (origin, t_min, direction, t_max; the batch's mask) or 9 (those and the ray's
+    /// mask, a u32: `cast_masked`).
     fn stride(&self) -> usize;
     /// Writes items `first..` into `out` (whole items: `stride` little-endian floats each),
     /// false if one of them is not a valid item (the batch is then not traced).
@@ -114,6 +116,14 @@ pub enum ChunkAnswers<'a> {
         hits: &'a [GpuHit],
         work: &'a [[f32; 4]],
     },
+}
+
+/// The interval and the mask of a batch's rays, where its source does not carry them (a
+/// source of stride 6 carries neither, of stride 8 the interval, of stride 9 both).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Bounds {
+    pub interval: (f32, f32),
+    pub mask: u32,
 }
 
 /// What a batch asks for.
@@ -224,7 +234,22 @@ impl GpuRenderer {
         answer: Answer,
         take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
-        self.batch(rays, interval, Query::Rays(answer), take)
+        self.cast_masked(rays, interval, u32::MAX, answer, take)
+    }
+
+    /// `cast` with the rays' mask (`ray_mask` in common.wgsl) for a source of stride 6 or 8
+    /// (one of stride 9 carries each ray's): a scene of two levels answers only from the
+    /// instances whose mask shares a bit with it; a scene of one level has no instances and
+    /// sees every triangle.
+    pub fn cast_masked(
+        &mut self,
+        rays: &dyn WireSource,
+        interval: (f32, f32),
+        mask: u32,
+        answer: Answer,
+        take: impl FnMut(usize, ChunkAnswers<'_>),
+    ) -> Result<()> {
+        self.batch(rays, Bounds { interval, mask }, Query::Rays(answer), take)
     }
 
     /// The statistics of the last batch (`cast`, `intersect`, `occluded`, closest points).
@@ -236,7 +261,7 @@ impl GpuRenderer {
     pub(super) fn batch(
         &mut self,
         source: &dyn WireSource,
-        interval: (f32, f32),
+        bounds: Bounds,
         query: Query,
         mut take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
@@ -271,7 +296,7 @@ impl GpuRenderer {
             if outcome.is_err() {
                 break;
             }
-            match self.submit_chunk(slot, items.clone(), source, interval, kind, query, &mut stats) {
+            match self.submit_chunk(slot, items.clone(), source, bounds, kind, query, &mut stats) {
                 Ok(f) => flight[slot] = Some(f),
                 Err(e) => {
                     outcome = Err(e);
@@ -320,8 +345,8 @@ impl GpuRenderer {
                 mapped_at_creation: false,
             })
         };
-        // The widest wire item (8 floats) and the widest packed answer (a `TriHit`).
-        let wire = storage("batch wire rays", items * 32);
+        // The widest wire item (9 words) and the widest packed answer (a `TriHit`).
+        let wire = storage("batch wire rays", items * 36);
         let answers = storage("batch answers", items * size_of::<TriHit>() as u64);
         let uniform = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("batch uniform"),
@@ -355,7 +380,7 @@ impl GpuRenderer {
         slot: usize,
         items: Range<usize>,
         source: &dyn WireSource,
-        interval: (f32, f32),
+        bounds: Bounds,
         kind: AccelKind,
         query: Query,
         stats: &mut GpuQueryStats,
@@ -395,8 +420,12 @@ impl GpuRenderer {
         let uniform = BatchUniform {
             stride: source.stride() as u32,
             to_shadow: (queue_slot == SLOT_SHADOW) as u32,
-            t_min: interval.0,
-            t_max: interval.1,
+            t_min: bounds.interval.0,
+            t_max: bounds.interval.1,
+            mask: bounds.mask,
+            _pad0: 0,
+            _pad1: 0,
+            _pad2: 0,
         };
         let q = &self.ctx.queue;
         let device_side = self.batches.device.as_ref().expect("made by `batch`");

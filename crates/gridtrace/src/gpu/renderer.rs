@@ -15,6 +15,7 @@ use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{GpuQueryStats, StageTimer, Timestamps};
 use super::variants::GpuVariants;
 use super::walks::grid::build::GpuBuildStats;
+use super::walks::two_level::{BottomLevels, TOP_LEVEL_ARRAY, TopLevel};
 use super::walks::{self, DeviceBuilder};
 use crate::accel::AccelKind;
 use crate::render::{Ablation, Mode};
@@ -147,8 +148,48 @@ impl GpuRenderer {
     /// `GpuVariants::default()` is today's); compiles the kernels unless an earlier renderer on
     /// `ctx` did.
     pub fn new(ctx: Arc<GpuContext>, prepared: &PreparedScene, variants: &GpuVariants) -> Result<GpuRenderer> {
-        let dev = &ctx.device;
         let scene = SceneBuffers::upload(&ctx, prepared, variants)?;
+        let mut renderer = Self::with_scene(ctx, scene, prepared.accel.kind(), variants)?;
+        // A scene whose grid was left to the GPU: build it now.
+        if prepared.accel.structure_stale {
+            renderer.update_vertices(prepared)?;
+        }
+        Ok(renderer)
+    }
+
+    /// A renderer of a scene of two levels (`walks::two_level`), for ray batches only: each
+    /// mesh's structure as `bottoms` lays it out, uploaded once, and the top level `top`,
+    /// which `set_top_level` replaces when instances move.
+    pub(crate) fn two_level(
+        ctx: Arc<GpuContext>,
+        bottoms: &BottomLevels,
+        top: &TopLevel,
+        variants: &GpuVariants,
+    ) -> Result<GpuRenderer> {
+        let scene = SceneBuffers::upload_two_level(&ctx, bottoms, top, variants)?;
+        Self::with_scene(ctx, scene, bottoms.kind, variants)
+    }
+
+    /// Uploads a new top level over the one a renderer of two levels has (instances moved,
+    /// masks changed); the meshes' arrays stay. Returns the bytes written.
+    pub(crate) fn set_top_level(&mut self, top: &TopLevel) -> Result<u64> {
+        self.scene
+            .write_array(&self.ctx, TOP_LEVEL_ARRAY.0, bytemuck::cast_slice(&top.recs))
+    }
+
+    /// Bytes written to the scene's arrays since the renderer was made: the first upload, and
+    /// every later write (a scene of two levels: its top levels).
+    pub fn scene_upload_bytes(&self) -> u64 {
+        self.scene.uploaded_bytes
+    }
+
+    fn with_scene(
+        ctx: Arc<GpuContext>,
+        scene: SceneBuffers,
+        kind: AccelKind,
+        variants: &GpuVariants,
+    ) -> Result<GpuRenderer> {
+        let dev = &ctx.device;
         let uniform = |label: &str, size: u64| {
             dev.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -181,8 +222,8 @@ impl GpuRenderer {
         });
         let timestamps = Timestamps::new(&ctx);
         ctx.check_errors()?;
-        let mut renderer = GpuRenderer {
-            kind: prepared.accel.kind(),
+        Ok(GpuRenderer {
+            kind,
             ctx,
             kernels,
             scene,
@@ -199,12 +240,7 @@ impl GpuRenderer {
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
             device_builder: None,
-        };
-        // A scene whose grid was left to the GPU: build it now.
-        if prepared.accel.structure_stale {
-            renderer.update_vertices(prepared)?;
-        }
-        Ok(renderer)
+        })
     }
 
     /// The scene's vertices moved (`PreparedScene::update_vertices`): uploads the new triangles

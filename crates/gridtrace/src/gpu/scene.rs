@@ -10,7 +10,8 @@ use super::context::{GpuContext, check_scene_fits};
 use super::kernels::{Kernels, WalkPipelines};
 use super::layout::{GpuMaterial, GpuTri, SceneUniform, TriShade};
 use super::variants::GpuVariants;
-use super::walks::{WalkSpec, device_structure, upload_of};
+use super::walks::two_level::{BottomLevels, TopLevel};
+use super::walks::{DeviceStructure, WalkSpec, device_structure, upload_of};
 use crate::scene::PreparedScene;
 use crate::{Error, Result};
 
@@ -49,6 +50,9 @@ pub(crate) struct SceneBuffers {
     pub consts: SceneUniform,
     /// Bytes of each scene array, for `GpuRenderer::memory`.
     pub bytes: Vec<(&'static str, u64)>,
+    /// Bytes written to the scene's arrays since they were made, the first upload included
+    /// (`GpuRenderer::scene_upload_bytes`: a scene of two levels counts its moves here).
+    pub uploaded_bytes: u64,
 }
 
 /// A storage buffer holding `data` (an empty array gets 16 bytes of padding: zero-length
@@ -62,11 +66,22 @@ fn storage(dev: &wgpu::Device, label: &str, data: &[u8]) -> wgpu::Buffer {
     })
 }
 
+/// What a scene's upload holds, before it is on the device: the walk and its arrays (in
+/// `spec.arrays` order), group 0's shared arrays and the scene constants.
+struct SceneArrays<'a> {
+    spec: &'static WalkSpec,
+    arrays: Vec<&'a [u8]>,
+    /// Triangles, shading data, materials.
+    shared: [(&'static str, &'a [u8]); 3],
+    consts: SceneUniform,
+    /// The triangles a ray may test at most (`WalkSpec::software_max_tris`).
+    reachable_tris: usize,
+}
+
 impl SceneBuffers {
     /// Checks the scene against the device's limits and uploads it, in the layout and with the
     /// walk `variants` choose.
     pub fn upload(ctx: &GpuContext, scene: &PreparedScene, variants: &GpuVariants) -> Result<SceneBuffers> {
-        let dev = &ctx.device;
         let walk = upload_of(scene, variants.bvh_walk())?;
         let tri_shade = tri_shade(scene);
         let materials: Vec<GpuMaterial> = scene
@@ -78,51 +93,6 @@ impl SceneBuffers {
             })
             .collect();
         let gpu_tris = GpuTri::all(&scene.accel.tris);
-        let shared: [(&'static str, &[u8]); 3] = [
-            ("triangles", bytemuck::cast_slice(&gpu_tris)),
-            ("tri_shade", bytemuck::cast_slice(&tri_shade)),
-            ("materials", bytemuck::cast_slice(&materials)),
-        ];
-        let own = walk
-            .spec
-            .arrays
-            .iter()
-            .map(|a| a.0)
-            .zip(walk.arrays.iter().map(|a| &a[..]));
-        let arrays: Vec<(&'static str, &[u8])> = own.chain(shared).collect();
-        let bytes: Vec<(&'static str, u64)> = arrays.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
-        check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
-        if let Some(max) = walk.spec.software_max_tris.filter(|_| ctx.is_software()) {
-            let n = scene.accel.tris.len();
-            if n > max as usize {
-                return Err(Error::Gpu(format!(
-                    "'{}' on a software adapter ('{}') takes at most {max} triangles (its shader loops end after \
-                     65,535 iterations); this scene has {n}",
-                    walk.spec.structure, ctx.info.name
-                )));
-            }
-        }
-        if walk.spec.tlas.is_some() {
-            // Before compiling: the walk's module needs the feature this names.
-            ctx.check_ray_queries(walk.spec.structure)?;
-        }
-        let pipelines = Kernels::of(ctx, variants)?.walk(dev, walk.spec)?;
-        let structure: Vec<wgpu::Buffer> = walk
-            .spec
-            .arrays
-            .iter()
-            .zip(&walk.arrays)
-            .map(|((label, _), data)| storage(dev, label, data))
-            .collect();
-        let device = device_structure(ctx, scene)?;
-        let mut bytes = bytes;
-        if let Some(d) = &device {
-            bytes.push(("ray-query geometry", d.input_bytes));
-        }
-        let tlas = device.map(|d| d.tlas);
-        let structure_group = structure_group(dev, &pipelines, &structure, tlas.as_ref());
-        let [tris, tri_shade, materials] = shared.map(|(n, d)| storage(dev, n, d));
-
         let mut consts = SceneUniform {
             ray_epsilon: scene.ray_epsilon,
             n_lights: 0,
@@ -132,6 +102,106 @@ impl SceneBuffers {
             ..bytemuck::Zeroable::zeroed()
         };
         walk.lattice.write_to(&mut consts);
+        let parts = SceneArrays {
+            spec: walk.spec,
+            arrays: walk.arrays.iter().map(|a| &a[..]).collect(),
+            shared: [
+                ("triangles", bytemuck::cast_slice(&gpu_tris)),
+                ("tri_shade", bytemuck::cast_slice(&tri_shade)),
+                ("materials", bytemuck::cast_slice(&materials)),
+            ],
+            consts,
+            reachable_tris: scene.accel.tris.len(),
+        };
+        Self::from_arrays(ctx, parts, variants, || device_structure(ctx, scene))
+    }
+
+    /// Uploads a scene of two levels (`walks::two_level`): the meshes' structures, laid out by
+    /// `bottoms`, and the top level `top`. Rays only: no shading data, one stand-in material.
+    pub fn upload_two_level(
+        ctx: &GpuContext,
+        bottoms: &BottomLevels,
+        top: &TopLevel,
+        variants: &GpuVariants,
+    ) -> Result<SceneBuffers> {
+        let stand_in_shade = [TriShade {
+            n0: [0.0; 3],
+            n1: [0.0; 3],
+            n2: [0.0; 3],
+            material: 0,
+        }];
+        let stand_in_material = [GpuMaterial {
+            diffuse: [0.0; 3],
+            reflectivity: 0.0,
+        }];
+        let parts = SceneArrays {
+            spec: bottoms.spec,
+            arrays: bottoms
+                .arrays
+                .iter()
+                .map(|a| &a[..])
+                .chain([bytemuck::cast_slice(&top.recs)])
+                .collect(),
+            shared: [
+                ("triangles", bytemuck::cast_slice(&bottoms.tris)),
+                ("tri_shade", bytemuck::cast_slice(&stand_in_shade)),
+                ("materials", bytemuck::cast_slice(&stand_in_material)),
+            ],
+            consts: SceneUniform {
+                n_tris: bottoms.tris.len() as u32,
+                ..bytemuck::Zeroable::zeroed()
+            },
+            reachable_tris: top.answers as usize,
+        };
+        Self::from_arrays(ctx, parts, variants, || Ok(None))
+    }
+
+    /// The upload itself: checks, the walk's pipelines, the buffers, the bind group, and the
+    /// device's own structure (`device`) where the walk traces one.
+    fn from_arrays(
+        ctx: &GpuContext,
+        parts: SceneArrays<'_>,
+        variants: &GpuVariants,
+        device: impl FnOnce() -> Result<Option<DeviceStructure>>,
+    ) -> Result<SceneBuffers> {
+        let dev = &ctx.device;
+        let SceneArrays {
+            spec,
+            arrays,
+            shared,
+            consts,
+            reachable_tris,
+        } = parts;
+        let named: Vec<(&'static str, &[u8])> = spec.arrays.iter().map(|a| a.0).zip(arrays).chain(shared).collect();
+        let bytes: Vec<(&'static str, u64)> = named.iter().map(|(n, d)| (*n, d.len() as u64)).collect();
+        check_scene_fits(&bytes, &ctx.limits(), &ctx.info.name)?;
+        if let Some(max) = spec.software_max_tris.filter(|_| ctx.is_software())
+            && reachable_tris > max as usize
+        {
+            return Err(Error::Gpu(format!(
+                "'{}' on a software adapter ('{}') takes at most {max} triangles (its shader loops end after \
+                 65,535 iterations); this scene has {reachable_tris}",
+                spec.structure, ctx.info.name
+            )));
+        }
+        if spec.tlas.is_some() {
+            // Before compiling: the walk's module needs the feature this names.
+            ctx.check_ray_queries(spec.structure)?;
+        }
+        let pipelines = Kernels::of(ctx, variants)?.walk(dev, spec)?;
+        let structure: Vec<wgpu::Buffer> = named[..spec.arrays.len()]
+            .iter()
+            .map(|(label, data)| storage(dev, label, data))
+            .collect();
+        let device = device()?;
+        let mut bytes = bytes;
+        if let Some(d) = &device {
+            bytes.push(("ray-query geometry", d.input_bytes));
+        }
+        let uploaded_bytes = bytes.iter().map(|b| b.1).sum();
+        let tlas = device.map(|d| d.tlas);
+        let structure_group = structure_group(dev, &pipelines, &structure, tlas.as_ref());
+        let [tris, tri_shade, materials] = shared.map(|(n, d)| storage(dev, n, d));
         let uniform = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("scene uniform"),
             size: std::mem::size_of::<SceneUniform>() as u64,
@@ -150,12 +220,35 @@ impl SceneBuffers {
             uniform,
             consts,
             bytes,
+            uploaded_bytes,
         })
     }
 
     /// The structure's walk.
     pub fn spec(&self) -> &'static WalkSpec {
         self.walk.spec
+    }
+
+    /// Writes `data` over the structure's array `label` from its start (a new buffer if it
+    /// does not fit, rebound), counted in `uploaded_bytes`; returns the bytes written.
+    pub fn write_array(&mut self, ctx: &GpuContext, label: &str, data: &[u8]) -> Result<u64> {
+        let i = self
+            .spec()
+            .arrays
+            .iter()
+            .position(|a| a.0 == label)
+            .ok_or_else(|| Error::Gpu(format!("the walk '{}' has no array '{label}'", self.spec().name)))?;
+        if (data.len() as u64) <= self.structure[i].size() {
+            ctx.queue.write_buffer(&self.structure[i], 0, data);
+        } else {
+            let b = storage(&ctx.device, label, data);
+            self.replace_array(&ctx.device, label, &b);
+        }
+        if let Some(e) = self.bytes.iter_mut().find(|e| e.0 == label) {
+            e.1 = data.len() as u64;
+        }
+        self.uploaded_bytes += data.len() as u64;
+        Ok(data.len() as u64)
     }
 
     /// Replaces the structure's array `label` (the grid's GPU build writes new cells and

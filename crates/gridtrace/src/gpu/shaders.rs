@@ -91,7 +91,11 @@ pub fn all_modules() -> Vec<(String, String)> {
     let mut out = Vec::new();
     for (name, src) in KERNELS {
         if walks(name) {
-            for w in super::walks::WALKS {
+            // The closest-point kernel only with a walk that searches points.
+            for w in super::walks::WALKS
+                .iter()
+                .filter(|w| w.points() || name != "closest point")
+            {
                 out.push((format!("{name} [{}]", w.name), walk_module_source(src, w)));
             }
         } else {

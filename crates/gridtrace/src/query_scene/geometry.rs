@@ -56,8 +56,8 @@ impl SceneMesh {
     }
 
     /// The bottom level, built now (counted in `builds`) if it is not yet. Its structure is the
-    /// scene's (`opts.accel`), built for the CPU whatever the scene's backend: the two-level
-    /// walk is the CPU's (the GPU's ray queries still run on the merged mesh, `merged.rs`).
+    /// scene's (`opts.accel`), built on the CPU whatever the scene's backend: the CPU's two
+    /// levels walk it, and the GPU's upload it as it is (`gpu_rays.rs`).
     pub(crate) fn bottom(&self, opts: &QueryOptions, builds: &AtomicUsize) -> Result<Option<&TraceMesh>> {
         if let Some(b) = self.bottom.get() {
             return Ok(b.as_ref());

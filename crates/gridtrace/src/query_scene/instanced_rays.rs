@@ -10,15 +10,19 @@ use super::all_hits::{Intersections, skip_ties};
 use super::batch::{RayHits, RayOptions, ray_of};
 use super::streamed_rays::{self, STREAM_MAX_INSTANCES};
 use super::two_level::{NamedHit, TwoLevel};
-use super::{INVALID_ID, QueryScene};
+use super::{INVALID_ID, QueryScene, RayPath};
 use crate::Result;
 
 impl QueryScene {
     /// Where a count or list with `o` runs: `ray_path`'s choice, except that the merged
-    /// path's lists take only the default interval (`0 < t < inf`).
+    /// path's lists take only the default interval (`0 < t < inf`), and that the GPU lists no
+    /// hits (its two levels' counts and lists run on the CPU's).
     pub(super) fn hits_path(&self, o: &RayOptions) -> Result<Option<Arc<TwoLevel>>> {
         match o.uniform() {
-            Some((t_near, t_far, _)) if t_near == 0.0 && t_far == f32::INFINITY => self.ray_path(o),
+            Some((t_near, t_far, _)) if t_near == 0.0 && t_far == f32::INFINITY => Ok(match self.ray_path(o)? {
+                RayPath::Merged => None,
+                RayPath::Cpu(two) | RayPath::Gpu(two) => Some(two),
+            }),
             _ => self.two_level().map(Some),
         }
     }

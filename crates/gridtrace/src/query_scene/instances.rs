@@ -34,6 +34,7 @@ impl QueryScene {
         };
         let what = format!("transform of the new instance (geometry {})", self.next_id);
         let g = Geometry::place(mesh, transform.unwrap_or(Mat4::IDENTITY), mask, &what)?;
+        self.moving = true;
         self.push(g)
     }
 
@@ -44,8 +45,9 @@ impl QueryScene {
 
     /// Moves geometries `ids[k]` to `transforms[k]`, all or none: an unknown id, or a transform
     /// that is not finite, affine and invertible, is an error naming the geometry, and changes
-    /// nothing. The two levels' top is rebuilt (the meshes' structures stay); the merged mesh
-    /// (GPU rays, point queries) is rebuilt by the next query that uses it.
+    /// nothing. The two levels' top is rebuilt (the meshes' structures stay; on the GPU the
+    /// next ray query uploads the top level alone); the merged mesh (point queries, the GPU
+    /// rays of structures the GPU walks merged) is rebuilt by the next query that uses it.
     pub fn set_transforms(&mut self, ids: &[u32], transforms: &[Mat4]) -> Result<()> {
         if ids.len() != transforms.len() {
             return Err(Error::InvalidInput(format!(
@@ -76,6 +78,7 @@ impl QueryScene {
     /// were built (every bottom level is, so this builds none), so that the cost of a move is
     /// paid, and measured, here.
     fn after_move(&mut self) -> Result<()> {
+        self.moving = true;
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         let slot = self.two_level.get_mut().unwrap_or_else(|p| p.into_inner());
         if slot.is_some() {

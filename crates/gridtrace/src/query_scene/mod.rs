@@ -48,13 +48,18 @@
 //! level only. Every ray query takes each ray's interval and mask (`RayOptions`: the `_with`
 //! forms).
 //!
-//! **The merged path.** Where the backend traces on a GPU, the ray queries whose rays all share
-//! one interval and see every geometry still run on one world-space mesh of every geometry's
-//! triangles (`merged.rs`), as do the point queries on every backend (closest points,
-//! distances, signed distances, occupancy, winding numbers): a change marks it stale and the
-//! next such query rebuilds it, except `update_vertices` on a built scene, which moves the
-//! vertices of the built mesh (the BVH refits) when that gives what a rebuild would. The GPU's
-//! own walk of the two levels is a later step.
+//! **On the GPU** (`gpu_rays.rs`): where the backend traces on a GPU and the meshes' structure is
+//! the BVH, the grid (or pc) or brute force, closest hits and occlusion walk the two levels there too
+//! (`gpu::walks::two_level`): each mesh's structure uploaded once, a move uploads the top level
+//! alone (`gpu_uploads` reports the bytes).
+//!
+//! **The merged path.** Where the backend traces on a GPU and the structure is another (the
+//! irregular grid, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
+//! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
+//! do the point queries on every backend (closest points, distances, signed distances,
+//! occupancy, winding numbers): a change marks it stale and the next such query rebuilds it,
+//! except `update_vertices` on a built scene, which moves the vertices of the built mesh (the
+//! BVH refits) when that gives what a rebuild would. `ray_path` is where that is decided.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -70,6 +75,7 @@ mod all_hits;
 mod batch;
 mod cpu_rays;
 mod geometry;
+mod gpu_rays;
 mod instanced_rays;
 mod instances;
 mod merged;
@@ -82,6 +88,7 @@ mod two_level;
 pub use all_hits::Intersections;
 pub use batch::{PerRay, RayHits, RayOptions};
 pub use geometry::{Geometry, SceneMesh};
+pub use gpu_rays::GpuUploads;
 pub use instances::InstanceOf;
 pub use points::ClosestPoints;
 
@@ -104,6 +111,25 @@ pub struct QueryScene {
     /// Structures built over triangles so far: bottom levels and merged meshes (for tests:
     /// a move must build none).
     builds: AtomicUsize,
+    /// The two levels on the GPU, once a GPU ray query ran on them (`gpu_rays.rs`); kept
+    /// across moves, which upload its top level alone.
+    gpu: Mutex<Option<gpu_rays::GpuTwoLevel>>,
+    /// Whether the scene moves: set by `add_instance`, `set_transform(s)` and `set_mask` (and
+    /// by `from_parts` when meshes are shared). `ray_path` sends a static scene's CPU rays to
+    /// the merged mesh, one structure over every triangle, and a moving one's to the two
+    /// levels, whose moves build nothing.
+    moving: bool,
+}
+
+/// Where a ray query runs (`QueryScene::ray_path`).
+pub(crate) enum RayPath {
+    /// The merged mesh (a backend that traces on a GPU, a structure the GPU does not carry
+    /// under a top level, rays that share one interval and see every geometry).
+    Merged,
+    /// The CPU's two levels.
+    Cpu(Arc<TwoLevel>),
+    /// The GPU's two levels (`gpu_rays.rs`).
+    Gpu(Arc<TwoLevel>),
 }
 
 impl QueryScene {
@@ -117,6 +143,8 @@ impl QueryScene {
             merged: Mutex::new(None),
             two_level: Mutex::new(None),
             builds: AtomicUsize::new(0),
+            gpu: Mutex::new(None),
+            moving: false,
         }
     }
 
@@ -184,6 +212,8 @@ impl QueryScene {
                 Error::InvalidInput(format!("geometry {id} names mesh {mesh}; there are {}", meshes.len()))
             })?;
             let g = Geometry::place(m.clone(), transform, mask, &format!("transform of geometry {id}"))?;
+            // A mesh placed twice: the scene was made with instances.
+            scene.moving |= Arc::strong_count(m) > 2;
             scene.insert(id, g);
         }
         Ok(scene)
@@ -218,6 +248,7 @@ impl QueryScene {
     /// top (the bottom levels belong to the meshes and stay).
     fn stale(&mut self) {
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        // The GPU's renderer stays: the next query uploads what changed (`gpu_rays.rs`).
         *self.two_level.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
     }
 
@@ -300,17 +331,43 @@ impl QueryScene {
         Ok(t)
     }
 
-    /// Where a ray query with `o` runs: `None` on the merged mesh (a backend that traces on a
-    /// GPU, rays that share one interval and see every geometry), else on the CPU's two levels.
-    fn ray_path(&self, o: &RayOptions) -> Result<Option<Arc<TwoLevel>>> {
-        let merged_answers = self.opts.backend.traces_on_gpu()
-            && o.uniform().is_some_and(|(t_near, t_far, mask)| {
+    /// Where a ray query with `o` runs, decided here alone: with a backend that traces on a GPU,
+    /// on the GPU's two levels where it carries the meshes' structure (`gpu_carries`: the BVH,
+    /// the grid and brute force), else on the merged mesh where the rays share one interval and see
+    /// every geometry, else on the CPU's two levels. With the CPU: a static scene's rays that
+    /// share one interval and see every geometry on the merged mesh (one structure over every
+    /// triangle: a room and five Bunnies' camera rays took 2.4x as long through two levels),
+    /// the others on the CPU's two levels (`moving`).
+    fn ray_path(&self, o: &RayOptions) -> Result<RayPath> {
+        let merged_answers = || {
+            o.uniform().is_some_and(|(t_near, t_far, mask)| {
                 t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
-            });
-        if merged_answers {
-            return Ok(None);
+            })
+        };
+        if !self.opts.backend.traces_on_gpu() {
+            if !self.moving && merged_answers() {
+                return Ok(RayPath::Merged);
+            }
+            return self.two_level().map(RayPath::Cpu);
         }
-        self.two_level().map(Some)
+        let two = self.two_level()?;
+        if self.gpu_carries(&two) {
+            return Ok(RayPath::Gpu(two));
+        }
+        Ok(if merged_answers() {
+            RayPath::Merged
+        } else {
+            RayPath::Cpu(two)
+        })
+    }
+
+    /// The query `on_gpu` on the GPU's two levels; under `auto`, a GPU that fails leaves the
+    /// query to the CPU's (`on_cpu`), as the merged mesh's queries do (`TraceMesh`).
+    fn gpu_or_cpu<T>(&self, on_gpu: impl FnOnce() -> Result<T>, on_cpu: impl FnOnce() -> Result<T>) -> Result<T> {
+        match on_gpu() {
+            Err(Error::Gpu(_)) if self.opts.backend == crate::query::Backend::Auto => on_cpu(),
+            r => r,
+        }
     }
 
     /// Structures built over triangles so far by this scene: each mesh's bottom level (once,

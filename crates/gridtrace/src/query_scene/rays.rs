@@ -9,12 +9,13 @@
 use rayon::prelude::*;
 
 use super::INVALID_ID;
-use super::QueryScene;
 use super::batch::PerRay;
 use super::batch::{RayHits, RayOptions, STAND_IN, ray_of};
 use super::cpu_rays;
 use super::instanced_rays;
 use super::merged::Merged;
+use super::two_level::TwoLevel;
+use super::{QueryScene, RayPath};
 use crate::accel::Hit;
 use crate::gpu::{Answer, ChunkAnswers, WireSource, gpu_hit, unpack_bits};
 use crate::{Error, Result};
@@ -22,8 +23,8 @@ use crate::{Error, Result};
 /// Open3D's rows (`[ox, oy, oz, dx, dy, dz]`) as the GPU's wire takes them: each row as it is,
 /// or `STAND_IN` for a row that cannot hit anything (`ray_of`), whose answer the caller makes
 /// a miss: `Scene` answers such rays as Open3D does, without an error (README, "NaN").
-struct RowRays<'a> {
-    rows: &'a [[f32; 6]],
+pub(super) struct RowRays<'a> {
+    pub rows: &'a [[f32; 6]],
 }
 
 impl WireSource for RowRays<'_> {
@@ -77,11 +78,16 @@ impl QueryScene {
     /// (`RayOptions`).
     pub fn cast_rays_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<RayHits> {
         o.check(rays.len())?;
-        if let Some(two) = self.ray_path(o)? {
+        let on_cpu = |two: &TwoLevel| {
             two.check_cpu(true)?;
             let mut out = RayHits::zeroed(rays.len());
-            instanced_rays::cast(&two, rays, o, &mut out);
-            return Ok(out);
+            instanced_rays::cast(two, rays, o, &mut out);
+            Ok(out)
+        };
+        match self.ray_path(o)? {
+            RayPath::Cpu(two) => return on_cpu(&two),
+            RayPath::Gpu(two) => return self.gpu_or_cpu(|| self.gpu_cast(&two, rays, o), || on_cpu(&two)),
+            RayPath::Merged => {}
         }
         // The merged path: one interval for every ray (`ray_path`).
         let (t_near, t_far, _) = o.uniform().expect("the merged path takes one interval");
@@ -148,11 +154,16 @@ impl QueryScene {
     /// (`RayOptions`).
     pub fn test_occlusions_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Vec<bool>> {
         o.check(rays.len())?;
-        if let Some(two) = self.ray_path(o)? {
+        let on_cpu = |two: &TwoLevel| {
             two.check_cpu(true)?;
             let mut out = vec![false; rays.len()];
-            instanced_rays::occluded(&two, rays, o, &mut out);
-            return Ok(out);
+            instanced_rays::occluded(two, rays, o, &mut out);
+            Ok(out)
+        };
+        match self.ray_path(o)? {
+            RayPath::Cpu(two) => return on_cpu(&two),
+            RayPath::Gpu(two) => return self.gpu_or_cpu(|| self.gpu_occluded(&two, rays, o), || on_cpu(&two)),
+            RayPath::Merged => {}
         }
         let (t_near, t_far, _) = o.uniform().expect("the merged path takes one interval");
         let m = self.merged()?;

@@ -11,6 +11,7 @@
 use glam::Vec3;
 
 use crate::accel::Aabb;
+use crate::accel::bvh::{Bvh, BvhNode};
 
 /// Instances a leaf holds at most.
 const LEAF: usize = 2;
@@ -91,6 +92,39 @@ impl TopLevel {
             todo.push((left + 1, first + half, count - half));
         }
         t
+    }
+
+    /// The tree as the BVH's binary tree (`accel::bvh::Bvh`: the same node rule, children at
+    /// `first` and `first + 1`, leaves' items in `prims`), for the GPU's layout of it
+    /// (`gpu::walks::two_level`). `None` for no instances.
+    pub fn as_bvh(&self) -> Option<Bvh> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let nodes: Vec<BvhNode> = self
+            .nodes
+            .iter()
+            .map(|n| BvhNode {
+                min: n.bounds.min.to_array(),
+                first: n.first,
+                max: n.bounds.max.to_array(),
+                count: n.count,
+            })
+            .collect();
+        let mut depth = 0;
+        let mut todo = vec![(0usize, 0usize)];
+        while let Some((i, d)) = todo.pop() {
+            depth = depth.max(d);
+            if nodes[i].count == 0 {
+                let c = nodes[i].first as usize;
+                todo.extend([(c, d + 1), (c + 1, d + 1)]);
+            }
+        }
+        Some(Bvh {
+            nodes,
+            prims: self.items.clone(),
+            depth,
+        })
     }
 
     /// Bytes held (nodes and items).

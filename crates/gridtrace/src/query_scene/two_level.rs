@@ -140,9 +140,16 @@ impl TwoLevel {
                 t_max
             }
         });
-        let p = self.placed.get(who)?;
-        let n_local = self.mesh_of(p).prepared().accel.tris[best.tri as usize].normal();
-        Some(self.named(who as u32, &best, n_local))
+        (who < self.placed.len()).then(|| self.name(who, &best))
+    }
+
+    /// A hit `h` of instance `who`'s mesh (its own triangle index) in world terms: the
+    /// instance's id, the face's index among the mesh's faces as given, and the world-space
+    /// unit normal (`named`, the face's normal looked up).
+    #[inline]
+    pub fn name(&self, who: usize, h: &Hit) -> (NamedHit, Vec3) {
+        let n_local = self.mesh_of(&self.placed[who]).prepared().accel.tris[h.tri as usize].normal();
+        self.named(who as u32, h, n_local)
     }
 
     /// A bottom-level hit `hit` of instance `i` on a face of own-space geometric normal
@@ -192,6 +199,16 @@ impl TwoLevel {
     /// How many instances the scene places.
     pub fn instance_count(&self) -> usize {
         self.placed.len()
+    }
+
+    /// Each mesh once (`Placed::mesh` indexes it), with its structure.
+    pub fn meshes(&self) -> impl Iterator<Item = (&Arc<SceneMesh>, &crate::accel::Accel)> {
+        self.meshes.iter().map(|m| (m, &self.bottom(m).prepared().accel))
+    }
+
+    /// The top level over `placed` (their indices in its leaves).
+    pub fn top(&self) -> &super::top_level::TopLevel {
+        &self.top
     }
 
     /// Whether anything with `t_near < t < t_far` is hit among instances whose mask shares a

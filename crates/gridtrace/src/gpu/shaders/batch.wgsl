@@ -2,35 +2,43 @@
 // only the answers the caller asked for go down; the queue records the walks read (48 bytes a
 // ray) and their hits (16) are made and read here, on the device, where those bytes cost
 // nothing. One file, two pipelines (override BATCH_ANSWERS), one invocation a ray of the chunk:
-// - rays: a wire ray, 24 bytes (origin, direction; the batch's interval) or 32 (origin,
-//   t_min, direction, t_max), or a point, 12 bytes, into queue A (closest hits, closest
-//   points) or the shadow queue (occlusion);
+// - rays: a wire ray, 24 bytes (origin, direction; the batch's interval and mask), 32 (origin,
+//   t_min, direction, t_max; the batch's mask) or 36 (those and the ray's mask), or a point,
+//   12 bytes, into queue A (closest hits, closest points) or the shadow queue (occlusion);
 // - answers: closest hits as (t, triangle), 8 bytes a ray (the caller who wants u, v reads the
 //   hits themselves, 16); occlusion as bits, one u32 per 32 rays (ray k of the chunk is bit
 //   k % 32 of word k / 32), made by the word's first invocation.
 
-@group(1) @binding(0) var<storage, read> wire: array<f32>;
+// The wire as words: a ray's mask (stride 9) is an integer, whose bits no float load may
+// touch; the coordinates are bit casts.
+@group(1) @binding(0) var<storage, read> wire: array<u32>;
 @group(1) @binding(1) var<storage, read_write> answers: array<u32>;
 @group(1) @binding(2) var<uniform> batch: BatchUniform;
 
 override BATCH_ANSWERS: bool = false;
 
+fn wire_f32(k: u32) -> f32 { return bitcast<f32>(wire[k]); }
+
 fn batch_ray(i: u32) {
     let b = i * batch.stride;
-    let o = vec3<f32>(wire[b], wire[b + 1u], wire[b + 2u]);
+    let o = vec3<f32>(wire_f32(b), wire_f32(b + 1u), wire_f32(b + 2u));
     var t_min = batch.t_min;
     var t_max = batch.t_max;
+    var mask = batch.mask;
     // A point (stride 3) has no direction: the closest-point kernel reads its origin only.
     var d = vec3<f32>(0.0);
-    if (batch.stride == 8u) {
-        t_min = wire[b + 3u];
-        d = vec3<f32>(wire[b + 4u], wire[b + 5u], wire[b + 6u]);
-        t_max = wire[b + 7u];
+    if (batch.stride >= 8u) {
+        t_min = wire_f32(b + 3u);
+        d = vec3<f32>(wire_f32(b + 4u), wire_f32(b + 5u), wire_f32(b + 6u));
+        t_max = wire_f32(b + 7u);
+        if (batch.stride == 9u) { mask = wire[b + 8u]; }
     } else if (batch.stride == 6u) {
-        d = vec3<f32>(wire[b + 3u], wire[b + 4u], wire[b + 5u]);
+        d = vec3<f32>(wire_f32(b + 3u), wire_f32(b + 4u), wire_f32(b + 5u));
     }
-    // `pixel` numbers the ray within its chunk; an occluded shadow ray's weight is zeroed.
-    let rec = RayRec(o, i, d, t_max, vec3<f32>(1.0), t_min);
+    // `pixel` numbers the ray within its chunk; an occluded shadow ray's weight is zeroed; the
+    // mask rides in the weight's y and z (`ray_mask`).
+    let weight = vec3<f32>(1.0, f32(mask & 0xffffu), f32(mask >> 16u));
+    let rec = RayRec(o, i, d, t_max, weight, t_min);
     if (batch.to_shadow != 0u) {
         shadow_rays[i] = rec;
     } else {

@@ -20,7 +20,7 @@ struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1
 struct RayRec { origin: vec3<f32>, pixel: u32, dir: vec3<f32>, t_max: f32, weight: vec3<f32>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
 // A ray batch's constants (batch.wgsl; BatchUniform on the host).
-struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32 }
+struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32, mask: u32, _pad0: u32, _pad1: u32, _pad2: u32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,
@@ -99,6 +99,27 @@ fn shadow_len() -> u32 {
     return pass_.tile_pixels * scene.n_lights;
 }
 
+// A queued ray's mask: it sees an instance of a scene of two levels when `mask & the
+// instance's mask != 0` (gpu/walks/two_level/top_level.wgsl). A batch ray carries it in its
+// weight's y and z as two 16-bit halves, exact in f32 (batch.wgsl), since a batch ray's weight
+// is only its occlusion flag (x); the tracer's own rays carry throughput there and walk one
+// level, which drops the mask (`WalkSpec::entry_points`).
+fn ray_mask(r: RayRec) -> u32 { return u32(r.weight.y) | (u32(r.weight.z) << 16u); }
+
+// Where one mesh's structure lies in the arrays its walk reads: `first` and `count` are the
+// structure's own (the BVH: its root node, `count` unused; brute force: its first triangle and
+// how many). A scene of one mesh walks it with `first` 0; a scene of two levels keeps each
+// instance's in its record (gpu/walks/two_level/).
+struct MeshHeader { first: u32, count: u32 }
+
+// 1 / d with zero components replaced by +-DIR_TINY first (BoxRay::new): the slabs never
+// compute 0 * inf, and a box beside a parallel ray gets an entry beyond 1e20.
+fn safe_inv_dir(d: vec3<f32>) -> vec3<f32> {
+    let sign_bits = bitcast<vec3<u32>>(d) & vec3<u32>(0x80000000u);
+    let tiny = bitcast<vec3<f32>>(sign_bits | vec3<u32>(bitcast<u32>(DIR_TINY)));
+    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(DIR_TINY));
+}
+
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }
 fn inf() -> f32 { return bitcast<f32>(0x7f800000u); }
@@ -164,17 +185,34 @@ fn intersect_tri(tri: GpuTri, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32
     return vec4<f32>(t, e1 * inv_det, e2 * inv_det, 1.0);
 }
 
-// Ray/box slab clip; mirrors Aabb::clip (axes with d == 0 handled apart: no 0 * inf).
-// Returns (t_enter, t_exit, ok).
-fn clip_box(o: vec3<f32>, inv_d: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec3<f32> {
+// A regular lattice over a box (the uniform grid's cells, the irregular grid's virtual voxels):
+// the scene uniform's (`scene_lattice`), or, in a scene of two levels, one mesh's row of the
+// grid's lattice table (gpu/walks/two_level/), where `first_cell` and `first_tri` say where the
+// mesh's cells and triangles start in the shared arrays (`LatticeRow` on the host).
+struct Lattice {
+    lo: vec3<f32>, first_cell: u32,
+    hi: vec3<f32>, first_tri: u32,
+    cell: vec3<f32>, shift: u32,
+    inv_cell: vec3<f32>, _pad0: u32,
+    dims: vec3<u32>, _pad1: u32,
+}
+
+fn scene_lattice() -> Lattice {
+    return Lattice(scene.bounds_min, 0u, scene.bounds_max, 0u, scene.cell_size, scene.shift,
+                   scene.inv_cell_size, 0u, scene.dims, 0u);
+}
+
+// Ray/box slab clip against the lattice's box; mirrors Aabb::clip (axes with d == 0 handled
+// apart: no 0 * inf). Returns (t_enter, t_exit, ok).
+fn clip_lattice(l: Lattice, o: vec3<f32>, inv_d: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec3<f32> {
     var t_enter = t_min;
     var t_exit = t_max;
     for (var a = 0; a < 3; a++) {
         if (d[a] == 0.0 || abs(inv_d[a]) == inf()) {
-            if (o[a] < scene.bounds_min[a] || o[a] > scene.bounds_max[a]) { return vec3<f32>(0.0, 0.0, 0.0); }
+            if (o[a] < l.lo[a] || o[a] > l.hi[a]) { return vec3<f32>(0.0, 0.0, 0.0); }
         } else {
-            let t0 = (scene.bounds_min[a] - o[a]) * inv_d[a];
-            let t1 = (scene.bounds_max[a] - o[a]) * inv_d[a];
+            let t0 = (l.lo[a] - o[a]) * inv_d[a];
+            let t1 = (l.hi[a] - o[a]) * inv_d[a];
             t_enter = max(t_enter, min(t0, t1));
             t_exit = min(t_exit, max(t0, t1));
         }
@@ -182,12 +220,21 @@ fn clip_box(o: vec3<f32>, inv_d: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32
     return vec3<f32>(t_enter, t_exit, select(0.0, 1.0, t_enter <= t_exit));
 }
 
+// `clip_lattice` against the scene's bounds.
+fn clip_box(o: vec3<f32>, inv_d: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> vec3<f32> {
+    return clip_lattice(scene_lattice(), o, inv_d, d, t_min, t_max);
+}
+
 // Lattice basics every grid walk shares (the uniform grid's DDA, the irregular grid's lookups):
 // the cell of a point, and the axis of the smallest component (first on ties).
-fn world_to_grid(p: vec3<f32>) -> vec3<i32> {
+fn lattice_cell(l: Lattice, p: vec3<f32>) -> vec3<i32> {
     // Clamp before converting: f32 -> i32 of huge values is best kept away from.
-    let g = clamp(floor((p - scene.bounds_min) * scene.inv_cell_size), vec3<f32>(-2.0), vec3<f32>(scene.dims) + 1.0);
+    let g = clamp(floor((p - l.lo) * l.inv_cell), vec3<f32>(-2.0), vec3<f32>(l.dims) + 1.0);
     return vec3<i32>(g);
+}
+
+fn world_to_grid(p: vec3<f32>) -> vec3<i32> {
+    return lattice_cell(scene_lattice(), p);
 }
 
 fn min_position(v: vec3<f32>) -> i32 {

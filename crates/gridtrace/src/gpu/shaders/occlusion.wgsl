@@ -15,9 +15,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var work = 0u;
     if (SHADOW_CLOSEST) {
         // The ablation: the closest hit before the light, as a closest-hit-only tracer would.
-        occluded = walk_closest(o, d, r.t_min, r.t_max, &work).tri != MISS;
+        occluded = walk_closest(o, d, r.t_min, r.t_max, ray_mask(r), &work).tri != MISS;
     } else {
-        occluded = walk_any(o, d, r.t_min, r.t_max);
+        occluded = walk_any(o, d, r.t_min, r.t_max, ray_mask(r));
     }
     if (occluded) {
         shadow_rays[i].weight = vec3<f32>(0.0);

@@ -10,7 +10,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let r = rays_in[i];
     if (r.pixel == MISS) { return; }
     var work = 0u;
-    hits[i] = walk_closest(r.origin, r.dir, r.t_min, r.t_max, &work);
+    hits[i] = walk_closest(r.origin, r.dir, r.t_min, r.t_max, ray_mask(r), &work);
     if (COUNT_WORK) {
         accum[r.pixel] = vec4<f32>(f32(work), f32(work), f32(work), 0.0);
     }

@@ -17,6 +17,7 @@ pub mod bvh;
 pub mod grid;
 mod hwrt;
 mod irregular;
+pub mod two_level;
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -66,24 +67,52 @@ pub struct WalkSpec {
     /// The structure's own WGSL constants, by WGSL name: they join the prelude of every module
     /// (`wgsl_prelude`), so its walk and its device build read the host's values.
     pub constants: &'static [(&'static str, WgslConst)],
+    /// For a walk of two levels (`two_level/`): the bottom structure's prefix, whose
+    /// `{bottom}_closest_in` and `{bottom}_any_in` walk one mesh's part of the shared arrays,
+    /// named by the mesh's header (`MeshHeader`), under the top level's walk; its last array is
+    /// the top level's (`two_level::TOP_LEVEL_ARRAY`). `None`: a walk of one level.
+    pub bottom: Option<&'static str>,
 }
 
 impl WalkSpec {
-    /// The three lines that make this walk the module's `walk_closest`, `walk_any` and
-    /// `walk_closest_point` (the nearest point of the mesh: squared distance, triangle, u, v).
+    /// The lines that make this walk the module's `walk_closest`, `walk_any` and (for a walk of
+    /// one level) `walk_closest_point` (the nearest point of the mesh: squared distance,
+    /// triangle, u, v). A ray's mask reaches the walk (`ray_mask` in common.wgsl); a walk of
+    /// one level has no instances to mask and drops it. A walk of two levels also gets its
+    /// bottom walk's two lines (`bottom_closest`, `bottom_any`) and the top level's binding.
     pub fn entry_points(&self) -> String {
         let p = self.prefix;
-        format!(
-            "fn walk_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest(o, d, t_min, t_max, work); }}\n\
-             fn walk_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {{ return {p}_any(o, d, t_min, t_max); }}\n\
-             fn walk_closest_point(point: vec3<f32>, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest_point(point, work); }}\n"
-        )
+        let rays = format!(
+            "fn walk_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, mask: u32, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest(o, d, t_min, t_max, {m}work); }}\n\
+             fn walk_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, mask: u32) -> bool {{ return {p}_any(o, d, t_min, t_max{m_last}); }}\n",
+            m = if self.bottom.is_some() { "mask, " } else { "" },
+            m_last = if self.bottom.is_some() { ", mask" } else { "" },
+        );
+        match self.bottom {
+            None => format!(
+                "{rays}fn walk_closest_point(point: vec3<f32>, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest_point(point, work); }}\n"
+            ),
+            Some(b) => format!(
+                "{rays}@group(1) @binding({top}) var<storage, read> {name}: array<TopRec>;\n\
+                 fn bottom_closest(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {{ return {b}_closest_in(h, o, d, t_min, t_max, work); }}\n\
+                 fn bottom_any(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {{ return {b}_any_in(h, o, d, t_min, t_max); }}\n",
+                top = self.arrays.len() - 1,
+                name = two_level::TOP_LEVEL_ARRAY.1,
+            ),
+        }
+    }
+
+    /// Whether the walk searches for nearest points (the closest-point kernel is compiled with
+    /// it): the walks of one level. The two levels answer rays only; a scene's point queries
+    /// run on its merged mesh (`query_scene/merged.rs`).
+    pub fn points(&self) -> bool {
+        self.bottom.is_none()
     }
 }
 
 /// Every GPU walk: each structure's default first, then the BVH's variants
-/// (`gpu::variants`).
-pub const WALKS: [&WalkSpec; 8] = [
+/// (`gpu::variants`), then the walks of two levels (`two_level`).
+pub const WALKS: [&WalkSpec; 12] = [
     &grid::SPEC,
     &bvh::SPEC,
     &irregular::SPEC,
@@ -92,6 +121,10 @@ pub const WALKS: [&WalkSpec; 8] = [
     &bvh::SPEC_SHORT,
     &bvh::SPEC_WIDE8,
     &bvh::SPEC_WIDE8_SHORT,
+    &two_level::BVH,
+    &two_level::BVH_SHORT,
+    &two_level::BRUTE,
+    &two_level::GRID,
 ];
 
 // Every walk's arrays fit what a device is asked to allow for them (a walk with more fails to

@@ -8,34 +8,49 @@
 // edge-leak test caught it). Four a turn reach 262,140 triangles there; the upload refuses
 // more on a software adapter (`gpu/walks/brute/mod.rs`). Hardware has no such cap.
 
-fn brute_test(i: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, best: ptr<function, GpuHit>) {
-    if (i < scene.n_tris) {
+// The walk of one mesh's triangles, `tris[h.first..h.first + h.count]` (the scene's one mesh:
+// all of them; a scene of two levels: the mesh's part of the shared triangles,
+// `gpu/walks/two_level/`). A hit names the mesh's own triangle, `i - h.first`.
+
+fn brute_test(i: u32, end: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, best: ptr<function, GpuHit>) {
+    if (i < end) {
         let h = intersect_tri(tris[i], o, d, t_min, (*best).t);
         if (h.w != 0.0) { *best = GpuHit(h.x, i, h.y, h.z); }
     }
 }
 
 fn brute_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    return brute_closest_in(MeshHeader(0u, scene.n_tris), o, d, t_min, t_max, work);
+}
+
+fn brute_closest_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
-    for (var i = 0u; i < scene.n_tris; i += 4u) {
-        if (COUNT_WORK) { *work += min(4u, scene.n_tris - i); }
-        brute_test(i, o, d, t_min, &best);
-        brute_test(i + 1u, o, d, t_min, &best);
-        brute_test(i + 2u, o, d, t_min, &best);
-        brute_test(i + 3u, o, d, t_min, &best);
+    let end = h.first + h.count;
+    for (var i = h.first; i < end; i += 4u) {
+        if (COUNT_WORK) { *work += min(4u, end - i); }
+        brute_test(i, end, o, d, t_min, &best);
+        brute_test(i + 1u, end, o, d, t_min, &best);
+        brute_test(i + 2u, end, o, d, t_min, &best);
+        brute_test(i + 3u, end, o, d, t_min, &best);
     }
     if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    best.tri -= h.first;
     return best;
 }
 
-fn brute_hits(i: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
-    return i < scene.n_tris && intersect_tri(tris[i], o, d, t_min, t_max).w != 0.0;
+fn brute_hits(i: u32, end: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    return i < end && intersect_tri(tris[i], o, d, t_min, t_max).w != 0.0;
 }
 
 fn brute_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
-    for (var i = 0u; i < scene.n_tris; i += 4u) {
-        if (brute_hits(i, o, d, t_min, t_max) || brute_hits(i + 1u, o, d, t_min, t_max)
-            || brute_hits(i + 2u, o, d, t_min, t_max) || brute_hits(i + 3u, o, d, t_min, t_max)) {
+    return brute_any_in(MeshHeader(0u, scene.n_tris), o, d, t_min, t_max);
+}
+
+fn brute_any_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    let end = h.first + h.count;
+    for (var i = h.first; i < end; i += 4u) {
+        if (brute_hits(i, end, o, d, t_min, t_max) || brute_hits(i + 1u, end, o, d, t_min, t_max)
+            || brute_hits(i + 2u, end, o, d, t_min, t_max) || brute_hits(i + 3u, end, o, d, t_min, t_max)) {
             return true;
         }
     }

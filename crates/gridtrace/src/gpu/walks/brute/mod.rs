@@ -15,6 +15,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     // Four triangles a loop iteration (brute.wgsl) times llvmpipe's 65,535 iterations.
     software_max_tris: Some(4 * 65_535),
     constants: &[],
+    bottom: None,
 };
 
 pub fn upload(bounds: Aabb) -> WalkUpload<'static> {

@@ -129,6 +129,44 @@ pub fn gpu_nodes(bvh: &Bvh) -> Result<Vec<GpuBvhNode>> {
     Ok(out)
 }
 
+/// Moves a tree's nodes (`gpu_nodes`) to where they lie in arrays shared with other trees:
+/// its nodes from index `node_base` on, its leaves' triangles (or items) from `leaf_base` on.
+/// Every inner child and parent position is offset by `node_base` and every leaf's first by
+/// `leaf_base`, so that a walk started at `node_base` needs no other base (the scenes of two
+/// levels, `gpu/walks/two_level/`). An error where an entry no longer fits its encoding.
+pub fn offset_entries(nodes: &mut [GpuBvhNode], node_base: u32, leaf_base: u32) -> Result<()> {
+    let too_far = || {
+        Error::InvalidInput(format!(
+            "the shared GPU BVH arrays address at most {} nodes and {} triangles",
+            LEAF_BIT / 2,
+            LEAF_FIRST_MAX - LEAF_MAX
+        ))
+    };
+    let node = |i: u32| {
+        i.checked_add(node_base)
+            .filter(|&j| j < LEAF_BIT / 2)
+            .ok_or_else(too_far)
+    };
+    for n in nodes.iter_mut() {
+        for k in 0..2 {
+            let e = n.child[k];
+            n.child[k] = match decode_leaf(e) {
+                _ if e == STACK_DONE => e,
+                Some((first, count)) => first
+                    .checked_add(leaf_base)
+                    .and_then(|f| encode_leaf(f, count))
+                    .ok_or_else(too_far)?,
+                None => node(e)?,
+            };
+        }
+        // The parent's position, `parent << 1 | slot` (the root's is STACK_DONE).
+        if n.child[2] != STACK_DONE {
+            n.child[2] = (node(n.child[2] >> 1)? << 1) | (n.child[2] & 1);
+        }
+    }
+    Ok(())
+}
+
 fn node_box(n: &BvhNode) -> Aabb {
     Aabb {
         min: n.min.into(),

@@ -27,13 +27,6 @@ struct BvhNode { xy0: vec4<f32>, xy1: vec4<f32>, z01: vec4<f32>, child: vec4<u32
 
 struct BoxPair { t0: f32, t1: f32, hit0: bool, hit1: bool }
 
-// 1 / d with zero components replaced by +-DIR_TINY first (BoxRay::new): the slabs never
-// compute 0 * inf, and a box beside a parallel ray gets an entry beyond 1e20.
-fn bvh_inv_dir(d: vec3<f32>) -> vec3<f32> {
-    let sign_bits = bitcast<vec3<u32>>(d) & vec3<u32>(0x80000000u);
-    let tiny = bitcast<vec3<f32>>(sign_bits | vec3<u32>(bitcast<u32>(DIR_TINY)));
-    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(DIR_TINY));
-}
 
 // Entry distances into both child boxes within [t_min, t_max] (BoxRay::enter): per axis the
 // near plane is the low one where the ray goes up the axis; the exit is widened by FAR_SCALE so
@@ -81,13 +74,21 @@ fn bvh_descend(entry_in: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_box: f
     return entry;
 }
 
+// The walk of one mesh's tree, whose header names its root: `h.first` (the scene's one tree:
+// node 0; a scene of two levels: where the mesh's nodes start in the shared arrays, every
+// child, leaf and parent entry already offset there by the upload, `gpu/walks/two_level/`).
+
 // Closest hit with t_min <= t < t_max; mirrors BvhAccel::intersect. `work` gets the cost (nodes
-// visited + triangle tests) when COUNT_WORK is set.
+// visited + triangle tests) when COUNT_WORK is set. The triangle is the mesh's own index.
 fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    return bvh_closest_in(MeshHeader(0u, 0u), o, d, t_min, t_max, work);
+}
+
+fn bvh_closest_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
-    let inv = bvh_inv_dir(d);
+    let inv = safe_inv_dir(d);
     var st = bvh_stack_new();
-    var entry = 0u;
+    var entry = h.first;
     loop {
         // The box bound follows the closest hit so far, T_SLOP past it (see walk.rs: the
         // triangle test's t may be a little short of where the ray enters the triangle's box).
@@ -108,9 +109,13 @@ fn bvh_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
 
 // Any hit with t_min <= t < t_max; mirrors BvhAccel::occluded.
 fn bvh_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
-    let inv = bvh_inv_dir(d);
+    return bvh_any_in(MeshHeader(0u, 0u), o, d, t_min, t_max);
+}
+
+fn bvh_any_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    let inv = safe_inv_dir(d);
     var st = bvh_stack_new();
-    var entry = 0u;
+    var entry = h.first;
     var work = 0u;
     loop {
         entry = bvh_descend(entry, o, inv, t_min, t_max * T_SLOP, &st, &work);

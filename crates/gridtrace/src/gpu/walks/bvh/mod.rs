@@ -53,7 +53,7 @@ pub struct BvhWalk {
 pub const BVH_STACK: u32 = crate::accel::bvh::STACK as u32;
 
 /// The BVH walks' WGSL constants (in the prelude of every module: `walks::wgsl_prelude`).
-const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
+pub(super) const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
     ("BVH_STACK", WgslConst::U32(BVH_STACK)),
     ("SHORT_STACK_MAX", WgslConst::U32(SHORT_STACK_MAX as u32)),
     ("LEAF_BIT", WgslConst::U32(binary::LEAF_BIT)),
@@ -67,12 +67,12 @@ const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
 
 pub(super) const BINARY: &str = include_str!("bvh.wgsl");
 pub(super) const BINARY_PRIVATE: &str = include_str!("bvh_stack_private.wgsl");
-const BINARY_SHORT: &str = include_str!("bvh_stack_short.wgsl");
+pub(super) const BINARY_SHORT: &str = include_str!("bvh_stack_short.wgsl");
 const WIDE8: &str = include_str!("bvh8.wgsl");
 const WIDE8_PRIVATE: &str = include_str!("bvh8_stack_private.wgsl");
 const WIDE8_SHORT: &str = include_str!("bvh8_stack_short.wgsl");
 
-const BINARY_ARRAYS: &[(&str, &str)] = &[
+pub(super) const BINARY_ARRAYS: &[(&str, &str)] = &[
     ("bvh_nodes", "bvh_nodes"),
     ("refs", "bvh_prims"),
     ("leaf triangles", "bvh_tris"),
@@ -94,6 +94,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     tlas: None,
     software_max_tris: None,
     constants: WGSL_CONSTANTS,
+    bottom: None,
 };
 
 /// Binary nodes, short stack.

@@ -28,6 +28,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     // The driver's walk has no shader loop of ours; the closest-point walk is bounded by nodes.
     software_max_tris: None,
     constants: bvh::SPEC.constants,
+    bottom: None,
 };
 
 /// The BVH's arrays for the closest points, in the layout `SPEC`'s BVH walk reads whatever the

@@ -29,6 +29,7 @@ pub const SPEC: WalkSpec = WalkSpec {
     tlas: None,
     software_max_tris: None,
     constants: WGSL_CONSTANTS,
+    bottom: None,
 };
 
 pub fn upload(g: &IrregularGrid) -> WalkUpload<'_> {

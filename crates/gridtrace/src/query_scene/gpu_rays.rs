@@ -1,0 +1,323 @@
+//! The ray queries over the two levels on the GPU (`gpu::walks::two_level`): closest hits and
+//! occlusion, each ray with its own interval and mask. The meshes' structures are the CPU's
+//! bottom levels (built once, in each mesh's own space), laid out one after another and
+//! uploaded once; the top level (nodes and instance records) is uploaded again after a move
+//! (`set_transforms`, `set_mask`, an instance added of a mesh already there), and nothing else.
+//! A mesh added or removed uploads the meshes again.
+//!
+//! The wire: rows that share one interval and mask go up as 24 bytes a ray, the interval and
+//! mask in the batch's uniform; rows with their own go up as 36 (origin, t_near, direction,
+//! t_far, mask: `OptionRows`), 12 bytes a ray more. The answers come down as 16 bytes a ray
+//! (t, the triangle's number among every instance's, u, v) for closest hits, one bit for
+//! occlusion, and are named here (instance id, face, world normal) as the CPU's two levels
+//! name theirs (`TwoLevel::name`).
+
+use std::sync::Arc;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::batch::{RayHits, RayOptions, STAND_IN, ray_of};
+use super::geometry::SceneMesh;
+use super::rays::RowRays;
+use super::two_level::{NamedHit, TwoLevel};
+use super::{INVALID_ID, QueryScene};
+use crate::accel::{Accel, Hit};
+use crate::gpu::walks::two_level::{self, BottomLevels, Instance, TopLevel};
+use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource, gpu_hit, unpack_bits};
+use crate::{Error, Result};
+
+/// What the scene's GPU holds and has written (`QueryScene::gpu_uploads`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GpuUploads {
+    /// Bytes of the meshes' structures on the device (and their triangles).
+    pub mesh_bytes: u64,
+    /// How many times the meshes' structures were uploaded: once, and again only after a mesh
+    /// was added or removed.
+    pub mesh_uploads: u32,
+    /// Nodes of the top level on the device, and instance records after them (64 bytes each).
+    pub top_nodes: u32,
+    pub top_records: u32,
+    /// Bytes written to the device's scene arrays by this scene's renderer (meshes, top
+    /// levels), as the renderer counts its writes (`GpuRenderer::scene_upload_bytes`).
+    pub written_bytes: u64,
+}
+
+/// The scene on the GPU: the renderer of its two levels, and what it was made from.
+pub(super) struct GpuTwoLevel {
+    renderer: GpuRenderer,
+    /// The meshes whose structures are on the device, in their order there.
+    meshes: Vec<Arc<SceneMesh>>,
+    /// The meshes' headers and triangle counts (their arrays dropped once uploaded).
+    bottoms: BottomLevels,
+    /// The two levels whose top is on the device, and that top's layout.
+    two: Arc<TwoLevel>,
+    top: TopLevel,
+    uploads: GpuUploads,
+}
+
+/// The meshes' structures of `two`, in its order.
+fn accels(two: &TwoLevel) -> Vec<&Accel> {
+    two.meshes().map(|(_, a)| a).collect()
+}
+
+/// The top level of `two` laid out over `bottoms` (no instances: `None`).
+fn top_of(two: &TwoLevel, bottoms: &BottomLevels) -> Result<Option<TopLevel>> {
+    let Some(tree) = two.top().as_bvh() else {
+        return Ok(None);
+    };
+    let instances: Vec<Instance> = two
+        .placed
+        .iter()
+        .map(|p| Instance {
+            to_local: p.to_local,
+            mask: p.mask,
+            mesh: p.mesh,
+        })
+        .collect();
+    TopLevel::new(&tree, &instances, bottoms).map(Some)
+}
+
+impl GpuTwoLevel {
+    /// Uploads `two`'s meshes and top level to `ctx`'s device (`uploads`: the counts so far).
+    fn upload(
+        ctx: Arc<GpuContext>,
+        two: &Arc<TwoLevel>,
+        bottoms: BottomLevels,
+        scene: &QueryScene,
+        mut uploads: GpuUploads,
+    ) -> Result<GpuTwoLevel> {
+        let top = top_of(two, &bottoms)?.expect("a scene with no instance does not reach the GPU");
+        let renderer = GpuRenderer::two_level(ctx, &bottoms, &top, &scene.opts.gpu_variants)?;
+        uploads.mesh_bytes = bottoms.bytes();
+        uploads.mesh_uploads += 1;
+        let mut g = GpuTwoLevel {
+            renderer,
+            meshes: two.meshes().map(|(m, _)| m.clone()).collect(),
+            bottoms: BottomLevels {
+                arrays: Vec::new(),
+                tris: Vec::new(),
+                ..bottoms
+            },
+            two: two.clone(),
+            top,
+            uploads,
+        };
+        g.count_top();
+        Ok(g)
+    }
+
+    /// Brings the top level up to `two` (same meshes): uploads it alone.
+    fn move_to(&mut self, two: &Arc<TwoLevel>) -> Result<()> {
+        let top = top_of(two, &self.bottoms)?.expect("a scene with no instance does not reach the GPU");
+        self.renderer.set_top_level(&top)?;
+        self.top = top;
+        self.two = two.clone();
+        self.count_top();
+        Ok(())
+    }
+
+    fn count_top(&mut self) {
+        self.uploads.top_nodes = self.top.nodes as u32;
+        self.uploads.top_records = (self.top.recs.len() - self.top.nodes) as u32;
+        self.uploads.written_bytes = self.renderer.scene_upload_bytes();
+    }
+
+    /// Whether the device holds the structures of exactly `two`'s meshes, in its order.
+    fn same_meshes(&self, two: &TwoLevel) -> bool {
+        self.meshes.len() == two.meshes().count()
+            && self
+                .meshes
+                .iter()
+                .zip(two.meshes())
+                .all(|(a, (b, _))| Arc::ptr_eq(a, b))
+    }
+}
+
+/// Rows with their own interval and mask, 36 bytes a ray on the wire (origin, t_near,
+/// direction, t_far, mask), a row that cannot hit anything as `STAND_IN` with an empty
+/// interval.
+struct OptionRows<'a> {
+    rows: &'a [[f32; 6]],
+    o: &'a RayOptions<'a>,
+}
+
+impl WireSource for OptionRows<'_> {
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    fn stride(&self) -> usize {
+        9
+    }
+
+    fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool {
+        let (out, _) = out.into_chunks::<36>();
+        let count = out.len();
+        out.write_iter(self.rows[first..first + count].iter().enumerate().map(|(k, r)| {
+            let (t_near, t_far, mask) = self.o.of(first + k);
+            let (r, t_far) = match ray_of(r) {
+                Some(_) => (*r, t_far),
+                None => {
+                    let (o, d) = (STAND_IN.origin, STAND_IN.dir);
+                    ([o.x, o.y, o.z, d.x, d.y, d.z], -1.0)
+                }
+            };
+            let words: [u32; 9] = [
+                r[0].to_bits(),
+                r[1].to_bits(),
+                r[2].to_bits(),
+                t_near.to_bits(),
+                r[3].to_bits(),
+                r[4].to_bits(),
+                r[5].to_bits(),
+                t_far.to_bits(),
+                mask,
+            ];
+            bytemuck::cast::<[u32; 9], [u8; 36]>(words)
+        }));
+        true
+    }
+
+    fn invalid(&self) -> Error {
+        Error::InvalidInput("a scene's rays go to the GPU whole, bad ones as stand-ins".into())
+    }
+}
+
+impl QueryScene {
+    /// Whether the ray queries of `two` run on the GPU's two levels: a backend that traces on
+    /// a GPU, and meshes whose structure the GPU carries under a top level
+    /// (`two_level::walk_for`: the BVH, the grid and brute force today).
+    pub(super) fn gpu_carries(&self, two: &TwoLevel) -> bool {
+        let walk = self.opts.gpu_variants.bvh_walk();
+        let mut specs = two.meshes().map(|(_, a)| two_level::walk_for(&a.structure, walk));
+        // One walk for every mesh (`bottom_levels` lays out meshes of one structure).
+        let first = specs.next().flatten();
+        self.opts.backend.traces_on_gpu()
+            && !two.placed.is_empty()
+            && first.is_some_and(|f| specs.all(|s| s.is_some_and(|s| std::ptr::eq(s, f))))
+    }
+
+    /// What the scene's GPU holds and has written; `None` before its first GPU ray query.
+    pub fn gpu_uploads(&self) -> Option<GpuUploads> {
+        self.gpu
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .map(|g| g.uploads)
+    }
+
+    /// Runs `f` on the GPU's two levels, brought up to `two` first: the top level alone where
+    /// the device holds `two`'s meshes already, else everything.
+    fn on_gpu_two_level<T>(&self, two: &Arc<TwoLevel>, f: impl FnOnce(&mut GpuTwoLevel) -> Result<T>) -> Result<T> {
+        let mut slot = self.gpu.lock().unwrap_or_else(|p| p.into_inner());
+        let mut g = match slot.take() {
+            Some(g) if Arc::ptr_eq(&g.two, two) => g,
+            Some(mut g) if g.same_meshes(two) => {
+                g.move_to(two)?;
+                g
+            }
+            old => {
+                let (ctx, uploads) = match old {
+                    Some(g) => (g.renderer.context().clone(), g.uploads),
+                    None => (Arc::new(GpuContext::new()?), GpuUploads::default()),
+                };
+                let bottoms = two_level::bottom_levels(&accels(two), self.opts.gpu_variants.bvh_walk())?
+                    .ok_or_else(|| Error::Gpu("the scene's meshes have no GPU walk of two levels".into()))?;
+                GpuTwoLevel::upload(ctx, two, bottoms, self, uploads)?
+            }
+        };
+        let r = f(&mut g);
+        *slot = Some(g);
+        r
+    }
+
+    /// Closest hits of `rays` on the GPU's two levels, into `out` (every entry written).
+    pub(super) fn gpu_cast(&self, two: &Arc<TwoLevel>, rays: &[[f32; 6]], o: &RayOptions) -> Result<RayHits> {
+        let mut out = RayHits::zeroed(rays.len());
+        self.on_gpu_two_level(two, |g| {
+            let GpuTwoLevel { renderer, top, two, .. } = g;
+            let take = |first: usize, answers: ChunkAnswers<'_>| {
+                let ChunkAnswers::HitsUv(hits) = answers else {
+                    return;
+                };
+                let end = first + hits.len();
+                (
+                    &mut out.t_hit[first..end],
+                    &mut out.geometry_ids[first..end],
+                    &mut out.primitive_ids[first..end],
+                    &mut out.primitive_uvs[first..end],
+                    &mut out.primitive_normals[first..end],
+                )
+                    .into_par_iter()
+                    .zip((hits, &rays[first..end]))
+                    .with_min_len(1024)
+                    .for_each(|((t, id, p, uv, n), (h, r))| {
+                        let h = gpu_hit(*h);
+                        if h.is_hit() && ray_of(r).is_some() {
+                            let (named, normal) = name(top, two, &h);
+                            (*t, *id, *p) = (named.t, named.id, named.prim);
+                            *uv = [named.u, named.v];
+                            *n = normal.to_array();
+                        } else {
+                            (*t, *id, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
+                        }
+                    });
+            };
+            cast(renderer, rays, o, Answer::Hits { uv: true }, take)
+        })?;
+        Ok(out)
+    }
+
+    /// Whether each ray hits anything, on the GPU's two levels.
+    pub(super) fn gpu_occluded(&self, two: &Arc<TwoLevel>, rays: &[[f32; 6]], o: &RayOptions) -> Result<Vec<bool>> {
+        let mut out = vec![false; rays.len()];
+        self.on_gpu_two_level(two, |g| {
+            cast(&mut g.renderer, rays, o, Answer::Occlusion, |first, answers| {
+                let ChunkAnswers::Occlusion(bits) = answers else {
+                    return;
+                };
+                let end = (first + bits.len() * 32).min(rays.len());
+                unpack_bits(bits, &mut out[first..end]);
+                // A stand-in's answer is not the row's: such a ray hits nothing.
+                out[first..end]
+                    .par_iter_mut()
+                    .zip(&rays[first..end])
+                    .with_min_len(4096)
+                    .for_each(|(o, r)| *o &= ray_of(r).is_some());
+            })
+        })?;
+        Ok(out)
+    }
+}
+
+/// A GPU hit (its triangle numbered among every instance's, `top`) in world terms: the
+/// instance's id, the face, u, v and the world-space unit normal.
+#[inline]
+fn name(top: &TopLevel, two: &TwoLevel, h: &Hit) -> (NamedHit, Vec3) {
+    let (who, tri) = top.name(h.tri);
+    two.name(who as usize, &Hit { tri, ..*h })
+}
+
+/// Casts `rays` with `o` for `answer`: 24 bytes a ray when the rays share one interval and
+/// mask, else 36.
+fn cast(
+    renderer: &mut GpuRenderer,
+    rays: &[[f32; 6]],
+    o: &RayOptions,
+    answer: Answer,
+    take: impl FnMut(usize, ChunkAnswers<'_>),
+) -> Result<()> {
+    match o.uniform() {
+        Some((t_near, t_far, mask)) => {
+            renderer.cast_masked(&RowRays { rows: rays }, (t_near, t_far), mask, answer, take)
+        }
+        None => renderer.cast_masked(
+            &OptionRows { rows: rays, o },
+            (0.0, f32::INFINITY),
+            u32::MAX,
+            answer,
+            take,
+        ),
+    }
+}
