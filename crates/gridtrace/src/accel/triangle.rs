@@ -565,7 +565,7 @@ fn sheared_lanes<const N: usize, L: Lanes<N>>(
     let zero = [!e[0].ne(L::ZERO), !e[1].ne(L::ZERO), !e[2].ne(L::ZERO)];
     let refine = (zero[0] | zero[1] | zero[2]) & !(zero[0] & zero[1] & zero[2]);
     if refine.bits() != 0 {
-        e = refine_lanes(&p, e, refine.bits());
+        e = refine_lanes(p, e, refine.bits());
     }
     let neg = e[0].lt(L::ZERO) | e[1].lt(L::ZERO) | e[2].lt(L::ZERO);
     let pos = e[0].gt(L::ZERO) | e[1].gt(L::ZERO) | e[2].gt(L::ZERO);
