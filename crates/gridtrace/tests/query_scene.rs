@@ -1,6 +1,7 @@
-//! `QueryScene` against brute force over the same triangles, on every structure (the rays over
-//! each geometry's own-space triangles with the ray carried in as the two levels carry it, the
-//! points over the world-space ones):
+//! `QueryScene` against brute force over the same triangles, on every structure (the rays of a
+//! static scene over the world-space triangles, as the merged mesh walks them, and of a moving
+//! one over each geometry's own-space triangles with the ray carried in as the two levels carry
+//! it; the points over the world-space ones):
 //! closest hits, occlusion, counts and lists of all hits, closest points and distances, the
 //! signed distance's sign and occupancy against the brute-force winding number (closed meshes,
 //! away from the surface). Scenes of several geometries with transforms, open and closed
@@ -151,20 +152,20 @@ fn cpu(kind: AccelKind) -> QueryOptions {
     }
 }
 
-#[test]
-fn rays_equal_brute_force_on_every_structure() {
-    let geoms = geometries(true);
-    let r = reference(&geoms);
-    let rays = rays(&r, 3000, 1);
-    let truth: Vec<(Hit, bool, Vec<Hit>)> = rays
-        .par_iter()
+/// Brute force's answers to `rays` over `parts`: each a geometry whose own space the ray is
+/// carried into (`None`: the world's), its faces and their (geometry, face) names. Per ray: the
+/// closest hit, occlusion within `t < 1.5`, and every hit under Open3D's rule.
+type Part<'a> = (Option<&'a Geometry>, &'a [TriAccel], &'a [(u32, u32)]);
+
+fn brute_truth(parts: &[Part], rays: &[[f32; 6]]) -> Vec<(Hit, bool, Vec<Hit>)> {
+    rays.par_iter()
         .map(|q| match ray(q) {
             None => (Hit::MISS, false, Vec::new()),
             Some(ray) => {
                 // Hits name (geometry, face) by `tri` = geometry * 2^20 + face.
                 let (mut all, mut best, mut occluded) = (Vec::new(), Hit::MISS, false);
-                for (g, tris, names) in &r.local {
-                    let q = g.ray_to_local(&ray);
+                for (g, tris, names) in parts {
+                    let q = g.map_or(ray, |g| g.ray_to_local(&ray));
                     let name = |h: Hit| Hit {
                         tri: (names[h.tri as usize].0 << 20) | names[h.tri as usize].1,
                         ..h
@@ -185,71 +186,105 @@ fn rays_equal_brute_force_on_every_structure() {
                 (best, occluded, all)
             }
         })
+        .collect()
+}
+
+/// A static scene walks the merged mesh and a moving one (an instance added or moved) the two
+/// levels (`QueryScene::ray_path`): each against brute force over what it walks, bit for bit.
+#[test]
+fn rays_equal_brute_force_on_every_structure() {
+    let geoms = geometries(true);
+    let r = reference(&geoms);
+    let rays = rays(&r, 3000, 1);
+    let flat: Vec<Part> = vec![(None, &r.tris, &r.names)];
+    let local: Vec<Part> = r
+        .local
+        .iter()
+        .map(|(g, t, n)| (Some(g), t.as_slice(), n.as_slice()))
         .collect();
-    let hits_total: usize = truth.iter().filter(|t| t.0.is_hit()).count();
-    let multi: usize = truth.iter().filter(|t| t.2.len() >= 2).count();
-    assert!(
-        hits_total > 1500 && multi > 500,
-        "{hits_total} hits, {multi} with two or more"
-    );
-    for kind in kinds() {
-        let scene = scene_of(&geoms, cpu(kind));
-        let hits = scene.cast_rays(&rays).unwrap();
-        let occluded = scene.test_occlusions(&rays, 0.0, 1.5).unwrap();
-        let counts = scene.count_intersections(&rays).unwrap();
-        let lists = scene.list_intersections(&rays).unwrap();
-        assert_eq!(lists.ray_splits.len(), rays.len() + 1);
-        for (i, (want, want_occ, want_all)) in truth.iter().enumerate() {
-            let what = format!("{} ray {i} {:?}", kind.name(), rays[i]);
-            assert_eq!(occluded[i], *want_occ, "{what}: occluded");
-            assert_eq!(counts[i] as usize, want_all.len(), "{what}: count");
-            let (s, e) = (lists.ray_splits[i] as usize, lists.ray_splits[i + 1] as usize);
-            let got: Vec<(u32, u32, u32, [f32; 2])> = (s..e)
-                .map(|k| {
-                    assert_eq!(lists.ray_ids[k], i as u32);
-                    (
-                        lists.t_hit[k].to_bits(),
-                        lists.geometry_ids[k],
-                        lists.primitive_ids[k],
-                        lists.primitive_uvs[k],
-                    )
-                })
-                .collect();
-            let expect: Vec<(u32, u32, u32, [f32; 2])> = want_all
-                .iter()
-                .map(|h| (h.t.to_bits(), h.tri >> 20, h.tri & 0xFFFFF, [h.u, h.v]))
-                .collect();
-            assert_eq!(got, expect, "{what}: list");
-            if !want.is_hit() {
-                assert_eq!(
-                    (hits.t_hit[i], hits.geometry_ids[i], hits.primitive_ids[i]),
-                    (f32::INFINITY, INVALID_ID, INVALID_ID),
-                    "{what}"
-                );
-                continue;
+    for (walk, parts) in [("merged", &flat), ("two levels", &local)] {
+        let truth = brute_truth(parts, &rays);
+        let hits_total: usize = truth.iter().filter(|t| t.0.is_hit()).count();
+        let multi: usize = truth.iter().filter(|t| t.2.len() >= 2).count();
+        assert!(
+            hits_total > 1500 && multi > 500,
+            "{hits_total} hits, {multi} with two or more"
+        );
+        for kind in kinds() {
+            let mut scene = scene_of(&geoms, cpu(kind));
+            if parts.len() > 1 {
+                // The same place and mask: a move, so the scene walks two levels.
+                scene.set_mask(0, u32::MAX).unwrap();
             }
-            // The same t as brute force; the face named is one brute force hits at that t
-            // (equal t on a shared edge may name either), with its uv and world normal (the
-            // world face's, within the rounding of the two ways to it).
-            assert_eq!(hits.t_hit[i], want.t, "{what}: t");
-            let name = (hits.geometry_ids[i], hits.primitive_ids[i]);
-            let (g, tris, names) = &r.local[name.0 as usize];
-            let k = names
-                .iter()
-                .position(|&n| n == name)
-                .unwrap_or_else(|| panic!("{what}: names a face brute force does not have"));
-            let q = g.ray_to_local(&ray(&rays[i]).unwrap());
-            let h = tris[k]
-                .intersect(q.origin, q.dir, 0.0, f32::INFINITY)
-                .expect("the named face is hit");
-            assert_eq!((h.t, [h.u, h.v]), (hits.t_hit[i], hits.primitive_uvs[i]), "{what}: uv");
-            let w = r.names.iter().position(|&n| n == name).unwrap();
-            let n = r.tris[w].normal().normalize();
-            assert!(
-                Vec3::from(hits.primitive_normals[i]).abs_diff_eq(n, 1e-5),
-                "{what}: normal"
-            );
+            check_rays(&format!("{} ({walk})", kind.name()), &scene, &rays, &truth, parts, &r);
         }
+    }
+}
+
+/// `scene`'s ray queries against `truth` (`brute_truth` over `parts`).
+fn check_rays(
+    name: &str,
+    scene: &QueryScene,
+    rays: &[[f32; 6]],
+    truth: &[(Hit, bool, Vec<Hit>)],
+    parts: &[Part],
+    r: &Reference,
+) {
+    let hits = scene.cast_rays(rays).unwrap();
+    let occluded = scene.test_occlusions(rays, 0.0, 1.5).unwrap();
+    let counts = scene.count_intersections(rays).unwrap();
+    let lists = scene.list_intersections(rays).unwrap();
+    assert_eq!(lists.ray_splits.len(), rays.len() + 1);
+    for (i, (want, want_occ, want_all)) in truth.iter().enumerate() {
+        let what = format!("{name} ray {i} {:?}", rays[i]);
+        assert_eq!(occluded[i], *want_occ, "{what}: occluded");
+        assert_eq!(counts[i] as usize, want_all.len(), "{what}: count");
+        let (s, e) = (lists.ray_splits[i] as usize, lists.ray_splits[i + 1] as usize);
+        let got: Vec<(u32, u32, u32, [f32; 2])> = (s..e)
+            .map(|k| {
+                assert_eq!(lists.ray_ids[k], i as u32);
+                (
+                    lists.t_hit[k].to_bits(),
+                    lists.geometry_ids[k],
+                    lists.primitive_ids[k],
+                    lists.primitive_uvs[k],
+                )
+            })
+            .collect();
+        let expect: Vec<(u32, u32, u32, [f32; 2])> = want_all
+            .iter()
+            .map(|h| (h.t.to_bits(), h.tri >> 20, h.tri & 0xFFFFF, [h.u, h.v]))
+            .collect();
+        assert_eq!(got, expect, "{what}: list");
+        if !want.is_hit() {
+            assert_eq!(
+                (hits.t_hit[i], hits.geometry_ids[i], hits.primitive_ids[i]),
+                (f32::INFINITY, INVALID_ID, INVALID_ID),
+                "{what}"
+            );
+            continue;
+        }
+        // The same t as brute force; the face named is one brute force hits at that t
+        // (equal t on a shared edge may name either), with its uv and world normal (the
+        // world face's, within the rounding of the two ways to it).
+        assert_eq!(hits.t_hit[i], want.t, "{what}: t");
+        let name = (hits.geometry_ids[i], hits.primitive_ids[i]);
+        let (g, tri) = parts
+            .iter()
+            .find_map(|(g, tris, names)| names.iter().position(|&n| n == name).map(|k| (*g, &tris[k])))
+            .unwrap_or_else(|| panic!("{what}: names a face brute force does not have"));
+        let world = ray(&rays[i]).unwrap();
+        let q = g.map_or(world, |g| g.ray_to_local(&world));
+        let h = tri
+            .intersect(q.origin, q.dir, 0.0, f32::INFINITY)
+            .expect("the named face is hit");
+        assert_eq!((h.t, [h.u, h.v]), (hits.t_hit[i], hits.primitive_uvs[i]), "{what}: uv");
+        let w = r.names.iter().position(|&n| n == name).unwrap();
+        let n = r.tris[w].normal().normalize();
+        assert!(
+            Vec3::from(hits.primitive_normals[i]).abs_diff_eq(n, 1e-5),
+            "{what}: normal"
+        );
     }
 }
 
@@ -479,7 +514,11 @@ fn gpu_rays_equal_cpu() {
     for kind in gridtrace::testing::gpu_kinds(&ctx) {
         // `hwrt` (the GPU's ray queries, its geometries merged into one bottom-level
         // structure) against the CPU's BVH.
-        let on_cpu = scene_of(&geoms, cpu(if kind.entry().cpu { kind } else { AccelKind::Bvh }));
+        let mut on_cpu = scene_of(&geoms, cpu(if kind.entry().cpu { kind } else { AccelKind::Bvh }));
+        // A move (the same mask again): the CPU walks its two levels, as the GPU does for the
+        // structures it carries under a top level (a static scene's CPU rays walk the merged
+        // mesh, `rays_equal_brute_force_on_every_structure`).
+        on_cpu.set_mask(0, u32::MAX).unwrap();
         let on_gpu = scene_of(
             &geoms,
             QueryOptions {
