@@ -48,10 +48,19 @@ def load(path):
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
 
 
-def timed(f):
-    t0 = time.perf_counter()
+CPU = []  # (name, process CPU seconds) of every timed call, in order
+
+
+def timed(f, name=None):
+    """Wall seconds of ``f()`` and its answer; with a ``name``, its CPU seconds (every thread of
+    this process) go to ``CPU``: on a shared machine the wall time carries the other
+    processes' load, the CPU time much less of it."""
+    c0, t0 = time.process_time(), time.perf_counter()
     out = f()
-    return time.perf_counter() - t0, out
+    wall = time.perf_counter() - t0
+    if name:
+        CPU.append((name, time.process_time() - c0))
+    return wall, out
 
 
 def main():
@@ -107,24 +116,29 @@ def main():
     if igl is not None and not whole:
         print("libigl's fast_winding_number(V, F, Q) has beta 2 only: query rows only")
     for _ in range(args.reps):
-        t, answers["gridtrace"] = timed(ours)
+        t, answers["gridtrace"] = timed(ours, "gridtrace whole")
         rows["gridtrace whole"].append(t)
         if whole:
-            t, _ = timed(theirs)
+            t, _ = timed(theirs, "libigl whole")
             rows["libigl whole"].append(t)
-        t, _ = timed(lambda: kept.compute_winding_number(q32, accuracy=args.accuracy))
+        t, _ = timed(lambda: kept.compute_winding_number(q32, accuracy=args.accuracy), "gridtrace query")
         rows["gridtrace query"].append(t)
         if igl is not None:
-            t, answers["libigl"] = timed(lambda: bvh.winding_number(q, args.accuracy))
+            t, answers["libigl"] = timed(lambda: bvh.winding_number(q, args.accuracy), "libigl query")
             rows["libigl query"].append(t)
     for name, ts in rows.items():
         if ts:
             per = min(ts) / args.points * 1e9
             print(f"  {name:16}: " + ", ".join(f"{t:.3f}" for t in ts) + f" s; best {min(ts):.3f} s ({per:.0f} ns a point)")
+    cpu = {name: [c for n, c in CPU if n == name] for name in rows}
+    for name, cs in cpu.items():
+        if cs:
+            print(f"  {name:16}: CPU " + ", ".join(f"{c:.3f}" for c in cs) + f" s; best {min(cs):.3f} s")
     for kind in ("whole", "query"):
         if rows[f"libigl {kind}"]:
             ratio = min(rows[f"libigl {kind}"]) / min(rows[f"gridtrace {kind}"])
-            print(f"  ratio {kind} (libigl / gridtrace, best of each): {ratio:.2f}x")
+            ratio_cpu = min(cpu[f"libigl {kind}"]) / min(cpu[f"gridtrace {kind}"])
+            print(f"  ratio {kind} (libigl / gridtrace, best of each): wall {ratio:.2f}x, CPU {ratio_cpu:.2f}x")
 
     n = min(args.exact, args.points)
     s = Scene(accel="bvh", backend="cpu")

@@ -71,6 +71,16 @@ fn cubic_slot(i: usize, j: usize, k: usize) -> usize {
 }
 
 impl Moment {
+    /// No triangles (a placeholder until a node's moments are known).
+    pub const ZERO: Moment = Moment {
+        center: DVec3::ZERO,
+        radius: 0.0,
+        area: 0.0,
+        n: [0.0; 3],
+        nik: [[0.0; 3]; 3],
+        nijk: [[[0.0; 3]; 3]; 3],
+    };
+
     /// One triangle about its centroid.
     pub fn triangle(t: &TriAccel) -> Moment {
         let v = t.vertices().map(|v| v.as_dvec3());
@@ -209,8 +219,8 @@ mod tests {
     /// A patch of a sphere (open: its area vectors do not cancel), seen from farther and
     /// farther along a random direction: the second-order expansion's error against the exact
     /// sum falls as `(r / |q|)^3` relative to the dipole's size, so doubling the distance
-    /// divides it by about 2^5 = 32 (the dipole itself falls as 2^2); the first-order part
-    /// alone (the dipole) would fall only by 2^3. Measured here: ratios above 20 each step.
+    /// divides it by about 2^5 = 32 (the dipole itself falls as 2^2; the dipole alone's error
+    /// would fall only by 2^3). Measured here: ratios above 20 each step.
     #[test]
     fn expansion_error_falls_as_the_third_order() {
         let mut rng = Rng::new(7);

@@ -26,10 +26,12 @@ use rayon::prelude::*;
 use super::expansion::Moment;
 use super::solid_angle;
 use super::wide::WideTree;
+use crate::accel::bvh::MAX_LEAF;
 use crate::accel::{Aabb, Bvh, TriAccel};
 
-/// A node is summed as a dipole when the point is farther than `BETA` times its radius (the
-/// paper's accuracy parameter; 2 is its default, and the queries' default `accuracy`).
+/// A node is summed as its expansion when the point is farther than `BETA` times its radius
+/// (the paper's accuracy parameter; 2 is its default and libigl's, and the queries' default
+/// `accuracy`).
 pub const BETA: f64 = 2.0;
 
 /// Checks an `accuracy` (the paper's beta): a number above 0, `inf` for the exact sum. An error
@@ -155,30 +157,30 @@ fn node_moments(bvh: &Bvh, tris: &[TriAccel]) -> Vec<Moment> {
             stack.extend([n.first as usize, n.first as usize + 1]);
         }
     }
-    let mut moments: Vec<Option<Moment>> = bvh
-        .nodes
-        .par_iter()
-        .map(|n| {
-            n.is_leaf().then(|| {
-                let prims = &bvh.prims[n.first as usize..(n.first + n.count) as usize];
-                let parts: Vec<Moment> = prims.iter().map(|&t| Moment::triangle(&tris[t as usize])).collect();
-                Moment::merge(&parts).with_radius(
-                    prims
-                        .iter()
-                        .flat_map(|&t| tris[t as usize].vertices())
-                        .map(|v| v.as_dvec3()),
-                )
-            })
-        })
-        .collect();
+    let mut moments = vec![Moment::ZERO; bvh.nodes.len()];
+    moments.par_iter_mut().zip(&bvh.nodes).for_each(|(m, n)| {
+        if n.is_leaf() {
+            let prims = &bvh.prims[n.first as usize..(n.first + n.count) as usize];
+            let mut parts = [Moment::ZERO; MAX_LEAF];
+            for (part, &t) in parts.iter_mut().zip(prims) {
+                *part = Moment::triangle(&tris[t as usize]);
+            }
+            *m = Moment::merge(&parts[..prims.len()]).with_radius(
+                prims
+                    .iter()
+                    .flat_map(|&t| tris[t as usize].vertices())
+                    .map(|v| v.as_dvec3()),
+            );
+        }
+    });
     for &i in order.iter().rev() {
         let n = bvh.nodes[i];
         if !n.is_leaf() {
-            let kids = [n.first as usize, n.first as usize + 1].map(|k| moments[k].expect("children first"));
-            moments[i] = Some(Moment::merge(&kids));
+            let kids = [moments[n.first as usize], moments[n.first as usize + 1]];
+            moments[i] = Moment::merge(&kids);
         }
     }
-    moments.into_iter().map(|m| m.expect("every node")).collect()
+    moments
 }
 
 /// The indices of `points` sorted by their Morton codes (ten bits an axis over the finite

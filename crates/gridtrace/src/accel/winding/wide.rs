@@ -219,6 +219,12 @@ fn far_field<const N: usize, L: Lanes<N>>(node: &WideNode, base: usize, p: [L; 3
     let q = [r(0) - p[0], r(1) - p[1], r(2) - p[2]];
     let d2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
     let far = d2.gt(accuracy2 * r(3));
+    let all = (1u32 << N) - 1;
+    if far.bits() == 0 {
+        // Every child near (the common case deep in the tree, near the surface): the
+        // expansion's 22 other rows are not read.
+        return (L::ZERO, all);
+    }
     let inv2 = L::ONE / d2;
     let inv1 = inv2.sqrt();
     let (x, y, z) = (q[0] * inv1, q[1] * inv1, q[2] * inv1);
@@ -241,7 +247,6 @@ fn far_field<const N: usize, L: Lanes<N>>(node: &WideNode, base: usize, p: [L; 3
     let omega = order0 + order1 + order2;
     // `abs < inf` is false for NaN and infinities alike.
     let take = far & omega.abs().lt(L::INFINITY);
-    let all = (1u32 << N) - 1;
     (L::select(take, omega, L::ZERO), !take.bits() & all)
 }
 
