@@ -204,10 +204,12 @@ fn block(tris: &[TriAccel], prims: &[u32]) -> Block {
     Block { v }
 }
 
-/// Lanes `base..base + N` of a row.
+/// Lanes `base..base + N` of a row, one load. (The rows' loads are where a third of the
+/// query's samples fall: perf, 300,000 Dragon points; the node's 832 bytes miss the cache.
+/// Prefetching a pushed node's first two lines did not change the samples' count.)
 #[inline(always)]
 fn lanes<const N: usize, L: Lanes<N>>(row: &[f32; WIDTH], base: usize) -> L {
-    L::from_array(std::array::from_fn(|k| row[base + k]))
+    L::from_array(*row[base..].first_chunk::<N>().expect("lanes within the row"))
 }
 
 /// Children `base..base + N` of `node` seen from `p`: the far ones' expansions summed lane by
