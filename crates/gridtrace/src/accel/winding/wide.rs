@@ -190,14 +190,16 @@ fn block(tris: &[TriAccel], prims: &[u32]) -> Block {
     );
     let first = tris[prims[0] as usize].v0;
     let mut v = [[[0.0; WIDTH]; 3]; 3];
-    for lane in 0..WIDTH {
-        let t = prims.get(lane).map_or([first; 3], |&t| {
+    let lanes = (0..WIDTH).map(|lane| {
+        prims.get(lane).map_or([first; 3], |&t| {
             let t = &tris[t as usize];
             [t.v0, t.v1, t.v2]
-        });
+        })
+    });
+    for (lane, t) in lanes.enumerate() {
         for (corner, xyz) in t.iter().enumerate() {
-            for axis in 0..3 {
-                v[corner][axis][lane] = xyz[axis];
+            for (axis, x) in xyz.iter().enumerate() {
+                v[corner][axis][lane] = *x;
             }
         }
     }
