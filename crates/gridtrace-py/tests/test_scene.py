@@ -264,12 +264,32 @@ def test_sign_and_occupancy_against_the_winding_number():
         if d < 1e-3:
             continue
         w = winding(tris, p)
-        # The fast winding number sums far faces as dipoles: close, not exact.
-        assert abs(w - round(w)) < 1e-6 and wn[i] == pytest.approx(w, abs=0.02)
+        # The fast winding number sums far faces as their expansion: close, not exact.
+        assert abs(w - round(w)) < 1e-6 and wn[i] == pytest.approx(w, abs=0.005)
         assert occ[i] == (1.0 if w > 0.5 else 0.0)
         assert sdf[i] == pytest.approx(-d if w > 0.5 else d, rel=1e-4, abs=1e-5)
         inside += w > 0.5
     assert inside > 40
+
+
+def test_winding_number_accuracy_against_the_exact_sum():
+    """The `accuracy=` knob (libigl's beta) on an open soup (its far faces do not cancel): the
+    exact sum at `inf` (numpy's, every triangle), and the bounds docs/robustness.md gives at 1,
+    2 (the default) and 8; 0, negative and NaN refused, naming the argument."""
+    s = Scene(backend="cpu")
+    sv, sf = soup(600, seed=3)
+    s.add_triangles(sv, sf)
+    tris = sv[sf]
+    pts = np.random.default_rng(5).uniform(-1.0, 2.0, (300, 3))
+    exact = np.array([winding(tris, p) for p in pts])
+    np.testing.assert_allclose(s.compute_winding_number(pts, accuracy=math.inf), exact, atol=1e-5)
+    for accuracy, bound in ((1.0, 0.15), (2.0, 0.005), (8.0, 1e-4)):
+        err = np.abs(s.compute_winding_number(pts, accuracy=accuracy) - exact).max()
+        assert err < bound, (accuracy, err)
+    np.testing.assert_array_equal(s.compute_winding_number(pts), s.compute_winding_number(pts, accuracy=2.0))
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="accuracy"):
+            s.compute_winding_number(pts, accuracy=bad)
 
 
 def test_shapes_dtypes_and_leading_dimensions():

@@ -281,8 +281,15 @@ fn winding_number_of_an_open_mesh_is_between() {
 
 #[test]
 fn fast_winding_numbers_follow_brute_force() {
-    // The dipole terms' error is a fraction of far nodes' small contributions: measured here
+    // The expansion's error is a fraction of far nodes' small contributions: measured here
     // (the worst difference is printed), bounded well below the 0.5 that decides inside.
+    // Points on a vertex, an edge or a face (`surface_points`' first seven of nine, rounded
+    // to `f32`: within an ulp of the surface, on either side) sit on the jump: near an edge a
+    // triangle subtends anything from -2 pi to 2 pi by the direction of the offset, which
+    // rounding decides, and the fast path's `f32` leaves round otherwise than brute force's
+    // `f64` (measured: up to 1.8 apart on the knot, where several triangles meet). There only
+    // a finite answer is asked; the points a hair off the faces (1e-4 and 1e-6 along the
+    // normal) are held to the bound.
     let knot = TriAccel::from_mesh(&procedural::torus_knot(2, 3, 0.2, 128, 16));
     let sphere = TriAccel::from_mesh(&procedural::icosphere(Vec3::new(0.1, 0.2, -0.1), 0.5, 4));
     let mut open = sphere.clone();
@@ -294,26 +301,34 @@ fn fast_winding_numbers_follow_brute_force() {
         ("open sphere", open),
     ] {
         let mut pts = random_points(&tris, 3000, 3);
-        pts.extend(surface_points(&tris, 4).into_iter().step_by(7));
+        let mut on_surface = vec![false; pts.len()];
+        for (i, p) in surface_points(&tris, 4).into_iter().enumerate().step_by(7) {
+            pts.push(p);
+            on_surface.push(i % 9 < 7);
+        }
         let fast = winding_numbers(&tris, &pts);
-        let worst = pts
-            .iter()
-            .zip(&fast)
-            .map(|(p, f)| (f - winding_number_brute(&tris, Vec3::from(*p))).abs())
-            .fold(0.0f32, f32::max);
+        let mut worst = 0.0f32;
+        for ((p, f), on) in pts.iter().zip(&fast).zip(&on_surface) {
+            let d = f - winding_number_brute(&tris, Vec3::from(*p));
+            if *on {
+                assert!(f.is_finite(), "{name}: {f} at {p:?} on the surface");
+            } else {
+                worst = worst.max(d.abs());
+            }
+        }
         println!("{name}: worst difference {worst}");
-        assert!(worst < 0.05, "{name}: fast winding numbers off by {worst}");
+        assert!(worst < 0.01, "{name}: fast winding numbers off by {worst}");
     }
 }
 
 /// The accuracy knob (libigl's beta), as a property over random meshes: random closed meshes
 /// (icospheres of random centre, radius and level) and random soups, random points in and
-/// around them. At `accuracy = inf` every node is opened: the exact sum, brute force's within
-/// the f64 sum's order (the tree sums the same solid angles in another order; 1e-6 is far above
-/// that and far below any far-field error). At the default (2) and at 1, within the bounds
-/// docs/robustness.md gives (0.05 and 0.25: the first run of this test measured 0.025 and 0.13
-/// on its first icosphere, the shared meshes up to 0.059 and 0.22); and occupancy, the
-/// side of 0.5, the same at every accuracy for points on a closed mesh's definite side.
+/// around them. At `accuracy = inf`: the exact sum (every triangle's solid angle in f64, as
+/// brute force sums them; 1e-6 is far below any far-field error). At the default (2) and at 1,
+/// within the bounds docs/robustness.md gives for the second-order expansion (0.005 and 0.15:
+/// this test measured up to 0.0023 and 0.088 over its eight cases, the shared meshes up to
+/// 0.0014 and 0.10); and occupancy, the side of 0.5, the same at every accuracy for points on
+/// a closed mesh's definite side.
 #[test]
 fn winding_accuracy_knob() {
     let mut rng = Rng::new(2018);
@@ -342,8 +357,9 @@ fn winding_accuracy_knob() {
         let at_inf = worst(f64::INFINITY);
         assert!(at_inf <= 1e-6, "case {case}: accuracy inf off by {at_inf}");
         let (at_default, at_one) = (worst(BETA), worst(1.0));
+        println!("case {case}: worst {at_default} at the default, {at_one} at 1");
         assert!(
-            at_default < 0.05 && at_one < 0.25,
+            at_default < 0.005 && at_one < 0.15,
             "case {case}: {at_default} (beta 2), {at_one} (beta 1)"
         );
         // The default is today's answer: `winding_numbers` is `winding_numbers_at(BETA)`.

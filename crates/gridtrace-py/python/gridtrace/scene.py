@@ -467,8 +467,8 @@ class Scene:
     def compute_winding_number(self, query_points, nthreads: int = 0, accuracy: float = 2.0) -> np.ndarray:
         """The generalised winding number of all faces at each point (float32 ``[...]``).
         ``nthreads``: CPU threads (0: all cores). ``accuracy``: libigl's beta (Barill et al.
-        2018): a group of faces farther than ``accuracy`` times its radius is summed as one
-        dipole; larger is more accurate and slower, ``inf`` is the exact sum (docs/robustness.md
+        2018): a group of faces farther than ``accuracy`` times its radius is summed as its
+        second-order expansion (libigl's); larger is more accurate and slower, ``inf`` is the exact sum (docs/robustness.md
         gives the error measured at each)."""
         return self._values("winding_number", query_points, nthreads, accuracy)
 

@@ -45,6 +45,8 @@ pub trait Lanes<const N: usize>:
     /// `self > b ? self : b`, as SSE's `max` (NaN in either: `b`).
     fn max(self, b: Self) -> Self;
     fn abs(self) -> Self;
+    /// The correctly rounded square root (IEEE, as `f32::sqrt`), lane by lane.
+    fn sqrt(self) -> Self;
     /// Truncation of values in `0..2^24` (voxel coordinates): exact through `i32`.
     fn trunc_small(self) -> Self;
 }
@@ -130,6 +132,14 @@ impl Lanes<4> for Vec4 {
     #[inline(always)]
     fn abs(self) -> Self {
         Vec4::abs(self)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: SSE is part of x86-64; `Vec4` is an `__m128` there.
+        return Vec4::from(unsafe { std::arch::x86_64::_mm_sqrt_ps(self.into()) });
+        #[cfg(not(target_arch = "x86_64"))]
+        Vec4::from_array(self.to_array().map(f32::sqrt))
     }
     #[inline(always)]
     fn trunc_small(self) -> Self {
@@ -269,6 +279,10 @@ mod avx {
             F8(unsafe { _mm256_and_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX))) })
         }
         #[inline(always)]
+        fn sqrt(self) -> Self {
+            F8(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
         fn trunc_small(self) -> Self {
             F8(unsafe { _mm256_round_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(self.0) })
         }
@@ -318,6 +332,7 @@ mod tests {
                     (x + y, a + b),
                     (x * y, a * b),
                     (x.abs(), a.abs()),
+                    (x.sqrt(), a.sqrt()),
                 ] {
                     assert_eq!(got.to_array()[lane].to_bits(), want.to_bits(), "{N} lanes: {a} {b}");
                 }
@@ -343,7 +358,7 @@ mod tests {
                 b[k] = vals[(k + shift) % vals.len()];
             }
             let (x, y) = (L::from_array(a), L::from_array(b));
-            let sums = [x.min(y), x.max(y), x / y, x - y, x + y, x * y, x.abs()].map(L::to_array);
+            let sums = [x.min(y), x.max(y), x / y, x - y, x + y, x * y, x.abs(), x.sqrt()].map(L::to_array);
             let masks = [x.lt(y), x.le(y), x.gt(y), x.ge(y), x.ne(y), x.is_nan()].map(Mask::bits);
             for k in 0..N {
                 let (a, b) = (a[k], b[k]);
@@ -355,6 +370,7 @@ mod tests {
                     a + b,
                     a * b,
                     a.abs(),
+                    a.sqrt(),
                 ];
                 for (op, (got, want)) in sums.iter().zip(want).enumerate() {
                     assert_eq!(

@@ -9,8 +9,8 @@
 //! meshes away from the surface and the robust choice for others. On the surface itself the
 //! number jumps and the sign is whatever rounding gives; the distance there is (near) zero.
 //!
-//! Batches go through `FastWinding` (Barill et al. 2018: far nodes of a BVH summed as one
-//! dipole each, `winding/fast.rs`), parallel over points; `winding_number_brute` sums every
+//! Batches go through `FastWinding` (Barill et al. 2018: far nodes of a BVH summed as their
+//! second-order expansion, `winding/fast.rs`), parallel over points; `winding_number_brute` sums every
 //! triangle and is the oracle the tests hold it to.
 
 use glam::{DVec3, Vec3};
@@ -19,7 +19,9 @@ use super::closest::closest_points;
 use super::{Accel, TriAccel};
 use crate::Result;
 
+mod expansion;
 mod fast;
+mod wide;
 pub use fast::{BETA, FastWinding, check_accuracy};
 
 /// The signed solid angle triangle `t` subtends at `p`, in steradians, positive where `p` is on

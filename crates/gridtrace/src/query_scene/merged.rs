@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::sync::OnceLock;
 
 use crate::accel::winding::FastWinding;
-use crate::accel::{Accel, TriAccel};
+use crate::accel::{Accel, Structure, TriAccel};
 use crate::query::{QueryOptions, TraceMesh};
 use crate::{Error, Result};
 
@@ -133,9 +133,14 @@ impl Merged {
         self.accel().map_or(&[], |a| a.tris.as_slice())
     }
 
-    /// The winding-number tree, built on first use.
+    /// The winding-number tree, built on first use: over the ray BVH's binary tree where the
+    /// structure is a BVH (its SAH build is most of a tree's cost: 871,414 Dragon triangles,
+    /// docs/benchmarks.md), else a tree of its own.
     pub fn winding(&self) -> &FastWinding {
-        self.winding.get_or_init(|| FastWinding::build(self.tris()))
+        self.winding.get_or_init(|| match self.accel().map(|a| &a.structure) {
+            Some(Structure::Bvh(b)) => FastWinding::from_bvh(&b.bvh, self.tris()),
+            _ => FastWinding::build(self.tris()),
+        })
     }
 
     /// (geometry id, face index in it) of a kept triangle of the mesh.

@@ -1,28 +1,37 @@
 //! Fast winding numbers (Barill, Dickson, Schmidt, Levin, Jacobson 2018, "Fast Winding Numbers
-//! for Soups and Clouds"), first order: a binary BVH over the triangles (the library's SAH
-//! builder), and for each node the sum of its triangles' area vectors `A = sum (e1 x e2) / 2`,
-//! their area-weighted centre `c` and a radius `r` around `c` that holds them all.
+//! for Soups and Clouds"), second order, as libigl's: a BVH over the triangles (the library's
+//! SAH builder, collapsed to eight children a node: `wide.rs`), and for each node the moments
+//! of its triangles' area vectors about their area-weighted centre `c` to second order
+//! (`expansion.rs`) and a radius `r` around `c` that holds them all.
 //!
-//! Seen from a point `p` far from a node (`|c - p| > BETA * r`), the node's triangles subtend
-//! about the solid angle of one small flat patch at `c`: `A . (c - p) / |c - p|^3` (the dipole
-//! term of the expansion; its relative error falls as `(r / |c - p|)^2`). Nearer nodes are
-//! opened, down to exact solid angles (`solid_angle`) at the leaves. A point in empty space
-//! far from the mesh costs a handful of nodes instead of every triangle; a point near the
-//! surface opens the nodes around it and is exact there.
+//! Seen from a point `p` far from a node (`|c - p| > accuracy * r`, libigl's beta), the node's
+//! triangles subtend about what the expansion says: the dipole `N . (c - p) / |c - p|^3` and
+//! the first- and second-order corrections for the cluster's extent; the error falls as
+//! `(r / |c - p|)^3` relative to the dipole. Nearer nodes are opened, down to exact solid
+//! angles at the leaves. A point in empty space far from the mesh costs a handful of nodes
+//! instead of every triangle; a point near the surface opens the nodes around it and is exact
+//! there.
 //!
-//! A closed piece of surface has `A = 0` (its area vectors cancel) and subtends 0 from outside:
-//! the far-field term is right for it whatever its size. The error of an open piece is what the
-//! tests bound (against brute force, well under the 0.5 the inside test needs away from the
-//! surface).
+//! A closed piece of surface has all moments 0 (its area vectors cancel, and so do their
+//! moments) and subtends 0 from outside: the far-field term is right for it whatever its
+//! size. The error of an open piece is what the tests bound (against brute force) and
+//! docs/robustness.md measures on the shared meshes.
+//!
+//! A batch is walked in the order of the points' Morton codes (answers in the input order):
+//! neighbouring points open the same nodes, which stay in cache.
 
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
+use super::expansion::Moment;
 use super::solid_angle;
+use super::wide::WideTree;
+use crate::accel::bvh::MAX_LEAF;
 use crate::accel::{Aabb, Bvh, TriAccel};
 
-/// A node is summed as a dipole when the point is farther than `BETA` times its radius (the
-/// paper's accuracy parameter; 2 is its default, and the queries' default `accuracy`).
+/// A node is summed as its expansion when the point is farther than `BETA` times its radius
+/// (the paper's accuracy parameter; 2 is its default and libigl's, and the queries' default
+/// `accuracy`).
 pub const BETA: f64 = 2.0;
 
 /// Checks an `accuracy` (the paper's beta): a number above 0, `inf` for the exact sum. An error
@@ -38,66 +47,35 @@ pub fn check_accuracy(accuracy: f64) -> crate::Result<f64> {
     }
 }
 
-/// One node's far-field data.
-#[derive(Debug, Clone, Copy)]
-struct Moment {
-    /// Area-weighted centre of the node's triangles.
-    center: DVec3,
-    /// Sum of the triangles' area vectors (`(e1 x e2) / 2`).
-    area: DVec3,
-    /// Every vertex of the node's triangles is within this distance of `center`.
-    radius: f64,
-    /// Total area of the node's triangles (weights the centres when nodes merge).
-    total: f64,
-}
-
-/// A binary BVH with the far-field data of each node, over the triangles the queries are
-/// given (`winding_number` takes the same slice `build` did).
+/// A BVH with the far-field data of each node, over the triangles the queries are given
+/// (`winding_number` takes the same slice `build` did), collapsed to eight children a node.
 #[derive(Debug, Clone)]
 pub struct FastWinding {
-    bvh: Bvh,
-    moments: Vec<Moment>,
+    wide: WideTree,
     triangles: usize,
 }
 
 impl FastWinding {
-    /// Builds the tree and its moments over `tris`.
+    /// Builds the tree and its moments over `tris` (the library's SAH builder; `from_bvh`
+    /// where a BVH over them exists).
     pub fn build(tris: &[TriAccel]) -> FastWinding {
-        let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(&t.vertices())).collect();
+        let boxes: Vec<Aabb> = tris.par_iter().map(|t| Aabb::from_points(&t.vertices())).collect();
         let centers: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
-        let bvh = Bvh::build(&boxes, &centers);
-        let mut moments = vec![
-            Moment {
-                center: DVec3::ZERO,
-                area: DVec3::ZERO,
-                radius: 0.0,
-                total: 0.0,
-            };
-            bvh.nodes.len()
-        ];
-        if !tris.is_empty() {
-            // Children before parents: the reverse of a preorder (whatever the node numbering).
-            let mut order = Vec::with_capacity(bvh.nodes.len());
-            let mut stack = vec![0usize];
-            while let Some(i) = stack.pop() {
-                order.push(i);
-                let n = &bvh.nodes[i];
-                if !n.is_leaf() {
-                    stack.extend([n.first as usize, n.first as usize + 1]);
-                }
-            }
-            for &i in order.iter().rev() {
-                let n = bvh.nodes[i];
-                moments[i] = if n.is_leaf() {
-                    leaf_moment(tris, &bvh.prims[n.first as usize..(n.first + n.count) as usize])
-                } else {
-                    merge(&moments[n.first as usize], &moments[n.first as usize + 1])
-                };
-            }
-        }
+        FastWinding::from_bvh(&Bvh::build(&boxes, &centers), tris)
+    }
+
+    /// The moments and the wide tree over a binary BVH already built over `tris` (a scene's
+    /// ray BVH: its leaves hold up to `MAX_LEAF` triangles, one block of lanes). Any partition
+    /// of the triangles gives right answers (the moments and radii are the triangles' own);
+    /// the tree's shape only decides how many nodes a point opens.
+    pub fn from_bvh(bvh: &Bvh, tris: &[TriAccel]) -> FastWinding {
+        let wide = if tris.is_empty() {
+            WideTree::build(bvh, &[], tris)
+        } else {
+            WideTree::build(bvh, &node_moments(bvh, tris), tris)
+        };
         FastWinding {
-            bvh,
-            moments,
+            wide,
             triangles: tris.len(),
         }
     }
@@ -114,18 +92,25 @@ impl FastWinding {
         self.winding_numbers_at(tris, points, BETA)
     }
 
-    /// The winding numbers of a batch of points, on all cores, a node summed as a dipole where
-    /// the point is farther than `accuracy` times its radius (`check_accuracy`; `inf`: never, the
-    /// exact sum of every triangle's solid angle). Each worker keeps one stack
-    /// (`winding_number_with`).
+    /// The winding numbers of a batch of points, on all cores, a node summed as its expansion
+    /// where the point is farther than `accuracy` times its radius (`check_accuracy`; `inf`:
+    /// never, the exact sum of every triangle's solid angle in `f64`). The points are walked
+    /// in Morton order (module notes), each worker with one stack (`winding_number_with`);
+    /// the answers come back in the points' order.
     pub fn winding_numbers_at(&self, tris: &[TriAccel], points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
-        points
+        let order = morton_order(points);
+        let sorted: Vec<f32> = order
             .par_iter()
             .with_min_len(64)
-            .map_init(Vec::new, |stack, p| {
-                self.winding_number_with(tris, Vec3::from(*p), accuracy, stack)
+            .map_init(Vec::new, |stack, &i| {
+                self.winding_number_with(tris, Vec3::from(points[i as usize]), accuracy, stack)
             })
-            .collect()
+            .collect();
+        let mut out = vec![0.0; points.len()];
+        for (&i, w) in order.iter().zip(sorted) {
+            out[i as usize] = w;
+        }
+        out
     }
 
     /// `winding_number` with the caller's stack, kept between points: a batch's worker reuses
@@ -134,7 +119,7 @@ impl FastWinding {
     /// (perf, 200,000 points at the Stanford Bunny: 12% of samples in malloc, free and
     /// realloc, 11% in the kernel's futex wake-ups); with the stack kept, 1.8-2.0x.
     /// `accuracy` as `winding_numbers_at` takes it.
-    pub fn winding_number_with(&self, tris: &[TriAccel], p: Vec3, accuracy: f64, stack: &mut Vec<usize>) -> f32 {
+    pub fn winding_number_with(&self, tris: &[TriAccel], p: Vec3, accuracy: f64, stack: &mut Vec<u32>) -> f32 {
         assert_eq!(tris.len(), self.triangles, "the triangles the tree was built over");
         if !p.is_finite() {
             return f32::NAN;
@@ -142,82 +127,155 @@ impl FastWinding {
         if tris.is_empty() {
             return 0.0;
         }
-        let pd = p.as_dvec3();
-        let mut sum = 0.0f64;
-        stack.clear();
-        stack.push(0);
-        while let Some(i) = stack.pop() {
-            let m = &self.moments[i];
-            let to = m.center - pd;
-            let d2 = to.length_squared();
-            // With `accuracy` infinite the bound is infinite (or NaN for a node of radius 0,
-            // which compares false too): every node is opened and the sum is exact.
-            if d2 > (accuracy * m.radius).powi(2) {
-                sum += m.area.dot(to) / (d2 * d2.sqrt());
-                continue;
-            }
-            let n = &self.bvh.nodes[i];
-            if n.is_leaf() {
-                for &t in &self.bvh.prims[n.first as usize..(n.first + n.count) as usize] {
-                    sum += solid_angle(&tris[t as usize], p);
-                }
-            } else {
-                stack.extend([n.first as usize, n.first as usize + 1]);
-            }
-        }
+        let sum = if accuracy.is_finite() {
+            // Squared in `f64`: a finite accuracy beyond `f32`'s range is infinite here, and
+            // opens every node as `inf` does (through the `f32` leaves).
+            self.wide.solid_angle(p, (accuracy * accuracy) as f32, stack)
+        } else {
+            self.exact_solid_angle(tris, p)
+        };
         (sum / (4.0 * std::f64::consts::PI)) as f32
     }
-}
 
-/// The moment of a leaf's triangles. A leaf of zero total area takes its vertices' mean as its
-/// centre.
-fn leaf_moment(tris: &[TriAccel], prims: &[u32]) -> Moment {
-    let mut area = DVec3::ZERO;
-    let mut weighted = DVec3::ZERO;
-    let mut total = 0.0;
-    let mut mean = DVec3::ZERO;
-    for &t in prims {
-        let tri = &tris[t as usize];
-        let a = tri.normal().as_dvec3() * 0.5;
-        let [v0, v1, v2] = tri.vertices().map(|v| v.as_dvec3());
-        let centroid = (v0 + v1 + v2) / 3.0;
-        area += a;
-        weighted += centroid * a.length();
-        total += a.length();
-        mean += centroid;
-    }
-    let center = if total > 0.0 {
-        weighted / total
-    } else {
-        mean / prims.len().max(1) as f64
-    };
-    let radius = prims
-        .iter()
-        .flat_map(|&t| tris[t as usize].vertices())
-        .map(|v| (v.as_dvec3() - center).length())
-        .fold(0.0, f64::max);
-    Moment {
-        center,
-        area,
-        radius,
-        total,
+    /// Every triangle's solid angle at `p`, summed in `f64` (what `winding_number_brute`
+    /// sums: `accuracy = inf` is the exact sum, without the tree).
+    fn exact_solid_angle(&self, tris: &[TriAccel], p: Vec3) -> f64 {
+        tris.iter().map(|t| solid_angle(t, p)).sum()
     }
 }
 
-/// The moment of two children: centres weighted by area (halfway if neither has any), a
-/// radius that holds both children's spheres.
-fn merge(a: &Moment, b: &Moment) -> Moment {
-    let total = a.total + b.total;
-    let center = if total > 0.0 {
-        (a.center * a.total + b.center * b.total) / total
-    } else {
-        (a.center + b.center) * 0.5
+/// Each binary node's moments: leaves from their triangles in parallel (the radius through
+/// their vertices), then the inner nodes children first.
+fn node_moments(bvh: &Bvh, tris: &[TriAccel]) -> Vec<Moment> {
+    // Children before parents: the reverse of a preorder (whatever the node numbering).
+    let mut order = Vec::with_capacity(bvh.nodes.len());
+    let mut stack = vec![0usize];
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        let n = &bvh.nodes[i];
+        if !n.is_leaf() {
+            stack.extend([n.first as usize, n.first as usize + 1]);
+        }
+    }
+    let mut moments = vec![Moment::ZERO; bvh.nodes.len()];
+    moments.par_iter_mut().zip(&bvh.nodes).for_each(|(m, n)| {
+        if n.is_leaf() {
+            let prims = &bvh.prims[n.first as usize..(n.first + n.count) as usize];
+            let mut parts = [Moment::ZERO; MAX_LEAF];
+            for (part, &t) in parts.iter_mut().zip(prims) {
+                *part = Moment::triangle(&tris[t as usize]);
+            }
+            *m = Moment::merge(&parts[..prims.len()]).with_radius(
+                prims
+                    .iter()
+                    .flat_map(|&t| tris[t as usize].vertices())
+                    .map(|v| v.as_dvec3()),
+            );
+        }
+    });
+    for &i in order.iter().rev() {
+        let n = bvh.nodes[i];
+        if !n.is_leaf() {
+            let kids = [moments[n.first as usize], moments[n.first as usize + 1]];
+            moments[i] = Moment::merge(&kids);
+        }
+    }
+    moments
+}
+
+/// The indices of `points` sorted by their Morton codes (ten bits an axis over the finite
+/// points' bounding box; a point that is not finite sorts first, its code 0).
+fn morton_order(points: &[[f32; 3]]) -> Vec<u32> {
+    let finite = |p: &[f32; 3]| p.iter().all(|x| x.is_finite());
+    let bounds = points
+        .par_iter()
+        .filter(|p| finite(p))
+        .fold(|| Aabb::EMPTY, |b, p| b.grow(Vec3::from(*p)))
+        .reduce(|| Aabb::EMPTY, Aabb::union);
+    // A flat or single-point batch has no extent on some axis: those bits stay 0.
+    let extent = bounds.extent();
+    let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), 1023.0 / extent, Vec3::ZERO);
+    let spread = |x: u32| {
+        // Bits 0..10 to every third bit.
+        let mut x = x & 0x3ff;
+        x = (x | (x << 16)) & 0x0300_00ff;
+        x = (x | (x << 8)) & 0x0300_f00f;
+        x = (x | (x << 4)) & 0x030c_30c3;
+        (x | (x << 2)) & 0x0924_9249
     };
-    let radius = ((a.center - center).length() + a.radius).max((b.center - center).length() + b.radius);
-    Moment {
-        center,
-        area: a.area + b.area,
-        radius,
-        total,
+    let mut keyed: Vec<(u32, u32)> = points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let code = if finite(p) {
+                let c = ((Vec3::from(*p) - bounds.min) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+                spread(c.x as u32) | spread(c.y as u32) << 1 | spread(c.z as u32) << 2
+            } else {
+                0
+            };
+            (code, i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    keyed.into_iter().map(|(_, i)| i).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::winding::winding_number_brute;
+    use crate::util::Rng;
+
+    /// The walk in lanes of four (the path of a CPU without AVX2) and the batch's (eight lanes
+    /// here where the CPU has AVX2), over an open soup of 3,000 random triangles (its area
+    /// vectors do not cancel: the expansion's worst case) and points in, around and far from
+    /// it, Morton-sorted batches answering in input order: both within the bound of the
+    /// brute-force sum that docs/robustness.md gives per accuracy, and within 1e-5 of each
+    /// other (the same terms summed in other lanes).
+    #[test]
+    fn lane_widths_agree_with_brute_force() {
+        let mut rng = Rng::new(55);
+        let mut unit = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let tris: Vec<TriAccel> = (0..3000)
+            .map(|_| {
+                let a = unit();
+                TriAccel::new(a, a + (unit() - 0.5) * 0.1, a + (unit() - 0.5) * 0.1)
+            })
+            .collect();
+        let points: Vec<[f32; 3]> = (0..400)
+            .map(|i| ((unit() - 0.5) * [1.5, 3.0, 40.0][i % 3] + 0.5).to_array())
+            .collect();
+        let exact: Vec<f32> = points
+            .iter()
+            .map(|p| winding_number_brute(&tris, Vec3::from(*p)))
+            .collect();
+        let tree = FastWinding::build(&tris);
+        for (accuracy, bound) in [(1.0, 0.05), (2.0, 5e-3), (8.0, 1e-4)] {
+            let batch = tree.winding_numbers_at(&tris, &points, accuracy);
+            let mut stack = Vec::new();
+            let mut worst = [0.0f32; 3];
+            for ((p, w), x) in points.iter().zip(&batch).zip(&exact) {
+                let fours = tree
+                    .wide
+                    .solid_angle_fours(Vec3::from(*p), (accuracy * accuracy) as f32, &mut stack);
+                let fours = (fours / (4.0 * std::f64::consts::PI)) as f32;
+                worst[0] = worst[0].max((w - x).abs());
+                worst[1] = worst[1].max((fours - x).abs());
+                worst[2] = worst[2].max((fours - w).abs());
+            }
+            println!(
+                "accuracy {accuracy}: batch {}, fours {}, between {}",
+                worst[0], worst[1], worst[2]
+            );
+            assert!(
+                worst[0] < bound && worst[1] < bound,
+                "accuracy {accuracy}: {worst:?} against {bound}"
+            );
+            assert!(
+                worst[2] < 1e-5,
+                "accuracy {accuracy}: lane widths apart by {}",
+                worst[2]
+            );
+        }
     }
 }
