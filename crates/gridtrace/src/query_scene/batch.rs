@@ -2,11 +2,30 @@
 //! what the GPU path (`rays.rs`), the CPU path (`cpu_rays.rs`) and the all-hits walk share.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::INVALID_ID;
 use crate::accel::Ray;
 use crate::accel::huge::advise_huge_pages_within;
 use crate::{Error, Result};
+
+/// A chunk of `RayHits`' outputs: t, geometry ids, primitive ids, uvs, normals.
+pub(super) type HitsChunk<'a> = (
+    &'a mut [f32],
+    &'a mut [u32],
+    &'a mut [u32],
+    &'a mut [[f32; 2]],
+    &'a mut [[f32; 3]],
+);
+
+/// One row of `RayHits`' outputs, as `HitsChunk`.
+pub(super) type HitsRow<'a> = (
+    &'a mut f32,
+    &'a mut u32,
+    &'a mut u32,
+    &'a mut [f32; 2],
+    &'a mut [f32; 3],
+);
 
 /// Closest hits, one entry per ray (Open3D's `cast_rays` keys). A miss: `t_hit = inf`, ids
 /// `INVALID_ID`, uv and normal zero.
@@ -56,6 +75,35 @@ impl RayHits {
 
     pub fn len(&self) -> usize {
         self.t_hit.len()
+    }
+
+    /// The five outputs cut into chunks of `n` rows, a chunk's five side by side: what the
+    /// paths that fill them on all cores split.
+    pub(super) fn par_chunks_mut(&mut self, n: usize) -> impl IndexedParallelIterator<Item = HitsChunk<'_>> {
+        (
+            self.t_hit.par_chunks_mut(n),
+            self.geometry_ids.par_chunks_mut(n),
+            self.primitive_ids.par_chunks_mut(n),
+            self.primitive_uvs.par_chunks_mut(n),
+            self.primitive_normals.par_chunks_mut(n),
+        )
+            .into_par_iter()
+    }
+
+    /// Rows `rows` of the five outputs, a row's five entries side by side: what the GPU's
+    /// answers, a chunk at a time, are written into.
+    pub(super) fn par_rows_mut(
+        &mut self,
+        rows: std::ops::Range<usize>,
+    ) -> impl IndexedParallelIterator<Item = HitsRow<'_>> {
+        (
+            &mut self.t_hit[rows.clone()],
+            &mut self.geometry_ids[rows.clone()],
+            &mut self.primitive_ids[rows.clone()],
+            &mut self.primitive_uvs[rows.clone()],
+            &mut self.primitive_normals[rows],
+        )
+            .into_par_iter()
     }
 
     pub fn is_empty(&self) -> bool {

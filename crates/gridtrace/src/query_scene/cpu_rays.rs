@@ -34,41 +34,31 @@ pub(super) fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
 /// hits only (a miss keeps the zeros of `RayHits::zeroed`).
 pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], (t_near, t_far): (f32, f32), out: &mut RayHits) {
     let accel = &mesh.prepared().accel;
-    (
-        out.t_hit.par_chunks_mut(BATCH),
-        out.geometry_ids.par_chunks_mut(BATCH),
-        out.primitive_ids.par_chunks_mut(BATCH),
-        out.primitive_uvs.par_chunks_mut(BATCH),
-        out.primitive_normals.par_chunks_mut(BATCH),
-        rays.par_chunks(BATCH),
-    )
-        .into_par_iter()
-        .for_each_init(
-            || Vec::with_capacity(BATCH),
-            |made, (t, g, p, uv, n, r)| {
-                let bad = make_into(r, made);
-                accel.intersect_batch_each(made, t_near, t_far, |i, hit, normal| {
-                    if hit.is_hit() {
-                        let (id, prim) = m.name(hit.tri);
-                        t[i] = hit.t;
-                        g[i] = id;
-                        p[i] = prim;
-                        uv[i] = [hit.u, hit.v];
-                        n[i] = normal.normalize().to_array();
-                    } else {
-                        (t[i], g[i], p[i]) = (f32::INFINITY, INVALID_ID, INVALID_ID);
-                    }
-                });
-                if bad {
-                    for (i, q) in r.iter().enumerate() {
-                        if ray_of(q).is_none() {
-                            (t[i], g[i], p[i], uv[i], n[i]) =
-                                (f32::INFINITY, INVALID_ID, INVALID_ID, [0.0; 2], [0.0; 3]);
-                        }
+    out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
+        || Vec::with_capacity(BATCH),
+        |made, ((t, g, p, uv, n), r)| {
+            let bad = make_into(r, made);
+            accel.intersect_batch_each(made, t_near, t_far, |i, hit, normal| {
+                if hit.is_hit() {
+                    let (id, prim) = m.name(hit.tri);
+                    t[i] = hit.t;
+                    g[i] = id;
+                    p[i] = prim;
+                    uv[i] = [hit.u, hit.v];
+                    n[i] = normal.normalize().to_array();
+                } else {
+                    (t[i], g[i], p[i]) = (f32::INFINITY, INVALID_ID, INVALID_ID);
+                }
+            });
+            if bad {
+                for (i, q) in r.iter().enumerate() {
+                    if ray_of(q).is_none() {
+                        (t[i], g[i], p[i], uv[i], n[i]) = (f32::INFINITY, INVALID_ID, INVALID_ID, [0.0; 2], [0.0; 3]);
                     }
                 }
-            },
-        );
+            }
+        },
+    );
 }
 
 /// Whether each ray hits anything with `t_near < t < t_far`, into `out`.

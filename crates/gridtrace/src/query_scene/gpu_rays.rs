@@ -19,12 +19,12 @@ use rayon::prelude::*;
 
 use super::batch::{RayHits, RayOptions, STAND_IN, ray_of};
 use super::geometry::SceneMesh;
-use super::rays::RowRays;
+use super::rays::{RowRays, occlusion_into};
 use super::two_level::{NamedHit, TwoLevel};
 use super::{INVALID_ID, QueryScene};
 use crate::accel::{Accel, Hit};
 use crate::gpu::walks::two_level::{self, BottomLevels, Instance, TopLevel};
-use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource, gpu_hit, unpack_bits};
+use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource, gpu_hit};
 use crate::{Error, Result};
 
 /// What the scene's GPU holds and has written (`QueryScene::gpu_uploads`).
@@ -242,14 +242,7 @@ impl QueryScene {
                     return;
                 };
                 let end = first + hits.len();
-                (
-                    &mut out.t_hit[first..end],
-                    &mut out.geometry_ids[first..end],
-                    &mut out.primitive_ids[first..end],
-                    &mut out.primitive_uvs[first..end],
-                    &mut out.primitive_normals[first..end],
-                )
-                    .into_par_iter()
+                out.par_rows_mut(first..end)
                     .zip((hits, &rays[first..end]))
                     .with_min_len(1024)
                     .for_each(|((t, id, p, uv, n), (h, r))| {
@@ -274,17 +267,7 @@ impl QueryScene {
         let mut out = vec![false; rays.len()];
         self.on_gpu_two_level(two, |g| {
             cast(&mut g.renderer, rays, o, Answer::Occlusion, |first, answers| {
-                let ChunkAnswers::Occlusion(bits) = answers else {
-                    return;
-                };
-                let end = (first + bits.len() * 32).min(rays.len());
-                unpack_bits(bits, &mut out[first..end]);
-                // A stand-in's answer is not the row's: such a ray hits nothing.
-                out[first..end]
-                    .par_iter_mut()
-                    .zip(&rays[first..end])
-                    .with_min_len(4096)
-                    .for_each(|(o, r)| *o &= ray_of(r).is_some());
+                occlusion_into(&mut out, rays, first, answers)
             })
         })?;
         Ok(out)

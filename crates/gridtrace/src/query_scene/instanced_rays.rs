@@ -66,17 +66,10 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut 
     {
         return streamed_rays::cast(two, rays, shared, out);
     }
-    (
-        out.t_hit.par_chunks_mut(BATCH),
-        out.geometry_ids.par_chunks_mut(BATCH),
-        out.primitive_ids.par_chunks_mut(BATCH),
-        out.primitive_uvs.par_chunks_mut(BATCH),
-        out.primitive_normals.par_chunks_mut(BATCH),
-        rays.par_chunks(BATCH),
-    )
-        .into_par_iter()
+    out.par_chunks_mut(BATCH)
+        .zip(rays.par_chunks(BATCH))
         .enumerate()
-        .for_each(|(b, (t, g, p, uv, n, r))| {
+        .for_each(|(b, ((t, g, p, uv, n), r))| {
             for (k, q) in r.iter().enumerate() {
                 let (t_near, t_far, mask) = o.of(b * BATCH + k);
                 match ray_of(q).and_then(|ray| two.closest(&ray, t_near, t_far, mask)) {

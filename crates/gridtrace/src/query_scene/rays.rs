@@ -113,14 +113,7 @@ impl QueryScene {
                         return;
                     };
                     let end = first + hits.len();
-                    (
-                        &mut out.t_hit[first..end],
-                        &mut out.geometry_ids[first..end],
-                        &mut out.primitive_ids[first..end],
-                        &mut out.primitive_uvs[first..end],
-                        &mut out.primitive_normals[first..end],
-                    )
-                        .into_par_iter()
+                    out.par_rows_mut(first..end)
                         .zip((hits, &rays[first..end]))
                         .with_min_len(1024)
                         .for_each(|((t, g, p, uv, n), (h, r))| {
@@ -183,17 +176,7 @@ impl QueryScene {
                 let mut out = vec![false; rays.len()];
                 let source = RowRays { rows: rays };
                 gpu.cast(&source, (t_near, t_far), Answer::Occlusion, |first, answers| {
-                    let ChunkAnswers::Occlusion(bits) = answers else {
-                        return;
-                    };
-                    let end = (first + bits.len() * 32).min(rays.len());
-                    unpack_bits(bits, &mut out[first..end]);
-                    // A stand-in's answer is not the row's: such a ray hits nothing.
-                    out[first..end]
-                        .par_iter_mut()
-                        .zip(&rays[first..end])
-                        .with_min_len(4096)
-                        .for_each(|(o, r)| *o &= ray_of(r).is_some());
+                    occlusion_into(&mut out, rays, first, answers)
                 })?;
                 Ok(out)
             },
@@ -211,4 +194,19 @@ fn write_hit(m: &Merged, h: &Hit, t: &mut f32, g: &mut u32, p: &mut u32, uv: &mu
     *p = prim;
     *uv = [h.u, h.v];
     *n = m.tris()[h.tri as usize].normal().normalize().to_array();
+}
+
+/// A chunk of the GPU's occlusion answers (bits, from row `first`) into `out`; a ray the GPU
+/// traced as a stand-in (`ray_of`: it cannot hit) is not occluded.
+pub(super) fn occlusion_into(out: &mut [bool], rays: &[[f32; 6]], first: usize, answers: ChunkAnswers<'_>) {
+    let ChunkAnswers::Occlusion(bits) = answers else {
+        return;
+    };
+    let end = (first + bits.len() * 32).min(rays.len());
+    unpack_bits(bits, &mut out[first..end]);
+    out[first..end]
+        .par_iter_mut()
+        .zip(&rays[first..end])
+        .with_min_len(4096)
+        .for_each(|(o, r)| *o &= ray_of(r).is_some());
 }

@@ -58,7 +58,7 @@ impl Scratch {
         self.world.extend(rays.iter().map(ray_of));
         self.pairs.clear();
         // `tnear > tfar` (or NaN) misses (Embree's rule): nothing to pair.
-        if !(t_near <= t_far) {
+        if t_near > t_far || t_near.is_nan() || t_far.is_nan() {
             return;
         }
         for (k, ray) in self.world.iter().enumerate() {
@@ -92,16 +92,9 @@ impl Scratch {
 /// into `out` (every entry written).
 pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out: &mut RayHits) {
     let (t_near, t_far, _) = opts;
-    (
-        out.t_hit.par_chunks_mut(BATCH),
-        out.geometry_ids.par_chunks_mut(BATCH),
-        out.primitive_ids.par_chunks_mut(BATCH),
-        out.primitive_uvs.par_chunks_mut(BATCH),
-        out.primitive_normals.par_chunks_mut(BATCH),
-        rays.par_chunks(BATCH),
-    )
-        .into_par_iter()
-        .for_each_init(Scratch::default, |s, (t, g, p, uv, n, r)| {
+    out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
+        Scratch::default,
+        |s, ((t, g, p, uv, n), r)| {
             s.meet(two, r, opts);
             s.best.clear();
             s.best.resize(r.len(), (Hit::MISS, u32::MAX, Vec3::ZERO));
@@ -133,7 +126,8 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out
                     n[k] = normal.to_array();
                 }
             }
-        });
+        },
+    );
 }
 
 /// Whether each ray hits anything with `t_near <= t < t_far` among instances whose mask shares
