@@ -1,4 +1,4 @@
-//! Lanes of `f32`: the SIMD vocabulary that the packet triangle test (`triangle.rs`) and the
+//! Lanes of `f32`: the SIMD vocabulary that the packet triangle test (`triangle/packed.rs`) and the
 //! irregular grid's packet walk (`irregular/packet.rs`) are written in, once, for four lanes
 //! (glam's `Vec4`, SSE) and for eight (`F8`, one AVX register, only in code compiled for AVX2;
 //! without AVX2 a packet of eight runs as two packets of four).

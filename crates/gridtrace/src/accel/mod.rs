@@ -4,7 +4,7 @@
 //!
 //! Every structure keeps one contract (`contract::AccelStructure`: build, update, bounds,
 //! memory, reports, closest and any hits for rays, packets and batches) over `TriAccel`s
-//! (`triangle.rs`, the one edge-safe triangle test all share), and has one row in the registry
+//! (`triangle/`, the one edge-safe triangle test all share; its lane forms in `triangle/packed.rs`), and has one row in the registry
 //! (`registry.rs`: names, aliases, parameters). What they share lives beside them, not in one of
 //! them: `binning` (bounds, candidate cells, counting sort), `resolution`, `tri_box`, `lattice`
 //! (DDA basics), `simd` (AVX2, prefetch, packet width), `lanes`. No structure imports another.

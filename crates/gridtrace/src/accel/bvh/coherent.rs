@@ -374,7 +374,7 @@ impl BvhAccel {
                         u: u[r],
                         v: v[r],
                     };
-                    // A hit has `t >= t_min >= 0`, finite, and +0 for zero (`triangle.rs`), so the next float up
+                    // A hit has `t >= t_min >= 0`, finite, and +0 for zero (`triangle/`), so the next float up
                     // is the next bit pattern.
                     s.limit[r] = f32::from_bits(t[r].to_bits() + 1);
                     s.t_box[r] = t[r] * T_SLOP;
