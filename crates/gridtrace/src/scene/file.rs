@@ -135,20 +135,63 @@ struct PlacementDef {
 impl PlacementDef {
     /// The matrix, or `None` when an entry is not finite.
     fn matrix(&self) -> Option<Mat4> {
-        let scale = self.scale.as_ref().map(Rgb::vec).unwrap_or(Vec3::ONE);
-        let rot = self.rotate.map(Vec3::from).unwrap_or(Vec3::ZERO);
-        let xf = Mat4::from_scale_rotation_translation(
-            scale,
-            Quat::from_euler(
-                EulerRot::ZYX,
-                rot.z.to_radians(),
-                rot.y.to_radians(),
-                rot.x.to_radians(),
-            ),
-            Vec3::from(self.translate.unwrap_or([0.0; 3])),
-        );
-        xf.is_finite().then_some(xf)
+        placement(self.translate, self.rotate, self.scale.as_ref())
     }
+}
+
+/// `translate * rotate * scale` (each optional: none, none, one), or `None` when an entry is not
+/// finite: an object's own transform and each of its `copies`.
+fn placement(translate: Option<[f32; 3]>, rotate: Option<[f32; 3]>, scale: Option<&Rgb>) -> Option<Mat4> {
+    let scale = scale.map(Rgb::vec).unwrap_or(Vec3::ONE);
+    let rot = rotate.map(Vec3::from).unwrap_or(Vec3::ZERO);
+    let xf = Mat4::from_scale_rotation_translation(
+        scale,
+        Quat::from_euler(
+            EulerRot::ZYX,
+            rot.z.to_radians(),
+            rot.y.to_radians(),
+            rot.x.to_radians(),
+        ),
+        Vec3::from(translate.unwrap_or([0.0; 3])),
+    );
+    xf.is_finite().then_some(xf)
+}
+
+/// An object's triangles: its mesh file (relative to `base`), a built-in scene's geometry or
+/// a procedural shape, exactly one of them; the error without its place (the caller adds it).
+fn object_mesh(o: &ObjectDef, base: &Path) -> std::result::Result<crate::Mesh, String> {
+    let given = [o.mesh.is_some(), o.shape.is_some(), o.builtin.is_some()]
+        .iter()
+        .filter(|b| **b)
+        .count();
+    if given != 1 {
+        return Err("an object needs exactly one of 'mesh', 'shape' or 'builtin'".into());
+    }
+    if let Some(file) = &o.mesh {
+        // The mesh's own error (file and place in it), and where the scene refers to it.
+        return crate::io::load_mesh(&base.join(file)).map_err(|e| format!("mesh '{file}': {e}"));
+    }
+    if let Some(name) = &o.builtin {
+        return builtin::scene(name)
+            .map(|s| s.mesh)
+            .ok_or_else(|| format!("unknown builtin scene '{name}'"));
+    }
+    let min = Vec3::from(o.min.unwrap_or([-1.0; 3]));
+    let max = Vec3::from(o.max.unwrap_or([1.0; 3]));
+    Ok(match o.shape.as_deref().unwrap_or_default() {
+        "icosphere" | "sphere" => icosphere(Vec3::ZERO, o.radius.unwrap_or(1.0), o.level.unwrap_or(3).min(8)),
+        "box" => box_mesh(min, max, o.subdiv.unwrap_or(1).min(1024), false),
+        "room" => box_mesh(min, max, o.subdiv.unwrap_or(1).min(1024), true),
+        "plane" => plane(o.size.unwrap_or(2.0), o.subdiv.unwrap_or(1).min(4096)),
+        "torus-knot" => torus_knot(
+            o.p.unwrap_or(2),
+            o.q.unwrap_or(3),
+            o.tube.unwrap_or(0.15),
+            o.rings.unwrap_or(84).clamp(3, 1 << 16),
+            o.sides.unwrap_or(6).clamp(3, 1 << 10),
+        ),
+        other => return Err(format!("unknown shape '{other}'")),
+    })
 }
 
 /// Triangles the copies of one object may make in all: a typo in `copies` (or a big mesh copied
@@ -240,13 +283,7 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             ),
             None => None,
         };
-        let own = PlacementDef {
-            translate: o.translate,
-            rotate: o.rotate,
-            scale: o.scale.as_ref().map(|r| Rgb::Rgb(r.vec().to_array())),
-        };
-        let xf = own
-            .matrix()
+        let xf = placement(o.translate, o.rotate, o.scale.as_ref())
             .ok_or_else(|| err("non-finite transform (translate, rotate or scale)".into()))?;
         let copies = match &o.copies {
             None => vec![Mat4::IDENTITY],
@@ -263,39 +300,7 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
                 })
                 .collect::<Result<Vec<_>>>()?,
         };
-        let given = [o.mesh.is_some(), o.shape.is_some(), o.builtin.is_some()]
-            .iter()
-            .filter(|b| **b)
-            .count();
-        if given != 1 {
-            return Err(err("an object needs exactly one of 'mesh', 'shape' or 'builtin'".into()));
-        }
-        let mesh = if let Some(file) = &o.mesh {
-            // The mesh's own error (file and place in it), and where the scene refers to it.
-            crate::io::load_mesh(&base.join(file)).map_err(|e| err(format!("mesh '{file}': {e}")))?
-        } else if let Some(name) = &o.builtin {
-            builtin::scene(name)
-                .ok_or_else(|| err(format!("unknown builtin scene '{name}'")))?
-                .mesh
-        } else {
-            let shape = o.shape.as_deref().unwrap_or_default();
-            let min = Vec3::from(o.min.unwrap_or([-1.0; 3]));
-            let max = Vec3::from(o.max.unwrap_or([1.0; 3]));
-            match shape {
-                "icosphere" | "sphere" => icosphere(Vec3::ZERO, o.radius.unwrap_or(1.0), o.level.unwrap_or(3).min(8)),
-                "box" => box_mesh(min, max, o.subdiv.unwrap_or(1).min(1024), false),
-                "room" => box_mesh(min, max, o.subdiv.unwrap_or(1).min(1024), true),
-                "plane" => plane(o.size.unwrap_or(2.0), o.subdiv.unwrap_or(1).min(4096)),
-                "torus-knot" => torus_knot(
-                    o.p.unwrap_or(2),
-                    o.q.unwrap_or(3),
-                    o.tube.unwrap_or(0.15),
-                    o.rings.unwrap_or(84).clamp(3, 1 << 16),
-                    o.sides.unwrap_or(6).clamp(3, 1 << 10),
-                ),
-                other => return Err(err(format!("unknown shape '{other}'"))),
-            }
-        };
+        let mesh = object_mesh(o, base).map_err(err)?;
         if mesh.triangles.len().saturating_mul(copies.len()) > MAX_COPIED_TRIANGLES {
             return Err(err(format!(
                 "{} copies of {} triangles are more than {MAX_COPIED_TRIANGLES} triangles",
@@ -304,17 +309,13 @@ pub fn parse_scene(bytes: &[u8], path: &Path) -> Result<Scene> {
             )));
         }
         // The mesh is read (or made) once; each copy adds its triangles placed by its own
-        // transform after the object's. The renderer traces one merged structure over them.
-        let last = copies.len() - 1;
-        let mut mesh = Some(mesh);
-        for (k, copy) in copies.iter().enumerate() {
-            let m = if k == last {
-                mesh.take().expect("moved once")
-            } else {
-                mesh.clone().expect("kept")
-            };
-            scene.add_mesh(m, *copy * xf, material.clone());
+        // transform after the object's (the last takes the mesh itself). The renderer traces
+        // one merged structure over them.
+        let (last, others) = copies.split_last().expect("at least one copy");
+        for copy in others {
+            scene.add_mesh(mesh.clone(), *copy * xf, material.clone());
         }
+        scene.add_mesh(mesh, *last * xf, material);
     }
     if scene.mesh.triangles.is_empty() {
         return Err(Error::parse(
