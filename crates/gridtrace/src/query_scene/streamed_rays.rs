@@ -46,7 +46,6 @@ struct Scratch {
     /// geometric normal (handed over by the batch walk while the face is in cache: looking
     /// the face up again afterwards cost random rays a cache miss a hit).
     best: Vec<(Hit, u32, Vec3)>,
-    occluded: Vec<bool>,
     /// One instance's rays' any-hit answers.
     any: Vec<bool>,
 }
@@ -70,13 +69,13 @@ impl Scratch {
     }
 
     /// The rays of one instance's pairs (`group`) carried into its mesh's space, into `local`
-    /// and `which`, but for those `needed(self, ray)` refuses.
-    fn carry_group(&mut self, two: &TwoLevel, group: &[(u32, u32)], needed: impl Fn(&Self, usize) -> bool) {
+    /// and `which`, but for those `needed(ray)` refuses.
+    fn carry_group(&mut self, two: &TwoLevel, group: &[(u32, u32)], needed: impl Fn(usize) -> bool) {
         let to_local = two.placed[group[0].0 as usize].to_local;
         self.local.clear();
         self.which.clear();
         for &(_, k) in group {
-            if !needed(self, k as usize) {
+            if !needed(k as usize) {
                 continue;
             }
             let ray = self.world[k as usize]
@@ -103,7 +102,7 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out
             // one: of hits at the same t, the lower instance's (the lower id's) is kept.
             for group in pairs.chunk_by(|a, b| a.0 == b.0) {
                 let i = group[0].0;
-                s.carry_group(two, group, |_, _| true);
+                s.carry_group(two, group, |_| true);
                 let best = &mut s.best;
                 let which = &s.which;
                 two.accel_of(i)
@@ -138,12 +137,11 @@ pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32),
         .zip(rays.par_chunks(BATCH))
         .for_each_init(Scratch::default, |s, (o, r)| {
             s.meet(two, r, opts);
-            s.occluded.clear();
-            s.occluded.resize(r.len(), false);
+            o.fill(false);
             let pairs = std::mem::take(&mut s.pairs);
             for group in pairs.chunk_by(|a, b| a.0 == b.0) {
                 // A ray occluded by an earlier instance is done.
-                s.carry_group(two, group, |s, k| !s.occluded[k]);
+                s.carry_group(two, group, |k| !o[k]);
                 if s.local.is_empty() {
                     continue;
                 }
@@ -152,10 +150,9 @@ pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32),
                 two.accel_of(group[0].0)
                     .occluded_batch(&s.local, t_near, t_far, &mut s.any);
                 for (j, hit) in s.any.iter().enumerate() {
-                    s.occluded[s.which[j] as usize] |= hit;
+                    o[s.which[j] as usize] |= hit;
                 }
             }
             s.pairs = pairs;
-            o.copy_from_slice(&s.occluded);
         });
 }
