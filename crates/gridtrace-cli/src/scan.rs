@@ -148,16 +148,7 @@ fn make_sensor(a: &ScanArgs) -> gridtrace::Result<Sensor> {
     let lidar = if name.to_ascii_lowercase().ends_with(".toml") {
         let mut l = sensor::load_beam_table(std::path::Path::new(name))?;
         if let Some(steps) = a.azimuth_steps {
-            l = sensor::Lidar::new(
-                l.elevations_deg.clone(),
-                steps,
-                l.azimuth_range_deg,
-                l.min_range,
-                l.max_range,
-            )
-            .and_then(|n| n.with_azimuth_offsets(l.azimuth_offsets_deg.clone()))
-            .and_then(|n| n.with_origin_offsets(l.origin_offsets.clone()))
-            .map_err(|e| for_arg("--azimuth-steps", e))?;
+            l = l.with_azimuth_steps(steps).map_err(|e| for_arg("--azimuth-steps", e))?;
         }
         l
     } else {

@@ -86,6 +86,24 @@ impl Lidar {
         })
     }
 
+    /// The same LiDAR with `azimuth_steps` columns a turn (> 0), its table and offsets kept.
+    pub fn with_azimuth_steps(self, azimuth_steps: u32) -> Result<Lidar> {
+        let Lidar {
+            elevations_deg,
+            azimuth_range_deg,
+            min_range,
+            max_range,
+            azimuth_offsets_deg,
+            origin_offsets,
+            ..
+        } = self;
+        Ok(Lidar {
+            azimuth_offsets_deg,
+            origin_offsets,
+            ..Lidar::new(elevations_deg, azimuth_steps, azimuth_range_deg, min_range, max_range)?
+        })
+    }
+
     /// The same LiDAR with per-beam azimuth offsets (degrees, one per beam).
     pub fn with_azimuth_offsets(mut self, offsets_deg: Vec<f32>) -> Result<Lidar> {
         self.check_per_beam("azimuth_offsets_deg", offsets_deg.len())?;
@@ -177,6 +195,21 @@ mod tests {
         assert!(d.abs_diff_eq(Vec3::new(a.cos(), a.sin(), 0.0), 1e-6));
         let b = 135.0f32.to_radians();
         assert!(o.abs_diff_eq(Vec3::new(0.1 * b.cos(), 0.1 * b.sin(), 0.2), 1e-6));
+    }
+
+    #[test]
+    fn new_azimuth_steps_keep_the_table_and_offsets() {
+        let l = Lidar::new(vec![5.0, -5.0], 4, (-90.0, 90.0), 0.5, 20.0)
+            .and_then(|l| l.with_azimuth_offsets(vec![1.0, -1.0]))
+            .and_then(|l| l.with_origin_offsets(vec![[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]]))
+            .unwrap();
+        let want = Lidar::new(vec![5.0, -5.0], 12, (-90.0, 90.0), 0.5, 20.0)
+            .and_then(|l| l.with_azimuth_offsets(vec![1.0, -1.0]))
+            .and_then(|l| l.with_origin_offsets(vec![[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]]))
+            .unwrap();
+        assert_eq!(l.clone().with_azimuth_steps(12).unwrap(), want);
+        let e = l.with_azimuth_steps(0).unwrap_err().to_string();
+        assert!(e.contains("azimuth_steps must be > 0"), "{e}");
     }
 
     #[test]
