@@ -35,6 +35,24 @@ fn read_cloud(path: &std::path::Path) -> Vec<[f32; 4]> {
         .collect()
 }
 
+/// `gridtrace scan` of the room mesh `obj` alone, z up, with `extra` arguments.
+fn scan_room(obj: &std::path::Path, extra: &[&str]) -> (bool, String) {
+    let mut args = vec!["scan", "--mesh", obj.to_str().unwrap(), "--no-floor", "--up", "0,0,1"];
+    args.extend_from_slice(extra);
+    gridtrace(&args)
+}
+
+/// Every point of `cloud` lies on a wall of the room (one coordinate at +-5) at its range's
+/// distance from the sensor at `at`.
+fn assert_on_walls_at_range(cloud: &[[f32; 4]], at: [f32; 3]) {
+    for [x, y, z, range] in cloud {
+        let p = [*x, *y, *z];
+        assert!(p.iter().any(|c| (c.abs() - 5.0).abs() < 1e-4), "{p:?} is on no wall");
+        let d = p.iter().zip(at).map(|(c, a)| (c - a) * (c - a)).sum::<f32>().sqrt();
+        assert!((d - range).abs() <= 1e-5 * range, "{p:?}: range {range}, distance {d}");
+    }
+}
+
 #[test]
 fn a_lidar_in_a_room_returns_points_on_its_walls() {
     let dir = scratch("room");
@@ -43,41 +61,36 @@ fn a_lidar_in_a_room_returns_points_on_its_walls() {
     let (ply, png) = (dir.join("cloud.ply"), dir.join("range.png"));
     // A level VLP-16 at (1, 2, 0.5) facing +x, z up; 90 columns.
     let at = [1.0f32, 2.0, 0.5];
-    let (ok, out) = gridtrace(&[
-        "scan",
-        "--mesh",
-        obj.to_str().unwrap(),
-        "--no-floor",
-        "--lidar",
-        "vlp16",
-        "--azimuth-steps",
-        "90",
-        "--at",
-        "1,2,0.5",
-        "--toward",
-        "3,2,0.5",
-        "--up",
-        "0,0,1",
-        "-o",
-        ply.to_str().unwrap(),
-        "--range-png",
-        png.to_str().unwrap(),
-    ]);
+    let (ok, out) = scan_room(
+        &obj,
+        &[
+            "--lidar",
+            "vlp16",
+            "--azimuth-steps",
+            "90",
+            "--at",
+            "1,2,0.5",
+            "--toward",
+            "3,2,0.5",
+            "-o",
+            ply.to_str().unwrap(),
+            "--range-png",
+            png.to_str().unwrap(),
+        ],
+    );
     assert!(ok, "{out}");
     assert!(out.contains("returns 1440 of 1440 rays"), "{out}");
     let cloud = read_cloud(&ply);
     assert_eq!(cloud.len(), 16 * 90);
+    assert_on_walls_at_range(&cloud, at);
     let mut rising = 0;
-    for [x, y, z, range] in &cloud {
-        let p = [*x, *y, *z];
-        // On a wall: one coordinate at +-5.
-        assert!(p.iter().any(|c| (c.abs() - 5.0).abs() < 1e-4), "{p:?} is on no wall");
-        // The range is the distance from the sensor.
-        let d = p.iter().zip(at).map(|(c, a)| (c - a) * (c - a)).sum::<f32>().sqrt();
-        assert!((d - range).abs() <= 1e-5 * range, "{p:?}: range {range}, distance {d}");
+    for [_, _, z, range] in &cloud {
         // VLP-16 beams run +15..-15 degrees; none points further up or down.
-        let slope = (z - at[2]) / d;
-        assert!(slope.abs() <= (15.0f32 + 1e-3).to_radians().sin(), "{p:?}");
+        let slope = (z - at[2]) / range;
+        assert!(
+            slope.abs() <= (15.0f32 + 1e-3).to_radians().sin(),
+            "z {z} at range {range}"
+        );
         rising += (slope > 0.0) as usize;
     }
     // Eight beams look up, eight down.
@@ -97,22 +110,19 @@ fn a_camera_and_a_beam_table_file_scan_as_asked() {
     let ply = dir.join("c.ply");
     // One level beam, four columns at -135, -45, 45, 135 degrees from the centre: corners at
     // 5 * sqrt(2) = 7.07 are beyond max_range, so nothing returns.
-    let (ok, out) = gridtrace(&[
-        "scan",
-        "--mesh",
-        obj.to_str().unwrap(),
-        "--no-floor",
-        "--lidar",
-        table.to_str().unwrap(),
-        "--at",
-        "0,0,0",
-        "--toward",
-        "1,0,0",
-        "--up",
-        "0,0,1",
-        "-o",
-        ply.to_str().unwrap(),
-    ]);
+    let (ok, out) = scan_room(
+        &obj,
+        &[
+            "--lidar",
+            table.to_str().unwrap(),
+            "--at",
+            "0,0,0",
+            "--toward",
+            "1,0,0",
+            "-o",
+            ply.to_str().unwrap(),
+        ],
+    );
     assert!(ok, "{out}");
     assert!(out.contains("returns 0 of 4 rays"), "{out}");
     assert!(read_cloud(&ply).is_empty());
@@ -121,29 +131,26 @@ fn a_camera_and_a_beam_table_file_scan_as_asked() {
     // the last frame's, 240 degrees round, from (2 cos 240, 2 sin 240, 0). Every pixel returns
     // a point on a wall at its distance from there.
     let png = dir.join("depth.png");
-    let (ok, out) = gridtrace(&[
-        "scan",
-        "--mesh",
-        obj.to_str().unwrap(),
-        "--no-floor",
-        "--camera",
-        "9x7",
-        "--fov",
-        "90",
-        "--at",
-        "2,0,0",
-        "--toward",
-        "0,0,0",
-        "--up",
-        "0,0,1",
-        "-o",
-        ply.to_str().unwrap(),
-        "--range-png",
-        png.to_str().unwrap(),
-        "--frames",
-        "3",
-        "--orbit",
-    ]);
+    let (ok, out) = scan_room(
+        &obj,
+        &[
+            "--camera",
+            "9x7",
+            "--fov",
+            "90",
+            "--at",
+            "2,0,0",
+            "--toward",
+            "0,0,0",
+            "-o",
+            ply.to_str().unwrap(),
+            "--range-png",
+            png.to_str().unwrap(),
+            "--frames",
+            "3",
+            "--orbit",
+        ],
+    );
     assert!(ok, "{out}");
     assert!(
         out.contains("returns 63 of 63 rays") && out.contains("3 scan(s)"),
@@ -153,11 +160,9 @@ fn a_camera_and_a_beam_table_file_scan_as_asked() {
     let at = [2.0 * turn.cos(), 2.0 * turn.sin(), 0.0];
     let cloud = read_cloud(&ply);
     assert_eq!(cloud.len(), 63);
-    for [x, y, z, range] in &cloud {
+    assert_on_walls_at_range(&cloud, at);
+    for [x, y, z, _] in &cloud {
         let p = [*x, *y, *z];
-        assert!(p.iter().any(|c| (c.abs() - 5.0).abs() < 1e-4), "{p:?} is on no wall");
-        let d = p.iter().zip(at).map(|(c, a)| (c - a) * (c - a)).sum::<f32>().sqrt();
-        assert!((d - range).abs() <= 1e-5 * range, "{p:?}: range {range}, distance {d}");
         // In front of the camera: towards the centre from where it stands.
         assert!(p.iter().zip(at).map(|(c, a)| (c - a) * -a).sum::<f32>() > 0.0, "{p:?}");
     }

@@ -719,25 +719,8 @@ fn flat(scene: &QueryScene, mask: u32, opts: QueryOptions) -> (QueryScene, Vec<(
 #[test]
 fn instances_answer_as_the_scene_merged_flat() {
     let mut rng = Rng::new(11);
-    let n = 1500;
-    let mut rays = Vec::with_capacity(n);
-    for _ in 0..n {
-        let o = Vec3::new(rng.range(-14.0, 14.0), rng.range(-14.0, 14.0), rng.range(-14.0, 14.0));
-        let target = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0));
-        let d = (target - o) * rng.range(0.05, 2.0);
-        rays.push([o.x, o.y, o.z, d.x, d.y, d.z]);
-    }
-    let t_near: Vec<f32> = (0..n)
-        .map(|i| if i % 4 == 0 { 0.0 } else { rng.range(0.0, 0.5) })
-        .collect();
-    // Some rays with t_far < t_near: they see nothing.
-    let t_far: Vec<f32> = (0..n)
-        .map(|i| match i % 5 {
-            0 => f32::INFINITY,
-            1 => t_near[i] * 0.5,
-            _ => t_near[i] + rng.range(0.0, 3.0),
-        })
-        .collect();
+    let (rays, t_near, t_far) = rays_with_intervals(&mut rng, 1500, false);
+    let n = rays.len();
     for kind in kinds() {
         let (scene, _) = instanced(cpu(kind), 3);
         let mut compared = 0;
@@ -957,6 +940,33 @@ fn top_nodes(n: u32) -> u32 {
     inner(n).max(1)
 }
 
+/// `n` random rays from a cube of side 28 towards the instances' region (and with `bad` a NaN
+/// ray after them), each with its interval: a quarter from 0, a fifth to infinity, a fifth with
+/// `t_far < t_near` (they see nothing).
+fn rays_with_intervals(rng: &mut Rng, n: usize, bad: bool) -> (Vec<[f32; 6]>, Vec<f32>, Vec<f32>) {
+    let mut rays = Vec::with_capacity(n + 1);
+    for _ in 0..n {
+        let o = Vec3::new(rng.range(-14.0, 14.0), rng.range(-14.0, 14.0), rng.range(-14.0, 14.0));
+        let target = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0));
+        let d = (target - o) * rng.range(0.05, 2.0);
+        rays.push([o.x, o.y, o.z, d.x, d.y, d.z]);
+    }
+    if bad {
+        rays.push([f32::NAN, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    }
+    let t_near: Vec<f32> = (0..rays.len())
+        .map(|i| if i % 4 == 0 { 0.0 } else { rng.range(0.0, 0.5) })
+        .collect();
+    let t_far: Vec<f32> = (0..rays.len())
+        .map(|i| match i % 5 {
+            0 => f32::INFINITY,
+            1 => t_near[i] * 0.5,
+            _ => t_near[i] + rng.range(0.0, 3.0),
+        })
+        .collect();
+    (rays, t_near, t_far)
+}
+
 /// The GPU's two levels (lavapipe in CI) answer as the CPU's, for each structure the GPU
 /// carries under a top level (the BVH, brute force, the grid with and without proximity
 /// clouds): 100 instances under random rotations,
@@ -973,26 +983,8 @@ fn gpu_two_levels_equal_cpu_two_levels() {
         return;
     }
     let mut rng = Rng::new(21);
-    let n = 1500;
-    let mut rays = Vec::with_capacity(n);
-    for _ in 0..n {
-        let o = Vec3::new(rng.range(-14.0, 14.0), rng.range(-14.0, 14.0), rng.range(-14.0, 14.0));
-        let target = Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0));
-        let d = (target - o) * rng.range(0.05, 2.0);
-        rays.push([o.x, o.y, o.z, d.x, d.y, d.z]);
-    }
-    rays.push([f32::NAN, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    let (rays, t_near, t_far) = rays_with_intervals(&mut rng, 1500, true);
     let n = rays.len();
-    let t_near: Vec<f32> = (0..n)
-        .map(|i| if i % 4 == 0 { 0.0 } else { rng.range(0.0, 0.5) })
-        .collect();
-    let t_far: Vec<f32> = (0..n)
-        .map(|i| match i % 5 {
-            0 => f32::INFINITY,
-            1 => t_near[i] * 0.5,
-            _ => t_near[i] + rng.range(0.0, 3.0),
-        })
-        .collect();
     let masks: Vec<u32> = (0..n).map(|i| [1, 2, 4 | 8, u32::MAX][i % 4]).collect();
     let each = RayOptions {
         t_near: PerRay::Each(&t_near),
