@@ -65,6 +65,30 @@ pub struct Bvh {
 }
 
 impl Bvh {
+    /// The binary nodes that stand for node `b` in a node of up to `width` children: a leaf
+    /// alone, else its two children, then again and again the inner one of largest `size`
+    /// opened into its two, until there are `width` or only leaves are left. How the binary
+    /// tree collapses into a wide one (the BVH's eight-wide nodes, the winding tree's).
+    pub fn wide_children(&self, b: usize, width: usize, size: impl Fn(usize) -> f64) -> Vec<usize> {
+        let bin = &self.nodes;
+        let mut kids: Vec<usize> = if bin[b].is_leaf() {
+            vec![b]
+        } else {
+            vec![bin[b].first as usize, bin[b].first as usize + 1]
+        };
+        while kids.len() < width {
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|&(_, &k)| !bin[k].is_leaf())
+                .max_by(|a, b| size(*a.1).total_cmp(&size(*b.1)));
+            let Some((pos, &k)) = open else { break };
+            kids.swap_remove(pos);
+            kids.extend([bin[k].first as usize, bin[k].first as usize + 1]);
+        }
+        kids
+    }
+
     /// Builds over primitives with the given boxes and centres (any point inside the box serves;
     /// the centroid gives the best trees). An empty input gives a single empty leaf.
     ///

@@ -98,22 +98,8 @@ pub(super) fn collapse(bvh: &Bvh, tris: &[TriAccel]) -> (Vec<WideNode>, Vec<TriA
     // (wide node to fill, binary node it stands for)
     let mut work = vec![(0usize, 0usize)];
     while let Some((wide, b)) = work.pop() {
-        let mut kids: Vec<usize> = if bin[b].is_leaf() {
-            vec![b]
-        } else {
-            vec![bin[b].first as usize, bin[b].first as usize + 1]
-        };
-        while kids.len() < WIDTH {
-            let open = kids
-                .iter()
-                .enumerate()
-                .filter(|&(_, &k)| !bin[k].is_leaf())
-                .max_by(|a, b| area(*a.1).total_cmp(&area(*b.1)));
-            let Some((pos, &k)) = open else { break };
-            kids.swap_remove(pos);
-            kids.push(bin[k].first as usize);
-            kids.push(bin[k].first as usize + 1);
-        }
+        // f32 to f64 is exact: the areas order as they are.
+        let kids = bvh.wide_children(b, WIDTH, |i| area(i) as f64);
         for (slot, &k) in kids.iter().enumerate() {
             let n = &bin[k];
             for a in 0..3 {

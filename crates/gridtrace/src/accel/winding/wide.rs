@@ -71,21 +71,7 @@ impl WideTree {
         tree.nodes.push(empty_node());
         let mut work = vec![(0usize, 0usize)];
         while let Some((wide, b)) = work.pop() {
-            let mut kids: Vec<usize> = if bin[b].is_leaf() {
-                vec![b]
-            } else {
-                vec![bin[b].first as usize, bin[b].first as usize + 1]
-            };
-            while kids.len() < WIDTH {
-                let open = kids
-                    .iter()
-                    .enumerate()
-                    .filter(|&(_, &k)| !bin[k].is_leaf())
-                    .max_by(|a, b| moments[*a.1].radius.total_cmp(&moments[*b.1].radius));
-                let Some((pos, &k)) = open else { break };
-                kids.swap_remove(pos);
-                kids.extend([bin[k].first as usize, bin[k].first as usize + 1]);
-            }
+            let kids = bvh.wide_children(b, WIDTH, |k| moments[k].radius);
             for (slot, &k) in kids.iter().enumerate() {
                 for (row, x) in moments[k].coefficients().into_iter().enumerate() {
                     tree.nodes[wide].rows[row][slot] = x;
