@@ -103,17 +103,18 @@ pub trait AccelStructure: Sized {
     }
 
     /// Closest hits of a batch handed to `f(i, hit, normal)` in any order, with the hit
-    /// triangle's unnormalised geometric normal (zero for a miss). On this thread.
+    /// triangle's unnormalised geometric normal (zero for a miss); ray `i` up to
+    /// `t_max.of(i)`. On this thread.
     fn intersect_batch_each(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         mut f: impl FnMut(usize, Hit, Vec3),
     ) {
         for (i, r) in rays.iter().enumerate() {
-            let hit = self.intersect(tris, r, t_min, t_max, &mut NoCounters);
+            let hit = self.intersect(tris, r, t_min, t_max.of(i), &mut NoCounters);
             f(i, hit, hit_normal(tris, &hit));
         }
     }
@@ -161,6 +162,26 @@ pub trait AccelStructure: Sized {
     fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
         for (r, o) in rays.iter().zip(out) {
             *o = self.occluded(tris, r, t_min, t_max, &mut NoCounters);
+        }
+    }
+}
+
+/// How far each ray of a batch is walked (`t < t_max`): one limit for all, or one a ray,
+/// indexed as the batch's rays (the two levels' streams: each ray up to its closest hit in the
+/// instances already walked).
+#[derive(Debug, Clone, Copy)]
+pub enum TMax<'a> {
+    One(f32),
+    Each(&'a [f32]),
+}
+
+impl TMax<'_> {
+    /// The limit of the batch's ray `i`.
+    #[inline(always)]
+    pub fn of(self, i: usize) -> f32 {
+        match self {
+            TMax::One(t) => t,
+            TMax::Each(t) => t[i],
         }
     }
 }

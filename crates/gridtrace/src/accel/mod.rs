@@ -39,7 +39,7 @@ pub use binning::grid_bounds;
 pub use brute::Brute;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
-pub use contract::AccelStructure;
+pub use contract::{AccelStructure, TMax};
 pub use grid::{Cell, Grid, GridLattice, GridStats, Stepping};
 pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
 pub use params::AccelParams;
@@ -368,6 +368,15 @@ impl Accel {
     /// rays as packets.
     #[inline]
     pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: f32, f: impl FnMut(usize, Hit, Vec3)) {
+        let t_max = TMax::One(t_max);
+        dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, f))
+    }
+
+    /// `intersect_batch_each` with each ray's own far limit, `rays[i]` up to `t_max[i]`.
+    #[inline]
+    pub fn intersect_batch_upto(&self, rays: &[Ray], t_min: f32, t_max: &[f32], f: impl FnMut(usize, Hit, Vec3)) {
+        assert_eq!(rays.len(), t_max.len(), "one limit per ray");
+        let t_max = TMax::Each(t_max);
         dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, f))
     }
 

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use super::huge::HugePageArray;
 use super::triangle::slack_pad;
-use super::{Aabb, Counters, Hit, PACKET, Ray, TriAccel, TriAccel4};
+use super::{Aabb, Counters, Hit, PACKET, Ray, TMax, TriAccel, TriAccel4};
 
 mod all_hits;
 mod box_test;
@@ -111,7 +111,7 @@ impl BvhAccel {
     /// Closest hits of a batch of rays, `out[i]` for `rays[i]`: the same answers as `intersect`,
     /// faster (`traced`).
     pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
-        self.traced::<false>(rays, t_min, t_max, |i, best| out[i] = self.result(best));
+        self.traced::<false>(rays, t_min, TMax::One(t_max), |i, best| out[i] = self.result(best));
     }
 
     /// Closest hits of a batch handed to `f(i, hit, normal)` as each ray `rays[i]` is done, in
@@ -120,7 +120,7 @@ impl BvhAccel {
     /// and still in cache. A caller can write its own output format here, without a pass over
     /// an intermediate array.
     #[inline]
-    pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: f32, mut f: impl FnMut(usize, Hit, Vec3)) {
+    pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: TMax<'_>, mut f: impl FnMut(usize, Hit, Vec3)) {
         self.traced::<false>(rays, t_min, t_max, |i, best| {
             let normal = if best.is_hit() {
                 let tri = best.tri as usize;
@@ -134,7 +134,7 @@ impl BvhAccel {
 
     /// Any-hit results of a batch of rays (as `intersect_batch`).
     pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
-        self.traced::<true>(rays, t_min, t_max, |i, best| out[i] = best.is_hit());
+        self.traced::<true>(rays, t_min, TMax::One(t_max), |i, best| out[i] = best.is_hit());
     }
 
     /// Traces a batch, handing each ray's walk result (`Walk::best`) to `finish(i, best)`.
@@ -144,7 +144,7 @@ impl BvhAccel {
     /// interleaved, each step prefetching what its ray touches next, so that one ray's wait
     /// for memory overlaps the others' work (incoherent rays spend most of their time waiting
     /// for nodes and triangles, one dependent load after another). The same answers either way.
-    fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, mut finish: impl FnMut(usize, &Hit)) {
+    fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: TMax<'_>, mut finish: impl FnMut(usize, &Hit)) {
         #[cfg(target_arch = "x86_64")]
         if crate::accel::simd::has_avx2() && rays.len() >= PACKET && coherent::packets_enabled() {
             let extent = self.extent();
@@ -155,10 +155,11 @@ impl BvhAccel {
                 let start = g * PACKET;
                 if group.len() == PACKET && coherent::coherent(group, extent) {
                     // SAFETY: the CPU has AVX2, checked above.
-                    let a = unsafe { self.walk_coherent::<ANY>(group, t_min, [t_max; PACKET]) };
+                    let limits = std::array::from_fn(|k| t_max.of(start + k));
+                    let a = unsafe { self.walk_coherent::<ANY>(group, t_min, limits) };
                     for (k, best) in a.best.iter().enumerate() {
                         if a.redo >> k & 1 != 0 {
-                            finish(start + k, &self.walk_best::<ANY>(&group[k], t_min, t_max));
+                            finish(start + k, &self.walk_best::<ANY>(&group[k], t_min, limits[k]));
                         } else {
                             finish(start + k, best);
                         }

@@ -7,7 +7,7 @@ use super::BvhAccel;
 use crate::Result;
 use crate::accel::AccelParams;
 use crate::accel::contract::AccelStructure;
-use crate::accel::{Counters, Hit, PACKET, Ray, TriAccel};
+use crate::accel::{Counters, Hit, PACKET, Ray, TMax, TriAccel};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for BvhAccel {
@@ -79,7 +79,7 @@ impl AccelStructure for BvhAccel {
         _tris: &[TriAccel],
         rays: &[Ray],
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         f: impl FnMut(usize, Hit, Vec3),
     ) {
         BvhAccel::intersect_batch_each(self, rays, t_min, t_max, f)

@@ -299,9 +299,9 @@ fn avx_and_baseline_traversals_agree() {
         let finish = |i: usize, w: &Walk| out[i] = accel.result(&w.best);
         if avx {
             // SAFETY: the CPU has AVX2, checked above.
-            unsafe { accel.interleaved_avx2::<false>(rays.iter().enumerate(), 0.0, f32::INFINITY, finish) }
+            unsafe { accel.interleaved_avx2::<false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish) }
         } else {
-            accel.interleaved_body::<false, false>(rays.iter().enumerate(), 0.0, f32::INFINITY, finish)
+            accel.interleaved_body::<false, false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish)
         }
         out
     };
@@ -310,9 +310,9 @@ fn avx_and_baseline_traversals_agree() {
         let finish = |i: usize, w: &Walk| out[i] = w.best.is_hit();
         if avx {
             // SAFETY: the CPU has AVX2, checked above.
-            unsafe { accel.interleaved_avx2::<true>(rays.iter().enumerate(), 0.0, 1.0, finish) }
+            unsafe { accel.interleaved_avx2::<true>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish) }
         } else {
-            accel.interleaved_body::<true, false>(rays.iter().enumerate(), 0.0, 1.0, finish)
+            accel.interleaved_body::<true, false>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish)
         }
         out
     };

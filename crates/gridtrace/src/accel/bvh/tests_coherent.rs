@@ -251,7 +251,7 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
             let mut blocked = vec![false; rays.len()];
             accel.occluded_batch(rays, t_min, t_max, &mut blocked);
             let mut each = vec![(Hit::MISS, Vec3::NAN); rays.len()];
-            accel.intersect_batch_each(rays, t_min, t_max, |i, hit, normal| each[i] = (hit, normal));
+            accel.intersect_batch_each(rays, t_min, TMax::One(t_max), |i, hit, normal| each[i] = (hit, normal));
             for (i, ray) in rays.iter().enumerate() {
                 let want = accel.intersect(ray, t_min, t_max, &mut NoCounters);
                 assert_eq!(bits(&got[i]), bits(&want), "{what} batch ray {i}");

@@ -7,7 +7,7 @@ use glam::{Vec3, Vec4};
 
 use crate::accel::simd::{has_avx2, prefetch};
 use crate::accel::triangle::{LaneRay, ShearedRay, intersect_lanes_cull};
-use crate::accel::{Counters, Hit, NoCounters, Ray};
+use crate::accel::{Counters, Hit, NoCounters, Ray, TMax};
 
 use super::BvhAccel;
 use super::box_test::{BoxRay, Pending, T_SLOP};
@@ -40,7 +40,7 @@ impl BvhAccel {
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
         #[cfg(target_arch = "x86_64")]
@@ -59,7 +59,7 @@ impl BvhAccel {
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
         self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
@@ -71,7 +71,7 @@ impl BvhAccel {
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
         self.interleaved_body::<ANY, true>(rays, t_min, t_max, finish)
@@ -92,18 +92,26 @@ impl BvhAccel {
         &self,
         mut rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         mut finish: impl FnMut(usize, &Walk),
     ) {
-        // The walks are reset in place for each new ray: a walk holds a few KiB of stack, which
-        // is never copied.
+        // The walks are set up and reset in place for each new ray: a walk holds a few KiB of
+        // stack, which is never copied. (Made by `Walk::new` and moved into the array, the
+        // eight cost a 44 KiB `memmove` a batch: a sixth of the two levels' time, whose
+        // batches are each instance's few rays.)
         let idle = Ray::new(Vec3::ZERO, Vec3::X);
-        let mut walks: [Walk; LANES] = std::array::from_fn(|_| Walk::new(&idle, t_min, t_max));
+        let mut slots: [MaybeUninit<Walk>; LANES] = [const { MaybeUninit::uninit() }; LANES];
+        for slot in &mut slots {
+            Walk::start_in(slot, &idle, t_min, 0.0);
+        }
+        // SAFETY: every slot was initialised just above (`start_in` writes every field but the
+        // stack, an array of `MaybeUninit`), and `MaybeUninit<Walk>` has `Walk`'s layout.
+        let walks = unsafe { &mut *(&raw mut slots).cast::<[Walk; LANES]>() };
         let mut item = [0usize; LANES];
         let mut live = 0u32;
         for (k, w) in walks.iter_mut().enumerate() {
             let Some((i, r)) = rays.next() else { break };
-            w.reset(r, t_min, t_max);
+            w.reset(r, t_min, t_max.of(i));
             item[k] = i;
             live |= 1 << k;
         }
@@ -120,14 +128,14 @@ impl BvhAccel {
                         live &= !(1 << k);
                         break;
                     };
-                    w.reset(r, t_min, t_max);
+                    w.reset(r, t_min, t_max.of(i));
                     item[k] = i;
                 }
                 self.prefetch(&w.current);
                 k = (k + 1) % LANES;
             }
         }
-        self.drain::<ANY, AVX>(&mut walks, &item, live, finish);
+        self.drain::<ANY, AVX>(walks, &item, live, finish);
     }
 
     /// Runs the walks of the `live` lanes to their ends (the batch's last rays).

@@ -18,7 +18,7 @@ use crate::accel::AccelParams;
 use crate::accel::bvh::BvhAccel;
 use crate::accel::closest::ClosestPoint;
 use crate::accel::contract::AccelStructure;
-use crate::accel::{Counters, Hit, PACKET, Ray, TriAccel};
+use crate::accel::{Counters, Hit, PACKET, Ray, TMax, TriAccel};
 
 /// The BVH kept beside the device's acceleration structures (see the module's note).
 #[derive(Debug, Clone)]
@@ -93,7 +93,7 @@ impl AccelStructure for Hwrt {
         tris: &[TriAccel],
         rays: &[Ray],
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         f: impl FnMut(usize, Hit, Vec3),
     ) {
         AccelStructure::intersect_batch_each(&self.bvh, tris, rays, t_min, t_max, f)

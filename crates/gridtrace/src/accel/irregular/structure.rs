@@ -6,7 +6,7 @@ use glam::Vec3;
 use super::{IrregularGrid, IrregularParams, IrregularStats};
 use crate::Result;
 use crate::accel::contract::{AccelStructure, dedup_hits, hit_normal};
-use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
+use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TMax, TriAccel, dims_str};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for IrregularGrid {
@@ -128,10 +128,21 @@ impl AccelStructure for IrregularGrid {
         tris: &[TriAccel],
         rays: &[Ray],
         t_min: f32,
-        t_max: f32,
+        t_max: TMax<'_>,
         mut f: impl FnMut(usize, Hit, Vec3),
     ) {
-        self.batch::<false>(tris, rays, t_min, t_max, |i, hit| f(i, hit, hit_normal(tris, &hit)))
+        match t_max {
+            TMax::One(t_max) => {
+                self.batch::<false>(tris, rays, t_min, t_max, |i, hit| f(i, hit, hit_normal(tris, &hit)))
+            }
+            // A limit a ray: the packets assume one (the two levels' streams; ray by ray).
+            TMax::Each(_) => {
+                for (i, r) in rays.iter().enumerate() {
+                    let hit = self.intersect(tris, r, t_min, t_max.of(i), &mut NoCounters);
+                    f(i, hit, hit_normal(tris, &hit));
+                }
+            }
+        }
     }
 
     fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
