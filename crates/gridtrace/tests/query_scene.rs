@@ -671,7 +671,7 @@ fn instanced(opts: QueryOptions, seed: u64) -> (QueryScene, Vec<(Vec<[f32; 3]>, 
         }
         let m = Mat4::from_scale_rotation_translation(
             scale,
-            Quat::from_axis_angle(axis, rng.range(0.0, 6.28)),
+            Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU)),
             Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0)),
         );
         let mask = 1 << rng.below(4);

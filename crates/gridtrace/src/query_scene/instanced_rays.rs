@@ -60,10 +60,8 @@ const LIST_BATCH: usize = 256;
 
 /// Closest hits into `out` (every entry written).
 pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut RayHits) {
-    // One interval and mask for every ray, few instances: the batch walks (`streamed_rays.rs`).
-    if let Some(shared) = o.uniform()
-        && two.instance_count() <= STREAM_MAX_INSTANCES
-    {
+    // One interval and mask for every ray: the batch walks, in rounds (`streamed_rays.rs`).
+    if let Some(shared) = o.uniform() {
         return streamed_rays::cast(two, rays, shared, out);
     }
     out.par_chunks_mut(BATCH)

@@ -5,12 +5,13 @@
 //!
 //! Why: the per-ray walk (`TwoLevel::closest`) calls the bottom level's single-ray walk, and the
 //! batch walk is what makes the flat path fast (the BVH interleaves rays to hide memory latency
-//! and takes coherent rays eight at a time). Measured on the Stanford Bunny as one instance,
-//! 307,200 rays, 2 threads (loaded machine): the per-ray walk was 2.7x the flat `Mesh.intersect`'s
-//! time on random rays, and the streams 1.0-1.2x. What the streams give up is pruning across
-//! instances (a ray's hit in one instance does not shorten its walk in the next; each instance's
-//! walk still stops at its own closest hit), and with many instances each one's share of a work
-//! item is too few rays to interleave: past `STREAM_MAX_INSTANCES` the per-ray walk is used.
+//! and takes coherent rays eight at a time). Closest hits go in rounds, nearest box first, each
+//! ray walked up to its closest hit so far (`cast`), which keeps the per-ray walk's pruning
+//! across instances. Measured (2026-11-28, `examples/instances_vs_flat.rs`, 1M random rays at
+//! K randomly turned and scaled Stanford Bunnies, two threads of a loaded machine, medians of
+//! 3 alternating rounds), the two levels' time over the same triangles merged flat: K = 100:
+//! 1.71x (3.17x through the per-ray walk before the rounds), 16: 1.26x, 4: 0.99x, 1: 0.93x.
+//! Occlusion (any hit) needs no order: each instance's rays together, a ray done once hit.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -22,14 +23,16 @@ use super::two_level::TwoLevel;
 
 use crate::accel::{Hit, Ray};
 
-/// Rays per work item, as on the other paths.
-const BATCH: usize = 1024;
+/// Rays per work item: more than the other paths' 1,024, so that each instance's share of a
+/// round is enough rays to interleave.
+const BATCH: usize = 4096;
 
-/// The most instances for which the streams beat the per-ray walk. Measured (2026-11-28, two
+/// The most instances for which the occlusion streams are taken over the per-ray walk.
+/// Measured for closest hits before the rounds and the four-wide top level (2026-11-28, two
 /// threads of a loaded machine, medians of 5 alternating rounds, 300,000 random rays at K
 /// randomly turned and scaled Stanford Bunnies, bvh), the per-ray walk's time over the
 /// streams': K = 1: 2.94, 2: 1.51, 4: 1.25, 8: 1.22, 16: 1.08, 100: 0.73 (each instance's
-/// share of a work item is then too few rays, and nothing prunes across instances).
+/// share of a work item was then too few rays). Not measured again for occlusion since.
 pub(super) const STREAM_MAX_INSTANCES: usize = 16;
 
 /// A worker's buffers, kept from item to item.
@@ -37,35 +40,45 @@ pub(super) const STREAM_MAX_INSTANCES: usize = 16;
 struct Scratch {
     /// The item's rays in world space (a stand-in for a ray that cannot hit: never walked).
     world: Vec<Option<Ray>>,
-    /// `(instance, ray)` for every instance box a ray crosses.
+    /// `(t_enter, instance)` for every instance box a ray enters, ray after ray (`starts[k]..
+    /// starts[k + 1]` are ray `k`'s), each ray's nearest first.
+    entries: Vec<(f32, u32)>,
+    starts: Vec<u32>,
+    /// `(instance, ray)`: the pairs of one round (or all of them, for occlusion), sorted by
+    /// instance.
     pairs: Vec<(u32, u32)>,
-    /// One instance's rays in its mesh's space, and which of the item's rays each is.
+    /// One instance's rays in its mesh's space, which of the item's rays each is, and how far
+    /// each is walked (its closest hit so far).
     local: Vec<Ray>,
     which: Vec<u32>,
-    /// The closest hit so far of each ray, its instance (`u32::MAX`: none) and its own-space
-    /// geometric normal (handed over by the batch walk while the face is in cache: looking
-    /// the face up again afterwards cost random rays a cache miss a hit).
+    limits: Vec<f32>,
+    /// The closest hit so far of each ray (`t` the limit: `t_far` before any), its instance
+    /// (`u32::MAX`: none) and its own-space geometric normal (handed over by the batch walk
+    /// while the face is in cache: looking the face up again afterwards cost random rays a
+    /// cache miss a hit).
     best: Vec<(Hit, u32, Vec3)>,
     /// One instance's rays' any-hit answers.
     any: Vec<bool>,
 }
 
 impl Scratch {
-    /// The item's rays and every `(instance, ray)` pair they meet, sorted by instance.
+    /// The item's rays and, for each, the instance boxes it enters, nearest first.
     fn meet(&mut self, two: &TwoLevel, rays: &[[f32; 6]], (t_near, t_far, mask): (f32, f32, u32)) {
         self.world.clear();
         self.world.extend(rays.iter().map(ray_of));
-        self.pairs.clear();
-        // `tnear > tfar` (or NaN) misses (Embree's rule): nothing to pair.
-        if t_near > t_far || t_near.is_nan() || t_far.is_nan() {
-            return;
-        }
-        for (k, ray) in self.world.iter().enumerate() {
-            if let Some(ray) = ray {
-                two.instances_on(ray, t_near, t_far, mask, |i| self.pairs.push((i, k as u32)));
+        self.entries.clear();
+        self.starts.clear();
+        self.starts.push(0);
+        // `tnear > tfar` (or NaN) misses (Embree's rule): nothing to enter.
+        let empty = t_near > t_far || t_near.is_nan() || t_far.is_nan();
+        for ray in &self.world {
+            let from = self.entries.len();
+            if let (Some(ray), false) = (ray, empty) {
+                two.entries_on(ray, t_near, t_far, mask, |i, t_enter| self.entries.push((t_enter, i)));
             }
+            self.entries[from..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            self.starts.push(self.entries.len() as u32);
         }
-        self.pairs.sort_unstable();
     }
 
     /// The rays of one instance's pairs (`group`) carried into its mesh's space, into `local`
@@ -85,10 +98,31 @@ impl Scratch {
             self.which.push(k);
         }
     }
+
+    /// Round `round`'s pairs: each ray's `round`-th nearest box, where the ray enters it
+    /// before its closest hit so far (a box entered at or past it cannot hold a nearer hit).
+    fn round(&mut self, round: usize) -> bool {
+        self.pairs.clear();
+        for (k, w) in self.starts.windows(2).enumerate() {
+            let e = w[0] as usize + round;
+            if e < w[1] as usize && self.entries[e].0 < self.best[k].0.t {
+                self.pairs.push((self.entries[e].1, k as u32));
+            }
+        }
+        self.pairs.sort_unstable();
+        !self.pairs.is_empty()
+    }
 }
 
 /// Closest hits with `t_near <= t < t_far` among instances whose mask shares a bit with `mask`,
 /// into `out` (every entry written).
+///
+/// In rounds: first every ray's nearest box, then its second nearest, and so on, each round's
+/// rays grouped by instance and walked together (interleaved) up to each ray's closest hit so
+/// far, and a box entered past that hit skipped: the pruning of the per-ray walk (which visits
+/// boxes nearest first and walks each up to the closest hit), with the batch walk's speed. Of
+/// hits at the same `t` in two instances, the nearer box's is kept (the later one's walk
+/// stops short of it).
 pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out: &mut RayHits) {
     let (t_near, t_far, _) = opts;
     out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
@@ -96,24 +130,29 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out
         |s, ((t, g, p, uv, n), r)| {
             s.meet(two, r, opts);
             s.best.clear();
-            s.best.resize(r.len(), (Hit::MISS, u32::MAX, Vec3::ZERO));
-            let pairs = std::mem::take(&mut s.pairs);
-            // Instances in index order, and a later one's hit replaces only a strictly nearer
-            // one: of hits at the same t, the lower instance's (the lower id's) is kept.
-            for group in pairs.chunk_by(|a, b| a.0 == b.0) {
-                let i = group[0].0;
-                s.carry_group(two, group, |_| true);
-                let best = &mut s.best;
-                let which = &s.which;
-                two.accel_of(i)
-                    .intersect_batch_each(&s.local, t_near, t_far, |j, hit, normal| {
-                        let k = which[j] as usize;
-                        if hit.is_hit() && hit.t < best[k].0.t {
-                            best[k] = (hit, i, normal);
-                        }
-                    });
+            s.best
+                .resize(r.len(), (Hit { t: t_far, ..Hit::MISS }, u32::MAX, Vec3::ZERO));
+            let mut round = 0;
+            while s.round(round) {
+                let pairs = std::mem::take(&mut s.pairs);
+
+                for group in pairs.chunk_by(|a, b| a.0 == b.0) {
+                    let i = group[0].0;
+                    s.carry_group(two, group, |_| true);
+                    s.limits.clear();
+                    s.limits.extend(s.which.iter().map(|&k| s.best[k as usize].0.t));
+                    let best = &mut s.best;
+                    let which = &s.which;
+                    two.accel_of(i)
+                        .intersect_batch_upto(&s.local, t_near, &s.limits, |j, hit, normal| {
+                            if hit.is_hit() {
+                                best[which[j] as usize] = (hit, i, normal);
+                            }
+                        });
+                }
+                s.pairs = pairs;
+                round += 1;
             }
-            s.pairs = pairs;
             for (k, (hit, i, normal)) in s.best.iter().enumerate() {
                 if *i == u32::MAX {
                     (t[k], g[k], p[k]) = (f32::INFINITY, INVALID_ID, INVALID_ID);
@@ -138,6 +177,15 @@ pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32),
         .for_each_init(Scratch::default, |s, (o, r)| {
             s.meet(two, r, opts);
             o.fill(false);
+            s.pairs.clear();
+            for (k, w) in s.starts.windows(2).enumerate() {
+                s.pairs.extend(
+                    s.entries[w[0] as usize..w[1] as usize]
+                        .iter()
+                        .map(|&(_, i)| (i, k as u32)),
+                );
+            }
+            s.pairs.sort_unstable();
             let pairs = std::mem::take(&mut s.pairs);
             for group in pairs.chunk_by(|a, b| a.0 == b.0) {
                 // A ray occluded by an earlier instance is done.

@@ -121,7 +121,7 @@ impl TwoLevel {
     pub fn closest(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32) -> Option<(NamedHit, Vec3)> {
         let mut best = Hit::MISS;
         let mut who = usize::MAX;
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_max| {
+        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, _, t_max| {
             let p = &self.placed[i as usize];
             if p.mask & mask == 0 {
                 return t_max;
@@ -177,20 +177,14 @@ impl TwoLevel {
     }
 
     /// Hands `visit` each instance whose mask shares a bit with `mask` and whose box `ray`
-    /// crosses within `[t_near, t_far]`, in no particular order (the streamed walk,
-    /// `streamed_rays.rs`, then walks each instance's rays together).
+    /// enters within `[t_near, t_far]`, with where it enters (`t_enter`, at least `t_near`),
+    /// in no particular order (the streamed walk, `streamed_rays.rs`, then walks each
+    /// instance's rays together).
     #[inline]
-    pub fn instances_on(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32, mut visit: impl FnMut(u32)) {
-        if let [only] = self.placed.as_slice() {
-            // One instance: its box need not be tested (its mesh's walk clips to its own).
-            if only.mask & mask != 0 {
-                visit(0);
-            }
-            return;
-        }
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_max| {
+    pub fn entries_on(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32, mut visit: impl FnMut(u32, f32)) {
+        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_enter, t_max| {
             if self.placed[i as usize].mask & mask != 0 {
-                visit(i);
+                visit(i, t_enter);
             }
             t_max
         });
@@ -216,7 +210,7 @@ impl TwoLevel {
     #[inline]
     pub fn occluded(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32) -> bool {
         let mut any = false;
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_max| {
+        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, _, t_max| {
             let p = &self.placed[i as usize];
             if p.mask & mask == 0 {
                 return t_max;
@@ -248,7 +242,7 @@ impl TwoLevel {
         scratch: &mut Vec<Hit>,
         out: &mut Vec<NamedHit>,
     ) {
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_max| {
+        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, _, t_max| {
             let p = &self.placed[i as usize];
             if p.mask & mask == 0 {
                 return t_max;
