@@ -83,6 +83,19 @@ def test_the_one_line_and_rebuild_on_change():
     assert mesh.contains([[0, 0, 0], [10, 0, 0]]).tolist() == [False, True]
 
 
+def test_embrees_signature_is_taken():
+    """Code written for trimesh's Embree intersector passes ``scale_to_box``: taken, with the
+    same answers either way (a unit icosphere placed far from the origin, where Embree's
+    scaling would matter)."""
+    mesh = trimesh.creation.icosphere()
+    mesh.apply_translation([1e4, 0, 0])
+    o, d = [[1e4 + 0.1, 0.05, 5]], [[0, 0, -1]]
+    a = gridtrace.trimesh.RayMeshIntersector(mesh, scale_to_box=False, backend="cpu").intersects_location(o, d)
+    b = gridtrace.trimesh.RayMeshIntersector(mesh, backend="cpu").intersects_location(o, d)
+    assert len(a[0]) == 2 and np.array_equal(a[0], b[0])
+    assert np.allclose(sorted(a[0][:, 2]), [-1, 1], atol=1e-2)
+
+
 def test_one_hit_per_point_through_edges_and_vertices():
     """A cylinder's caps are fans of faces: rays along its axis on a 16 x 16 lattice, 32 of them
     through the fans' edges, each hit exactly twice (trimesh's Embree engine's answer), with or

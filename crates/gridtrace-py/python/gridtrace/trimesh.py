@@ -32,9 +32,12 @@ __all__ = ["RayMeshIntersector"]
 class RayMeshIntersector:
     """trimesh's ``RayMeshIntersector`` interface over a gridtrace :class:`~gridtrace.Scene` of
     ``mesh``, rebuilt when the mesh changes (trimesh's data hash). ``accel`` and ``backend`` are
-    as for :class:`gridtrace.Scene`."""
+    as for :class:`gridtrace.Scene`. ``scale_to_box`` is taken, and has no effect, so that code
+    written for trimesh's Embree intersector (``ray_pyembree.RayMeshIntersector(mesh,
+    scale_to_box=False)``) runs unchanged: Embree scales the mesh into a unit box for its
+    float32 precision, where gridtrace puts each hit on its face's plane in float64."""
 
-    def __init__(self, mesh, accel: str = "auto", backend: str = "auto"):
+    def __init__(self, mesh, scale_to_box: bool = True, accel: str = "auto", backend: str = "auto"):
         self.mesh = mesh
         self._accel, self._backend = accel, backend
         self._scene = None
