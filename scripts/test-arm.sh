@@ -40,6 +40,10 @@ root=$PWD
 target="${CARGO_TARGET_DIR:-$root/target}"
 arm_root="${ARM_ROOT:-$target/arm64-root}"
 case "$arm_root" in /*) ;; *) arm_root="$root/$arm_root" ;; esac
+if [ "$(uname -m)" != x86_64 ]; then
+    echo "test-arm: runs on an x86-64 machine (it compares the emulated aarch64 build with this machine's x86-64 one)" >&2
+    exit 1
+fi
 qemu=$(command -v qemu-aarch64-static || true)
 if [ -z "$qemu" ]; then
     echo "test-arm: qemu-aarch64-static not found (Debian: apt-get install qemu-user-static)" >&2
