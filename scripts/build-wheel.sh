@@ -7,8 +7,12 @@
 # 2.17's symbols whatever glibc the build machine has: no container. One abi3 wheel serves
 # CPython 3.9 and later.
 #
-#   scripts/build-wheel.sh [OUT_DIR]     default: target/wheels/manylinux2014-ARCH
-#                                        (ARCH: x86_64 or aarch64; under $CARGO_TARGET_DIR if set)
+#   scripts/build-wheel.sh [--target TRIPLE] [OUT_DIR]
+#       TRIPLE: x86_64-unknown-linux-gnu or aarch64-unknown-linux-gnu; default: this machine's.
+#               Another machine's is a cross build (zig links for it; `rustup target add
+#               TRIPLE` once): from x86-64, the aarch64 wheel that scripts/test-arm.sh tests.
+#       OUT_DIR default: target/wheels/manylinux2014-ARCH (ARCH: x86_64 or aarch64, the
+#               triple's first part; under $CARGO_TARGET_DIR if set)
 #
 # The folder holds one wheel: an older build's gridtrace wheel for the same machine is removed,
 # so `pip install target/wheels/manylinux2014-x86_64/gridtrace-*.whl` names exactly one. (Not
@@ -25,9 +29,29 @@ target="${CARGO_TARGET_DIR:-$root/target}"
 
 # The oldest glibc the binaries may need: manylinux2014's.
 glibc=2.17
-arch=$(uname -m)
+triple="$(uname -m)-unknown-linux-gnu"
+if [ "${1:-}" = "--target" ]; then
+    if [ -z "${2:-}" ]; then
+        echo "build-wheel: --target needs a triple (x86_64-unknown-linux-gnu or aarch64-unknown-linux-gnu)" >&2
+        exit 2
+    fi
+    triple=$2
+    shift 2
+fi
+case "$triple" in
+x86_64-unknown-linux-gnu | aarch64-unknown-linux-gnu) ;;
+*)
+    echo "build-wheel: --target $triple: not a manylinux2014 target this script builds (x86_64-unknown-linux-gnu or aarch64-unknown-linux-gnu)" >&2
+    exit 2
+    ;;
+esac
+arch=${triple%%-*}
 out="${1:-$target/wheels/manylinux2014-$arch}"
-triple="$arch-unknown-linux-gnu"
+# The host's objdump may not read another machine's ELF files: the cross binutils' then.
+objdump=objdump
+if [ "$arch" != "$(uname -m)" ] && command -v "$arch-linux-gnu-objdump" >/dev/null 2>&1; then
+    objdump="$arch-linux-gnu-objdump"
+fi
 
 tmp=$(mktemp -d)
 data=crates/gridtrace-py/gridtrace._gridtrace.data
@@ -90,8 +114,8 @@ fi
 
 # maturin's check covers the extension; the tool must need no newer glibc than the tag promises
 # either (scripts/test-wheel.sh checks both again, from the wheel itself).
-if command -v objdump >/dev/null 2>&1; then
-    need=$(objdump -T "$cli" | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -n 1)
+if command -v "$objdump" >/dev/null 2>&1; then
+    need=$("$objdump" -T "$cli" | grep -o 'GLIBC_[0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -n 1)
     if [ -n "$need" ] && [ "$(printf '%s\n%s\n' "$need" "$glibc" | sort -V | tail -n 1)" != "$glibc" ]; then
         echo "build-wheel: the tool needs glibc $need, newer than the wheel's manylinux tag ($glibc)" >&2
         exit 1
