@@ -45,7 +45,6 @@ use build::LEAF_BLOCK;
 pub(crate) use build::STACK;
 pub use build::{Bvh, BvhNode, MAX_LEAF};
 use walk::Walk;
-#[cfg(target_arch = "x86_64")]
 use wide::collapse;
 pub use wide::{ChildRef, WIDTH, WideNode};
 
