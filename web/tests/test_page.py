@@ -15,7 +15,8 @@ Environment: GRIDTRACE_CLI (default target/release/gridtrace), CHROMIUM (default
 GRIDTRACE_WEB_SCREENSHOT (a PNG path: the CPU case's page is saved there, as in the README).
 Under CI=1 what is missing fails instead of skipping.
 
-Run: scripts/build-web.sh && .venv/bin/python -m pytest -s web/tests
+Run: scripts/test-web.sh (builds web/dist and the release CLI, then runs these), or
+scripts/build-web.sh && python3 -m pytest -s web/tests
 """
 
 import base64
@@ -161,6 +162,20 @@ def test_cpu_page_matches_the_native_render(server, browser, reference):
         # The README's picture of the page.
         page.set_viewport_size({"width": 760, "height": 520})
         page.screenshot(path=shot)
+    page.close()
+
+
+@pytest.mark.parametrize(
+    "query",
+    [f"mode={m}" for m in ("cast", "trace", "heat")] + [f"mode=shadow&accel={a}" for a in ("grid", "pc", "irregular", "brute")],
+)
+def test_every_mode_and_structure_matches_the_native_render(server, browser, query):
+    """The page's other choices, each against render given the same options (small frames)."""
+    page = load(browser, f"{server}?scene=mirror-spheres&res=96x72&backend=cpu&{query}")
+    args = [a for kv in query.split("&") for a in (f"--{kv.split('=')[0]}", kv.split("=")[1])]
+    frac = differing(canvas_rgb(page), native_render("--scene", "mirror-spheres", "--res", "96x72", *args))
+    print(f"\n{query}: {frac:.4%} of pixels differ")
+    assert frac <= MAX_DIFFERING
     page.close()
 
 
