@@ -6,8 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/build-web.sh
-if [ -z "${GRIDTRACE_CLI:-}" ]; then
+if [ -z "${GRIDTRACE_BIN:-}" ]; then
     cargo build --release -p gridtrace-cli
-    export GRIDTRACE_CLI="${CARGO_TARGET_DIR:-target}/release/gridtrace"
+    export GRIDTRACE_BIN="${CARGO_TARGET_DIR:-target}/release/gridtrace"
 fi
 "${PYTHON:-python3}" -m pytest -s -rsx web/tests "$@"

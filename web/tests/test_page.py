@@ -10,7 +10,7 @@ These tests sit beside the page rather than with the Python package's: they need
 only Playwright (from PyPI, no browser download), Pillow, numpy, the browser, web/dist and the
 native CLI.
 
-Environment: GRIDTRACE_CLI (default target/release/gridtrace), CHROMIUM (default
+Environment: GRIDTRACE_BIN (default target/release/gridtrace), CHROMIUM (default
 /usr/bin/chromium), GRIDTRACE_DATA_DIR (the mesh folder, for the bunny; skipped without it),
 GRIDTRACE_WEB_SCREENSHOT (a PNG path: the CPU case's page is saved there, as in the README).
 Under CI=1 what is missing fails instead of skipping.
@@ -35,7 +35,7 @@ from PIL import Image
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 DIST = ROOT / "web" / "dist"
-CLI = pathlib.Path(os.environ.get("GRIDTRACE_CLI", ROOT / "target" / "release" / "gridtrace"))
+CLI = pathlib.Path(os.environ.get("GRIDTRACE_BIN", ROOT / "target" / "release" / "gridtrace"))
 CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
 CI = os.environ.get("CI", "") not in ("", "0", "false")
 
