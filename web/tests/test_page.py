@@ -244,6 +244,32 @@ def test_a_bad_parameter_is_an_error_on_the_page(server, browser):
     page.close()
 
 
+# A tetrahedron, as an OFF file.
+TETRA_OFF = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"
+
+DROP = """([name, text]) => {
+    const dt = new DataTransfer();
+    dt.items.add(new File([text], name));
+    document.body.dispatchEvent(new DragEvent('drop', {dataTransfer: dt, bubbles: true, cancelable: true}));
+}"""
+
+
+def test_a_dropped_mesh_renders_and_a_bad_one_says_where(server, browser, tmp_path):
+    page = load(browser, f"{server}?mode=shadow&res=96x72&backend=cpu")
+    page.evaluate(DROP, ["tetra.off", TETRA_OFF])
+    page.wait_for_function("document.body.dataset.frames === '2' || document.body.dataset.error", timeout=60_000)
+    assert not page.evaluate("document.body.dataset.error")
+    off = tmp_path / "tetra.off"
+    off.write_text(TETRA_OFF)
+    frac = differing(canvas_rgb(page), native_render("--mesh", str(off), "--mode", "shadow", "--res", "96x72"))
+    assert frac <= MAX_DIFFERING, frac
+    page.evaluate(DROP, ["bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"])
+    page.wait_for_function("document.body.dataset.error", timeout=60_000)
+    error = page.evaluate("document.body.dataset.error")
+    assert "bad.obj" in error and "line 4" in error, error
+    page.close()
+
+
 def test_an_opened_bunny_renders(server, browser):
     data = os.environ.get("GRIDTRACE_DATA_DIR")
     bunny = pathlib.Path(data or "/nonexistent") / "bunny" / "bun_zipper.ply"
