@@ -357,7 +357,13 @@ mod tests {
         }
         let from_bytes = parse_mesh(&std::fs::read(&obj).unwrap(), Path::new("quad.OBJ")).unwrap();
         assert_eq!((from_bytes.triangles.len(), from_bytes.positions), (2, m.positions));
-        assert!(from_bytes.materials.is_empty());
+        // `usemtl red` names a material the library would have given; without it, not red.
+        assert!(
+            from_bytes
+                .materials
+                .iter()
+                .all(|m| m.diffuse != Vec3::new(1.0, 0.0, 0.0))
+        );
         let err = parse_mesh(b"v 0 0 0\n", Path::new("bunny")).unwrap_err().to_string();
         assert!(err.contains("bunny: has no extension"), "{err}");
         let err = parse_mesh(b"", Path::new("x.fbx")).unwrap_err().to_string();
