@@ -4,7 +4,6 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-use glam::Vec3;
 use gridtrace::gpu::GpuVariants;
 use gridtrace::scene::{Scene, builtin, file::load_scene};
 use gridtrace::{AccelChoice, AccelKind, AccelParams, AccelSpec, TracedOn, Work};
@@ -212,33 +211,10 @@ pub fn backend_parser() -> impl TypedValueParser<Value = Backend> {
         .map(|s| s.parse::<Backend>().expect("every listed backend parses"))
 }
 
-pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v: Result<Vec<f32>, _> = s.split(',').map(|p| p.trim().parse::<f32>()).collect();
-    match v.as_deref() {
-        Ok([x, y, z]) if x.is_finite() && y.is_finite() && z.is_finite() => Ok(Vec3::new(*x, *y, *z)),
-        _ => Err(format!("expected x,y,z with finite numbers, got '{s}'")),
-    }
-}
-
-/// `--res`: WxH or N, each side from 1 to the tracers' largest (`MAX_IMAGE_SIDE`), refused
-/// here rather than after the scene is built.
-pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
-    use gridtrace::render::MAX_IMAGE_SIDE;
-    let parts: Vec<&str> = s.split(['x', 'X']).collect();
-    let nums: Result<Vec<u32>, _> = parts.iter().map(|p| p.trim().parse::<u32>()).collect();
-    let (w, h) = match nums.as_deref() {
-        Ok([n]) if *n > 0 => (*n, *n),
-        Ok([w, h]) if *w > 0 && *h > 0 => (*w, *h),
-        Ok([_] | [_, _]) => return Err(format!("image size must be positive in both directions, got '{s}'")),
-        _ => return Err(format!("expected WxH or N (N x N) in pixels, got '{s}'")),
-    };
-    if w.max(h) > MAX_IMAGE_SIDE {
-        return Err(format!(
-            "image size {w}x{h} is too large: at most {MAX_IMAGE_SIDE} pixels a side ({MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE})"
-        ));
-    }
-    Ok((w, h))
-}
+// `--res` and `x,y,z` values are read by the library, so that the web page reads its URL's
+// parameters as these options are read.
+pub use gridtrace::render::parse_res;
+pub use gridtrace::util::parse_vec3;
 
 /// An output file's folder exists and the path is not a folder itself: checked when the
 /// arguments are read, so a run of minutes is not lost to a typo at the end. The message leaves

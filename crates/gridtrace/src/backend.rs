@@ -371,6 +371,13 @@ impl Tracer {
         self.gpu.as_ref()
     }
 
+    /// The GPU upload, to submit a frame and read it back later (`GpuRenderer::submit_frame`,
+    /// `finish_frame`): a browser page cannot block on `render`'s wait, so it submits, yields
+    /// to its event loop until the frame `is_ready`, then finishes it.
+    pub fn gpu_mut(&mut self) -> Option<&mut GpuRenderer> {
+        self.gpu.as_mut()
+    }
+
     /// "cpu (N threads)" or the GPU adapter's description.
     pub fn describe(&self) -> String {
         describe_tracer(self.gpu.as_ref())

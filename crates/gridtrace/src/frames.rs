@@ -28,8 +28,8 @@
 //! # Ok::<(), gridtrace::Error>(())
 //! ```
 
+use crate::util::Instant;
 use std::collections::VecDeque;
-use std::time::Instant;
 
 use crate::Result;
 use crate::backend::{Frame, Rendered, Tracer};

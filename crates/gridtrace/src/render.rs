@@ -122,6 +122,26 @@ impl Ablation {
 /// refuse larger sizes before any work with it (`gridtrace render --res`).
 pub const MAX_IMAGE_SIDE: u32 = 16384;
 
+/// An image size as `WxH` or `N` (N x N): `render --res`, the viewer's and the web page's
+/// `res`. Each side from 1 to `MAX_IMAGE_SIDE`, refused when read rather than after the scene
+/// is built.
+pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
+    let parts: Vec<&str> = s.split(['x', 'X']).collect();
+    let nums: Result<Vec<u32>, _> = parts.iter().map(|p| p.trim().parse::<u32>()).collect();
+    let (w, h) = match nums.as_deref() {
+        Ok([n]) if *n > 0 => (*n, *n),
+        Ok([w, h]) if *w > 0 && *h > 0 => (*w, *h),
+        Ok([_] | [_, _]) => return Err(format!("image size must be positive in both directions, got '{s}'")),
+        _ => return Err(format!("expected WxH or N (N x N) in pixels, got '{s}'")),
+    };
+    if w.max(h) > MAX_IMAGE_SIDE {
+        return Err(format!(
+            "image size {w}x{h} is too large: at most {MAX_IMAGE_SIDE} pixels a side ({MAX_IMAGE_SIDE}x{MAX_IMAGE_SIDE})"
+        ));
+    }
+    Ok((w, h))
+}
+
 impl RenderOptions {
     pub fn new(width: u32, height: u32, mode: Mode) -> Self {
         RenderOptions {

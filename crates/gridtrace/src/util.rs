@@ -1,10 +1,29 @@
 //! Small shared utilities.
 
+/// The host's monotonic clock for the timings the library reports: std's on native targets;
+/// in a browser (wasm32-unknown-unknown, where `std::time::Instant::now` panics: the target
+/// has no clock of its own) the page's `performance.now()`, through web-time, whose `Instant`
+/// has std's API.
+#[cfg(not(target_arch = "wasm32"))]
+pub use std::time::Instant;
+#[cfg(target_arch = "wasm32")]
+pub use web_time::Instant;
+
 /// The most CPU threads a caller may ask for (`--threads`, Python's `threads=` and
 /// `nthreads=`): far above any machine's cores, so oversubscribing to measure stays possible,
 /// while a slip such as 100000 is refused at once. Asked for 100,000, the thread pool starts
 /// that many OS threads, each with its stack, and the call sat for minutes like a hang.
 pub const MAX_THREADS: usize = 1024;
+
+/// A point or direction written `x,y,z` with finite numbers: the CLI's `--eye`, `--target`,
+/// `--up`, the web page's `eye=`, `target=`.
+pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
+    let v: Result<Vec<f32>, _> = s.split(',').map(|p| p.trim().parse::<f32>()).collect();
+    match v.as_deref() {
+        Ok([x, y, z]) if x.is_finite() && y.is_finite() && z.is_finite() => Ok(glam::Vec3::new(*x, *y, *z)),
+        _ => Err(format!("expected x,y,z with finite numbers, got '{s}'")),
+    }
+}
 
 /// A tiny deterministic PRNG (SplitMix64) for tests, benchmarks and procedural scenes, so
 /// results are reproducible without pulling a random-number crate into the library.

@@ -203,3 +203,41 @@ fn a_fault_hands_the_frames_in_flight_to_the_cpu() {
     let notes = tracer.take_notes();
     assert!(notes.len() == 1 && notes[0].contains("the GPU failed"), "{notes:?}");
 }
+
+/// The browser's way (`gridtrace-web`, where nothing may block): a frame submitted, the device
+/// polled without waiting until the frame `is_ready`, then finished, is `render`'s frame; it is
+/// not ready before the device was polled (natively a mapping completes only in a poll), so
+/// `is_ready` says something.
+#[test]
+fn a_frame_polled_until_ready_equals_render() {
+    if skip_gpu() {
+        return;
+    }
+    let scene = builtin::knot_box()
+        .prepare_for(AccelKind::Bvh, &AccelParams::NONE)
+        .unwrap();
+    let ctx = ctx();
+    let placement = Placement::on_device(Backend::Gpu, ctx.clone());
+    let mut tracer = Tracer::open(scene.clone(), &placement, &mut Vec::new()).unwrap();
+    let opts = RenderOptions::new(48, 40, Mode::Shadow).with_pixels(PixelFormat::Srgb8);
+    let (camera, lights) = (scene.camera, scene.lights.clone());
+    let alone = tracer.render(&camera, &lights, &opts).unwrap();
+    let gpu = tracer.gpu_mut().expect("traced on the GPU");
+    let frame = gpu.submit_frame(&camera, &lights, &opts, None).unwrap();
+    assert!(!frame.is_ready(), "ready before the device was polled");
+    // A bound on the polls, not on time: a frame that never comes back fails instead of hanging.
+    let mut polls = 0;
+    while !frame.is_ready() {
+        ctx.device.poll(wgpu::PollType::Poll).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        polls += 1;
+        assert!(polls < 120_000, "the frame never became ready");
+    }
+    let (image, stats) = gpu.finish_frame(frame).unwrap();
+    let image = image.expect("a frame without a device image comes to the host");
+    assert_eq!(stats.render.rays, alone.stats.rays);
+    assert!(
+        image.to_rgb8() == alone.image.to_rgb8(),
+        "the polled frame's pixels differ from render's"
+    );
+}

@@ -4,7 +4,7 @@
 //! the same path one ray at a time (the reference the block renders are tested against, and
 //! what `rays` records).
 
-use std::time::Instant;
+use crate::util::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;

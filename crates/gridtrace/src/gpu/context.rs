@@ -4,7 +4,9 @@
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use crate::util::Instant;
 
 use super::bindings::storage_buffers_needed;
 use super::host_phases::HostPhases;
@@ -77,11 +79,23 @@ impl GpuContext {
     /// environment, as `new`'s): the viewer passes one that knows the window system's display
     /// (`InstanceDescriptor::new_with_display_handle`), so that a window's surface can be made
     /// from the tracer's own instance and the frames presented from its device.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new_with(desc: wgpu::InstanceDescriptor) -> Result<GpuContext> {
         pollster::block_on(Self::new_async(desc))
     }
 
-    async fn new_async(mut desc: wgpu::InstanceDescriptor) -> Result<GpuContext> {
+    /// In a browser nothing may block: the adapter and device come from promises the page's
+    /// event loop resolves, so the blocking `new_with` (which would wait forever) is an error
+    /// that says to open the device with `new_async` (`Backend::Auto` falls back to the CPU).
+    #[cfg(target_arch = "wasm32")]
+    pub fn new_with(_desc: wgpu::InstanceDescriptor) -> Result<GpuContext> {
+        Err(Error::Gpu(
+            "in a browser the GPU device is opened asynchronously (GpuContext::new_async)".into(),
+        ))
+    }
+
+    /// `new_with`, awaited rather than blocked on: the one way to open a device in a browser.
+    pub async fn new_async(mut desc: wgpu::InstanceDescriptor) -> Result<GpuContext> {
         desc.backends = wgpu::Backends::PRIMARY.with_env();
         desc.flags = wgpu::InstanceFlags::empty().with_env();
         let instance = wgpu::Instance::new(desc);
@@ -346,14 +360,18 @@ impl GpuContext {
         after: Option<wgpu::SubmissionIndex>,
     ) -> PendingRead {
         let (tx, rx) = std::sync::mpsc::channel();
+        let mapped = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = mapped.clone();
         staging.map_async(wgpu::MapMode::Read, ..size, move |r| {
             let _ = tx.send(r);
+            flag.store(true, std::sync::atomic::Ordering::Release);
         });
         PendingRead {
             staging: staging.clone(),
             size,
             after,
             rx,
+            mapped,
         }
     }
 }
@@ -364,9 +382,18 @@ pub(crate) struct PendingRead {
     size: u64,
     after: Option<wgpu::SubmissionIndex>,
     rx: std::sync::mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+    /// Set when the mapping has completed (or failed): `finish` will not wait.
+    mapped: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl PendingRead {
+    /// Whether the mapping has completed, so that `finish` returns without waiting. In a
+    /// browser the mapping completes only on the page's event loop, and nothing may block: the
+    /// page yields to it until this holds, then calls `finish`.
+    pub(crate) fn is_ready(&self) -> bool {
+        self.mapped.load(std::sync::atomic::Ordering::Acquire)
+    }
+
     /// Waits for the submission and the mapping, hands the bytes to `f` and unmaps; with `f`'s
     /// result come the wait (to the mapped bytes) and the readout (`f`'s own time) on the
     /// host's clock, the preparation left at 0 for the caller (`HostPhases::close`).
@@ -376,6 +403,7 @@ impl PendingRead {
             size,
             after,
             rx,
+            mapped: _,
         } = self;
         let waited = Instant::now();
         // On any failure the buffer is unmapped again (a pending map is cancelled), so that it
@@ -387,7 +415,14 @@ impl PendingRead {
         if let Err(e) = ctx.wait_for(after) {
             return failed(e);
         }
-        match rx.recv_timeout(Duration::from_secs(5)) {
+        // In a browser, waiting is not possible (`recv_timeout` needs a clock std lacks there,
+        // and the mapping cannot complete while the page's thread blocks): the page waited for
+        // `is_ready` before calling this.
+        #[cfg(target_arch = "wasm32")]
+        let received = rx.try_recv().map_err(|_| ());
+        #[cfg(not(target_arch = "wasm32"))]
+        let received = rx.recv_timeout(Duration::from_secs(5)).map_err(|_| ());
+        match received {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return failed(Error::Gpu(format!("mapping a result buffer failed: {e}"))),
             Err(_) => return failed(Error::Gpu("mapping a result buffer did not complete".into())),
@@ -407,6 +442,26 @@ impl PendingRead {
             readout_ms: ms(mapped.elapsed()),
         };
         Ok((out, phases))
+    }
+}
+
+/// Runs `f`, which creates things on `dev`, with the validation error it caused, if any.
+/// Natively that is an error scope, popped by blocking: wgpu-core validates as things are
+/// created, so the scope's future is ready at once. In a browser (WebGPU) the scope's promise
+/// resolves only on the page's event loop, which blocking would never reach: there no scope is
+/// pushed, and an error goes to the device's uncaptured-error record, which the next wait
+/// reports (`GpuContext::check_errors`).
+pub(crate) fn validated<T>(dev: &wgpu::Device, f: impl FnOnce() -> T) -> (T, Option<wgpu::Error>) {
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+        let made = f();
+        (made, pollster::block_on(scope.pop()))
+    }
+    #[cfg(target_arch = "wasm32")]
+    {
+        let _ = dev;
+        (f(), None)
     }
 }
 

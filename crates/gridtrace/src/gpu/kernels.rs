@@ -225,81 +225,82 @@ fn compile(
     source: impl Fn(&KernelSpec) -> String,
     include: impl Fn(&KernelSpec) -> bool,
 ) -> Result<Vec<Option<wgpu::ComputePipeline>>> {
-    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let pipelines = SPECS
-        .iter()
-        .map(|s| {
-            include(s).then(|| {
-                let desc = wgpu::ShaderModuleDescriptor {
-                    label: Some(s.label),
-                    source: wgpu::ShaderSource::Wgsl(source(s).into()),
-                };
-                let module = if variants.checks {
-                    dev.create_shader_module(desc)
-                } else {
-                    // SAFETY: `checks=off` drops bounds checks and loop bounding (integer
-                    // division keeps its guards), which is sound because no kernel indexes out
-                    // of bounds or loops without end:
-                    // - every per-ray kernel returns (or, with appends, does nothing) for an
-                    //   invocation at or past its queue's length, and the queues, hits, resolve
-                    //   and accumulation buffers hold a whole tile (`ensure_work` sizes them by
-                    //   `tile_pixels`, the shadow queue by `tile_pixels * max_lights`; a tile's
-                    //   pixels and `tile_offset + i` are within the frame the camera uniform
-                    //   describes);
-                    // - the walks index their arrays with what the upload wrote: the grid's
-                    //   cells are clamped to its dims, a cell's and a leaf's references lie in
-                    //   `refs` and name triangles below `n_tris` (the builders' invariants,
-                    //   checked by the layout tests and the mirror walks), BVH children name
-                    //   nodes that exist, and the stacks' pushes are guarded by their depth
-                    //   (private: `sp < BVH_STACK`; short: a ring index `% SHORT_STACK`, at most
-                    //   SHORT_STACK_MAX, times WORKGROUP plus the lane); the top level of two
-                    //   levels (`walks/two_level/`) reads its nodes and the records its leaves
-                    //   name, and hands the bottom walk a header the upload wrote (a mesh's
-                    //   root, or its triangles' range within `tris`), its stack guarded by
-                    //   `sp < TOP_STACK`;
-                    // - the counters are indexed by the prelude's slot constants, the materials
-                    //   by the scene's own material ids, the lights below `n_lights`;
-                    // - every loop is bounded: the DDA by the grid's cells, the BVH walks by
-                    //   their nodes (each entered at most once per ray), the light loops by
-                    //   `n_lights`, the top level's walk by its nodes (each entered at most
-                    //   once) and its leaves' records, the closest-point searches by the grid's rings (clamped
-                    //   into its dims, every step at least one cell), the tree's nodes (each
-                    //   entered at most once; their stacks guarded by `sp < BVH_STACK`) or the
-                    //   irregular grid's rings of top cells and voxel-map rows (clamped into
-                    //   its top dims and `2^level`), and no loop's exit depends on a value it
-                    //   never changes.
-                    // tests/gpu_variants.rs renders and queries every structure with
-                    // `checks=off` and compares the results with the checked kernels';
-                    // tests/gpu_closest.rs does so for the closest points.
-                    unsafe {
-                        dev.create_shader_module_trusted(
-                            desc,
-                            wgpu::ShaderRuntimeChecks {
-                                bounds_checks: false,
-                                force_loop_bounding: false,
-                                ..wgpu::ShaderRuntimeChecks::checked()
-                            },
-                        )
-                    }
-                };
-                let constants: Vec<(&str, f64)> = s.overrides.iter().copied().chain(variants.overrides()).collect();
-                dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(s.label),
-                    layout: Some(&layout_of(s)),
-                    module: &module,
-                    entry_point: Some("main"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        // Every kernel that reads workgroup memory writes it first (`append`,
-                        // the short stacks), so `checks=off` skips zeroing it.
-                        zero_initialize_workgroup_memory: variants.checks,
-                    },
-                    cache: None,
+    let (pipelines, error) = super::context::validated(dev, || {
+        SPECS
+            .iter()
+            .map(|s| {
+                include(s).then(|| {
+                    let desc = wgpu::ShaderModuleDescriptor {
+                        label: Some(s.label),
+                        source: wgpu::ShaderSource::Wgsl(source(s).into()),
+                    };
+                    let module = if variants.checks {
+                        dev.create_shader_module(desc)
+                    } else {
+                        // SAFETY: `checks=off` drops bounds checks and loop bounding (integer
+                        // division keeps its guards), which is sound because no kernel indexes out
+                        // of bounds or loops without end:
+                        // - every per-ray kernel returns (or, with appends, does nothing) for an
+                        //   invocation at or past its queue's length, and the queues, hits, resolve
+                        //   and accumulation buffers hold a whole tile (`ensure_work` sizes them by
+                        //   `tile_pixels`, the shadow queue by `tile_pixels * max_lights`; a tile's
+                        //   pixels and `tile_offset + i` are within the frame the camera uniform
+                        //   describes);
+                        // - the walks index their arrays with what the upload wrote: the grid's
+                        //   cells are clamped to its dims, a cell's and a leaf's references lie in
+                        //   `refs` and name triangles below `n_tris` (the builders' invariants,
+                        //   checked by the layout tests and the mirror walks), BVH children name
+                        //   nodes that exist, and the stacks' pushes are guarded by their depth
+                        //   (private: `sp < BVH_STACK`; short: a ring index `% SHORT_STACK`, at most
+                        //   SHORT_STACK_MAX, times WORKGROUP plus the lane); the top level of two
+                        //   levels (`walks/two_level/`) reads its nodes and the records its leaves
+                        //   name, and hands the bottom walk a header the upload wrote (a mesh's
+                        //   root, or its triangles' range within `tris`), its stack guarded by
+                        //   `sp < TOP_STACK`;
+                        // - the counters are indexed by the prelude's slot constants, the materials
+                        //   by the scene's own material ids, the lights below `n_lights`;
+                        // - every loop is bounded: the DDA by the grid's cells, the BVH walks by
+                        //   their nodes (each entered at most once per ray), the light loops by
+                        //   `n_lights`, the top level's walk by its nodes (each entered at most
+                        //   once) and its leaves' records, the closest-point searches by the grid's rings (clamped
+                        //   into its dims, every step at least one cell), the tree's nodes (each
+                        //   entered at most once; their stacks guarded by `sp < BVH_STACK`) or the
+                        //   irregular grid's rings of top cells and voxel-map rows (clamped into
+                        //   its top dims and `2^level`), and no loop's exit depends on a value it
+                        //   never changes.
+                        // tests/gpu_variants.rs renders and queries every structure with
+                        // `checks=off` and compares the results with the checked kernels';
+                        // tests/gpu_closest.rs does so for the closest points.
+                        unsafe {
+                            dev.create_shader_module_trusted(
+                                desc,
+                                wgpu::ShaderRuntimeChecks {
+                                    bounds_checks: false,
+                                    force_loop_bounding: false,
+                                    ..wgpu::ShaderRuntimeChecks::checked()
+                                },
+                            )
+                        }
+                    };
+                    let constants: Vec<(&str, f64)> = s.overrides.iter().copied().chain(variants.overrides()).collect();
+                    dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(s.label),
+                        layout: Some(&layout_of(s)),
+                        module: &module,
+                        entry_point: Some("main"),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: &constants,
+                            // Every kernel that reads workgroup memory writes it first (`append`,
+                            // the short stacks), so `checks=off` skips zeroing it.
+                            zero_initialize_workgroup_memory: variants.checks,
+                        },
+                        cache: None,
+                    })
                 })
             })
-        })
-        .collect();
-    if let Some(e) = pollster::block_on(scope.pop()) {
+            .collect()
+    });
+    if let Some(e) = error {
         return Err(Error::Gpu(format!("creating the kernels failed ({variants}): {e}")));
     }
     Ok(pipelines)

@@ -19,9 +19,9 @@
 //!   answer buffers are kept and grown; the work buffers are made only for what the query
 //!   uses (`WorkUse`), not a frame's whole set.
 
+use crate::util::Instant;
 use std::mem::size_of;
 use std::ops::Range;
-use std::time::Instant;
 
 use rayon::prelude::*;
 

@@ -2,9 +2,9 @@
 //! buffers (ray queues, hits, accumulation) that the tile loop (`wavefront.rs`) and the ray
 //! queries (`queries.rs`) share.
 
+use crate::util::Instant;
 use std::mem::size_of;
 use std::sync::Arc;
-use std::time::Instant;
 
 use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
 use super::constants::{COUNTER_SLOTS, accel_code, mode_code};

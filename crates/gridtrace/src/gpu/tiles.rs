@@ -4,7 +4,7 @@
 //! (`submit_tiles`); later the wait and the readout (`read_tiles`). The frame (`wavefront.rs`)
 //! makes one run, or as few as the device's largest buffer allows.
 
-use std::time::Instant;
+use crate::util::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -70,6 +70,13 @@ pub(super) struct SubmittedTiles {
     /// Its recording and its submission (ms, host clock).
     pub(super) record_ms: f64,
     pub(super) submit_ms: f64,
+}
+
+impl SubmittedTiles {
+    /// Whether its readback is mapped (`PendingRead::is_ready`).
+    pub(super) fn is_ready(&self) -> bool {
+        self.read.is_ready()
+    }
 }
 
 impl GpuRenderer {

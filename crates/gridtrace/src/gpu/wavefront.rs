@@ -7,8 +7,8 @@
 //! is submitted without a wait and read back later (`submit_frame`, `finish_frame`), so
 //! frames can be in flight; the runs of tiles themselves are `tiles.rs`.
 
+use crate::util::Instant;
 use std::sync::Arc;
-use std::time::Instant;
 
 use super::device_image::DeviceImage;
 use super::layout::SceneUniform;
@@ -83,6 +83,18 @@ impl GpuRenderStats {
 /// A frame given to the device and not yet read back (`GpuRenderer::submit_frame`); hand it
 /// to `finish_frame` of the same renderer. Dropped unfinished, its results are discarded.
 pub struct FrameInFlight(Flight);
+
+impl FrameInFlight {
+    /// Whether its results are in host-visible memory, so that `finish_frame` reads it back
+    /// without waiting. A browser page yields to its event loop until this holds (the mapping
+    /// completes only there, and nothing on the page's thread may block).
+    pub fn is_ready(&self) -> bool {
+        match &self.0 {
+            Flight::Submitted(f) => f.run.is_ready(),
+            Flight::Done(_) => true,
+        }
+    }
+}
 
 enum Flight {
     /// One submission, its results on their way to a mapped readback.

@@ -43,34 +43,58 @@ pub(crate) fn count_of(n: usize, noun: &str) -> String {
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
     // The format comes from the extension, so say exactly what is wrong with the name (or the
     // path) before reading anything: "unsupported mesh format '.'" helped nobody.
-    let unusable = |what: String| Error::parse(path, Location::Whole, format!("{what}; {SUPPORTED_FORMATS}"));
     let meta = std::fs::metadata(path);
     if meta.as_ref().is_ok_and(|m| m.is_dir()) {
-        return Err(unusable("is a directory, not a mesh file".into()));
+        return Err(unusable(path, "is a directory, not a mesh file".into()));
     }
+    if path.extension().is_none() {
+        // A missing file is reported as missing, not as badly named.
+        meta.map_err(|e| Error::io(path, e))?;
+    }
+    let format = format_of(path)?;
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_format(&format, &data, path, Some(path.parent().unwrap_or(Path::new(""))))
+}
+
+/// Parses a mesh file's bytes, the format chosen from `name`'s extension as `load_mesh` chooses
+/// it, with no file system: what a browser hands over (a file opened or dropped on the page).
+/// The file comes alone, so an OBJ's material library and a glTF's external buffers are not
+/// read (the OBJ keeps its geometry; a glTF that needs one is an error: a `.glb` or embedded
+/// buffers work). `name` is used in errors.
+pub fn parse_mesh(data: &[u8], name: &Path) -> Result<Mesh> {
+    parse_format(&format_of(name)?, data, name, None)
+}
+
+/// `path`'s error for a name that gives no mesh format, with the formats there are.
+fn unusable(path: &Path, what: String) -> Error {
+    Error::parse(path, Location::Whole, format!("{what}; {SUPPORTED_FORMATS}"))
+}
+
+/// The mesh format `path`'s extension names, lower case, or the error saying why it names none.
+fn format_of(path: &Path) -> Result<String> {
     let ext = match path.extension() {
-        None => {
-            // A missing file is reported as missing, not as badly named.
-            meta.map_err(|e| Error::io(path, e))?;
-            return Err(unusable("has no extension, so its mesh format is unknown".into()));
-        }
+        None => return Err(unusable(path, "has no extension, so its mesh format is unknown".into())),
         Some(e) => e.to_string_lossy().to_ascii_lowercase(),
     };
     if !matches!(ext.as_str(), "obj" | "ply" | "gltf" | "glb" | "stl" | "off") {
-        return Err(unusable(format!("unsupported mesh format '.{ext}'")));
+        return Err(unusable(path, format!("unsupported mesh format '.{ext}'")));
     }
-    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let dir = path.parent().unwrap_or(Path::new(""));
-    match ext.as_str() {
+    Ok(ext)
+}
+
+/// Parses `data` as `format` (from `format_of`); `dir`: the folder an OBJ's material library
+/// and a glTF's external buffers are read from (`None`: not read).
+fn parse_format(format: &str, data: &[u8], path: &Path, dir: Option<&Path>) -> Result<Mesh> {
+    match format {
         "obj" => {
-            let resolve = |name: &str| std::fs::read(dir.join(name)).ok();
-            obj::parse(&data, path, &resolve)
+            let resolve = |name: &str| dir.and_then(|d| std::fs::read(d.join(name)).ok());
+            obj::parse(data, path, &resolve)
         }
-        "ply" => ply::parse(&data, path),
-        "gltf" | "glb" => gltf::parse_with_base(&data, path, Some(dir)),
-        "stl" => stl::parse(&data, path),
-        "off" => off::parse(&data, path),
-        _ => unreachable!("extension checked above"),
+        "ply" => ply::parse(data, path),
+        "gltf" | "glb" => gltf::parse_with_base(data, path, dir),
+        "stl" => stl::parse(data, path),
+        "off" => off::parse(data, path),
+        _ => unreachable!("format_of returns one of these"),
     }
 }
 
@@ -322,6 +346,28 @@ mod tests {
         let err = load_mesh(&missing).unwrap_err();
         assert!(matches!(err, Error::Io { .. }));
         assert!(err.to_string().contains("missing.obj"));
+
+        // From bytes (a page's dropped file): the same format choice and mesh, no file read:
+        // the OBJ keeps its geometry without its material library.
+        for path in [&off, &stl, &ply] {
+            let bytes = std::fs::read(path).unwrap();
+            let name = Path::new(path.file_name().unwrap());
+            let (a, b) = (parse_mesh(&bytes, name).unwrap(), load_mesh(path).unwrap());
+            assert_eq!((a.positions, a.triangles), (b.positions, b.triangles), "{name:?}");
+        }
+        let from_bytes = parse_mesh(&std::fs::read(&obj).unwrap(), Path::new("quad.OBJ")).unwrap();
+        assert_eq!((from_bytes.triangles.len(), from_bytes.positions), (2, m.positions));
+        // `usemtl red` names a material the library would have given; without it, not red.
+        assert!(
+            from_bytes
+                .materials
+                .iter()
+                .all(|m| m.diffuse != Vec3::new(1.0, 0.0, 0.0))
+        );
+        let err = parse_mesh(b"v 0 0 0\n", Path::new("bunny")).unwrap_err().to_string();
+        assert!(err.contains("bunny: has no extension"), "{err}");
+        let err = parse_mesh(b"", Path::new("x.fbx")).unwrap_err().to_string();
+        assert!(err.contains("'.fbx'") && err.contains("OBJ (.obj)"), "{err}");
     }
 
     /// Real-world meshes from the shared data folder, when it is present.

@@ -4,6 +4,7 @@ pub mod animated;
 pub mod builtin;
 pub mod camera;
 pub mod file;
+pub mod orbit;
 pub mod procedural;
 
 use bytemuck::{Pod, Zeroable};
@@ -239,7 +240,7 @@ impl PreparedScene {
     /// triangle indices keep their meaning from frame to frame.
     pub fn update_vertices(&mut self, positions: &[Vec3], on: RebuildOn) -> Result<UpdateTimes> {
         use rayon::prelude::*;
-        let t0 = std::time::Instant::now();
+        let t0 = crate::util::Instant::now();
         let n = self.normals.len();
         if positions.len() != n {
             return Err(Error::InvalidInput(format!(
@@ -263,7 +264,7 @@ impl PreparedScene {
             .collect();
         let normals = vertex_normals(positions, &self.tri_vertices);
         let geometry_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let t1 = std::time::Instant::now();
+        let t1 = crate::util::Instant::now();
         let how = if on == RebuildOn::Device && self.accel.grid().is_some() {
             self.accel.update_triangles_only(tris)?;
             "left to the GPU"

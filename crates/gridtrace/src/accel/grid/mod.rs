@@ -2,7 +2,7 @@
 //! triangle-reference list, plus the proximity-cloud distance. This is the paper's Figure 3
 //! layout (its RGB texel per cell), kept as plain arrays that go to the GPU unchanged.
 
-use std::time::Instant;
+use crate::util::Instant;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{UVec3, Vec3};

@@ -3,7 +3,7 @@
 //! cells merged inside it (one task per top cell), merging across top cells, expansion, and
 //! the final arrays.
 
-use std::time::Instant;
+use crate::util::Instant;
 
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;

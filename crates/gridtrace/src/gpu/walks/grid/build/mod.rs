@@ -26,9 +26,9 @@
 //! the CPU build's: it decides buffer sizes, which the host must know before it records the
 //! build, and it makes both builds test the very same cell boxes.
 
+use crate::util::Instant;
 use std::mem::size_of;
 use std::sync::Arc;
-use std::time::Instant;
 
 use wgpu::util::DeviceExt;
 

@@ -144,30 +144,31 @@ impl BuildKernels {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipelines = STAGES
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                debug_assert_eq!(s.stage as usize, i);
-                let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(s.name),
-                    source: wgpu::ShaderSource::Wgsl(module_source(s.source).into()),
-                });
-                dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(s.name),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some(s.entry),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: s.overrides,
-                        ..Default::default()
-                    },
-                    cache: None,
+        let (pipelines, error) = crate::gpu::context::validated(dev, || {
+            STAGES
+                .iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    debug_assert_eq!(s.stage as usize, i);
+                    let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+                        label: Some(s.name),
+                        source: wgpu::ShaderSource::Wgsl(module_source(s.source).into()),
+                    });
+                    dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(s.name),
+                        layout: Some(&pipeline_layout),
+                        module: &module,
+                        entry_point: Some(s.entry),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: s.overrides,
+                            ..Default::default()
+                        },
+                        cache: None,
+                    })
                 })
-            })
-            .collect();
-        if let Some(e) = pollster::block_on(scope.pop()) {
+                .collect()
+        });
+        if let Some(e) = error {
             return Err(Error::Gpu(format!("creating the grid-build kernels failed: {e}")));
         }
         Ok(BuildKernels { layout, pipelines })
