@@ -2,7 +2,8 @@
 # The web page's tests in a real browser: builds web/dist (scripts/build-web.sh) and the
 # release CLI (the reference images), then runs web/tests with PYTHON (default python3), which
 # needs pytest, playwright (from PyPI; no browser download: Debian's chromium is used), pillow
-# and numpy. GRIDTRACE_DATA_DIR (the mesh folder) adds the Stanford Bunny case.
+# and numpy. GRIDTRACE_DATA_DIR names the mesh folder of the Stanford Bunny case (default:
+# ../shared/data/meshes beside the checkout).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/build-web.sh

@@ -30,6 +30,18 @@ fi
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" maturin develop --release --locked -q -m crates/gridtrace-py/Cargo.toml
 GRIDTRACE_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/gridtrace" .venv/bin/python -m pytest -q crates/gridtrace-py/tests
 
+# The web page in a real browser: the library built for wasm32 with wasm-bindgen's glue
+# (scripts/build-web.sh), Debian's chromium (`apt-get install chromium`; .ci/run installs it)
+# driven by Playwright from PyPI, with no browser download; each image compared with the
+# release CLI's.
+rustup target add wasm32-unknown-unknown >/dev/null
+bindgen=$(awk '/^name = "wasm-bindgen"$/ { getline; gsub(/[^0-9.]/, ""); print; exit }' Cargo.lock)
+if [ "$(wasm-bindgen --version 2>/dev/null | awk '{ print $2 }')" != "$bindgen" ]; then
+    cargo install -q wasm-bindgen-cli --version "$bindgen"
+fi
+.venv/bin/python -m pip install -q --disable-pip-version-check "playwright==1.65.2" pillow
+GRIDTRACE_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/gridtrace" PYTHON=.venv/bin/python ./scripts/test-web.sh
+
 # The wheel as users get it: built with the dist profile (scripts/build-wheel.sh), installed into
 # a new environment without Rust, where a query, a render and its gridtrace tool (whose version
 # must be the release build's above) run.

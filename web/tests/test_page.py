@@ -11,8 +11,8 @@ only Playwright (from PyPI, no browser download), Pillow, numpy, the browser, we
 native CLI.
 
 Environment: GRIDTRACE_BIN (default target/release/gridtrace), CHROMIUM (default
-/usr/bin/chromium), GRIDTRACE_DATA_DIR (the mesh folder, for the bunny; skipped without it),
-GRIDTRACE_WEB_SCREENSHOT (a PNG path: the CPU case's page is saved there, as in the README).
+/usr/bin/chromium), GRIDTRACE_DATA_DIR (the mesh folder, for the bunny; default
+../shared/data/meshes beside the checkout), GRIDTRACE_WEB_SCREENSHOT (a PNG path: the CPU case's page is saved there, as in the README).
 Under CI=1 what is missing fails instead of skipping.
 
 Run: scripts/test-web.sh (builds web/dist and the release CLI, then runs these), or
@@ -271,10 +271,11 @@ def test_a_dropped_mesh_renders_and_a_bad_one_says_where(server, browser, tmp_pa
 
 
 def test_an_opened_bunny_renders(server, browser):
-    data = os.environ.get("GRIDTRACE_DATA_DIR")
-    bunny = pathlib.Path(data or "/nonexistent") / "bunny" / "bun_zipper.ply"
+    # The shared meshes beside the checkout, as the Rust tests read them, unless named.
+    data = os.environ.get("GRIDTRACE_DATA_DIR") or ROOT.parent / "shared" / "data" / "meshes"
+    bunny = pathlib.Path(data) / "bunny" / "bun_zipper.ply"
     if not bunny.exists():
-        pytest.skip("no Stanford Bunny (GRIDTRACE_DATA_DIR/bunny/bun_zipper.ply)")
+        missing(f"no Stanford Bunny at {bunny} (GRIDTRACE_DATA_DIR names the mesh folder)")
     page = load(browser, f"{server}?mode=cast&res=128x128&backend=cpu")
     page.set_input_files("#file", str(bunny))
     page.wait_for_function("document.body.dataset.frames === '2' || document.body.dataset.error", timeout=120_000)
