@@ -47,6 +47,9 @@ struct Scratch {
     /// `(instance, ray)`: the pairs of one round (or all of them, for occlusion), sorted by
     /// instance.
     pairs: Vec<(u32, u32)>,
+    /// The counting sort's counts (then offsets) an instance, and its output.
+    count: Vec<u32>,
+    sorted: Vec<(u32, u32)>,
     /// One instance's rays in its mesh's space, which of the item's rays each is, and how far
     /// each is walked (its closest hit so far).
     local: Vec<Ray>,
@@ -101,16 +104,37 @@ impl Scratch {
 
     /// Round `round`'s pairs: each ray's `round`-th nearest box, where the ray enters it
     /// before its closest hit so far (a box entered at or past it cannot hold a nearer hit).
-    fn round(&mut self, round: usize) -> bool {
+    fn round(&mut self, round: usize, instances: usize) -> bool {
         self.pairs.clear();
+        self.count.clear();
+        self.count.resize(instances + 1, 0);
         for (k, w) in self.starts.windows(2).enumerate() {
             let e = w[0] as usize + round;
             if e < w[1] as usize && self.entries[e].0 < self.best[k].0.t {
-                self.pairs.push((self.entries[e].1, k as u32));
+                let i = self.entries[e].1;
+                self.pairs.push((i, k as u32));
+                self.count[i as usize + 1] += 1;
             }
         }
-        self.pairs.sort_unstable();
+        self.group_by_instance();
         !self.pairs.is_empty()
+    }
+
+    /// `pairs` in instance order, each instance's in the order given (rays ascending), from
+    /// the instances' counts in `count[i + 1]`: a counting sort, linear where `sort_unstable`
+    /// took a tenth of the two levels' time (100 instances, 4,096 rays a work item).
+    fn group_by_instance(&mut self) {
+        for i in 1..self.count.len() {
+            self.count[i] += self.count[i - 1];
+        }
+        self.sorted.clear();
+        self.sorted.resize(self.pairs.len(), (0, 0));
+        for &(i, k) in &self.pairs {
+            let at = &mut self.count[i as usize];
+            self.sorted[*at as usize] = (i, k);
+            *at += 1;
+        }
+        std::mem::swap(&mut self.pairs, &mut self.sorted);
     }
 }
 
@@ -133,7 +157,7 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out
             s.best
                 .resize(r.len(), (Hit { t: t_far, ..Hit::MISS }, u32::MAX, Vec3::ZERO));
             let mut round = 0;
-            while s.round(round) {
+            while s.round(round, two.instance_count()) {
                 let pairs = std::mem::take(&mut s.pairs);
 
                 for group in pairs.chunk_by(|a, b| a.0 == b.0) {
