@@ -117,18 +117,16 @@ impl IrregularGrid {
             rays.len() <= PACKET && counters.len() == rays.len(),
             "a packet is up to {PACKET} rays, a counter each"
         );
-        #[cfg(target_arch = "x86_64")]
-        if crate::accel::simd::has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.walk_packet_avx2::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
+        if crate::accel::simd::has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.walk_packet_wide::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
         }
         self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[allow(clippy::too_many_arguments)]
-    fn walk_packet_avx2<const ANY: bool, C: Counters>(
+    unsafe fn walk_packet_wide<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
@@ -140,7 +138,7 @@ impl IrregularGrid {
         if fours {
             return self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters);
         }
-        // `F8` is for AVX2 code only: this function is.
+        // `F8` is for the eight-lane build only: this function is compiled for it.
         self.walk_lanes::<PACKET, crate::accel::lanes::F8, ANY, C>(tris, rays, t_min, t_max, counters)
     }
 
