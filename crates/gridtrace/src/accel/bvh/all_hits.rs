@@ -71,7 +71,7 @@ impl BvhAccel {
     /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists, by the same walk (the same
     /// box test, so the same leaves; the same triangle test, so the same hits), without listing
     /// them. `COUNT_LANES` rays are walked interleaved, each step prefetching what its ray
-    /// visits next (as `intersect_batch`), compiled for AVX2 where the CPU has it.
+    /// visits next (as `intersect_batch`), in the eight-lane build where the CPU runs it (`simd::has_wide`).
     pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         assert_eq!(rays.len(), out.len(), "one count per ray");
         if self.blocks.is_empty() {

@@ -54,7 +54,7 @@ impl BvhAccel {
     }
 
     /// Walks the rays as one packet where they look coherent and nothing is counted
-    /// (`coherent.rs`), else interleaved, compiled for AVX2 where the CPU has it (as `walk`),
+    /// (`coherent.rs`), else interleaved, in the eight-lane build where the CPU runs it (as `walk`),
     /// and hands each ray's result (`Walk::best`) to `finish(i, best)`.
     fn packet<const ANY: bool, C: Counters>(
         &self,

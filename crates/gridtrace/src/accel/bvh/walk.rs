@@ -15,7 +15,8 @@ use super::build::{LEAF_BLOCK, MAX_LEAF, STACK};
 use super::wide::{ChildRef, WIDTH};
 
 impl BvhAccel {
-    /// Runs one ray's walk to its end, compiled for AVX2 where the CPU has it (as `interleaved`).
+    /// Runs one ray's walk to its end, in the eight-lane build where the CPU runs it (as
+    /// `interleaved`).
     pub(super) fn walk<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
         if has_wide() {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
@@ -29,8 +30,9 @@ impl BvhAccel {
         while !w.step::<ANY, true, C>(self, counters) {}
     }
 
-    /// Runs the batch traversal compiled for AVX2 where the CPU has it (with the box test in
-    /// AVX instructions, `BoxRay::enter_avx2`), else the baseline build. Both give the same
+    /// Runs the batch traversal compiled for the eight-lane build where the CPU runs it
+    /// (`simd::has_wide`: AVX2 on x86-64, NEON on aarch64; the box test in eight lanes,
+    /// `BoxRay::enter_wide`), else the baseline build. Both give the same
     /// bits: IEEE arithmetic rounds the same at any vector width, and Rust never fuses
     /// multiply-adds on its own.
     /// `rays` yields each ray with its index in the batch (handed back to `finish`).
@@ -48,7 +50,7 @@ impl BvhAccel {
         self.interleaved_portable::<ANY>(rays, t_min, t_max, finish)
     }
 
-    /// The batch traversal without AVX2, out of line as `interleaved_wide` is: inlined, its
+    /// The batch traversal without the eight-lane build, out of line as `interleaved_wide` is: inlined, its
     /// loop made the callers' own code (`traced`: the packets' answers) compile differently
     /// with each change to the walk, by up to 9 instructions a camera ray.
     #[inline(never)]

@@ -1,7 +1,7 @@
 //! Packets: up to eight coherent rays (a 4x2 block of pixels' eye, shadow or mirror rays)
-//! walked together, a ray per SIMD lane: one AVX register of eight lanes where the CPU has
-//! AVX2, two packets of four in SSE registers elsewhere (`lanes.rs`: the walk is written once
-//! for both).
+//! walked together, a ray per SIMD lane: eight lanes (`simd::F8`: one AVX register where the
+//! CPU has AVX2, two NEON registers on aarch64), two packets of four in SSE registers elsewhere
+//! (`lanes.rs`: the walk is written once for both).
 //!
 //! Why: a single ray's step is one long chain of dependent operations (voxel -> top cell ->
 //! voxel map -> cell -> exit distances -> exit point -> next voxel), about a hundred cycles of
@@ -98,7 +98,8 @@ impl IrregularGrid {
         self.walk_packet::<ANY, C>(tris, rays, t_min, t_max, counters, true)
     }
 
-    /// The packet walk: eight rays in AVX registers where the CPU has AVX2 (compiled for it:
+    /// The packet walk: eight rays in eight lanes where the CPU runs them (`simd::has_wide`;
+    /// on x86-64 compiled for AVX2:
     /// three-operand instructions, the same bits, as the BVH's `interleaved` explains), else
     /// (or with `fours`) as two packets of four in SSE registers. Hits and counts are the
     /// single-ray walk's either way.

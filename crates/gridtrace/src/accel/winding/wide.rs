@@ -1,7 +1,7 @@
 //! The fast winding numbers' query tree: the binary BVH collapsed to eight children a node,
 //! each child's second-order coefficients (`expansion.rs`) stored lane by lane, and each leaf's
-//! triangles as one block of eight lanes; walked in `f32` lanes (eight in one AVX register where
-//! the CPU has AVX2, else two halves of four), as libigl walks its four-wide tree.
+//! triangles as one block of eight lanes; walked in `f32` lanes (eight, `simd::F8`, where the
+//! CPU runs them: AVX2 or NEON; else two halves of four), as libigl walks its four-wide tree.
 //!
 //! Per node, the eight children are tested at once: a child farther than `accuracy` times
 //! its radius adds its expansion; a nearer one is opened, a leaf through the exact solid
