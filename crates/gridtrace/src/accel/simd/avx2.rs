@@ -185,8 +185,13 @@ impl U8 {
     #[inline(always)]
     pub(crate) fn to_array(self) -> [u32; 8] {
         let mut a = [0; 8];
-        unsafe { _mm256_storeu_si256(a.as_mut_ptr() as *mut __m256i, self.0) };
+        self.store(&mut a);
         a
+    }
+    /// The lanes into `out` (in place: an array returned by value was copied once more).
+    #[inline(always)]
+    pub(crate) fn store(self, out: &mut [u32; 8]) {
+        unsafe { _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, self.0) };
     }
     #[inline(always)]
     pub(crate) fn and(self, b: U8) -> U8 {

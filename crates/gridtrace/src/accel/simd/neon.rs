@@ -297,11 +297,16 @@ impl U8 {
     #[inline(always)]
     pub(crate) fn to_array(self) -> [u32; 8] {
         let mut a = [0; 8];
-        unsafe {
-            vst1q_u32(a.as_mut_ptr(), self.lo);
-            vst1q_u32(a.as_mut_ptr().add(4), self.hi);
-        }
+        self.store(&mut a);
         a
+    }
+    /// The lanes into `out`.
+    #[inline(always)]
+    pub(crate) fn store(self, out: &mut [u32; 8]) {
+        unsafe {
+            vst1q_u32(out.as_mut_ptr(), self.lo);
+            vst1q_u32(out.as_mut_ptr().add(4), self.hi);
+        }
     }
     u8_halves!(and, vandq_u32);
     u8_halves!(or, vorrq_u32);

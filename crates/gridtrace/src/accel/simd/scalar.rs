@@ -147,6 +147,9 @@ impl U8 {
     pub(crate) fn to_array(self) -> [u32; 8] {
         self.0
     }
+    pub(crate) fn store(self, out: &mut [u32; 8]) {
+        *out = self.0;
+    }
     fn zip(self, b: U8, f: impl Fn(u32, u32) -> u32) -> U8 {
         U8(std::array::from_fn(|k| f(self.0[k], b.0[k])))
     }
