@@ -218,7 +218,7 @@ impl BvhAccel {
             let sign = d.to_bits().and(U8::splat(0x8000_0000));
             let tiny = d.abs().lt(F8::splat(DIR_TINY));
             let safe = F8::select(tiny, F8::from_u8_bits(sign.or(U8::splat(DIR_TINY.to_bits()))), d);
-            inv[a] = (F8::ONE / safe).to_array();
+            (F8::ONE / safe).store(&mut inv[a]);
             // `safe` is never zero: its sign bit says whether it is below zero.
             down[a] = safe.sign_bits();
         }

@@ -142,6 +142,11 @@ impl Lanes<8> for F8 {
 }
 
 impl F8 {
+    /// The lanes into `out` (in place: an array returned by value was copied once more).
+    #[inline(always)]
+    pub(crate) fn store(self, out: &mut [f32; 8]) {
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), self.0) };
+    }
     /// Eight floats from memory (a load the arithmetic can take as its operand).
     #[inline(always)]
     pub(crate) fn load(a: &[f32; 8]) -> F8 {

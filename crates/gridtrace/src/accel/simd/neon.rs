@@ -216,6 +216,14 @@ fn cmp_eq(a: F8, b: F8) -> M8 {
 }
 
 impl F8 {
+    /// The lanes into `out`.
+    #[inline(always)]
+    pub(crate) fn store(self, out: &mut [f32; 8]) {
+        unsafe {
+            vst1q_f32(out.as_mut_ptr(), self.lo);
+            vst1q_f32(out.as_mut_ptr().add(4), self.hi);
+        }
+    }
     /// Eight floats from memory.
     #[inline(always)]
     pub(crate) fn load(a: &[f32; 8]) -> F8 {

@@ -117,6 +117,9 @@ impl Lanes<8> for F8 {
 }
 
 impl F8 {
+    pub(crate) fn store(self, out: &mut [f32; 8]) {
+        *out = self.0;
+    }
     pub(crate) fn load(a: &[f32; 8]) -> F8 {
         F8(*a)
     }
