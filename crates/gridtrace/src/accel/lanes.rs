@@ -1,7 +1,8 @@
 //! Lanes of `f32`: the SIMD vocabulary that the packet triangle test (`triangle/packed.rs`) and the
 //! irregular grid's packet walk (`irregular/packet.rs`) are written in, once, for four lanes
-//! (glam's `Vec4`, SSE) and for eight (`F8`, one AVX register, only in code compiled for AVX2;
-//! without AVX2 a packet of eight runs as two packets of four).
+//! (glam's `Vec4`: SSE on x86-64, NEON on aarch64) and for eight (`F8`, `simd`'s: AVX2 or NEON,
+//! only in code compiled for the eight-lane path; without it a packet of eight runs as two
+//! packets of four).
 //!
 //! Every operation is IEEE arithmetic lane by lane, so a lane rounds exactly as the scalar code
 //! does (Rust never fuses multiply-adds on its own): the packet code's bit-for-bit agreement
@@ -122,12 +123,19 @@ impl Lanes<4> for Vec4 {
     }
     #[inline(always)]
     fn min(self, b: Self) -> Self {
-        // glam's `Vec4::min` is SSE's `minps(self, b)`: `self < b ? self : b`.
-        Vec4::min(self, b)
+        // On x86-64 glam's `Vec4::min` is SSE's `minps(self, b)`: `self < b ? self : b`.
+        // Elsewhere (NEON's `fmin`: NaN from either side) the rule is written out.
+        #[cfg(target_arch = "x86_64")]
+        return Vec4::min(self, b);
+        #[cfg(not(target_arch = "x86_64"))]
+        Vec4::select(self.cmplt(b), self, b)
     }
     #[inline(always)]
     fn max(self, b: Self) -> Self {
-        Vec4::max(self, b)
+        #[cfg(target_arch = "x86_64")]
+        return Vec4::max(self, b);
+        #[cfg(not(target_arch = "x86_64"))]
+        Vec4::select(self.cmpgt(b), self, b)
     }
     #[inline(always)]
     fn abs(self) -> Self {
@@ -147,170 +155,27 @@ impl Lanes<4> for Vec4 {
     }
 }
 
-/// Eight lanes of `f32` in one AVX register.
-///
-/// Only for code compiled with AVX2 enabled and entered after `simd::has_avx2()` said the CPU
-/// has it (the irregular grid's `walk_packet` is the one user): the operations are AVX
-/// intrinsics, inlined into that code.
-#[cfg(target_arch = "x86_64")]
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct F8(__m256);
-
-/// A mask of eight lanes: all bits set or clear per lane, so that `select` is a blend.
-#[cfg(target_arch = "x86_64")]
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct M8(__m256);
-
-// SAFETY (every `unsafe` block from here to the tests): each is one AVX or AVX2 intrinsic on
-// values in registers (loads and stores go through arrays of the right size). `F8` and `M8`
-// exist only inside functions compiled with `#[target_feature(enable = "avx2")]` that run
-// after `has_avx2()` (see `F8`), so the CPU has the instructions.
-#[cfg(target_arch = "x86_64")]
-mod avx {
-    use super::*;
-    use std::arch::x86_64::*;
-
-    macro_rules! lanewise {
-        ($t:ident, $trait:ident, $f:ident, $intr:ident) => {
-            impl $trait for $t {
-                type Output = $t;
-                #[inline(always)]
-                fn $f(self, b: $t) -> $t {
-                    $t(unsafe { $intr(self.0, b.0) })
-                }
-            }
-        };
-    }
-    lanewise!(F8, Add, add, _mm256_add_ps);
-    lanewise!(F8, Sub, sub, _mm256_sub_ps);
-    lanewise!(F8, Mul, mul, _mm256_mul_ps);
-    lanewise!(F8, Div, div, _mm256_div_ps);
-    lanewise!(M8, BitAnd, bitand, _mm256_and_ps);
-    lanewise!(M8, BitOr, bitor, _mm256_or_ps);
-
-    #[inline(always)]
-    fn all_ones() -> __m256 {
-        unsafe { _mm256_castsi256_ps(_mm256_set1_epi32(-1)) }
-    }
-
-    impl Not for M8 {
-        type Output = M8;
-        #[inline(always)]
-        fn not(self) -> M8 {
-            M8(unsafe { _mm256_xor_ps(self.0, all_ones()) })
-        }
-    }
-
-    impl Mask for M8 {
-        #[inline(always)]
-        fn from_bits(bits: u32) -> Self {
-            unsafe {
-                let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-                let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bit);
-                M8(_mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bit)))
-            }
-        }
-        #[inline(always)]
-        fn bits(self) -> u32 {
-            unsafe { _mm256_movemask_ps(self.0) as u32 }
-        }
-    }
-
-    macro_rules! cmp {
-        ($f:ident, $pred:ident) => {
-            #[inline(always)]
-            fn $f(self, b: Self) -> M8 {
-                M8(unsafe { _mm256_cmp_ps::<$pred>(self.0, b.0) })
-            }
-        };
-    }
-
-    /// Lanes from an array: a const-friendly transmute (same size, any bits are valid).
-    const fn from_f32s(a: [f32; 8]) -> F8 {
-        // SAFETY: `[f32; 8]` and `__m256` are both 32 bytes of plain floats.
-        F8(unsafe { std::mem::transmute::<[f32; 8], __m256>(a) })
-    }
-
-    impl Lanes<8> for F8 {
-        type Mask = M8;
-        const ZERO: Self = from_f32s([0.0; 8]);
-        const ONE: Self = from_f32s([1.0; 8]);
-        const INFINITY: Self = from_f32s([f32::INFINITY; 8]);
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            F8(unsafe { _mm256_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn from_array(a: [f32; 8]) -> Self {
-            F8(unsafe { _mm256_loadu_ps(a.as_ptr()) })
-        }
-        #[inline(always)]
-        fn to_array(self) -> [f32; 8] {
-            let mut a = [0.0; 8];
-            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
-        }
-        #[inline(always)]
-        fn select(mask: M8, a: Self, b: Self) -> Self {
-            // `blendv` takes the second operand where the mask's sign bit is set.
-            F8(unsafe { _mm256_blendv_ps(b.0, a.0, mask.0) })
-        }
-        // Ordered comparisons (false with a NaN) as SSE's `cmplt` & co.; `ne` unordered, as
-        // SSE's `cmpneq` and Rust's `!=`.
-        cmp!(lt, _CMP_LT_OQ);
-        cmp!(le, _CMP_LE_OQ);
-        cmp!(gt, _CMP_GT_OQ);
-        cmp!(ge, _CMP_GE_OQ);
-        cmp!(ne, _CMP_NEQ_UQ);
-        #[inline(always)]
-        fn is_nan(self) -> M8 {
-            M8(unsafe { _mm256_cmp_ps::<_CMP_UNORD_Q>(self.0, self.0) })
-        }
-        #[inline(always)]
-        fn min(self, b: Self) -> Self {
-            F8(unsafe { _mm256_min_ps(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn max(self, b: Self) -> Self {
-            F8(unsafe { _mm256_max_ps(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn abs(self) -> Self {
-            F8(unsafe { _mm256_and_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX))) })
-        }
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            F8(unsafe { _mm256_sqrt_ps(self.0) })
-        }
-        #[inline(always)]
-        fn trunc_small(self) -> Self {
-            F8(unsafe { _mm256_round_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(self.0) })
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-use std::arch::x86_64::__m256;
+/// Eight lanes (`simd`: one AVX register on x86-64, two NEON registers on aarch64), only in
+/// code compiled for the eight-lane path and entered after `simd::has_wide()`.
+pub(crate) use super::simd::{F8, M8};
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The four lanes' (and where the CPU has AVX2, the eight lanes') operations agree with the
+    /// The four lanes' (and where the CPU runs them, the eight lanes': AVX2 or NEON) operations agree with the
     /// scalar rules lane by lane, NaN, infinities, signed zeros and subnormals included.
     #[test]
     fn lanes_follow_the_scalar_rules() {
         check::<4, Vec4>();
-        #[cfg(target_arch = "x86_64")]
-        if crate::accel::simd::has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
+        if crate::accel::simd::has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
             unsafe { check_f8() };
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn check_f8() {
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    unsafe fn check_f8() {
         check::<8, F8>();
     }
 

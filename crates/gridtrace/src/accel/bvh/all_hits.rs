@@ -17,8 +17,7 @@ use super::box_test::{BoxRay, Pending};
 use super::build::{LEAF_BLOCK, STACK};
 use super::interleave::interleave;
 use super::wide::{ChildRef, WIDTH};
-#[cfg(target_arch = "x86_64")]
-use crate::accel::simd::has_avx2;
+use crate::accel::simd::has_wide;
 use crate::accel::{Hit, Ray};
 
 /// Entries the stack can hold: a node pops one entry and pushes at most `WIDTH`, and no path
@@ -72,29 +71,27 @@ impl BvhAccel {
     /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists, by the same walk (the same
     /// box test, so the same leaves; the same triangle test, so the same hits), without listing
     /// them. `COUNT_LANES` rays are walked interleaved, each step prefetching what its ray
-    /// visits next (as `intersect_batch`), compiled for AVX2 where the CPU has it.
+    /// visits next (as `intersect_batch`), in the eight-lane build where the CPU runs it (`simd::has_wide`).
     pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         assert_eq!(rays.len(), out.len(), "one count per ray");
         if self.blocks.is_empty() {
             out.fill(0);
             return;
         }
-        #[cfg(target_arch = "x86_64")]
-        if has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.count_hits_avx2(rays, t_min, t_max, out) };
+        if has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.count_hits_wide(rays, t_min, t_max, out) };
         }
         self.count_hits_body::<false>(rays, t_min, t_max, out)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn count_hits_avx2(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    unsafe fn count_hits_wide(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         self.count_hits_body::<true>(rays, t_min, t_max, out)
     }
 
     #[inline(always)]
-    pub(super) fn count_hits_body<const AVX: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+    pub(super) fn count_hits_body<const WIDE: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
         let idle = Ray::new(Vec3::ZERO, Vec3::X);
         let mut walks: [CountWalk; COUNT_LANES] = std::array::from_fn(|_| {
             let mut w = CountWalk {
@@ -120,7 +117,7 @@ impl BvhAccel {
                 w.reset(r);
                 Some(i)
             },
-            |w| w.step::<AVX>(self, t_min, t_max),
+            |w| w.step::<WIDE>(self, t_min, t_max),
             |w| {
                 self.prefetch(&Pending {
                     child: w.current,
@@ -162,19 +159,17 @@ impl CountWalk {
 
     /// Visits `current` and pops the next entry; true when the walk is over.
     #[inline(always)]
-    fn step<const AVX: bool>(&mut self, accel: &BvhAccel, t_min: f32, t_max: f32) -> bool {
+    fn step<const WIDE: bool>(&mut self, accel: &BvhAccel, t_min: f32, t_max: f32) -> bool {
         let child = self.current;
         if child.count() == 0 {
             let node = &accel.nodes[child.index() as usize];
-            #[cfg(target_arch = "x86_64")]
-            let mut entered = if AVX {
-                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                unsafe { self.r.entered_avx2(node, t_min, t_max * T_SLOP) }
+            let mut entered = if WIDE {
+                // SAFETY: `WIDE` is true only in code compiled for (and run on) CPUs of the
+                // eight-lane build (`simd::has_wide`).
+                unsafe { self.r.entered_wide(node, t_min, t_max * T_SLOP) }
             } else {
                 self.r.enter(node, t_min, t_max * T_SLOP).1
             };
-            #[cfg(not(target_arch = "x86_64"))]
-            let mut entered = self.r.enter(node, t_min, t_max * T_SLOP).1;
             while entered != 0 {
                 let k = entered.trailing_zeros() as usize;
                 entered &= entered - 1;

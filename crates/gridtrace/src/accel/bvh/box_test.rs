@@ -1,9 +1,11 @@
-//! The ray/node box test: eight slabs at once (portable and AVX2, bit-identical), and the
+//! The ray/node box test: eight slabs at once (portable and eight-lane `simd`, bit-identical), and the
 //! branch-free ordering of the entered children into stack entries.
 
 use std::mem::MaybeUninit;
 
 use crate::accel::Ray;
+use crate::accel::lanes::{Lanes as _, Mask as _};
+use crate::accel::simd::{F8, M8, U8, sort8};
 
 use super::wide::{ChildRef, Lanes, WIDTH, WideNode};
 
@@ -13,7 +15,7 @@ use super::wide::{ChildRef, Lanes, WIDTH, WideNode};
 /// the high bits of `t_enter` (a non-negative float orders as its bits; `max(0)` maps -0.0,
 /// possible when `t_min` is -0.0, to +0.0), the slot in the low three. Entry distances within
 /// eight ulps of each other thus order by slot: a visiting order, never a result, depends on
-/// it. `BoxRay::push_entered_avx2` computes the same keys.
+/// it. `order_keys` computes the same keys eight at a time.
 #[inline(always)]
 pub(super) fn order_key(t_enter: f32, entered: bool, slot: usize) -> u32 {
     if entered {
@@ -97,7 +99,7 @@ impl BoxRay {
     /// each slab costs a subtract and a multiply per plane and nothing else (`neg_inv`).
     ///
     /// The portable form, lane by lane over plain arrays (`if a > b { a } else { b }` is exactly
-    /// `maxps`, so the compiler vectorises it partly); `enter_avx2` is its AVX form.
+    /// `maxps`, so the compiler vectorises it partly); `enter_wide` is its eight-lane form.
     #[inline(always)]
     pub(super) fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
         let mut t_enter = [t_min; WIDTH];
@@ -147,45 +149,30 @@ impl BoxRay {
         mask.count_ones() as usize
     }
 
-    /// `push_entered` in AVX2 instructions, with the same entries bit for bit: the keys are
-    /// `order_key`'s, sorted by a bitonic network (unique keys have one sorted order).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    /// `push_entered` in eight-lane instructions (`simd`: AVX2 or NEON), with the same entries
+    /// bit for bit (the tests' view of `push_sorted`).
+    ///
+    /// # Safety
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
+    #[cfg(test)]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[inline]
-    pub(super) fn push_entered_avx2(
+    pub(super) unsafe fn push_entered_wide(
         &self,
         n: &WideNode,
         t_min: f32,
         t_max: f32,
         out: &mut [MaybeUninit<Pending>; WIDTH],
     ) -> usize {
-        use std::arch::x86_64::*;
-        let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
-        let key = order_keys_avx2(t_enter, _mm256_castps_si256(entered));
-        let order = _mm256_and_si256(sort8_avx2(key), _mm256_set1_epi32(7));
-        let t = _mm256_castps_si256(_mm256_permutevar8x32_ps(t_enter, order));
-        // SAFETY: `child` is eight u32s (an unaligned load needs nothing more).
-        let child = unsafe { _mm256_loadu_si256(n.child.as_ptr() as *const __m256i) };
-        let child = _mm256_permutevar8x32_epi32(child, order);
-        // (child, t) pairs: `Pending`'s layout. `lo` holds entries 0, 1 | 4, 5 and `hi` 2, 3 |
-        // 6, 7: stored a 16-byte quarter at a time, not regrouped by `vperm2i128` first (a
-        // single instruction on Intel, eight micro-ops on AMD's Zen 1, where 256-bit shuffles
-        // across the halves are split in two and recombined).
-        let lo = _mm256_unpacklo_epi32(child, t);
-        let hi = _mm256_unpackhi_epi32(child, t);
-        // SAFETY: `out` is eight eight-byte entries: 64 bytes, stored as four 16-byte parts.
-        unsafe {
-            let at = out.as_mut_ptr() as *mut __m128i;
-            _mm256_storeu2_m128i(at.add(2), at, lo);
-            _mm256_storeu2_m128i(at.add(3), at.add(1), hi);
-        }
-        _mm256_movemask_ps(entered).count_ones() as usize
+        let (t_enter, entered) = self.enter_wide(n, t_min, t_max);
+        push_sorted(n, t_enter, entered, out)
     }
 
-    /// The node step of a single walk in AVX2: pushes the entered children's entries at
-    /// `stack[sp..]` and returns the new top, as `push_entered_avx2` orders them (farthest first, the nearest on top,
-    /// where the walk's pop takes it at once: an entered child's entry distance is within the
-    /// search distance), the same entries in the same order, so the same visits and answers.
+    /// The node step of a single walk in eight-lane instructions: pushes the entered children's
+    /// entries at `stack[sp..]` and returns the new top, as `push_entered_wide` orders them
+    /// (farthest first, the nearest on top, where the walk's pop takes it at once: an entered
+    /// child's entry distance is within the search distance), the same entries in the same
+    /// order, so the same visits and answers.
     /// Where one or two children are entered (most node visits of incoherent rays: their
     /// paths narrow to one child below the top levels) the entries are picked without a sort
     /// and without a branch on their number: both written, the farther below the nearer, and
@@ -201,10 +188,9 @@ impl BoxRay {
     /// function with `target_feature` cannot be `inline(always)`.
     ///
     /// # Safety
-    /// The CPU must have AVX2.
-    #[cfg(target_arch = "x86_64")]
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
     #[inline(always)]
-    pub(super) unsafe fn descend_avx2(
+    pub(super) unsafe fn descend_wide(
         &self,
         n: &WideNode,
         t_min: f32,
@@ -212,25 +198,18 @@ impl BoxRay {
         stack: &mut [MaybeUninit<Pending>],
         sp: usize,
     ) -> usize {
-        use std::arch::x86_64::*;
-        // SAFETY: the CPU has AVX2 (the contract).
-        let (t_enter, entered) = unsafe { self.enter_avx2_packed(n, t_min, t_max) };
+        let (t_enter, entered) = self.enter_wide(n, t_min, t_max);
         // Per slot the entry distance's bits and `m = max(bits, 0) | 7`, the nearness below (in
         // AVX, 3 instructions for all eight; per child picked, a conditional move and more).
+        let bits = t_enter.to_bits();
         let (mut t, mut m) = ([0u32; WIDTH], [0u32; WIDTH]);
-        // SAFETY: the CPU has AVX2 (the contract); `t` and `m` are eight u32s each.
-        let mask = unsafe {
-            let bits = _mm256_castps_si256(t_enter);
-            let near = _mm256_or_si256(_mm256_max_epi32(bits, _mm256_setzero_si256()), _mm256_set1_epi32(7));
-            _mm256_storeu_si256(t.as_mut_ptr() as *mut __m256i, bits);
-            _mm256_storeu_si256(m.as_mut_ptr() as *mut __m256i, near);
-            _mm256_movemask_ps(entered) as u32
-        };
+        bits.store(&mut t);
+        bits.max_i32(U8::splat(0)).or(U8::splat(7)).store(&mut m);
+        let mask = entered.bits();
         let rest = mask & mask.wrapping_sub(1);
         if rest & rest.wrapping_sub(1) != 0 {
             let out = (&mut stack[sp..sp + WIDTH]).try_into().expect("WIDTH entries");
-            // SAFETY: the CPU has AVX2 (the contract).
-            return sp + unsafe { self.push_entered_avx2(n, t_min, t_max, out) };
+            return sp + push_sorted(n, t_enter, entered, out);
         }
         // No child: lane 0, written but not counted. One: both entries are it.
         let k0 = mask.trailing_zeros() as usize & (WIDTH - 1);
@@ -256,8 +235,8 @@ impl BoxRay {
         // SAFETY: two entries from `sp` are within `stack`: the entries pending are the
         // siblings of the nodes above the one visited, at most WIDTH - 1 a level of a tree
         // less than `STACK` levels deep, and the walks' stacks hold `(WIDTH - 1) * STACK +
-        // WIDTH` (`STACK_LEN`); `Pending` is `repr(C)`, a `u32` then an `f32` (little-endian:
-        // the low half, then the high one).
+        // WIDTH` (`STACK_LEN`); `Pending` is `repr(C)`, a `u32` then an `f32` (little-endian,
+        // on x86-64 and aarch64 alike: the low half, then the high one).
         unsafe {
             let at = stack.as_mut_ptr().add(sp) as *mut u64;
             at.write_unaligned(far);
@@ -266,131 +245,96 @@ impl BoxRay {
         sp + (mask != 0) as usize + (rest != 0) as usize
     }
 
-    /// The mask of the boxes `enter` enters, in AVX instructions (the same bits: `enter_avx2_packed`).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    /// The mask of the boxes `enter` enters, in eight-lane instructions (the same bits:
+    /// `enter_wide`).
+    ///
+    /// # Safety
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[inline]
-    pub(super) fn entered_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> u32 {
-        let (_, entered) = self.enter_avx2_packed(n, t_min, t_max);
-        std::arch::x86_64::_mm256_movemask_ps(entered) as u32
+    pub(super) unsafe fn entered_wide(&self, n: &WideNode, t_min: f32, t_max: f32) -> u32 {
+        self.enter_wide(n, t_min, t_max).1.bits()
     }
 
-    /// `enter` in AVX instructions, the same bits (the tests' view of `enter_avx2_packed`).
-    #[cfg(all(test, target_arch = "x86_64"))]
-    #[target_feature(enable = "avx2")]
+    /// `enter` in eight-lane instructions, the same bits (the tests' view of `enter_wide`).
+    ///
+    /// # Safety
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
+    #[cfg(test)]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[inline]
-    pub(super) fn enter_avx2(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
-        use std::arch::x86_64::*;
-        let (t_enter, entered) = self.enter_avx2_packed(n, t_min, t_max);
-        let mut out = [0.0; WIDTH];
-        // SAFETY: `out` holds eight f32s.
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t_enter) };
-        (out, _mm256_movemask_ps(entered) as u32)
+    pub(super) unsafe fn enter_wide_arrays(&self, n: &WideNode, t_min: f32, t_max: f32) -> (Lanes, u32) {
+        let (t_enter, entered) = self.enter_wide(n, t_min, t_max);
+        (t_enter.to_array(), entered.bits())
     }
 
-    /// `enter` in AVX instructions, with the same results bit for bit: each operation is the
-    /// packed form of the portable one (`_mm256_max_ps(a, b)` is `if a > b { a } else { b }`
-    /// per lane, NaNs included). The compiler vectorises the portable loops only partly.
-    /// Returns the entry distances and the entered lanes (all bits set) as registers.
+    /// `enter` in eight-lane instructions, with the same results bit for bit: each operation is
+    /// the packed form of the portable one (`max(a, b)` is `if a > b { a } else { b }` per
+    /// lane, NaNs included, in every backend). The compiler vectorises the portable loops only
+    /// partly. Returns the entry distances and the entered lanes (all bits set) as registers.
     /// Reading both planes at fixed offsets and picking near and far after the multiply by the
     /// sign of `neg_inv` (`vblendvps`; the same bits, and six general registers fewer in the
     /// walks' loop) was 4% slower on Zen 1 for 7 instructions a random ray fewer.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn enter_avx2_packed(
-        &self,
-        n: &WideNode,
-        t_min: f32,
-        t_max: f32,
-    ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
-        use std::arch::x86_64::*;
-        let mut t_enter = _mm256_set1_ps(t_min);
-        let mut t_exit = _mm256_setzero_ps();
+    ///
+    /// Only in code compiled for the eight-lane build (always inlined there).
+    #[inline(always)]
+    pub(super) fn enter_wide(&self, n: &WideNode, t_min: f32, t_max: f32) -> (F8, M8) {
+        let mut t_enter = F8::splat(t_min);
+        let mut t_exit = F8::ZERO;
         for a in 0..3 {
             // SAFETY: `near` and `far` are byte offsets of two of the six plane arrays
-            // (`BoxRay::from_parts`), each eight f32s (an unaligned load needs nothing more).
+            // (`BoxRay::from_parts`), each eight f32s.
             let (near, far) = unsafe {
                 let planes = n.planes.as_ptr() as *const u8;
                 (
-                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
-                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
+                    F8::load(&*(planes.add(self.near[a]) as *const Lanes)),
+                    F8::load(&*(planes.add(self.far[a]) as *const Lanes)),
                 )
             };
-            let o = _mm256_set1_ps(self.origin[a]);
-            let neg_inv = _mm256_set1_ps(self.neg_inv[a]);
-            let t_near = _mm256_mul_ps(_mm256_sub_ps(o, near), neg_inv);
-            let t_far = _mm256_mul_ps(_mm256_sub_ps(o, far), neg_inv);
-            t_enter = _mm256_max_ps(t_enter, t_near);
+            let o = F8::splat(self.origin[a]);
+            let neg_inv = F8::splat(self.neg_inv[a]);
+            let t_near = (o - near) * neg_inv;
+            let t_far = (o - far) * neg_inv;
+            t_enter = t_enter.max(t_near);
             // The first axis's far distances as they are: `min(inf, x)` (the portable form's
-            // start) is `x` bit for bit, NaN included (`minps` returns its second operand
+            // start) is `x` bit for bit, NaN included (`min` returns its second operand
             // unless the first is less); one constant load fewer per node.
-            t_exit = if a == 0 { t_far } else { _mm256_min_ps(t_exit, t_far) };
+            t_exit = if a == 0 { t_far } else { t_exit.min(t_far) };
         }
-        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
-        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
+        let t_exit = (t_exit * F8::splat(FAR_SCALE)).min(F8::splat(t_max));
+        (t_enter, t_enter.le(t_exit))
     }
 }
 
-/// The mask of `_mm256_blend_epi32` for one layer of a bitonic sorting network on eight lanes
-/// (Batcher 1968): lanes `i` and `i ^ j` compare, in blocks of `k` that sort up where `i & k`
-/// is 0 and down elsewhere; bit `i` set where lane `i` keeps the larger value.
-#[cfg(target_arch = "x86_64")]
-pub(super) const fn bitonic_mask(k: usize, j: usize) -> i32 {
-    let mut mask = 0;
-    let mut i = 0;
-    while i < 8 {
-        if ((i & j) == 0) != ((i & k) == 0) {
-            mask |= 1 << i;
-        }
-        i += 1;
-    }
-    mask
+/// Writes a node's children entered (`entered`, with entry distances `t_enter`) to `out` as
+/// stack entries, farthest first (`order_key`'s order, sorted by the bitonic network: unique
+/// keys have one sorted order), and returns how many; the rest of `out` is left meaningless.
+/// Takes the box test's results rather than testing again: the node step (`descend_wide`)
+/// has them in registers already, and written over `simd`'s types the compiler did not merge a
+/// second test with the first (cachegrind, random rays on the Stanford Bunny: the box test's
+/// loads ran 14% more often, the share of node visits with three or more children entered).
+#[inline(always)]
+fn push_sorted(n: &WideNode, t_enter: F8, entered: M8, out: &mut [MaybeUninit<Pending>; WIDTH]) -> usize {
+    let key = order_keys(t_enter, entered);
+    let order = sort8(key).and(U8::splat(7));
+    let t = t_enter.permute(order).to_bits();
+    // SAFETY: `ChildRef` is a `u32` (`repr(transparent)`): `child` is eight of them.
+    let child = U8::load(unsafe { &*(n.child.as_ptr() as *const [u32; WIDTH]) }).permute(order);
+    // SAFETY: `out` is eight `Pending`s, each a `u32` then an `f32` (`repr(C)`): sixteen
+    // `u32`s, (child, t) pairs.
+    unsafe { U8::store_pairs(child, t, out.as_mut_ptr() as *mut u32) };
+    entered.bits().count_ones() as usize
 }
 
-/// `order_key` of a node's eight slots in AVX2, the same bits: `t_enter` the slots' entry
-/// distances, `entered` all bits set in the lanes of the slots entered.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-pub(super) fn order_keys_avx2(
-    t_enter: std::arch::x86_64::__m256,
-    entered: std::arch::x86_64::__m256i,
-) -> std::arch::x86_64::__m256i {
-    use std::arch::x86_64::*;
-    let slot = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let bits = _mm256_max_epi32(_mm256_castps_si256(t_enter), _mm256_setzero_si256());
-    let hit_key = _mm256_or_si256(
-        _mm256_and_si256(
-            _mm256_sub_epi32(_mm256_set1_epi32(0x7FFF_FFFF), bits),
-            _mm256_set1_epi32(!7),
-        ),
-        slot,
-    );
-    let miss_key = _mm256_or_si256(_mm256_set1_epi32(i32::MIN), slot);
-    _mm256_blendv_epi8(miss_key, hit_key, entered)
-}
-
-/// Sorts eight u32s, ascending, without a branch: the six layers of the bitonic network, each
-/// a lane shuffle, a min, a max and a blend.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-pub(super) fn sort8_avx2(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256i {
-    use std::arch::x86_64::*;
-    macro_rules! layer {
-        ($v:expr, $partner:expr, $k:literal, $j:literal) => {{
-            let (v, p) = ($v, $partner);
-            _mm256_blend_epi32::<{ bitonic_mask($k, $j) }>(_mm256_min_epu32(v, p), _mm256_max_epu32(v, p))
-        }};
-    }
-    // Partners: lane i ^ 1 and i ^ 2 within each 128-bit half; i ^ 4 across the halves.
-    let v = layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 2, 1);
-    let v = layer!(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v), 4, 2);
-    let v = layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 4, 1);
-    let v = layer!(v, _mm256_permute4x64_epi64::<0b01_00_11_10>(v), 8, 4);
-    let v = layer!(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v), 8, 2);
-    layer!(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v), 8, 1)
+/// `order_key` of a node's eight slots in eight lanes, the same bits: `t_enter` the slots'
+/// entry distances, `entered` the slots entered.
+#[inline(always)]
+pub(super) fn order_keys(t_enter: F8, entered: M8) -> U8 {
+    let slot = U8::from_array([0, 1, 2, 3, 4, 5, 6, 7]);
+    let bits = t_enter.to_bits().max_i32(U8::splat(0));
+    let hit_key = U8::splat(0x7FFF_FFFF).wrapping_sub(bits).and(U8::splat(!7)).or(slot);
+    let miss_key = U8::splat(0x8000_0000).or(slot);
+    U8::select(entered, hit_key, miss_key)
 }
 
 /// One pending child on the traversal stack, with the distance at which the ray enters its box.

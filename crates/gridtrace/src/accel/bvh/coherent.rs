@@ -29,16 +29,17 @@
 use std::mem::MaybeUninit;
 
 use crate::accel::lanes::{F8, Lanes, Mask, load3, splat3};
+use crate::accel::simd::{U8, sort8};
 use crate::accel::triangle::{LaneRay, SharedFrame, intersect_frame_cull, intersect_lanes_cull};
 use crate::accel::{Hit, PACKET, Ray};
 use crate::util::set_bits as bits;
 
 use super::BvhAccel;
-use super::box_test::{BoxRay, DIR_TINY, T_SLOP, order_keys_avx2, sort8_avx2};
+use super::box_test::{BoxRay, DIR_TINY, T_SLOP, order_keys};
 use super::build::LEAF_BLOCK;
 use super::interval::Interval;
 use super::walk::STACK_LEN;
-use super::wide::{ChildRef, WIDTH, WideNode};
+use super::wide::{ChildRef, WideNode};
 
 /// A child pending on the packet's stack: the rays that entered its box, and the smallest of
 /// their entry distances (no ray in `rays` can hit anything in it nearer than that).
@@ -74,13 +75,12 @@ pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
             && dot * dot >= COHERENT_COS * COHERENT_COS * r.dir.length_squared() * len0_sq
             && (r.origin - first.origin).length_squared() <= near * near
     };
-    #[cfg(target_arch = "x86_64")]
-    if let (Ok(group), true) = (<&[Ray; PACKET]>::try_from(rays), crate::accel::simd::has_avx2()) {
+    if let (Ok(group), true) = (<&[Ray; PACKET]>::try_from(rays), crate::accel::simd::has_wide()) {
         // The last ray alone first: incoherent groups (random rays) almost all fail there.
         // Without it random rays cost 11 instructions a ray more (990 against 979,
         // cachegrind); with it eye and camera rays 6 more (366 against 360 for eye rays).
-        // SAFETY: the CPU has AVX2, checked just above.
-        return close(&group[PACKET - 1]) && unsafe { coherent_avx2(group, extent) };
+        // SAFETY: the CPU runs the eight-lane build, checked just above.
+        return close(&group[PACKET - 1]) && unsafe { coherent_wide(group, extent) };
     }
     rays.iter().all(close)
 }
@@ -88,55 +88,54 @@ pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
 /// The cone of `coherent`: cos(8 degrees).
 const COHERENT_COS: f32 = 0.990;
 
-/// `coherent` for a whole packet in AVX2, the eight rays one per lane: the same operations in
-/// the same order (glam's `dot` is `(x * x') + (y * y')) + z * z'`; Rust fuses nothing), so
-/// the same answer. Eye rays 383 -> 360 instructions a ray and camera rays 488 -> 464 against
-/// the scalar test ray by ray (cachegrind, Stanford Bunny); which route a group takes only ever
-/// changes speed, never an answer, anyway.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn coherent_avx2(rays: &[Ray; PACKET], extent: f32) -> bool {
-    use std::arch::x86_64::*;
-    let lanes = |f: fn(&Ray) -> f32| {
-        _mm256_setr_ps(
-            f(&rays[0]),
-            f(&rays[1]),
-            f(&rays[2]),
-            f(&rays[3]),
-            f(&rays[4]),
-            f(&rays[5]),
-            f(&rays[6]),
-            f(&rays[7]),
-        )
-    };
-    let (dx, dy, dz) = (lanes(|r| r.dir.x), lanes(|r| r.dir.y), lanes(|r| r.dir.z));
+/// `coherent` for a whole packet in eight lanes, the eight rays one per lane: the same
+/// operations in the same order (glam's `dot` is `(x * x') + (y * y')) + z * z'`; Rust fuses
+/// nothing), so the same answer. Eye rays 383 -> 360 instructions a ray and camera rays 488 ->
+/// 464 against the scalar test ray by ray (cachegrind, Stanford Bunny, AVX2); which route a
+/// group takes only ever changes speed, never an answer, anyway.
+///
+/// # Safety
+/// The CPU must run the eight-lane build (`simd::has_wide`).
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+unsafe fn coherent_wide(rays: &[Ray; PACKET], extent: f32) -> bool {
+    let d = [
+        ray_lanes(rays, |r| r.dir.x),
+        ray_lanes(rays, |r| r.dir.y),
+        ray_lanes(rays, |r| r.dir.z),
+    ];
     let (d0, o0) = (rays[0].dir, rays[0].origin);
-    let dot3 = |(ax, ay, az): (__m256, __m256, __m256), (bx, by, bz): (__m256, __m256, __m256)| {
-        _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
-            _mm256_mul_ps(az, bz),
-        )
-    };
-    let d = (dx, dy, dz);
-    let dot = dot3(d, (_mm256_set1_ps(d0.x), _mm256_set1_ps(d0.y), _mm256_set1_ps(d0.z)));
-    let cone = _mm256_mul_ps(
-        _mm256_mul_ps(_mm256_set1_ps(COHERENT_COS * COHERENT_COS), dot3(d, d)),
-        _mm256_set1_ps(d0.length_squared()),
-    );
-    let o = (
-        _mm256_sub_ps(lanes(|r| r.origin.x), _mm256_set1_ps(o0.x)),
-        _mm256_sub_ps(lanes(|r| r.origin.y), _mm256_set1_ps(o0.y)),
-        _mm256_sub_ps(lanes(|r| r.origin.z), _mm256_set1_ps(o0.z)),
-    );
+    let dot = dot3(d, splat3(d0.to_array()));
+    let cone = F8::splat(COHERENT_COS * COHERENT_COS) * dot3(d, d) * F8::splat(d0.length_squared());
+    let o = [
+        ray_lanes(rays, |r| r.origin.x) - F8::splat(o0.x),
+        ray_lanes(rays, |r| r.origin.y) - F8::splat(o0.y),
+        ray_lanes(rays, |r| r.origin.z) - F8::splat(o0.z),
+    ];
     let near = 0.02 * extent;
-    let ok = _mm256_and_ps(
-        _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_GT_OQ>(dot, _mm256_setzero_ps()),
-            _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(dot, dot), cone),
-        ),
-        _mm256_cmp_ps::<_CMP_LE_OQ>(dot3(o, o), _mm256_set1_ps(near * near)),
-    );
-    _mm256_movemask_ps(ok) == 0xFF
+    let ok = dot.gt(F8::ZERO) & (dot * dot).ge(cone) & dot3(o, o).le(F8::splat(near * near));
+    ok.bits() == 0xFF
+}
+
+/// `f` of each ray, a lane each. (Functions, not closures, around the vector operations:
+/// closures do not inherit `target_feature`.)
+#[inline(always)]
+fn ray_lanes(rays: &[Ray; PACKET], f: fn(&Ray) -> f32) -> F8 {
+    F8::from_array([
+        f(&rays[0]),
+        f(&rays[1]),
+        f(&rays[2]),
+        f(&rays[3]),
+        f(&rays[4]),
+        f(&rays[5]),
+        f(&rays[6]),
+        f(&rays[7]),
+    ])
+}
+
+/// `(a.x * b.x + a.y * b.y) + a.z * b.z` lane by lane, as glam's `dot`.
+#[inline(always)]
+fn dot3(a: [F8; 3], b: [F8; 3]) -> F8 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Whether the queries may take the packet route: yes, unless the environment sets
@@ -187,9 +186,8 @@ impl BvhAccel {
     /// use (`pop_live`).
     ///
     /// # Safety
-    /// The CPU must have AVX2 (`simd::has_avx2`).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[inline]
     pub(super) unsafe fn walk_coherent<const ANY: bool>(
         &self,
@@ -200,7 +198,6 @@ impl BvhAccel {
         let n = rays.len();
         debug_assert!((1..=PACKET).contains(&n));
         let all = (1u32 << n) - 1;
-        use std::arch::x86_64::*;
         // Lanes past `n` repeat ray 0; they are in no mask, and their triangle tests run up
         // to `t_min`, which no hit passes.
         let ray = |i: usize| &rays[if i < n { i } else { 0 }];
@@ -217,17 +214,13 @@ impl BvhAccel {
         let mut inv = [[0.0; PACKET]; 3];
         let mut down = [0u32; 3];
         for a in 0..3 {
-            // SAFETY: AVX2 (the contract); the arrays hold eight f32s.
-            unsafe {
-                let d = _mm256_loadu_ps(dir[a].as_ptr());
-                let sign = _mm256_and_ps(d, _mm256_set1_ps(-0.0));
-                let tiny =
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(_mm256_set1_ps(-0.0), d), _mm256_set1_ps(DIR_TINY));
-                let safe = _mm256_blendv_ps(d, _mm256_or_ps(sign, _mm256_set1_ps(DIR_TINY)), tiny);
-                _mm256_storeu_ps(inv[a].as_mut_ptr(), _mm256_div_ps(_mm256_set1_ps(1.0), safe));
-                // `safe` is never zero: its sign bit says whether it is below zero.
-                down[a] = _mm256_movemask_ps(safe) as u32;
-            }
+            let d = F8::load(&dir[a]);
+            let sign = d.to_bits().and(U8::splat(0x8000_0000));
+            let tiny = d.abs().lt(F8::splat(DIR_TINY));
+            let safe = F8::select(tiny, F8::from_u8_bits(sign.or(U8::splat(DIR_TINY.to_bits()))), d);
+            (F8::ONE / safe).store(&mut inv[a]);
+            // `safe` is never zero: its sign bit says whether it is below zero.
+            down[a] = safe.sign_bits();
         }
         let interval = Interval::from_lanes(&origin, &inv, down);
         // Each ray's own box test, for packets that go different ways (built only for them).
@@ -272,17 +265,17 @@ impl BvhAccel {
             let count = cur.child.count();
             if count == 0 {
                 let node = &self.nodes[cur.child.index() as usize];
-                // SAFETY: AVX2 (the contract).
+                // SAFETY: the eight-lane build (the contract).
                 sp = unsafe { p.push_children(node, cur.rays, t_min, &s.t_box, &mut stack, sp) };
             } else {
                 let first = cur.child.index() as usize;
-                // SAFETY: AVX2 (the contract).
+                // SAFETY: the eight-lane build (the contract).
                 let done = unsafe { self.test_leaf::<ANY>(&p, first, count as usize, cur.rays, t_min, &mut s) };
                 if done {
                     break;
                 }
             }
-            // SAFETY: AVX2 (the contract).
+            // SAFETY: the eight-lane build (the contract).
             match unsafe { pop_live(&stack, &mut sp, s.live, &s.t_box) } {
                 Some(e) => cur = e,
                 None => break,
@@ -303,8 +296,7 @@ impl BvhAccel {
     /// is done (`ANY` only).
     ///
     /// # Safety
-    /// The CPU must have AVX2 (always inlined into the AVX2 walk).
-    #[cfg(target_arch = "x86_64")]
+    /// The CPU must run the eight-lane build (always inlined into the eight-lane walk).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     unsafe fn test_leaf<const ANY: bool>(
@@ -416,12 +408,11 @@ struct PacketRays<'a> {
 
 impl PacketRays<'_> {
     /// Pushes the children of `node` that the rays of `rays` enter at `stack[sp..]`, farthest
-    /// first (`order_key`, as `push_entered_avx2`: the nearest ends on top), each with the
+    /// first (`order_key`, as `push_entered_wide`: the nearest ends on top), each with the
     /// rays that entered it and their least entry distance; returns the new top.
     ///
     /// # Safety
-    /// The CPU must have AVX2 (always inlined into the AVX2 walk).
-    #[cfg(target_arch = "x86_64")]
+    /// The CPU must run the eight-lane build (always inlined into the eight-lane walk).
     #[inline(always)]
     unsafe fn push_children(
         &self,
@@ -432,60 +423,46 @@ impl PacketRays<'_> {
         stack: &mut [MaybeUninit<Entry>; STACK_LEN],
         mut sp: usize,
     ) -> usize {
-        use std::arch::x86_64::*;
         let mut entered = 0u64;
         let mut union = 0u32;
-        // SAFETY (every intrinsic below): AVX2 (the contract); the arrays hold eight 32-bit
-        // values.
-        unsafe {
-            let mut t_near = _mm256_set1_ps(f32::INFINITY);
-            if let Some(iv) = self.interval {
-                // One test for the packet: every ray its own test would let in is let in.
-                let mut reach = f32::NEG_INFINITY;
-                for r in bits(rays) {
-                    reach = reach.max(t_box[r]);
-                }
-                let (t_enter, hit) = iv.enter(node, t_min, reach);
-                t_near = _mm256_blendv_ps(t_near, t_enter, hit);
-                union = _mm256_movemask_ps(hit) as u32;
-            } else if let Some(boxes) = self.boxes {
-                for r in bits(rays) {
-                    let (t_enter, hit) = boxes[r].enter_avx2_packed(node, t_min, t_box[r]);
-                    t_near = _mm256_min_ps(t_near, _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t_enter, hit));
-                    let m = _mm256_movemask_ps(hit) as u32;
-                    union |= m;
-                    entered |= (m as u64) << (8 * r);
-                }
+        let mut t_near = F8::INFINITY;
+        if let Some(iv) = self.interval {
+            // One test for the packet: every ray its own test would let in is let in.
+            let mut reach = f32::NEG_INFINITY;
+            for r in bits(rays) {
+                reach = reach.max(t_box[r]);
             }
-            if union == 0 {
-                return sp;
+            let (t_enter, hit) = iv.enter(node, t_min, reach);
+            t_near = F8::select(hit, t_enter, t_near);
+            union = hit.bits();
+        } else if let Some(boxes) = self.boxes {
+            for r in bits(rays) {
+                let (t_enter, hit) = boxes[r].enter_wide(node, t_min, t_box[r]);
+                t_near = t_near.min(F8::select(hit, t_enter, F8::INFINITY));
+                let m = hit.bits();
+                union |= m;
+                entered |= (m as u64) << (8 * r);
             }
-            let by_child = transpose8(entered);
-            let in_union = _mm256_cmpeq_epi32(
-                _mm256_and_si256(
-                    _mm256_set1_epi32(union as i32),
-                    _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
-                ),
-                _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128),
-            );
-            let key = order_keys_avx2(t_near, in_union);
-            let mut order = [0u32; WIDTH];
-            let mut t_near_k = [0f32; WIDTH];
-            _mm256_storeu_si256(order.as_mut_ptr() as *mut __m256i, sort8_avx2(key));
-            _mm256_storeu_ps(t_near_k.as_mut_ptr(), t_near);
-            for &key in &order[..union.count_ones() as usize] {
-                let k = (key & 7) as usize;
-                stack[sp] = MaybeUninit::new(Entry {
-                    child: node.child[k],
-                    rays: if self.interval.is_some() {
-                        rays
-                    } else {
-                        (by_child >> (8 * k)) as u32 & 0xFF
-                    },
-                    t_enter: t_near_k[k],
-                });
-                sp += 1;
-            }
+        }
+        if union == 0 {
+            return sp;
+        }
+        let by_child = transpose8(entered);
+        let key = order_keys(t_near, <F8 as Lanes<8>>::Mask::from_bits(union));
+        let order = sort8(key).to_array();
+        let t_near_k = t_near.to_array();
+        for &key in &order[..union.count_ones() as usize] {
+            let k = (key & 7) as usize;
+            stack[sp] = MaybeUninit::new(Entry {
+                child: node.child[k],
+                rays: if self.interval.is_some() {
+                    rays
+                } else {
+                    (by_child >> (8 * k)) as u32 & 0xFF
+                },
+                t_enter: t_near_k[k],
+            });
+            sp += 1;
         }
         sp
     }
@@ -495,8 +472,7 @@ impl PacketRays<'_> {
 /// within its search distance `t_box`), popped with those rays; `None` when none is left.
 ///
 /// # Safety
-/// The CPU must have AVX2 (always inlined into the AVX2 walk).
-#[cfg(target_arch = "x86_64")]
+/// The CPU must run the eight-lane build (always inlined into the eight-lane walk).
 #[inline(always)]
 unsafe fn pop_live(
     stack: &[MaybeUninit<Entry>; STACK_LEN],
@@ -504,18 +480,11 @@ unsafe fn pop_live(
     live: u32,
     t_box: &[f32; PACKET],
 ) -> Option<Entry> {
-    use std::arch::x86_64::*;
     while *sp > 0 {
         *sp -= 1;
         // SAFETY: entries below `sp` were written by a push.
         let e = unsafe { stack[*sp].assume_init() };
-        // SAFETY: AVX2 (the contract); `t_box` holds eight f32s.
-        let reach = unsafe {
-            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(
-                _mm256_set1_ps(e.t_enter),
-                _mm256_loadu_ps(t_box.as_ptr()),
-            )) as u32
-        };
+        let reach = F8::splat(e.t_enter).le(F8::load(t_box)).bits();
         let rays = e.rays & live & reach;
         if rays != 0 {
             return Some(Entry { rays, ..e });

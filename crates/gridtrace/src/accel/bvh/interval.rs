@@ -3,6 +3,7 @@
 //! packet walk (`coherent.rs`).
 
 use crate::accel::PACKET;
+use crate::accel::lanes::{F8, Lanes, M8};
 
 #[cfg(test)]
 use super::box_test::BoxRay;
@@ -83,50 +84,42 @@ impl Interval {
 
     /// Entry distances (lower bounds over the rays) into the node's boxes within
     /// `[t_min, t_max]`, `t_max` the greatest of the rays' search distances, and the entered
-    /// lanes.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn enter(
-        &self,
-        n: &WideNode,
-        t_min: f32,
-        t_max: f32,
-    ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
-        use std::arch::x86_64::*;
-        let mut t_enter = _mm256_set1_ps(t_min);
-        let mut t_exit = _mm256_set1_ps(f32::INFINITY);
+    /// lanes. Only in code compiled for the eight-lane build (always inlined there).
+    #[inline(always)]
+    pub(super) fn enter(&self, n: &WideNode, t_min: f32, t_max: f32) -> (F8, M8) {
+        let mut t_enter = F8::splat(t_min);
+        let mut t_exit = F8::INFINITY;
         for a in 0..3 {
             // SAFETY: `near` and `far` index the six plane arrays (as `BoxRay`'s), each eight
-            // f32s (an unaligned load needs nothing more).
+            // f32s.
             let (near, far) = unsafe {
                 let planes = n.planes.as_ptr() as *const [f32; WIDTH];
                 (
-                    _mm256_loadu_ps(planes.add(self.near[a]) as *const f32),
-                    _mm256_loadu_ps(planes.add(self.far[a]) as *const f32),
+                    F8::load(&*planes.add(self.near[a])),
+                    F8::load(&*planes.add(self.far[a])),
                 )
             };
-            let (lo, hi) = (_mm256_set1_ps(self.inv_lo[a]), _mm256_set1_ps(self.inv_hi[a]));
-            let dn = _mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a]));
-            let df = _mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a]));
-            let t_near = _mm256_min_ps(_mm256_mul_ps(dn, lo), _mm256_mul_ps(dn, hi));
-            let t_far = _mm256_max_ps(_mm256_mul_ps(df, lo), _mm256_mul_ps(df, hi));
-            t_enter = _mm256_max_ps(t_enter, t_near);
-            t_exit = _mm256_min_ps(t_exit, t_far);
+            let (lo, hi) = (F8::splat(self.inv_lo[a]), F8::splat(self.inv_hi[a]));
+            let dn = near - F8::splat(self.o_near[a]);
+            let df = far - F8::splat(self.o_far[a]);
+            let t_near = (dn * lo).min(dn * hi);
+            let t_far = (df * lo).max(df * hi);
+            t_enter = t_enter.max(t_near);
+            t_exit = t_exit.min(t_far);
         }
-        let t_exit = _mm256_min_ps(_mm256_mul_ps(t_exit, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(t_max));
-        (t_enter, _mm256_cmp_ps::<_CMP_LE_OQ>(t_enter, t_exit))
+        let t_exit = (t_exit * F8::splat(FAR_SCALE)).min(F8::splat(t_max));
+        (t_enter, t_enter.le(t_exit))
     }
 
     /// `enter` as arrays, for the tests.
+    ///
+    /// # Safety
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
     #[cfg(test)]
-    #[target_feature(enable = "avx2")]
-    pub(super) fn enter_for_test(&self, n: &WideNode, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
-        use std::arch::x86_64::*;
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    pub(super) unsafe fn enter_for_test(&self, n: &WideNode, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
+        use crate::accel::lanes::Mask;
         let (t, m) = self.enter(n, t_min, t_max);
-        let mut out = [0.0; WIDTH];
-        // SAFETY: `out` holds eight f32s.
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t) };
-        (out, _mm256_movemask_ps(m) as u32)
+        (t.to_array(), m.bits())
     }
 }

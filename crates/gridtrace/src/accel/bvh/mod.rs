@@ -23,17 +23,15 @@ mod all_hits;
 mod box_test;
 mod build;
 mod closest;
-#[cfg(target_arch = "x86_64")]
 mod coherent;
 mod interleave;
-#[cfg(target_arch = "x86_64")]
 mod interval;
 mod packet;
 mod refit;
 mod structure;
 #[cfg(test)]
 mod tests;
-#[cfg(all(test, target_arch = "x86_64"))]
+#[cfg(test)]
 mod tests_coherent;
 #[cfg(test)]
 mod tests_queries;
@@ -144,8 +142,7 @@ impl BvhAccel {
     /// for memory overlaps the others' work (incoherent rays spend most of their time waiting
     /// for nodes and triangles, one dependent load after another). The same answers either way.
     fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: TMax<'_>, mut finish: impl FnMut(usize, &Hit)) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::accel::simd::has_avx2() && rays.len() >= PACKET && coherent::packets_enabled() {
+        if crate::accel::simd::has_wide() && rays.len() >= PACKET && coherent::packets_enabled() {
             let extent = self.extent();
             // Indices of the rays left to the interleaved walks (u32: a batch is cut into
             // work items far smaller than 2^32 rays; checked).
@@ -153,8 +150,8 @@ impl BvhAccel {
             for (g, group) in rays.chunks(PACKET).enumerate() {
                 let start = g * PACKET;
                 if group.len() == PACKET && coherent::coherent(group, extent) {
-                    // SAFETY: the CPU has AVX2, checked above.
                     let limits = std::array::from_fn(|k| t_max.of(start + k));
+                    // SAFETY: the CPU runs the eight-lane build, checked above.
                     let a = unsafe { self.walk_coherent::<ANY>(group, t_min, limits) };
                     for (k, best) in a.best.iter().enumerate() {
                         if a.redo >> k & 1 != 0 {
@@ -175,7 +172,6 @@ impl BvhAccel {
     }
 
     /// One ray's single walk, its result as `Walk::best` (a packet's ray with a tie).
-    #[cfg(target_arch = "x86_64")]
     fn walk_best<const ANY: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> Hit {
         let mut w = Walk::new(ray, t_min, t_max);
         self.walk::<ANY, _>(&mut w, &mut crate::accel::NoCounters);

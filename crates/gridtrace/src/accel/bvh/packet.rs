@@ -19,8 +19,7 @@ use crate::accel::{Counters, Hit, PACKET, Ray};
 
 use super::BvhAccel;
 use super::walk::Walk;
-#[cfg(target_arch = "x86_64")]
-use crate::accel::simd::has_avx2;
+use crate::accel::simd::has_wide;
 
 impl BvhAccel {
     /// Closest hits of up to `PACKET` rays, each counted into its own `counters[i]`: the same
@@ -55,7 +54,7 @@ impl BvhAccel {
     }
 
     /// Walks the rays as one packet where they look coherent and nothing is counted
-    /// (`coherent.rs`), else interleaved, compiled for AVX2 where the CPU has it (as `walk`),
+    /// (`coherent.rs`), else interleaved, in the eight-lane build where the CPU runs it (as `walk`),
     /// and hands each ray's result (`Walk::best`) to `finish(i, best)`.
     fn packet<const ANY: bool, C: Counters>(
         &self,
@@ -71,14 +70,13 @@ impl BvhAccel {
         );
         // Counting walks visit what the single walk visits (their counts are compared), so
         // only a walk that counts nothing may take the packet's route.
-        #[cfg(target_arch = "x86_64")]
         if !C::COUNTS
             && !rays.is_empty()
-            && has_avx2()
+            && has_wide()
             && super::coherent::packets_enabled()
             && super::coherent::coherent(rays, self.extent())
         {
-            // SAFETY: the CPU has AVX2, checked just above.
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
             let a = unsafe { self.walk_coherent::<ANY>(rays, t_min, t_max) };
             for (k, ray) in rays.iter().enumerate() {
                 if a.redo >> k & 1 != 0 {
@@ -89,17 +87,15 @@ impl BvhAccel {
             }
             return;
         }
-        #[cfg(target_arch = "x86_64")]
-        if has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.packet_avx2::<ANY, C>(rays, t_min, t_max, counters, finish) };
+        if has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.packet_wide::<ANY, C>(rays, t_min, t_max, counters, finish) };
         }
         self.packet_body::<ANY, false, C>(rays, t_min, t_max, counters, finish)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn packet_avx2<const ANY: bool, C: Counters>(
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    unsafe fn packet_wide<const ANY: bool, C: Counters>(
         &self,
         rays: &[Ray],
         t_min: f32,
@@ -111,7 +107,7 @@ impl BvhAccel {
     }
 
     #[inline(always)]
-    fn packet_body<const ANY: bool, const AVX: bool, C: Counters>(
+    fn packet_body<const ANY: bool, const WIDE: bool, C: Counters>(
         &self,
         rays: &[Ray],
         t_min: f32,
@@ -136,7 +132,7 @@ impl BvhAccel {
                 let i = left.trailing_zeros() as usize;
                 left &= left - 1;
                 let w = &mut walks[i];
-                if w.step::<ANY, AVX, C>(self, &mut counters[i]) {
+                if w.step::<ANY, WIDE, C>(self, &mut counters[i]) {
                     finish(i, &w.best);
                     live &= !(1 << i);
                 } else {

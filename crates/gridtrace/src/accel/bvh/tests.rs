@@ -2,13 +2,10 @@
 
 use std::mem::MaybeUninit;
 
-#[cfg(target_arch = "x86_64")]
-use super::box_test::sort8_avx2;
 use super::box_test::{BoxRay, Pending};
 use super::build::{MAX_LEAF, STACK};
 use super::*;
-#[cfg(target_arch = "x86_64")]
-use crate::accel::simd::has_avx2;
+use crate::accel::simd::has_wide;
 use crate::accel::{NoCounters, brute_force_intersect, brute_force_occluded};
 
 #[test]
@@ -76,7 +73,6 @@ fn leaves_cover_their_primitives() {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
 fn random_ray(rng: &mut crate::util::Rng) -> Ray {
     let mut d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
     // Some directions with zero components: rays parallel to slabs.
@@ -94,7 +90,6 @@ fn random_ray(rng: &mut crate::util::Rng) -> Ray {
 
 /// A node of random boxes (some flat, some points, some slots empty) and a random ray, most
 /// of the time aimed through the first box, with `t_min` and `t_max`.
-#[cfg(target_arch = "x86_64")]
 pub(super) fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (WideNode, Ray, f32, f32) {
     let mut node = WideNode::EMPTY;
     for slot in 0..WIDTH - round % 3 {
@@ -128,37 +123,36 @@ pub(super) fn random_node_and_ray(rng: &mut crate::util::Rng, round: usize) -> (
 }
 
 /// The bitonic network sorts: random keys, many repeated, against the standard sort.
-#[cfg(target_arch = "x86_64")]
 #[test]
-fn sort8_avx2_sorts() {
-    use std::arch::x86_64::*;
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the network is not used here");
+fn sort8_sorts() {
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the network is not used here");
         return;
     }
+    // SAFETY: the CPU runs the eight-lane build, checked above.
+    unsafe { sort8_rounds() }
+}
+
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+unsafe fn sort8_rounds() {
+    use crate::accel::simd::{U8, sort8};
     let mut rng = crate::util::Rng::new(0x5027);
     for round in 0..20_000 {
         let range = [4, 1000, u32::MAX][round % 3];
         let keys: [u32; 8] = std::array::from_fn(|_| (rng.next_u64() as u32) % range);
         let mut want = keys;
         want.sort_unstable();
-        let mut got = [0u32; 8];
-        // SAFETY: the CPU has AVX2, checked above; both arrays are eight u32s.
-        unsafe {
-            let v = sort8_avx2(_mm256_loadu_si256(keys.as_ptr() as *const __m256i));
-            _mm256_storeu_si256(got.as_mut_ptr() as *mut __m256i, v);
-        }
+        let got = sort8(U8::from_array(keys)).to_array();
         assert_eq!(got, want, "keys {keys:?}");
     }
 }
 
 /// A node step's pushed entries, portable and AVX2, are the same bits; they are exactly the
 /// children the box test enters, farthest first (up to `order_key`'s eight ulps).
-#[cfg(target_arch = "x86_64")]
 #[test]
 fn avx_push_equals_portable_and_sorts_far_to_near() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: only the portable push runs here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: only the portable push runs here");
         return;
     }
     let mut rng = crate::util::Rng::new(0x9E57);
@@ -173,8 +167,8 @@ fn avx_push_equals_portable_and_sorts_far_to_near() {
         }); WIDTH];
         let mut b = a;
         let n = r.push_entered(&node, t_min, t_max, &mut a);
-        // SAFETY: the CPU has AVX2, checked above.
-        let n_avx = unsafe { r.push_entered_avx2(&node, t_min, t_max, &mut b) };
+        // SAFETY: the CPU runs the eight-lane build, checked above.
+        let n_avx = unsafe { r.push_entered_wide(&node, t_min, t_max, &mut b) };
         assert_eq!((n, n_avx), (mask.count_ones() as usize, n), "round {round}: counts");
         // SAFETY: all WIDTH entries were written by both pushes.
         let (a, b) = unsafe { (a.map(|p| p.assume_init()), b.map(|p| p.assume_init())) };
@@ -203,15 +197,14 @@ fn avx_push_equals_portable_and_sorts_far_to_near() {
     assert!(several > 1000, "nodes with several entered children: {several}");
 }
 
-/// The single walk's node step (`descend_avx2`: one or two children picked without the sort)
+/// The single walk's node step (`descend_wide`: one or two children picked without the sort)
 /// leaves the stack as pushing every entered child would: the same entries, in the same order,
 /// the same top. Some rounds with a negative `t_min` (entry distances below zero, which
 /// `order_key` orders as zero, by slot).
-#[cfg(target_arch = "x86_64")]
 #[test]
 fn descend_equals_the_full_push() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the node step is not used here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the node step is not used here");
         return;
     }
     let mut rng = crate::util::Rng::new(0xD35C);
@@ -227,8 +220,8 @@ fn descend_equals_the_full_push() {
         let (mut a, mut b) = ([blank; 2 * WIDTH], [blank; 2 * WIDTH]);
         let base = round % 5;
         let n = r.push_entered(&node, t_min, t_max, (&mut a[base..base + WIDTH]).try_into().unwrap());
-        // SAFETY: the CPU has AVX2, checked above.
-        let top = unsafe { r.descend_avx2(&node, t_min, t_max, &mut b, base) };
+        // SAFETY: the CPU runs the eight-lane build, checked above.
+        let top = unsafe { r.descend_wide(&node, t_min, t_max, &mut b, base) };
         assert_eq!(top, base + n, "round {round}: the top");
         // SAFETY: the entries below the top were written by both.
         let entries = |p: &[MaybeUninit<Pending>]| {
@@ -249,11 +242,10 @@ fn descend_equals_the_full_push() {
 /// The AVX box test gives the portable one's entry distances and mask bit for bit: random
 /// boxes (some flat, some points, some slots empty, some around a common point) against
 /// random rays, some parallel to an axis, with and without limits on t.
-#[cfg(target_arch = "x86_64")]
 #[test]
 fn avx_box_test_equals_portable() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: only the portable box test runs here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: only the portable box test runs here");
         return;
     }
     let mut rng = crate::util::Rng::new(0xB0C5);
@@ -262,8 +254,8 @@ fn avx_box_test_equals_portable() {
         let (node, ray, t_min, t_max) = random_node_and_ray(&mut rng, round);
         let r = BoxRay::new(&ray);
         let (t, mask) = r.enter(&node, t_min, t_max);
-        // SAFETY: the CPU has AVX2, checked above.
-        let (t_avx, mask_avx) = unsafe { r.enter_avx2(&node, t_min, t_max) };
+        // SAFETY: the CPU runs the eight-lane build, checked above.
+        let (t_avx, mask_avx) = unsafe { r.enter_wide_arrays(&node, t_min, t_max) };
         assert_eq!(mask, mask_avx, "round {round}: masks");
         assert_eq!(
             t.map(f32::to_bits),
@@ -277,11 +269,10 @@ fn avx_box_test_equals_portable() {
 
 /// The batch traversal's AVX2 build and its baseline build give the same hits, bit for bit,
 /// closest and any, on random triangles and rays.
-#[cfg(target_arch = "x86_64")]
 #[test]
 fn avx_and_baseline_traversals_agree() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: only the baseline traversal runs here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: only the baseline traversal runs here");
         return;
     }
     let mut rng = crate::util::Rng::new(0x7A5E);
@@ -298,8 +289,8 @@ fn avx_and_baseline_traversals_agree() {
         let mut out = vec![Hit::MISS; rays.len()];
         let finish = |i: usize, w: &Walk| out[i] = accel.result(&w.best);
         if avx {
-            // SAFETY: the CPU has AVX2, checked above.
-            unsafe { accel.interleaved_avx2::<false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish) }
+            // SAFETY: the CPU runs the eight-lane build, checked above.
+            unsafe { accel.interleaved_wide::<false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish) }
         } else {
             accel.interleaved_body::<false, false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish)
         }
@@ -309,8 +300,8 @@ fn avx_and_baseline_traversals_agree() {
         let mut out = vec![false; rays.len()];
         let finish = |i: usize, w: &Walk| out[i] = w.best.is_hit();
         if avx {
-            // SAFETY: the CPU has AVX2, checked above.
-            unsafe { accel.interleaved_avx2::<true>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish) }
+            // SAFETY: the CPU runs the eight-lane build, checked above.
+            unsafe { accel.interleaved_wide::<true>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish) }
         } else {
             accel.interleaved_body::<true, false>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish)
         }

@@ -8,7 +8,7 @@ use glam::Vec3;
 use super::coherent::{coherent, transpose8};
 use super::tests::{random_mesh, tris_of};
 use super::*;
-use crate::accel::simd::has_avx2;
+use crate::accel::simd::has_wide;
 use crate::accel::{NoCounters, PACKET};
 use crate::util::Rng;
 
@@ -19,7 +19,7 @@ fn bits(h: &Hit) -> (u32, u32, u32, u32) {
 /// The packet walk forced on `rays` (whatever `coherent` says), ties redone by the single walk
 /// as the queries do; the closest hits as answered, and how many rays needed the redo.
 fn forced(accel: &BvhAccel, rays: &[Ray], t_min: f32, t_max: [f32; PACKET]) -> (Vec<Hit>, Vec<bool>, u32) {
-    // SAFETY: the callers checked that the CPU has AVX2.
+    // SAFETY: the callers checked that the CPU runs the eight-lane build.
     let closest = unsafe { accel.walk_coherent::<false>(rays, t_min, t_max) };
     // SAFETY: as above.
     let any = unsafe { accel.walk_coherent::<true>(rays, t_min, t_max) };
@@ -76,8 +76,8 @@ fn transpose8_transposes() {
 
 #[test]
 fn coherent_packets_equal_single_rays_on_random_triangles() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the packet walk does not run here");
         return;
     }
     let mut rng = Rng::new(0xC0_4E5E);
@@ -152,8 +152,8 @@ fn coherent_packets_equal_single_rays_on_random_triangles() {
 /// packet walk must hand those rays back to the single walk (and does: some are redone).
 #[test]
 fn coherent_packets_break_ties_as_single_rays() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the packet walk does not run here");
         return;
     }
     let side = 40;
@@ -212,8 +212,8 @@ fn coherent_packets_break_ties_as_single_rays() {
 /// order and on random rays, and the packet queries without counters.
 #[test]
 fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the packet walk does not run here");
         return;
     }
     let mut rng = Rng::new(0xBA7C);
@@ -295,8 +295,8 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
 fn interval_test_is_conservative_ray_by_ray() {
     use super::box_test::BoxRay;
     use super::interval::Interval;
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the packet walk does not run here");
         return;
     }
     let mut rng = Rng::new(0x1A7E);
@@ -320,11 +320,11 @@ fn interval_test_is_conservative_ray_by_ray() {
         let Some(iv) = Interval::new(&boxes) else { continue };
         let reach: [f32; PACKET] = std::array::from_fn(|k| if k % 2 == 0 { t_max } else { t_max * 0.5 });
         let widest = reach.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-        // SAFETY: the CPU has AVX2, checked above.
+        // SAFETY: the CPU runs the eight-lane build, checked above.
         let (t_iv, m_iv) = unsafe { iv.enter_for_test(&node, t_min, widest) };
         for (k, b) in boxes.iter().enumerate() {
             // SAFETY: as above.
-            let (t, m) = unsafe { b.enter_avx2(&node, t_min, reach[k]) };
+            let (t, m) = unsafe { b.enter_wide_arrays(&node, t_min, reach[k]) };
             assert_eq!(m & !m_iv, 0, "round {round}, ray {k}: a box the ray enters is culled");
             for slot in super::coherent::bit_iter(m) {
                 assert!(t_iv[slot] <= t[slot], "round {round}, ray {k}, box {slot}: later entry");
@@ -347,8 +347,8 @@ fn interval_test_is_conservative_ray_by_ray() {
 /// for bit.
 #[test]
 fn pinhole_packets_near_edges_miss_and_hit_as_aimed() {
-    if !has_avx2() {
-        eprintln!("no AVX2 on this CPU: the packet walk does not run here");
+    if !has_wide() {
+        eprintln!("no eight-lane build on this CPU: the packet walk does not run here");
         return;
     }
     let unit = crate::testing::unit_triangle();

@@ -5,7 +5,7 @@ use std::mem::MaybeUninit;
 
 use glam::{Vec3, Vec4};
 
-use crate::accel::simd::{has_avx2, prefetch};
+use crate::accel::simd::{has_wide, prefetch};
 use crate::accel::triangle::{LaneRay, ShearedRay, intersect_lanes_cull};
 use crate::accel::{Counters, Hit, NoCounters, Ray, TMax};
 
@@ -15,24 +15,24 @@ use super::build::{LEAF_BLOCK, MAX_LEAF, STACK};
 use super::wide::{ChildRef, WIDTH};
 
 impl BvhAccel {
-    /// Runs one ray's walk to its end, compiled for AVX2 where the CPU has it (as `interleaved`).
+    /// Runs one ray's walk to its end, in the eight-lane build where the CPU runs it (as
+    /// `interleaved`).
     pub(super) fn walk<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
-        #[cfg(target_arch = "x86_64")]
-        if has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.walk_avx2::<ANY, C>(w, counters) };
+        if has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.walk_wide::<ANY, C>(w, counters) };
         }
         while !w.step::<ANY, false, C>(self, counters) {}
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) fn walk_avx2<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    pub(super) unsafe fn walk_wide<const ANY: bool, C: Counters>(&self, w: &mut Walk, counters: &mut C) {
         while !w.step::<ANY, true, C>(self, counters) {}
     }
 
-    /// Runs the batch traversal compiled for AVX2 where the CPU has it (with the box test in
-    /// AVX instructions, `BoxRay::enter_avx2`), else the baseline build. Both give the same
+    /// Runs the batch traversal compiled for the eight-lane build where the CPU runs it
+    /// (`simd::has_wide`: AVX2 on x86-64, NEON on aarch64; the box test in eight lanes,
+    /// `BoxRay::enter_wide`), else the baseline build. Both give the same
     /// bits: IEEE arithmetic rounds the same at any vector width, and Rust never fuses
     /// multiply-adds on its own.
     /// `rays` yields each ray with its index in the batch (handed back to `finish`).
@@ -43,15 +43,14 @@ impl BvhAccel {
         t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.interleaved_avx2::<ANY>(rays, t_min, t_max, finish) };
+        if has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.interleaved_wide::<ANY>(rays, t_min, t_max, finish) };
         }
         self.interleaved_portable::<ANY>(rays, t_min, t_max, finish)
     }
 
-    /// The batch traversal without AVX2, out of line as `interleaved_avx2` is: inlined, its
+    /// The batch traversal without the eight-lane build, out of line as `interleaved_wide` is: inlined, its
     /// loop made the callers' own code (`traced`: the packets' answers) compile differently
     /// with each change to the walk, by up to 9 instructions a camera ray.
     #[inline(never)]
@@ -65,9 +64,8 @@ impl BvhAccel {
         self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) fn interleaved_avx2<'r, const ANY: bool>(
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    pub(super) unsafe fn interleaved_wide<'r, const ANY: bool>(
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
@@ -88,7 +86,7 @@ impl BvhAccel {
     /// iterator and the output then hold no registers in the loop) saved 46 instructions a
     /// random ray but cost camera rays 8 (`traced`'s packet answers no longer unrolled).
     #[inline(always)]
-    pub(super) fn interleaved_body<'r, const ANY: bool, const AVX: bool>(
+    pub(super) fn interleaved_body<'r, const ANY: bool, const WIDE: bool>(
         &self,
         mut rays: impl Iterator<Item = (usize, &'r Ray)>,
         t_min: f32,
@@ -121,7 +119,7 @@ impl BvhAccel {
             let mut k = 0;
             loop {
                 let w = &mut walks[k];
-                if w.step::<ANY, AVX, _>(self, &mut NoCounters) {
+                if w.step::<ANY, WIDE, _>(self, &mut NoCounters) {
                     finish(item[k], w);
                     let Some((i, r)) = rays.next() else {
                         // This lane is done; the others go on in `drain`.
@@ -135,12 +133,12 @@ impl BvhAccel {
                 k = (k + 1) % LANES;
             }
         }
-        self.drain::<ANY, AVX>(walks, &item, live, finish);
+        self.drain::<ANY, WIDE>(walks, &item, live, finish);
     }
 
     /// Runs the walks of the `live` lanes to their ends (the batch's last rays).
     #[inline(always)]
-    fn drain<const ANY: bool, const AVX: bool>(
+    fn drain<const ANY: bool, const WIDE: bool>(
         &self,
         walks: &mut [Walk; LANES],
         item: &[usize; LANES],
@@ -153,7 +151,7 @@ impl BvhAccel {
                 let k = left.trailing_zeros() as usize;
                 left &= left - 1;
                 let w = &mut walks[k];
-                if w.step::<ANY, AVX, _>(self, &mut NoCounters) {
+                if w.step::<ANY, WIDE, _>(self, &mut NoCounters) {
                     finish(item[k], w);
                     live &= !(1 << k);
                 } else {
@@ -294,7 +292,7 @@ impl Walk {
     /// Returns true when the ray is done: nothing left that could hold a (closer) hit, or, for
     /// `ANY`, a hit found.
     #[inline(always)]
-    pub(super) fn step<const ANY: bool, const AVX: bool, C: Counters>(
+    pub(super) fn step<const ANY: bool, const WIDE: bool, C: Counters>(
         &mut self,
         accel: &BvhAccel,
         counters: &mut C,
@@ -318,10 +316,10 @@ impl Walk {
         } else {
             counters.cell();
             let n = &accel.nodes[cur.child.index() as usize];
-            #[cfg(target_arch = "x86_64")]
-            if AVX {
-                // SAFETY: `AVX` is true only in code compiled for (and run on) AVX2 CPUs.
-                let sp = unsafe { self.r.descend_avx2(n, self.t_min, self.t_box, &mut self.stack, self.sp) };
+            if WIDE {
+                // SAFETY: `WIDE` is true only in code compiled for (and run on) CPUs of the
+                // eight-lane build (`simd::has_wide`).
+                let sp = unsafe { self.r.descend_wide(n, self.t_min, self.t_box, &mut self.stack, self.sp) };
                 return self.pop_from(sp);
             }
             // The entered children, nearest on top: popped first, just below.
@@ -385,7 +383,7 @@ impl Walk {
             sp -= 1;
             // SAFETY: entries below the top were written by a push, within the stack
             // (`sp <= STACK_LEN`: the walk's pushes index the stack checked, or, two at a time,
-            // within `(WIDTH - 1) * depth + 2 < STACK_LEN`, `descend_avx2`).
+            // within `(WIDTH - 1) * depth + 2 < STACK_LEN`, `descend_wide`).
             let p = unsafe { self.stack.get_unchecked(sp).assume_init() };
             if p.t_enter <= self.t_box {
                 self.sp = sp;

@@ -1,7 +1,7 @@
 //! Packets: up to eight coherent rays (a 4x2 block of pixels' eye, shadow or mirror rays)
-//! walked together, a ray per SIMD lane: one AVX register of eight lanes where the CPU has
-//! AVX2, two packets of four in SSE registers elsewhere (`lanes.rs`: the walk is written once
-//! for both).
+//! walked together, a ray per SIMD lane: eight lanes (`simd::F8`: one AVX register where the
+//! CPU has AVX2, two NEON registers on aarch64), two packets of four in SSE registers elsewhere
+//! (`lanes.rs`: the walk is written once for both).
 //!
 //! Why: a single ray's step is one long chain of dependent operations (voxel -> top cell ->
 //! voxel map -> cell -> exit distances -> exit point -> next voxel), about a hundred cycles of
@@ -98,7 +98,8 @@ impl IrregularGrid {
         self.walk_packet::<ANY, C>(tris, rays, t_min, t_max, counters, true)
     }
 
-    /// The packet walk: eight rays in AVX registers where the CPU has AVX2 (compiled for it:
+    /// The packet walk: eight rays in eight lanes where the CPU runs them (`simd::has_wide`;
+    /// on x86-64 compiled for AVX2:
     /// three-operand instructions, the same bits, as the BVH's `interleaved` explains), else
     /// (or with `fours`) as two packets of four in SSE registers. Hits and counts are the
     /// single-ray walk's either way.
@@ -117,18 +118,16 @@ impl IrregularGrid {
             rays.len() <= PACKET && counters.len() == rays.len(),
             "a packet is up to {PACKET} rays, a counter each"
         );
-        #[cfg(target_arch = "x86_64")]
-        if crate::accel::simd::has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.walk_packet_avx2::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
+        if crate::accel::simd::has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.walk_packet_wide::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
         }
         self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[allow(clippy::too_many_arguments)]
-    fn walk_packet_avx2<const ANY: bool, C: Counters>(
+    unsafe fn walk_packet_wide<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
@@ -140,7 +139,7 @@ impl IrregularGrid {
         if fours {
             return self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters);
         }
-        // `F8` is for AVX2 code only: this function is.
+        // `F8` is for the eight-lane build only: this function is compiled for it.
         self.walk_lanes::<PACKET, crate::accel::lanes::F8, ANY, C>(tris, rays, t_min, t_max, counters)
     }
 

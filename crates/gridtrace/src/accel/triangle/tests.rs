@@ -85,16 +85,14 @@ fn four_lanes_equal_the_scalar_test() {
 #[test]
 fn a_ray_per_lane_equals_the_scalar_test() {
     rays_per_lane::<4, Vec4>();
-    #[cfg(target_arch = "x86_64")]
-    if crate::accel::simd::has_avx2() {
-        // SAFETY: the CPU has AVX2, checked just above.
-        unsafe { rays_per_lane_avx() };
+    if crate::accel::simd::has_wide() {
+        // SAFETY: the CPU runs the eight-lane build, checked just above.
+        unsafe { rays_per_lane_wide() };
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn rays_per_lane_avx() {
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+unsafe fn rays_per_lane_wide() {
     rays_per_lane::<8, crate::accel::lanes::F8>();
 }
 

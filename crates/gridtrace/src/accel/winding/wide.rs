@@ -1,7 +1,7 @@
 //! The fast winding numbers' query tree: the binary BVH collapsed to eight children a node,
 //! each child's second-order coefficients (`expansion.rs`) stored lane by lane, and each leaf's
-//! triangles as one block of eight lanes; walked in `f32` lanes (eight in one AVX register where
-//! the CPU has AVX2, else two halves of four), as libigl walks its four-wide tree.
+//! triangles as one block of eight lanes; walked in `f32` lanes (eight, `simd::F8`, where the
+//! CPU runs them: AVX2 or NEON; else two halves of four), as libigl walks its four-wide tree.
 //!
 //! Per node, the eight children are tested at once: a child farther than `accuracy` times
 //! its radius adds its expansion; a nearer one is opened, a leaf through the exact solid
@@ -97,10 +97,9 @@ impl WideTree {
         if self.nodes.is_empty() {
             return 0.0;
         }
-        #[cfg(target_arch = "x86_64")]
-        if crate::accel::simd::has_avx2() {
-            // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.solid_angle_avx2(p, accuracy2, stack) };
+        if crate::accel::simd::has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.solid_angle_wide(p, accuracy2, stack) };
         }
         self.walk::<4, glam::Vec4>(p, accuracy2, stack)
     }
@@ -115,10 +114,9 @@ impl WideTree {
         self.walk::<4, glam::Vec4>(p, accuracy2, stack)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn solid_angle_avx2(&self, p: Vec3, accuracy2: f32, stack: &mut Vec<u32>) -> f64 {
-        // `F8` is for AVX2 code only: this function is.
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    unsafe fn solid_angle_wide(&self, p: Vec3, accuracy2: f32, stack: &mut Vec<u32>) -> f64 {
+        // `F8` is for the eight-lane build only: this function is compiled for it.
         self.walk::<8, crate::accel::lanes::F8>(p, accuracy2, stack)
     }
 
