@@ -16,7 +16,7 @@
 use glam::{Vec3, Vec4};
 
 use crate::accel::Aabb;
-use crate::accel::bvh::DIR_TINY;
+use crate::accel::bvh::safe_dir;
 use crate::accel::bvh::{Bvh, BvhNode};
 
 /// Instances a leaf holds at most.
@@ -344,10 +344,9 @@ struct Slabs {
 impl Slabs {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Slabs {
-        let safe = |d: f32| if d.abs() < DIR_TINY { DIR_TINY.copysign(d) } else { d };
         Slabs {
             origin: origin.to_array().map(Vec4::splat),
-            inv_dir: dir.to_array().map(|d| Vec4::splat(1.0 / safe(d))),
+            inv_dir: dir.to_array().map(|d| Vec4::splat(1.0 / safe_dir(d))),
         }
     }
 

@@ -55,6 +55,13 @@ const PLANE_BYTES: usize = std::mem::size_of::<Lanes>();
 /// reciprocal (`BoxRay::neg_inv`); the GPU walk does the same.
 pub(crate) const DIR_TINY: f32 = 1e-30;
 
+/// `d` with a size below `DIR_TINY` replaced by `DIR_TINY` of its sign: a direction component
+/// whose reciprocal the slab tests may take (every CPU box test of a single ray uses it).
+#[inline(always)]
+pub(crate) fn safe_dir(d: f32) -> f32 {
+    if d.abs() < DIR_TINY { DIR_TINY.copysign(d) } else { d }
+}
+
 /// `1 + 2 * gamma(3)`: the slab distances are each computed with at most three roundings, so
 /// widening the exit distance by this factor makes the box test conservative (Ize, "Robust
 /// BVH Ray Traversal", JCGT 2013). A ray that touches a box is never reported as missing it.
@@ -71,8 +78,7 @@ pub(crate) const T_SLOP: f32 = 1.0 + 1.0 / 256.0;
 
 impl BoxRay {
     pub(super) fn new(ray: &Ray) -> BoxRay {
-        let safe = |d: f32| if d.abs() < DIR_TINY { DIR_TINY.copysign(d) } else { d };
-        let d = ray.dir.to_array().map(safe);
+        let d = ray.dir.to_array().map(safe_dir);
         BoxRay::from_parts(ray.origin.to_array(), d.map(|x| 1.0 / x), d.map(|x| x < 0.0))
     }
 

@@ -38,7 +38,7 @@ mod tests_queries;
 mod walk;
 mod wide;
 
-pub(crate) use box_test::{DIR_TINY, FAR_SCALE, T_SLOP};
+pub(crate) use box_test::{DIR_TINY, FAR_SCALE, T_SLOP, safe_dir};
 use build::LEAF_BLOCK;
 pub(crate) use build::STACK;
 pub use build::{Bvh, BvhNode, MAX_LEAF};

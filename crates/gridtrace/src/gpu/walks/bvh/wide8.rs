@@ -17,7 +17,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
-use crate::accel::bvh::{BvhAccel, DIR_TINY, FAR_SCALE, STACK, T_SLOP, WIDTH, WideNode};
+use crate::accel::bvh::{BvhAccel, FAR_SCALE, STACK, T_SLOP, WIDTH, WideNode, safe_dir};
 use crate::accel::triangle::TriAccel4;
 use crate::accel::{Aabb, Counters, Hit, Ray, TriAccel};
 use crate::gpu::walks::bvh::binary::STACK_DONE;
@@ -316,8 +316,7 @@ pub fn walk<const ANY: bool, C: Counters>(
     work: &mut Wide8Work,
 ) -> Hit {
     let o = ray.origin;
-    let safe = |d: f32| if d.abs() < DIR_TINY { DIR_TINY.copysign(d) } else { d };
-    let inv = Vec3::ONE / Vec3::from(ray.dir.to_array().map(safe));
+    let inv = Vec3::ONE / Vec3::from(ray.dir.to_array().map(safe_dir));
     let oct = (inv.x < 0.0) as usize | ((inv.y < 0.0) as usize) << 1 | ((inv.z < 0.0) as usize) << 2;
     let mut best = Hit { t: t_max, ..Hit::MISS };
     let mut stack: Vec<u32> = Vec::with_capacity(STACK);
