@@ -111,12 +111,9 @@ pub trait AccelStructure: Sized {
         rays: &[Ray],
         t_min: f32,
         t_max: TMax<'_>,
-        mut f: impl FnMut(usize, Hit, Vec3),
+        f: impl FnMut(usize, Hit, Vec3),
     ) {
-        for (i, r) in rays.iter().enumerate() {
-            let hit = self.intersect(tris, r, t_min, t_max.of(i), &mut NoCounters);
-            f(i, hit, hit_normal(tris, &hit));
-        }
+        intersect_ray_by_ray(self, tris, rays, t_min, t_max, f)
     }
 
     /// The point of the mesh nearest to `p` (`closest.rs`: the nearest, then the smallest
@@ -183,6 +180,22 @@ impl TMax<'_> {
             TMax::One(t) => t,
             TMax::Each(t) => t[i],
         }
+    }
+}
+
+/// `intersect_batch_each` one ray at a time (`intersect`): the default, and what a structure
+/// whose batch walk assumes one limit for all takes for a limit a ray.
+pub(crate) fn intersect_ray_by_ray<S: AccelStructure>(
+    s: &S,
+    tris: &[TriAccel],
+    rays: &[Ray],
+    t_min: f32,
+    t_max: TMax<'_>,
+    mut f: impl FnMut(usize, Hit, Vec3),
+) {
+    for (i, r) in rays.iter().enumerate() {
+        let hit = s.intersect(tris, r, t_min, t_max.of(i), &mut NoCounters);
+        f(i, hit, hit_normal(tris, &hit));
     }
 }
 

@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use super::{IrregularGrid, IrregularParams, IrregularStats};
 use crate::Result;
-use crate::accel::contract::{AccelStructure, dedup_hits, hit_normal};
+use crate::accel::contract::{AccelStructure, dedup_hits, hit_normal, intersect_ray_by_ray};
 use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TMax, TriAccel, dims_str};
 use crate::util::fmt_bytes;
 
@@ -136,12 +136,7 @@ impl AccelStructure for IrregularGrid {
                 self.batch::<false>(tris, rays, t_min, t_max, |i, hit| f(i, hit, hit_normal(tris, &hit)))
             }
             // A limit a ray: the packets assume one (the two levels' streams; ray by ray).
-            TMax::Each(_) => {
-                for (i, r) in rays.iter().enumerate() {
-                    let hit = self.intersect(tris, r, t_min, t_max.of(i), &mut NoCounters);
-                    f(i, hit, hit_normal(tris, &hit));
-                }
-            }
+            TMax::Each(_) => intersect_ray_by_ray(self, tris, rays, t_min, t_max, f),
         }
     }
 
