@@ -4,8 +4,9 @@
 //!
 //! Every structure keeps one contract (`contract::AccelStructure`: build, update, bounds,
 //! memory, reports, closest and any hits for rays, packets and batches) over `TriAccel`s
-//! (`triangle/`, the one edge-safe triangle test all share; its lane forms in `triangle/packed.rs`), and has one row in the registry
-//! (`registry.rs`: names, aliases, parameters). What they share lives beside them, not in one of
+//! (`triangle/`, the one edge-safe triangle test all share; its lane forms in
+//! `triangle/packed.rs`), and has one row in the registry (`registry.rs`: names, aliases,
+//! parameters). What they share lives beside them, not in one of
 //! them: `binning` (bounds, candidate cells, counting sort), `resolution`, `tri_box`, `lattice`
 //! (DDA basics), `simd` (AVX2, prefetch, packet width), `lanes`. No structure imports another.
 //! Adding one: see "Adding a structure" in docs/design.md.
