@@ -32,6 +32,7 @@ async function draw(page) {
   body.dataset.frames = String(Number(body.dataset.frames || 0) + 1);
   body.dataset.firstFrameMs = body.dataset.firstFrameMs || frame.ms.toFixed(1);
   overlay.textContent = `${page.describe()}\n${frame.ms.toFixed(1)} ms a frame, ${frame.mraysPerS.toFixed(2)} Mrays/s`;
+  if (frame.stages) overlay.textContent += `\n${frame.stages}`;
 }
 
 // The selectors list the library's registries, so a structure or mode added there shows here;
@@ -76,8 +77,9 @@ async function main() {
   await draw(page);
   body.dataset.loadMs = (performance.now() - t0).toFixed(1);
 
-  // Orbit (drag, one finger), pan (right or shift drag), zoom (wheel): each redraws once the
-  // frame in progress is done, with all the input since folded into the camera.
+  // Orbit (drag, one finger), pan (right or shift drag), zoom (wheel, two-finger pinch): each
+  // redraws once the frame in progress is done, with all the input since folded into the
+  // camera.
   let busy = false;
   let again = false;
   const redraw = async () => {
@@ -97,11 +99,29 @@ async function main() {
       busy = false;
     }
   };
+  // Pointers down on the canvas (mouse, pen or fingers), by id: two fingers pinch to zoom.
+  const down = new Map();
+  const apart = () => {
+    const [a, b] = [...down.values()];
+    return Math.hypot(a.x - b.x, a.y - b.y);
+  };
   canvas.addEventListener('contextmenu', (ev) => ev.preventDefault());
-  canvas.addEventListener('pointerdown', (ev) => canvas.setPointerCapture(ev.pointerId));
+  canvas.addEventListener('pointerdown', (ev) => {
+    down.set(ev.pointerId, { x: ev.clientX, y: ev.clientY });
+    canvas.setPointerCapture(ev.pointerId);
+  });
+  const lift = (ev) => down.delete(ev.pointerId);
+  canvas.addEventListener('pointerup', lift);
+  canvas.addEventListener('pointercancel', lift);
   canvas.addEventListener('pointermove', (ev) => {
     if (!ev.buttons) return;
-    if (ev.buttons & 2 || ev.shiftKey) page.pan(ev.movementX, ev.movementY);
+    if (down.size === 2 && down.has(ev.pointerId)) {
+      const before = apart();
+      down.set(ev.pointerId, { x: ev.clientX, y: ev.clientY });
+      page.pinch(apart() / before);
+    } else if (down.size > 2) {
+      return;
+    } else if (ev.buttons & 2 || ev.shiftKey) page.pan(ev.movementX, ev.movementY);
     else page.orbit(ev.movementX, ev.movementY);
     redraw();
   });

@@ -2,9 +2,10 @@
 
 The page (web/dist, from scripts/build-web.sh) renders knot-box at 256x256 in shadow mode;
 its canvas, read back as PNG, is compared with the native CLI's CPU render of the same camera:
-at most 1% of pixels may differ. Once on the CPU tracer (the path without WebGPU), once on
-WebGPU (SwiftShader's adapter), where the browser gives one; the page without WebGPU says so
-and traces on the CPU; a Stanford Bunny PLY opened on the page renders.
+at most 1% of pixels may differ. On the CPU tracer (the path without WebGPU) and on WebGPU
+(SwiftShader's adapter): every mode and structure, a dropped mesh and an opened Stanford Bunny
+PLY, each on both; the page without WebGPU says so and traces on the CPU; dragging, the wheel
+and a two-finger pinch move the camera as render places it.
 
 These tests sit beside the page rather than with the Python package's: they need no wheel,
 only Playwright (from PyPI, no browser download), Pillow, numpy, the browser, web/dist and the
@@ -12,7 +13,7 @@ native CLI.
 
 Environment: GRIDTRACE_BIN (default target/release/gridtrace), CHROMIUM (default
 /usr/bin/chromium), GRIDTRACE_DATA_DIR (the mesh folder, for the bunny; default
-../shared/data/meshes beside the checkout), GRIDTRACE_WEB_SCREENSHOT (a PNG path: the CPU case's page is saved there, as in the README).
+../shared/data/meshes beside the checkout), GRIDTRACE_WEB_SCREENSHOT (a PNG path: the WebGPU case's page is saved there, as in the README).
 Under CI=1 what is missing fails instead of skipping.
 
 Run: scripts/test-web.sh (builds web/dist and the release CLI, then runs these), or
@@ -102,13 +103,13 @@ def browser():
         context.close()
 
 
-def native_render(*args):
-    """The native CLI's CPU render with `args`, as an RGB array."""
+def native_render(*args, backend="cpu"):
+    """The native CLI's render with `args` (on the CPU unless `backend` says), as an RGB array."""
     if not CLI.exists():
         missing(f"no native CLI at {CLI} (cargo build --release -p gridtrace-cli)")
     with tempfile.TemporaryDirectory() as d:
         out = pathlib.Path(d) / "ref.png"
-        subprocess.run([str(CLI), "render", *args, "--backend", "cpu", "-o", str(out)], check=True, capture_output=True)
+        subprocess.run([str(CLI), "render", *args, "--backend", backend, "-o", str(out)], check=True, capture_output=True)
         return np.asarray(Image.open(out).convert("RGB"), dtype=np.int16)
 
 
@@ -157,44 +158,62 @@ def test_cpu_page_matches_the_native_render(server, browser, reference):
     frac = differing(canvas_rgb(page), reference)
     print(f"\ncpu: {frac:.4%} of pixels differ from the native CPU render; {figures(page)}")
     assert frac <= MAX_DIFFERING
-    shot = os.environ.get("GRIDTRACE_WEB_SCREENSHOT")
-    if shot:
-        # The README's picture of the page.
-        page.set_viewport_size({"width": 760, "height": 520})
-        page.screenshot(path=shot)
     page.close()
 
 
+def load_on(browser, url, backend):
+    """`load` on the CPU tracer (`backend=cpu`), or on WebGPU (`backend=auto`): a page that found
+    no WebGPU device fails under CI (SwiftShader's adapter is there with these flags) and skips
+    elsewhere."""
+    page = load(browser, f"{url}&backend={'cpu' if backend == 'cpu' else 'auto'}")
+    got = page.evaluate("document.body.dataset.backend")
+    if backend == "webgpu" and got != "webgpu":
+        message = page.inner_text("#message")
+        page.close()
+        missing(f"this Chromium gave no WebGPU device: {message}")
+    assert got == backend
+    return page
+
+
+BACKENDS = ["cpu", "webgpu"]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(
     "query",
     [f"mode={m}" for m in ("cast", "trace", "heat")] + [f"mode=shadow&accel={a}" for a in ("grid", "pc", "irregular", "brute")],
 )
-def test_every_mode_and_structure_matches_the_native_render(server, browser, query):
-    """The page's other choices, each against render given the same options (small frames)."""
-    page = load(browser, f"{server}?scene=mirror-spheres&res=96x72&backend=cpu&{query}")
+def test_every_mode_and_structure_matches_the_native_render(server, browser, query, backend):
+    """The page's other choices, each against render given the same options (small frames). On
+    WebGPU heat mode is compared with the native GPU render (lavapipe): its colours count the GPU
+    walk's steps, which are not the CPU walk's."""
+    page = load_on(browser, f"{server}?scene=mirror-spheres&res=96x72&{query}", backend)
     args = [a for kv in query.split("&") for a in (f"--{kv.split('=')[0]}", kv.split("=")[1])]
-    frac = differing(canvas_rgb(page), native_render("--scene", "mirror-spheres", "--res", "96x72", *args))
-    print(f"\n{query}: {frac:.4%} of pixels differ")
+    native = "gpu" if (backend, query) == ("webgpu", "mode=heat") else "cpu"
+    frac = differing(
+        canvas_rgb(page), native_render("--scene", "mirror-spheres", "--res", "96x72", *args, backend=native)
+    )
+    print(f"\n{backend} {query}: {frac:.4%} of pixels differ; {figures(page)}")
     assert frac <= MAX_DIFFERING
     page.close()
 
 
 def test_webgpu_page_matches_the_native_render(server, browser, reference):
-    page = load(browser, f"{server}?{QUERY}")
-    backend = page.evaluate("document.body.dataset.backend")
-    if backend != "webgpu":
-        message = page.inner_text("#message")
-        page.close()
-        if "max_storage_buffers_per_shader_stage" in message:
-            # Known gap: the frame kernels bind 15 storage buffers a stage (11 in group 0, up to
-            # 4 structure arrays); Chromium gives at most 10 (SwiftShader and, tiered, every
-            # adapter). The page says so and traces on the CPU (checked above).
-            pytest.xfail(f"the kernels need more storage buffers than WebGPU gives: {message}")
-        missing(f"this Chromium gave no WebGPU device: {message}")
+    page = load_on(browser, f"{server}?{QUERY}", "webgpu")
     frac = differing(canvas_rgb(page), reference)
-    print(f"\nwebgpu: {frac:.4%} of pixels differ from the native CPU render; {figures(page)}")
-    print(page.inner_text("#overlay"))
+    overlay = page.inner_text("#overlay")
+    print(f"\nwebgpu: {frac:.4%} of pixels differ from the native CPU render; {figures(page)}\n{overlay}")
     assert frac <= MAX_DIFFERING
+    shot = os.environ.get("GRIDTRACE_WEB_SCREENSHOT")
+    if shot:
+        # The README's picture of the page.
+        page.set_viewport_size({"width": 760, "height": 560})
+        page.screenshot(path=shot)
+    # The GPU's stage times, where the browser gives timestamp queries (SwiftShader does).
+    stages = overlay.splitlines()[-1]
+    assert stages == "GPU stage times: this browser gives no timestamp queries" or (
+        stages.startswith("GPU ") and all(f"{k} " in stages for k in ("raygen", "traverse", "shade", "occlusion"))
+    ), overlay
     page.close()
 
 
@@ -234,6 +253,49 @@ def test_dragging_and_the_wheel_move_the_camera_as_render_places_it(server, brow
     page.close()
 
 
+def distance(view):
+    eye = np.array([float(x) for x in view["eye"].split(",")])
+    target = np.array([float(x) for x in view["target"].split(",")])
+    return float(np.linalg.norm(eye - target))
+
+
+def test_a_two_finger_pinch_zooms_as_render_places_it(server, browser):
+    page = load(browser, f"{server}?scene=mirror-spheres&mode=shadow&res=160x120&backend=cpu")
+    start = dict(p.split("=", 1) for p in page.evaluate("document.body.dataset.view").split("&"))
+    box = page.locator("#gridtrace").bounding_box()
+    cx, cy = box["x"] + 80, box["y"] + 60
+    # Real touches, as Chromium's input pipeline makes them (trusted pointer events).
+    cdp = page.context.new_cdp_session(page)
+    cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 2})
+
+    def touch(kind, half):
+        points = [] if kind == "touchEnd" else [
+            {"x": cx - half, "y": cy, "id": 0},
+            {"x": cx + half, "y": cy, "id": 1},
+        ]
+        cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
+
+    touch("touchStart", 20)
+    for half in (25, 30, 35, 40):
+        touch("touchMove", half)
+    touch("touchEnd", 40)
+    page.wait_for_function("Number(document.body.dataset.frames) >= 2", timeout=60_000)
+    page.wait_for_timeout(500)
+    shot = page.evaluate(
+        "({png: document.getElementById('gridtrace').toDataURL('image/png'), view: document.body.dataset.view})"
+    )
+    view = dict(p.split("=", 1) for p in shot["view"].split("&"))
+    # The fingers went from 40 to 80 pixels apart: the scene twice as large, the eye at half
+    # the distance (each finger's moves count; the spreads multiply to 2).
+    ratio = distance(view) / distance(start)
+    assert abs(ratio - 0.5) < 1e-3, (start, view)
+    args = [a for k, v in view.items() for a in (f"--{k}", v)]
+    frac = differing(png_rgb(shot["png"]), native_render("--scene", "mirror-spheres", "--mode", "shadow", "--res", "160x120", *args))
+    print(f"\npinched: distance x{ratio:.4f}, {frac:.4%} of pixels differ from render at {view}")
+    assert frac <= MAX_DIFFERING
+    page.close()
+
+
 def test_a_bad_parameter_is_an_error_on_the_page(server, browser):
     page = browser.new_page()
     page.goto(f"{server}?scene=teapot")
@@ -254,8 +316,9 @@ DROP = """([name, text]) => {
 }"""
 
 
-def test_a_dropped_mesh_renders_and_a_bad_one_says_where(server, browser, tmp_path):
-    page = load(browser, f"{server}?mode=shadow&res=96x72&backend=cpu")
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_dropped_mesh_renders_and_a_bad_one_says_where(server, browser, tmp_path, backend):
+    page = load_on(browser, f"{server}?mode=shadow&res=96x72", backend)
     page.evaluate(DROP, ["tetra.off", TETRA_OFF])
     page.wait_for_function("document.body.dataset.frames === '2' || document.body.dataset.error", timeout=60_000)
     assert not page.evaluate("document.body.dataset.error")
@@ -270,20 +333,21 @@ def test_a_dropped_mesh_renders_and_a_bad_one_says_where(server, browser, tmp_pa
     page.close()
 
 
-def test_an_opened_bunny_renders(server, browser):
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_opened_bunny_renders(server, browser, backend):
     # The shared meshes beside the checkout, as the Rust tests read them, unless named.
     data = os.environ.get("GRIDTRACE_DATA_DIR") or ROOT.parent / "shared" / "data" / "meshes"
     bunny = pathlib.Path(data) / "bunny" / "bun_zipper.ply"
     if not bunny.exists():
         missing(f"no Stanford Bunny at {bunny} (GRIDTRACE_DATA_DIR names the mesh folder)")
-    page = load(browser, f"{server}?mode=cast&res=128x128&backend=cpu")
+    page = load_on(browser, f"{server}?mode=cast&res=128x128", backend)
     page.set_input_files("#file", str(bunny))
     page.wait_for_function("document.body.dataset.frames === '2' || document.body.dataset.error", timeout=120_000)
     assert not page.evaluate("document.body.dataset.error")
     overlay = page.inner_text("#overlay")
     # The same auto-framed scene (the mesh over a floor) as render --mesh.
     frac = differing(canvas_rgb(page), native_render("--mesh", str(bunny), "--mode", "cast", "--res", "128x128"))
-    print(f"\nbunny: {frac:.4%} of pixels differ from the native CPU render; {overlay}")
+    print(f"\nbunny ({backend}): {frac:.4%} of pixels differ from the native CPU render; {overlay}")
     assert overlay.startswith("bun_zipper.ply: "), overlay
     assert frac <= MAX_DIFFERING
     page.close()

@@ -89,6 +89,7 @@ pub struct Frame {
     rgba: Vec<u8>,
     ms: f64,
     mrays_per_s: f64,
+    stages: String,
 }
 
 #[wasm_bindgen]
@@ -115,6 +116,21 @@ impl Frame {
     pub fn mrays_per_s(&self) -> f64 {
         self.mrays_per_s
     }
+    /// A WebGPU frame's time per kernel stage on the GPU, from timestamp queries, as a line for
+    /// the overlay; without them (a browser that gives none) the line says so; empty on the CPU.
+    #[wasm_bindgen(getter)]
+    pub fn stages(&self) -> String {
+        self.stages.clone()
+    }
+}
+
+/// The overlay's line of GPU stage times (see `Frame::stages`).
+fn stage_line(t: &gridtrace::gpu::GpuTimings) -> String {
+    if !t.from_timestamps {
+        return "GPU stage times: this browser gives no timestamp queries".to_string();
+    }
+    let stages: Vec<String> = t.stages_ms.iter().map(|(s, ms)| format!("{s} {ms:.2}")).collect();
+    format!("GPU {:.2} ms: {} (ms)", t.total_ms, stages.join(", "))
 }
 
 /// A scene prepared and placed (WebGPU or the CPU) with the page's choices, and the frame
@@ -268,6 +284,12 @@ impl Page {
         self.camera = self.orbit.camera();
     }
 
+    /// Zooms by a two-finger pinch: `spread` is the fingers' new distance apart over the old.
+    pub fn pinch(&mut self, spread: f32) {
+        self.orbit.pinch(spread);
+        self.camera = self.orbit.camera();
+    }
+
     /// The frame's camera as URL parameters (`eye=X,Y,Z&target=X,Y,Z&up=X,Y,Z&vfov=D`, each
     /// number as it round-trips): with them the page, or `gridtrace render` given the same
     /// values as options, traces this view again.
@@ -316,15 +338,16 @@ impl Page {
 
     /// The frame `submit` started, once `ready`.
     pub fn finish(&mut self) -> Result<Frame, JsError> {
-        let (image, stats, t0) = match self.pending.take() {
+        let (image, stats, stages, t0) = match self.pending.take() {
             None => return Err(JsError::new("finish: no frame was submitted")),
-            Some(Pending::Done(f, t0)) => (f.image, f.stats, t0),
+            Some(Pending::Done(f, t0)) => (f.image, f.stats, String::new(), t0),
             Some(Pending::Gpu(f, t0)) => {
                 let gpu = self.tracer.gpu_mut().expect("a GPU frame comes from the GPU tracer");
                 let (image, stats) = gpu.finish_frame(f).map_err(js_error)?;
                 (
                     image.expect("a frame without a device image comes to the host"),
                     stats.render,
+                    stage_line(&stats.timings),
                     t0,
                 )
             }
@@ -346,6 +369,7 @@ impl Page {
             rgba,
             ms,
             mrays_per_s: stats.rays.total() as f64 / (ms * 1e3).max(1e-9),
+            stages,
         })
     }
 }

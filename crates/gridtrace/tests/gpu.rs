@@ -338,6 +338,43 @@ fn dynamic_camera_and_lights() {
     assert!(differing_pixels(&cpu.to_rgb8(), &second.to_rgb8(), 2) <= 0.005);
 }
 
+/// The lights are a uniform array of `MAX_LIGHTS` (one storage buffer fewer for WebGPU's limit):
+/// a frame with that many reads the last one as the CPU does (255 dark lights, then the one
+/// that lights the scene), and one more is refused with a message naming the limit, after which
+/// the renderer still renders.
+#[test]
+fn lights_up_to_the_uniform_arrays_length() {
+    use gridtrace::gpu::constants::MAX_LIGHTS;
+    let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    let scene = builtin::scene("knot-box")
+        .unwrap()
+        .prepare(Resolution::default())
+        .unwrap();
+    let Some(mut gpu) = renderer(&scene) else { return };
+    let opts = RenderOptions::new(48, 48, Mode::Shadow);
+    let mut lights: Vec<PointLight> = (0..MAX_LIGHTS - 1)
+        .map(|i| PointLight::new(Vec3::new(i as f32 * 0.01, 3.0, 1.0), Vec3::ZERO))
+        .collect();
+    lights.push(scene.lights[0]);
+    let (image, _) = gpu.render(&scene.camera, &lights, &opts).unwrap();
+    let mut lit = scene.clone();
+    lit.lights = lights.clone();
+    let (cpu, _) = gridtrace::cpu::render(&lit, &opts, None).unwrap();
+    assert!(differing_pixels(&cpu.to_rgb8(), &image.to_rgb8(), 2) <= 0.005);
+    let (dark, _) = gpu.render(&scene.camera, &lights[..lights.len() - 1], &opts).unwrap();
+    assert_ne!(dark, image, "the last light lights the scene");
+    lights.push(scene.lights[0]);
+    let err = gpu.render(&scene.camera, &lights, &opts).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!("{} lights", MAX_LIGHTS + 1)) && err.contains("at most"),
+        "{err}"
+    );
+    let (again, _) = gpu
+        .render(&scene.camera, &lights[..MAX_LIGHTS as usize], &opts)
+        .unwrap();
+    assert_eq!(again, image);
+}
+
 /// The ablations (`bench --ablate`) change what runs, not what is seen: with shadow rays
 /// finding closest hits, or without compacted queues, every structure's GPU image equals its
 /// normal image bit for bit, and so does the CPU's with closest-hit shadow rays; ray counts

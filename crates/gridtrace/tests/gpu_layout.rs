@@ -372,3 +372,75 @@ fn bindings_match_wgsl() {
         .collect();
     assert_eq!(declared, table);
 }
+
+/// Group 0's rows each module's entry point uses, by naga's analysis (the one wgpu checks a
+/// pipeline's layout against): the (group 0) binding indices of the globals it reaches.
+fn frame_bindings_used(src: &str, name: &str) -> Vec<u32> {
+    let m = naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+        .validate(&m)
+        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+    let ep = m
+        .entry_points
+        .iter()
+        .position(|e| e.name == "main")
+        .expect("entry point main");
+    let uses = info.get_entry_point(ep);
+    let mut out: Vec<u32> = m
+        .global_variables
+        .iter()
+        .filter(|(h, _)| !uses[*h].is_empty())
+        .filter_map(|(_, g)| g.binding.as_ref())
+        .filter(|b| b.group == bindings::FRAME_GROUP)
+        .map(|b| b.binding)
+        .collect();
+    out.sort();
+    out
+}
+
+/// Each kernel's group 0 (`bindings::FRAME_USE`) is exactly what its modules use: a row it lacks
+/// would fail its pipeline's creation, one it has but never reads would count against WebGPU's
+/// storage buffers a stage for nothing. A walking kernel's list is the union over the walks.
+#[test]
+fn each_kernel_binds_the_group_0_rows_it_uses() {
+    let mut problems = Vec::new();
+    for (name, src) in shaders::KERNELS {
+        let modules: Vec<(String, String)> = if shaders::walks(name) {
+            shaders::all_modules()
+                .into_iter()
+                .filter(|(n, _)| n.starts_with(&format!("{name} [")))
+                .collect()
+        } else {
+            vec![(name.to_string(), shaders::module_source(src))]
+        };
+        assert!(!modules.is_empty(), "{name}");
+        let mut union: Vec<u32> = Vec::new();
+        for (module, src) in &modules {
+            for b in frame_bindings_used(src, module) {
+                if !union.contains(&b) {
+                    union.push(b);
+                }
+            }
+        }
+        union.sort();
+        let listed: Vec<u32> = bindings::frame_rows(name).iter().map(|b| b.index).collect();
+        if union != listed {
+            let names = |ix: &[u32]| -> Vec<&str> {
+                ix.iter()
+                    .map(|i| {
+                        bindings::FRAME_BINDINGS
+                            .iter()
+                            .find(|b| b.index == *i)
+                            .map_or("?", |b| b.name)
+                    })
+                    .collect()
+            };
+            problems.push(format!(
+                "{name}: uses {:?}, FRAME_USE lists {:?}",
+                names(&union),
+                names(&listed)
+            ));
+        }
+    }
+    assert!(problems.is_empty(), "{problems:#?}");
+}

@@ -21,7 +21,8 @@ pub struct Binding<S> {
     pub slot: S,
 }
 
-/// What group 0 binds: everything a kernel of the tile loop reads or writes.
+/// What group 0 binds: everything a kernel of the tile loop reads or writes. Each kernel's own
+/// group 0 holds only the rows its module uses (`FRAME_USE`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrameSlot {
     SceneUniform,
@@ -63,7 +64,8 @@ pub const FRAME_BINDINGS: [Binding<FrameSlot>; 14] = [
     row(5, "tris", StorageRead, FrameSlot::Tris),
     row(6, "tri_shade", StorageRead, FrameSlot::TriShade),
     row(7, "materials", StorageRead, FrameSlot::Materials),
-    row(8, "lights", StorageRead, FrameSlot::Lights),
+    // A uniform array (`constants::MAX_LIGHTS` long): one storage buffer fewer for shading.
+    row(8, "lights", Uniform, FrameSlot::Lights),
     row(9, "rays_in", StorageReadWrite, FrameSlot::RaysIn),
     row(10, "rays_out", StorageReadWrite, FrameSlot::RaysOut),
     row(11, "hits", StorageReadWrite, FrameSlot::Hits),
@@ -138,17 +140,89 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
 /// crate compiles.
 pub const STRUCTURE_ARRAYS_MAX: usize = 4;
 
-/// Storage buffers a kernel may bind at once: group 0's storage rows and the most of group 1
-/// (a structure's arrays, the indirect arguments or the packed pixels): the device must allow
+/// The rows of group 0 each kernel's module uses, by its name in `shaders::KERNELS` (a walking
+/// kernel's: what it uses with any walk). A kernel's group 0 layout has these rows alone, not
+/// all of `FRAME_BINDINGS`: WebGPU counts every storage buffer of a pipeline's layout against
+/// `maxStorageBuffersPerShaderStage` (8 by default, 10 on SwiftShader), whether the kernel reads
+/// it or not, and group 0 holds 10 of them. `tests/gpu_layout.rs` checks each list against
+/// naga's analysis of the kernel's modules (a row missing fails pipeline creation; an extra one
+/// only costs a binding, but is reported too).
+pub const FRAME_USE: [(&str, &[FrameSlot]); 9] = {
+    use FrameSlot::*;
+    [
+        (
+            "raygen",
+            &[SceneUniform, CameraUniform, PassUniform, RaysIn, Accum, Counters],
+        ),
+        (
+            "traverse",
+            &[SceneUniform, PassUniform, Tris, RaysIn, Hits, Accum, Counters],
+        ),
+        ("occlusion", &[SceneUniform, PassUniform, Tris, ShadowRays, Counters]),
+        (
+            "closest point",
+            &[SceneUniform, PassUniform, Tris, RaysIn, Hits, Accum, Counters],
+        ),
+        (
+            "shade",
+            &[
+                SceneUniform,
+                PassUniform,
+                Tris,
+                TriShade,
+                Materials,
+                Lights,
+                RaysIn,
+                RaysOut,
+                Hits,
+                ShadowRays,
+                Resolve,
+                Accum,
+                Counters,
+            ],
+        ),
+        ("resolve", &[PassUniform, RaysIn, ShadowRays, Resolve, Accum, Counters]),
+        ("indirect", &[SceneUniform, PassUniform, Counters]),
+        ("pack", &[PassUniform, Accum]),
+        ("batch", &[PassUniform, RaysIn, Hits, ShadowRays]),
+    ]
+};
+
+/// Group 0's rows of the kernel `name` (in `shaders::KERNELS`), in binding order.
+pub fn frame_rows(name: &str) -> Vec<Binding<FrameSlot>> {
+    let used = FRAME_USE
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or(&[][..], |(_, slots)| *slots);
+    FRAME_BINDINGS
+        .iter()
+        .filter(|b| used.contains(&b.slot))
+        .copied()
+        .collect()
+}
+
+/// Storage buffers the kernel `name` binds at once: its group 0's storage rows and its group 1
+/// (a structure's arrays, the indirect arguments, the packed pixels or a batch's buffers).
+pub fn storage_buffers_of(name: &str) -> u32 {
+    let storage = |rows: &[Binding<FrameSlot>]| rows.iter().filter(|b| b.access != Access::Uniform).count();
+    let group1 = match name {
+        "indirect" => INDIRECT_BINDINGS.len(),
+        "pack" => PACK_BINDINGS.len(),
+        "batch" => BATCH_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count(),
+        _ if crate::gpu::shaders::walks(name) => STRUCTURE_ARRAYS_MAX,
+        _ => 0,
+    };
+    (storage(&frame_rows(name)) + group1) as u32
+}
+
+/// Storage buffers a kernel may bind at once, the most over the kernels: the device must allow
 /// this many per shader stage.
 pub fn storage_buffers_needed() -> u32 {
-    let frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
-    let batch = BATCH_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
-    (frame
-        + STRUCTURE_ARRAYS_MAX
-            .max(INDIRECT_BINDINGS.len())
-            .max(PACK_BINDINGS.len())
-            .max(batch)) as u32
+    FRAME_USE
+        .iter()
+        .map(|(name, _)| storage_buffers_of(name))
+        .max()
+        .unwrap_or(0)
 }
 
 /// The layout entries of a table (every kernel is a compute kernel).
@@ -196,10 +270,20 @@ mod tests {
     #[test]
     fn tables_are_unique() {
         let rows = all();
-        // 11 in group 0 and at most 4 of a structure's (the irregular grid's) in group 1:
-        // within what desktop and mobile Vulkan, Metal (31 buffers a stage, uniforms included)
-        // and D3D12 allow.
-        assert_eq!(storage_buffers_needed(), 15);
+        // Shading's 10 (tris, their shading, materials, three queues, hits, resolve, accum,
+        // counters); traversal's 5 and a structure's 4 (the irregular grid's): within
+        // SwiftShader's WebGPU (10), and what desktop and mobile Vulkan, Metal (31 buffers a
+        // stage, uniforms included) and D3D12 allow. Group 0 in one layout would be 14.
+        assert_eq!(storage_buffers_of("shade"), 10);
+        assert_eq!(storage_buffers_of("traverse"), 9);
+        assert_eq!(storage_buffers_needed(), 10);
+        let all_frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
+        assert_eq!(all_frame + STRUCTURE_ARRAYS_MAX, 14);
+        // Every kernel of `shaders::KERNELS` has a row list, and each list names a slot once.
+        for (name, _) in crate::gpu::shaders::KERNELS {
+            let (_, slots) = FRAME_USE.iter().find(|(n, _)| *n == name).expect(name);
+            assert_eq!(frame_rows(name).len(), slots.len(), "{name}");
+        }
         // Group 1 is a different table in each kernel that binds one (indirect, pack, a
         // structure's arrays): indices are unique within a table, names across all of them.
         let tables = [

@@ -49,6 +49,13 @@ pub fn set_max_groups_x(n: u32) {
 /// `GpuHit::tri` of a miss.
 pub const MISS: u32 = u32::MAX;
 
+/// Lights a GPU frame takes at most: the lights are a uniform array of this length (8 KiB),
+/// not a storage buffer, because the shading kernel would otherwise bind 11 storage buffers
+/// and WebGPU's adapters give 8 to 10 a stage (`bindings::storage_buffers_needed`). Every light
+/// costs each pixel a shadow ray, so a frame past a few dozen is already slow; the CPU tracer
+/// has no such limit.
+pub const MAX_LIGHTS: u32 = 256;
+
 /// The number `PassUniform::mode` carries for each render mode; the prelude's `MODE_*` names
 /// are printed from this same function.
 pub const fn mode_code(mode: Mode) -> u32 {
@@ -85,7 +92,7 @@ pub enum WgslConst {
 /// The constants every kernel shares, by WGSL name (each structure's are its
 /// `WalkSpec::constants`). The triangle test's slack constants are `TriAccel::intersect`'s own,
 /// so both backends accept the same hits.
-pub const SHARED: [(&str, WgslConst); 15] = [
+pub const SHARED: [(&str, WgslConst); 16] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -97,6 +104,7 @@ pub const SHARED: [(&str, WgslConst); 15] = [
     ("MODE_HEAT", WgslConst::U32(mode_code(Mode::Heat))),
     ("ACCEL_PC", WgslConst::U32(accel_code(AccelKind::ProximityCloud))),
     ("MISS", WgslConst::U32(MISS)),
+    ("MAX_LIGHTS", WgslConst::U32(MAX_LIGHTS)),
     ("WORKGROUP", WgslConst::U32(WORKGROUP)),
     ("MAX_GROUPS_X", WgslConst::U32(MAX_GROUPS_X)),
     ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),

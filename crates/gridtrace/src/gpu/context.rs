@@ -202,9 +202,14 @@ impl GpuContext {
         } else {
             format!(", driver {} {}", i.driver, i.driver_info)
         };
+        // Browsers withhold the adapter's name (fingerprinting); say so rather than print nothing.
+        let name = if i.name.is_empty() {
+            "an unnamed adapter"
+        } else {
+            i.name.as_str()
+        };
         format!(
-            "{} ({:?}, {:?}{driver}; {})",
-            i.name,
+            "{name} ({:?}, {:?}{driver}; {})",
             i.backend,
             i.device_type,
             self.ray_queries_words()

@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use super::bindings::{
-    self, Access, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_BINDINGS, FRAME_GROUP, INDIRECT_BINDINGS, INDIRECT_GROUP,
+    self, Access, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_GROUP, FrameSlot, INDIRECT_BINDINGS, INDIRECT_GROUP,
     PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP,
 };
 use super::constants::{WORKGROUP, dispatch_groups};
@@ -171,6 +171,17 @@ const SPECS: [KernelSpec; 12] = [
     },
 ];
 
+impl KernelSpec {
+    /// Its file's name in `shaders::KERNELS`, which keys `bindings::FRAME_USE`.
+    fn file(&self) -> &'static str {
+        shaders::KERNELS
+            .iter()
+            .find(|(_, src)| *src == self.source)
+            .map(|(name, _)| *name)
+            .expect("every kernel's source is in shaders::KERNELS")
+    }
+}
+
 fn spec_of(kernel: Kernel) -> &'static KernelSpec {
     let spec = &SPECS[kernel as usize];
     debug_assert_eq!(spec.kernel, kernel);
@@ -197,8 +208,9 @@ pub(crate) struct WalkPipelines {
 pub(crate) struct Kernels {
     /// The variants they were compiled with.
     pub variants: GpuVariants,
-    /// Layout of group 0 (`FRAME_BINDINGS`).
-    pub frame_layout: wgpu::BindGroupLayout,
+    /// Each kernel's layout of group 0 (the rows of `FRAME_BINDINGS` its module uses,
+    /// `bindings::frame_rows`), indexed by `kernel as usize`.
+    frame_layouts: Vec<wgpu::BindGroupLayout>,
     /// Layout of group 1 of the indirect kernel (`INDIRECT_BINDINGS`).
     pub indirect_layout: wgpu::BindGroupLayout,
     /// Layout of group 1 of the pack kernel (`PACK_BINDINGS`).
@@ -324,10 +336,15 @@ impl Kernels {
 
     /// Compiles every kernel that walks no structure.
     pub fn new(dev: &wgpu::Device, variants: &GpuVariants) -> Result<Kernels> {
-        let frame_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gridtrace"),
-            entries: &bindings::layout_entries(&FRAME_BINDINGS),
-        });
+        let frame_layouts: Vec<_> = SPECS
+            .iter()
+            .map(|s| {
+                dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some(s.label),
+                    entries: &bindings::layout_entries(&bindings::frame_rows(s.file())),
+                })
+            })
+            .collect();
         let indirect_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("indirect args"),
             entries: &bindings::layout_entries(&INDIRECT_BINDINGS),
@@ -350,18 +367,21 @@ impl Kernels {
         let pipelines = compile(
             dev,
             variants,
-            |s| match s.group1 {
-                Group1::None => layout(&[Some(&frame_layout)]),
-                Group1::IndirectArgs => layout(&[Some(&frame_layout), Some(&indirect_layout)]),
-                Group1::Packed => layout(&[Some(&frame_layout), Some(&pack_layout)]),
-                Group1::Batch => layout(&[Some(&frame_layout), Some(&batch_layout)]),
+            |s| {
+                let frame = Some(&frame_layouts[s.kernel as usize]);
+                match s.group1 {
+                    Group1::None => layout(&[frame]),
+                    Group1::IndirectArgs => layout(&[frame, Some(&indirect_layout)]),
+                    Group1::Packed => layout(&[frame, Some(&pack_layout)]),
+                    Group1::Batch => layout(&[frame, Some(&batch_layout)]),
+                }
             },
             |s| shaders::module_source_for(s.source, variants),
             |s| !s.walks,
         )?;
         Ok(Kernels {
             variants: *variants,
-            frame_layout,
+            frame_layouts,
             indirect_layout,
             pack_layout,
             batch_layout,
@@ -401,15 +421,16 @@ impl Kernels {
             label: Some(spec.structure),
             entries: &entries,
         });
-        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(spec.structure),
-            bind_group_layouts: &[Some(&self.frame_layout), Some(&layout)],
-            immediate_size: 0,
-        });
         let pipelines = compile(
             dev,
             &self.variants,
-            |_| pipeline_layout.clone(),
+            |s| {
+                dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some(spec.structure),
+                    bind_group_layouts: &[Some(&self.frame_layouts[s.kernel as usize]), Some(&layout)],
+                    immediate_size: 0,
+                })
+            },
             |s| shaders::walk_module_source(s.source, spec),
             // The closest-point kernel only with a walk that searches points.
             |s| s.walks && (spec.points() || s.kernel != Kernel::ClosestPoint),
@@ -421,6 +442,32 @@ impl Kernels {
         });
         walks.insert(spec.name, w.clone());
         Ok(w)
+    }
+}
+
+/// One bounce's group 0 for every kernel: the same buffers, each kernel's bind group holding the
+/// rows its layout has (indexed by `kernel as usize`).
+pub(crate) struct FrameGroups(Vec<wgpu::BindGroup>);
+
+impl Kernels {
+    /// One bounce's group 0 for every kernel, binding what `resource` names for each slot.
+    pub fn frame_groups<'a>(
+        &self,
+        dev: &wgpu::Device,
+        resource: impl Fn(FrameSlot) -> wgpu::BindingResource<'a>,
+    ) -> FrameGroups {
+        FrameGroups(
+            SPECS
+                .iter()
+                .map(|s| {
+                    dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some(s.label),
+                        layout: &self.frame_layouts[s.kernel as usize],
+                        entries: &bindings::group_entries(&bindings::frame_rows(s.file()), &resource),
+                    })
+                })
+                .collect(),
+        )
     }
 }
 
@@ -446,8 +493,8 @@ pub(crate) struct PassRecorder<'a> {
 }
 
 impl PassRecorder<'_> {
-    /// One compute pass running `kernel` with `frame` as group 0.
-    pub fn pass(&mut self, enc: &mut wgpu::CommandEncoder, kernel: Kernel, frame: &wgpu::BindGroup) {
+    /// One compute pass running `kernel` with its group 0 of `frame`.
+    pub fn pass(&mut self, enc: &mut wgpu::CommandEncoder, kernel: Kernel, frame: &FrameGroups) {
         let kernel = match (kernel, self.shadow_closest_hit) {
             (Kernel::Occlusion, true) => Kernel::OcclusionClosest,
             (k, _) => k,
@@ -468,7 +515,7 @@ impl PassRecorder<'_> {
                 .as_ref()
                 .expect("every kernel is compiled for its set"),
         );
-        cp.set_bind_group(FRAME_GROUP, frame, &[]);
+        cp.set_bind_group(FRAME_GROUP, &frame.0[kernel as usize], &[]);
         if spec.walks {
             cp.set_bind_group(STRUCTURE_GROUP, self.structure_group, &[]);
         }

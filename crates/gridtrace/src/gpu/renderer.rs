@@ -6,10 +6,10 @@ use crate::util::Instant;
 use std::mem::size_of;
 use std::sync::Arc;
 
-use super::bindings::{self, FRAME_BINDINGS, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
-use super::constants::{COUNTER_SLOTS, accel_code, mode_code};
+use super::bindings::{self, FrameSlot, INDIRECT_BINDINGS, IndirectSlot, PACK_BINDINGS, PackSlot};
+use super::constants::{COUNTER_SLOTS, MAX_LIGHTS, accel_code, mode_code};
 use super::context::{GpuContext, max_binding_bytes};
-use super::kernels::{Kernels, PassRecorder};
+use super::kernels::{FrameGroups, Kernels, PassRecorder};
 use super::layout::{GpuHit, GpuTri, IndirectArgs, PassUniform, RayRec};
 use super::scene::{SceneBuffers, tri_shade};
 use super::timing::{GpuQueryStats, StageTimer, Timestamps};
@@ -56,7 +56,6 @@ impl WorkUse {
     const RESOLVE: u8 = 16;
     const ACCUM: u8 = 32;
     const PACKED: u8 = 64;
-    const LIGHTS: u8 = 128;
     /// A frame: every buffer.
     pub const FRAME: WorkUse = WorkUse(u8::MAX);
     /// Closest hits of a batch: queue A and the hits.
@@ -91,8 +90,8 @@ pub(super) struct WorkBuffers {
     pub packed: wgpu::Buffer,
     pub packed_group: wgpu::BindGroup,
     pub lights: wgpu::Buffer,
-    /// One bind group per bounce (queues A/B swap roles every bounce).
-    pub bind_groups: Vec<wgpu::BindGroup>,
+    /// Group 0 per bounce (queues A/B swap roles every bounce), a bind group for each kernel.
+    pub bind_groups: Vec<FrameGroups>,
 }
 
 /// A scene resident on the GPU. Camera and lights change per frame; nothing else is uploaded
@@ -413,11 +412,13 @@ impl GpuRenderer {
                 PackSlot::Packed => packed.as_entire_binding(),
             }),
         });
-        let lights_buf = buf(
-            "lights",
-            WorkUse::LIGHTS,
-            size_of::<PointLight>() as u64 * max_lights as u64,
-        );
+        // A uniform array of `MAX_LIGHTS` (common.wgsl): its binding must hold all of them.
+        let lights_buf = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("lights"),
+            size: size_of::<PointLight>() as u64 * MAX_LIGHTS as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let bind_groups = (0..MAX_PASSES)
             .map(|d| {
                 let (rays_in, rays_out) = if d % 2 == 0 {
@@ -425,7 +426,7 @@ impl GpuRenderer {
                 } else {
                     (&queue_b, &queue_a)
                 };
-                let entries = bindings::group_entries(&FRAME_BINDINGS, |slot| match slot {
+                self.kernels.frame_groups(dev, |slot| match slot {
                     FrameSlot::SceneUniform => self.scene.uniform.as_entire_binding(),
                     FrameSlot::CameraUniform => self.camera_uniform.as_entire_binding(),
                     FrameSlot::PassUniform => wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -444,11 +445,6 @@ impl GpuRenderer {
                     FrameSlot::Resolve => resolve.as_entire_binding(),
                     FrameSlot::Accum => accum.as_entire_binding(),
                     FrameSlot::Counters => self.counters.as_entire_binding(),
-                });
-                dev.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("gridtrace"),
-                    layout: &self.kernels.frame_layout,
-                    entries: &entries,
                 })
             })
             .collect();

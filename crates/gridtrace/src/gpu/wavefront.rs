@@ -10,6 +10,7 @@
 use crate::util::Instant;
 use std::sync::Arc;
 
+use super::constants::MAX_LIGHTS;
 use super::device_image::DeviceImage;
 use super::layout::SceneUniform;
 use super::renderer::{GpuRenderer, TILE_UNIFORM_BYTES, grow};
@@ -204,6 +205,13 @@ impl GpuRenderer {
         opts.validate()?;
         camera.validate().map_err(Error::Scene)?;
         let t0 = Instant::now();
+        if lights.len() > MAX_LIGHTS as usize {
+            return Err(Error::Gpu(format!(
+                "the scene has {} lights; the GPU tracer takes at most {MAX_LIGHTS} (a uniform array, \
+                 constants::MAX_LIGHTS); the CPU tracer (--backend cpu) has no limit",
+                lights.len()
+            )));
+        }
         let n_lights = lights.len() as u32;
         // The frame's pixels are numbered row by row; a band of rows is a range of them.
         let rows = opts.row_range();

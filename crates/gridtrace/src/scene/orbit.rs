@@ -138,6 +138,15 @@ impl Orbit {
     pub fn zoom(&mut self, steps: f32) {
         self.distance = (self.distance * ZOOM_PER_STEP.powf(steps)).max(1e-6);
     }
+
+    /// A pinch: two fingers' distance apart grew by `spread` (new over old), and the scene with
+    /// them: the orbit distance is divided by it. A spread that is not a positive finite number
+    /// (fingers on one point) changes nothing.
+    pub fn pinch(&mut self, spread: f32) {
+        if spread.is_finite() && spread > 0.0 {
+            self.distance = (self.distance / spread).max(1e-6);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -161,6 +170,13 @@ mod tests {
         assert!(((moved.eye - c.target).length() - (c.eye - c.target).length()).abs() < 1e-4);
         o.zoom(1.0);
         assert!(((o.camera().eye - c.target).length() - 0.9 * (c.eye - c.target).length()).abs() < 1e-4);
+        let before = o.distance;
+        o.pinch(2.0);
+        assert!((o.distance - before / 2.0).abs() < 1e-6);
+        for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            o.pinch(bad);
+            assert_eq!(o.distance, before / 2.0, "{bad}");
+        }
         o.drag(0.0, 1e6);
         assert!(o.pitch <= MAX_PITCH);
         assert!(o.camera().eye.is_finite());

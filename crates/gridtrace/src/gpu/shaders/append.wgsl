@@ -10,8 +10,11 @@ var<workgroup> wg_count: atomic<u32>;
 var<workgroup> wg_base: u32;
 fn append(slot: u32, n: u32, lid: u32) -> u32 {
     if (!WG_APPENDS) {
-        if (n == 0u) { return 0u; }
-        return atomicAdd(&counters[slot], n);
+        // No return that depends on `n`: WGSL's uniformity analysis (which Tint enforces) would
+        // then put the barriers below in non-uniform control flow, though this path skips them.
+        var first = 0u;
+        if (n != 0u) { first = atomicAdd(&counters[slot], n); }
+        return first;
     }
     // Set here, not relied on from zero-initialisation (`checks=off` turns that off); the
     // barrier also keeps an earlier call's readers of wg_base ahead of this call's writer.

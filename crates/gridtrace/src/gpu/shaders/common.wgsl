@@ -73,7 +73,7 @@ var<private> lane: u32;
 @group(0) @binding(5) var<storage, read> tris: array<GpuTri>;
 @group(0) @binding(6) var<storage, read> tri_shade: array<TriShade>;
 @group(0) @binding(7) var<storage, read> materials: array<GpuMaterial>;
-@group(0) @binding(8) var<storage, read> lights: array<PointLight>;
+@group(0) @binding(8) var<uniform> lights: array<PointLight, MAX_LIGHTS>;
 @group(0) @binding(9) var<storage, read_write> rays_in: array<RayRec>;
 @group(0) @binding(10) var<storage, read_write> rays_out: array<RayRec>;
 @group(0) @binding(11) var<storage, read_write> hits: array<GpuHit>;
@@ -122,7 +122,10 @@ fn safe_inv_dir(d: vec3<f32>) -> vec3<f32> {
 
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }
-fn inf() -> f32 { return bitcast<f32>(0x7f800000u); }
+// Through a `let`: WGSL evaluates a constant expression when the shader is created and must
+// reject one whose value is not a finite f32, which Tint (Chrome's WebGPU) does; a `let` is a
+// runtime value, so the bits become infinity on the GPU, as they do with naga.
+fn inf() -> f32 { let bits = 0x7f800000u; return bitcast<f32>(bits); }
 
 // Invocation index in a 2-D grid of 64-wide workgroups (dispatches may exceed 65535 groups in x).
 fn flat_index(wg: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
