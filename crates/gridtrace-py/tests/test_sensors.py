@@ -1,6 +1,6 @@
 """Tests of gridtrace's sensors (Camera, Lidar, Scene.scan, create_rays_pinhole): a scan answers
 exactly as cast_rays on the sensor's own rays (one pose and a batch, a LiDAR and a camera, a
-rolling scan); create_rays_pinhole against rays derived here in numpy from Open3D's documented
+rolling scan; on the CPU and on the GPU, where the scan's rays are made on the device); create_rays_pinhole against rays derived here in numpy from Open3D's documented
 conventions (and against Open3D itself where it is installed); bad input names its argument."""
 
 import math
@@ -12,7 +12,7 @@ import gridtrace
 from gridtrace import Camera, Lidar, Scene
 
 
-def room():
+def room(backend="cpu"):
     """A closed box room with a small box inside: every ray from inside returns."""
     def cuboid(lo, hi):
         v = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])], np.float32)
@@ -20,7 +20,7 @@ def room():
         f = np.array([t for a, b, c, d in q for t in ([a, b, c], [a, c, d])], np.uint32)
         return v, f
 
-    s = Scene(backend="cpu")
+    s = Scene(backend=backend)
     s.add_triangles(*cuboid((-10, -8, -3), (10, 8, 5)))
     s.add_triangles(*cuboid((2, -1, -1), (3, 1, 1.5)))
     return s
@@ -51,8 +51,11 @@ def check_scan_is_cast_rays(scene, sensor, poses, ends=None):
     np.testing.assert_allclose(np.linalg.norm(rays[..., 3:], axis=-1), 1.0, atol=1e-6)
 
 
-def test_lidar_scan_is_cast_rays_one_pose_and_a_batch():
-    scene = room()
+# On the GPU (lavapipe in CI) the scan's rays are made on the device from the sensor's table
+# and the poses; cast_rays gets the same rays made here.
+@pytest.mark.parametrize("backend", ["cpu", "gpu"])
+def test_lidar_scan_is_cast_rays_one_pose_and_a_batch(backend):
+    scene = room(backend)
     lidar = Lidar.preset("vlp16", azimuth_steps=90)
     assert lidar.shape == (16, 90)
     check_scan_is_cast_rays(scene, lidar, POSES[0])
@@ -61,8 +64,9 @@ def test_lidar_scan_is_cast_rays_one_pose_and_a_batch():
     check_scan_is_cast_rays(scene, lidar, POSES, ends)
 
 
-def test_camera_scan_is_cast_rays_and_depth_is_z():
-    scene = room()
+@pytest.mark.parametrize("backend", ["cpu", "gpu"])
+def test_camera_scan_is_cast_rays_and_depth_is_z(backend):
+    scene = room(backend)
     cam = Camera.from_fov(60.0, 32, 24)
     check_scan_is_cast_rays(scene, cam, POSES[0])
     check_scan_is_cast_rays(scene, cam, POSES)

@@ -681,9 +681,10 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
         }
     };
     assert_eq!(s.downloaded_bytes, 2500 * 16 + stamps(&s, 3));
-    // 24 bytes a ray, and per chunk its counters (64), batch constants (32: the interval and
-    // the rays' mask, padded) and the three bounces' pass uniforms (3 x 48).
-    assert_eq!(s.uploaded_bytes, 2500 * 24 + 4 * (64 + 32 + 3 * 48));
+    // 24 bytes a ray, and per chunk its counters (64), batch constants (48: the interval, the
+    // rays' mask and a scan's sensor layout, padded) and the three bounces' pass uniforms
+    // (3 x 48).
+    assert_eq!(s.uploaded_bytes, 2500 * 24 + 4 * (64 + 48 + 3 * 48));
     // The phases add up to the wall time; the device's work overlaps the host's preparation
     // of the next chunk (that is the pipelining), so it lies within the wall, not the waits.
     let h = s.timings.host;

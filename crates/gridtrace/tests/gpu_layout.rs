@@ -108,7 +108,9 @@ fn wgsl_structs_match_rust() {
         m,
         BatchUniform,
         "BatchUniform",
-        [stride, to_shadow, t_min, t_max, mask, _pad0, _pad1, _pad2]
+        [
+            stride, to_shadow, t_min, t_max, mask, range_only, first, cells, cols, poses_at, pose_cols, _pad0
+        ]
     );
     check!(m, TopRec, "TopRec", [a, b, c, w]);
     check!(

@@ -17,6 +17,8 @@ pub(super) struct BatchDevice {
     pub wire: wgpu::Buffer,
     pub answers: wgpu::Buffer,
     pub uniform: wgpu::Buffer,
+    /// A sensor's table and poses (`scan.rs`), grown as scans need.
+    pub sensor: wgpu::Buffer,
     pub group: wgpu::BindGroup,
 }
 
@@ -33,4 +35,8 @@ pub(super) struct Slot {
 pub(super) struct Batches {
     pub device: Option<BatchDevice>,
     pub slots: [Slot; SLOTS],
+    /// The sensor table the device's `sensor` buffer holds from its start, as written (`None`:
+    /// none, or forgotten when the buffer was made again): a scan with the same table sends
+    /// only its poses.
+    pub sensor_table: Option<Vec<[f32; 6]>>,
 }

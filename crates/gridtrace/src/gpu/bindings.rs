@@ -112,15 +112,18 @@ pub enum BatchSlot {
     Wire,
     Answers,
     Uniform,
+    /// A sensor's table and poses (scans: the rays made on the device).
+    Sensor,
 }
 
 pub const BATCH_GROUP: u32 = 1;
 
 /// Group 1, as declared in batch.wgsl.
-pub const BATCH_BINDINGS: [Binding<BatchSlot>; 3] = [
+pub const BATCH_BINDINGS: [Binding<BatchSlot>; 4] = [
     row(0, "wire", StorageRead, BatchSlot::Wire),
     row(1, "answers", StorageReadWrite, BatchSlot::Answers),
     row(2, "batch", Uniform, BatchSlot::Uniform),
+    row(3, "sensor", StorageRead, BatchSlot::Sensor),
 ];
 
 /// Every binding of every group as (group, index, WGSL name, access), for checks against WGSL.

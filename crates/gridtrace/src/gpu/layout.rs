@@ -134,19 +134,30 @@ pub struct PassUniform {
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct BatchUniform {
     /// Words a wire ray: 6 (origin, direction; the interval and mask below for every ray), 8
-    /// (origin, t_min, direction, t_max; the mask below) or 9 (those and the ray's mask).
+    /// (origin, t_min, direction, t_max; the mask below) or 9 (those and the ray's mask); 0:
+    /// no wire, the rays made on the device from a sensor's table and poses (`sensor` below).
     pub stride: u32,
     /// 1: the rays go to the shadow queue and the answers are occlusion bits; 0: queue A and
     /// closest hits.
     pub to_shadow: u32,
-    /// The interval of every ray when `stride` is 6.
+    /// The interval of every ray when `stride` is 6 (or 0).
     pub t_min: f32,
     pub t_max: f32,
-    /// The mask of every ray when `stride` is 6 or 8 (`ray_mask` in common.wgsl).
+    /// The mask of every ray when `stride` is 6, 8 or 0 (`ray_mask` in common.wgsl).
     pub mask: u32,
+    /// 1: closest hits answer `t` alone (4 bytes a ray: a sensor's range); 0: (t, triangle).
+    pub range_only: u32,
+    /// The batch's index of the chunk's first ray (a sensor's rays are numbered across
+    /// chunks: environment, row, column).
+    pub first: u32,
+    /// A sensor's cells (rows x columns) and columns, and where its poses start in `sensor`
+    /// (in floats; its table of rays, six floats a cell, starts at 0).
+    pub cells: u32,
+    pub cols: u32,
+    pub poses_at: u32,
+    /// Poses an environment: `cols` (a rolling scan: one a column) or 1 (one for all).
+    pub pose_cols: u32,
     pub _pad0: u32,
-    pub _pad1: u32,
-    pub _pad2: u32,
 }
 
 /// Arguments of the two indirect dispatches the `indirect` kernel writes: workgroups (x, y, z)

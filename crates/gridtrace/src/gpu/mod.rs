@@ -42,6 +42,7 @@ pub mod layout;
 mod points;
 mod queries;
 mod renderer;
+mod scan;
 mod scene;
 pub mod shaders;
 mod tiles;
@@ -57,7 +58,8 @@ pub use device_image::DeviceImage;
 pub use points::GpuClosestPoints;
 pub use queries::{Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, TriHit, WireSource, gpu_hit, unpack_bits};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
-pub use timing::{GpuQueryStats, GpuTimings, HostPhases};
+pub use scan::{PoseColumns, SensorLayout};
+pub use timing::{GpuQueryStats, GpuTimings, HostPhases, MAX_TIMESTAMPS_BYTES};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.
 pub use walks::bvh::binary as bvh;

@@ -32,6 +32,7 @@ use super::context::PendingRead;
 use super::kernels::Kernel;
 use super::layout::{BatchUniform, GpuHit};
 use super::renderer::{ACCUM_TEXEL_BYTES, GpuRenderer, WorkUse, grow};
+use super::scan::SensorLayout;
 use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
 use super::upload::MappedUpload;
 use crate::accel::{AccelKind, Hit, Ray};
@@ -62,6 +63,11 @@ pub trait WireSource: Sync {
     fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool;
     /// The error naming the batch's first invalid item (after `write` said there is one).
     fn invalid(&self) -> Error;
+    /// For a source of stride 0 (nothing on the wire): the sensor whose table and poses the
+    /// device holds, from which `batch.wgsl` makes the rays (`scan.rs`).
+    fn sensor(&self) -> Option<SensorLayout> {
+        None
+    }
 }
 
 /// Rays the caller has already checked (`Ray` is `repr(C)`: origin, direction, 24 bytes),
@@ -94,6 +100,8 @@ pub enum Answer {
     Hits { uv: bool },
     /// Whether anything is hit within the interval (one bit).
     Occlusion,
+    /// The closest hit's `t` alone (4 bytes; `inf` for a miss): a sensor's range.
+    Range,
 }
 
 /// A hit as the (t, triangle) answer brings it: a miss has `t = inf`, `tri = u32::MAX`.
@@ -111,6 +119,8 @@ pub enum ChunkAnswers<'a> {
     HitsUv(&'a [GpuHit]),
     /// Bit `i % 32` of word `i / 32` is ray `i` of the chunk.
     Occlusion(&'a [u32]),
+    /// The closest hit's `t` a ray (`inf`: a miss).
+    Range(&'a [f32]),
     /// The nearest points and each point's search work (`x` of its accumulation texel).
     Points {
         hits: &'a [GpuHit],
@@ -138,7 +148,7 @@ impl Query {
     /// The walking kernel, the queue its items go to and the work buffers it uses.
     fn walk(self) -> (Kernel, usize, WorkUse) {
         match self {
-            Query::Rays(Answer::Hits { .. }) => (Kernel::Traverse, SLOT_QUEUE_A, WorkUse::CLOSEST_HITS),
+            Query::Rays(Answer::Hits { .. } | Answer::Range) => (Kernel::Traverse, SLOT_QUEUE_A, WorkUse::CLOSEST_HITS),
             Query::Rays(Answer::Occlusion) => (Kernel::Occlusion, SLOT_SHADOW, WorkUse::OCCLUSION),
             Query::ClosestPoint => (Kernel::ClosestPoint, SLOT_QUEUE_A, WorkUse::CLOSEST_POINTS),
         }
@@ -146,7 +156,10 @@ impl Query {
 
     /// Whether the answers kernel packs the walk's output (else the output is read as it is).
     fn packs(self) -> bool {
-        matches!(self, Query::Rays(Answer::Hits { uv: false } | Answer::Occlusion))
+        matches!(
+            self,
+            Query::Rays(Answer::Hits { uv: false } | Answer::Occlusion | Answer::Range)
+        )
     }
 
     /// Bytes read back for a chunk of `n` items, per region in order.
@@ -155,6 +168,7 @@ impl Query {
             Query::Rays(Answer::Hits { uv: false }) => vec![n * size_of::<TriHit>() as u64],
             Query::Rays(Answer::Hits { uv: true }) => vec![n * size_of::<GpuHit>() as u64],
             Query::Rays(Answer::Occlusion) => vec![n.div_ceil(32) * 4],
+            Query::Rays(Answer::Range) => vec![n * size_of::<f32>() as u64],
             Query::ClosestPoint => vec![n * size_of::<GpuHit>() as u64, n * ACCUM_TEXEL_BYTES],
         }
     }
@@ -276,13 +290,13 @@ impl GpuRenderer {
             },
             ..GpuQueryStats::default()
         };
-        let cap = (self.tile_capacity(1) as usize).clamp(1, PIPELINE_ITEMS);
+        let cap = self.chunk_capacity(source.sensor().is_some());
         let chunks: Vec<Range<usize>> = (0..n).step_by(cap).map(|a| a..(a + cap).min(n)).collect();
-        if let Some(first) = chunks.first() {
-            let items = if chunks.len() > 1 { cap } else { first.len() };
+        if !chunks.is_empty() {
+            let items = n.min(cap);
             let lights = self.work.as_ref().map_or(1, |w| w.max_lights);
             self.ensure_work(items as u32, lights, query.walk().2);
-            self.ensure_batch_device(items as u64);
+            self.ensure_batch_device(items as u64, 0);
         }
         let mut flight: [Option<InFlight>; SLOTS] = Default::default();
         let mut outcome = Ok(());
@@ -331,11 +345,34 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Makes sure the batch's device buffers hold chunks of `items`.
-    fn ensure_batch_device(&mut self, items: u64) {
-        if self.batches.device.as_ref().is_some_and(|d| d.items >= items) {
+    /// Items a chunk holds at most: what the device's bindings allow (a tile's), and up to
+    /// `PIPELINE_ITEMS` where the host writes the chunk's rays (a sensor's rays are made on the
+    /// device: nothing to overlap, so as few submissions as the bindings allow).
+    fn chunk_capacity(&self, sensor: bool) -> usize {
+        let tile = (self.tile_capacity(1) as usize).max(1);
+        if sensor { tile } else { tile.min(PIPELINE_ITEMS) }
+    }
+
+    /// Items the device's buffers must hold for a batch of `n` (`sensor`: rays made on the
+    /// device): a chunk's, or the whole batch.
+    pub(super) fn chunk_items(&self, n: usize, sensor: bool) -> usize {
+        n.min(self.chunk_capacity(sensor))
+    }
+
+    /// Makes sure the batch's device buffers hold chunks of `items`, and a sensor's table and
+    /// poses of `sensor_bytes` (made again, with what they held forgotten, when either grows).
+    pub(super) fn ensure_batch_device(&mut self, items: u64, sensor_bytes: u64) {
+        if self
+            .batches
+            .device
+            .as_ref()
+            .is_some_and(|d| d.items >= items && d.sensor.size() >= sensor_bytes)
+        {
             return;
         }
+        let items = items.max(self.batches.device.as_ref().map_or(0, |d| d.items));
+        let sensor_bytes = sensor_bytes.max(self.batches.device.as_ref().map_or(0, |d| d.sensor.size()));
+        self.batches.sensor_table = None;
         let dev = &self.ctx.device;
         let storage = |label: &str, size: u64| {
             dev.create_buffer(&wgpu::BufferDescriptor {
@@ -348,6 +385,7 @@ impl GpuRenderer {
         // The widest wire item (9 words) and the widest packed answer (a `TriHit`).
         let wire = storage("batch wire rays", items * 36);
         let answers = storage("batch answers", items * size_of::<TriHit>() as u64);
+        let sensor = storage("sensor table and poses", sensor_bytes);
         let uniform = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("batch uniform"),
             size: size_of::<BatchUniform>() as u64,
@@ -361,6 +399,7 @@ impl GpuRenderer {
                 BatchSlot::Wire => wire.as_entire_binding(),
                 BatchSlot::Answers => answers.as_entire_binding(),
                 BatchSlot::Uniform => uniform.as_entire_binding(),
+                BatchSlot::Sensor => sensor.as_entire_binding(),
             }),
         });
         self.batches.device = Some(BatchDevice {
@@ -368,6 +407,7 @@ impl GpuRenderer {
             wire,
             answers,
             uniform,
+            sensor,
             group,
         });
     }
@@ -390,8 +430,10 @@ impl GpuRenderer {
         let wire_bytes = (n * item_bytes) as u64;
         let dev = &self.ctx.device;
         // The chunk's items, in pieces written on every core straight into the mapped upload.
-        let upload = MappedUpload::ready(&mut self.batches.slots[slot].upload, dev, wire_bytes);
-        let all_valid = {
+        // A sensor's rays (stride 0) have nothing on the wire: the upload keeps one word, never
+        // copied (a mapped range must not be empty).
+        let upload = MappedUpload::ready(&mut self.batches.slots[slot].upload, dev, wire_bytes.max(4));
+        let all_valid = wire_bytes == 0 || {
             let mut view = upload
                 .get_mapped_range_mut(..wire_bytes)
                 .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
@@ -417,15 +459,21 @@ impl GpuRenderer {
         let (walk, queue_slot, _) = query.walk();
         let mut counts = [0u32; COUNTER_SLOTS];
         counts[queue_slot] = n as u32;
+        let sensor = source.sensor().unwrap_or_default();
         let uniform = BatchUniform {
             stride: source.stride() as u32,
             to_shadow: (queue_slot == SLOT_SHADOW) as u32,
             t_min: bounds.interval.0,
             t_max: bounds.interval.1,
             mask: bounds.mask,
+            range_only: (query == Query::Rays(Answer::Range)) as u32,
+            // A chunk's first item is below `u32::MAX`: a batch's are (`scan` checks a sensor's).
+            first: items.start as u32,
+            cells: sensor.cells,
+            cols: sensor.cols,
+            poses_at: sensor.poses_at,
+            pose_cols: sensor.pose_cols,
             _pad0: 0,
-            _pad1: 0,
-            _pad2: 0,
         };
         let q = &self.ctx.queue;
         let device_side = self.batches.device.as_ref().expect("made by `batch`");
@@ -464,7 +512,9 @@ impl GpuRenderer {
         let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("ray batch"),
         });
-        enc.copy_buffer_to_buffer(upload, 0, &device_side.wire, 0, Some(wire_bytes));
+        if wire_bytes > 0 {
+            enc.copy_buffer_to_buffer(upload, 0, &device_side.wire, 0, Some(wire_bytes));
+        }
         let mut rec = self.recorder(n as u32, true, Ablation::default());
         rec.batch_group = Some(&device_side.group);
         rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
@@ -525,6 +575,7 @@ impl GpuRenderer {
                 Query::Rays(Answer::Hits { uv: false }) => ChunkAnswers::Hits(bytemuck::cast_slice(region(0))),
                 Query::Rays(Answer::Hits { uv: true }) => ChunkAnswers::HitsUv(bytemuck::cast_slice(region(0))),
                 Query::Rays(Answer::Occlusion) => ChunkAnswers::Occlusion(bytemuck::cast_slice(region(0))),
+                Query::Rays(Answer::Range) => ChunkAnswers::Range(bytemuck::cast_slice(region(0))),
                 Query::ClosestPoint => ChunkAnswers::Points {
                     hits: bytemuck::cast_slice(region(0)),
                     work: bytemuck::cast_slice(region(1)),

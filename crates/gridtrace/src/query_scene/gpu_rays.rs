@@ -198,6 +198,15 @@ impl QueryScene {
             && first.is_some_and(|f| specs.all(|s| s.is_some_and(|s| std::ptr::eq(s, f))))
     }
 
+    /// What the last ray batch on the GPU's two levels took; `None` before the first.
+    pub(super) fn two_level_batch_stats(&self) -> Option<crate::gpu::GpuQueryStats> {
+        self.gpu
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .map(|g| g.renderer.last_query_stats().clone())
+    }
+
     /// What the scene's GPU holds and has written; `None` before its first GPU ray query.
     pub fn gpu_uploads(&self) -> Option<GpuUploads> {
         self.gpu
@@ -268,6 +277,26 @@ impl QueryScene {
         self.on_gpu_two_level(two, |g| {
             cast(&mut g.renderer, rays, o, Answer::Occlusion, |first, answers| {
                 occlusion_into(&mut out, rays, first, answers)
+            })
+        })?;
+        Ok(out)
+    }
+}
+
+impl QueryScene {
+    /// A scan's closest hits on the GPU's two levels, the rays made on the device
+    /// (`gpu_scan.rs`).
+    pub(super) fn gpu_scan(&self, two: &Arc<TwoLevel>, s: &super::ScanRays, range_only: bool) -> Result<RayHits> {
+        let mut out = RayHits::misses(s.len());
+        self.on_gpu_two_level(two, |g| {
+            let GpuTwoLevel { renderer, top, two, .. } = g;
+            super::gpu_scan::scan_with(renderer, s, range_only, |first, answers| {
+                super::gpu_scan::take_scan_answers(&mut out, first, answers, |h, t, id, p, uv, nrm| {
+                    let (named, normal) = name(top, two, h);
+                    (*t, *id, *p) = (named.t, named.id, named.prim);
+                    *uv = [named.u, named.v];
+                    *nrm = normal.to_array();
+                })
             })
         })?;
         Ok(out)

@@ -76,6 +76,7 @@ mod batch;
 mod cpu_rays;
 mod geometry;
 mod gpu_rays;
+mod gpu_scan;
 mod instanced_rays;
 mod instances;
 mod merged;
@@ -89,6 +90,7 @@ pub use all_hits::Intersections;
 pub use batch::{PerRay, RayHits, RayOptions};
 pub use geometry::{Geometry, SceneMesh};
 pub use gpu_rays::GpuUploads;
+pub use gpu_scan::ScanRays;
 pub use instances::InstanceOf;
 pub use points::ClosestPoints;
 

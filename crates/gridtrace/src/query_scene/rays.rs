@@ -187,7 +187,15 @@ impl QueryScene {
 
 /// One hit of the merged mesh, named by geometry and face, with its world-space unit normal.
 #[inline(always)]
-fn write_hit(m: &Merged, h: &Hit, t: &mut f32, g: &mut u32, p: &mut u32, uv: &mut [f32; 2], n: &mut [f32; 3]) {
+pub(super) fn write_hit(
+    m: &Merged,
+    h: &Hit,
+    t: &mut f32,
+    g: &mut u32,
+    p: &mut u32,
+    uv: &mut [f32; 2],
+    n: &mut [f32; 3],
+) {
     let (id, prim) = m.name(h.tri);
     *t = h.t;
     *g = id;

@@ -1,12 +1,16 @@
-//! `scan`: a sensor traced from one pose or a batch, its rays made inside the worker threads a
-//! chunk at a time (`CHUNK` rays into a buffer each worker keeps) and traced through
-//! `QueryScene::cast_rays`; only the outputs asked for are allocated and written.
+//! `scan`: a sensor traced from one pose or a batch. On the CPU its rays are made inside the
+//! worker threads a chunk at a time (`CHUNK` rays into a buffer each worker keeps) and traced
+//! through `QueryScene::cast_rays`; where the scene traces on a GPU they are made on the device
+//! from the sensor's table and the poses, all environments in one batch
+//! (`QueryScene::scan_on_gpu`, `gpu::scan`). Only the outputs asked for are allocated and
+//! written.
 
 use rayon::prelude::*;
 
 use super::pose::column_poses;
 use super::{Pose, Sensor};
-use crate::query_scene::{INVALID_ID, QueryScene};
+use crate::gpu::PoseColumns;
+use crate::query_scene::{INVALID_ID, QueryScene, RayHits, ScanRays};
 use crate::util::fmt_bytes;
 use crate::{Error, Result};
 
@@ -148,12 +152,40 @@ impl<'a> Out<'a> {
     }
 }
 
+/// One chunk's share of a batch's hits (`RayHits` from ray `first`, `n` of them).
+struct Hits<'a> {
+    t_hit: &'a [f32],
+    geometry_ids: &'a [u32],
+    primitive_ids: &'a [u32],
+    primitive_normals: &'a [[f32; 3]],
+}
+
+impl<'a> Hits<'a> {
+    fn of(h: &'a RayHits, first: usize, n: usize) -> Hits<'a> {
+        let r = first..first + n;
+        Hits {
+            t_hit: &h.t_hit[r.clone()],
+            geometry_ids: &h.geometry_ids[r.clone()],
+            primitive_ids: &h.primitive_ids[r.clone()],
+            primitive_normals: &h.primitive_normals[r],
+        }
+    }
+}
+
+/// A pose as the GPU's batch kernel reads it: the matrix's three columns, then the translation.
+fn pose_columns(p: &Pose) -> PoseColumns {
+    let (x, y, z, t) = (p.matrix3.x_axis, p.matrix3.y_axis, p.matrix3.z_axis, p.translation);
+    [x.x, x.y, x.z, y.x, y.y, y.z, z.x, z.y, z.z, t.x, t.y, t.z]
+}
+
 /// Scans `scene` with `sensor` from each of `poses` (sensor-to-world, checked by `check_pose`;
 /// one environment each), and with `poses_end` (one per pose) a rolling scan: column `c` of
-/// `cols` traced from the pose `c / (cols - 1)` of the way from `pose` to `pose_end`. Rays are
-/// made per chunk inside the workers and traced by `cast_rays`, so the answers are exactly
-/// those of `cast_rays` on `sensor.rays(pose, pose_end)`, with returns outside the sensor's
-/// `[min_range, max_range]` made misses.
+/// `cols` traced from the pose `c / (cols - 1)` of the way from `pose` to `pose_end`. On the
+/// CPU the rays are made per chunk inside the workers and traced by `cast_rays`, so the answers
+/// are exactly those of `cast_rays` on `sensor.rays(pose, pose_end)`; on a GPU the device makes
+/// them in the same operations (its rounding its own: ranges within 1e-6 relative of
+/// `cast_rays` on the host's rays, `tests/gpu_scan.rs`). Returns outside the sensor's
+/// `[min_range, max_range]` are made misses.
 pub fn scan(
     scene: &QueryScene,
     sensor: &Sensor,
@@ -223,23 +255,58 @@ pub fn scan(
 
     let (min_range, max_range) = sensor.range_limits();
     let cells = rows * cols;
+    // On a GPU the rays are made where they are traced, all in one batch (`scan_on_gpu`):
+    // only `t` comes down unless ids or normals are asked for.
+    let range_only = !(outputs.geometry_ids || outputs.primitive_ids || outputs.normals || outputs.incidence);
+    let on_gpu = if scene.traces_on_gpu() {
+        let table: Vec<[f32; 6]> = (0..cells)
+            .map(|cell| {
+                let (o, d) = sensor.ray_in_sensor(cell / cols, cell % cols);
+                [o.x, o.y, o.z, d.x, d.y, d.z]
+            })
+            .collect();
+        // A rolling scan's pose of each column, else each environment's one pose.
+        let pose_cols = if poses_end.is_some() { cols } else { 1 };
+        let poses: Vec<PoseColumns> = columns.iter().step_by(cols / pose_cols).map(pose_columns).collect();
+        scene.scan_on_gpu(
+            &ScanRays {
+                table: &table,
+                cols,
+                poses: &poses,
+                pose_cols,
+            },
+            range_only,
+        )?
+    } else {
+        None
+    };
+    // The world rays, made on the host where the CPU traces them or an output needs them.
+    let rays_needed = on_gpu.is_none() || outputs.points == Some(Frame::World) || outputs.incidence;
     chunks.into_par_iter().try_for_each_init(
         || Vec::with_capacity(CHUNK),
         |rays: &mut Vec<[f32; 6]>, (start, mut out)| -> Result<()> {
             let n = CHUNK.min(count - start);
             rays.clear();
-            rays.extend((start..start + n).map(|i| {
-                let (e, cell) = (i / cells, i % cells);
-                let (row, col) = (cell / cols, cell % cols);
-                sensor.ray_in_world(&columns[e * cols + col], row, col)
-            }));
-            let hits = scene.cast_rays(rays)?;
+            if rays_needed {
+                rays.extend((start..start + n).map(|i| {
+                    let (e, cell) = (i / cells, i % cells);
+                    let (row, col) = (cell / cols, cell % cols);
+                    sensor.ray_in_world(&columns[e * cols + col], row, col)
+                }));
+            }
+            let cast;
+            let hits = match &on_gpu {
+                Some(all) => Hits::of(all, start, n),
+                None => {
+                    cast = scene.cast_rays(rays)?;
+                    Hits::of(&cast, 0, n)
+                }
+            };
             for j in 0..n {
                 let t = hits.t_hit[j];
                 let hit = t >= min_range && t <= max_range;
                 let cell = (start + j) % cells;
                 let (row, col) = (cell / cols, cell % cols);
-                let r = &rays[j];
                 if let Some(o) = out.range.as_deref_mut() {
                     o[j] = if hit { t } else { f32::INFINITY };
                 }
@@ -251,6 +318,7 @@ pub fn scan(
                     o[j] = if !hit {
                         [f32::NAN; 3]
                     } else if outputs.points == Some(Frame::World) {
+                        let r = &rays[j];
                         [r[0] + t * r[3], r[1] + t * r[4], r[2] + t * r[5]]
                     } else {
                         let (so, sd) = sensor.ray_in_sensor(row, col);
@@ -268,6 +336,7 @@ pub fn scan(
                     o[j] = if hit { normal } else { [0.0; 3] };
                 }
                 if let Some(o) = out.incidence.as_deref_mut() {
+                    let r = &rays[j];
                     let cos = r[3] * normal[0] + r[4] * normal[1] + r[5] * normal[2];
                     o[j] = if hit { cos.abs().min(1.0) } else { 0.0 };
                 }

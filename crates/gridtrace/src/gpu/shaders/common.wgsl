@@ -20,7 +20,7 @@ struct PointLight { position: vec3<f32>, _pad0: f32, intensity: vec3<f32>, _pad1
 struct RayRec { origin: vec3<f32>, pixel: u32, dir: vec3<f32>, t_max: f32, weight: vec3<f32>, t_min: f32 }
 struct GpuHit { t: f32, tri: u32, u: f32, v: f32 }
 // A ray batch's constants (batch.wgsl; BatchUniform on the host).
-struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32, mask: u32, _pad0: u32, _pad1: u32, _pad2: u32 }
+struct BatchUniform { stride: u32, to_shadow: u32, t_min: f32, t_max: f32, mask: u32, range_only: u32, first: u32, cells: u32, cols: u32, poses_at: u32, pose_cols: u32, _pad0: u32 }
 
 struct SceneUniform {
     bounds_min: vec3<f32>, ray_epsilon: f32,

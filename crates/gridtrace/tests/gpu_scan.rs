@@ -1,0 +1,228 @@
+//! Scans on the GPU (lavapipe in CI): the sensor's rays made on the device from its table and
+//! poses (`GpuRenderer::scan`) answer as `cast_rays` on the explicit rays does, and as the CPU's
+//! scan does, for a LiDAR and a camera, one pose and a batch, on both GPU paths (the two levels
+//! for the BVH, the merged mesh's renderer for the irregular grid); what crosses the bus is the
+//! poses (the table once) and 4 bytes a ray for a range.
+
+use glam::{Affine3A, Quat, Vec3};
+use gridtrace::QueryScene;
+use gridtrace::accel::AccelKind;
+use gridtrace::query::{Backend, QueryOptions};
+use gridtrace::sensor::{Camera, Frame, Pose, ScanOutputs, Sensor, preset, scan};
+use gridtrace::testing::skip_gpu;
+
+/// A closed room 20 x 16 x 8, a box and a turned box inside: three geometries.
+fn room(backend: Backend, accel: AccelKind) -> QueryScene {
+    let mut s = QueryScene::new(QueryOptions {
+        backend,
+        accel: accel.into(),
+        ..Default::default()
+    });
+    let (v, f) = cuboid(Vec3::new(-10.0, -8.0, -3.0), Vec3::new(10.0, 8.0, 5.0));
+    s.add_triangles(v, f, None).unwrap();
+    let (v, f) = cuboid(Vec3::new(2.0, -1.0, -1.0), Vec3::new(3.0, 1.0, 1.5));
+    s.add_triangles(v, f, None).unwrap();
+    let (v, f) = cuboid(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(1.0, 1.0, 1.0));
+    let turned = glam::Mat4::from_scale_rotation_translation(
+        Vec3::splat(0.7),
+        Quat::from_euler(glam::EulerRot::ZYX, 0.4, 0.3, 0.2),
+        Vec3::new(-4.0, 3.0, 0.0),
+    );
+    s.add_triangles(v, f, Some(turned)).unwrap();
+    s
+}
+
+fn cuboid(lo: Vec3, hi: Vec3) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let v = (0..8)
+        .map(|i| {
+            [
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            ]
+        })
+        .collect();
+    let quads = [
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+    ];
+    let f = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
+    (v, f)
+}
+
+fn poses(n: usize) -> Vec<Pose> {
+    (0..n)
+        .map(|k| {
+            let a = k as f32 * 0.7;
+            Affine3A::from_rotation_translation(
+                Quat::from_euler(glam::EulerRot::ZYX, a, 0.1 * a.sin(), 0.05),
+                // Inside the room (z from -3 to 5) and off its boxes.
+                Vec3::new(0.5 + a.cos(), 0.2 - a.sin(), 0.05 * (k % 30) as f32),
+            )
+        })
+        .collect()
+}
+
+fn everything(camera: bool) -> ScanOutputs {
+    ScanOutputs {
+        range: true,
+        depth: camera,
+        points: Some(Frame::World),
+        geometry_ids: true,
+        primitive_ids: true,
+        normals: true,
+        incidence: true,
+    }
+}
+
+/// The GPU's scan against `cast_rays` on the explicit rays on the same GPU scene (ranges within
+/// 1e-6 relative) and against the CPU scene's scan (1e-5: the GPU's walk rounds its own way, as
+/// `cast_rays` on the two does), the same geometry and face (the device
+/// makes the rays with its own rounding, a fused multiply-add maybe: a ray that the host's
+/// rounding puts on the diagonal shared by a wall's two triangles may name the other; counted,
+/// held to 0.1%), the other outputs from them as the CPU makes them.
+fn assert_gpu_scan(
+    gpu: &QueryScene,
+    cpu: &QueryScene,
+    sensor: &Sensor,
+    poses: &[Pose],
+    ends: Option<&[Pose]>,
+) -> usize {
+    let camera = matches!(sensor, Sensor::Camera(_));
+    let got = scan(gpu, sensor, poses, ends, everything(camera)).unwrap();
+    let on_cpu = scan(cpu, sensor, poses, ends, everything(camera)).unwrap();
+    let cells = got.rows * got.cols;
+    let (range, ids, faces) = (
+        got.range.as_ref().unwrap(),
+        got.geometry_ids.as_ref().unwrap(),
+        got.primitive_ids.as_ref().unwrap(),
+    );
+    let mut other_face = 0;
+    for (e, pose) in poses.iter().enumerate() {
+        let rays = sensor.rays(pose, ends.map(|x| &x[e])).unwrap();
+        let want = gpu.cast_rays(&rays).unwrap();
+        for i in 0..cells {
+            let k = e * cells + i;
+            for (what, t, rel) in [
+                ("cast_rays", want.t_hit[i], 1e-6),
+                ("the CPU's scan", on_cpu.range.as_ref().unwrap()[k], 1e-5),
+            ] {
+                assert!(
+                    range[k] == t || (range[k] - t).abs() <= rel * t,
+                    "env {e} cell {i}: range {} against {what}'s {t}",
+                    range[k]
+                );
+            }
+            assert!(range[k].is_finite(), "inside a closed room every ray returns");
+            assert_eq!(ids[k], want.geometry_ids[i], "env {e} cell {i}");
+            assert_eq!(ids[k], on_cpu.geometry_ids.as_ref().unwrap()[k], "env {e} cell {i}");
+            if faces[k] != want.primitive_ids[i] {
+                other_face += 1;
+            }
+        }
+    }
+    assert!(
+        other_face * 1000 <= got.range.as_ref().unwrap().len(),
+        "{other_face} rays name another face"
+    );
+    // The outputs made from the hits are the CPU's within rounding.
+    for (a, b) in got.points.unwrap().iter().zip(on_cpu.points.unwrap()) {
+        for c in 0..3 {
+            assert!((a[c] - b[c]).abs() <= 1e-4, "{a:?} {b:?}");
+        }
+    }
+    for (a, b) in got.incidence.unwrap().iter().zip(on_cpu.incidence.unwrap()) {
+        assert!((a - b).abs() <= 1e-5, "{a} {b}");
+    }
+    other_face
+}
+
+#[test]
+fn gpu_scans_answer_as_cast_rays_on_their_rays() {
+    if skip_gpu() {
+        return;
+    }
+    let lidar = Sensor::from(preset("vlp16", Some(360)).unwrap());
+    let cam = Sensor::from(Camera::from_fov(70.0, 48, 36).unwrap());
+    // The BVH walks two levels on the GPU, the irregular grid the merged mesh's renderer.
+    for accel in [AccelKind::Bvh, AccelKind::Irregular] {
+        let gpu = room(Backend::Gpu, accel);
+        assert!(gpu.device().unwrap().starts_with("gpu"), "{}", gpu.device().unwrap());
+        let cpu = room(Backend::Cpu, accel);
+        let mut other = 0;
+        let (one, three) = (poses(1), poses(3));
+        // A rolling scan: a pose a column, from each pose to one turned half a radian.
+        let ends: Vec<Pose> = three.iter().map(|p| Affine3A::from_rotation_z(0.5) * *p).collect();
+        for sensor in [&lidar, &cam] {
+            other += assert_gpu_scan(&gpu, &cpu, sensor, &one, None);
+            other += assert_gpu_scan(&gpu, &cpu, sensor, &three, None);
+            other += assert_gpu_scan(&gpu, &cpu, sensor, &three, Some(&ends));
+        }
+        println!("{accel:?}: {other} rays named another face");
+    }
+}
+
+/// A range alone: the table goes up once, then a scan sends its poses (48 bytes an environment;
+/// a rolling scan's 48 a column) and a few constants, and gets 4 bytes a ray back; 64 VLP-16s
+/// in one call are one batch.
+#[test]
+fn a_range_sends_poses_up_and_four_bytes_a_ray_down() {
+    if skip_gpu() {
+        return;
+    }
+    let gpu = room(Backend::Gpu, AccelKind::Bvh);
+    let vlp = Sensor::from(preset("vlp16", None).unwrap());
+    let (rows, cols) = vlp.shape();
+    let range = ScanOutputs {
+        range: true,
+        ..Default::default()
+    };
+    let ps = poses(64);
+    let first = scan(&gpu, &vlp, &ps, None, range).unwrap();
+    let stats = gpu.last_gpu_batch().unwrap().expect("a GPU batch ran");
+    let rays = (64 * rows * cols) as u64;
+    let table = (rows * cols * 24) as u64;
+    let poses_bytes = 64 * 48;
+    // The table, the poses, and per submission the counters, the batch's and passes' uniforms.
+    let extra = stats.uploaded_bytes - table - poses_bytes;
+    assert!(extra <= 4096 * stats.round_trips as u64, "{stats:?}");
+    // Down: 4 bytes a ray, and the stage times where the adapter has timestamps.
+    let stamps = stats.round_trips as u64 * gridtrace::gpu::MAX_TIMESTAMPS_BYTES;
+    assert!(
+        stats.downloaded_bytes >= 4 * rays && stats.downloaded_bytes <= 4 * rays + stamps,
+        "{stats:?}"
+    );
+    println!(
+        "64 x VLP-16 ({rays} rays): {} submissions, up {} bytes ({table} table, {poses_bytes} poses), down {} bytes",
+        stats.round_trips, stats.uploaded_bytes, stats.downloaded_bytes
+    );
+    // The same scan again: the table stays on the device.
+    let again = scan(&gpu, &vlp, &ps, None, range).unwrap();
+    assert_eq!(again, first);
+    let stats = gpu.last_gpu_batch().unwrap().unwrap();
+    assert!(
+        stats.uploaded_bytes - poses_bytes <= 4096 * stats.round_trips as u64,
+        "{stats:?}"
+    );
+    // The ranges of `cast_rays` on the explicit rays (the same device), and of the CPU's scan
+    // (its own rounding: 1e-5).
+    let got = first.range.unwrap();
+    let cells = rows * cols;
+    for (e, pose) in ps.iter().enumerate() {
+        let want = gpu.cast_rays(&vlp.rays(pose, None).unwrap()).unwrap();
+        for (a, b) in got[e * cells..(e + 1) * cells].iter().zip(&want.t_hit) {
+            assert!(a == b || (a - b).abs() <= 1e-6 * b, "{a} {b}");
+        }
+    }
+    let cpu = scan(&room(Backend::Cpu, AccelKind::Bvh), &vlp, &ps, None, range).unwrap();
+    for (a, b) in got.iter().zip(cpu.range.unwrap()) {
+        assert!(*a == b || (a - b).abs() <= 1e-5 * b, "{a} {b}");
+    }
+}
