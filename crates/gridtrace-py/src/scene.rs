@@ -332,6 +332,15 @@ impl NativeScene {
         self.read().structure_builds()
     }
 
+    /// What the last ray batch on the scene's GPU took (a dict: wall and GPU time, submissions,
+    /// bytes up and down), or None where its rays trace on the CPU or before the first.
+    fn last_gpu_batch<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        match self.read().last_gpu_batch().map_err(to_py)? {
+            Some(s) => Ok(Some(crate::stats::batch(py, &s)?)),
+            None => Ok(None),
+        }
+    }
+
     /// What the GPU's two levels hold and have written (a dict), or None before their first
     /// ray query (`QueryScene::gpu_uploads`).
     fn gpu_uploads<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {

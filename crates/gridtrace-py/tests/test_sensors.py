@@ -75,6 +75,26 @@ def test_camera_scan_is_cast_rays_and_depth_is_z(backend):
     np.testing.assert_allclose(got["depth"], got["points"][..., 2], rtol=1e-5)
 
 
+def test_a_gpu_scan_sends_poses_and_gets_four_bytes_a_ray():
+    """backend="gpu": the scan's rays are made on the device; a range alone comes down as 4
+    bytes a ray, and what goes up is the sensor's table (once) and the poses."""
+    scene = room("gpu")
+    lidar = Lidar.preset("vlp16", azimuth_steps=90)
+    poses = np.stack([pose(0.1 * k, (0.5, 0.2, 0.05 * k)) for k in range(8)])
+    got = scene.scan(lidar, poses, outputs=("range",))["range"]
+    s = scene.last_gpu_batch()
+    want = scene.cast_rays(lidar.rays(poses))["t_hit"]
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    rays = 8 * 16 * 90
+    assert s["rays"] == rays, s
+    assert 4 * rays <= s["downloaded_bytes"] <= 4 * rays + 4096 * s["round_trips"], s
+    table, poses_bytes = 16 * 90 * 24, 8 * 48
+    assert s["uploaded_bytes"] - poses_bytes <= table + 4096 * s["round_trips"], s
+    scene.scan(lidar, poses, outputs=("range",))
+    s = scene.last_gpu_batch()
+    assert s["uploaded_bytes"] - poses_bytes <= 4096 * s["round_trips"], s  # the table stayed
+
+
 def test_lidar_rays_follow_the_table():
     lidar = Lidar([10.0, -20.0], 4, min_range=0.5, max_range=50.0)
     r = lidar.rays(np.eye(4))

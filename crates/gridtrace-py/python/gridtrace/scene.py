@@ -291,6 +291,13 @@ class Scene:
         geometries' records and the top level, and the merged mesh if a point query built one."""
         return self._native.memory_bytes()
 
+    def last_gpu_batch(self):
+        """What the last ray query or scan on the scene's GPU took, or ``None`` where its rays
+        trace on the CPU (or before the first): a dict as ``Mesh.last_gpu_batch`` gives (wall
+        and GPU time, submissions, ``uploaded_bytes`` and ``downloaded_bytes``). A scan sends
+        its sensor's table once and then its poses, and gets 4 bytes a ray back for a range."""
+        return self._native.last_gpu_batch()
+
     def gpu_uploads(self):
         """What the GPU's two levels hold and have written, or ``None`` before their first ray
         query (a GPU backend with the BVH, the grid, pc or brute force): a dict of
