@@ -187,6 +187,9 @@ fn a_range_sends_poses_up_and_four_bytes_a_ray_down() {
     let ps = poses(64);
     let first = scan(&gpu, &vlp, &ps, None, range).unwrap();
     let stats = gpu.last_gpu_batch().unwrap().expect("a GPU batch ran");
+    // One submission and one readback: its 1.84M rays' queue (88 MB) within any device's
+    // storage binding (128 MiB at the least WebGPU allows).
+    assert_eq!((stats.chunks, stats.round_trips), (1, 1), "{stats:?}");
     let rays = (64 * rows * cols) as u64;
     let table = (rows * cols * 24) as u64;
     let poses_bytes = 64 * 48;
@@ -224,5 +227,112 @@ fn a_range_sends_poses_up_and_four_bytes_a_ray_down() {
     let cpu = scan(&room(Backend::Cpu, AccelKind::Bvh), &vlp, &ps, None, range).unwrap();
     for (a, b) in got.iter().zip(cpu.range.unwrap()) {
         assert!(*a == b || (a - b).abs() <= 1e-5 * b, "{a} {b}");
+    }
+}
+
+/// `GpuRenderer::scan` in many submissions equals one (each chunk numbers its rays from the
+/// batch's first, `BatchUniform::first`), for a range and for hits, one pose and a pose a
+/// column; and its rays are `Sensor::ray_in_world`'s: the hits of `intersect` on those.
+#[test]
+fn a_scan_in_many_submissions_equals_one() {
+    use gridtrace::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, GpuVariants};
+    if skip_gpu() {
+        return;
+    }
+    let scene = gridtrace::scene::builtin::scene("sparse-room")
+        .unwrap()
+        .prepare(gridtrace::accel::Resolution::default())
+        .unwrap();
+    let ctx = std::sync::Arc::new(GpuContext::new().expect("GPU tests need an adapter"));
+    let mut whole = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
+    let mut chunked = GpuRenderer::new(ctx, &scene, &GpuVariants::default()).unwrap();
+    chunked.set_max_scan_rays(700);
+    let lidar = Sensor::from(preset("vlp16", Some(90)).unwrap());
+    let (rows, cols) = lidar.shape();
+    let table: Vec<[f32; 6]> = (0..rows * cols)
+        .map(|c| {
+            let (o, d) = lidar.ray_in_sensor(c / cols, c % cols);
+            [o.x, o.y, o.z, d.x, d.y, d.z]
+        })
+        .collect();
+    let columns = |p: &Pose| {
+        let (x, y, z, t) = (p.matrix3.x_axis, p.matrix3.y_axis, p.matrix3.z_axis, p.translation);
+        [x.x, x.y, x.z, y.x, y.y, y.z, z.x, z.y, z.z, t.x, t.y, t.z]
+    };
+    let ps = poses(3);
+    // One pose an environment, and a pose a column (each environment's turned bit by bit).
+    let rolling: Vec<Pose> = ps
+        .iter()
+        .flat_map(|p| (0..cols).map(move |c| Affine3A::from_rotation_z(0.002 * c as f32) * *p))
+        .collect();
+    for (poses, pose_cols) in [
+        (ps.iter().map(columns).collect::<Vec<_>>(), 1),
+        (rolling.iter().map(columns).collect(), cols),
+    ] {
+        let n = table.len() * poses.len() / pose_cols;
+        let run = |r: &mut GpuRenderer, answer: Answer| {
+            let mut t = vec![f32::NAN; n];
+            let mut tri = vec![0u32; n];
+            r.scan(
+                &table,
+                cols,
+                &poses,
+                pose_cols,
+                (0.0, f32::INFINITY),
+                answer,
+                |first, a| match a {
+                    ChunkAnswers::Range(ts) => t[first..first + ts.len()].copy_from_slice(ts),
+                    ChunkAnswers::HitsUv(hs) => {
+                        for (k, h) in hs.iter().enumerate() {
+                            (t[first + k], tri[first + k]) = (h.t, h.tri);
+                        }
+                    }
+                    _ => panic!("a scan answers ranges or hits"),
+                },
+            )
+            .unwrap();
+            (t, tri)
+        };
+        let (range, _) = run(&mut whole, Answer::Range);
+        assert_eq!(whole.last_query_stats().round_trips, 1);
+        let (chunked_range, _) = run(&mut chunked, Answer::Range);
+        assert_eq!(chunked.last_query_stats().round_trips as usize, n.div_ceil(700));
+        assert_eq!(
+            range.iter().map(|t| t.to_bits()).collect::<Vec<_>>(),
+            chunked_range.iter().map(|t| t.to_bits()).collect::<Vec<_>>()
+        );
+        let (t, tri) = run(&mut chunked, Answer::Hits { uv: true });
+        assert_eq!(
+            t.iter().map(|t| t.to_bits()).collect::<Vec<_>>(),
+            range.iter().map(|t| t.to_bits()).collect::<Vec<_>>()
+        );
+        // The explicit rays, as the host makes them, through the renderer's own batch.
+        let rays: Vec<gridtrace::accel::Ray> = (0..n)
+            .map(|i| {
+                let (e, cell) = (i / table.len(), i % table.len());
+                let pose = if pose_cols == 1 {
+                    ps[e]
+                } else {
+                    rolling[e * cols + cell % cols]
+                };
+                let r = lidar.ray_in_world(&pose, cell / cols, cell % cols);
+                gridtrace::accel::Ray::new(Vec3::new(r[0], r[1], r[2]), Vec3::new(r[3], r[4], r[5]))
+            })
+            .collect();
+        let want = whole.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+        let mut hits = 0;
+        for i in 0..n {
+            assert!(
+                t[i] == want[i].t || (t[i] - want[i].t).abs() <= 1e-6 * want[i].t,
+                "ray {i}: {} {}",
+                t[i],
+                want[i].t
+            );
+            if t[i].is_finite() {
+                hits += 1;
+                assert_eq!(tri[i], want[i].tri, "ray {i}");
+            }
+        }
+        assert!(hits * 2 > n, "most rays hit the room: {hits} of {n}");
     }
 }

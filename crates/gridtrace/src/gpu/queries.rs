@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use super::batch_buffers::{BatchDevice, SLOTS};
 use super::bindings::{self, BATCH_BINDINGS, BatchSlot};
 use super::constants::{COUNTER_SLOTS, MISS, SLOT_QUEUE_A, SLOT_SHADOW};
-use super::context::PendingRead;
+use super::context::{PendingRead, max_binding_bytes};
 use super::kernels::Kernel;
 use super::layout::{BatchUniform, GpuHit};
 use super::renderer::{ACCUM_TEXEL_BYTES, GpuRenderer, WorkUse, grow};
@@ -345,12 +345,16 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Items a chunk holds at most: what the device's bindings allow (a tile's), and up to
-    /// `PIPELINE_ITEMS` where the host writes the chunk's rays (a sensor's rays are made on the
-    /// device: nothing to overlap, so as few submissions as the bindings allow).
+    /// Items a chunk holds at most: what the device's bindings allow (a tile's), up to
+    /// `PIPELINE_ITEMS` where the host writes the chunk's rays; a sensor's rays are made on the
+    /// device, so there is nothing to overlap: as few submissions as the bindings allow, up to
+    /// `scan::MAX_SCAN_RAYS`.
     fn chunk_capacity(&self, sensor: bool) -> usize {
-        let tile = (self.tile_capacity(1) as usize).max(1);
-        if sensor { tile } else { tile.min(PIPELINE_ITEMS) }
+        if sensor {
+            let by_rays = max_binding_bytes(&self.ctx.limits()) / size_of::<super::layout::RayRec>() as u64;
+            return by_rays.min(u64::from(self.max_scan_rays)).max(1) as usize;
+        }
+        (self.tile_capacity(1) as usize).clamp(1, PIPELINE_ITEMS)
     }
 
     /// Items the device's buffers must hold for a batch of `n` (`sensor`: rays made on the

@@ -122,6 +122,8 @@ pub struct GpuRenderer {
     pub(super) last_query: GpuQueryStats,
     /// Largest tile in pixels (`MAX_TILE_PIXELS`; tests lower it to make many tiles).
     max_tile_pixels: u32,
+    /// Rays of a scan's submission at most (`scan.rs`); tests lower it.
+    pub(super) max_scan_rays: u32,
     /// The structure's builder on the device, for a structure the GPU rebuilds when the mesh
     /// moves (`update_vertices`), once it has.
     device_builder: Option<DeviceBuilder>,
@@ -238,6 +240,7 @@ impl GpuRenderer {
             batches: Default::default(),
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
+            max_scan_rays: super::scan::MAX_SCAN_RAYS,
             device_builder: None,
         })
     }

@@ -46,11 +46,23 @@ impl WireSource for SensorRays {
     }
 }
 
+/// Rays of one scan submission at most: 64 VLP-16s (1.84M rays) go in one, with a queue of
+/// 88 MB and hits of 29 MB on the device (where the bindings allow: `chunk_capacity`); a
+/// hardware GPU traces them in milliseconds, far inside any watchdog.
+pub const MAX_SCAN_RAYS: u32 = 1 << 22;
+
 /// A pose as the kernel reads it: the sensor-to-world matrix's three columns, then the
 /// translation.
 pub type PoseColumns = [f32; 12];
 
 impl GpuRenderer {
+    /// Lowers the rays of a scan's submission to `rays` (at least 1): tests make a small scan of
+    /// many submissions with it.
+    #[doc(hidden)]
+    pub fn set_max_scan_rays(&mut self, rays: u32) {
+        self.max_scan_rays = rays.clamp(1, MAX_SCAN_RAYS);
+    }
+
     /// Traces a sensor from `poses.len() / pose_cols` environments: `table` holds each cell's ray
     /// in the sensor's frame (origin, unit direction; row-major, `cols` a row), `poses` each
     /// environment's poses, `pose_cols` of them (`cols`: one a column, a rolling scan; or 1).
