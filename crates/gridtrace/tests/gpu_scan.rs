@@ -169,6 +169,47 @@ fn gpu_scans_answer_as_cast_rays_on_their_rays() {
     }
 }
 
+/// A scene that moves: the turned box placed twice more as instances of its mesh, then one
+/// moved (the GPU's two levels upload the top level alone); the scan still answers as
+/// `cast_rays` on its rays, and as the CPU's scan of the same moves.
+#[test]
+fn gpu_scans_of_instances_that_move() {
+    use gridtrace::query_scene::InstanceOf;
+    if skip_gpu() {
+        return;
+    }
+    let place = |s: &mut QueryScene| {
+        let first = s.ids().last().unwrap();
+        let a = s
+            .add_instance(
+                InstanceOf::Geometry(first),
+                Some(glam::Mat4::from_translation(Vec3::new(5.0, -3.0, 0.5))),
+                u32::MAX,
+            )
+            .unwrap();
+        s.add_instance(
+            InstanceOf::Geometry(first),
+            Some(glam::Mat4::from_translation(Vec3::new(-6.0, -4.0, 1.0))),
+            u32::MAX,
+        )
+        .unwrap();
+        a
+    };
+    let (mut gpu, mut cpu) = (room(Backend::Gpu, AccelKind::Bvh), room(Backend::Cpu, AccelKind::Bvh));
+    let (a, b) = (place(&mut gpu), place(&mut cpu));
+    let lidar = Sensor::from(preset("vlp16", Some(180)).unwrap());
+    assert_gpu_scan(&gpu, &cpu, &lidar, &poses(2), None);
+    let moved = glam::Mat4::from_rotation_translation(Quat::from_rotation_z(0.7), Vec3::new(4.0, 4.0, -1.0));
+    gpu.set_transform(a, moved).unwrap();
+    cpu.set_transform(b, moved).unwrap();
+    assert_gpu_scan(&gpu, &cpu, &lidar, &poses(2), None);
+    let uploads = gpu.gpu_uploads().expect("the GPU's two levels ran");
+    assert_eq!(
+        uploads.mesh_uploads, 1,
+        "a move uploads the top level alone: {uploads:?}"
+    );
+}
+
 /// A range alone: the table goes up once, then a scan sends its poses (48 bytes an environment;
 /// a rolling scan's 48 a column) and a few constants, and gets 4 bytes a ray back; 64 VLP-16s
 /// in one call are one batch.
