@@ -51,6 +51,7 @@ fn main() -> gridtrace::Result<()> {
                     gridtrace::gpu::ChunkAnswers::Hits(h) => h.len(),
                     gridtrace::gpu::ChunkAnswers::HitsUv(h) => h.len(),
                     gridtrace::gpu::ChunkAnswers::Occlusion(b) => b.len(),
+                    gridtrace::gpu::ChunkAnswers::Range(t) => t.len(),
                     gridtrace::gpu::ChunkAnswers::Points { hits, .. } => hits.len(),
                 })
             })?;

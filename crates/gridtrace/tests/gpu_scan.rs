@@ -314,23 +314,21 @@ fn a_scan_in_many_submissions_equals_one() {
         let run = |r: &mut GpuRenderer, answer: Answer| {
             let mut t = vec![f32::NAN; n];
             let mut tri = vec![0u32; n];
-            r.scan(
-                &table,
+            let rays = gridtrace::gpu::ScanRays {
+                table: &table,
                 cols,
-                &poses,
+                poses: &poses,
                 pose_cols,
-                (0.0, f32::INFINITY),
-                answer,
-                |first, a| match a {
-                    ChunkAnswers::Range(ts) => t[first..first + ts.len()].copy_from_slice(ts),
-                    ChunkAnswers::HitsUv(hs) => {
-                        for (k, h) in hs.iter().enumerate() {
-                            (t[first + k], tri[first + k]) = (h.t, h.tri);
-                        }
+            };
+            r.scan(&rays, (0.0, f32::INFINITY), answer, |first, a| match a {
+                ChunkAnswers::Range(ts) => t[first..first + ts.len()].copy_from_slice(ts),
+                ChunkAnswers::HitsUv(hs) => {
+                    for (k, h) in hs.iter().enumerate() {
+                        (t[first + k], tri[first + k]) = (h.t, h.tri);
                     }
-                    _ => panic!("a scan answers ranges or hits"),
-                },
-            )
+                }
+                _ => panic!("a scan answers ranges or hits"),
+            })
             .unwrap();
             (t, tri)
         };

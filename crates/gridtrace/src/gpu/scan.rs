@@ -55,6 +55,28 @@ pub const MAX_SCAN_RAYS: u32 = 1 << 22;
 /// translation.
 pub type PoseColumns = [f32; 12];
 
+/// A scan's rays as the device makes them: each cell's ray in the sensor's frame (origin, unit
+/// direction; row-major, `cols` a row) and each environment's poses, `pose_cols` of them (one a
+/// column for a rolling scan, else one).
+#[derive(Debug, Clone, Copy)]
+pub struct ScanRays<'a> {
+    pub table: &'a [[f32; 6]],
+    pub cols: usize,
+    pub poses: &'a [PoseColumns],
+    pub pose_cols: usize,
+}
+
+impl ScanRays<'_> {
+    /// Rays of the scan: cells times environments.
+    pub fn len(&self) -> usize {
+        self.table.len() * (self.poses.len() / self.pose_cols.max(1))
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 impl GpuRenderer {
     /// Lowers the rays of a scan's submission to `rays` (at least 1): tests make a small scan of
     /// many submissions with it.
@@ -63,24 +85,25 @@ impl GpuRenderer {
         self.max_scan_rays = rays.clamp(1, MAX_SCAN_RAYS);
     }
 
-    /// Traces a sensor from `poses.len() / pose_cols` environments: `table` holds each cell's ray
-    /// in the sensor's frame (origin, unit direction; row-major, `cols` a row), `poses` each
-    /// environment's poses, `pose_cols` of them (`cols`: one a column, a rolling scan; or 1).
-    /// Ray `e * cells + cell` is cell `cell` carried into the world by its column's pose of
-    /// environment `e` (its one pose), and answers
+    /// Traces a sensor from `rays.poses.len() / rays.pose_cols` environments (`ScanRays`). Ray
+    /// `e * cells + cell` is cell `cell` of the table carried into the world by its column's
+    /// pose of environment `e` (its one pose), and answers
     /// `answer` within `interval` (closest hits: `Answer::Range` or `Answer::Hits`), handed to
     /// `take` chunk by chunk as `cast` does. The table goes up only when it differs from the
     /// last scan's; the bytes sent are in `last_query_stats`.
     pub fn scan(
         &mut self,
-        table: &[[f32; 6]],
-        cols: usize,
-        poses: &[PoseColumns],
-        pose_cols: usize,
+        rays: &ScanRays,
         interval: (f32, f32),
         answer: Answer,
         take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
+        let ScanRays {
+            table,
+            cols,
+            poses,
+            pose_cols,
+        } = *rays;
         if answer == Answer::Occlusion {
             return Err(Error::InvalidInput("a scan answers closest hits, not occlusion".into()));
         }

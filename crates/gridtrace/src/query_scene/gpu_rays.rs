@@ -286,7 +286,7 @@ impl QueryScene {
 impl QueryScene {
     /// A scan's closest hits on the GPU's two levels, the rays made on the device
     /// (`gpu_scan.rs`).
-    pub(super) fn gpu_scan(&self, two: &Arc<TwoLevel>, s: &super::ScanRays, range_only: bool) -> Result<RayHits> {
+    pub(super) fn gpu_scan(&self, two: &Arc<TwoLevel>, s: &crate::gpu::ScanRays, range_only: bool) -> Result<RayHits> {
         let mut out = RayHits::misses(s.len());
         self.on_gpu_two_level(two, |g| {
             let GpuTwoLevel { renderer, top, two, .. } = g;

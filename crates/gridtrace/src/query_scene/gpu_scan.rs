@@ -9,24 +9,7 @@ use rayon::prelude::*;
 use super::batch::{RayHits, RayOptions};
 use super::{INVALID_ID, QueryScene, RayPath};
 use crate::Result;
-use crate::gpu::{Answer, ChunkAnswers, GpuRenderer, PoseColumns, gpu_hit};
-
-/// A scan's rays as the device makes them: each cell's ray in the sensor's frame (origin, unit
-/// direction; row-major, `cols` a row) and each environment's poses, `pose_cols` of them (one a
-/// column for a rolling scan, else one).
-pub struct ScanRays<'a> {
-    pub table: &'a [[f32; 6]],
-    pub cols: usize,
-    pub poses: &'a [PoseColumns],
-    pub pose_cols: usize,
-}
-
-impl ScanRays<'_> {
-    /// Rays of the scan: cells times environments.
-    pub(super) fn len(&self) -> usize {
-        self.table.len() * (self.poses.len() / self.pose_cols.max(1))
-    }
-}
+use crate::gpu::{Answer, ChunkAnswers, GpuRenderer, ScanRays, gpu_hit};
 
 /// Writes a chunk's answers (from ray `first`) into `out`, naming each hit with `name` (`t`
 /// alone for `Answer::Range`, ids and normals left as `RayHits::misses` made them).
@@ -69,15 +52,7 @@ pub(super) fn scan_with(
     } else {
         Answer::Hits { uv: true }
     };
-    gpu.scan(
-        s.table,
-        s.cols,
-        s.poses,
-        s.pose_cols,
-        (0.0, f32::INFINITY),
-        answer,
-        take,
-    )
+    gpu.scan(s, (0.0, f32::INFINITY), answer, take)
 }
 
 impl QueryScene {

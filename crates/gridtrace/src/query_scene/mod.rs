@@ -90,7 +90,6 @@ pub use all_hits::Intersections;
 pub use batch::{PerRay, RayHits, RayOptions};
 pub use geometry::{Geometry, SceneMesh};
 pub use gpu_rays::GpuUploads;
-pub use gpu_scan::ScanRays;
 pub use instances::InstanceOf;
 pub use points::ClosestPoints;
 

@@ -9,8 +9,8 @@ use rayon::prelude::*;
 
 use super::pose::column_poses;
 use super::{Pose, Sensor};
-use crate::gpu::PoseColumns;
-use crate::query_scene::{INVALID_ID, QueryScene, RayHits, ScanRays};
+use crate::gpu::{PoseColumns, ScanRays};
+use crate::query_scene::{INVALID_ID, QueryScene, RayHits};
 use crate::util::fmt_bytes;
 use crate::{Error, Result};
 
