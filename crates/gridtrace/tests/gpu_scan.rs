@@ -9,7 +9,7 @@ use gridtrace::QueryScene;
 use gridtrace::accel::AccelKind;
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::sensor::{Camera, Frame, Pose, ScanOutputs, Sensor, preset, scan};
-use gridtrace::testing::skip_gpu;
+use gridtrace::testing::{cuboid, skip_gpu};
 
 /// A closed room 20 x 16 x 8, a box and a turned box inside: three geometries.
 fn room(backend: Backend, accel: AccelKind) -> QueryScene {
@@ -30,31 +30,6 @@ fn room(backend: Backend, accel: AccelKind) -> QueryScene {
     );
     s.add_triangles(v, f, Some(turned)).unwrap();
     s
-}
-
-fn cuboid(lo: Vec3, hi: Vec3) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let v = (0..8)
-        .map(|i| {
-            [
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            ]
-        })
-        .collect();
-    let quads = [
-        [0, 1, 3, 2],
-        [4, 6, 7, 5],
-        [0, 4, 5, 1],
-        [2, 3, 7, 6],
-        [0, 2, 6, 4],
-        [1, 5, 7, 3],
-    ];
-    let f = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
-    (v, f)
 }
 
 fn poses(n: usize) -> Vec<Pose> {
@@ -166,6 +141,40 @@ fn gpu_scans_answer_as_cast_rays_on_their_rays() {
             other += assert_gpu_scan(&gpu, &cpu, sensor, &three, Some(&ends));
         }
         println!("{accel:?}: {other} rays named another face");
+    }
+}
+
+/// Every structure the GPU traces (`hwrt` where the adapter has ray queries): a LiDAR's scan
+/// from two poses answers as `cast_rays` on its rays on the same scene.
+#[test]
+fn gpu_scans_on_every_structure() {
+    if skip_gpu() {
+        return;
+    }
+    let ctx = gridtrace::gpu::GpuContext::new().expect("GPU tests need an adapter");
+    let lidar = Sensor::from(preset("vlp16", Some(120)).unwrap());
+    let range = ScanOutputs {
+        range: true,
+        geometry_ids: true,
+        ..Default::default()
+    };
+    let ps = poses(2);
+    for kind in gridtrace::testing::gpu_kinds(&ctx) {
+        let gpu = room(Backend::Gpu, kind);
+        let got = scan(&gpu, &lidar, &ps, None, range).unwrap();
+        let (range, ids) = (got.range.unwrap(), got.geometry_ids.unwrap());
+        let cells = got.rows * got.cols;
+        for (e, pose) in ps.iter().enumerate() {
+            let want = gpu.cast_rays(&lidar.rays(pose, None).unwrap()).unwrap();
+            for i in 0..cells {
+                let (a, b) = (range[e * cells + i], want.t_hit[i]);
+                assert!(
+                    a.is_finite() && (a == b || (a - b).abs() <= 1e-6 * b),
+                    "{kind:?} env {e} cell {i}: {a} {b}"
+                );
+                assert_eq!(ids[e * cells + i], want.geometry_ids[i], "{kind:?} env {e} cell {i}");
+            }
+        }
     }
 }
 

@@ -366,6 +366,7 @@ mod tests {
     use super::*;
     use crate::query::{Backend, QueryOptions};
     use crate::sensor::{Camera, Lidar, preset};
+    use crate::testing::cuboid;
 
     /// A closed box room 20 x 16 x 8 around the origin (inward faces not needed: hits count
     /// either side) and a small box inside, as two geometries.
@@ -379,31 +380,6 @@ mod tests {
         let (v, f) = cuboid(Vec3::new(2.0, -1.0, -1.0), Vec3::new(3.0, 1.0, 1.5));
         s.add_triangles(v, f, None).unwrap();
         s
-    }
-
-    fn cuboid(lo: Vec3, hi: Vec3) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-        let v = (0..8)
-            .map(|i| {
-                [
-                    if i & 1 == 0 { lo.x } else { hi.x },
-                    if i & 2 == 0 { lo.y } else { hi.y },
-                    if i & 4 == 0 { lo.z } else { hi.z },
-                ]
-            })
-            .collect();
-        let quads = [
-            [0, 1, 3, 2],
-            [4, 6, 7, 5],
-            [0, 4, 5, 1],
-            [2, 3, 7, 6],
-            [0, 2, 6, 4],
-            [1, 5, 7, 3],
-        ];
-        let f = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        (v, f)
     }
 
     fn all() -> ScanOutputs {

@@ -559,3 +559,30 @@ pub fn near_miss_rays() -> Vec<NearMiss> {
     }
     out
 }
+
+/// An axis-aligned box from `lo` to `hi` as 8 vertices and 12 triangles (two a face, each
+/// face's pair sharing its diagonal): the rooms and boxes of the sensor tests.
+pub fn cuboid(lo: Vec3, hi: Vec3) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let v = (0..8)
+        .map(|i| {
+            [
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            ]
+        })
+        .collect();
+    let quads = [
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+    ];
+    let f = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
+    (v, f)
+}
