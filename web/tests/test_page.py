@@ -225,6 +225,39 @@ def test_without_webgpu_the_page_says_so_and_traces_on_the_cpu(server, browser, 
     page.close()
 
 
+# An adapter with WebGPU's default 8 storage buffers a stage (fewer than the shading kernel's
+# 10): its limits object reports 8 (wgpu asks for what the adapter reports).
+EIGHT_STORAGE_BUFFERS = """(() => {
+    const limits = Object.getOwnPropertyDescriptor(GPUAdapter.prototype, 'limits').get;
+    Object.defineProperty(GPUAdapter.prototype, 'limits', {
+        get() {
+            const real = limits.call(this);
+            return new Proxy(real, {
+                get: (target, key) => key === 'maxStorageBuffersPerShaderStage'
+                    ? 8 : Reflect.get(target, key, target),
+            });
+        },
+    });
+})();"""
+
+
+def test_an_adapter_with_too_few_storage_buffers_is_named_and_the_page_traces_on_the_cpu(server, browser, reference):
+    page = browser.new_page()
+    page.add_init_script(EIGHT_STORAGE_BUFFERS)
+    page.goto(f"{server}?{QUERY}")
+    page.wait_for_function("document.body.dataset.frames || document.body.dataset.error", timeout=120_000)
+    assert not page.evaluate("document.body.dataset.error")
+    if not page.evaluate("!!navigator.gpu"):
+        page.close()
+        missing("this Chromium has no WebGPU")
+    message = page.inner_text("#message")
+    assert page.evaluate("document.body.dataset.backend") == "cpu", message
+    assert "allows 8 storage buffers per shader stage" in message and "needs 10" in message, message
+    assert differing(canvas_rgb(page), reference) <= MAX_DIFFERING
+    print(f"\n8 storage buffers: {message}")
+    page.close()
+
+
 def test_dragging_and_the_wheel_move_the_camera_as_render_places_it(server, browser):
     page = load(browser, f"{server}?scene=mirror-spheres&mode=shadow&res=160x120&backend=cpu")
     first = canvas_rgb(page)
