@@ -208,8 +208,10 @@ pub(crate) struct WalkPipelines {
 pub(crate) struct Kernels {
     /// The variants they were compiled with.
     pub variants: GpuVariants,
-    /// Each kernel's layout of group 0 (the rows of `FRAME_BINDINGS` its module uses,
-    /// `bindings::frame_rows`), indexed by `kernel as usize`.
+    /// Each kernel's rows of group 0 (those of `FRAME_BINDINGS` its module uses,
+    /// `bindings::frame_rows`) and their layout, indexed by `kernel as usize`: looked up once
+    /// here, then used for the layouts and every bounce's bind groups (`frame_groups`).
+    frame_rows: Vec<Vec<Binding<FrameSlot>>>,
     frame_layouts: Vec<wgpu::BindGroupLayout>,
     /// Layout of group 1 of the indirect kernel (`INDIRECT_BINDINGS`).
     pub indirect_layout: wgpu::BindGroupLayout,
@@ -336,12 +338,14 @@ impl Kernels {
 
     /// Compiles every kernel that walks no structure.
     pub fn new(dev: &wgpu::Device, variants: &GpuVariants) -> Result<Kernels> {
+        let frame_rows: Vec<_> = SPECS.iter().map(|s| bindings::frame_rows(s.file())).collect();
         let frame_layouts: Vec<_> = SPECS
             .iter()
-            .map(|s| {
+            .zip(&frame_rows)
+            .map(|(s, rows)| {
                 dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                     label: Some(s.label),
-                    entries: &bindings::layout_entries(&bindings::frame_rows(s.file())),
+                    entries: &bindings::layout_entries(rows),
                 })
             })
             .collect();
@@ -381,6 +385,7 @@ impl Kernels {
         )?;
         Ok(Kernels {
             variants: *variants,
+            frame_rows,
             frame_layouts,
             indirect_layout,
             pack_layout,
@@ -459,11 +464,12 @@ impl Kernels {
         FrameGroups(
             SPECS
                 .iter()
-                .map(|s| {
+                .zip(self.frame_rows.iter().zip(&self.frame_layouts))
+                .map(|(s, (rows, layout))| {
                     dev.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some(s.label),
-                        layout: &self.frame_layouts[s.kernel as usize],
-                        entries: &bindings::group_entries(&bindings::frame_rows(s.file()), &resource),
+                        layout,
+                        entries: &bindings::group_entries(rows, &resource),
                     })
                 })
                 .collect(),
