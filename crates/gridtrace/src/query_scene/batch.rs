@@ -27,6 +27,36 @@ pub(super) type HitsRow<'a> = (
     &'a mut [f32; 3],
 );
 
+/// How a ray query names a hit: its geometry, face, uv and world-space unit normal written
+/// into one row (`rays::write_hit` for the merged mesh; the two levels' `TwoLevel::name`).
+pub(super) type NameHit<'a> =
+    dyn Fn(&crate::accel::Hit, &mut f32, &mut u32, &mut u32, &mut [f32; 2], &mut [f32; 3]) + Sync + 'a;
+
+/// A GPU batch's chunk of hits with barycentrics (`ChunkAnswers::HitsUv`, from row `first`)
+/// into `out`: a hit whose row `valid` accepts is named by `name`, anything else is a miss
+/// (`t = inf`, ids `INVALID_ID`; its uv and normal left as they are). The GPU paths of
+/// `cast_rays` (merged mesh and two levels) and of scans share it.
+pub(super) fn write_gpu_hits(
+    out: &mut RayHits,
+    first: usize,
+    hits: &[crate::gpu::layout::GpuHit],
+    valid: impl Fn(usize) -> bool + Sync,
+    name: &NameHit,
+) {
+    let end = first + hits.len();
+    out.par_rows_mut(first..end)
+        .zip((hits, first..end))
+        .with_min_len(1024)
+        .for_each(|((t, g, p, uv, n), (h, row))| {
+            let h = crate::gpu::gpu_hit(*h);
+            if h.is_hit() && valid(row) {
+                name(&h, t, g, p, uv, n);
+            } else {
+                (*t, *g, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
+            }
+        });
+}
+
 /// Closest hits, one entry per ray (Open3D's `cast_rays` keys). A miss: `t_hit = inf`, ids
 /// `INVALID_ID`, uv and normal zero.
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -14,18 +14,16 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
-use rayon::prelude::*;
-
-use super::batch::{RayHits, RayOptions, STAND_IN, ray_of};
+use super::QueryScene;
+use super::batch::{RayHits, RayOptions, STAND_IN, ray_of, write_gpu_hits};
 use super::geometry::SceneMesh;
 use super::rays::{RowRays, occlusion_into};
 use super::two_level::{NamedHit, TwoLevel};
-use super::{INVALID_ID, QueryScene};
 use crate::accel::{Accel, Hit};
 use crate::gpu::walks::two_level::{self, BottomLevels, Instance, TopLevel};
-use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource, gpu_hit};
+use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource};
 use crate::{Error, Result};
+use glam::Vec3;
 
 /// What the scene's GPU holds and has written (`QueryScene::gpu_uploads`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -247,24 +245,10 @@ impl QueryScene {
         self.on_gpu_two_level(two, |g| {
             let GpuTwoLevel { renderer, top, two, .. } = g;
             let take = |first: usize, answers: ChunkAnswers<'_>| {
-                let ChunkAnswers::HitsUv(hits) = answers else {
-                    return;
-                };
-                let end = first + hits.len();
-                out.par_rows_mut(first..end)
-                    .zip((hits, &rays[first..end]))
-                    .with_min_len(1024)
-                    .for_each(|((t, id, p, uv, n), (h, r))| {
-                        let h = gpu_hit(*h);
-                        if h.is_hit() && ray_of(r).is_some() {
-                            let (named, normal) = name(top, two, &h);
-                            (*t, *id, *p) = (named.t, named.id, named.prim);
-                            *uv = [named.u, named.v];
-                            *n = normal.to_array();
-                        } else {
-                            (*t, *id, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
-                        }
-                    });
+                if let ChunkAnswers::HitsUv(hits) = answers {
+                    let valid = |i: usize| ray_of(&rays[i]).is_some();
+                    write_gpu_hits(&mut out, first, hits, valid, &named_by(top, two));
+                }
             };
             cast(renderer, rays, o, Answer::Hits { uv: true }, take)
         })?;
@@ -291,15 +275,23 @@ impl QueryScene {
         self.on_gpu_two_level(two, |g| {
             let GpuTwoLevel { renderer, top, two, .. } = g;
             super::gpu_scan::scan_with(renderer, s, range_only, |first, answers| {
-                super::gpu_scan::take_scan_answers(&mut out, first, answers, |h, t, id, p, uv, nrm| {
-                    let (named, normal) = name(top, two, h);
-                    (*t, *id, *p) = (named.t, named.id, named.prim);
-                    *uv = [named.u, named.v];
-                    *nrm = normal.to_array();
-                })
+                super::gpu_scan::take_scan_answers(&mut out, first, answers, &named_by(top, two))
             })
         })?;
         Ok(out)
+    }
+}
+
+/// `name` as `write_gpu_hits` takes it: a hit's row written in world terms.
+fn named_by<'a>(
+    top: &'a TopLevel,
+    two: &'a TwoLevel,
+) -> impl Fn(&Hit, &mut f32, &mut u32, &mut u32, &mut [f32; 2], &mut [f32; 3]) + Sync + 'a {
+    move |h, t, id, p, uv, n| {
+        let (named, normal) = name(top, two, h);
+        (*t, *id, *p) = (named.t, named.id, named.prim);
+        *uv = [named.u, named.v];
+        *n = normal.to_array();
     }
 }
 

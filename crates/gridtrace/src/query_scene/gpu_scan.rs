@@ -4,37 +4,17 @@
 //! and the hits named as `cast_rays` names them. For a range alone only `t` comes down (4
 //! bytes a ray); ids and normals need the hits (16).
 
-use rayon::prelude::*;
-
-use super::batch::{RayHits, RayOptions};
-use super::{INVALID_ID, QueryScene, RayPath};
+use super::batch::{NameHit, RayHits, RayOptions, write_gpu_hits};
+use super::{QueryScene, RayPath};
 use crate::Result;
-use crate::gpu::{Answer, ChunkAnswers, GpuRenderer, ScanRays, gpu_hit};
+use crate::gpu::{Answer, ChunkAnswers, GpuRenderer, ScanRays};
 
 /// Writes a chunk's answers (from ray `first`) into `out`, naming each hit with `name` (`t`
 /// alone for `Answer::Range`, ids and normals left as `RayHits::misses` made them).
-pub(super) fn take_scan_answers(
-    out: &mut RayHits,
-    first: usize,
-    answers: ChunkAnswers<'_>,
-    name: impl Fn(&crate::accel::Hit, &mut f32, &mut u32, &mut u32, &mut [f32; 2], &mut [f32; 3]) + Sync,
-) {
+pub(super) fn take_scan_answers(out: &mut RayHits, first: usize, answers: ChunkAnswers<'_>, name: &NameHit) {
     match answers {
         ChunkAnswers::Range(ts) => out.t_hit[first..first + ts.len()].copy_from_slice(ts),
-        ChunkAnswers::HitsUv(hits) => {
-            let end = first + hits.len();
-            out.par_rows_mut(first..end)
-                .zip(hits)
-                .with_min_len(1024)
-                .for_each(|((t, g, p, uv, n), h)| {
-                    let h = gpu_hit(*h);
-                    if h.is_hit() {
-                        name(&h, t, g, p, uv, n);
-                    } else {
-                        (*t, *g, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
-                    }
-                });
-        }
+        ChunkAnswers::HitsUv(hits) => write_gpu_hits(out, first, hits, |_| true, name),
         _ => {}
     }
 }
@@ -97,7 +77,7 @@ impl QueryScene {
                     |gpu| {
                         let mut out = RayHits::misses(n);
                         scan_with(gpu, s, range_only, |first, answers| {
-                            take_scan_answers(&mut out, first, answers, |h, t, g, p, uv, nrm| {
+                            take_scan_answers(&mut out, first, answers, &|h, t, g, p, uv, nrm| {
                                 super::rays::write_hit(&m, h, t, g, p, uv, nrm)
                             })
                         })?;

@@ -8,16 +8,15 @@
 
 use rayon::prelude::*;
 
-use super::INVALID_ID;
 use super::batch::PerRay;
-use super::batch::{RayHits, RayOptions, STAND_IN, ray_of};
+use super::batch::{RayHits, RayOptions, STAND_IN, ray_of, write_gpu_hits};
 use super::cpu_rays;
 use super::instanced_rays;
 use super::merged::Merged;
 use super::two_level::TwoLevel;
 use super::{QueryScene, RayPath};
 use crate::accel::Hit;
-use crate::gpu::{Answer, ChunkAnswers, WireSource, gpu_hit, unpack_bits};
+use crate::gpu::{Answer, ChunkAnswers, WireSource, unpack_bits};
 use crate::{Error, Result};
 
 /// Open3D's rows (`[ox, oy, oz, dx, dy, dz]`) as the GPU's wire takes them: each row as it is,
@@ -109,21 +108,12 @@ impl QueryScene {
                 let mut out = RayHits::zeroed(rays.len());
                 let source = RowRays { rows: rays };
                 gpu.cast(&source, (t_near, t_far), Answer::Hits { uv: true }, |first, answers| {
-                    let ChunkAnswers::HitsUv(hits) = answers else {
-                        return;
-                    };
-                    let end = first + hits.len();
-                    out.par_rows_mut(first..end)
-                        .zip((hits, &rays[first..end]))
-                        .with_min_len(1024)
-                        .for_each(|((t, g, p, uv, n), (h, r))| {
-                            let h = gpu_hit(*h);
-                            if h.is_hit() && ray_of(r).is_some() {
-                                write_hit(&m, &h, t, g, p, uv, n);
-                            } else {
-                                (*t, *g, *p) = (f32::INFINITY, INVALID_ID, INVALID_ID);
-                            }
+                    if let ChunkAnswers::HitsUv(hits) = answers {
+                        let valid = |i: usize| ray_of(&rays[i]).is_some();
+                        write_gpu_hits(&mut out, first, hits, valid, &|h, t, g, p, uv, n| {
+                            write_hit(&m, h, t, g, p, uv, n)
                         });
+                    }
                 })?;
                 Ok(out)
             },
