@@ -178,6 +178,34 @@ fn pose_columns(p: &Pose) -> PoseColumns {
     [x.x, x.y, x.z, y.x, y.y, y.z, z.x, z.y, z.z, t.x, t.y, t.z]
 }
 
+/// Every ray's closest hit, the rays made on the scene's GPU from `sensor`'s table and each
+/// environment's `columns` (its pose of each column; a `rolling` scan sends them all, a fixed
+/// one its first): `QueryScene::scan_on_gpu`, `None` where the scene's rays trace on the CPU.
+fn scan_on_gpu(
+    scene: &QueryScene,
+    sensor: &Sensor,
+    columns: &[Pose],
+    rolling: bool,
+    range_only: bool,
+) -> Result<Option<RayHits>> {
+    let (rows, cols) = sensor.shape();
+    let table: Vec<[f32; 6]> = (0..rows * cols)
+        .map(|cell| {
+            let (o, d) = sensor.ray_in_sensor(cell / cols, cell % cols);
+            [o.x, o.y, o.z, d.x, d.y, d.z]
+        })
+        .collect();
+    let pose_cols = if rolling { cols } else { 1 };
+    let poses: Vec<PoseColumns> = columns.iter().step_by(cols / pose_cols).map(pose_columns).collect();
+    let rays = ScanRays {
+        table: &table,
+        cols,
+        poses: &poses,
+        pose_cols,
+    };
+    scene.scan_on_gpu(&rays, range_only)
+}
+
 /// Scans `scene` with `sensor` from each of `poses` (sensor-to-world, checked by `check_pose`;
 /// one environment each), and with `poses_end` (one per pose) a rolling scan: column `c` of
 /// `cols` traced from the pose `c / (cols - 1)` of the way from `pose` to `pose_end`. On the
@@ -259,24 +287,7 @@ pub fn scan(
     // only `t` comes down unless ids or normals are asked for.
     let range_only = !(outputs.geometry_ids || outputs.primitive_ids || outputs.normals || outputs.incidence);
     let on_gpu = if scene.traces_on_gpu() {
-        let table: Vec<[f32; 6]> = (0..cells)
-            .map(|cell| {
-                let (o, d) = sensor.ray_in_sensor(cell / cols, cell % cols);
-                [o.x, o.y, o.z, d.x, d.y, d.z]
-            })
-            .collect();
-        // A rolling scan's pose of each column, else each environment's one pose.
-        let pose_cols = if poses_end.is_some() { cols } else { 1 };
-        let poses: Vec<PoseColumns> = columns.iter().step_by(cols / pose_cols).map(pose_columns).collect();
-        scene.scan_on_gpu(
-            &ScanRays {
-                table: &table,
-                cols,
-                poses: &poses,
-                pose_cols,
-            },
-            range_only,
-        )?
+        scan_on_gpu(scene, sensor, &columns, poses_end.is_some(), range_only)?
     } else {
         None
     };
