@@ -56,9 +56,11 @@ pub use context::check_scene_fits;
 pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;
 pub use points::GpuClosestPoints;
-pub use queries::{Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, TriHit, WireSource, gpu_hit, unpack_bits};
+pub use queries::{
+    Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, SensorLayout, TriHit, WireSource, gpu_hit, unpack_bits,
+};
 pub use renderer::{GpuRenderer, GpuUpdateStats, MAX_TILE_PIXELS};
-pub use scan::{PoseColumns, ScanRays, SensorLayout};
+pub use scan::{PoseColumns, ScanRays};
 pub use timing::{GpuQueryStats, GpuTimings, HostPhases, MAX_TIMESTAMPS_BYTES};
 pub use variants::GpuVariants;
 /// The binary BVH's GPU layout and its CPU mirror walk (`walks::bvh::binary`), by its old path.

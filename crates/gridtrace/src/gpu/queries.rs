@@ -32,7 +32,6 @@ use super::context::{PendingRead, max_binding_bytes};
 use super::kernels::Kernel;
 use super::layout::{BatchUniform, GpuHit};
 use super::renderer::{ACCUM_TEXEL_BYTES, GpuRenderer, WorkUse, grow};
-use super::scan::SensorLayout;
 use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
 use super::upload::MappedUpload;
 use crate::accel::{AccelKind, Hit, Ray};
@@ -68,6 +67,19 @@ pub trait WireSource: Sync {
     fn sensor(&self) -> Option<SensorLayout> {
         None
     }
+}
+
+/// Where a sensor's rays come from, as the batch kernel reads them (`BatchUniform`): a source
+/// of stride 0 (`scan.rs`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SensorLayout {
+    /// Cells a environment (rows x columns) and columns.
+    pub cells: u32,
+    pub cols: u32,
+    /// Where the poses start in the sensor buffer, in floats (after the table's six a cell).
+    pub poses_at: u32,
+    /// Poses an environment: `cols` (one a column: a rolling scan) or 1.
+    pub pose_cols: u32,
 }
 
 /// Rays the caller has already checked (`Ray` is `repr(C)`: origin, direction, 24 bytes),
@@ -348,7 +360,7 @@ impl GpuRenderer {
     /// Items a chunk holds at most: what the device's bindings allow (a tile's), up to
     /// `PIPELINE_ITEMS` where the host writes the chunk's rays; a sensor's rays are made on the
     /// device, so there is nothing to overlap: as few submissions as the bindings allow, up to
-    /// `scan::MAX_SCAN_RAYS`.
+    /// `MAX_SCAN_RAYS`.
     fn chunk_capacity(&self, sensor: bool) -> usize {
         if sensor {
             let by_rays = max_binding_bytes(&self.ctx.limits()) / size_of::<super::layout::RayRec>() as u64;

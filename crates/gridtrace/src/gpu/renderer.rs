@@ -24,6 +24,10 @@ use crate::{Error, Result};
 
 /// Largest tile in pixels: bounds queue memory and keeps each submission short for watchdogs.
 pub const MAX_TILE_PIXELS: u32 = 1 << 20;
+/// Rays of one scan submission at most (`scan.rs`): 64 VLP-16s (1.84M rays) go in one, with a
+/// queue of 88 MB and hits of 29 MB on the device (where the bindings allow:
+/// `chunk_capacity`); a hardware GPU traces them in milliseconds, far inside any watchdog.
+pub const MAX_SCAN_RAYS: u32 = 1 << 22;
 /// Bytes between the bounces' pass uniforms: uniform binding offsets must be multiples of
 /// this (WebGPU's largest allowed `min_uniform_buffer_offset_alignment`).
 const PASS_UNIFORM_STRIDE_BYTES: u64 = 256;
@@ -240,7 +244,7 @@ impl GpuRenderer {
             batches: Default::default(),
             last_query: GpuQueryStats::default(),
             max_tile_pixels: MAX_TILE_PIXELS,
-            max_scan_rays: super::scan::MAX_SCAN_RAYS,
+            max_scan_rays: MAX_SCAN_RAYS,
             device_builder: None,
         })
     }

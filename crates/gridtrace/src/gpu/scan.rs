@@ -6,21 +6,9 @@
 //! and 64 environments go in one batch. The answers come down as the caller asks: `t` alone for
 //! a range (4 bytes a ray), or the hits.
 
-use super::queries::{Answer, ChunkAnswers, WireSource};
-use super::renderer::GpuRenderer;
+use super::queries::{Answer, ChunkAnswers, SensorLayout, WireSource};
+use super::renderer::{GpuRenderer, MAX_SCAN_RAYS};
 use crate::{Error, Result};
-
-/// Where a sensor's rays come from, as the batch kernel reads them (`BatchUniform`).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SensorLayout {
-    /// Cells a environment (rows x columns) and columns.
-    pub cells: u32,
-    pub cols: u32,
-    /// Where the poses start in the sensor buffer, in floats (after the table's six a cell).
-    pub poses_at: u32,
-    /// Poses an environment: `cols` (one a column: a rolling scan) or 1.
-    pub pose_cols: u32,
-}
 
 /// A scan's rays: nothing on the wire, `n` rays made on the device.
 struct SensorRays {
@@ -45,11 +33,6 @@ impl WireSource for SensorRays {
         Some(self.layout)
     }
 }
-
-/// Rays of one scan submission at most: 64 VLP-16s (1.84M rays) go in one, with a queue of
-/// 88 MB and hits of 29 MB on the device (where the bindings allow: `chunk_capacity`); a
-/// hardware GPU traces them in milliseconds, far inside any watchdog.
-pub const MAX_SCAN_RAYS: u32 = 1 << 22;
 
 /// A pose as the kernel reads it: the sensor-to-world matrix's three columns, then the
 /// translation.
