@@ -407,6 +407,14 @@ fn frame_bindings_used(src: &str, name: &str) -> Vec<u32> {
 fn each_kernel_binds_the_group_0_rows_it_uses() {
     let mut problems = Vec::new();
     for (name, src) in shaders::KERNELS {
+        // Every kernel has its entry, its group 1 as it binds it (a walk's arrays at most).
+        let (_, group1, _) = bindings::FRAME_USE
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .unwrap_or_else(|| panic!("{name} has no FRAME_USE entry"));
+        if shaders::walks(name) {
+            assert_eq!(*group1, bindings::STRUCTURE_ARRAYS_MAX, "{name}");
+        }
         let modules: Vec<(String, String)> = if shaders::walks(name) {
             shaders::all_modules()
                 .into_iter()

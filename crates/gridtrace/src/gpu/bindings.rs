@@ -143,31 +143,54 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
 /// crate compiles.
 pub const STRUCTURE_ARRAYS_MAX: usize = 4;
 
-/// The rows of group 0 each kernel's module uses, by its name in `shaders::KERNELS` (a walking
-/// kernel's: what it uses with any walk). A kernel's group 0 layout has these rows alone, not
-/// all of `FRAME_BINDINGS`: WebGPU counts every storage buffer of a pipeline's layout against
+/// Storage rows of a table (what WebGPU counts against `maxStorageBuffersPerShaderStage`).
+const fn storage_rows<S>(table: &[Binding<S>]) -> usize {
+    let (mut k, mut n) = (0, 0);
+    while k < table.len() {
+        if !matches!(table[k].access, Access::Uniform) {
+            n += 1;
+        }
+        k += 1;
+    }
+    n
+}
+
+/// What each kernel's module binds, by its name in `shaders::KERNELS` (a walking kernel's:
+/// what it uses with any walk): the rows of group 0 it uses, and the storage buffers of its
+/// group 1 (a structure's arrays, the indirect arguments, the packed pixels or a batch's
+/// buffers). A kernel's group 0 layout has these rows alone, not all of `FRAME_BINDINGS`:
+/// WebGPU counts every storage buffer of a pipeline's layout against
 /// `maxStorageBuffersPerShaderStage` (8 by default, 10 on SwiftShader), whether the kernel reads
 /// it or not, and group 0 holds 10 of them. `tests/gpu_layout.rs` checks each list against
 /// naga's analysis of the kernel's modules (a row missing fails pipeline creation; an extra one
 /// only costs a binding, but is reported too).
-pub const FRAME_USE: [(&str, &[FrameSlot]); 9] = {
+pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 9] = {
     use FrameSlot::*;
+    const WALK: usize = STRUCTURE_ARRAYS_MAX;
     [
         (
             "raygen",
+            0,
             &[SceneUniform, CameraUniform, PassUniform, RaysIn, Accum, Counters],
         ),
         (
             "traverse",
+            WALK,
             &[SceneUniform, PassUniform, Tris, RaysIn, Hits, Accum, Counters],
         ),
-        ("occlusion", &[SceneUniform, PassUniform, Tris, ShadowRays, Counters]),
+        (
+            "occlusion",
+            WALK,
+            &[SceneUniform, PassUniform, Tris, ShadowRays, Counters],
+        ),
         (
             "closest point",
+            WALK,
             &[SceneUniform, PassUniform, Tris, RaysIn, Hits, Accum, Counters],
         ),
         (
             "shade",
+            0,
             &[
                 SceneUniform,
                 PassUniform,
@@ -184,19 +207,33 @@ pub const FRAME_USE: [(&str, &[FrameSlot]); 9] = {
                 Counters,
             ],
         ),
-        ("resolve", &[PassUniform, RaysIn, ShadowRays, Resolve, Accum, Counters]),
-        ("indirect", &[SceneUniform, PassUniform, Counters]),
-        ("pack", &[PassUniform, Accum]),
-        ("batch", &[PassUniform, RaysIn, Hits, ShadowRays]),
+        (
+            "resolve",
+            0,
+            &[PassUniform, RaysIn, ShadowRays, Resolve, Accum, Counters],
+        ),
+        (
+            "indirect",
+            storage_rows(&INDIRECT_BINDINGS),
+            &[SceneUniform, PassUniform, Counters],
+        ),
+        ("pack", storage_rows(&PACK_BINDINGS), &[PassUniform, Accum]),
+        (
+            "batch",
+            storage_rows(&BATCH_BINDINGS),
+            &[PassUniform, RaysIn, Hits, ShadowRays],
+        ),
     ]
 };
 
+/// `FRAME_USE`'s entry of the kernel `name`.
+fn use_of(name: &str) -> Option<&'static (&'static str, usize, &'static [FrameSlot])> {
+    FRAME_USE.iter().find(|(n, _, _)| *n == name)
+}
+
 /// Group 0's rows of the kernel `name` (in `shaders::KERNELS`), in binding order.
 pub fn frame_rows(name: &str) -> Vec<Binding<FrameSlot>> {
-    let used = FRAME_USE
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map_or(&[][..], |(_, slots)| *slots);
+    let used = use_of(name).map_or(&[][..], |(_, _, slots)| *slots);
     FRAME_BINDINGS
         .iter()
         .filter(|b| used.contains(&b.slot))
@@ -204,18 +241,10 @@ pub fn frame_rows(name: &str) -> Vec<Binding<FrameSlot>> {
         .collect()
 }
 
-/// Storage buffers the kernel `name` binds at once: its group 0's storage rows and its group 1
-/// (a structure's arrays, the indirect arguments, the packed pixels or a batch's buffers).
+/// Storage buffers the kernel `name` binds at once: its group 0's storage rows and its group 1.
 pub fn storage_buffers_of(name: &str) -> u32 {
-    let storage = |rows: &[Binding<FrameSlot>]| rows.iter().filter(|b| b.access != Access::Uniform).count();
-    let group1 = match name {
-        "indirect" => INDIRECT_BINDINGS.len(),
-        "pack" => PACK_BINDINGS.len(),
-        "batch" => BATCH_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count(),
-        _ if crate::gpu::shaders::walks(name) => STRUCTURE_ARRAYS_MAX,
-        _ => 0,
-    };
-    (storage(&frame_rows(name)) + group1) as u32
+    let group1 = use_of(name).map_or(0, |(_, group1, _)| *group1);
+    (storage_rows(&frame_rows(name)) + group1) as u32
 }
 
 /// Storage buffers a kernel may bind at once, the most over the kernels: the device must allow
@@ -223,7 +252,7 @@ pub fn storage_buffers_of(name: &str) -> u32 {
 pub fn storage_buffers_needed() -> u32 {
     FRAME_USE
         .iter()
-        .map(|(name, _)| storage_buffers_of(name))
+        .map(|(name, _, _)| storage_buffers_of(name))
         .max()
         .unwrap_or(0)
 }
@@ -282,9 +311,8 @@ mod tests {
         assert_eq!(storage_buffers_needed(), 10);
         let all_frame = FRAME_BINDINGS.iter().filter(|b| b.access != Access::Uniform).count();
         assert_eq!(all_frame + STRUCTURE_ARRAYS_MAX, 14);
-        // Every kernel of `shaders::KERNELS` has a row list, and each list names a slot once.
-        for (name, _) in crate::gpu::shaders::KERNELS {
-            let (_, slots) = FRAME_USE.iter().find(|(n, _)| *n == name).expect(name);
+        // Each list names a slot once (that every kernel has one: tests/gpu_layout.rs).
+        for (name, _, slots) in FRAME_USE {
             assert_eq!(frame_rows(name).len(), slots.len(), "{name}");
         }
         // Group 1 is a different table in each kernel that binds one (indirect, pack, a
