@@ -39,4 +39,7 @@ pub(super) struct Batches {
     /// none, or forgotten when the buffer was made again): a scan with the same table sends
     /// only its poses.
     pub sensor_table: Option<Vec<[f32; 6]>>,
+    /// Hits one list pass may bring down at most (`all_hits.rs`; `None`: what the device's
+    /// bindings hold); tests lower it to split lists.
+    pub max_list_hits: Option<u32>,
 }

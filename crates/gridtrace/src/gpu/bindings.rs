@@ -164,7 +164,7 @@ const fn storage_rows<S>(table: &[Binding<S>]) -> usize {
 /// it or not, and group 0 holds 10 of them. `tests/gpu_layout.rs` checks each list against
 /// naga's analysis of the kernel's modules (a row missing fails pipeline creation; an extra one
 /// only costs a binding, but is reported too).
-pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 9] = {
+pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 11] = {
     use FrameSlot::*;
     const WALK: usize = STRUCTURE_ARRAYS_MAX;
     [
@@ -223,6 +223,13 @@ pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 9] = {
             storage_rows(&BATCH_BINDINGS),
             &[PassUniform, RaysIn, Hits, ShadowRays],
         ),
+        // A walking kernel with the batch's buffers in group 2 (`kernels.rs`).
+        (
+            "all hits",
+            WALK + storage_rows(&BATCH_BINDINGS),
+            &[SceneUniform, PassUniform, Tris, RaysIn, Counters],
+        ),
+        ("prefix sum", storage_rows(&BATCH_BINDINGS), &[PassUniform]),
     ]
 };
 

@@ -43,6 +43,12 @@ pub(crate) enum Kernel {
     BatchRays,
     /// A ray batch's chunk: the walk's output into the answers asked for.
     BatchAnswers,
+    /// Every hit of each ray of a batch's chunk, counted (`all_hits.rs`).
+    AllHits,
+    /// The same, listed where the prefix sum of the counts places each ray's hits.
+    AllHitsList,
+    /// The running sum of a chunk's hit counts.
+    PrefixSum,
 }
 
 /// What a kernel that walks no structure binds as group 1 (a walking kernel binds its
@@ -54,7 +60,8 @@ enum Group1 {
     IndirectArgs,
     /// The packed pixels the pack kernel writes.
     Packed,
-    /// A ray batch's wire rays, answers and constants.
+    /// A ray batch's wire rays, answers and constants (a walking kernel binds them as group
+    /// 2, after its structure's arrays: the all-hits kernels).
     Batch,
 }
 
@@ -107,7 +114,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 12] = [
+const SPECS: [KernelSpec; 15] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -169,6 +176,23 @@ const SPECS: [KernelSpec; 12] = [
         overrides: &[("BATCH_ANSWERS", 1.0)],
         ..spec(Kernel::BatchAnswers, "batch answers", "batch out", shaders::BATCH)
     },
+    KernelSpec {
+        walks: true,
+        group1: Group1::Batch,
+        overrides: &[("NEXT_HIT", 1.0)],
+        ..spec(Kernel::AllHits, "all hits (counts)", "all hits", shaders::ALL_HITS)
+    },
+    KernelSpec {
+        walks: true,
+        group1: Group1::Batch,
+        overrides: &[("NEXT_HIT", 1.0), ("ALL_HITS_LIST", 1.0)],
+        ..spec(Kernel::AllHitsList, "all hits (lists)", "all hits", shaders::ALL_HITS)
+    },
+    KernelSpec {
+        launch: Launch::Once,
+        group1: Group1::Batch,
+        ..spec(Kernel::PrefixSum, "prefix sum", "prefix sum", shaders::PREFIX_SUM)
+    },
 ];
 
 impl KernelSpec {
@@ -200,8 +224,20 @@ pub(crate) struct WalkPipelines {
     pub spec: &'static WalkSpec,
     /// Layout of group 1: the structure's arrays, in `spec.arrays` order.
     pub layout: wgpu::BindGroupLayout,
-    /// Indexed by `kernel as usize` (`None` for the kernels that do not walk).
+    /// Indexed by `kernel as usize` (`None` for the kernels that do not walk, and for those
+    /// compiled on first use).
     pipelines: Vec<Option<wgpu::ComputePipeline>>,
+    /// The walking kernels that bind a batch's buffers too (the all-hits kernels), compiled
+    /// when first run (`Kernels::prepare`): most scenes never count or list hits, and a browser
+    /// compiles every pipeline it is given at upload.
+    on_demand: std::sync::OnceLock<Vec<Option<wgpu::ComputePipeline>>>,
+}
+
+impl KernelSpec {
+    /// Whether a walk's pipeline of this kernel is compiled on first use (`on_demand`).
+    fn on_demand(&self) -> bool {
+        self.walks && self.group1 == Group1::Batch
+    }
 }
 
 /// The compiled kernels of one device and one choice of variants.
@@ -438,15 +474,44 @@ impl Kernels {
             },
             |s| shaders::walk_module_source(s.source, spec),
             // The closest-point kernel only with a walk that searches points.
-            |s| s.walks && (spec.points() || s.kernel != Kernel::ClosestPoint),
+            |s| s.walks && !s.on_demand() && (spec.points() || s.kernel != Kernel::ClosestPoint),
         )?;
         let w = Arc::new(WalkPipelines {
             spec,
             layout,
             pipelines,
+            on_demand: std::sync::OnceLock::new(),
         });
         walks.insert(spec.name, w.clone());
         Ok(w)
+    }
+
+    /// Compiles `walk`'s pipelines of the kernels compiled on first use (the all-hits kernels:
+    /// group 0, the structure's arrays, the batch's buffers), unless compiled already.
+    pub fn prepare(&self, dev: &wgpu::Device, walk: &WalkPipelines) -> Result<()> {
+        if walk.on_demand.get().is_some() {
+            return Ok(());
+        }
+        let pipelines = compile(
+            dev,
+            &self.variants,
+            |s| {
+                dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some(walk.spec.structure),
+                    bind_group_layouts: &[
+                        Some(&self.frame_layouts[s.kernel as usize]),
+                        Some(&walk.layout),
+                        Some(&self.batch_layout),
+                    ],
+                    immediate_size: 0,
+                })
+            },
+            |s| shaders::walk_module_source(s.source, walk.spec),
+            KernelSpec::on_demand,
+        )?;
+        // A second caller's set, compiled at the same time, is the same.
+        let _ = walk.on_demand.set(pipelines);
+        Ok(())
     }
 }
 
@@ -511,7 +576,12 @@ impl PassRecorder<'_> {
             label: Some(spec.stage),
             timestamp_writes,
         });
-        let pipelines = if spec.walks {
+        let pipelines = if spec.on_demand() {
+            self.walk
+                .on_demand
+                .get()
+                .expect("`Kernels::prepare` compiles them before they run")
+        } else if spec.walks {
             &self.walk.pipelines
         } else {
             &self.kernels.pipelines
@@ -535,7 +605,8 @@ impl PassRecorder<'_> {
                 &[],
             ),
             Group1::Batch => cp.set_bind_group(
-                BATCH_GROUP,
+                // A walking kernel's group 1 is its structure's arrays.
+                if spec.walks { STRUCTURE_GROUP + 1 } else { BATCH_GROUP },
                 self.batch_group.expect("the batch kernels run with a batch's buffers"),
                 &[],
             ),

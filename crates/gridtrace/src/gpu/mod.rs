@@ -31,6 +31,7 @@
 //!   the wall time;
 //! - `variants`: the GPU choices switchable at run time (`--gpu-variant`), equal in results.
 
+mod all_hits;
 mod batch_buffers;
 pub mod bindings;
 pub mod constants;
@@ -56,6 +57,7 @@ pub use context::check_scene_fits;
 pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;
 pub use points::GpuClosestPoints;
+pub use all_hits::AllHits;
 pub use queries::{
     Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, SensorLayout, TriHit, WireSource, gpu_hit, unpack_bits,
 };

@@ -408,16 +408,7 @@ impl GpuRenderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ray batch"),
-            layout: &self.kernels.batch_layout,
-            entries: &bindings::group_entries(&BATCH_BINDINGS, |slot| match slot {
-                BatchSlot::Wire => wire.as_entire_binding(),
-                BatchSlot::Answers => answers.as_entire_binding(),
-                BatchSlot::Uniform => uniform.as_entire_binding(),
-                BatchSlot::Sensor => sensor.as_entire_binding(),
-            }),
-        });
+        let group = batch_group(dev, &self.kernels.batch_layout, [&wire, &answers, &uniform, &sensor]);
         self.batches.device = Some(BatchDevice {
             items,
             wire,
@@ -426,6 +417,32 @@ impl GpuRenderer {
             sensor,
             group,
         });
+    }
+
+    /// Makes sure the batch's answers buffer holds `bytes`, its first `keep` bytes kept when it
+    /// is made again to grow (copied on the device, before any later submission): every hit's
+    /// list is longer than a ray's answer (`all_hits.rs`). After `ensure_batch_device`.
+    pub(super) fn ensure_answer_bytes(&mut self, bytes: u64, keep: u64) {
+        let dev = &self.ctx.device;
+        let d = self.batches.device.as_mut().expect("made by `ensure_batch_device`");
+        if d.answers.size() >= bytes {
+            return;
+        }
+        let answers = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("batch answers"),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        if keep > 0 {
+            let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("batch answers grown"),
+            });
+            enc.copy_buffer_to_buffer(&d.answers, 0, &answers, 0, Some(keep.min(d.answers.size())));
+            self.ctx.queue.submit([enc.finish()]);
+        }
+        d.answers = answers;
+        d.group = batch_group(dev, &self.kernels.batch_layout, [&d.wire, &d.answers, &d.uniform, &d.sensor]);
     }
 
     /// Writes chunk `items` of `source` into `slot`'s upload and submits its copies and
@@ -442,36 +459,8 @@ impl GpuRenderer {
         stats: &mut GpuQueryStats,
     ) -> Result<InFlight> {
         let n = items.len();
-        let item_bytes = source.stride() * size_of::<f32>();
-        let wire_bytes = (n * item_bytes) as u64;
+        let wire_bytes = self.write_wire(slot, items.clone(), source)?;
         let dev = &self.ctx.device;
-        // The chunk's items, in pieces written on every core straight into the mapped upload.
-        // A sensor's rays (stride 0) have nothing on the wire: the upload keeps one word, never
-        // copied (a mapped range must not be empty).
-        let upload = MappedUpload::ready(&mut self.batches.slots[slot].upload, dev, wire_bytes.max(4));
-        let all_valid = wire_bytes == 0 || {
-            let mut view = upload
-                .get_mapped_range_mut(..wire_bytes)
-                .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
-            let mut rest = view.slice(..);
-            let mut pieces = Vec::with_capacity(n.div_ceil(PIECE_ITEMS));
-            let mut first = items.start;
-            while first < items.end {
-                let take = PIECE_ITEMS.min(items.end - first);
-                let (piece, tail) = rest.split_at(take * item_bytes);
-                rest = tail;
-                pieces.push((first, Piece(piece)));
-                first += take;
-            }
-            pieces
-                .into_par_iter()
-                .map(|(first, Piece(piece))| source.write(first, piece))
-                .reduce(|| true, |a, b| a & b)
-        };
-        MappedUpload::unmap(&self.batches.slots[slot].upload);
-        if !all_valid {
-            return Err(source.invalid());
-        }
         let (walk, queue_slot, _) = query.walk();
         let mut counts = [0u32; COUNTER_SLOTS];
         counts[queue_slot] = n as u32;
@@ -566,6 +555,44 @@ impl GpuRenderer {
         })
     }
 
+    /// Writes items `items` of `source` into `slot`'s upload (mapped again after the slot's
+    /// last submission) and unmaps it: their bytes, or the source's error where an item
+    /// cannot go up.
+    pub(super) fn write_wire(&mut self, slot: usize, items: Range<usize>, source: &dyn WireSource) -> Result<u64> {
+        let n = items.len();
+        let item_bytes = source.stride() * size_of::<f32>();
+        let wire_bytes = (n * item_bytes) as u64;
+        let dev = &self.ctx.device;
+        // The chunk's items, in pieces written on every core straight into the mapped upload.
+        // A sensor's rays (stride 0) have nothing on the wire: the upload keeps one word, never
+        // copied (a mapped range must not be empty).
+        let upload = MappedUpload::ready(&mut self.batches.slots[slot].upload, dev, wire_bytes.max(4));
+        let all_valid = wire_bytes == 0 || {
+            let mut view = upload
+                .get_mapped_range_mut(..wire_bytes)
+                .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
+            let mut rest = view.slice(..);
+            let mut pieces = Vec::with_capacity(n.div_ceil(PIECE_ITEMS));
+            let mut first = items.start;
+            while first < items.end {
+                let take = PIECE_ITEMS.min(items.end - first);
+                let (piece, tail) = rest.split_at(take * item_bytes);
+                rest = tail;
+                pieces.push((first, Piece(piece)));
+                first += take;
+            }
+            pieces
+                .into_par_iter()
+                .map(|(first, Piece(piece))| source.write(first, piece))
+                .reduce(|| true, |a, b| a & b)
+        };
+        MappedUpload::unmap(&self.batches.slots[slot].upload);
+        if !all_valid {
+            return Err(source.invalid());
+        }
+        Ok(wire_bytes)
+    }
+
     /// Waits for a submitted chunk and hands its answers to `take`.
     fn finish_chunk(
         &self,
@@ -607,6 +634,21 @@ impl GpuRenderer {
         stats.timings.untimed_passes += untimed;
         Ok(())
     }
+}
+
+/// The batch's bind group over its wire, answers, uniform and sensor buffers.
+fn batch_group(dev: &wgpu::Device, layout: &wgpu::BindGroupLayout, buffers: [&wgpu::Buffer; 4]) -> wgpu::BindGroup {
+    let [wire, answers, uniform, sensor] = buffers;
+    dev.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("ray batch"),
+        layout,
+        entries: &bindings::group_entries(&BATCH_BINDINGS, |slot| match slot {
+            BatchSlot::Wire => wire.as_entire_binding(),
+            BatchSlot::Answers => answers.as_entire_binding(),
+            BatchSlot::Uniform => uniform.as_entire_binding(),
+            BatchSlot::Sensor => sensor.as_entire_binding(),
+        }),
+    })
 }
 
 /// A closest hit as the GPU's `GpuHit` gives it.

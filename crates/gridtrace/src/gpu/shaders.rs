@@ -26,8 +26,12 @@ pub const INDIRECT: &str = include_str!("shaders/indirect.wgsl");
 pub const PACK: &str = include_str!("shaders/pack.wgsl");
 /// A ray batch's rays in from the wire and its answers out (two pipelines of one file).
 pub const BATCH: &str = include_str!("shaders/batch.wgsl");
+/// Every hit of a ray batch's rays: counts, or lists (two pipelines of one file; `all_hits.rs`).
+pub const ALL_HITS: &str = include_str!("shaders/all_hits.wgsl");
+/// The running sum of a chunk's hit counts, where each ray's list ends.
+pub const PREFIX_SUM: &str = include_str!("shaders/prefix_sum.wgsl");
 /// Every kernel with its name.
-pub const KERNELS: [(&str, &str); 9] = [
+pub const KERNELS: [(&str, &str); 11] = [
     ("raygen", RAYGEN),
     ("traverse", TRAVERSE),
     ("occlusion", OCCLUSION),
@@ -37,6 +41,8 @@ pub const KERNELS: [(&str, &str); 9] = [
     ("indirect", INDIRECT),
     ("pack", PACK),
     ("batch", BATCH),
+    ("all hits", ALL_HITS),
+    ("prefix sum", PREFIX_SUM),
 ];
 
 /// The prelude and `common.wgsl`: every declaration all kernels share.
@@ -82,7 +88,7 @@ pub fn walk_module_source(kernel: &str, walk: &super::walks::WalkSpec) -> String
 
 /// Whether kernel `name` walks the scene's structure (its module includes a walk file).
 pub fn walks(name: &str) -> bool {
-    matches!(name, "traverse" | "occlusion" | "closest point")
+    matches!(name, "traverse" | "occlusion" | "closest point" | "all hits")
 }
 
 /// Every module the tracer compiles, named `kernel` or `kernel [walk]`, with its source: the

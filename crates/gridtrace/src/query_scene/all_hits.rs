@@ -51,6 +51,9 @@ impl QueryScene {
     /// How many faces each ray hits with `t >= 0` under Open3D's rule (the module notes): the
     /// length of each ray's `list_intersections` list. Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
+        if let Some(out) = self.count_on_gpu(rays, &Default::default())? {
+            return Ok(out);
+        }
         if self.hits_path(&Default::default())?.is_some() {
             return self.count_intersections_with(rays, &Default::default());
         }
@@ -90,6 +93,9 @@ impl QueryScene {
     /// Every hit of each ray with `t >= 0` under Open3D's rule (the module notes), nearest
     /// first (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
+        if let Some(out) = self.list_on_gpu(rays, &Default::default())? {
+            return Ok(out);
+        }
         if self.hits_path(&Default::default())?.is_some() {
             return self.list_intersections_with(rays, &Default::default());
         }

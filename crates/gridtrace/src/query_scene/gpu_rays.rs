@@ -21,7 +21,9 @@ use super::rays::{RowRays, occlusion_into};
 use super::two_level::{NamedHit, TwoLevel};
 use crate::accel::{Accel, Hit};
 use crate::gpu::walks::two_level::{self, BottomLevels, Instance, TopLevel};
-use crate::gpu::{Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource};
+use super::gpu_all_hits::{DeviceAnswer, DeviceHits};
+use crate::gpu::layout::GpuHit;
+use crate::gpu::{AllHits, Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource};
 use crate::{Error, Result};
 use glam::Vec3;
 
@@ -268,6 +270,40 @@ impl QueryScene {
 }
 
 impl QueryScene {
+    /// Counts or lists of every hit of `rays` with `o` on the GPU's two levels
+    /// (`gpu_all_hits.rs`): 24 bytes a ray up where they share one interval and mask, else 36.
+    pub(super) fn gpu_all_hits(
+        &self,
+        two: &Arc<TwoLevel>,
+        rays: &[[f32; 6]],
+        o: &RayOptions,
+        answer: AllHits,
+    ) -> Result<DeviceAnswer> {
+        self.on_gpu_two_level(two, |g| {
+            let GpuTwoLevel { renderer, top, two, .. } = g;
+            let mut out = DeviceHits::new(rays, answer);
+            let take = |first: usize, counts: &[u32], hits: &[GpuHit]| out.take(first, counts, hits);
+            let firsts = &top.first_answer;
+            match o.uniform() {
+                Some((t_near, t_far, mask)) => {
+                    renderer.all_hits(&RowRays { rows: rays }, (t_near, t_far), mask, firsts, answer, take)
+                }
+                None => renderer.all_hits(
+                    &OptionRows { rows: rays, o },
+                    (0.0, f32::INFINITY),
+                    u32::MAX,
+                    firsts,
+                    answer,
+                    take,
+                ),
+            }?;
+            Ok(out.answer(|h| {
+                let (named, _) = name(top, two, &crate::gpu::gpu_hit(*h));
+                (named.id, named.prim, [named.u, named.v], named.t)
+            }))
+        })
+    }
+
     /// A scan's closest hits on the GPU's two levels, the rays made on the device
     /// (`gpu_scan.rs`).
     pub(super) fn gpu_scan(&self, two: &Arc<TwoLevel>, s: &crate::gpu::ScanRays, range_only: bool) -> Result<RayHits> {

@@ -31,6 +31,9 @@ impl QueryScene {
     /// (`RayOptions`; see `count_intersections` for shared edges).
     pub fn count_intersections_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Vec<u32>> {
         o.check(rays.len())?;
+        if let Some(out) = self.count_on_gpu(rays, o)? {
+            return Ok(out);
+        }
         let Some(two) = self.hits_path(o)? else {
             return self.count_intersections(rays);
         };
@@ -44,6 +47,9 @@ impl QueryScene {
     /// (`RayOptions`), nearest first.
     pub fn list_intersections_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Intersections> {
         o.check(rays.len())?;
+        if let Some(out) = self.list_on_gpu(rays, o)? {
+            return Ok(out);
+        }
         let Some(two) = self.hits_path(o)? else {
             return self.list_intersections(rays);
         };

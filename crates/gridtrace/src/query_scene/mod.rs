@@ -75,6 +75,7 @@ mod all_hits;
 mod batch;
 mod cpu_rays;
 mod geometry;
+mod gpu_all_hits;
 mod gpu_rays;
 mod gpu_scan;
 mod instanced_rays;

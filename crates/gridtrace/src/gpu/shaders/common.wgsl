@@ -67,6 +67,47 @@ override SHORT_STACK: u32 = 8u;
 // short stack); set by the walking kernels' entry points before they walk.
 var<private> lane: u32;
 
+// Every hit of a ray (all_hits.wgsl) is found one at a time: each the closest after the one
+// found before it in the order of (t, triangle number), so that every hit comes once, ties at
+// one t included, through each structure's own closest-hit walk rather than a second copy of
+// every walk. Set per pipeline: the all-hits kernels compile the walks' leaf tests for it
+// (`leaf_bound`, `leaf_takes`); every other pipeline folds the branch away.
+override NEXT_HIT: bool = false;
+// The hit found before (its t and number in the answers' numbering), none before the first.
+var<private> after_none: bool = true;
+var<private> after_t: f32;
+var<private> after_key: u32;
+// What the answers' numbering adds to a walk's own (mesh-local) triangle: a top level sets it
+// to an instance record's first before the instance's walk; 0 for a walk of one level.
+var<private> key_base: u32 = 0u;
+
+// The next float above `t` toward +inf (the smallest normal above 0: a GPU may flush
+// subnormals); inf stays inf.
+fn next_up(t: f32) -> f32 {
+    if (!(t < inf())) { return t; }
+    if (t == 0.0) { return 1.17549435e-38; }
+    let b = bitcast<u32>(t);
+    return bitcast<f32>(select(b - 1u, b + 1u, t > 0.0));
+}
+
+// The bound a walk's leaf hands `intersect_tri` (`t < bound`) for the closest hit so far at
+// `best_t`: with NEXT_HIT a hit at exactly `best_t` may still come first by its number.
+fn leaf_bound(best_t: f32) -> f32 {
+    if (NEXT_HIT) { return next_up(best_t); }
+    return best_t;
+}
+
+// Whether a hit at `t` of the walk's triangle `tri` replaces `best` (a walk's closest so far;
+// `first`: what the walk subtracts from its numbering for its answer). Without NEXT_HIT
+// `intersect_tri` has decided already (t < best.t). With it: the hit must come after the one
+// found before and before `best`, both in (t, number) order.
+fn leaf_takes(t: f32, tri: u32, best: GpuHit, first: u32) -> bool {
+    if (!NEXT_HIT) { return true; }
+    let key = tri - first + key_base;
+    if (!after_none && (t < after_t || (t == after_t && key <= after_key))) { return false; }
+    return best.tri == MISS || t < best.t || (t == best.t && key < best.tri - first + key_base);
+}
+
 @group(0) @binding(0) var<uniform> scene: SceneUniform;
 @group(0) @binding(1) var<uniform> camera: CameraFrame;
 @group(0) @binding(2) var<uniform> pass_: PassUniform;

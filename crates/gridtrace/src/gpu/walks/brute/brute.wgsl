@@ -12,10 +12,10 @@
 // all of them; a scene of two levels: the mesh's part of the shared triangles,
 // `gpu/walks/two_level/`). A hit names the mesh's own triangle, `i - h.first`.
 
-fn brute_test(i: u32, end: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, best: ptr<function, GpuHit>) {
+fn brute_test(i: u32, end: u32, first: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, best: ptr<function, GpuHit>) {
     if (i < end) {
-        let h = intersect_tri(tris[i], o, d, t_min, (*best).t);
-        if (h.w != 0.0) { *best = GpuHit(h.x, i, h.y, h.z); }
+        let h = intersect_tri(tris[i], o, d, t_min, leaf_bound((*best).t));
+        if (h.w != 0.0 && leaf_takes(h.x, i, *best, first)) { *best = GpuHit(h.x, i, h.y, h.z); }
     }
 }
 
@@ -28,10 +28,10 @@ fn brute_closest_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max
     let end = h.first + h.count;
     for (var i = h.first; i < end; i += 4u) {
         if (COUNT_WORK) { *work += min(4u, end - i); }
-        brute_test(i, end, o, d, t_min, &best);
-        brute_test(i + 1u, end, o, d, t_min, &best);
-        brute_test(i + 2u, end, o, d, t_min, &best);
-        brute_test(i + 3u, end, o, d, t_min, &best);
+        brute_test(i, end, h.first, o, d, t_min, &best);
+        brute_test(i + 1u, end, h.first, o, d, t_min, &best);
+        brute_test(i + 2u, end, h.first, o, d, t_min, &best);
+        brute_test(i + 3u, end, h.first, o, d, t_min, &best);
     }
     if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
     best.tri -= h.first;

@@ -98,8 +98,8 @@ fn bvh_closest_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: 
         let count = ((entry >> LEAF_COUNT_SHIFT) & 7u) + 1u;
         for (var k = first; k < first + count; k++) {
             if (COUNT_WORK) { *work += 1u; }
-            let h = intersect_tri(bvh_tris[k], o, d, t_min, best.t);
-            if (h.w != 0.0) { best = GpuHit(h.x, bvh_prims[k], h.y, h.z); }
+            let h = intersect_tri(bvh_tris[k], o, d, t_min, leaf_bound(best.t));
+            if (h.w != 0.0 && leaf_takes(h.x, bvh_prims[k], best, 0u)) { best = GpuHit(h.x, bvh_prims[k], h.y, h.z); }
         }
         entry = bvh_pop(&st, o, inv, t_min, best.t * T_SLOP);
     }

@@ -125,8 +125,8 @@ fn bvh8_walk(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, any: bool, work
         let first = info.y + bvh8_tris_below(info.z, slot);
         for (var i = first; i < first + count; i++) {
             if (COUNT_WORK) { *work += 1u; }
-            let h = intersect_tri(bvh8_tris[i], o, d, t_min, best.t);
-            if (h.w != 0.0) {
+            let h = intersect_tri(bvh8_tris[i], o, d, t_min, leaf_bound(best.t));
+            if (h.w != 0.0 && leaf_takes(h.x, bvh8_prims[i], best, 0u)) {
                 best = GpuHit(h.x, bvh8_prims[i], h.y, h.z);
                 if (any) { return best; }
             }

@@ -104,8 +104,8 @@ fn closest_hit(lat: Lattice, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32,
             for (var i = cell.start; i < cell.start + cell.count; i++) {
                 if (COUNT_WORK) { *work += 1u; }
                 let tri = grid_refs[i];
-                let h = intersect_tri(tris[tri], o, d, t_min, best.t);
-                if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
+                let h = intersect_tri(tris[tri], o, d, t_min, leaf_bound(best.t));
+                if (h.w != 0.0 && leaf_takes(h.x, tri, best, lat.first_tri)) { best = GpuHit(h.x, tri, h.y, h.z); }
             }
             if (best.tri != MISS && best.t <= min(t_exit, s.t_leave)) { break; }
         }

@@ -23,6 +23,9 @@ fn hwrt_ray(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, flags: u32) -> R
 }
 
 fn hwrt_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    // Every hit (NEXT_HIT) as the CPU lists them, by `intersect_tri`: through the BVH the
+    // structure keeps beside the driver's (its arrays are bound for the closest points).
+    if (NEXT_HIT) { return bvh_closest(o, d, t_min, t_max, work); }
     if (COUNT_WORK) { *work += 1u; }
     if (!(t_max > t_min)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
     var rq: ray_query;

@@ -133,8 +133,8 @@ fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
             for (var i = cell.start; i < cell.start + cell.count; i++) {
                 if (COUNT_WORK) { *work += 1u; }
                 let tri = irr_refs[i];
-                let h = intersect_tri(tris[tri], o, d, t_min, best.t);
-                if (h.w != 0.0) { best = GpuHit(h.x, tri, h.y, h.z); }
+                let h = intersect_tri(tris[tri], o, d, t_min, leaf_bound(best.t));
+                if (h.w != 0.0 && leaf_takes(h.x, tri, best, 0u)) { best = GpuHit(h.x, tri, h.y, h.z); }
             }
             // As in the grid: a hit is final only inside the (grown) cell; a triangle that
             // reaches beyond it may hide a nearer one in a later cell.

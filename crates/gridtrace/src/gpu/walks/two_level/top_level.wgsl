@@ -109,8 +109,13 @@ fn top_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, mask: u32, wo
         for (var k = first; k < first + count; k++) {
             let r = top_level[k];
             if ((r.w.x & mask) == 0u) { continue; }
+            // The bottom walk's numbers in the answers' (NEXT_HIT: its leaf tests compare them).
+            key_base = r.w.w;
             let h = bottom_closest(MeshHeader(r.w.y, r.w.z), top_origin(r, o), top_dir(r, d), t_min, best.t, work);
-            if (h.tri != MISS && h.t < best.t) {
+            // With NEXT_HIT a tie at best.t comes first by its number (`leaf_takes`).
+            let key = r.w.w + h.tri;
+            let ahead = h.t < best.t || (NEXT_HIT && h.t == best.t && (best.tri == MISS || key < best.tri));
+            if (h.tri != MISS && ahead) {
                 best = GpuHit(h.t, r.w.w + h.tri, h.u, h.v);
             }
         }

@@ -1,0 +1,293 @@
+//! Every hit along each ray of a batch, on the device (`count_intersections`,
+//! `list_intersections`; all_hits.wgsl): the rays go up as for closest hits (`queries.rs`, 24
+//! or 36 bytes a ray), and only what is asked comes down.
+//!
+//! - **Counts**: a count a ray, 4 bytes.
+//! - **Lists**: counts first, their running sum on the device (prefix_sum.wgsl), and only
+//!   the ends come down (4 bytes a ray: the caller's `ray_splits`); then the hits, 16 bytes
+//!   each (t, triangle, u, v), written where the sum places them. The host learns the list's
+//!   length from the ends before the second pass, so the answers buffer is sized to it; a list
+//!   longer than the device's bindings hold goes down in several passes over runs of rays,
+//!   never cut short (one ray with more hits than a binding holds is refused, naming the limit).
+//!
+//! Each hit is the structure's closest-hit walk after the hit before it in (t, triangle) order
+//! (`NEXT_HIT`, common.wgsl): every structure, and the two levels, without a second walk
+//! each. The price is k + 1 walks for a ray of k hits, each pruned as a closest-hit walk is;
+//! a ray through a closed mesh has few. Chunks go one at a time (the list pass needs the
+//! counts' readback): these queries are rarer than closest hits, and their answers larger.
+//! Open3D's rule (a hit with the t and the geometry of the one before is not counted) needs
+//! each geometry's first triangle in the answers' numbering, which goes up in the batch's
+//! sensor buffer ahead of the rays.
+
+use std::mem::size_of;
+use std::ops::Range;
+
+use super::constants::{COUNTER_SLOTS, SLOT_QUEUE_A};
+use super::context::max_binding_bytes;
+use super::kernels::Kernel;
+use super::layout::{BatchUniform, GpuHit};
+use super::queries::WireSource;
+use super::renderer::{GpuRenderer, WorkUse, grow};
+use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
+use super::upload::MappedUpload;
+use crate::render::{Ablation, Mode};
+use crate::util::Instant;
+use crate::{Error, Result};
+
+/// Words of the hits table before the geometries' first triangles (all_hits.wgsl's
+/// `HITS_TABLE_HEAD`): their count, the rays a list pass lists (from, to), one unused.
+const TABLE_HEAD: usize = 4;
+
+/// Which every-hit answer a batch brings down.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AllHits {
+    /// How many hits each ray has.
+    Counts,
+    /// Each ray's hits, nearest first.
+    Lists,
+}
+
+/// What one submission copies back: bytes of the answers buffer from `at`.
+struct Region {
+    at: u64,
+    bytes: u64,
+}
+
+impl GpuRenderer {
+    /// Every hit of each ray of `rays` within `interval` (or each ray's own, for a source that
+    /// carries them) among what `mask` sees, under Open3D's rule (the module notes), where
+    /// `geometry_firsts` (ascending) gives each geometry's first triangle in the answers'
+    /// numbering. `take(first, counts, hits)` gets runs of consecutive rays from ray `first`
+    /// on: each ray's count, and for `AllHits::Lists` their hits one ray after another, each
+    /// ray's nearest first (`hits` is empty for counts).
+    pub fn all_hits(
+        &mut self,
+        rays: &dyn WireSource,
+        interval: (f32, f32),
+        mask: u32,
+        geometry_firsts: &[u32],
+        answer: AllHits,
+        mut take: impl FnMut(usize, &[u32], &[GpuHit]),
+    ) -> Result<()> {
+        let t0 = Instant::now();
+        let n_all = rays.len();
+        let mut stats = GpuQueryStats {
+            rays: n_all as u64,
+            timings: GpuTimings {
+                from_timestamps: self.timed(),
+                ..GpuTimings::default()
+            },
+            ..GpuQueryStats::default()
+        };
+        let cap = self.chunk_items(n_all, false).max(1);
+        self.kernels.prepare(&self.ctx.device, &self.scene.walk)?;
+        let lights = self.work.as_ref().map_or(1, |w| w.max_lights);
+        self.ensure_work(cap as u32, lights, WorkUse::CLOSEST_HITS);
+        let table_bytes = ((TABLE_HEAD + geometry_firsts.len()) * size_of::<u32>()) as u64;
+        self.ensure_batch_device(cap as u64, table_bytes);
+        // The table takes the sensor buffer's start: a scan's table kept there is gone.
+        self.batches.sensor_table = None;
+        let mut table = vec![geometry_firsts.len() as u32, 0, 0, 0];
+        table.extend_from_slice(geometry_firsts);
+        for first in (0..n_all).step_by(cap) {
+            let items = first..(first + cap).min(n_all);
+            self.all_hits_chunk(rays, items, interval, mask, &table, answer, &mut stats, &mut take)?;
+        }
+        stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+        stats.timings.host.close(stats.wall_ms);
+        stats.timings.total_ms = if self.timed() {
+            stats.timings.stages_ms.values().sum()
+        } else {
+            stats.wall_ms
+        };
+        self.last_query = stats;
+        Ok(())
+    }
+
+    /// Hits one list pass may bring down with `n` rays in the chunk: what a binding of the
+    /// answers buffer holds after the counts and ends (or what a test set).
+    fn list_hits_max(&self, n: u64) -> u64 {
+        let words = max_binding_bytes(&self.ctx.limits()) / size_of::<u32>() as u64;
+        let by_device = words.saturating_sub(2 * n) / 4;
+        self.batches
+            .max_list_hits
+            .map_or(by_device, |m| by_device.min(u64::from(m)))
+    }
+
+    /// Lowers the hits one list pass brings down (at least 1): tests split lists with it.
+    #[doc(hidden)]
+    pub fn set_max_list_hits(&mut self, hits: u32) {
+        self.batches.max_list_hits = Some(hits.max(1));
+    }
+
+    /// One chunk: its rays up, the counts (and for lists their sum) in one submission, then
+    /// for lists the hits in as many passes as the answers buffer needs.
+    #[allow(clippy::too_many_arguments)]
+    fn all_hits_chunk(
+        &mut self,
+        rays: &dyn WireSource,
+        items: Range<usize>,
+        interval: (f32, f32),
+        mask: u32,
+        table: &[u32],
+        answer: AllHits,
+        stats: &mut GpuQueryStats,
+        take: &mut impl FnMut(usize, &[u32], &[GpuHit]),
+    ) -> Result<()> {
+        let n = items.len();
+        let wire_bytes = self.write_wire(0, items.clone(), rays)?;
+        let mut counters = [0u32; COUNTER_SLOTS];
+        counters[SLOT_QUEUE_A] = n as u32;
+        let uniform = BatchUniform {
+            stride: rays.stride() as u32,
+            to_shadow: 0,
+            t_min: interval.0,
+            t_max: interval.1,
+            mask,
+            range_only: 0,
+            first: items.start as u32,
+            cells: 0,
+            cols: 0,
+            poses_at: 0,
+            pose_cols: 0,
+            _pad0: 0,
+        };
+        let device_side = self.batches.device.as_ref().expect("made by `all_hits`");
+        let q = &self.ctx.queue;
+        q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counters));
+        q.write_buffer(&device_side.uniform, 0, bytemuck::bytes_of(&uniform));
+        q.write_buffer(&device_side.sensor, 0, bytemuck::cast_slice(table));
+        let uniforms_bytes = self.write_pass_uniforms_to(
+            self.pass_uniform(),
+            0,
+            0,
+            n as u32,
+            Mode::Cast,
+            self.kind,
+            Ablation::default(),
+        );
+        stats.uploaded_bytes += wire_bytes
+            + size_of_val(&counters) as u64
+            + size_of::<BatchUniform>() as u64
+            + size_of_val(table) as u64
+            + uniforms_bytes;
+        let word = size_of::<u32>() as u64;
+        let (kernels, region): (&[Kernel], Region) = match answer {
+            AllHits::Counts => (
+                &[Kernel::Indirect, Kernel::BatchRays, Kernel::AllHits],
+                Region {
+                    at: 0,
+                    bytes: n as u64 * word,
+                },
+            ),
+            AllHits::Lists => (
+                &[Kernel::Indirect, Kernel::BatchRays, Kernel::AllHits, Kernel::PrefixSum],
+                Region {
+                    at: n as u64 * word,
+                    bytes: n as u64 * word,
+                },
+            ),
+        };
+        let first_words: Vec<u32> = self.submit_and_read(n, wire_bytes, kernels, region, stats)?;
+        if answer == AllHits::Counts {
+            take(items.start, &first_words, &[]);
+            return Ok(());
+        }
+        // The ends: ray i's hits are ends[i - 1]..ends[i] of the chunk's list.
+        let ends = first_words;
+        let counts: Vec<u32> = (0..n)
+            .map(|i| ends[i] - if i == 0 { 0 } else { ends[i - 1] })
+            .collect();
+        let most = self.list_hits_max(n as u64);
+        let mut from = 0;
+        while from < n {
+            let base = if from == 0 { 0 } else { ends[from - 1] };
+            // The longest run of rays from `from` whose hits fit one pass.
+            let to = from + ends[from..].partition_point(|&e| u64::from(e - base) <= most);
+            if to == from {
+                return Err(Error::Gpu(format!(
+                    "ray {} has {} hits, more than one list pass holds on this device ({most})",
+                    items.start + from,
+                    counts[from]
+                )));
+            }
+            let hits = u64::from(ends[to - 1] - base);
+            // The counts and their sums stay: the list pass reads them.
+            self.ensure_answer_bytes((2 * n as u64 + 4 * hits) * word, 2 * n as u64 * word);
+            let device_side = self.batches.device.as_ref().expect("made by `all_hits`");
+            let head = [table[0], from as u32, to as u32, 0];
+            self.ctx.queue.write_buffer(&device_side.sensor, 0, bytemuck::cast_slice(&head));
+            stats.uploaded_bytes += size_of_val(&head) as u64;
+            let region = Region {
+                at: 2 * n as u64 * word,
+                bytes: 4 * hits * word,
+            };
+            let listed: Vec<GpuHit> = self.submit_and_read(n, 0, &[Kernel::AllHitsList], region, stats)?;
+            take(items.start + from, &counts[from..to], &listed);
+            from = to;
+        }
+        Ok(())
+    }
+
+    /// Records `kernels` over the chunk of `n` rays (the wire's `wire_bytes` copied in
+    /// first), copies `region` of the answers back, submits and waits: the region as `T`s.
+    fn submit_and_read<T: bytemuck::Pod>(
+        &mut self,
+        n: usize,
+        wire_bytes: u64,
+        kernels: &[Kernel],
+        region: Region,
+        stats: &mut GpuQueryStats,
+    ) -> Result<Vec<T>> {
+        let dev = &self.ctx.device;
+        let stamps_bytes = if self.timed() {
+            super::timing::MAX_TIMESTAMPS_BYTES
+        } else {
+            0
+        };
+        grow(
+            dev,
+            &mut self.batches.slots[0].readback,
+            region.bytes + stamps_bytes,
+            "batch readback",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let readback = self.batches.slots[0].readback.clone().expect("grown above");
+        let upload = self.batches.slots[0].upload.as_ref().expect("made by `write_wire`").buffer();
+        let device_side = self.batches.device.as_ref().expect("made by `all_hits`");
+        let w = self.work.as_ref().expect("made by `all_hits`");
+        let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("all hits"),
+        });
+        if wire_bytes > 0 {
+            enc.copy_buffer_to_buffer(upload, 0, &device_side.wire, 0, Some(wire_bytes));
+        }
+        let mut rec = self.recorder(n as u32, true, Ablation::default());
+        rec.batch_group = Some(&device_side.group);
+        for &k in kernels {
+            rec.pass(&mut enc, k, &w.bind_groups[0]);
+        }
+        if region.bytes > 0 {
+            enc.copy_buffer_to_buffer(&device_side.answers, region.at, &readback, 0, Some(region.bytes));
+        }
+        rec.timer.resolve_into(&mut enc, &readback, region.bytes);
+        let total = region.bytes + rec.timer.bytes();
+        let (stages, untimed) = (rec.timer.stages().to_vec(), rec.timer.untimed);
+        let index = self.ctx.queue.submit([enc.finish()]);
+        MappedUpload::remap(&self.batches.slots[0].upload);
+        stats.chunks += u32::from(wire_bytes > 0);
+        stats.round_trips += 1;
+        stats.downloaded_bytes += total;
+        let read = self.ctx.begin_read(&readback, total, Some(index));
+        let ((out, times), phases) = read.finish(&self.ctx, |raw| {
+            let out: Vec<T> = bytemuck::pod_collect_to_vec(&raw[..region.bytes as usize]);
+            (out, parse_stages(&stages, &self.ctx, &raw[region.bytes as usize..]))
+        })?;
+        stats.timings.host.add(&phases);
+        for (name, ms) in times {
+            *stats.timings.stages_ms.entry(name).or_default() += ms;
+        }
+        stats.timings.untimed_passes += untimed;
+        Ok(out)
+    }
+}
