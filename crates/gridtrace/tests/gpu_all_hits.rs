@@ -69,9 +69,14 @@ fn scene(backend: Backend, accel: AccelKind, instanced: bool) -> QueryScene {
             Quat::from_euler(glam::EulerRot::ZYX, 0.5, 0.2, -0.3),
             Vec3::new(-0.4, 0.3, 0.2),
         );
-        s.add_instance(InstanceOf::Geometry(soup), Some(turned), u32::MAX).unwrap();
-        s.add_instance(InstanceOf::Geometry(soup), Some(Mat4::from_translation(Vec3::Y * 0.3)), 0b100)
+        s.add_instance(InstanceOf::Geometry(soup), Some(turned), u32::MAX)
             .unwrap();
+        s.add_instance(
+            InstanceOf::Geometry(soup),
+            Some(Mat4::from_translation(Vec3::Y * 0.3)),
+            0b100,
+        )
+        .unwrap();
     }
     s
 }
@@ -118,10 +123,16 @@ fn assert_same_lists(want: &Intersections, got: &Intersections, what: &str) {
     assert_eq!(want.geometry_ids, got.geometry_ids, "{what}: geometry ids");
     assert_eq!(want.primitive_ids, got.primitive_ids, "{what}: faces");
     for (k, (a, b)) in want.t_hit.iter().zip(&got.t_hit).enumerate() {
-        assert!((a - b).abs() <= 1e-5 * a.abs().max(1.0), "{what}: hit {k}: t {a} and {b}");
+        assert!(
+            (a - b).abs() <= 1e-5 * a.abs().max(1.0),
+            "{what}: hit {k}: t {a} and {b}"
+        );
     }
     for (a, b) in want.primitive_uvs.iter().zip(&got.primitive_uvs) {
-        assert!((a[0] - b[0]).abs() <= 1e-4 && (a[1] - b[1]).abs() <= 1e-4, "{what}: uv {a:?} {b:?}");
+        assert!(
+            (a[0] - b[0]).abs() <= 1e-4 && (a[1] - b[1]).abs() <= 1e-4,
+            "{what}: uv {a:?} {b:?}"
+        );
     }
 }
 
@@ -172,7 +183,11 @@ fn counts_and_lists_equal_the_cpu_on_every_structure_and_path() {
             assert_same_lists(&cpu.list_intersections(&rays).unwrap(), &lists, &what);
             if instanced {
                 let want = cpu.count_intersections_with(&rays, &per_ray).unwrap();
-                assert_eq!(want, gpu.count_intersections_with(&rays, &per_ray).unwrap(), "{what}: per ray");
+                assert_eq!(
+                    want,
+                    gpu.count_intersections_with(&rays, &per_ray).unwrap(),
+                    "{what}: per ray"
+                );
                 assert_same_lists(
                     &cpu.list_intersections_with(&rays, &per_ray).unwrap(),
                     &gpu.list_intersections_with(&rays, &per_ray).unwrap(),
@@ -194,7 +209,10 @@ fn counts_follow_a_move() {
     let kind = AccelKind::Bvh;
     let mut cpu = scene(Backend::Cpu, kind, true);
     let mut gpu = scene(Backend::Gpu, kind, true);
-    assert_eq!(cpu.count_intersections(&rays).unwrap(), gpu.count_intersections(&rays).unwrap());
+    assert_eq!(
+        cpu.count_intersections(&rays).unwrap(),
+        gpu.count_intersections(&rays).unwrap()
+    );
     let moved = Mat4::from_rotation_translation(Quat::from_rotation_x(1.0), Vec3::new(0.3, -0.2, 0.1));
     cpu.set_transform(5, moved).unwrap();
     gpu.set_transform(5, moved).unwrap();

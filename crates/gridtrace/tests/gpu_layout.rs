@@ -194,12 +194,12 @@ fn mismatch_is_detected() {
 #[test]
 fn kernels_validate() {
     let modules = shaders::all_modules();
-    // Traverse and occlusion per walk, closest point per walk that searches points.
+    // Traverse, occlusion and all hits per walk, closest point per walk that searches points.
     let walking: usize = gridtrace::gpu::walks::WALKS
         .iter()
-        .map(|w| 2 + w.points() as usize)
+        .map(|w| 3 + w.points() as usize)
         .sum();
-    assert_eq!(modules.len(), 6 + walking);
+    assert_eq!(modules.len(), 7 + walking);
     for (name, src) in modules {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
@@ -413,7 +413,13 @@ fn each_kernel_binds_the_group_0_rows_it_uses() {
             .find(|(n, _, _)| *n == name)
             .unwrap_or_else(|| panic!("{name} has no FRAME_USE entry"));
         if shaders::walks(name) {
-            assert_eq!(*group1, bindings::STRUCTURE_ARRAYS_MAX, "{name}");
+            // The all-hits kernels bind the batch's buffers too, after the structure's arrays.
+            let batch = bindings::BATCH_BINDINGS
+                .iter()
+                .filter(|b| b.access != Access::Uniform)
+                .count();
+            let extra = if name == "all hits" { batch } else { 0 };
+            assert_eq!(*group1, bindings::STRUCTURE_ARRAYS_MAX + extra, "{name}");
         }
         let modules: Vec<(String, String)> = if shaders::walks(name) {
             shaders::all_modules()

@@ -195,9 +195,7 @@ impl GpuRenderer {
         }
         // The ends: ray i's hits are ends[i - 1]..ends[i] of the chunk's list.
         let ends = first_words;
-        let counts: Vec<u32> = (0..n)
-            .map(|i| ends[i] - if i == 0 { 0 } else { ends[i - 1] })
-            .collect();
+        let counts: Vec<u32> = (0..n).map(|i| ends[i] - if i == 0 { 0 } else { ends[i - 1] }).collect();
         let most = self.list_hits_max(n as u64);
         let mut from = 0;
         while from < n {
@@ -216,7 +214,9 @@ impl GpuRenderer {
             self.ensure_answer_bytes((2 * n as u64 + 4 * hits) * word, 2 * n as u64 * word);
             let device_side = self.batches.device.as_ref().expect("made by `all_hits`");
             let head = [table[0], from as u32, to as u32, 0];
-            self.ctx.queue.write_buffer(&device_side.sensor, 0, bytemuck::cast_slice(&head));
+            self.ctx
+                .queue
+                .write_buffer(&device_side.sensor, 0, bytemuck::cast_slice(&head));
             stats.uploaded_bytes += size_of_val(&head) as u64;
             let region = Region {
                 at: 2 * n as u64 * word,
@@ -253,7 +253,11 @@ impl GpuRenderer {
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
         let readback = self.batches.slots[0].readback.clone().expect("grown above");
-        let upload = self.batches.slots[0].upload.as_ref().expect("made by `write_wire`").buffer();
+        let upload = self.batches.slots[0]
+            .upload
+            .as_ref()
+            .expect("made by `write_wire`")
+            .buffer();
         let device_side = self.batches.device.as_ref().expect("made by `all_hits`");
         let w = self.work.as_ref().expect("made by `all_hits`");
         let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {

@@ -117,6 +117,9 @@ pub enum BatchSlot {
 }
 
 pub const BATCH_GROUP: u32 = 1;
+/// The batch's group in a walking kernel that binds it (the all-hits kernels), after the
+/// structure's arrays.
+pub const BATCH_AFTER_WALK_GROUP: u32 = 2;
 
 /// Group 1, as declared in batch.wgsl.
 pub const BATCH_BINDINGS: [Binding<BatchSlot>; 4] = [
@@ -134,7 +137,15 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
         .map(|b| (INDIRECT_GROUP, b.index, b.name, b.access));
     let pack = PACK_BINDINGS.iter().map(|b| (PACK_GROUP, b.index, b.name, b.access));
     let batch = BATCH_BINDINGS.iter().map(|b| (BATCH_GROUP, b.index, b.name, b.access));
-    frame.chain(indirect).chain(pack).chain(batch).collect()
+    let batch_after_walk = BATCH_BINDINGS
+        .iter()
+        .map(|b| (BATCH_AFTER_WALK_GROUP, b.index, b.name, b.access));
+    frame
+        .chain(indirect)
+        .chain(pack)
+        .chain(batch)
+        .chain(batch_after_walk)
+        .collect()
 }
 
 /// The most arrays a structure's walk binds in group 1 (the irregular grid's four): what the

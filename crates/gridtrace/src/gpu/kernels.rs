@@ -8,8 +8,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use super::bindings::{
-    self, Access, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_GROUP, FrameSlot, INDIRECT_BINDINGS, INDIRECT_GROUP,
-    PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP,
+    self, Access, BATCH_AFTER_WALK_GROUP, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_GROUP, FrameSlot,
+    INDIRECT_BINDINGS, INDIRECT_GROUP, PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP,
 };
 use super::constants::{WORKGROUP, dispatch_groups};
 use super::context::GpuContext;
@@ -606,7 +606,11 @@ impl PassRecorder<'_> {
             ),
             Group1::Batch => cp.set_bind_group(
                 // A walking kernel's group 1 is its structure's arrays.
-                if spec.walks { STRUCTURE_GROUP + 1 } else { BATCH_GROUP },
+                if spec.walks {
+                    BATCH_AFTER_WALK_GROUP
+                } else {
+                    BATCH_GROUP
+                },
                 self.batch_group.expect("the batch kernels run with a batch's buffers"),
                 &[],
             ),

@@ -53,11 +53,11 @@ pub mod variants;
 pub mod walks;
 mod wavefront;
 
+pub use all_hits::AllHits;
 pub use context::check_scene_fits;
 pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;
 pub use points::GpuClosestPoints;
-pub use all_hits::AllHits;
 pub use queries::{
     Answer, ChunkAnswers, PIPELINE_ITEMS, RaySlice, SensorLayout, TriHit, WireSource, gpu_hit, unpack_bits,
 };

@@ -442,7 +442,11 @@ impl GpuRenderer {
             self.ctx.queue.submit([enc.finish()]);
         }
         d.answers = answers;
-        d.group = batch_group(dev, &self.kernels.batch_layout, [&d.wire, &d.answers, &d.uniform, &d.sensor]);
+        d.group = batch_group(
+            dev,
+            &self.kernels.batch_layout,
+            [&d.wire, &d.answers, &d.uniform, &d.sensor],
+        );
     }
 
     /// Writes chunk `items` of `source` into `slot`'s upload and submits its copies and

@@ -11,11 +11,16 @@
 //   `answers[n + i]`) places them, for the rays `list_from <= i < list_to` of the chunk, the
 //   first of them at word 2n (a list larger than the buffer goes in several passes).
 
-// Group 2: the ray batch's buffers (queries.rs): the answers, and in `sensor` this query's
-// table: the geometries' count, the rays listed (from, to), then each geometry's first
-// triangle in the answers' numbering, ascending.
+// Group 2: the ray batch's buffers (queries.rs; group 1 of batch.wgsl): the answers, and in
+// the buffer a scan's sensor table takes this query's table (`hits_table`): the geometries'
+// count, the rays listed (from, to), then each geometry's first triangle in the answers'
+// numbering, ascending. The wire and the batch's constants are batch.wgsl's alone.
+@group(2) @binding(0) var<storage, read> wire: array<u32>;
 @group(2) @binding(1) var<storage, read_write> answers: array<u32>;
-@group(2) @binding(3) var<storage, read> hits_table: array<u32>;
+@group(2) @binding(2) var<uniform> batch: BatchUniform;
+@group(2) @binding(3) var<storage, read> sensor: array<u32>;
+
+fn hits_table(k: u32) -> u32 { return sensor[k]; }
 
 override ALL_HITS_LIST: bool = false;
 
@@ -26,10 +31,10 @@ const HITS_TABLE_HEAD: u32 = 4u;
 // triangles of one geometry, different for two of different ones.
 fn geometry_of(tri: u32) -> u32 {
     var lo = 0u;
-    var hi = hits_table[0];
+    var hi = hits_table(0u);
     while (lo < hi) {
         let mid = (lo + hi) / 2u;
-        if (hits_table[HITS_TABLE_HEAD + mid] <= tri) { lo = mid + 1u; } else { hi = mid; }
+        if (hits_table(HITS_TABLE_HEAD + mid) <= tri) { lo = mid + 1u; } else { hi = mid; }
     }
     return lo;
 }
@@ -42,8 +47,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let n = pass_.tile_pixels;
     var at = 0u;
     if (ALL_HITS_LIST) {
-        let list_from = hits_table[1];
-        if (i < list_from || i >= hits_table[2]) { return; }
+        let list_from = hits_table(1u);
+        if (i < list_from || i >= hits_table(2u)) { return; }
         // Word of ray i's first hit: its start in the chunk's list less the first listed ray's.
         let base = select(0u, answers[n + list_from - 1u], list_from > 0u);
         at = 2u * n + 4u * (answers[n + i] - answers[i] - base);
