@@ -60,6 +60,12 @@ enum Asked {
     Hits,
     /// Occlusion within t < 1e30 (as likely as a hit): one bit a ray down.
     Occlusion,
+    /// Every hit counted (`GpuRenderer::all_hits`: k + 1 closest walks for k hits): 4 bytes a
+    /// ray down; checked as a hit where the count is above 0.
+    Counts,
+    /// Every hit listed: the counts' sums (4 bytes a ray), then 16 bytes a hit, after a second
+    /// round trip; checked as the counts.
+    Lists,
 }
 
 /// Camera rays of `mesh`'s auto-framed view, `n` of them in image order (row by row).
@@ -131,7 +137,12 @@ pub fn ray_study(
                 // lean answers beside them.
                 let asks: Vec<(usize, Asked)> = (0..renderers.len())
                     .map(|k| (k, Asked::HitsUv))
-                    .chain([(0, Asked::Hits), (0, Asked::Occlusion)])
+                    .chain([
+                        (0, Asked::Hits),
+                        (0, Asked::Occlusion),
+                        (0, Asked::Counts),
+                        (0, Asked::Lists),
+                    ])
                     .collect();
                 let runs = interleaved(asks.len(), 0.0, plan.reps, |j| {
                     let (k, asked) = asks[j];
@@ -146,13 +157,15 @@ pub fn ray_study(
                         Asked::HitsUv => renderers[k].0.clone(),
                         Asked::Hits => "answers=t,tri".to_string(),
                         Asked::Occlusion => "answers=occlusion".to_string(),
+                        Asked::Counts => "answers=counts".to_string(),
+                        Asked::Lists => "answers=lists".to_string(),
                     };
                     let variant = &variant;
                     let last = outs.last().expect("at least one timed run").1.clone();
                     let gpu_median_ms = Summary::median_of(outs.iter().filter_map(|o| o.1.gpu_ms()));
                     let host = host_medians(outs.iter().map(|o| o.1.timings.host));
                     let hits = outs.pop().expect("at least one timed run").0;
-                    let differing = if asked == Asked::Occlusion {
+                    let differing = if matches!(asked, Asked::Occlusion | Asked::Counts | Asked::Lists) {
                         let n = hits
                             .iter()
                             .zip(&cpu_hits)
@@ -193,22 +206,42 @@ fn ask(r: &mut GpuRenderer, rays: &[Ray], asked: Asked) -> Result<Vec<Hit>> {
     match asked {
         Asked::HitsUv => r.intersect(rays, 0.0, f32::INFINITY),
         Asked::Hits => r.intersect_of(&rays_of, (0.0, 1e30), false),
-        Asked::Occlusion => Ok(r
-            .occluded_of(&rays_of, (0.0, 1e30))?
-            .into_iter()
-            .map(|o| {
-                if o {
-                    Hit {
-                        t: 0.0,
-                        tri: 0,
-                        u: 0.0,
-                        v: 0.0,
+        Asked::Occlusion => Ok(r.occluded_of(&rays_of, (0.0, 1e30))?.into_iter().map(any_hit).collect()),
+        Asked::Counts | Asked::Lists => {
+            let answer = if asked == Asked::Counts {
+                gridtrace::gpu::AllHits::Counts
+            } else {
+                gridtrace::gpu::AllHits::Lists
+            };
+            let mut hit = vec![false; rays.len()];
+            r.all_hits(
+                &rays_of,
+                (0.0, f32::INFINITY),
+                u32::MAX,
+                &[0],
+                answer,
+                |first, counts, _| {
+                    for (k, &c) in counts.iter().enumerate() {
+                        hit[first + k] = c > 0;
                     }
-                } else {
-                    Hit::MISS
-                }
-            })
-            .collect()),
+                },
+            )?;
+            Ok(hit.into_iter().map(any_hit).collect())
+        }
+    }
+}
+
+/// A hit standing for "something is hit" (occlusion, a count above 0), or a miss.
+fn any_hit(hit: bool) -> Hit {
+    if hit {
+        Hit {
+            t: 0.0,
+            tri: 0,
+            u: 0.0,
+            v: 0.0,
+        }
+    } else {
+        Hit::MISS
     }
 }
 
