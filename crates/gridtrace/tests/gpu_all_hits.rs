@@ -160,7 +160,9 @@ fn counts_and_lists_equal_the_cpu_on_every_structure_and_path() {
             let gpu = scene(Backend::Gpu, kind, instanced);
             let want = cpu.count_intersections(&rays).unwrap();
             let got = gpu.count_intersections(&rays).unwrap();
-            let stats = gpu.last_gpu_batch().unwrap().expect("the counts ran on the GPU");
+            let last = gpu.last_query();
+            assert_eq!((last.name, last.device), ("count_intersections", "gpu"), "{what}");
+            let stats = last.gpu.expect("the GPU's statistics");
             assert_eq!(stats.rays, n as u64, "{what}");
             // A count a ray down, and the timestamps.
             assert!(stats.downloaded_bytes >= 4 * n as u64, "{what}");

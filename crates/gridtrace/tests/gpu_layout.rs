@@ -189,8 +189,8 @@ fn mismatch_is_detected() {
 }
 
 /// Every kernel compiles and validates as its own module (common + kernel): raygen, shade,
-/// resolve, indirect, pack and batch once, traverse, occlusion and closest point once per
-/// structure, with its walk.
+/// resolve, indirect, pack, batch, prefix sum and winding once, traverse, occlusion, all hits
+/// and closest point once per structure, with its walk.
 #[test]
 fn kernels_validate() {
     let modules = shaders::all_modules();
@@ -199,7 +199,7 @@ fn kernels_validate() {
         .iter()
         .map(|w| 3 + w.points() as usize)
         .sum();
-    assert_eq!(modules.len(), 7 + walking);
+    assert_eq!(modules.len(), 8 + walking);
     for (name, src) in modules {
         let m = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{name}: {e}"));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())

@@ -23,6 +23,7 @@ mod expansion;
 mod fast;
 mod wide;
 pub use fast::{BETA, FastWinding, check_accuracy};
+pub(crate) use wide::{DEVICE_EMPTY, DEVICE_LEAF, DeviceTree};
 
 /// The signed solid angle triangle `t` subtends at `p`, in steradians, positive where `p` is on
 /// the side `e1 x e2` points away from. Van Oosterom and Strackee (1983):

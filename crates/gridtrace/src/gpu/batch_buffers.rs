@@ -42,4 +42,6 @@ pub(super) struct Batches {
     /// Hits one list pass may bring down at most (`all_hits.rs`; `None`: what the device's
     /// bindings hold); tests lower it to split lists.
     pub max_list_hits: Option<u32>,
+    /// The fast winding tree on the device, once a winding batch uploaded it (`winding.rs`).
+    pub winding: Option<super::winding::DeviceWinding>,
 }

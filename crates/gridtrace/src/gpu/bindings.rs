@@ -129,6 +129,23 @@ pub const BATCH_BINDINGS: [Binding<BatchSlot>; 4] = [
     row(3, "sensor", StorageRead, BatchSlot::Sensor),
 ];
 
+/// What group 2 of the winding kernel (`winding.wgsl`) binds: the fast winding tree's nodes and
+/// leaf blocks, as the CPU lays them out (`gpu/winding.rs`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WindingSlot {
+    Nodes,
+    Blocks,
+}
+
+/// The winding kernel's group after the batch's.
+pub const WINDING_GROUP: u32 = 2;
+
+/// Group 2 of winding.wgsl.
+pub const WINDING_BINDINGS: [Binding<WindingSlot>; 2] = [
+    row(0, "wind_nodes", StorageRead, WindingSlot::Nodes),
+    row(1, "wind_blocks", StorageRead, WindingSlot::Blocks),
+];
+
 /// Every binding of every group as (group, index, WGSL name, access), for checks against WGSL.
 pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
     let frame = FRAME_BINDINGS.iter().map(|b| (FRAME_GROUP, b.index, b.name, b.access));
@@ -145,6 +162,11 @@ pub fn all() -> Vec<(u32, u32, &'static str, Access)> {
         .chain(pack)
         .chain(batch)
         .chain(batch_after_walk)
+        .chain(
+            WINDING_BINDINGS
+                .iter()
+                .map(|b| (WINDING_GROUP, b.index, b.name, b.access)),
+        )
         .collect()
 }
 
@@ -175,7 +197,7 @@ const fn storage_rows<S>(table: &[Binding<S>]) -> usize {
 /// it or not, and group 0 holds 10 of them. `tests/gpu_layout.rs` checks each list against
 /// naga's analysis of the kernel's modules (a row missing fails pipeline creation; an extra one
 /// only costs a binding, but is reported too).
-pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 11] = {
+pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 12] = {
     use FrameSlot::*;
     const WALK: usize = STRUCTURE_ARRAYS_MAX;
     [
@@ -241,6 +263,11 @@ pub const FRAME_USE: [(&str, usize, &[FrameSlot]); 11] = {
             &[SceneUniform, PassUniform, Tris, RaysIn, Counters],
         ),
         ("prefix sum", storage_rows(&BATCH_BINDINGS), &[PassUniform]),
+        (
+            "winding",
+            storage_rows(&BATCH_BINDINGS) + storage_rows(&WINDING_BINDINGS),
+            &[PassUniform, RaysIn, Counters],
+        ),
     ]
 };
 

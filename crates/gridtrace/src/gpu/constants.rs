@@ -92,7 +92,7 @@ pub enum WgslConst {
 /// The constants every kernel shares, by WGSL name (each structure's are its
 /// `WalkSpec::constants`). The triangle test's slack constants are `TriAccel::intersect`'s own,
 /// so both backends accept the same hits.
-pub const SHARED: [(&str, WgslConst); 16] = [
+pub const SHARED: [(&str, WgslConst); 19] = [
     ("SLOT_QUEUE_A", WgslConst::U32(SLOT_QUEUE_A as u32)),
     ("SLOT_SHADOW", WgslConst::U32(SLOT_SHADOW as u32)),
     ("SLOT_SHADOW_TOTAL", WgslConst::U32(SLOT_SHADOW_TOTAL as u32)),
@@ -109,7 +109,15 @@ pub const SHARED: [(&str, WgslConst); 16] = [
     ("MAX_GROUPS_X", WgslConst::U32(MAX_GROUPS_X)),
     ("F32_EPSILON", WgslConst::F32(f32::EPSILON)),
     ("PARALLEL_COS2", WgslConst::F32(PARALLEL_COS2)),
+    ("WIND_STACK", WgslConst::U32(WIND_STACK)),
+    ("WIND_LEAF", WgslConst::U32(crate::accel::winding::DEVICE_LEAF)),
+    ("WIND_EMPTY", WgslConst::U32(crate::accel::winding::DEVICE_EMPTY)),
 ];
+
+/// Entries of the winding kernel's stack (`gpu/winding.rs`): a tree whose walk may need more
+/// (`DeviceTree::stack`, eight a level) is refused. 256 holds 32 levels of eight-wide nodes,
+/// about 8^32 leaves' worth of a balanced tree; the SAH tree over the Stanford Dragon has 12.
+pub const WIND_STACK: u32 = 256;
 
 /// One WGSL literal that denotes exactly `v`: Rust's `{:?}` prints the shortest decimal that
 /// parses back to the same f32, and the `f` suffix makes WGSL parse it as an f32 directly (no

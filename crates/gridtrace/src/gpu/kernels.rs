@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 
 use super::bindings::{
     self, Access, BATCH_AFTER_WALK_GROUP, BATCH_BINDINGS, BATCH_GROUP, Binding, FRAME_GROUP, FrameSlot,
-    INDIRECT_BINDINGS, INDIRECT_GROUP, PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP,
+    INDIRECT_BINDINGS, INDIRECT_GROUP, PACK_BINDINGS, PACK_GROUP, STRUCTURE_GROUP, WINDING_BINDINGS, WINDING_GROUP,
 };
 use super::constants::{WORKGROUP, dispatch_groups};
 use super::context::GpuContext;
@@ -49,6 +49,8 @@ pub(crate) enum Kernel {
     AllHitsList,
     /// The running sum of a chunk's hit counts.
     PrefixSum,
+    /// The winding number of each point of a batch's chunk (`winding.rs`).
+    Winding,
 }
 
 /// What a kernel that walks no structure binds as group 1 (a walking kernel binds its
@@ -63,6 +65,8 @@ enum Group1 {
     /// A ray batch's wire rays, answers and constants (a walking kernel binds them as group
     /// 2, after its structure's arrays: the all-hits kernels).
     Batch,
+    /// A batch's buffers, and the fast winding tree as group 2.
+    BatchWinding,
 }
 
 /// How many invocations a kernel's dispatch has.
@@ -114,7 +118,7 @@ const fn spec(kernel: Kernel, label: &'static str, stage: &'static str, source: 
 }
 
 /// Every pipeline, in `Kernel` order (`kernel as usize` indexes it; a test checks).
-const SPECS: [KernelSpec; 15] = [
+const SPECS: [KernelSpec; 16] = [
     KernelSpec {
         launch: Launch::PerPixel,
         ..spec(Kernel::Raygen, "raygen", "raygen", shaders::RAYGEN)
@@ -193,6 +197,10 @@ const SPECS: [KernelSpec; 15] = [
         group1: Group1::Batch,
         ..spec(Kernel::PrefixSum, "prefix sum", "prefix sum", shaders::PREFIX_SUM)
     },
+    KernelSpec {
+        group1: Group1::BatchWinding,
+        ..spec(Kernel::Winding, "winding", "winding", shaders::WINDING)
+    },
 ];
 
 impl KernelSpec {
@@ -255,6 +263,8 @@ pub(crate) struct Kernels {
     pub pack_layout: wgpu::BindGroupLayout,
     /// Layout of group 1 of the ray batches' kernels (`BATCH_BINDINGS`).
     pub batch_layout: wgpu::BindGroupLayout,
+    /// Layout of group 2 of the winding kernel (`WINDING_BINDINGS`).
+    pub winding_layout: wgpu::BindGroupLayout,
     /// The kernels that walk no structure, in `SPECS` order (`None` for those that walk).
     pipelines: Vec<Option<wgpu::ComputePipeline>>,
     /// Each walk's pipelines (by `WalkSpec::name`), compiled when a scene of it is first
@@ -397,6 +407,10 @@ impl Kernels {
             label: Some("ray batch"),
             entries: &bindings::layout_entries(&BATCH_BINDINGS),
         });
+        let winding_layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("winding tree"),
+            entries: &bindings::layout_entries(&WINDING_BINDINGS),
+        });
         let layout = |groups: &[Option<&wgpu::BindGroupLayout>]| {
             dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("gridtrace"),
@@ -414,6 +428,7 @@ impl Kernels {
                     Group1::IndirectArgs => layout(&[frame, Some(&indirect_layout)]),
                     Group1::Packed => layout(&[frame, Some(&pack_layout)]),
                     Group1::Batch => layout(&[frame, Some(&batch_layout)]),
+                    Group1::BatchWinding => layout(&[frame, Some(&batch_layout), Some(&winding_layout)]),
                 }
             },
             |s| shaders::module_source_for(s.source, variants),
@@ -426,6 +441,7 @@ impl Kernels {
             indirect_layout,
             pack_layout,
             batch_layout,
+            winding_layout,
             pipelines,
             walks: Mutex::new(HashMap::new()),
         })
@@ -553,6 +569,8 @@ pub(crate) struct PassRecorder<'a> {
     pub packed_group: Option<&'a wgpu::BindGroup>,
     /// The ray batch's group 1 (`queries.rs`), for its two kernels.
     pub batch_group: Option<&'a wgpu::BindGroup>,
+    /// The fast winding tree's group (`winding.rs`), for the winding kernel.
+    pub winding_group: Option<&'a wgpu::BindGroup>,
     /// The scene's structure's walking pipelines and its group 1.
     pub walk: &'a WalkPipelines,
     pub structure_group: &'a wgpu::BindGroup,
@@ -614,6 +632,16 @@ impl PassRecorder<'_> {
                 self.batch_group.expect("the batch kernels run with a batch's buffers"),
                 &[],
             ),
+            Group1::BatchWinding => {
+                let batch = self
+                    .batch_group
+                    .expect("the winding kernel runs with a batch's buffers");
+                cp.set_bind_group(BATCH_GROUP, batch, &[]);
+                let tree = self
+                    .winding_group
+                    .expect("the winding kernel runs with an uploaded tree");
+                cp.set_bind_group(WINDING_GROUP, tree, &[]);
+            }
         }
         match spec.launch {
             Launch::PerPixel => {

@@ -52,6 +52,7 @@ mod upload;
 pub mod variants;
 pub mod walks;
 mod wavefront;
+mod winding;
 
 pub use all_hits::AllHits;
 pub use context::check_scene_fits;

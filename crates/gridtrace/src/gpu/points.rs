@@ -88,8 +88,8 @@ impl GpuRenderer {
 
 /// Query points on the wire, 12 bytes each; a point that is not finite goes as the origin (its
 /// answer is the host's).
-struct PointRows<'a> {
-    points: &'a [[f32; 3]],
+pub(super) struct PointRows<'a> {
+    pub points: &'a [[f32; 3]],
 }
 
 impl WireSource for PointRows<'_> {

@@ -138,6 +138,8 @@ pub enum ChunkAnswers<'a> {
         hits: &'a [GpuHit],
         work: &'a [[f32; 4]],
     },
+    /// The winding number at each point (`winding.rs`).
+    Winding(&'a [f32]),
 }
 
 /// The interval and the mask of a batch's rays, where its source does not carry them (a
@@ -154,6 +156,9 @@ pub(super) enum Query {
     Rays(Answer),
     /// The nearest point to each item, with the search's work.
     ClosestPoint,
+    /// The winding number at each item over the renderer's uploaded tree (`winding.rs`); the
+    /// bounds' `t_max` is the accuracy squared.
+    Winding,
 }
 
 impl Query {
@@ -163,6 +168,7 @@ impl Query {
             Query::Rays(Answer::Hits { .. } | Answer::Range) => (Kernel::Traverse, SLOT_QUEUE_A, WorkUse::CLOSEST_HITS),
             Query::Rays(Answer::Occlusion) => (Kernel::Occlusion, SLOT_SHADOW, WorkUse::OCCLUSION),
             Query::ClosestPoint => (Kernel::ClosestPoint, SLOT_QUEUE_A, WorkUse::CLOSEST_POINTS),
+            Query::Winding => (Kernel::Winding, SLOT_QUEUE_A, WorkUse::CLOSEST_HITS),
         }
     }
 
@@ -182,6 +188,7 @@ impl Query {
             Query::Rays(Answer::Occlusion) => vec![n.div_ceil(32) * 4],
             Query::Rays(Answer::Range) => vec![n * size_of::<f32>() as u64],
             Query::ClosestPoint => vec![n * size_of::<GpuHit>() as u64, n * ACCUM_TEXEL_BYTES],
+            Query::Winding => vec![n * size_of::<f32>() as u64],
         }
     }
 }
@@ -526,6 +533,7 @@ impl GpuRenderer {
         }
         let mut rec = self.recorder(n as u32, true, Ablation::default());
         rec.batch_group = Some(&device_side.group);
+        rec.winding_group = self.batches.winding.as_ref().map(|t| &t.group);
         rec.pass(&mut enc, Kernel::Indirect, &w.bind_groups[0]);
         rec.pass(&mut enc, Kernel::BatchRays, &w.bind_groups[0]);
         rec.pass(&mut enc, walk, &w.bind_groups[0]);
@@ -535,6 +543,8 @@ impl GpuRenderer {
                 vec![&device_side.answers]
             }
             Query::ClosestPoint => vec![&w.hits, &w.accum],
+            // The kernel writes the answers itself.
+            Query::Winding => vec![&device_side.answers],
             _ => vec![&w.hits],
         };
         let mut at = 0;
@@ -627,6 +637,7 @@ impl GpuRenderer {
                     hits: bytemuck::cast_slice(region(0)),
                     work: bytemuck::cast_slice(region(1)),
                 },
+                Query::Winding => ChunkAnswers::Winding(bytemuck::cast_slice(region(0))),
             };
             take(items.start, answers);
             parse_stages(&stages, &self.ctx, &raw[results_bytes as usize..])

@@ -352,6 +352,7 @@ impl GpuRenderer {
             indirect_group: &self.indirect_group,
             packed_group: self.work.as_ref().map(|w| &w.packed_group),
             batch_group: None,
+            winding_group: None,
             walk: &self.scene.walk,
             structure_group: &self.scene.structure_group,
             shadow_closest_hit: ablation.shadow_closest_hit,

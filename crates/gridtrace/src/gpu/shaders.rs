@@ -30,8 +30,10 @@ pub const BATCH: &str = include_str!("shaders/batch.wgsl");
 pub const ALL_HITS: &str = include_str!("shaders/all_hits.wgsl");
 /// The running sum of a chunk's hit counts, where each ray's list ends.
 pub const PREFIX_SUM: &str = include_str!("shaders/prefix_sum.wgsl");
+/// Generalised winding numbers over the fast winding tree (`winding.rs`).
+pub const WINDING: &str = include_str!("shaders/winding.wgsl");
 /// Every kernel with its name.
-pub const KERNELS: [(&str, &str); 11] = [
+pub const KERNELS: [(&str, &str); 12] = [
     ("raygen", RAYGEN),
     ("traverse", TRAVERSE),
     ("occlusion", OCCLUSION),
@@ -43,6 +45,7 @@ pub const KERNELS: [(&str, &str); 11] = [
     ("batch", BATCH),
     ("all hits", ALL_HITS),
     ("prefix sum", PREFIX_SUM),
+    ("winding", WINDING),
 ];
 
 /// The prelude and `common.wgsl`: every declaration all kernels share.

@@ -51,6 +51,7 @@ impl QueryScene {
     /// How many faces each ray hits with `t >= 0` under Open3D's rule (the module notes): the
     /// length of each ray's `list_intersections` list. Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
+        let _record = self.recording("count_intersections");
         if let Some(out) = self.count_on_gpu(rays, &Default::default())? {
             return Ok(out);
         }
@@ -93,6 +94,7 @@ impl QueryScene {
     /// Every hit of each ray with `t >= 0` under Open3D's rule (the module notes), nearest
     /// first (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
+        let _record = self.recording("list_intersections");
         if let Some(out) = self.list_on_gpu(rays, &Default::default())? {
             return Ok(out);
         }

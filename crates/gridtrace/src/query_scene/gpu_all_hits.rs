@@ -144,6 +144,7 @@ impl QueryScene {
                             answer,
                             |first, counts, hits| out.take(first, counts, hits),
                         )?;
+                        self.answered_on_gpu(gpu.last_query_stats());
                         Ok(Some(out.answer(|h| {
                             let (id, prim) = m.name(h.tri);
                             (id, prim, [h.u, h.v], h.t)

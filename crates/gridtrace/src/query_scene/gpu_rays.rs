@@ -237,6 +237,9 @@ impl QueryScene {
             }
         };
         let r = f(&mut g);
+        if r.is_ok() {
+            self.answered_on_gpu(g.renderer.last_query_stats());
+        }
         *slot = Some(g);
         r
     }

@@ -30,6 +30,7 @@ impl QueryScene {
     /// How many faces each ray hits within its interval among the geometries its mask sees
     /// (`RayOptions`; see `count_intersections` for shared edges).
     pub fn count_intersections_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Vec<u32>> {
+        let _record = self.recording("count_intersections");
         o.check(rays.len())?;
         if let Some(out) = self.count_on_gpu(rays, o)? {
             return Ok(out);
@@ -46,6 +47,7 @@ impl QueryScene {
     /// Every hit of each ray within its interval among the geometries its mask sees
     /// (`RayOptions`), nearest first.
     pub fn list_intersections_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Intersections> {
+        let _record = self.recording("list_intersections");
         o.check(rays.len())?;
         if let Some(out) = self.list_on_gpu(rays, o)? {
             return Ok(out);

@@ -80,6 +80,7 @@ mod gpu_rays;
 mod gpu_scan;
 mod instanced_rays;
 mod instances;
+mod last_query;
 mod merged;
 mod points;
 mod rays;
@@ -92,6 +93,7 @@ pub use batch::{PerRay, RayHits, RayOptions};
 pub use geometry::{Geometry, SceneMesh};
 pub use gpu_rays::GpuUploads;
 pub use instances::InstanceOf;
+pub use last_query::LastQuery;
 pub use points::ClosestPoints;
 
 use merged::Merged;
@@ -121,6 +123,8 @@ pub struct QueryScene {
     /// the merged mesh, one structure over every triangle, and a moving one's to the two
     /// levels, whose moves build nothing.
     moving: bool,
+    /// What the last query did (`last_query.rs`).
+    records: Mutex<last_query::Records>,
 }
 
 /// Where a ray query runs (`QueryScene::ray_path`).
@@ -147,6 +151,7 @@ impl QueryScene {
             builds: AtomicUsize::new(0),
             gpu: Mutex::new(None),
             moving: false,
+            records: Mutex::default(),
         }
     }
 

@@ -4,7 +4,9 @@
 //! the BVH, eight searches interleaved; the brute-force answer, tie rule included,
 //! `accel::closest`) or, where the backend traces on a GPU, there (`GpuRenderer::closest_points`:
 //! the same searches in WGSL, the same answers within rounding). The inside/outside decision
-//! (winding numbers) stays on the CPU.
+//! (winding numbers) follows the same choice: the fast winding tree walked on the GPU
+//! (`GpuRenderer::winding_numbers`) or on the CPU's cores; `accuracy = inf` (the exact `f64`
+//! sum) on the CPU.
 //!
 //! **Inside or outside** is decided by the generalised winding number of all the scene's
 //! faces together (`accel::winding`, fast far-field sums): inside when it exceeds 0.5. For
@@ -46,6 +48,7 @@ const BATCH: usize = 256;
 impl QueryScene {
     /// The nearest point of the scene to each query point.
     pub fn compute_closest_points(&self, points: &[[f32; 3]]) -> Result<ClosestPoints> {
+        let _record = self.recording("compute_closest_points");
         let m = self.merged()?;
         let n = points.len();
         let mut out = ClosestPoints {
@@ -82,6 +85,7 @@ impl QueryScene {
     /// The distance from each point to the scene: NaN for a point that is not finite, inf in
     /// an empty scene.
     pub fn compute_distance(&self, points: &[[f32; 3]]) -> Result<Vec<f32>> {
+        let _record = self.recording("compute_distance");
         let m = self.merged()?;
         Ok(self.closest(&m, points)?.iter().map(ClosestPoint::distance).collect())
     }
@@ -95,10 +99,11 @@ impl QueryScene {
     /// `compute_signed_distance` with the winding numbers' `accuracy` (libigl's beta: larger is
     /// more accurate, `inf` exact; `accel::winding::check_accuracy`).
     pub fn compute_signed_distance_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let _record = self.recording("compute_signed_distance");
         let accuracy = check_accuracy(accuracy)?;
         let m = self.merged()?;
         let closest = self.closest(&m, points)?;
-        let winding = winding_numbers(&m, points, accuracy);
+        let winding = winding_numbers(self, &m, points, accuracy)?;
         Ok(closest
             .iter()
             .zip(winding)
@@ -113,9 +118,10 @@ impl QueryScene {
 
     /// `compute_occupancy` with the winding numbers' `accuracy` (as `compute_signed_distance_at`).
     pub fn compute_occupancy_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let _record = self.recording("compute_occupancy");
         let accuracy = check_accuracy(accuracy)?;
         let m = self.merged()?;
-        Ok(winding_numbers(&m, points, accuracy)
+        Ok(winding_numbers(self, &m, points, accuracy)?
             .into_iter()
             .map(|w| match w {
                 w if w.is_nan() => f32::NAN,
@@ -133,9 +139,10 @@ impl QueryScene {
 
     /// `winding_numbers` with an `accuracy` (as `compute_signed_distance_at`).
     pub fn winding_numbers_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let _record = self.recording("compute_winding_number");
         let accuracy = check_accuracy(accuracy)?;
         let m = self.merged()?;
-        Ok(winding_numbers(&m, points, accuracy))
+        winding_numbers(self, &m, points, accuracy)
     }
 
     /// The structure's nearest point for each point (an error when it is stale).
@@ -154,16 +161,35 @@ impl QueryScene {
         };
         // The mesh decides where (as `cast_rays`): the GPU's search where the backend traces on
         // one, else (or if `auto` found no GPU) the CPU's.
-        mesh.closest_points(points)
+        mesh.on_gpu_or_cpu(
+            |gpu| {
+                let c = gpu.closest_points(&mesh.prepared().accel.tris, points)?;
+                self.answered_on_gpu(gpu.last_query_stats());
+                Ok(c)
+            },
+            || mesh.closest_points_with(crate::query::Backend::Cpu, points),
+        )
     }
 }
 
-fn winding_numbers(m: &Merged, points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
-    if m.tris().is_empty() {
-        return points
+/// The winding numbers of the merged mesh's faces at `points`: on the GPU where the mesh
+/// traces there (`GpuRenderer::winding_numbers`: the CPU's tree uploaded once and walked the
+/// same way), else (and for `accuracy = inf`, the exact `f64` sum) on the CPU's cores.
+fn winding_numbers(s: &QueryScene, m: &Merged, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+    let on_cpu = || Ok(m.winding().winding_numbers_at(m.tris(), points, accuracy));
+    match m.mesh.as_ref() {
+        None => Ok(points
             .iter()
             .map(|p| if Vec3::from(*p).is_finite() { 0.0 } else { f32::NAN })
-            .collect();
+            .collect()),
+        Some(mesh) if accuracy.is_finite() => mesh.on_gpu_or_cpu(
+            |gpu| {
+                let w = gpu.winding_numbers(m.winding(), points, accuracy)?;
+                s.answered_on_gpu(gpu.last_query_stats());
+                Ok(w)
+            },
+            on_cpu,
+        ),
+        Some(_) => on_cpu(),
     }
-    m.winding().winding_numbers_at(m.tris(), points, accuracy)
 }

@@ -70,12 +70,14 @@ pub(crate) fn check_interval(t_near: f32, t_far: f32) -> Result<()> {
 impl QueryScene {
     /// The closest hit of each ray with `t >= 0` (Open3D's `cast_rays`).
     pub fn cast_rays(&self, rays: &[[f32; 6]]) -> Result<RayHits> {
+        let _record = self.recording("cast_rays");
         self.cast_rays_with(rays, &RayOptions::default())
     }
 
     /// The closest hit of each ray within its interval among the geometries its mask sees
     /// (`RayOptions`).
     pub fn cast_rays_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<RayHits> {
+        let _record = self.recording("cast_rays");
         o.check(rays.len())?;
         let on_cpu = |two: &TwoLevel| {
             two.check_cpu(true)?;
@@ -115,6 +117,7 @@ impl QueryScene {
                         });
                     }
                 })?;
+                self.answered_on_gpu(gpu.last_query_stats());
                 Ok(out)
             },
             on_cpu,
@@ -124,6 +127,7 @@ impl QueryScene {
     /// Whether each ray hits anything with `t_near < t < t_far` (Open3D's `test_occlusions`;
     /// its defaults are `0` and `inf`).
     pub fn test_occlusions(&self, rays: &[[f32; 6]], t_near: f32, t_far: f32) -> Result<Vec<bool>> {
+        let _record = self.recording("test_occlusions");
         check_interval(t_near, t_far)?;
         let o = RayOptions {
             t_near: PerRay::All(t_near),
@@ -136,6 +140,7 @@ impl QueryScene {
     /// Whether each ray hits anything within its interval among the geometries its mask sees
     /// (`RayOptions`).
     pub fn test_occlusions_with(&self, rays: &[[f32; 6]], o: &RayOptions) -> Result<Vec<bool>> {
+        let _record = self.recording("test_occlusions");
         o.check(rays.len())?;
         let on_cpu = |two: &TwoLevel| {
             two.check_cpu(true)?;
@@ -168,6 +173,7 @@ impl QueryScene {
                 gpu.cast(&source, (t_near, t_far), Answer::Occlusion, |first, answers| {
                     occlusion_into(&mut out, rays, first, answers)
                 })?;
+                self.answered_on_gpu(gpu.last_query_stats());
                 Ok(out)
             },
             on_cpu,

@@ -144,6 +144,13 @@ impl FastWinding {
     }
 }
 
+impl FastWinding {
+    /// The tree as the GPU walks it (`gpu/winding.rs`).
+    pub(crate) fn device(&self) -> super::wide::DeviceTree<'_> {
+        self.wide.device()
+    }
+}
+
 /// Each binary node's moments: leaves from their triangles in parallel (the radius through
 /// their vertices), then the inner nodes children first.
 fn node_moments(bvh: &Bvh, tris: &[TriAccel]) -> Vec<Moment> {

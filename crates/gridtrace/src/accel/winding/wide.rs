@@ -26,9 +26,12 @@ pub(super) const WIDTH: usize = 8;
 // A leaf of the library's BVH builder fits one block.
 const _: () = assert!(crate::accel::bvh::MAX_LEAF <= WIDTH);
 
-/// A child reference: a node's index, or `LEAF | block`, or `EMPTY`.
+/// A child reference: a node's index, or `LEAF | block`, or `EMPTY` (the GPU's walk reads
+/// them too: `DEVICE_LEAF`, `DEVICE_EMPTY`).
 const LEAF: u32 = 1 << 31;
 const EMPTY: u32 = u32::MAX;
+pub(crate) const DEVICE_LEAF: u32 = LEAF;
+pub(crate) const DEVICE_EMPTY: u32 = EMPTY;
 
 /// Eight children's coefficients, one row per field (`expansion::FIELDS`), a lane per child;
 /// an empty slot has an infinite radius (never far) and `EMPTY` as its child.
@@ -282,6 +285,50 @@ pub(super) fn atan2_lanes<const N: usize, L: Lanes<N>>(y: L, x: L) -> L {
     let r = L::select(ay.gt(ax), L::splat(FRAC_PI_2) - r, r);
     let r = L::select(x.lt(L::ZERO), L::splat(PI) - r, r);
     L::select(y.lt(L::ZERO), L::ZERO - r, r)
+}
+
+/// The tree as the GPU walks it (`gpu/winding.rs`, winding.wgsl): the nodes' and the blocks'
+/// bytes as they lie in memory (`#[repr(C)]`, no padding: 26 + 1 rows of eight 4-byte lanes a
+/// node, 9 a block), and the most entries the walk's stack holds at once (each node opened
+/// pushes at most its `WIDTH` children and pops itself).
+pub(crate) struct DeviceTree<'a> {
+    pub nodes: &'a [u8],
+    pub blocks: &'a [u8],
+    pub stack: usize,
+}
+
+// The WGSL's layouts (winding.wgsl `WindNode`, `WindBlock`) are these sizes, padding-free.
+const _: () = assert!(size_of::<WideNode>() == (FIELDS + 1) * WIDTH * 4);
+const _: () = assert!(size_of::<Block>() == 9 * WIDTH * 4);
+
+impl WideTree {
+    /// The tree for the GPU (`DeviceTree`).
+    pub(crate) fn device(&self) -> DeviceTree<'_> {
+        // SAFETY: both types are `#[repr(C)]` arrays of `f32` and `u32` with no padding (the
+        // asserts above), so every byte is initialised and any alignment of `u8` holds; the
+        // slices borrow `self`.
+        let bytes = |p: *const u8, len: usize| unsafe { std::slice::from_raw_parts(p, len) };
+        let nodes = bytes(self.nodes.as_ptr().cast(), size_of_val(self.nodes.as_slice()));
+        let blocks = bytes(self.blocks.as_ptr().cast(), size_of_val(self.blocks.as_slice()));
+        // The levels of nodes: a walk's stack holds at most the children one node of each
+        // level pushed, `WIDTH` each (the walk pops one before it pushes a node's).
+        let (mut levels, mut work) = (0, vec![(0u32, 1usize)]);
+        while let Some((i, level)) = work.pop() {
+            let Some(node) = self.nodes.get(i as usize) else { break };
+            levels = usize::max(levels, level);
+            work.extend(
+                node.child
+                    .iter()
+                    .filter(|&&c| c != EMPTY && c & LEAF == 0)
+                    .map(|&c| (c, level + 1)),
+            );
+        }
+        DeviceTree {
+            nodes,
+            blocks,
+            stack: levels.max(1) * WIDTH,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,132 @@
+//! Generalised winding numbers on the device (`compute_winding_number`, the sign of signed
+//! distance and occupancy; winding.wgsl): the CPU's fast winding tree (`FastWinding`, eight
+//! children a node with their second-order coefficients, leaf blocks of eight triangles)
+//! uploaded as it lies in memory, once per tree, and walked as the CPU walks it: the same
+//! nodes opened, the same terms summed, in `f32` as the CPU's lanes sum them. The points go up
+//! as 12 bytes each in the ray batches' pipelined chunks (`queries.rs`, `Query::Winding`), the
+//! winding numbers come down as 4.
+//!
+//! The device keeps one tree, named by a hash of its nodes' bytes (a tree rebuilt after a
+//! move has other coefficients): asking with the same tree again uploads nothing. `accuracy
+//! = inf` (the exact `f64` sum) stays on the CPU, which the callers see to.
+
+use super::bindings::{self, WINDING_BINDINGS, WindingSlot};
+use super::constants::WIND_STACK;
+use super::points::PointRows;
+use super::queries::{Bounds, ChunkAnswers, Query};
+use super::renderer::GpuRenderer;
+use crate::accel::winding::{DeviceTree, FastWinding};
+use crate::{Error, Result};
+
+/// The tree on the device: its arrays, their bind group (winding.wgsl's group 2), and what it
+/// was made from.
+pub(crate) struct DeviceWinding {
+    key: u64,
+    _nodes: wgpu::Buffer,
+    _blocks: wgpu::Buffer,
+    pub group: wgpu::BindGroup,
+    /// Bytes uploaded (the nodes and the blocks).
+    pub bytes: u64,
+}
+
+/// FNV-1a over the bytes, eight at a time, with the lengths: which tree the device holds.
+fn key_of(tree: &DeviceTree<'_>) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64 ^ (tree.nodes.len() as u64) ^ ((tree.blocks.len() as u64) << 32);
+    for word in tree.nodes.chunks(8) {
+        let mut w = [0u8; 8];
+        w[..word.len()].copy_from_slice(word);
+        h = (h ^ u64::from_le_bytes(w)).wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+impl GpuRenderer {
+    /// The winding number at each of `points` over `tree` (built over this renderer's mesh),
+    /// far nodes summed as their expansion where the point is farther than `accuracy` (finite,
+    /// above 0) times their radius, as `FastWinding::winding_numbers_at`. A point that is not
+    /// finite gets NaN. A tree too deep for the walk's stack is refused.
+    pub fn winding_numbers(&mut self, tree: &FastWinding, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        let device = tree.device();
+        if device.nodes.is_empty() {
+            return Ok(points.iter().map(|p| if finite(p) { 0.0 } else { f32::NAN }).collect());
+        }
+        if device.stack > WIND_STACK as usize {
+            return Err(Error::Gpu(format!(
+                "the winding tree needs a stack of {} entries; the GPU walk's holds {WIND_STACK}",
+                device.stack
+            )));
+        }
+        let uploaded = self.upload_winding(&device);
+        // Squared in f64: an accuracy beyond f32's range is infinite here, and opens every
+        // node (as on the CPU).
+        let accuracy2 = (accuracy * accuracy) as f32;
+        let mut out = vec![f32::NAN; points.len()];
+        self.batch(
+            &PointRows { points },
+            Bounds {
+                interval: (0.0, accuracy2),
+                mask: u32::MAX,
+            },
+            Query::Winding,
+            |first, answers| {
+                if let ChunkAnswers::Winding(w) = answers {
+                    out[first..first + w.len()].copy_from_slice(w);
+                }
+            },
+        )?;
+        self.last_query.uploaded_bytes += uploaded;
+        for (w, p) in out.iter_mut().zip(points) {
+            if !finite(p) {
+                *w = f32::NAN;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Bytes of the winding tree on the device (0 before the first winding batch).
+    pub fn winding_tree_bytes(&self) -> u64 {
+        self.batches.winding.as_ref().map_or(0, |w| w.bytes)
+    }
+
+    /// Puts `tree` on the device unless it is there already: the bytes written.
+    fn upload_winding(&mut self, tree: &DeviceTree<'_>) -> u64 {
+        let key = key_of(tree);
+        if self.batches.winding.as_ref().is_some_and(|w| w.key == key) {
+            return 0;
+        }
+        let dev = &self.ctx.device;
+        let buffer = |label: &str, bytes: &[u8]| {
+            let b = dev.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes.len().max(4) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.ctx.queue.write_buffer(&b, 0, bytes);
+            b
+        };
+        let nodes = buffer("winding nodes", tree.nodes);
+        let blocks = buffer("winding blocks", tree.blocks);
+        let group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("winding tree"),
+            layout: &self.kernels.winding_layout,
+            entries: &bindings::group_entries(&WINDING_BINDINGS, |slot| match slot {
+                WindingSlot::Nodes => nodes.as_entire_binding(),
+                WindingSlot::Blocks => blocks.as_entire_binding(),
+            }),
+        });
+        let bytes = (tree.nodes.len() + tree.blocks.len()) as u64;
+        self.batches.winding = Some(DeviceWinding {
+            key,
+            _nodes: nodes,
+            _blocks: blocks,
+            group,
+            bytes,
+        });
+        bytes
+    }
+}
+
+fn finite(p: &[f32; 3]) -> bool {
+    p.iter().all(|x| x.is_finite())
+}
