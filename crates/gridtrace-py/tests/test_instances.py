@@ -229,9 +229,39 @@ def test_gpu_counts_and_lists_equal_the_cpu(accel):
     got = g.count_intersections(rays)
     np.testing.assert_array_equal(got, want)
     assert (want >= 2).sum() > 100
-    stats = g.last_gpu_batch()
-    assert stats is not None and stats["rays"] == 3000
+    last = g.last_query()
+    assert last["name"] == "count_intersections" and last["device"] == "gpu"
+    assert last["gpu"]["rays"] == 3000 and last["gpu"]["downloaded_bytes"] >= 4 * 3000
+    assert c.last_query()["device"] == "cpu" and c.last_query()["gpu"] is None
     lists_g, lists_c = g.list_intersections(rays), c.list_intersections(rays)
     for key in ("ray_splits", "ray_ids", "geometry_ids", "primitive_ids"):
         np.testing.assert_array_equal(lists_g[key], lists_c[key], err_msg=key)
     np.testing.assert_allclose(lists_g["t_hit"], lists_c["t_hit"], rtol=1e-5)
+
+
+@pytest.mark.parametrize("accel", ["bvh", "grid"])
+def test_gpu_winding_signs_and_occupancy_equal_the_cpu(accel):
+    """backend="gpu": winding numbers on the device (the CPU's tree, walked the same way) within
+    1e-4 of the CPU's; signed distance's sign and occupancy the same away from the surface."""
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        pytest.skip("GRIDTRACE_SKIP_GPU is set")
+    rng = np.random.default_rng(12)
+    v, f = _sphere()
+    g, c = gridtrace.Scene(accel=accel, backend="gpu"), gridtrace.Scene(accel=accel, backend="cpu")
+    ts = _random_transforms(rng, 10)
+    for t in ts:
+        g.add_triangles(v, f, t)
+        c.add_triangles(v, f, t)
+    # Points in the whole box, and as many around the octahedra (inside some of them).
+    near = ts[rng.integers(10, size=2000), :3, 3] + rng.uniform(-1, 1, size=(2000, 3))
+    p = np.vstack([rng.uniform(-8, 8, size=(2000, 3)), near]).astype(np.float32)
+    for accuracy in (1.0, 2.0):
+        wg = g.compute_winding_number(p, accuracy=accuracy)
+        wc = c.compute_winding_number(p, accuracy=accuracy)
+        assert np.abs(wg - wc).max() <= 1e-4
+        assert g.last_query()["device"] == "gpu" and g.last_query()["name"] == "compute_winding_number"
+    assert (wc > 0.5).sum() > 200
+    away = np.abs(wc - 0.5) > 1e-3
+    sd_g, sd_c = g.compute_signed_distance(p), c.compute_signed_distance(p)
+    np.testing.assert_array_equal(np.signbit(sd_g[away]), np.signbit(sd_c[away]))
+    np.testing.assert_array_equal(g.compute_occupancy(p)[away], c.compute_occupancy(p)[away])

@@ -298,6 +298,17 @@ class Scene:
         its sensor's table once and then its poses, and gets 4 bytes a ray back for a range."""
         return self._native.last_gpu_batch()
 
+    def last_query(self):
+        """What the last query did, or ``None`` before the first: a dict with ``name`` (the
+        method, e.g. ``"count_intersections"``, ``"compute_winding_number"``), ``device``
+        (``"gpu"`` or ``"cpu"``: where it was answered; under ``backend="auto"`` the CPU after a
+        GPU fault) and ``gpu`` (for GPU work, the batch as ``last_gpu_batch`` gives it: bytes up
+        and down, submissions, wall and GPU time; else ``None``). Every query runs on the GPU
+        where the scene's backend traces there: rays, counts and lists of every hit, closest
+        points, winding numbers and the signs of signed distance and occupancy (``accuracy=inf``,
+        the exact sum, on the CPU)."""
+        return self._native.last_query()
+
     def gpu_uploads(self):
         """What the GPU's two levels hold and have written, or ``None`` before their first ray
         query (a GPU backend with the BVH, the grid, pc or brute force): a dict of
