@@ -344,7 +344,8 @@ fn hardware_suite_quick_runs_every_part() {
     for set in ["camera", "incoherent"] {
         // Every structure the suite traces (hwrt too where the adapter has ray queries, as
         // lavapipe 25 has), the BVH with every variant, the others with those that apply, and
-        // each structure's lean answers (t and triangle; occlusion bits) beside them.
+        // each structure's lean answers (t and triangle; occlusion bits; every hit counted and
+        // listed) beside them.
         let gpu: Vec<&serde_json::Value> = rays
             .iter()
             .filter(|r| r["set"] == set && r["backend"] == "gpu")
@@ -357,25 +358,54 @@ fn hardware_suite_quick_runs_every_part() {
         let n = accels.len();
         assert_eq!(
             gpu.len(),
-            variants.len() + (n - 1) * (variants.len() - 2) + n * 2,
+            variants.len() + (n - 1) * (variants.len() - 2) + n * 4,
             "{set}: {md}"
         );
         // Bytes a ray over the bus: 24 up (and the chunks' constants); down 16 with u, v, 8
-        // without, an eighth of a byte for occlusion (and the timestamps).
+        // without, an eighth of a byte for occlusion, 4 for a count (and the timestamps); a
+        // list brings 4 a ray and 16 a hit.
         for r in rays.iter().filter(|r| r["set"] == set && r["backend"] == "gpu") {
             let (up, down) = (
                 r["bytes_up_per_ray"].as_f64().unwrap(),
                 r["bytes_down_per_ray"].as_f64().unwrap(),
             );
             let want = match r["variant"].as_str().unwrap() {
-                "answers=t,tri" => 8.0,
-                "answers=occlusion" => 0.125,
-                _ => 16.0,
+                "answers=t,tri" => 8.0..9.0,
+                "answers=occlusion" => 0.125..1.125,
+                "answers=counts" => 4.0..5.0,
+                "answers=lists" => 4.0..f64::INFINITY,
+                _ => 16.0..17.0,
             };
-            assert!((24.0..25.0).contains(&up) && (want..want + 1.0).contains(&down), "{r}");
+            assert!((24.0..25.0).contains(&up) && want.contains(&down), "{r}");
         }
     }
     assert!(rays.iter().all(|r| r["differing_from_cpu"].as_f64().unwrap() <= 0.001));
+    // Point queries: nearest points through every structure and winding numbers, a CPU row
+    // beside each GPU row; 12 bytes a point up, 32 down for a nearest point (triangle,
+    // barycentrics and the search's work), 4 for a winding number.
+    let points = json["points"].as_array().unwrap();
+    for accel in ["grid", "pc", "bvh", "irregular", "-"] {
+        let query = if accel == "-" { "winding" } else { "closest" };
+        for backend in ["cpu", "gpu"] {
+            let row = points
+                .iter()
+                .find(|r| r["accel"] == accel && r["query"] == query && r["backend"] == backend)
+                .unwrap_or_else(|| panic!("no {backend} {query} {accel} row: {md}"));
+            assert!(row["differing_from_cpu"].as_f64().unwrap() <= 0.001, "{row}");
+            if backend == "gpu" {
+                let (up, down) = (
+                    row["bytes_up_per_point"].as_f64().unwrap(),
+                    row["bytes_down_per_point"].as_f64().unwrap(),
+                );
+                let want = if query == "winding" { 4.0 } else { 32.0 };
+                assert!(
+                    (12.0..13.0).contains(&up) && (want..want + 1.0).contains(&down),
+                    "{row}"
+                );
+            }
+        }
+    }
+    assert!(md.contains("## Point queries"), "{md}");
     assert!(!json["builds"].as_array().unwrap().is_empty(), "{md}");
     let _ = std::fs::remove_dir_all(&dir);
 }

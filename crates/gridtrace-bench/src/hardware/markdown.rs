@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::{FrameRow, HardwareReport, RayRow};
+use super::{FrameRow, HardwareReport, PointRow, RayRow};
 use gridtrace::gpu::HostPhases;
 
 pub fn markdown(r: &HardwareReport) -> String {
@@ -67,6 +67,7 @@ pub fn markdown(r: &HardwareReport) -> String {
     frames(&mut md, "Frames", &r.frames);
     frames(&mut md, "The big frame", &r.big_frame);
     rays(&mut md, &r.rays);
+    points(&mut md, &r.points);
     builds(&mut md, r);
     md
 }
@@ -141,6 +142,39 @@ fn rays(md: &mut String, rows: &[RayRow]) {
             r.chunks.map_or("-".into(), |c| c.to_string()),
             r.mrays_per_s,
             100.0 * r.hit_fraction,
+            100.0 * r.differing_from_cpu
+        );
+    }
+    md.push('\n');
+}
+
+fn points(md: &mut String, rows: &[PointRow]) {
+    if rows.is_empty() {
+        return;
+    }
+    md.push_str("## Point queries\n\nPoints uniform in the mesh's box grown by a tenth a side. `closest`: the nearest point through each structure's search; `winding`: generalised winding numbers over the fast winding tree at accuracy 2 (the sign of signed distance and occupancy), the tree built before the times. Wall: the whole query (median); GPU: the timestamps summed; B/pt: bytes over the bus a point, up / down; x CPU: the CPU's median over the GPU's; differing: answers apart from the CPU's by more than 1e-4 relative (distances) or 1e-3 (winding numbers).\n\n| mesh | query | accel | backend | points | ms | GPU ms | B/pt | Mpoints/s | x CPU | differing |\n|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    for r in rows {
+        let cpu = rows.iter().find(|c| {
+            r.backend == "gpu" && c.backend == "cpu" && c.mesh == r.mesh && c.query == r.query && c.accel == r.accel
+        });
+        let ratio = cpu.map_or("-".into(), |c| {
+            format!("{:.2}", c.wall.median_ms / r.wall.median_ms.max(1e-9))
+        });
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {:.2} | {} | {} | {:.2} | {ratio} | {:.3}% |",
+            r.mesh,
+            r.query,
+            r.accel,
+            r.backend,
+            r.points,
+            r.wall.median_ms,
+            r.gpu_median_ms.map_or("-".into(), |v| format!("{v:.2}")),
+            match (r.bytes_up_per_point, r.bytes_down_per_point) {
+                (Some(up), Some(down)) => format!("{up:.1} / {down:.1}"),
+                _ => "-".into(),
+            },
+            r.mpoints_per_s,
             100.0 * r.differing_from_cpu
         );
     }

@@ -17,6 +17,7 @@
 mod builds;
 mod frames;
 mod markdown;
+mod points;
 mod rays;
 
 use std::path::{Path, PathBuf};
@@ -32,6 +33,7 @@ use crate::{Machine, scenes};
 
 pub use builds::BuildRow;
 pub use frames::FrameRow;
+pub use points::PointRow;
 pub use rays::{RayRow, camera_rays};
 
 /// What one suite run covers.
@@ -161,6 +163,9 @@ pub struct HardwareReport {
     pub frames: Vec<FrameRow>,
     pub big_frame: Vec<FrameRow>,
     pub rays: Vec<RayRow>,
+    /// Nearest points and winding numbers (`points.rs`).
+    #[serde(default)]
+    pub points: Vec<PointRow>,
     pub builds: Vec<BuildRow>,
     /// Parts not run, and why (missing files, the time budget).
     pub skipped: Vec<String>,
@@ -312,6 +317,7 @@ pub fn run(
         frames: Vec::new(),
         big_frame: Vec::new(),
         rays: Vec::new(),
+        points: Vec::new(),
         builds: Vec::new(),
         skipped,
         mismatches: Vec::new(),
@@ -346,6 +352,17 @@ pub fn run(
         &gpu,
         &meshes,
         variants,
+        budget.part(RAYS_UNTIL),
+        &mut r.skipped,
+        &mut r.mismatches,
+        log,
+    )?;
+    checkpoint(r, &budget, out)?;
+    // The point queries share the ray batches' part of the budget.
+    r.points = points::point_study(
+        plan,
+        &gpu,
+        &meshes,
         budget.part(RAYS_UNTIL),
         &mut r.skipped,
         &mut r.mismatches,
