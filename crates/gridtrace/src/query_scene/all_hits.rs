@@ -1,5 +1,6 @@
 //! Every hit along each ray (`count_intersections`, `list_intersections`), on the CPU's
-//! cores, through the structure's all-hits walk (`AccelStructure::all_hits`).
+//! cores, through the structure's all-hits walk (`AccelStructure::all_hits`), or on the GPU
+//! where the scene traces there (`gpu_all_hits.rs`: the same answers).
 //!
 //! **What counts: Open3D's rule.** Every face the ray hits with `t >= 0` (the library's
 //! triangle test, exactly brute force's set), nearest first (equal `t`: by geometry id, then
