@@ -21,6 +21,8 @@ use crate::Result;
 
 mod expansion;
 mod fast;
+mod morton;
+mod shape;
 mod wide;
 pub use fast::{BETA, FastWinding, check_accuracy};
 pub(crate) use wide::{DEVICE_EMPTY, DEVICE_LEAF, DeviceTree};

@@ -1,6 +1,7 @@
 //! Fast winding numbers (Barill, Dickson, Schmidt, Levin, Jacobson 2018, "Fast Winding Numbers
-//! for Soups and Clouds"), second order, as libigl's: a BVH over the triangles (the library's
-//! SAH builder, collapsed to eight children a node: `wide.rs`), and for each node the moments
+//! for Soups and Clouds"), second order, as libigl's: a tree of eight children a node over the
+//! triangles (the Morton-order builder, `morton.rs`, or the scene's ray BVH collapsed; the
+//! shape's numbers in `shape.rs`, the walk in `wide.rs`), and for each node the moments
 //! of its triangles' area vectors about their area-weighted centre `c` to second order
 //! (`expansion.rs`) and a radius `r` around `c` that holds them all.
 //!
@@ -23,10 +24,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::expansion::Moment;
-use super::solid_angle;
+use super::shape::Shape;
 use super::wide::WideTree;
-use crate::accel::bvh::MAX_LEAF;
+use super::{morton, solid_angle};
 use crate::accel::{Aabb, Bvh, TriAccel};
 
 /// A node is summed as its expansion when the point is farther than `BETA` times its radius
@@ -56,23 +56,23 @@ pub struct FastWinding {
 }
 
 impl FastWinding {
-    /// Builds the tree and its moments over `tris` (the library's SAH builder; `from_bvh`
-    /// where a BVH over them exists).
+    /// Builds the tree and its moments over `tris`: the Morton-order tree (`morton.rs`; a
+    /// sort, a small fraction of an SAH build). `from_bvh` where a BVH over them exists.
     pub fn build(tris: &[TriAccel]) -> FastWinding {
-        let boxes: Vec<Aabb> = tris.par_iter().map(|t| Aabb::from_points(&t.vertices())).collect();
-        let centers: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
-        FastWinding::from_bvh(&Bvh::build(&boxes, &centers), tris)
+        FastWinding {
+            wide: morton::shape(tris).tree(tris),
+            triangles: tris.len(),
+        }
     }
 
     /// The moments and the wide tree over a binary BVH already built over `tris` (a scene's
-    /// ray BVH: its leaves hold up to `MAX_LEAF` triangles, one block of lanes). Any partition
-    /// of the triangles gives right answers (the moments and radii are the triangles' own);
-    /// the tree's shape only decides how many nodes a point opens.
+    /// ray BVH: its leaves hold up to `MAX_LEAF` triangles, one block of lanes), collapsed to
+    /// eight children a node (`Shape::from_bvh`).
     pub fn from_bvh(bvh: &Bvh, tris: &[TriAccel]) -> FastWinding {
         let wide = if tris.is_empty() {
-            WideTree::build(bvh, &[], tris)
+            Shape::default().tree(tris)
         } else {
-            WideTree::build(bvh, &node_moments(bvh, tris), tris)
+            Shape::from_bvh(bvh).tree(tris)
         };
         FastWinding {
             wide,
@@ -149,45 +149,6 @@ impl FastWinding {
     pub(crate) fn device(&self) -> super::wide::DeviceTree<'_> {
         self.wide.device()
     }
-}
-
-/// Each binary node's moments: leaves from their triangles in parallel (the radius through
-/// their vertices), then the inner nodes children first.
-fn node_moments(bvh: &Bvh, tris: &[TriAccel]) -> Vec<Moment> {
-    // Children before parents: the reverse of a preorder (whatever the node numbering).
-    let mut order = Vec::with_capacity(bvh.nodes.len());
-    let mut stack = vec![0usize];
-    while let Some(i) = stack.pop() {
-        order.push(i);
-        let n = &bvh.nodes[i];
-        if !n.is_leaf() {
-            stack.extend([n.first as usize, n.first as usize + 1]);
-        }
-    }
-    let mut moments = vec![Moment::ZERO; bvh.nodes.len()];
-    moments.par_iter_mut().zip(&bvh.nodes).for_each(|(m, n)| {
-        if n.is_leaf() {
-            let prims = &bvh.prims[n.first as usize..(n.first + n.count) as usize];
-            let mut parts = [Moment::ZERO; MAX_LEAF];
-            for (part, &t) in parts.iter_mut().zip(prims) {
-                *part = Moment::triangle(&tris[t as usize]);
-            }
-            *m = Moment::merge(&parts[..prims.len()]).with_radius(
-                prims
-                    .iter()
-                    .flat_map(|&t| tris[t as usize].vertices())
-                    .map(|v| v.as_dvec3()),
-            );
-        }
-    });
-    for &i in order.iter().rev() {
-        let n = bvh.nodes[i];
-        if !n.is_leaf() {
-            let kids = [moments[n.first as usize], moments[n.first as usize + 1]];
-            moments[i] = Moment::merge(&kids);
-        }
-    }
-    moments
 }
 
 /// The indices of `points` sorted by their Morton codes (ten bits an axis over the finite

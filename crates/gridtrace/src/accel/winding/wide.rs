@@ -1,4 +1,4 @@
-//! The fast winding numbers' query tree: the binary BVH collapsed to eight children a node,
+//! The fast winding numbers' query tree: eight children a node (its shape from `shape.rs`),
 //! each child's second-order coefficients (`expansion.rs`) stored lane by lane, and each leaf's
 //! triangles as one block of eight lanes; walked in `f32` lanes (eight, `simd::F8`, where the
 //! CPU runs them: AVX2 or NEON; else two halves of four), as libigl walks its four-wide tree.
@@ -16,14 +16,14 @@
 
 use glam::Vec3;
 
-use super::expansion::{FIELDS, Moment};
+use super::expansion::FIELDS;
+use crate::accel::TriAccel;
 use crate::accel::lanes::{Lanes, Mask};
-use crate::accel::{Bvh, TriAccel};
 
 /// Children per node: one AVX register of lanes.
 pub(super) const WIDTH: usize = 8;
 
-// A leaf of the library's BVH builder fits one block.
+// A leaf of the library's BVH builder fits one block (`shape::Shape::from_bvh`).
 const _: () = assert!(crate::accel::bvh::MAX_LEAF <= WIDTH);
 
 /// A child reference: a node's index, or `LEAF | block`, or `EMPTY` (the GPU's walk reads
@@ -47,7 +47,7 @@ pub(super) struct WideNode {
 /// denominator `4 |a|^3 >= 0`, or `atan2(0, 0)` at that vertex, which `atan2_lanes` calls 0).
 #[derive(Debug, Clone)]
 #[repr(C, align(32))]
-struct Block {
+pub(super) struct Block {
     v: [[[f32; WIDTH]; 3]; 3],
 }
 
@@ -59,39 +59,10 @@ pub(super) struct WideTree {
 }
 
 impl WideTree {
-    /// Collapses `bvh` (built over `tris`, with `moments` per binary node): each wide node
-    /// takes a binary node's children and opens the one of largest radius until it has eight
-    /// or only leaves.
-    pub fn build(bvh: &Bvh, moments: &[Moment], tris: &[TriAccel]) -> WideTree {
-        let bin = &bvh.nodes;
-        let mut tree = WideTree {
-            nodes: Vec::new(),
-            blocks: Vec::new(),
-        };
-        if tris.is_empty() {
-            return tree;
-        }
-        tree.nodes.push(empty_node());
-        let mut work = vec![(0usize, 0usize)];
-        while let Some((wide, b)) = work.pop() {
-            let kids = bvh.wide_children(b, WIDTH, |k| moments[k].radius);
-            for (slot, &k) in kids.iter().enumerate() {
-                for (row, x) in moments[k].coefficients().into_iter().enumerate() {
-                    tree.nodes[wide].rows[row][slot] = x;
-                }
-                let n = &bin[k];
-                tree.nodes[wide].child[slot] = if n.is_leaf() {
-                    let prims = &bvh.prims[n.first as usize..(n.first + n.count) as usize];
-                    tree.blocks.push(block(tris, prims));
-                    LEAF | (tree.blocks.len() - 1) as u32
-                } else {
-                    tree.nodes.push(empty_node());
-                    work.push((tree.nodes.len() - 1, k));
-                    (tree.nodes.len() - 1) as u32
-                };
-            }
-        }
-        tree
+    /// The tree of `nodes` (the root first) over `blocks` (`shape::Shape::tree` assembles
+    /// them: a node's children by `node`).
+    pub fn from_parts(nodes: Vec<WideNode>, blocks: Vec<Block>) -> WideTree {
+        WideTree { nodes, blocks }
     }
 
     /// The sum of the solid angles at `p` (steradians), far children by their expansion where
@@ -161,16 +132,33 @@ impl WideTree {
     }
 }
 
-fn empty_node() -> WideNode {
-    let mut rows = [[0.0; WIDTH]; FIELDS];
-    rows[3] = [f32::INFINITY; WIDTH];
-    WideNode {
-        rows,
-        child: [EMPTY; WIDTH],
-    }
+/// A child of a wide node: a node's index in the tree or a block's (`node`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Child {
+    Node(u32),
+    Block(u32),
 }
 
-fn block(tris: &[TriAccel], prims: &[u32]) -> Block {
+/// A node of up to `WIDTH` children, each with its cluster's coefficients
+/// (`Moment::coefficients`); the slots after them empty (an infinite radius: never far).
+pub(super) fn node(kids: impl IntoIterator<Item = ([f32; FIELDS], Child)>) -> WideNode {
+    let mut rows = [[0.0; WIDTH]; FIELDS];
+    rows[3] = [f32::INFINITY; WIDTH];
+    let mut child = [EMPTY; WIDTH];
+    for (slot, (coefficients, kid)) in kids.into_iter().take(WIDTH).enumerate() {
+        for (row, x) in coefficients.into_iter().enumerate() {
+            rows[row][slot] = x;
+        }
+        child[slot] = match kid {
+            Child::Node(i) => i,
+            Child::Block(b) => LEAF | b,
+        };
+    }
+    WideNode { rows, child }
+}
+
+/// A leaf's block: `prims` (one to `WIDTH` of them) index `tris`.
+pub(super) fn block(tris: &[TriAccel], prims: &[u32]) -> Block {
     assert!(
         !prims.is_empty() && prims.len() <= WIDTH,
         "a leaf fills one block (MAX_LEAF)"
