@@ -80,6 +80,7 @@ impl QueryScene {
     fn after_move(&mut self) -> Result<()> {
         self.moving = true;
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        *self.winding_only.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         let slot = self.two_level.get_mut().unwrap_or_else(|p| p.into_inner());
         if slot.is_some() {
             *slot = Some(Arc::new(TwoLevel::build(&self.geometries, &self.opts, &self.builds)?));

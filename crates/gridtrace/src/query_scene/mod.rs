@@ -81,6 +81,7 @@ mod gpu_scan;
 mod instanced_rays;
 mod instances;
 mod last_query;
+mod winding_only;
 mod merged;
 mod points;
 mod rays;
@@ -125,6 +126,9 @@ pub struct QueryScene {
     moving: bool,
     /// What the last query did (`last_query.rs`).
     records: Mutex<last_query::Records>,
+    /// The winding numbers' faces and tree while the merged mesh is not built
+    /// (`winding_only.rs`); `None` when a change made them stale.
+    winding_only: Mutex<Option<Arc<winding_only::WindingOnly>>>,
 }
 
 /// Where a ray query runs (`QueryScene::ray_path`).
@@ -152,6 +156,7 @@ impl QueryScene {
             gpu: Mutex::new(None),
             moving: false,
             records: Mutex::default(),
+            winding_only: Mutex::new(None),
         }
     }
 
@@ -255,6 +260,7 @@ impl QueryScene {
     /// top (the bottom levels belong to the meshes and stay).
     fn stale(&mut self) {
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        *self.winding_only.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         // The GPU's renderer stays: the next query uploads what changed (`gpu_rays.rs`).
         *self.two_level.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
     }
@@ -296,6 +302,7 @@ impl QueryScene {
         let world = g.world_vertices();
         // The geometry has a mesh of its own now: its bottom level is built on the next query.
         *self.two_level.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        *self.winding_only.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         let slot = self.merged.get_mut().unwrap_or_else(|p| p.into_inner());
         // In place only when no query holds the merged mesh (`Arc` unique).
         let updated = match slot.as_mut().and_then(Arc::get_mut) {

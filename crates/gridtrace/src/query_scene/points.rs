@@ -120,8 +120,8 @@ impl QueryScene {
     pub fn compute_occupancy_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
         let _record = self.recording("compute_occupancy");
         let accuracy = check_accuracy(accuracy)?;
-        let m = self.merged()?;
-        Ok(winding_numbers(self, &m, points, accuracy)?
+        Ok(self
+            .scene_winding_numbers(points, accuracy)?
             .into_iter()
             .map(|w| match w {
                 w if w.is_nan() => f32::NAN,
@@ -141,6 +141,15 @@ impl QueryScene {
     pub fn winding_numbers_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
         let _record = self.recording("compute_winding_number");
         let accuracy = check_accuracy(accuracy)?;
+        self.scene_winding_numbers(points, accuracy)
+    }
+
+    /// The winding numbers at `points`: the faces' own tree where the merged mesh is not built
+    /// (`winding_only.rs`: no ray structure built for them), else the merged mesh's.
+    fn scene_winding_numbers(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        if let Some(w) = self.winding_only()? {
+            return Ok(w.tree.winding_numbers_at(&w.tris, points, accuracy));
+        }
         let m = self.merged()?;
         winding_numbers(self, &m, points, accuracy)
     }
