@@ -81,13 +81,13 @@ mod gpu_scan;
 mod instanced_rays;
 mod instances;
 mod last_query;
-mod winding_only;
 mod merged;
 mod points;
 mod rays;
 mod streamed_rays;
 mod top_level;
 mod two_level;
+mod winding_only;
 
 pub use all_hits::Intersections;
 pub use batch::{PerRay, RayHits, RayOptions};

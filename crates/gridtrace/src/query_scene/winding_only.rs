@@ -100,13 +100,20 @@ mod tests {
         s.cast_rays(&[[0.0, 0.0, -5.0, 0.0, 0.0, 1.0]]).unwrap();
         assert_eq!(s.structure_builds(), 1);
         let merged = s.winding_numbers(&points).unwrap();
-        let worst = alone.iter().zip(&merged).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        let worst = alone
+            .iter()
+            .zip(&merged)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
         assert!(worst < 0.01, "apart by {worst}");
         assert!(alone.iter().any(|&w| w.abs() > 0.9), "some points inside the box");
         assert_eq!(occupancy, s.compute_occupancy(&points).unwrap());
         // A change drops both; the faces' tree answers again, for the scene as it is now.
         s.remove(0).unwrap();
-        assert_eq!(s.winding_numbers(&points).unwrap(), soup_alone.winding_numbers(&points).unwrap());
+        assert_eq!(
+            s.winding_numbers(&points).unwrap(),
+            soup_alone.winding_numbers(&points).unwrap()
+        );
         assert_eq!(s.structure_builds(), 1);
     }
 }
