@@ -53,6 +53,7 @@ fn main() -> gridtrace::Result<()> {
                     gridtrace::gpu::ChunkAnswers::Occlusion(b) => b.len(),
                     gridtrace::gpu::ChunkAnswers::Range(t) => t.len(),
                     gridtrace::gpu::ChunkAnswers::Points { hits, .. } => hits.len(),
+                    gridtrace::gpu::ChunkAnswers::Winding(w) => w.len(),
                 })
             })?;
             let s = gpu.last_query_stats().clone();

@@ -94,22 +94,22 @@ pub fn point_study(
             let cpu = mesh_for(cpu_reference(accel))?;
             head.triangles = tm.triangle_count();
             let points = points_in_box(&tm, plan.rays);
-            let (times, want) = timed(plan, || Ok((cpu.closest_points_with(Backend::Cpu, &points)?, None)))?;
-            rows.push(head.row("closest", accel.name(), "cpu", &times, None, 0.0));
+            let want = timed(plan, || Ok((cpu.closest_points_with(Backend::Cpu, &points)?, None)))?;
+            rows.push(head.row("closest", accel.name(), "cpu", &want.times, None, 0.0));
             let mut r = open_gpu(gpu, tm.prepared(), &GpuVariants::default())?;
             let tris = &tm.prepared().accel.tris;
-            let (times, got) = timed(plan, || {
+            let got = timed(plan, || {
                 let c = r.closest_points(tris, &points)?;
                 Ok((c, Some(r.last_query_stats().clone())))
             })?;
             let differ = want
-                .0
+                .last
                 .iter()
-                .zip(&got.0)
+                .zip(&got.last)
                 .filter(|(a, b)| (a.distance() - b.distance()).abs() > 1e-4 * a.distance().max(1e-3))
                 .count() as f64
                 / points.len().max(1) as f64;
-            rows.push(head.row("closest", accel.name(), "gpu", &times, Some(&got.1), differ));
+            rows.push(head.row("closest", accel.name(), "gpu", &got.times, Some(&got.stats), differ));
             check(&mut rows, mismatches, log);
         }
         if !budget.allows(&format!("winding numbers of {name}"), skipped) {
@@ -121,21 +121,21 @@ pub fn point_study(
         // The tree built once, outside the times (the query's cost; its build is the CPU's,
         // measured in bench/winding_vs_libigl.py).
         let tree = FastWinding::build(tris);
-        let (times, want) = timed(plan, || Ok((tree.winding_numbers_at(tris, &points, 2.0), None)))?;
-        rows.push(head.row("winding", "-", "cpu", &times, None, 0.0));
+        let want = timed(plan, || Ok((tree.winding_numbers_at(tris, &points, 2.0), None)))?;
+        rows.push(head.row("winding", "-", "cpu", &want.times, None, 0.0));
         let mut r = open_gpu(gpu, tm.prepared(), &GpuVariants::default())?;
-        let (times, got) = timed(plan, || {
+        let got = timed(plan, || {
             let w = r.winding_numbers(&tree, &points, 2.0)?;
             Ok((w, Some(r.last_query_stats().clone())))
         })?;
         let differ = want
-            .0
+            .last
             .iter()
-            .zip(&got.0)
+            .zip(&got.last)
             .filter(|(a, b)| (*a - *b).abs() > 1e-3)
             .count() as f64
             / points.len().max(1) as f64;
-        rows.push(head.row("winding", "-", "gpu", &times, Some(&got.1), differ));
+        rows.push(head.row("winding", "-", "gpu", &got.times, Some(&got.stats), differ));
         check(&mut rows, mismatches, log);
     }
     Ok(rows)
@@ -169,12 +169,16 @@ fn check(rows: &mut [PointRow], mismatches: &mut Vec<String>, log: &mut dyn FnMu
     }
 }
 
-/// One warm-up, then `reps` timed runs of `f` (wall ms); the last run's answers, and the GPU
-/// statistics of every run.
-fn timed<T>(
-    plan: &Plan,
-    mut f: impl FnMut() -> Result<(T, Option<GpuQueryStats>)>,
-) -> Result<(Vec<f64>, (T, Vec<GpuQueryStats>))> {
+/// The timed runs of one query: each run's wall time (ms), the last run's answers and every
+/// run's GPU statistics (none on the CPU).
+struct Runs<T> {
+    times: Vec<f64>,
+    last: T,
+    stats: Vec<GpuQueryStats>,
+}
+
+/// One warm-up, then `reps` timed runs of `f`.
+fn timed<T>(plan: &Plan, mut f: impl FnMut() -> Result<(T, Option<GpuQueryStats>)>) -> Result<Runs<T>> {
     let (times, mut outs) = repeat_warm(1, plan.warmup_ms, plan.reps, || {
         let t0 = Instant::now();
         let out = f()?;
@@ -182,7 +186,7 @@ fn timed<T>(
     })?;
     let stats: Vec<GpuQueryStats> = outs.iter().filter_map(|o| o.1.clone()).collect();
     let last = outs.pop().expect("at least one timed run").0;
-    Ok((times, (last, stats)))
+    Ok(Runs { times, last, stats })
 }
 
 struct PointHead<'a> {
