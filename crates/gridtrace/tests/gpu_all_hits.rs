@@ -15,32 +15,10 @@ use gridtrace::gpu::{AllHits, GpuContext, GpuRenderer, GpuVariants, RaySlice};
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{InstanceOf, Intersections, PerRay, RayOptions};
 use gridtrace::scene::builtin;
-use gridtrace::testing::{cuboid, gpu_kinds, ray_set, skip_gpu, soup_arrays, triangle_soup};
+use gridtrace::testing::{cuboid, gpu_kinds, open3d_cube, ray_set, skip_gpu, soup_arrays, triangle_soup};
 
 // One test at a time on the device: lavapipe uses every core for each dispatch anyway.
 static GPU_LOCK: Mutex<()> = Mutex::new(());
-
-/// Open3D's `create_box` cube (each side two faces split along a diagonal).
-fn open3d_cube() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let v = (0..8u32)
-        .map(|i| [(i >> 2) as f32, ((i >> 1) & 1) as f32, (i & 1) as f32])
-        .collect();
-    let f = vec![
-        [0, 1, 3],
-        [0, 3, 2],
-        [4, 6, 7],
-        [4, 7, 5],
-        [0, 4, 5],
-        [0, 5, 1],
-        [2, 3, 7],
-        [2, 7, 6],
-        [0, 2, 6],
-        [0, 6, 4],
-        [1, 5, 7],
-        [1, 7, 3],
-    ];
-    (v, f)
-}
 
 /// Two soups (many hits a ray, slivers), a box, and Open3D's cube twice at one place (ties of
 /// different geometries at one `t`, and within each the shared diagonals'); with `instanced`

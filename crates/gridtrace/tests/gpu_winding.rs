@@ -13,31 +13,9 @@ use gridtrace::QueryScene;
 use gridtrace::accel::AccelKind;
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::InstanceOf;
-use gridtrace::testing::{skip_gpu, soup_arrays, triangle_soup};
+use gridtrace::testing::{open3d_cube, skip_gpu, soup_arrays, triangle_soup};
 
 static GPU_LOCK: Mutex<()> = Mutex::new(());
-
-/// Open3D's `create_box` unit cube: closed, its normals outward (winding 1 inside).
-fn cube() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let v = (0..8u32)
-        .map(|i| [(i >> 2) as f32, ((i >> 1) & 1) as f32, (i & 1) as f32])
-        .collect();
-    let f = vec![
-        [0, 1, 3],
-        [0, 3, 2],
-        [4, 6, 7],
-        [4, 7, 5],
-        [0, 4, 5],
-        [0, 5, 1],
-        [2, 3, 7],
-        [2, 7, 6],
-        [0, 2, 6],
-        [0, 6, 4],
-        [1, 5, 7],
-        [1, 7, 3],
-    ];
-    (v, f)
-}
 
 /// A closed box, a closed turned box inside another's reach (overlap: winding 2 there), and an
 /// open soup (no inside: smooth values between).
@@ -47,7 +25,7 @@ fn scene(backend: Backend, accel: AccelKind) -> (QueryScene, u32) {
         accel: accel.into(),
         ..Default::default()
     });
-    let (v, f) = cube();
+    let (v, f) = open3d_cube();
     let to_centre = Mat4::from_scale_rotation_translation(Vec3::splat(2.0), Quat::IDENTITY, Vec3::splat(-1.0));
     let boxed = s.add_triangles(v, f, Some(to_centre)).unwrap();
     // The instance places the unit cube (the mesh's own vertices), 1.6 a side, turned.
@@ -112,6 +90,10 @@ fn gpu_winding_numbers_equal_the_cpu_tree() {
     for kind in [AccelKind::Bvh, AccelKind::Grid] {
         let (cpu, _) = scene(Backend::Cpu, kind);
         let (gpu, _) = scene(Backend::Gpu, kind);
+        // The CPU's merged mesh built (a distance needs it), so that its winding numbers come
+        // from the tree the GPU walks (a fresh CPU scene answers from its faces' own tree:
+        // winding_only.rs, the same within the accuracy's bound, not the same bits).
+        cpu.compute_distance(&[[0.0, 0.0, -9.0]]).unwrap();
         for accuracy in [1.0, 2.0, 8.0] {
             let want = cpu.winding_numbers_at(&pts, accuracy).unwrap();
             let got = gpu.winding_numbers_at(&pts, accuracy).unwrap();
@@ -188,6 +170,8 @@ fn gpu_winding_numbers_follow_a_move() {
     let pts = points(1000);
     let (mut cpu, moved) = scene(Backend::Cpu, AccelKind::Bvh);
     let (mut gpu, _) = scene(Backend::Gpu, AccelKind::Bvh);
+    let point = [[0.0, 0.0, -9.0]];
+    cpu.compute_distance(&point).unwrap();
     let first = gpu.winding_numbers(&pts).unwrap();
     assert!(worst(&first, &cpu.winding_numbers(&pts).unwrap()) <= 1e-4);
     let again = gpu.winding_numbers(&pts).unwrap();
@@ -195,6 +179,7 @@ fn gpu_winding_numbers_follow_a_move() {
     let to = Mat4::from_rotation_translation(Quat::from_rotation_y(0.7), Vec3::new(-0.6, 0.4, 0.3));
     cpu.set_transform(moved, to).unwrap();
     gpu.set_transform(moved, to).unwrap();
+    cpu.compute_distance(&point).unwrap();
     let want = cpu.winding_numbers(&pts).unwrap();
     let got = gpu.winding_numbers(&pts).unwrap();
     assert!(worst(&want, &got) <= 1e-4);

@@ -28,7 +28,7 @@ use super::kernels::Kernel;
 use super::layout::{BatchUniform, GpuHit};
 use super::queries::WireSource;
 use super::renderer::{GpuRenderer, WorkUse, grow};
-use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
+use super::timing::{GpuQueryStats, parse_stages};
 use super::upload::MappedUpload;
 use crate::render::{Ablation, Mode};
 use crate::util::Instant;
@@ -71,14 +71,7 @@ impl GpuRenderer {
     ) -> Result<()> {
         let t0 = Instant::now();
         let n_all = rays.len();
-        let mut stats = GpuQueryStats {
-            rays: n_all as u64,
-            timings: GpuTimings {
-                from_timestamps: self.timed(),
-                ..GpuTimings::default()
-            },
-            ..GpuQueryStats::default()
-        };
+        let mut stats = self.new_stats(n_all);
         let cap = self.chunk_items(n_all, false).max(1);
         self.kernels.prepare(&self.ctx.device, &self.scene.walk)?;
         let lights = self.work.as_ref().map_or(1, |w| w.max_lights);
@@ -93,14 +86,7 @@ impl GpuRenderer {
             let items = first..(first + cap).min(n_all);
             self.all_hits_chunk(rays, items, interval, mask, &table, answer, &mut stats, &mut take)?;
         }
-        stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
-        stats.timings.host.close(stats.wall_ms);
-        stats.timings.total_ms = if self.timed() {
-            stats.timings.stages_ms.values().sum()
-        } else {
-            stats.wall_ms
-        };
-        self.last_query = stats;
+        self.keep_stats(stats, t0);
         Ok(())
     }
 

@@ -301,14 +301,7 @@ impl GpuRenderer {
         let kind = self.kind;
         let t0 = Instant::now();
         let n = source.len();
-        let mut stats = GpuQueryStats {
-            rays: n as u64,
-            timings: GpuTimings {
-                from_timestamps: self.timed(),
-                ..GpuTimings::default()
-            },
-            ..GpuQueryStats::default()
-        };
+        let mut stats = self.new_stats(n);
         let cap = self.chunk_capacity(source.sensor().is_some());
         let chunks: Vec<Range<usize>> = (0..n).step_by(cap).map(|a| a..(a + cap).min(n)).collect();
         if !chunks.is_empty() {
@@ -353,6 +346,25 @@ impl GpuRenderer {
             }
         }
         outcome?;
+        self.keep_stats(stats, t0);
+        Ok(())
+    }
+
+    /// A batch's statistics before its first chunk: `items` items, the timestamps' kind.
+    pub(super) fn new_stats(&self, items: usize) -> GpuQueryStats {
+        GpuQueryStats {
+            rays: items as u64,
+            timings: GpuTimings {
+                from_timestamps: self.timed(),
+                ..GpuTimings::default()
+            },
+            ..GpuQueryStats::default()
+        }
+    }
+
+    /// Closes a batch's statistics begun at `t0` (the wall time, the host's phases, the total
+    /// from the timestamps where the device has them) and keeps them (`last_query_stats`).
+    pub(super) fn keep_stats(&mut self, mut stats: GpuQueryStats, t0: Instant) {
         stats.wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.timings.host.close(stats.wall_ms);
         stats.timings.total_ms = if self.timed() {
@@ -361,7 +373,6 @@ impl GpuRenderer {
             stats.wall_ms
         };
         self.last_query = stats;
-        Ok(())
     }
 
     /// Items a chunk holds at most: what the device's bindings allow (a tile's), up to

@@ -214,29 +214,7 @@ mod tests {
     use super::*;
     use crate::accel::AccelKind;
     use crate::query::{Backend, QueryOptions};
-
-    /// The unit cube as Open3D's `create_box` makes it: each side two faces split along a
-    /// diagonal (vertex `4x + 2y + z` at `(x, y, z)`), outward normals.
-    fn cube() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-        let v = (0..8u32)
-            .map(|i| [(i >> 2) as f32, ((i >> 1) & 1) as f32, (i & 1) as f32])
-            .collect();
-        let f = vec![
-            [0, 1, 3],
-            [0, 3, 2],
-            [4, 6, 7],
-            [4, 7, 5],
-            [0, 4, 5],
-            [0, 5, 1],
-            [2, 3, 7],
-            [2, 7, 6],
-            [0, 2, 6],
-            [0, 6, 4],
-            [1, 5, 7],
-            [1, 7, 3],
-        ];
-        (v, f)
-    }
+    use crate::testing::open3d_cube;
 
     /// Open3D's own test rays: up through the diagonals of the bottom and the top (both
     /// faces of each side hit at one `t`), the same from the centre, and a miss.
@@ -252,7 +230,7 @@ mod tests {
             backend: Backend::Cpu,
             ..Default::default()
         });
-        let (v, f) = cube();
+        let (v, f) = open3d_cube();
         for _ in 0..copies {
             s.add_triangles(v.clone(), f.clone(), None).unwrap();
         }
