@@ -43,5 +43,17 @@ pub(super) struct Batches {
     /// bindings hold); tests lower it to split lists.
     pub max_list_hits: Option<u32>,
     /// The fast winding tree on the device, once a winding batch uploaded it (`winding.rs`).
-    pub winding: Option<super::winding::DeviceWinding>,
+    pub winding: Option<DeviceWinding>,
+}
+
+/// The fast winding tree on the device (`winding.rs`): its arrays (kept with their bind group,
+/// which reads them), the bind group (winding.wgsl's group 2), and which tree it is (a hash of
+/// its nodes' bytes).
+pub(super) struct DeviceWinding {
+    pub key: u64,
+    pub _nodes: wgpu::Buffer,
+    pub _blocks: wgpu::Buffer,
+    pub group: wgpu::BindGroup,
+    /// Bytes uploaded (the nodes and the blocks).
+    pub bytes: u64,
 }

@@ -10,6 +10,7 @@
 //! move has other coefficients): asking with the same tree again uploads nothing. `accuracy
 //! = inf` (the exact `f64` sum) stays on the CPU, which the callers see to.
 
+use super::batch_buffers::DeviceWinding;
 use super::bindings::{self, WINDING_BINDINGS, WindingSlot};
 use super::constants::WIND_STACK;
 use super::points::PointRows;
@@ -17,17 +18,6 @@ use super::queries::{Bounds, ChunkAnswers, Query};
 use super::renderer::GpuRenderer;
 use crate::accel::winding::{DeviceTree, FastWinding};
 use crate::{Error, Result};
-
-/// The tree on the device: its arrays, their bind group (winding.wgsl's group 2), and what it
-/// was made from.
-pub(crate) struct DeviceWinding {
-    key: u64,
-    _nodes: wgpu::Buffer,
-    _blocks: wgpu::Buffer,
-    pub group: wgpu::BindGroup,
-    /// Bytes uploaded (the nodes and the blocks).
-    pub bytes: u64,
-}
 
 /// FNV-1a over the bytes, eight at a time, with the lengths: which tree the device holds.
 fn key_of(tree: &DeviceTree<'_>) -> u64 {
