@@ -53,6 +53,7 @@ pub mod variants;
 pub mod walks;
 mod wavefront;
 mod winding;
+mod wire;
 
 pub use all_hits::AllHits;
 pub use context::check_scene_fits;

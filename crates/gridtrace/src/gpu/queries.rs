@@ -34,77 +34,15 @@ use super::layout::{BatchUniform, GpuHit};
 use super::renderer::{ACCUM_TEXEL_BYTES, GpuRenderer, WorkUse, grow};
 use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
 use super::upload::MappedUpload;
+pub use super::wire::{RaySlice, SensorLayout, WireSource};
+use crate::Result;
 use crate::accel::{AccelKind, Hit, Ray};
 use crate::render::{Ablation, Mode};
-use crate::{Error, Result};
 
 /// Most items of one chunk (one submission). A million rays go in four, so that the host's
 /// writing and reading of one overlaps the device's tracing of another; each submission costs
 /// the driver tens of microseconds, a chunk's tracing hundreds.
 pub const PIPELINE_ITEMS: usize = 1 << 18;
-/// Items a worker writes at a time: enough to amortise the hand-off, few enough that a
-/// chunk spreads over every core.
-const PIECE_ITEMS: usize = 16 * 1024;
-
-/// A batch's rays (or points) as its caller holds them, written into the upload as they are.
-pub trait WireSource: Sync {
-    /// Items in the batch.
-    fn len(&self) -> usize;
-    fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-    /// Words an item on the wire: 3 (a point), 6 (origin, direction; the batch's interval and
-    /// mask), 8 (origin, t_min, direction, t_max; the batch's mask) or 9 (those and the ray's
-    /// mask, a u32: `cast_masked`).
-    fn stride(&self) -> usize;
-    /// Writes items `first..` into `out` (whole items: `stride` little-endian floats each),
-    /// false if one of them is not a valid item (the batch is then not traced).
-    fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool;
-    /// The error naming the batch's first invalid item (after `write` said there is one).
-    fn invalid(&self) -> Error;
-    /// For a source of stride 0 (nothing on the wire): the sensor whose table and poses the
-    /// device holds, from which `batch.wgsl` makes the rays (`scan.rs`).
-    fn sensor(&self) -> Option<SensorLayout> {
-        None
-    }
-}
-
-/// Where a sensor's rays come from, as the batch kernel reads them (`BatchUniform`): a source
-/// of stride 0 (`scan.rs`).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SensorLayout {
-    /// Cells a environment (rows x columns) and columns.
-    pub cells: u32,
-    pub cols: u32,
-    /// Where the poses start in the sensor buffer, in floats (after the table's six a cell).
-    pub poses_at: u32,
-    /// Poses an environment: `cols` (one a column: a rolling scan) or 1.
-    pub pose_cols: u32,
-}
-
-/// Rays the caller has already checked (`Ray` is `repr(C)`: origin, direction, 24 bytes),
-/// copied to the wire as they are, with one interval for all.
-pub struct RaySlice<'a> {
-    pub rays: &'a [Ray],
-}
-
-impl WireSource for RaySlice<'_> {
-    fn len(&self) -> usize {
-        self.rays.len()
-    }
-    fn stride(&self) -> usize {
-        6
-    }
-    fn write(&self, first: usize, mut out: wgpu::WriteOnly<'_, [u8]>) -> bool {
-        let n = out.len() / size_of::<Ray>();
-        out.copy_from_slice(bytemuck::cast_slice(&self.rays[first..first + n]));
-        true
-    }
-    fn invalid(&self) -> Error {
-        Error::InvalidInput("a ray batch's rays were checked by its caller".into())
-    }
-}
-
 /// What a ray batch answers (and so what comes back over the bus a ray).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Answer {
@@ -202,15 +140,6 @@ struct InFlight {
     stages: Vec<&'static str>,
     untimed: u32,
 }
-
-/// One worker's share of a chunk's mapped upload.
-struct Piece<'a>(wgpu::WriteOnly<'a, [u8]>);
-
-// SAFETY: wgpu's `WriteOnly<[T]>` is not `Send` only because its `Send` impl asks `T: Sized`
-// (a slice is not); what it guards holds here: each piece is a disjoint part of one mapped
-// range (made by `split_at`), written by the one worker it is moved to, and the mapping (the
-// view) outlives the parallel loop, which ends before the view is dropped.
-unsafe impl Send for Piece<'_> {}
 
 impl GpuRenderer {
     /// Closest hits (with barycentrics) for a batch of rays already checked by the caller.
@@ -578,44 +507,6 @@ impl GpuRenderer {
             stages,
             untimed,
         })
-    }
-
-    /// Writes items `items` of `source` into `slot`'s upload (mapped again after the slot's
-    /// last submission) and unmaps it: their bytes, or the source's error where an item
-    /// cannot go up.
-    pub(super) fn write_wire(&mut self, slot: usize, items: Range<usize>, source: &dyn WireSource) -> Result<u64> {
-        let n = items.len();
-        let item_bytes = source.stride() * size_of::<f32>();
-        let wire_bytes = (n * item_bytes) as u64;
-        let dev = &self.ctx.device;
-        // The chunk's items, in pieces written on every core straight into the mapped upload.
-        // A sensor's rays (stride 0) have nothing on the wire: the upload keeps one word, never
-        // copied (a mapped range must not be empty).
-        let upload = MappedUpload::ready(&mut self.batches.slots[slot].upload, dev, wire_bytes.max(4));
-        let all_valid = wire_bytes == 0 || {
-            let mut view = upload
-                .get_mapped_range_mut(..wire_bytes)
-                .map_err(|e| Error::Gpu(format!("writing a ray batch's upload failed: {e}")))?;
-            let mut rest = view.slice(..);
-            let mut pieces = Vec::with_capacity(n.div_ceil(PIECE_ITEMS));
-            let mut first = items.start;
-            while first < items.end {
-                let take = PIECE_ITEMS.min(items.end - first);
-                let (piece, tail) = rest.split_at(take * item_bytes);
-                rest = tail;
-                pieces.push((first, Piece(piece)));
-                first += take;
-            }
-            pieces
-                .into_par_iter()
-                .map(|(first, Piece(piece))| source.write(first, piece))
-                .reduce(|| true, |a, b| a & b)
-        };
-        MappedUpload::unmap(&self.batches.slots[slot].upload);
-        if !all_valid {
-            return Err(source.invalid());
-        }
-        Ok(wire_bytes)
     }
 
     /// Waits for a submitted chunk and hands its answers to `take`.
