@@ -22,15 +22,15 @@
 use std::mem::size_of;
 use std::ops::Range;
 
-use super::constants::{COUNTER_SLOTS, SLOT_QUEUE_A};
+use super::constants::SLOT_QUEUE_A;
 use super::context::max_binding_bytes;
 use super::kernels::Kernel;
-use super::layout::{BatchUniform, GpuHit};
-use super::queries::WireSource;
-use super::renderer::{GpuRenderer, WorkUse, grow};
+use super::layout::GpuHit;
+use super::queries::{Bounds, WireSource};
+use super::renderer::{GpuRenderer, WorkUse};
 use super::timing::{GpuQueryStats, parse_stages};
 use super::upload::MappedUpload;
-use crate::render::{Ablation, Mode};
+use crate::render::Ablation;
 use crate::util::Instant;
 use crate::{Error, Result};
 
@@ -122,41 +122,13 @@ impl GpuRenderer {
     ) -> Result<()> {
         let n = items.len();
         let wire_bytes = self.write_wire(0, items.clone(), rays)?;
-        let mut counters = [0u32; COUNTER_SLOTS];
-        counters[SLOT_QUEUE_A] = n as u32;
-        let uniform = BatchUniform {
-            stride: rays.stride() as u32,
-            to_shadow: 0,
-            t_min: interval.0,
-            t_max: interval.1,
-            mask,
-            range_only: 0,
-            first: items.start as u32,
-            cells: 0,
-            cols: 0,
-            poses_at: 0,
-            pose_cols: 0,
-            _pad0: 0,
-        };
+        let bounds = Bounds { interval, mask };
+        let constants = self.write_chunk_constants(&items, rays, bounds, SLOT_QUEUE_A, false);
         let device_side = self.batches.device.as_ref().expect("made by `all_hits`");
-        let q = &self.ctx.queue;
-        q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counters));
-        q.write_buffer(&device_side.uniform, 0, bytemuck::bytes_of(&uniform));
-        q.write_buffer(&device_side.sensor, 0, bytemuck::cast_slice(table));
-        let uniforms_bytes = self.write_pass_uniforms_to(
-            self.pass_uniform(),
-            0,
-            0,
-            n as u32,
-            Mode::Cast,
-            self.kind,
-            Ablation::default(),
-        );
-        stats.uploaded_bytes += wire_bytes
-            + size_of_val(&counters) as u64
-            + size_of::<BatchUniform>() as u64
-            + size_of_val(table) as u64
-            + uniforms_bytes;
+        self.ctx
+            .queue
+            .write_buffer(&device_side.sensor, 0, bytemuck::cast_slice(table));
+        stats.uploaded_bytes += wire_bytes + constants + size_of_val(table) as u64;
         let word = size_of::<u32>() as u64;
         let (kernels, region): (&[Kernel], Region) = match answer {
             AllHits::Counts => (
@@ -225,20 +197,8 @@ impl GpuRenderer {
         region: Region,
         stats: &mut GpuQueryStats,
     ) -> Result<Vec<T>> {
+        let readback = self.readback_for(0, region.bytes);
         let dev = &self.ctx.device;
-        let stamps_bytes = if self.timed() {
-            super::timing::MAX_TIMESTAMPS_BYTES
-        } else {
-            0
-        };
-        grow(
-            dev,
-            &mut self.batches.slots[0].readback,
-            region.bytes + stamps_bytes,
-            "batch readback",
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
-        let readback = self.batches.slots[0].readback.clone().expect("grown above");
         let upload = self.batches.slots[0]
             .upload
             .as_ref()
@@ -273,11 +233,7 @@ impl GpuRenderer {
             let out: Vec<T> = bytemuck::pod_collect_to_vec(&raw[..region.bytes as usize]);
             (out, parse_stages(&stages, &self.ctx, &raw[region.bytes as usize..]))
         })?;
-        stats.timings.host.add(&phases);
-        for (name, ms) in times {
-            *stats.timings.stages_ms.entry(name).or_default() += ms;
-        }
-        stats.timings.untimed_passes += untimed;
+        stats.add_readout(&phases, times, untimed);
         Ok(out)
     }
 }

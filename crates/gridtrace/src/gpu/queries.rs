@@ -36,7 +36,7 @@ use super::timing::{GpuQueryStats, GpuTimings, parse_stages};
 use super::upload::MappedUpload;
 pub use super::wire::{RaySlice, SensorLayout, WireSource};
 use crate::Result;
-use crate::accel::{AccelKind, Hit, Ray};
+use crate::accel::{Hit, Ray};
 use crate::render::{Ablation, Mode};
 
 /// Most items of one chunk (one submission). A million rays go in four, so that the host's
@@ -227,7 +227,6 @@ impl GpuRenderer {
         query: Query,
         mut take: impl FnMut(usize, ChunkAnswers<'_>),
     ) -> Result<()> {
-        let kind = self.kind;
         let t0 = Instant::now();
         let n = source.len();
         let mut stats = self.new_stats(n);
@@ -251,7 +250,7 @@ impl GpuRenderer {
             if outcome.is_err() {
                 break;
             }
-            match self.submit_chunk(slot, items.clone(), source, bounds, kind, query, &mut stats) {
+            match self.submit_chunk(slot, items.clone(), source, bounds, query, &mut stats) {
                 Ok(f) => flight[slot] = Some(f),
                 Err(e) => {
                     outcome = Err(e);
@@ -398,70 +397,25 @@ impl GpuRenderer {
 
     /// Writes chunk `items` of `source` into `slot`'s upload and submits its copies and
     /// passes; its readback is asked for, not waited for.
-    #[allow(clippy::too_many_arguments)]
     fn submit_chunk(
         &mut self,
         slot: usize,
         items: Range<usize>,
         source: &dyn WireSource,
         bounds: Bounds,
-        kind: AccelKind,
         query: Query,
         stats: &mut GpuQueryStats,
     ) -> Result<InFlight> {
         let n = items.len();
         let wire_bytes = self.write_wire(slot, items.clone(), source)?;
-        let dev = &self.ctx.device;
         let (walk, queue_slot, _) = query.walk();
-        let mut counts = [0u32; COUNTER_SLOTS];
-        counts[queue_slot] = n as u32;
-        let sensor = source.sensor().unwrap_or_default();
-        let uniform = BatchUniform {
-            stride: source.stride() as u32,
-            to_shadow: (queue_slot == SLOT_SHADOW) as u32,
-            t_min: bounds.interval.0,
-            t_max: bounds.interval.1,
-            mask: bounds.mask,
-            range_only: (query == Query::Rays(Answer::Range)) as u32,
-            // A chunk's first item is below `u32::MAX`: a batch's are (`scan` checks a sensor's).
-            first: items.start as u32,
-            cells: sensor.cells,
-            cols: sensor.cols,
-            poses_at: sensor.poses_at,
-            pose_cols: sensor.pose_cols,
-            _pad0: 0,
-        };
-        let q = &self.ctx.queue;
-        let device_side = self.batches.device.as_ref().expect("made by `batch`");
-        q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counts));
-        q.write_buffer(&device_side.uniform, 0, bytemuck::bytes_of(&uniform));
-        let uniforms_bytes = self.write_pass_uniforms_to(
-            self.pass_uniform(),
-            0,
-            0,
-            n as u32,
-            Mode::Cast,
-            kind,
-            Ablation::default(),
-        );
-        stats.uploaded_bytes +=
-            wire_bytes + size_of_val(&counts) as u64 + size_of::<BatchUniform>() as u64 + uniforms_bytes;
+        let range_only = query == Query::Rays(Answer::Range);
+        stats.uploaded_bytes += wire_bytes + self.write_chunk_constants(&items, source, bounds, queue_slot, range_only);
 
         let regions = query.regions(n as u64);
         let results_bytes: u64 = regions.iter().sum();
-        let stamps_bytes = if self.timed() {
-            super::timing::MAX_TIMESTAMPS_BYTES
-        } else {
-            0
-        };
-        grow(
-            dev,
-            &mut self.batches.slots[slot].readback,
-            results_bytes + stamps_bytes,
-            "batch readback",
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
-        let readback = self.batches.slots[slot].readback.clone().expect("grown above");
+        let readback = self.readback_for(slot, results_bytes);
+        let dev = &self.ctx.device;
         let upload = self.batches.slots[slot].upload.as_ref().expect("made above").buffer();
         let device_side = self.batches.device.as_ref().expect("made by `batch`");
         let w = self.work.as_ref().expect("made by `batch`");
@@ -544,12 +498,71 @@ impl GpuRenderer {
             take(items.start, answers);
             parse_stages(&stages, &self.ctx, &raw[results_bytes as usize..])
         })?;
-        stats.timings.host.add(&phases);
-        for (name, ms) in times {
-            *stats.timings.stages_ms.entry(name).or_default() += ms;
-        }
-        stats.timings.untimed_passes += untimed;
+        stats.add_readout(&phases, times, untimed);
         Ok(())
+    }
+
+    /// Writes a chunk's constants: its items' count as queue `queue_slot`'s length, the batch's
+    /// uniform (the wire's stride, `bounds`, a sensor's layout, whether only `t` is answered)
+    /// and the pass uniforms. Their bytes.
+    pub(super) fn write_chunk_constants(
+        &self,
+        items: &Range<usize>,
+        source: &dyn WireSource,
+        bounds: Bounds,
+        queue_slot: usize,
+        range_only: bool,
+    ) -> u64 {
+        let n = items.len();
+        let mut counts = [0u32; COUNTER_SLOTS];
+        counts[queue_slot] = n as u32;
+        let sensor = source.sensor().unwrap_or_default();
+        let uniform = BatchUniform {
+            stride: source.stride() as u32,
+            to_shadow: (queue_slot == SLOT_SHADOW) as u32,
+            t_min: bounds.interval.0,
+            t_max: bounds.interval.1,
+            mask: bounds.mask,
+            range_only: range_only as u32,
+            // A chunk's first item is below `u32::MAX`: a batch's are (`scan` checks a sensor's).
+            first: items.start as u32,
+            cells: sensor.cells,
+            cols: sensor.cols,
+            poses_at: sensor.poses_at,
+            pose_cols: sensor.pose_cols,
+            _pad0: 0,
+        };
+        let q = &self.ctx.queue;
+        let device_side = self.batches.device.as_ref().expect("made by `ensure_batch_device`");
+        q.write_buffer(&self.counters, 0, bytemuck::cast_slice(&counts));
+        q.write_buffer(&device_side.uniform, 0, bytemuck::bytes_of(&uniform));
+        let uniforms_bytes = self.write_pass_uniforms_to(
+            self.pass_uniform(),
+            0,
+            0,
+            n as u32,
+            Mode::Cast,
+            self.kind,
+            Ablation::default(),
+        );
+        size_of_val(&counts) as u64 + size_of::<BatchUniform>() as u64 + uniforms_bytes
+    }
+
+    /// `slot`'s readback, grown to hold `bytes` of answers and the timestamps after them.
+    pub(super) fn readback_for(&mut self, slot: usize, bytes: u64) -> wgpu::Buffer {
+        let stamps_bytes = if self.timed() {
+            super::timing::MAX_TIMESTAMPS_BYTES
+        } else {
+            0
+        };
+        grow(
+            &self.ctx.device,
+            &mut self.batches.slots[slot].readback,
+            bytes + stamps_bytes,
+            "batch readback",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        self.batches.slots[slot].readback.clone().expect("grown above")
     }
 }
 

@@ -190,6 +190,15 @@ pub struct GpuQueryStats {
 }
 
 impl GpuQueryStats {
+    /// Adds one read-back submission's host phases, stage times and untimed passes.
+    pub(crate) fn add_readout(&mut self, phases: &HostPhases, times: Vec<(&'static str, f64)>, untimed: u32) {
+        self.timings.host.add(phases);
+        for (name, ms) in times {
+            *self.timings.stages_ms.entry(name).or_default() += ms;
+        }
+        self.timings.untimed_passes += untimed;
+    }
+
     /// The device's time for the batch (the stages' timestamps summed), where it has them.
     pub fn gpu_ms(&self) -> Option<f64> {
         self.timings.from_timestamps.then_some(self.timings.total_ms)
