@@ -33,6 +33,7 @@
 
 mod all_hits;
 mod batch_buffers;
+mod batch_grow;
 pub mod bindings;
 pub mod constants;
 mod context;
