@@ -52,13 +52,12 @@ impl QueryScene {
     /// How many faces each ray hits with `t >= 0` under Open3D's rule (the module notes): the
     /// length of each ray's `list_intersections` list. Bad rays count 0.
     pub fn count_intersections(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
-        let _record = self.recording("count_intersections");
-        if let Some(out) = self.count_on_gpu(rays, &Default::default())? {
-            return Ok(out);
-        }
-        if self.hits_path(&Default::default())?.is_some() {
-            return self.count_intersections_with(rays, &Default::default());
-        }
+        self.count_intersections_with(rays, &Default::default())
+    }
+
+    /// `count_intersections` on the merged mesh, on the CPU's cores: the path of rays with the
+    /// default interval that see every geometry (`hits_path`).
+    pub(super) fn count_merged(&self, rays: &[[f32; 6]]) -> Result<Vec<u32>> {
         let m = self.merged()?;
         let mut out = vec![0u32; rays.len()];
         let Some(accel) = m.accel() else {
@@ -95,13 +94,11 @@ impl QueryScene {
     /// Every hit of each ray with `t >= 0` under Open3D's rule (the module notes), nearest
     /// first (Open3D's `list_intersections`).
     pub fn list_intersections(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
-        let _record = self.recording("list_intersections");
-        if let Some(out) = self.list_on_gpu(rays, &Default::default())? {
-            return Ok(out);
-        }
-        if self.hits_path(&Default::default())?.is_some() {
-            return self.list_intersections_with(rays, &Default::default());
-        }
+        self.list_intersections_with(rays, &Default::default())
+    }
+
+    /// `list_intersections` on the merged mesh, on the CPU's cores (as `count_merged`).
+    pub(super) fn list_merged(&self, rays: &[[f32; 6]]) -> Result<Intersections> {
         let m = self.merged()?;
         if m.mesh.is_some() {
             m.accel().map_or(Ok(()), |a| a.check_current())?;

@@ -133,7 +133,8 @@ impl QueryScene {
                     return Ok(Some(DeviceHits::new(rays, answer).answer(|_| unreachable!("no hits"))));
                 };
                 let firsts = m.kept_firsts();
-                mesh.on_gpu_or_cpu(
+                self.on_mesh(
+                    mesh,
                     |gpu| {
                         let mut out = DeviceHits::new(rays, answer);
                         gpu.all_hits(
@@ -144,7 +145,6 @@ impl QueryScene {
                             answer,
                             |first, counts, hits| out.take(first, counts, hits),
                         )?;
-                        self.answered_on_gpu(gpu.last_query_stats());
                         Ok(Some(out.answer(|h| {
                             let (id, prim) = m.name(h.tri);
                             (id, prim, [h.u, h.v], h.t)

@@ -73,7 +73,8 @@ impl QueryScene {
                 let Some(mesh) = m.mesh.as_ref() else {
                     return Ok(Some(RayHits::misses(n)));
                 };
-                mesh.on_gpu_or_cpu(
+                self.on_mesh(
+                    mesh,
                     |gpu| {
                         let mut out = RayHits::misses(n);
                         scan_with(gpu, s, range_only, |first, answers| {

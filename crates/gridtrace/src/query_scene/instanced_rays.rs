@@ -36,7 +36,7 @@ impl QueryScene {
             return Ok(out);
         }
         let Some(two) = self.hits_path(o)? else {
-            return self.count_intersections(rays);
+            return self.count_merged(rays);
         };
         two.check_cpu(false)?;
         let mut out = vec![0; rays.len()];
@@ -53,7 +53,7 @@ impl QueryScene {
             return Ok(out);
         }
         let Some(two) = self.hits_path(o)? else {
-            return self.list_intersections(rays);
+            return self.list_merged(rays);
         };
         two.check_cpu(false)?;
         Ok(list(&two, rays, o))

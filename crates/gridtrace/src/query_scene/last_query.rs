@@ -1,10 +1,12 @@
 //! What the last query did (`QueryScene::last_query`): its name, the device that answered and,
 //! for GPU work, the batch's statistics (bytes each way, submissions, wall and GPU time). Each
-//! public query opens a `Recording`; the GPU paths say when they answered (`answered_on_gpu`),
-//! and the outermost recording, when it ends, keeps the record (a query that calls another,
-//! `count_intersections_with` calling `count_intersections`, is recorded once, by its own name).
+//! public query opens a `Recording` (the `_with` form where there are two: the plain one calls
+//! it); the GPU paths say when they answered (`on_mesh`, `on_gpu_two_level`), and the
+//! recording, when it ends, keeps the record.
 
-use crate::gpu::GpuQueryStats;
+use crate::Result;
+use crate::gpu::{GpuQueryStats, GpuRenderer};
+use crate::query::TraceMesh;
 
 use super::QueryScene;
 
@@ -20,16 +22,14 @@ pub struct LastQuery {
     pub gpu: Option<GpuQueryStats>,
 }
 
-/// The record being made: the open recordings' depth, what the GPU answered so far, and the
-/// last finished record.
+/// The record being made: what the GPU answered so far, and the last finished record.
 #[derive(Debug, Default)]
 pub(super) struct Records {
-    depth: u32,
     gpu: Option<GpuQueryStats>,
     last: LastQuery,
 }
 
-/// An open query; its end (drop) keeps the record if it is the outermost.
+/// An open query; its end (drop) keeps the record.
 pub(super) struct Recording<'a> {
     scene: &'a QueryScene,
     name: &'static str,
@@ -38,12 +38,28 @@ pub(super) struct Recording<'a> {
 impl QueryScene {
     /// Opens the record of query `name` (kept when the returned recording ends).
     pub(super) fn recording(&self, name: &'static str) -> Recording<'_> {
-        let mut r = self.records.lock().unwrap_or_else(|p| p.into_inner());
-        if r.depth == 0 {
-            r.gpu = None;
-        }
-        r.depth += 1;
+        self.records.lock().unwrap_or_else(|p| p.into_inner()).gpu = None;
         Recording { scene: self, name }
+    }
+
+    /// `mesh.on_gpu_or_cpu` (the merged mesh decides where, by the scene's backend), the GPU's
+    /// answer marked as the open query's (`answered_on_gpu`): every query of the merged mesh
+    /// goes through here, as every query of the GPU's two levels goes through
+    /// `on_gpu_two_level`.
+    pub(super) fn on_mesh<T>(
+        &self,
+        mesh: &TraceMesh,
+        on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<T>,
+        on_cpu: impl FnOnce() -> Result<T>,
+    ) -> Result<T> {
+        mesh.on_gpu_or_cpu(
+            |gpu| {
+                let answer = on_gpu(gpu)?;
+                self.answered_on_gpu(gpu.last_query_stats());
+                Ok(answer)
+            },
+            on_cpu,
+        )
     }
 
     /// The GPU answered (part of) the open query with `stats`.
@@ -61,14 +77,11 @@ impl QueryScene {
 impl Drop for Recording<'_> {
     fn drop(&mut self) {
         let mut r = self.scene.records.lock().unwrap_or_else(|p| p.into_inner());
-        r.depth = r.depth.saturating_sub(1);
-        if r.depth == 0 {
-            let gpu = r.gpu.take();
-            r.last = LastQuery {
-                name: self.name,
-                device: if gpu.is_some() { "gpu" } else { "cpu" },
-                gpu,
-            };
-        }
+        let gpu = r.gpu.take();
+        r.last = LastQuery {
+            name: self.name,
+            device: if gpu.is_some() { "gpu" } else { "cpu" },
+            gpu,
+        };
     }
 }

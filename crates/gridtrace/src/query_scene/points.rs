@@ -170,12 +170,9 @@ impl QueryScene {
         };
         // The mesh decides where (as `cast_rays`): the GPU's search where the backend traces on
         // one, else (or if `auto` found no GPU) the CPU's.
-        mesh.on_gpu_or_cpu(
-            |gpu| {
-                let c = gpu.closest_points(&mesh.prepared().accel.tris, points)?;
-                self.answered_on_gpu(gpu.last_query_stats());
-                Ok(c)
-            },
+        self.on_mesh(
+            mesh,
+            |gpu| gpu.closest_points(&mesh.prepared().accel.tris, points),
             || mesh.closest_points_with(crate::query::Backend::Cpu, points),
         )
     }
@@ -191,14 +188,9 @@ fn winding_numbers(s: &QueryScene, m: &Merged, points: &[[f32; 3]], accuracy: f6
             .iter()
             .map(|p| if Vec3::from(*p).is_finite() { 0.0 } else { f32::NAN })
             .collect()),
-        Some(mesh) if accuracy.is_finite() => mesh.on_gpu_or_cpu(
-            |gpu| {
-                let w = gpu.winding_numbers(m.winding(), points, accuracy)?;
-                s.answered_on_gpu(gpu.last_query_stats());
-                Ok(w)
-            },
-            on_cpu,
-        ),
+        Some(mesh) if accuracy.is_finite() => {
+            s.on_mesh(mesh, |gpu| gpu.winding_numbers(m.winding(), points, accuracy), on_cpu)
+        }
         Some(_) => on_cpu(),
     }
 }

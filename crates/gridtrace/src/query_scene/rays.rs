@@ -70,7 +70,6 @@ pub(crate) fn check_interval(t_near: f32, t_far: f32) -> Result<()> {
 impl QueryScene {
     /// The closest hit of each ray with `t >= 0` (Open3D's `cast_rays`).
     pub fn cast_rays(&self, rays: &[[f32; 6]]) -> Result<RayHits> {
-        let _record = self.recording("cast_rays");
         self.cast_rays_with(rays, &RayOptions::default())
     }
 
@@ -104,7 +103,8 @@ impl QueryScene {
         };
         // The mesh decides where its queries run (`TraceMesh::on_backend`), by the scene's
         // backend, as it does for its own.
-        mesh.on_gpu_or_cpu(
+        self.on_mesh(
+            mesh,
             |gpu| {
                 // Every entry is written below (a miss's uv and normal are these zeros).
                 let mut out = RayHits::zeroed(rays.len());
@@ -117,7 +117,6 @@ impl QueryScene {
                         });
                     }
                 })?;
-                self.answered_on_gpu(gpu.last_query_stats());
                 Ok(out)
             },
             on_cpu,
@@ -127,7 +126,6 @@ impl QueryScene {
     /// Whether each ray hits anything with `t_near < t < t_far` (Open3D's `test_occlusions`;
     /// its defaults are `0` and `inf`).
     pub fn test_occlusions(&self, rays: &[[f32; 6]], t_near: f32, t_far: f32) -> Result<Vec<bool>> {
-        let _record = self.recording("test_occlusions");
         check_interval(t_near, t_far)?;
         let o = RayOptions {
             t_near: PerRay::All(t_near),
@@ -166,14 +164,14 @@ impl QueryScene {
         };
         // The mesh decides where its queries run (`TraceMesh::on_backend`), by the scene's
         // backend, as it does for its own.
-        mesh.on_gpu_or_cpu(
+        self.on_mesh(
+            mesh,
             |gpu| {
                 let mut out = vec![false; rays.len()];
                 let source = RowRays { rows: rays };
                 gpu.cast(&source, (t_near, t_far), Answer::Occlusion, |first, answers| {
                     occlusion_into(&mut out, rays, first, answers)
                 })?;
-                self.answered_on_gpu(gpu.last_query_stats());
                 Ok(out)
             },
             on_cpu,
