@@ -47,8 +47,8 @@ pub(super) struct Batches {
 }
 
 /// The fast winding tree on the device (`winding.rs`): its arrays (kept with their bind group,
-/// which reads them), the bind group (winding.wgsl's group 2), and which tree it is (a hash of
-/// its nodes' bytes).
+/// which reads them), the bind group (winding.wgsl's group 2), and which tree it is
+/// (`FastWinding::id`).
 pub(super) struct DeviceWinding {
     pub key: u64,
     pub _nodes: wgpu::Buffer,

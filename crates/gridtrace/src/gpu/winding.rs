@@ -6,8 +6,8 @@
 //! as 12 bytes each in the ray batches' pipelined chunks (`queries.rs`, `Query::Winding`), the
 //! winding numbers come down as 4.
 //!
-//! The device keeps one tree, named by a hash of its nodes' bytes (a tree rebuilt after a
-//! move has other coefficients): asking with the same tree again uploads nothing. `accuracy
+//! The device keeps one tree, named by its `FastWinding::id` (a tree rebuilt after a move is
+//! another): asking with the same tree again uploads nothing. `accuracy
 //! = inf` (the exact `f64` sum) stays on the CPU, which the callers see to.
 
 use super::batch_buffers::DeviceWinding;
@@ -18,17 +18,6 @@ use super::queries::{Bounds, ChunkAnswers, Query};
 use super::renderer::GpuRenderer;
 use crate::accel::winding::{DeviceTree, FastWinding};
 use crate::{Error, Result};
-
-/// FNV-1a over the bytes, eight at a time, with the lengths: which tree the device holds.
-fn key_of(tree: &DeviceTree<'_>) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64 ^ (tree.nodes.len() as u64) ^ ((tree.blocks.len() as u64) << 32);
-    for word in tree.nodes.chunks(8) {
-        let mut w = [0u8; 8];
-        w[..word.len()].copy_from_slice(word);
-        h = (h ^ u64::from_le_bytes(w)).wrapping_mul(0x0100_0000_01b3);
-    }
-    h
-}
 
 impl GpuRenderer {
     /// The winding number at each of `points` over `tree` (built over this renderer's mesh),
@@ -46,7 +35,7 @@ impl GpuRenderer {
                 device.stack
             )));
         }
-        let uploaded = self.upload_winding(&device);
+        let uploaded = self.upload_winding(tree.id(), &device);
         // Squared in f64: an accuracy beyond f32's range is infinite here, and opens every
         // node (as on the CPU).
         let accuracy2 = (accuracy * accuracy) as f32;
@@ -78,9 +67,9 @@ impl GpuRenderer {
         self.batches.winding.as_ref().map_or(0, |w| w.bytes)
     }
 
-    /// Puts `tree` on the device unless it is there already: the bytes written.
-    fn upload_winding(&mut self, tree: &DeviceTree<'_>) -> u64 {
-        let key = key_of(tree);
+    /// Puts `tree` (the tree `key` names) on the device unless it is there already: the bytes
+    /// written.
+    fn upload_winding(&mut self, key: u64, tree: &DeviceTree<'_>) -> u64 {
         if self.batches.winding.as_ref().is_some_and(|w| w.key == key) {
             return 0;
         }

@@ -53,6 +53,15 @@ pub fn check_accuracy(accuracy: f64) -> crate::Result<f64> {
 pub struct FastWinding {
     wide: WideTree,
     triangles: usize,
+    /// Which tree this is: a number no other tree built in this process has (a clone keeps
+    /// it: the same tree). The GPU keeps the tree it was last given by it (`gpu/winding.rs`).
+    id: u64,
+}
+
+/// A new tree's `id`.
+fn next_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 impl FastWinding {
@@ -62,6 +71,7 @@ impl FastWinding {
         FastWinding {
             wide: morton::shape(tris).tree(tris),
             triangles: tris.len(),
+            id: next_id(),
         }
     }
 
@@ -77,6 +87,7 @@ impl FastWinding {
         FastWinding {
             wide,
             triangles: tris.len(),
+            id: next_id(),
         }
     }
 
@@ -148,6 +159,11 @@ impl FastWinding {
     /// The tree as the GPU walks it (`gpu/winding.rs`).
     pub(crate) fn device(&self) -> super::wide::DeviceTree<'_> {
         self.wide.device()
+    }
+
+    /// Which tree this is (`id`).
+    pub(crate) fn id(&self) -> u64 {
+        self.id
     }
 }
 
