@@ -16,6 +16,7 @@ use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{InstanceOf, Intersections, PerRay, RayOptions};
 use gridtrace::scene::builtin;
 use gridtrace::testing::{cuboid, gpu_kinds, open3d_cube, ray_set, skip_gpu, soup_arrays, triangle_soup};
+use gridtrace::util::Rng;
 
 // One test at a time on the device: lavapipe uses every core for each dispatch anyway.
 static GPU_LOCK: Mutex<()> = Mutex::new(());
@@ -62,13 +63,8 @@ fn scene(backend: Backend, accel: AccelKind, instanced: bool) -> QueryScene {
 /// Rays from inside and around the scene in every direction, Open3D's diagonal rays through
 /// the cubes (ties), a miss, and bad rows (NaN, a zero direction) that count nothing.
 fn rays() -> Vec<[f32; 6]> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
+    let mut rng = Rng::new(0x2545_f491_4f6c_dd1d);
+    let mut next = || rng.range(-1.0, 1.0);
     let mut out: Vec<[f32; 6]> = (0..1500)
         .map(|_| {
             let o = [next() * 2.5, next() * 2.5, next() * 2.5];

@@ -14,6 +14,7 @@ use gridtrace::accel::AccelKind;
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::InstanceOf;
 use gridtrace::testing::{open3d_cube, skip_gpu, soup_arrays, triangle_soup};
+use gridtrace::util::Rng;
 
 static GPU_LOCK: Mutex<()> = Mutex::new(());
 
@@ -44,13 +45,8 @@ fn scene(backend: Backend, accel: AccelKind) -> (QueryScene, u32) {
 }
 
 fn points(n: usize) -> Vec<[f32; 3]> {
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
+    let mut next = || rng.range(-1.0, 1.0);
     let mut out: Vec<[f32; 3]> = (0..n)
         .map(|_| [next() * 2.5, next() * 2.5 + 1.0, next() * 2.5])
         .collect();

@@ -50,13 +50,8 @@ fn points_in_box(mesh: &TraceMesh, n: usize) -> Vec<[f32; 3]> {
     let b = mesh.prepared().accel.bounds();
     let grow = (b.max - b.min) * 0.1;
     let (lo, size) = (b.min - grow, (b.max - b.min) + 2.0 * grow);
-    let mut state = 0x853c_49e6_748f_ea9bu64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut rng = gridtrace::util::Rng::new(0x853c_49e6_748f_ea9b);
+    let mut next = || rng.next_f32();
     (0..n)
         .map(|_| (lo + size * glam::Vec3::new(next(), next(), next())).to_array())
         .collect()
