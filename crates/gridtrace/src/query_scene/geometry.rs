@@ -19,6 +19,9 @@ pub struct SceneMesh {
     pub faces: Vec<[u32; 3]>,
     /// The vertices' box in the mesh's own space.
     bounds: Aabb,
+    /// A few points whose hull holds every vertex (`enclosure.rs`), found on first use: the
+    /// instances' world boxes.
+    enclosure: OnceLock<Vec<Vec3>>,
     /// The bottom level: the structure over the mesh's own-space triangles, on the CPU
     /// (`None`: no face with non-zero area, so nothing to hit). Built once, whatever moves.
     bottom: OnceLock<Option<TraceMesh>>,
@@ -51,8 +54,16 @@ impl SceneMesh {
             vertices,
             faces,
             bounds,
+            enclosure: OnceLock::new(),
             bottom: OnceLock::new(),
         })
+    }
+
+    /// The points whose hull holds every vertex (`enclosure::dop_corners`), found now if not
+    /// yet.
+    fn enclosure(&self) -> &[Vec3] {
+        self.enclosure
+            .get_or_init(|| super::enclosure::dop_corners(&self.vertices))
     }
 
     /// The bottom level, built now (counted in `builds`) if it is not yet. Its structure is the
@@ -166,9 +177,15 @@ impl Geometry {
         carry(&self.to_local(), ray)
     }
 
-    /// The world-space box of the mesh (its own box's corners through the transform).
+    /// The world-space box of the mesh: the box of its enclosure's points through the
+    /// transform (`enclosure.rs`), the exact box of the transformed vertices within a few
+    /// percent a side, where the own box's corners turned can be half as large again.
     pub fn world_bounds(&self) -> Aabb {
-        world_box(&self.transform, &self.mesh.bounds)
+        let m = &self.transform;
+        self.mesh
+            .enclosure()
+            .iter()
+            .fold(Aabb::EMPTY, |b, &p| b.grow(m.transform_point3(p)))
     }
 
     /// The vertices in world space.
@@ -236,7 +253,9 @@ fn check_transform(transform: &Mat4, bounds: &Aabb, what: &str) -> Result<()> {
     // A large transform can overflow a finite vertex to infinity (every vertex lies in the
     // box, so finite corners keep every vertex finite).
     if !bounds.is_empty() {
-        let b = world_box(transform, bounds);
+        let b = super::enclosure::box_corners(bounds)
+            .into_iter()
+            .fold(Aabb::EMPTY, |b, c| b.grow(transform.transform_point3(c)));
         if !(b.min.is_finite() && b.max.is_finite()) {
             return Err(Error::InvalidInput(format!(
                 "vertices after the {what} are not finite (box {:?} .. {:?})",
@@ -253,21 +272,6 @@ fn check_transform(transform: &Mat4, bounds: &Aabb, what: &str) -> Result<()> {
         )));
     }
     Ok(())
-}
-
-/// The world box of an own-space box: its eight corners through `transform`.
-fn world_box(transform: &Mat4, b: &Aabb) -> Aabb {
-    if b.is_empty() {
-        return Aabb::EMPTY;
-    }
-    (0..8).fold(Aabb::EMPTY, |acc, k| {
-        let c = Vec3::new(
-            if k & 1 == 0 { b.min.x } else { b.max.x },
-            if k & 2 == 0 { b.min.y } else { b.max.y },
-            if k & 4 == 0 { b.min.z } else { b.max.z },
-        );
-        acc.grow(transform.transform_point3(c))
-    })
 }
 
 pub(crate) fn check_vertices(vertices: &[[f32; 3]], what: &str) -> Result<()> {

@@ -74,6 +74,7 @@ use crate::{Error, Result};
 mod all_hits;
 mod batch;
 mod cpu_rays;
+mod enclosure;
 mod geometry;
 mod gpu_all_hits;
 mod gpu_rays;

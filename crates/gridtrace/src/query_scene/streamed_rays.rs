@@ -78,7 +78,7 @@ impl Scratch {
         for ray in &self.world {
             let from = self.entries.len();
             if let (Some(ray), false) = (ray, empty) {
-                two.entries_on(ray, t_near, t_far, mask, |i, t_enter| self.entries.push((t_enter, i)));
+                two.entries_into(ray, t_near, t_far, mask, &mut self.entries);
             }
             self.entries[from..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             self.starts.push(self.entries.len() as u32);

@@ -51,6 +51,9 @@ pub(crate) struct TwoLevel {
     /// Each mesh once, however many instances place it; its bottom level built.
     meshes: Vec<Arc<SceneMesh>>,
     top: super::top_level::TopLevel,
+    /// Whether every instance's mask is all ones (then a ray's mask of all ones sees every
+    /// instance, and the entries need no filter).
+    all_masks_full: bool,
 }
 
 impl TwoLevel {
@@ -79,6 +82,7 @@ impl TwoLevel {
         }
         Ok(TwoLevel {
             top: super::top_level::TopLevel::build(&boxes),
+            all_masks_full: placed.iter().all(|p| p.mask == u32::MAX),
             placed,
             meshes,
         })
@@ -176,18 +180,25 @@ impl TwoLevel {
         &self.mesh_of(&self.placed[i as usize]).prepared().accel
     }
 
-    /// Hands `visit` each instance whose mask shares a bit with `mask` and whose box `ray`
-    /// enters within `[t_near, t_far]`, with where it enters (`t_enter`, at least `t_near`),
+    /// Appends to `out` `(t_enter, instance)` for each instance whose mask shares a bit with
+    /// `mask` and whose box `ray` enters within `[t_near, t_far]` (`t_enter` at least `t_near`),
     /// in no particular order (the streamed walk, `streamed_rays.rs`, then walks each
     /// instance's rays together).
     #[inline]
-    pub fn entries_on(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32, mut visit: impl FnMut(u32, f32)) {
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, t_enter, t_max| {
-            if self.placed[i as usize].mask & mask != 0 {
-                visit(i, t_enter);
+    pub fn entries_into(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32, out: &mut Vec<(f32, u32)>) {
+        let from = out.len();
+        self.top.entered_into(ray.origin, ray.dir, t_near, t_far, out);
+        if !self.all_masks_full || mask != u32::MAX {
+            let mut kept = from;
+            for e in from..out.len() {
+                let entry = out[e];
+                if self.placed[entry.1 as usize].mask & mask != 0 {
+                    out[kept] = entry;
+                    kept += 1;
+                }
             }
-            t_max
-        });
+            out.truncate(kept);
+        }
     }
 
     /// How many instances the scene places.
