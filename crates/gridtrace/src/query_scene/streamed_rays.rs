@@ -7,10 +7,12 @@
 //! batch walk is what makes the flat path fast (the BVH interleaves rays to hide memory latency
 //! and takes coherent rays eight at a time). Closest hits go in rounds, nearest box first, each
 //! ray walked up to its closest hit so far (`cast`), which keeps the per-ray walk's pruning
-//! across instances. Measured (2026-11-28, `examples/instances_vs_flat.rs`, 1M random rays at
-//! K randomly turned and scaled Stanford Bunnies, two threads of a loaded machine, medians of
-//! 3 alternating rounds), the two levels' time over the same triangles merged flat: K = 100:
-//! 1.71x (3.17x through the per-ray walk before the rounds), 16: 1.26x, 4: 0.99x, 1: 0.93x.
+//! across instances. Measured (2026-12-05, `examples/instances_vs_flat.rs`, 1M random rays at
+//! 100 randomly turned and scaled Stanford Bunnies, two threads, medians of 5 alternating
+//! rounds), the two levels' time over the same triangles merged flat: 1.29-1.33x, after the
+//! instances' boxes were fitted to each mesh's k-DOP (`enclosure.rs`) and the top level's
+//! entries found four rays at a time (`TopLevel::entered`); 1.71-2.14x before (3.17x through
+//! the per-ray walk before the rounds).
 //! Occlusion (any hit) needs no order: each instance's rays together, a ray done once hit.
 
 use glam::Vec3;
@@ -24,8 +26,10 @@ use super::two_level::TwoLevel;
 use crate::accel::{Hit, Ray, binning};
 
 /// Rays per work item: more than the other paths' 1,024, so that each instance's share of a
-/// round is enough rays to interleave.
-const BATCH: usize = 4096;
+/// round is enough rays to interleave. Measured (2026-12-05, 1M random rays at 100 turned
+/// Bunnies, two threads, three alternating pairs of runs, medians of 5 each): 16,384 took
+/// 191-192 ms, 4,096 200-209 ms (the flat scene 143-152 ms beside both).
+const BATCH: usize = 16384;
 
 /// The most instances for which the occlusion streams are taken over the per-ray walk.
 /// Measured for closest hits before the rounds and the four-wide top level (2026-11-28, two
@@ -46,6 +50,10 @@ struct Scratch {
     /// starts[k + 1]` are ray `k`'s), each ray's nearest first.
     entries: Vec<(f32, u32)>,
     starts: Vec<u32>,
+    /// The entries as the top level found them, `(t_enter, instance, ray)`, rays interleaved;
+    /// and where the next of each ray's goes while they are grouped.
+    found: Vec<(f32, u32, u32)>,
+    fill: Vec<u32>,
     /// `(instance, ray)`: the pairs of one round (or all of them, for occlusion), sorted by
     /// instance.
     pairs: Vec<(u32, u32)>,
@@ -70,18 +78,37 @@ impl Scratch {
     fn meet(&mut self, two: &TwoLevel, rays: &[[f32; 6]], (t_near, t_far, mask): (f32, f32, u32)) {
         self.world.clear();
         self.world.extend(rays.iter().map(ray_of));
-        self.entries.clear();
-        self.starts.clear();
-        self.starts.push(0);
+        self.found.clear();
         // `tnear > tfar` (or NaN) misses (Embree's rule): nothing to enter.
-        let empty = t_near > t_far || t_near.is_nan() || t_far.is_nan();
-        for ray in &self.world {
-            let from = self.entries.len();
-            if let (Some(ray), false) = (ray, empty) {
-                two.entries_into(ray, t_near, t_far, mask, &mut self.entries);
+        if !(t_near > t_far || t_near.is_nan() || t_far.is_nan()) {
+            let rays = self.world.iter().enumerate();
+            let rays = rays.filter_map(|(k, r)| r.as_ref().map(|r| (k as u32, r.origin, r.dir)));
+            two.entries(rays, t_near, t_far, mask, &mut self.found);
+        }
+        // Grouped by ray (a counting sort: `starts[k]..starts[k + 1]` are ray `k`'s), then each
+        // ray's few sorted, nearest first.
+        self.starts.clear();
+        self.starts.resize(rays.len() + 1, 0);
+        for &(_, _, k) in &self.found {
+            self.starts[k as usize + 1] += 1;
+        }
+        for k in 0..rays.len() {
+            self.starts[k + 1] += self.starts[k];
+        }
+        self.entries.clear();
+        self.entries.resize(self.found.len(), (0.0, 0));
+        self.fill.clear();
+        self.fill.extend_from_slice(&self.starts[..rays.len()]);
+        for &(t, i, k) in &self.found {
+            let at = &mut self.fill[k as usize];
+            self.entries[*at as usize] = (t, i);
+            *at += 1;
+        }
+        for w in self.starts.windows(2) {
+            let entered = &mut self.entries[w[0] as usize..w[1] as usize];
+            if entered.len() > 1 {
+                entered.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             }
-            self.entries[from..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            self.starts.push(self.entries.len() as u32);
         }
     }
 

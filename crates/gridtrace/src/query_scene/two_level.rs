@@ -180,14 +180,20 @@ impl TwoLevel {
         &self.mesh_of(&self.placed[i as usize]).prepared().accel
     }
 
-    /// Appends to `out` `(t_enter, instance)` for each instance whose mask shares a bit with
-    /// `mask` and whose box `ray` enters within `[t_near, t_far]` (`t_enter` at least `t_near`),
-    /// in no particular order (the streamed walk, `streamed_rays.rs`, then walks each
-    /// instance's rays together).
-    #[inline]
-    pub fn entries_into(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32, out: &mut Vec<(f32, u32)>) {
+    /// Appends to `out` `(t_enter, instance, ray)` for each ray `(ray, origin, dir)` of `rays`
+    /// and each instance whose mask shares a bit with `mask` and whose box the ray enters
+    /// within `[t_near, t_far]` (`t_enter` at least `t_near`), in no particular order (the
+    /// streamed walk, `streamed_rays.rs`, then walks each instance's rays together).
+    pub fn entries(
+        &self,
+        rays: impl Iterator<Item = (u32, Vec3, Vec3)>,
+        t_near: f32,
+        t_far: f32,
+        mask: u32,
+        out: &mut Vec<(f32, u32, u32)>,
+    ) {
         let from = out.len();
-        self.top.entered_into(ray.origin, ray.dir, t_near, t_far, out);
+        self.top.entered(rays, t_near, t_far, out);
         if !self.all_masks_full || mask != u32::MAX {
             let mut kept = from;
             for e in from..out.len() {
