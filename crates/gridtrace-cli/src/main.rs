@@ -6,6 +6,7 @@ mod bench;
 mod common;
 mod info;
 mod rays;
+mod rays_counts;
 mod render;
 mod scan;
 mod view;

@@ -8,6 +8,10 @@
 //! chunks, so memory stays bounded. On the GPU the rays go up as they are in the file, 24
 //! bytes each; the bytes each way are printed, also per ray. `--make camera|random` writes a
 //! ray file for a mesh instead (the auto-framed view's eye rays, or incoherent ones).
+//! `--counts` counts every hit along each ray instead (`rays_counts.rs`). After the queries a
+//! `query` line says which query ran, the device that answered it (the library's
+//! `last_query`: under `auto` the CPU once a GPU fault sent the work there) and, for GPU
+//! work, the bytes up and down.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -24,29 +28,34 @@ use crate::common::{AccelArgs, Backend, GpuFigures, GpuVariantArgs, backend_pars
 #[derive(Args)]
 pub struct RaysArgs {
     /// The mesh (OBJ, PLY, glTF/GLB, STL, OFF).
-    mesh: PathBuf,
+    pub(crate) mesh: PathBuf,
     /// Ray file: little-endian float32 records ox oy oz dx dy dz (24 bytes a ray); --make
     /// writes one.
     #[arg(long)]
-    rays: PathBuf,
+    pub(crate) rays: PathBuf,
     /// Hits count only for t > TMIN (t in units of each ray's direction length).
     // Hyphen values: clap would otherwise take `--tmin -1` for a flag `-1`.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    tmin: f32,
+    pub(crate) tmin: f32,
     /// Hits count only for t < TMAX.
     #[arg(long, default_value_t = f32::INFINITY, allow_hyphen_values = true)]
-    tmax: f32,
+    pub(crate) tmax: f32,
     /// Any-hit occlusion instead of closest hits (one byte per ray).
     #[arg(long)]
     occluded: bool,
     /// Closest hits without barycentrics: 8-byte records (t, tri) instead of 16.
     #[arg(long, conflicts_with = "occluded")]
     no_uv: bool,
+    /// Count every hit along each ray instead (a scene's `count_intersections`, Open3D's
+    /// rule: a face hit twice at one t counts once) within [TMIN, TMAX): one little-endian
+    /// u32 per ray. Prints the total of hits and how many rays hit anything.
+    #[arg(long, conflicts_with_all = ["occluded", "no_uv"])]
+    pub(crate) counts: bool,
     /// Where to trace: auto (GPU if present, else CPU), gpu or cpu.
     #[arg(long, default_value = "auto", value_parser = backend_parser())]
-    backend: Backend,
+    pub(crate) backend: Backend,
     #[command(flatten)]
-    gpu: GpuVariantArgs,
+    pub(crate) gpu: GpuVariantArgs,
     #[command(flatten)]
     pub(crate) accel_args: AccelArgs,
     /// Trace every chunk of rays this many times in a row (the answers of the last are
@@ -54,7 +63,7 @@ pub struct RaysArgs {
     /// its own (a single pass of a small file also times the threads' start and the first
     /// touch of fresh memory).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100), allow_hyphen_values = true)]
-    reps: u32,
+    pub(crate) reps: u32,
     /// Output file (its folder must exist; checked before any work).
     #[arg(long, value_parser = parse_output, required_unless_present = "make")]
     hits_out: Option<PathBuf>,
@@ -146,6 +155,9 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         ));
     }
     let n = size / 24;
+    if a.counts {
+        return crate::rays_counts::run(&a, n, &hits_out);
+    }
     let opts = QueryOptions {
         accel: a.accel_args.spec()?,
         backend: a.backend,
@@ -176,33 +188,10 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let (mut found, mut occ) = (Vec::new(), Vec::new());
     // The GPU batches' own figures, summed over the file's chunks.
     let mut gpu = gridtrace::gpu::GpuQueryStats::default();
+    let mut line = QueryLine::default();
     while done < n {
         let count = (n - done).min(CHUNK as u64) as usize;
-        let bytes = &mut buf[..count * 24];
-        input.read_exact(bytes).map_err(|e| Error::io(&a.rays, e))?;
-        // Converted and checked in parallel: a serial pass here would be a part of the run
-        // that no thread count speeds up.
-        let mut rays = Vec::with_capacity(count);
-        bytes
-            .par_chunks_exact(24)
-            .map(|r| {
-                let f = |k: usize| f32::from_le_bytes([r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]]);
-                Ray::new(glam::Vec3::new(f(0), f(1), f(2)), glam::Vec3::new(f(3), f(4), f(5)))
-            })
-            .collect_into_vec(&mut rays);
-        let bad = |r: &Ray| !r.origin.is_finite() || !r.dir.is_finite() || r.dir == glam::Vec3::ZERO;
-        if let Some(i) = rays.par_iter().position_first(bad) {
-            let k = done + i as u64;
-            let r = &rays[i];
-            return Err(Error::parse(
-                &a.rays,
-                gridtrace::Location::Byte(k * 24),
-                format!(
-                    "ray {k} is not finite or has a zero direction: {:?}",
-                    [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z]
-                ),
-            ));
-        }
+        let rays = read_rays(&mut input, &mut buf[..count * 24], &a.rays, done)?;
         if a.occluded {
             for s in pass_s.iter_mut() {
                 let t0 = Instant::now();
@@ -242,9 +231,12 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
                 .sum::<u64>();
             output.write_all(&out).map_err(write_err)?;
         }
-        if let Some(s) = mesh.last_gpu_batch() {
-            gpu.add(&s);
+        // This chunk's last pass: where it ran, and its GPU batch.
+        let q = mesh.last_query();
+        if let Some(s) = &q.gpu {
+            gpu.add(s);
         }
+        line.add(&q);
         done += count as u64;
     }
     output.flush().map_err(write_err)?;
@@ -268,13 +260,90 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     if gpu.round_trips > 0 {
         print_gpu_batches(&gpu);
     }
+    line.print();
     println!("wrote   {}", hits_out.display());
     Ok(())
 }
 
+/// Reads the next `bytes.len() / 24` rays of the file `path` (ray `first` on) from `input`,
+/// converted and checked in parallel (a serial pass here would be a part of the run that no
+/// thread count speeds up); a ray that is not finite or has a zero direction is an error
+/// naming its byte in the file.
+pub(crate) fn read_rays(
+    input: &mut impl Read,
+    bytes: &mut [u8],
+    path: &std::path::Path,
+    first: u64,
+) -> gridtrace::Result<Vec<Ray>> {
+    input.read_exact(bytes).map_err(|e| Error::io(path, e))?;
+    let mut rays = Vec::with_capacity(bytes.len() / 24);
+    bytes
+        .par_chunks_exact(24)
+        .map(|r| {
+            let f = |k: usize| f32::from_le_bytes([r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]]);
+            Ray::new(glam::Vec3::new(f(0), f(1), f(2)), glam::Vec3::new(f(3), f(4), f(5)))
+        })
+        .collect_into_vec(&mut rays);
+    let bad = |r: &Ray| !r.origin.is_finite() || !r.dir.is_finite() || r.dir == glam::Vec3::ZERO;
+    if let Some(i) = rays.par_iter().position_first(bad) {
+        let k = first + i as u64;
+        let r = &rays[i];
+        return Err(Error::parse(
+            path,
+            gridtrace::Location::Byte(k * 24),
+            format!(
+                "ray {k} is not finite or has a zero direction: {:?}",
+                [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z]
+            ),
+        ));
+    }
+    Ok(rays)
+}
+
+/// Where a run's queries were answered, from each chunk's `last_query`: the query's name, the
+/// devices in the order they answered (under `auto`, "gpu, then cpu" after a GPU fault), and
+/// the GPU's bytes each way, summed over the chunks. A fault's note goes to stderr as it
+/// comes.
+#[derive(Default)]
+pub(crate) struct QueryLine {
+    name: &'static str,
+    devices: Vec<&'static str>,
+    uploaded_bytes: u64,
+    downloaded_bytes: u64,
+}
+
+impl QueryLine {
+    pub(crate) fn add(&mut self, q: &gridtrace::query::LastQuery) {
+        self.name = q.name;
+        if self.devices.last() != Some(&q.device) {
+            self.devices.push(q.device);
+        }
+        if let Some(s) = &q.gpu {
+            self.uploaded_bytes += s.uploaded_bytes;
+            self.downloaded_bytes += s.downloaded_bytes;
+        }
+        if let Some(n) = &q.note {
+            eprintln!("note: {n}");
+        }
+    }
+
+    /// `query   NAME on DEVICE[, B up, B down]` (nothing for an empty ray file).
+    pub(crate) fn print(&self) {
+        if self.devices.is_empty() {
+            return;
+        }
+        let bytes = if self.devices.contains(&"gpu") {
+            format!(", {} B up, {} B down", self.uploaded_bytes, self.downloaded_bytes)
+        } else {
+            String::new()
+        };
+        println!("query   {} on {}{bytes}", self.name, self.devices.join(", then "));
+    }
+}
+
 /// The GPU's figures for the batches, with the frame's meanings (`render`'s `gpu` line), and
 /// the rays' rate on the device.
-fn print_gpu_batches(s: &gridtrace::gpu::GpuQueryStats) {
+pub(crate) fn print_gpu_batches(s: &gridtrace::gpu::GpuQueryStats) {
     let figures = GpuFigures {
         wall_ms: s.wall_ms,
         timings: &s.timings,

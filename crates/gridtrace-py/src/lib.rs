@@ -217,6 +217,13 @@ impl NativeMesh {
         }
     }
 
+    /// What the last answered query did (a dict, the shape of `Scene.last_query`'s), or None
+    /// before the first (`TraceMesh::last_query`).
+    fn last_query<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        let q = py.detach(|| self.mesh().last_query());
+        stats::last_query(py, &q)
+    }
+
     fn device(&self, py: Python<'_>, backend: &str) -> PyResult<String> {
         let b: Backend = parse("backend", backend)?;
         Ok(py.detach(|| self.mesh().device_for(b)))

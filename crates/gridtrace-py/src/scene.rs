@@ -341,21 +341,11 @@ impl NativeScene {
         }
     }
 
-    /// What the last query did (a dict: `name`, `device`, and for GPU work `gpu`, the batch as
-    /// `last_gpu_batch` gives it), or None before the first (`QueryScene::last_query`).
+    /// What the last query did (a dict: `name`, `device`, for GPU work `gpu`, the batch as
+    /// `last_gpu_batch` gives it, and `note` after a GPU fault), or None before the first
+    /// (`QueryScene::last_query`, `stats::last_query`).
     fn last_query<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let q = self.read().last_query();
-        if q.name.is_empty() {
-            return Ok(None);
-        }
-        let d = PyDict::new(py);
-        d.set_item("name", q.name)?;
-        d.set_item("device", q.device)?;
-        match &q.gpu {
-            Some(s) => d.set_item("gpu", crate::stats::batch(py, s)?)?,
-            None => d.set_item("gpu", py.None())?,
-        }
-        Ok(Some(d))
+        crate::stats::last_query(py, &self.read().last_query())
     }
 
     /// What the GPU's two levels hold and have written (a dict), or None before their first

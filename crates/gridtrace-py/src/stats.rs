@@ -73,3 +73,22 @@ pub fn batch<'py>(py: Python<'py>, s: &GpuQueryStats) -> PyResult<Bound<'py, PyD
     d.set_item("chunks", s.chunks)?;
     Ok(d)
 }
+
+/// What a scene's or a mesh's last query did (`LastQuery`), one shape for both: `name`,
+/// `device` (`"gpu"` or `"cpu"`), `gpu` (the batch as `batch` gives it, or None on the CPU)
+/// and `note` (on the query that met a GPU fault under `auto`, what failed; else None); None
+/// before the first query.
+pub fn last_query<'py>(py: Python<'py>, q: &gridtrace::query::LastQuery) -> PyResult<Option<Bound<'py, PyDict>>> {
+    if q.name.is_empty() {
+        return Ok(None);
+    }
+    let d = PyDict::new(py);
+    d.set_item("name", q.name)?;
+    d.set_item("device", q.device)?;
+    match &q.gpu {
+        Some(s) => d.set_item("gpu", batch(py, s)?)?,
+        None => d.set_item("gpu", py.None())?,
+    }
+    d.set_item("note", q.note.as_deref())?;
+    Ok(Some(d))
+}

@@ -232,6 +232,53 @@ def test_gpu_agrees_with_cpu():
     assert gridtrace.Mesh(vertices, faces, backend="cpu").last_gpu_batch() is None
 
 
+def test_mesh_last_query_says_where_each_query_ran():
+    """``Mesh.last_query()``: ``None`` before the first query, then the dict of
+    ``Scene.last_query`` (the same keys) for the method called. On the CPU ``device`` is "cpu"
+    and ``gpu`` None; a query that raised leaves the previous record. With ``backend="gpu"``
+    (the mesh's or the call's) ``device`` is "gpu" and ``gpu`` the batch: 24 bytes a ray up and
+    the chunk's constants (256 bytes: counters 64, batch constants 48, pass uniforms 144),
+    exactly, and 16 bytes a ray down for ``intersect``, one bit for ``occluded``, besides the
+    timestamps."""
+    vertices, faces = sphere_soup(seed=13)
+    mesh = gridtrace.Mesh(vertices, faces, backend="cpu")
+    assert mesh.last_query() is None
+    o, d = random_rays(5000, seed=14)
+    mesh.intersect(o, d)
+    assert mesh.last_query() == {"name": "intersect", "device": "cpu", "gpu": None, "note": None}
+    mesh.occluded(o, d, 0.0, 1.0)
+    assert mesh.last_query() == {"name": "occluded", "device": "cpu", "gpu": None, "note": None}
+    with pytest.raises(ValueError):
+        mesh.intersect(o, [0, 0, 0])
+    assert mesh.last_query()["name"] == "occluded"
+    scene = gridtrace.Scene(backend="cpu")
+    scene.add_triangles(vertices, faces)
+    scene.count_intersections(np.hstack([o, d]))
+    assert set(scene.last_query()) == set(mesh.last_query())
+    assert scene.last_query()["note"] is None
+    if os.environ.get("GRIDTRACE_SKIP_GPU"):
+        return
+    n = len(o)
+    for m, backend in ((mesh, "gpu"), (gridtrace.Mesh(vertices, faces, backend="gpu"), None)):
+        m.intersect(o, d, backend=backend)
+        q = m.last_query()
+        assert (q["name"], q["device"], q["note"]) == ("intersect", "gpu", None), q
+        s = q["gpu"]
+        assert s["rays"] == n and s["chunks"] == 1 and s["round_trips"] == 1, s
+        assert s["uploaded_bytes"] == 24 * n + 256, s
+        assert 16 * n <= s["downloaded_bytes"] <= 16 * n + 4096, s
+        m.occluded(o, d, 0.0, 1.0, backend=backend)
+        q = m.last_query()
+        assert (q["name"], q["device"]) == ("occluded", "gpu"), q
+        s = q["gpu"]
+        assert s["uploaded_bytes"] == 24 * n + 256, s
+        assert n // 8 <= s["downloaded_bytes"] <= n // 8 + 4 + 4096, s
+        assert s == m.last_gpu_batch()
+    # The call's backend, not the mesh's, says where it ran.
+    mesh.intersect(o, d, backend="cpu")
+    assert mesh.last_query()["device"] == "cpu" and mesh.last_query()["gpu"] is None
+
+
 def test_render_reports_its_frame():
     img, s = gridtrace.render("knot-box", 64, 48, mode="shadow", backend="cpu", stats=True)
     assert img.shape == (48, 64, 3)

@@ -1,7 +1,9 @@
 //! Device faults that cannot be made on demand (a lost device, memory gone), injected through
 //! the paths real ones take (`GpuContext::inject_fault`): with `auto` the tracer hands the work
 //! to the CPU for good and says so, the frame is still made and equals the CPU's; with `gpu`
-//! the fault is an error that names it; the query meshes (`TraceMesh`) follow the same rule.
+//! the fault is an error that names it; the query meshes (`TraceMesh`) and scenes
+//! (`QueryScene`: counts, lists, winding numbers, signed distance, on both GPU paths) follow
+//! the same rule, and a scene's `last_query` says which device answered and carries the note.
 //! A scene over the device's limits is
 //! `backend_sends_a_scene_the_device_cannot_hold_to_the_cpu` in gpu.rs.
 //!
@@ -199,4 +201,196 @@ fn query_meshes_hand_a_failed_gpu_to_the_cpu_under_auto() {
         other => panic!("expected a device-lost error, got {:?}", other.map(|h| h.t.len())),
     }
     assert!(mesh.gpu_failure().is_none());
+}
+
+/// The scene queries that run on the GPU besides closest hits: counts and lists of every hit,
+/// winding numbers, signed distance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum SceneQuery {
+    Count,
+    List,
+    Winding,
+    SignedDistance,
+}
+
+/// A query's answer, compared exactly: a CPU that takes over gives the CPU's answers bit for
+/// bit (the same walk, the same tree as a CPU scene's).
+#[derive(Debug, PartialEq)]
+enum SceneAnswer {
+    Counts(Vec<u32>),
+    Lists(gridtrace::query_scene::Intersections),
+    /// f32 bits, so that NaN (a point that is not finite) compares equal to itself.
+    Values(Vec<u32>),
+}
+
+impl SceneQuery {
+    const ALL: [SceneQuery; 4] = [
+        SceneQuery::Count,
+        SceneQuery::List,
+        SceneQuery::Winding,
+        SceneQuery::SignedDistance,
+    ];
+
+    /// The name `last_query` gives it.
+    fn name(self) -> &'static str {
+        match self {
+            SceneQuery::Count => "count_intersections",
+            SceneQuery::List => "list_intersections",
+            SceneQuery::Winding => "compute_winding_number",
+            SceneQuery::SignedDistance => "compute_signed_distance",
+        }
+    }
+
+    fn run(self, s: &gridtrace::QueryScene, rays: &[[f32; 6]], points: &[[f32; 3]]) -> gridtrace::Result<SceneAnswer> {
+        let bits = |v: Vec<f32>| SceneAnswer::Values(v.iter().map(|x| x.to_bits()).collect());
+        Ok(match self {
+            SceneQuery::Count => SceneAnswer::Counts(s.count_intersections(rays)?),
+            SceneQuery::List => SceneAnswer::Lists(s.list_intersections(rays)?),
+            SceneQuery::Winding => bits(s.winding_numbers(points)?),
+            SceneQuery::SignedDistance => bits(s.compute_signed_distance(points)?),
+        })
+    }
+}
+
+/// A soup (many hits a ray) and a closed box around part of it (points inside: winding number
+/// 1), static: with the BVH the rays walk the GPU's two levels, with the irregular grid the
+/// merged mesh's renderer; the point queries run on the merged mesh's renderer either way.
+fn fault_scene(backend: gridtrace::query::Backend, accel: &str) -> gridtrace::QueryScene {
+    use gridtrace::testing::{cuboid, soup_arrays, triangle_soup};
+    let mut s = gridtrace::QueryScene::new(gridtrace::query::QueryOptions {
+        backend,
+        accel: accel.parse().unwrap(),
+        ..Default::default()
+    });
+    let (v, f) = soup_arrays(&triangle_soup(300, 5));
+    s.add_triangles(v, f, None).unwrap();
+    let (v, f) = cuboid(glam::Vec3::splat(-0.5), glam::Vec3::new(1.0, 0.8, 0.6));
+    s.add_triangles(v, f, None).unwrap();
+    s
+}
+
+/// Rays from around the scene in every direction, and points in and around the box (one not
+/// finite).
+fn fault_rays_and_points() -> (Vec<[f32; 6]>, Vec<[f32; 3]>) {
+    let mut rng = gridtrace::util::Rng::new(41);
+    let mut next = || rng.range(-1.0, 1.0);
+    let rays = (0..600)
+        .map(|_| [next() * 2.0, next() * 2.0, next() * 2.0, next(), next(), next()])
+        .collect();
+    let mut points: Vec<[f32; 3]> = (0..400).map(|_| [next() * 1.5, next() * 1.5, next() * 1.5]).collect();
+    points.push([f32::NAN, 0.0, 0.0]);
+    (rays, points)
+}
+
+/// `QueryScene` under `auto` on a device given (lavapipe, as a hardware adapter): a fault
+/// (a lost device, memory gone) met by a count, a list, winding numbers or a signed distance,
+/// on either GPU path, hands the scene to the CPU for good. The query that met it gives the
+/// CPU scene's answer exactly, its `last_query` says "cpu" with no GPU batch and a note that
+/// the GPU failed and the CPU took over (`gpu_failure` keeps it); the next query is the CPU's
+/// too, without a new note. A fault met before the scene's first GPU work (the device lost
+/// before the renderer is made) is handed over the same way.
+#[test]
+fn scene_queries_hand_a_failed_gpu_to_the_cpu_under_auto() {
+    use gridtrace::query::Backend;
+    if skip_gpu() {
+        return;
+    }
+    let (rays, points) = fault_rays_and_points();
+    for accel in ["bvh", "irregular"] {
+        let cpu = fault_scene(Backend::Cpu, accel);
+        // The merged mesh built first: its tree answers the winding numbers, as on the GPU
+        // scene (whose first query builds it), not the faces' own tree.
+        cpu.compute_distance(&points[..1]).unwrap();
+        for query in SceneQuery::ALL {
+            // The point queries run on the merged mesh whatever the structure: once is enough.
+            if accel == "irregular" && matches!(query, SceneQuery::Winding | SceneQuery::SignedDistance) {
+                continue;
+            }
+            let want = query.run(&cpu, &rays, &points).unwrap();
+            if let SceneAnswer::Counts(c) = &want {
+                assert!(c.iter().filter(|&&c| c >= 2).count() > 50, "rays with several hits");
+            }
+            for (fault, first_on_gpu) in [
+                (Fault::DeviceLost, true),
+                (Fault::OutOfMemory, true),
+                (Fault::DeviceLost, false),
+            ] {
+                let what = format!("{accel} {query:?} {fault:?} (after a GPU query: {first_on_gpu})");
+                let mut s = fault_scene(Backend::Auto, accel);
+                let ctx = ctx();
+                s.adopt_device(ctx.clone());
+                if first_on_gpu {
+                    query.run(&s, &rays, &points).unwrap();
+                    let last = s.last_query();
+                    assert_eq!((last.name, last.device), (query.name(), "gpu"), "{what}");
+                    assert!(last.gpu.is_some_and(|g| g.uploaded_bytes > 0), "{what}");
+                }
+                ctx.inject_fault(fault);
+                let got = query.run(&s, &rays, &points).unwrap();
+                assert!(got == want, "{what}: the CPU's answers differ");
+                let last = s.last_query();
+                assert_eq!((last.name, last.device), (query.name(), "cpu"), "{what}");
+                assert!(last.gpu.is_none(), "{what}");
+                let note = last.note.unwrap_or_else(|| panic!("{what}: no note"));
+                assert!(
+                    note.contains("the GPU failed") && note.contains("CPU from now on"),
+                    "{what}: {note}"
+                );
+                let why = s.gpu_failure().unwrap_or_else(|| panic!("{what}: no gpu_failure"));
+                assert!(note.contains(&why), "{what}: {note} / {why}");
+                assert!(s.device().unwrap().starts_with("cpu"), "{what}");
+                // For good, without a new note: this query again, and every other.
+                for q in SceneQuery::ALL {
+                    let again = q.run(&s, &rays, &points).unwrap();
+                    if q == query {
+                        assert!(again == want, "{what}: again");
+                    }
+                    let last = s.last_query();
+                    assert_eq!((last.name, last.device), (q.name(), "cpu"), "{what}: then {q:?}");
+                    assert!(last.note.is_none() && last.gpu.is_none(), "{what}: then {q:?}");
+                }
+            }
+        }
+    }
+}
+
+/// Under `gpu` the same faults are the caller's: each query's error names the fault (a lost
+/// device stays lost; memory that ran out is reported once, and the next query runs on the
+/// GPU), and the scene does not leave the GPU.
+#[test]
+fn scene_queries_report_the_fault_under_gpu() {
+    use gridtrace::query::Backend;
+    if skip_gpu() {
+        return;
+    }
+    let (rays, points) = fault_rays_and_points();
+    for accel in ["bvh", "irregular"] {
+        for query in SceneQuery::ALL {
+            if accel == "irregular" && matches!(query, SceneQuery::Winding | SceneQuery::SignedDistance) {
+                continue;
+            }
+            for (fault, words) in [(Fault::DeviceLost, "lost"), (Fault::OutOfMemory, "Out of Memory")] {
+                let what = format!("{accel} {query:?} {fault:?}");
+                let mut s = fault_scene(Backend::Gpu, accel);
+                let ctx = ctx();
+                s.adopt_device(ctx.clone());
+                query.run(&s, &rays, &points).unwrap();
+                assert_eq!(s.last_query().device, "gpu", "{what}");
+                ctx.inject_fault(fault);
+                match query.run(&s, &rays, &points) {
+                    Err(Error::Gpu(m)) => assert!(m.contains(words), "{what}: {m}"),
+                    other => panic!("{what}: expected the fault, got {:?}", other.map(|_| ())),
+                }
+                assert!(s.gpu_failure().is_none(), "{what}");
+                let next = query.run(&s, &rays, &points);
+                match fault {
+                    Fault::DeviceLost => assert!(matches!(next, Err(Error::Gpu(_))), "{what}: still lost"),
+                    Fault::OutOfMemory => {
+                        next.unwrap_or_else(|e| panic!("{what}: the next query: {e}"));
+                        assert_eq!(s.last_query().device, "gpu", "{what}: the next query");
+                    }
+                }
+            }
+        }
+    }
 }

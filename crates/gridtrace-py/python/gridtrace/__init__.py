@@ -246,6 +246,17 @@ class Mesh:
         ``render(..., stats=True)`` and of the CLI."""
         return self._native.last_gpu_batch()
 
+    def last_query(self) -> Optional[dict]:
+        """What the last query did, or ``None`` before the first: the dict of
+        ``Scene.last_query`` — ``name`` (the method: ``"intersect"`` or ``"occluded"``),
+        ``device`` (``"gpu"`` or ``"cpu"``: where it was answered, by the ``backend`` given to
+        the call or the mesh's; under ``"auto"`` the CPU after a GPU fault), ``gpu`` (for GPU
+        work the batch as ``last_gpu_batch`` gives it: 24 bytes a ray up, 16 a ray down for
+        ``intersect`` and one bit for ``occluded``, with each chunk's constants and
+        timestamps; else ``None``) and ``note`` (on the query that met a GPU fault under
+        ``"auto"``; else ``None``). A query that raised leaves the previous record."""
+        return self._native.last_query()
+
     def device(self, backend: Optional[str] = None) -> str:
         """Where queries run: ``"cpu (N threads)"`` or the GPU adapter's name and driver."""
         return self._native.device(backend or self._backend)

@@ -303,7 +303,9 @@ class Scene:
         method, e.g. ``"count_intersections"``, ``"compute_winding_number"``), ``device``
         (``"gpu"`` or ``"cpu"``: where it was answered; under ``backend="auto"`` the CPU after a
         GPU fault) and ``gpu`` (for GPU work, the batch as ``last_gpu_batch`` gives it: bytes up
-        and down, submissions, wall and GPU time; else ``None``). Every query runs on the GPU
+        and down, submissions, wall and GPU time; else ``None``) and ``note`` (on the query
+        that met a GPU fault under ``backend="auto"``: what failed, and that the scene's queries
+        run on the CPU from now on; else ``None``). Every query runs on the GPU
         where the scene's backend traces there: rays, counts and lists of every hit, closest
         points, winding numbers and the signs of signed distance and occupancy (``accuracy=inf``,
         the exact sum, on the CPU)."""

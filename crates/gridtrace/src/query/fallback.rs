@@ -2,29 +2,73 @@
 //! `Tracer` follows, for the query meshes (`rays`, Python's `Mesh` and `Scene`). Under `auto`
 //! a GPU fault (a lost device, memory gone) hands the mesh to the CPU for good, the query that
 //! met it is answered there, and `gpu_failure` says what happened; under `gpu` the fault is the
-//! caller's error.
+//! caller's error. Every query goes through `on_backend`, which also keeps its record
+//! (`last_query`: the scene's `LastQuery`).
 
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
-use super::{Backend, TraceMesh};
-use crate::gpu::{GpuContext, GpuRenderer};
+use super::{Backend, TraceMesh, locked};
+use crate::gpu::{GpuContext, GpuQueryStats, GpuRenderer};
+use crate::query_scene::LastQuery;
 use crate::{Error, Result};
 
+/// Where a query was answered (`TraceMesh::route`).
+pub(crate) enum Answered {
+    /// On the GPU, with the batch's statistics.
+    Gpu(GpuQueryStats),
+    /// On the CPU; `fault` is the GPU's error where the GPU failed under `auto` and the CPU
+    /// took the query over (this query only: later ones go to the CPU without one).
+    Cpu { fault: Option<String> },
+}
+
 impl TraceMesh {
-    /// Answers on the GPU renderer `backend` gives (`on_gpu`), else on the CPU (`on_cpu`),
-    /// which also answers, under `auto`, a query whose GPU work failed.
+    /// Answers query `name` on the GPU renderer `backend` gives (`on_gpu`), else on the CPU
+    /// (`on_cpu`), which also answers, under `auto`, a query whose GPU work failed; and keeps
+    /// the record of an answered query (`last_query`). Every query of the mesh goes through
+    /// here.
     pub(super) fn on_backend<T>(
         &self,
+        name: &'static str,
         backend: Backend,
-        on_gpu: impl FnOnce(&Mutex<GpuRenderer>) -> Result<T>,
+        on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<T>,
         on_cpu: impl FnOnce() -> Result<T>,
     ) -> Result<T> {
-        let Some(gpu) = self.renderer(backend)? else {
-            return on_cpu();
+        let (answer, answered) = self.route(backend, on_gpu, on_cpu)?;
+        let record = match answered {
+            Answered::Gpu(stats) => LastQuery {
+                name,
+                device: "gpu",
+                gpu: Some(stats),
+                note: None,
+            },
+            Answered::Cpu { fault } => LastQuery {
+                name,
+                device: "cpu",
+                gpu: None,
+                note: fault.and_then(|_| self.gpu_failure()),
+            },
         };
-        match on_gpu(gpu) {
+        *self.last.lock().unwrap_or_else(|p| p.into_inner()) = record;
+        Ok(answer)
+    }
+
+    /// `on_backend` without the record, saying where the answer came from: the renderer is
+    /// held from the GPU's work to the reading of its statistics, so they are this query's.
+    pub(super) fn route<T>(
+        &self,
+        backend: Backend,
+        on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<T>,
+        on_cpu: impl FnOnce() -> Result<T>,
+    ) -> Result<(T, Answered)> {
+        let Some(gpu) = self.renderer(backend)? else {
+            return Ok((on_cpu()?, Answered::Cpu { fault: None }));
+        };
+        let mut g = locked(gpu);
+        match on_gpu(&mut g) {
+            Ok(answer) => Ok((answer, Answered::Gpu(g.last_query_stats().clone()))),
             Err(Error::Gpu(e)) if backend == Backend::Auto => {
+                drop(g);
                 // A grid the GPU rebuilt after `update_vertices` is not the CPU's to trace:
                 // then the fault stays the caller's.
                 if self.scene.accel.check_current().is_err() {
@@ -35,10 +79,18 @@ impl TraceMesh {
                 *self.gpu_failed.lock().unwrap_or_else(|p| p.into_inner()) = Some(format!(
                     "the GPU failed ({e}); this mesh's queries run on the CPU from now on"
                 ));
-                on_cpu()
+                Ok((on_cpu()?, Answered::Cpu { fault: Some(e) }))
             }
-            r => r,
+            Err(e) => Err(e),
         }
+    }
+
+    /// What the last answered query did: its name (`intersect`, `occluded`,
+    /// `closest_points`), the device, the GPU batch's statistics, and on the query that met
+    /// a GPU fault under `auto` the note that the CPU took over (`LastQuery`); the default
+    /// before the first. A query that failed leaves the previous record.
+    pub fn last_query(&self) -> LastQuery {
+        self.last.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
     /// Why this mesh's `auto` queries moved to the CPU, once a GPU fault sent them there.

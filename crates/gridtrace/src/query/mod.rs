@@ -44,7 +44,10 @@ mod points;
 mod rays;
 mod wire;
 
+/// What a mesh's last query did (`TraceMesh::last_query`): the scene's record.
+pub use crate::query_scene::LastQuery;
 pub use batch::CHUNK;
+pub(crate) use fallback::Answered;
 pub use hits::Hits;
 
 /// Where ray queries run (the same choice as rendering's).
@@ -89,6 +92,8 @@ pub struct TraceMesh {
     gpu_failed: Mutex<Option<String>>,
     /// `auto` traces on the renderer a test gave it (`adopt_device_for_auto`).
     auto_on_adopted: std::sync::atomic::AtomicBool,
+    /// What the last answered query did (`fallback.rs`, `last_query`).
+    last: Mutex<LastQuery>,
 }
 
 impl TraceMesh {
@@ -96,6 +101,17 @@ impl TraceMesh {
     /// triangles are skipped (they can never be hit); indices out of range and non-finite
     /// coordinates are errors.
     pub fn from_arrays(vertices: &[[f32; 3]], faces: &[[u32; 3]], opts: &QueryOptions) -> Result<TraceMesh> {
+        Self::from_arrays_on(vertices, faces, opts, None)
+    }
+
+    /// `from_arrays` with its GPU work on `device` where one is given, instead of a device
+    /// it opens (`QueryScene::adopt_device`: how the fault tests put a scene on lavapipe).
+    pub(crate) fn from_arrays_on(
+        vertices: &[[f32; 3]],
+        faces: &[[u32; 3]],
+        opts: &QueryOptions,
+        device: Option<Arc<GpuContext>>,
+    ) -> Result<TraceMesh> {
         let n = vertices.len() as u32;
         if let Some(i) = vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
             return Err(Error::InvalidInput(format!(
@@ -114,7 +130,7 @@ impl TraceMesh {
             triangles: faces.to_vec(),
             ..Default::default()
         };
-        Self::from_mesh(mesh, opts)
+        Self::from_mesh_on(mesh, opts, device)
     }
 
     /// Loads a mesh file (OBJ, PLY, glTF/GLB, STL, OFF).
@@ -123,6 +139,10 @@ impl TraceMesh {
     }
 
     pub fn from_mesh(mesh: Mesh, opts: &QueryOptions) -> Result<TraceMesh> {
+        Self::from_mesh_on(mesh, opts, None)
+    }
+
+    fn from_mesh_on(mesh: Mesh, opts: &QueryOptions, device: Option<Arc<GpuContext>>) -> Result<TraceMesh> {
         // Keep the input face order: drop degenerate faces here and remember where each kept
         // one came from, so hits report input indices.
         let mesh_faces = mesh.triangles.len();
@@ -169,7 +189,11 @@ impl TraceMesh {
             gpu: OnceLock::new(),
             gpu_failed: Mutex::new(None),
             auto_on_adopted: Default::default(),
+            last: Mutex::default(),
         };
+        if let Some(ctx) = device {
+            mesh.adopt_device_for_auto(ctx)?;
+        }
         // Open the GPU now when it was asked for, so a missing adapter is reported at once.
         if opts.backend == Backend::Gpu {
             mesh.renderer(Backend::Gpu)?;

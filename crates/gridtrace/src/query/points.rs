@@ -3,7 +3,7 @@
 //! (`GpuRenderer::closest_points`), with the same answers (distances equal within rounding;
 //! the same triangle unless two are equally near).
 
-use super::{Backend, TraceMesh, locked};
+use super::{Backend, TraceMesh};
 use crate::Result;
 use crate::accel::closest::{ClosestPoint, closest_points};
 
@@ -18,8 +18,9 @@ impl TraceMesh {
     /// `closest_points` on a given backend.
     pub fn closest_points_with(&self, backend: Backend, points: &[[f32; 3]]) -> Result<Vec<ClosestPoint>> {
         self.on_backend(
+            "closest_points",
             backend,
-            |gpu| locked(gpu).closest_points(&self.scene.accel.tris, points),
+            |gpu| gpu.closest_points(&self.scene.accel.tris, points),
             || closest_points(&self.scene.accel, points),
         )
     }

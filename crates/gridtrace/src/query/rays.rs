@@ -2,14 +2,12 @@
 //! broadcast over the other) or from prepared rays, on the GPU the mesh's backend gives (the
 //! arrays straight onto the wire, `wire.rs`) or on every core, with the same answers.
 
-use std::sync::Mutex;
-
 use glam::Vec3;
 use rayon::prelude::*;
 
 use super::batch::{CPU_BATCH, batch_len, check_interval, on_cpu_batches};
 use super::hits::{Hits, HitsMut};
-use super::{Backend, TraceMesh, locked, wire};
+use super::{Backend, TraceMesh, wire};
 use crate::Result;
 use crate::accel::{Hit, Ray};
 use crate::gpu::{Answer, ChunkAnswers, GpuRenderer};
@@ -33,6 +31,7 @@ impl TraceMesh {
         let n = batch_len(origins, dirs)?;
         check_interval(t_min, t_max)?;
         self.on_backend(
+            "intersect",
             backend,
             |gpu| self.intersect_on_gpu(gpu, origins, dirs, n, t_min, t_max),
             || {
@@ -55,7 +54,7 @@ impl TraceMesh {
     /// parallel, with their normals from the triangles here.
     fn intersect_on_gpu(
         &self,
-        gpu: &Mutex<GpuRenderer>,
+        gpu: &mut GpuRenderer,
         origins: &[[f32; 3]],
         dirs: &[[f32; 3]],
         n: usize,
@@ -65,7 +64,7 @@ impl TraceMesh {
         let mut out = Hits::zeroed(n);
         let rays = wire::SplitRays { origins, dirs, n };
         let answer = Answer::Hits { uv: true };
-        locked(gpu).cast(&rays, (t_min, t_max), answer, |first, answers| {
+        gpu.cast(&rays, (t_min, t_max), answer, |first, answers| {
             let ChunkAnswers::HitsUv(hits) = answers else {
                 return;
             };
@@ -114,11 +113,12 @@ impl TraceMesh {
         let n = batch_len(origins, dirs)?;
         check_interval(t_min, t_max)?;
         self.on_backend(
+            "occluded",
             backend,
             |gpu| {
                 // One bit a ray comes down.
                 let rays = wire::SplitRays { origins, dirs, n };
-                locked(gpu).occluded_of(&rays, (t_min, t_max))
+                gpu.occluded_of(&rays, (t_min, t_max))
             },
             || {
                 self.scene.accel.check_cpu_traces()?;
@@ -159,6 +159,7 @@ impl TraceMesh {
         out: &mut Vec<Hit>,
     ) -> Result<()> {
         self.run_into(
+            "intersect",
             backend,
             rays,
             |g| g.intersect_of(&crate::gpu::RaySlice { rays }, (t_min, t_max), uv),
@@ -193,6 +194,7 @@ impl TraceMesh {
         out: &mut Vec<bool>,
     ) -> Result<()> {
         self.run_into(
+            "occluded",
             backend,
             rays,
             |g| g.occluded(rays, t_min, t_max),
@@ -205,8 +207,10 @@ impl TraceMesh {
     /// One query over a batch into `out` (cleared, then one answer per ray): on the GPU
     /// renderer for `backend`, else on the CPU, in parallel over sub-batches of `CPU_BATCH`
     /// rays.
+    #[allow(clippy::too_many_arguments)]
     fn run_into<T: Send + Sync + Copy>(
         &self,
+        name: &'static str,
         backend: Backend,
         rays: &[Ray],
         on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<Vec<T>>,
@@ -217,8 +221,9 @@ impl TraceMesh {
         out.clear();
         // The GPU brings back an answer of its own; the CPU writes into `out`.
         let from_gpu = self.on_backend(
+            name,
             backend,
-            |g| on_gpu(&mut locked(g)).map(Some),
+            |g| on_gpu(g).map(Some),
             || {
                 self.scene.accel.check_cpu_traces()?;
                 // Reserved, not filled: each work item fills its own piece first, so fresh
@@ -251,13 +256,14 @@ impl TraceMesh {
 
     /// Answers on this mesh's GPU where its backend traces there (`on_gpu`, given the
     /// renderer), else on the CPU (`on_cpu`), which also answers a query
-    /// whose GPU work failed under `auto` (the mesh's queries then stay on the CPU). How
-    /// `QueryScene` sends its own wire sources (`query_scene/rays.rs`) through the mesh.
+    /// whose GPU work failed under `auto` (the mesh's queries then stay on the CPU); says
+    /// which answered (`Answered`), and keeps no record of its own: how `QueryScene` sends
+    /// its own wire sources (`query_scene/rays.rs`) through the mesh, and records them itself.
     pub(crate) fn on_gpu_or_cpu<T>(
         &self,
         on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<T>,
         on_cpu: impl FnOnce() -> Result<T>,
-    ) -> Result<T> {
-        self.on_backend(self.backend, |g| on_gpu(&mut locked(g)), on_cpu)
+    ) -> Result<(T, super::Answered)> {
+        self.route(self.backend, on_gpu, on_cpu)
     }
 }

@@ -193,7 +193,7 @@ impl QueryScene {
         let mut specs = two.meshes().map(|(_, a)| two_level::walk_for(&a.structure, walk));
         // One walk for every mesh (`bottom_levels` lays out meshes of one structure).
         let first = specs.next().flatten();
-        self.opts.backend.traces_on_gpu()
+        self.traces_on_gpu()
             && !two.placed.is_empty()
             && first.is_some_and(|f| specs.all(|s| s.is_some_and(|s| std::ptr::eq(s, f))))
     }
@@ -229,7 +229,13 @@ impl QueryScene {
             old => {
                 let (ctx, uploads) = match old {
                     Some(g) => (g.renderer.context().clone(), g.uploads),
-                    None => (Arc::new(GpuContext::new()?), GpuUploads::default()),
+                    None => {
+                        let ctx = match &self.adopted {
+                            Some(ctx) => ctx.clone(),
+                            None => Arc::new(GpuContext::new()?),
+                        };
+                        (ctx, GpuUploads::default())
+                    }
                 };
                 let bottoms = two_level::bottom_levels(&accels(two), self.opts.gpu_variants.bvh_walk())?
                     .ok_or_else(|| Error::Gpu("the scene's meshes have no GPU walk of two levels".into()))?;

@@ -36,10 +36,12 @@ pub(super) fn scan_with(
 }
 
 impl QueryScene {
-    /// Whether the scene's queries trace on a GPU (its backend's choice: `auto` may still fall
-    /// back to the CPU).
+    /// Whether the scene's queries trace on a GPU: its backend's choice (`auto` may still fall
+    /// back to the CPU), or a device a test gave `auto`; not once a GPU fault sent `auto` to
+    /// the CPU.
     pub(crate) fn traces_on_gpu(&self) -> bool {
-        self.opts.backend.traces_on_gpu()
+        let auto = self.opts.backend == crate::query::Backend::Auto;
+        (self.opts.backend.traces_on_gpu() || (auto && self.adopted.is_some())) && !self.failed_over()
     }
 
     /// What the last ray batch on this scene's GPU took (wall and GPU time, submissions, bytes

@@ -7,10 +7,11 @@
 //! prefix table here splits a merged face into (geometry id, face index in that geometry).
 
 use std::collections::BTreeMap;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use crate::accel::winding::FastWinding;
 use crate::accel::{Accel, Structure, TriAccel};
+use crate::gpu::GpuContext;
 use crate::query::{QueryOptions, TraceMesh};
 use crate::{Error, Result};
 
@@ -44,8 +45,13 @@ pub(crate) struct Merged {
 }
 
 impl Merged {
-    /// Merges `geometries` (ascending id) and builds the mesh.
-    pub fn build(geometries: &BTreeMap<u32, Geometry>, opts: &QueryOptions) -> Result<Merged> {
+    /// Merges `geometries` (ascending id) and builds the mesh, its GPU work on `device` where
+    /// one is given (`QueryScene::adopt_device`).
+    pub fn build(
+        geometries: &BTreeMap<u32, Geometry>,
+        opts: &QueryOptions,
+        device: Option<Arc<GpuContext>>,
+    ) -> Result<Merged> {
         let mut spans = Vec::with_capacity(geometries.len());
         let mut world = Vec::new();
         let mut faces = Vec::new();
@@ -69,7 +75,7 @@ impl Merged {
         let mesh = if degenerate.iter().all(|&d| d) {
             None
         } else {
-            Some(TraceMesh::from_arrays(&world, &faces, opts)?)
+            Some(TraceMesh::from_arrays_on(&world, &faces, opts, device)?)
         };
         Ok(Merged {
             mesh,

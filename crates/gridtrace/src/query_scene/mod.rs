@@ -130,6 +130,8 @@ pub struct QueryScene {
     /// The winding numbers' faces and tree while the merged mesh is not built
     /// (`winding_only.rs`); `None` when a change made them stale.
     winding_only: Mutex<Option<Arc<winding_only::WindingOnly>>>,
+    /// The device `auto` traces on where a test gave one (`adopt_device_for_auto`).
+    adopted: Option<Arc<crate::gpu::GpuContext>>,
 }
 
 /// Where a ray query runs (`QueryScene::ray_path`).
@@ -158,6 +160,7 @@ impl QueryScene {
             moving: false,
             records: Mutex::default(),
             winding_only: Mutex::new(None),
+            adopted: None,
         }
     }
 
@@ -328,7 +331,18 @@ impl QueryScene {
         if let Some(m) = slot.as_ref() {
             return Ok(m.clone());
         }
-        let m = Arc::new(Merged::build(&self.geometries, &self.opts)?);
+        // On the device a test gave (`adopt_device`), unless a fault sent the scene to the CPU.
+        let device = self.adopted.clone().filter(|_| !self.failed_over());
+        let m = match Merged::build(&self.geometries, &self.opts, device) {
+            // Opening the renderer on a device that failed is a fault like any other: under
+            // `auto` the scene's queries then run on the CPU, the mesh with them.
+            Err(Error::Gpu(e)) if self.opts.backend == crate::query::Backend::Auto => {
+                self.gpu_fault(&e);
+                Merged::build(&self.geometries, &self.opts, None)?
+            }
+            r => r?,
+        };
+        let m = Arc::new(m);
         self.builds.fetch_add(1, Ordering::Relaxed);
         *slot = Some(m.clone());
         Ok(m)
@@ -359,7 +373,7 @@ impl QueryScene {
                 t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
             })
         };
-        if !self.opts.backend.traces_on_gpu() {
+        if !self.traces_on_gpu() {
             if !self.moving && merged_answers() {
                 return Ok(RayPath::Merged);
             }
@@ -376,23 +390,18 @@ impl QueryScene {
         })
     }
 
-    /// The query `on_gpu` on the GPU's two levels; under `auto`, a GPU that fails leaves the
-    /// query to the CPU's (`on_cpu`), as the merged mesh's queries do (`TraceMesh`).
-    fn gpu_or_cpu<T>(&self, on_gpu: impl FnOnce() -> Result<T>, on_cpu: impl FnOnce() -> Result<T>) -> Result<T> {
-        match on_gpu() {
-            Err(Error::Gpu(_)) if self.opts.backend == crate::query::Backend::Auto => on_cpu(),
-            r => r,
-        }
-    }
-
     /// Structures built over triangles so far by this scene: each mesh's bottom level (once,
     /// however many instances share it) and each merged mesh. For tests: a move builds none.
     pub fn structure_builds(&self) -> usize {
         self.builds.load(Ordering::Relaxed)
     }
 
-    /// Where the ray queries run: "cpu (N threads)" or the GPU adapter (builds the scene).
+    /// Where the ray queries run: "cpu (N threads)" or the GPU adapter (builds the scene);
+    /// after a GPU fault under `auto`, the CPU and why.
     pub fn device(&self) -> Result<String> {
+        if let Some(why) = self.gpu_failure().filter(|_| self.failed_over()) {
+            return Ok(format!("{} (the GPU failed: {why})", crate::backend::describe_cpu()));
+        }
         let m = self.merged()?;
         Ok(m.mesh
             .as_ref()
