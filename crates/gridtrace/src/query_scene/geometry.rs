@@ -8,6 +8,7 @@ use std::sync::{Arc, OnceLock};
 
 use glam::{Affine3A, Mat3, Mat4, Vec3, Vec4};
 
+use super::enclosure::Enclosure;
 use crate::accel::{Aabb, Ray};
 use crate::query::{Backend, QueryOptions, TraceMesh};
 use crate::{Error, Result};
@@ -21,7 +22,7 @@ pub struct SceneMesh {
     bounds: Aabb,
     /// A few points whose hull holds every vertex (`enclosure.rs`), found on first use: the
     /// instances' world boxes.
-    enclosure: OnceLock<Vec<Vec3>>,
+    enclosure: OnceLock<Enclosure>,
     /// The bottom level: the structure over the mesh's own-space triangles, on the CPU
     /// (`None`: no face with non-zero area, so nothing to hit). Built once, whatever moves.
     bottom: OnceLock<Option<TraceMesh>>,
@@ -61,9 +62,9 @@ impl SceneMesh {
 
     /// The points whose hull holds every vertex (`enclosure::dop_corners`), found now if not
     /// yet.
-    fn enclosure(&self) -> &[Vec3] {
+    fn enclosure(&self) -> &Enclosure {
         self.enclosure
-            .get_or_init(|| super::enclosure::dop_corners(&self.vertices))
+            .get_or_init(|| Enclosure::new(&super::enclosure::dop_corners(&self.vertices)))
     }
 
     /// The bottom level, built now (counted in `builds`) if it is not yet. Its structure is the
@@ -128,14 +129,20 @@ impl Geometry {
     /// `mesh` placed by `transform` with `mask`; `what` names the transform in errors (the
     /// instance it is for).
     pub fn place(mesh: Arc<SceneMesh>, transform: Mat4, mask: u32, what: &str) -> Result<Geometry> {
+        Geometry::place_named(mesh, transform, mask, &|| what.to_string())
+    }
+
+    /// `place`, with the transform's name made only for an error (a move of a thousand
+    /// instances names none).
+    fn place_named(mesh: Arc<SceneMesh>, transform: Mat4, mask: u32, what: &dyn Fn() -> String) -> Result<Geometry> {
         check_transform(&transform, &mesh.bounds, what)?;
         Ok(Geometry { mesh, transform, mask })
     }
 
     /// The same mesh placed by `transform` instead (checked as `place` checks it; `what` names
     /// it in errors).
-    pub fn moved(&self, transform: Mat4, what: &str) -> Result<Geometry> {
-        Geometry::place(self.mesh.clone(), transform, self.mask, what)
+    pub fn moved(&self, transform: Mat4, what: &dyn Fn() -> String) -> Result<Geometry> {
+        Geometry::place_named(self.mesh.clone(), transform, self.mask, what)
     }
 
     pub fn mesh(&self) -> &Arc<SceneMesh> {
@@ -181,11 +188,7 @@ impl Geometry {
     /// transform (`enclosure.rs`), the exact box of the transformed vertices within a few
     /// percent a side, where the own box's corners turned can be half as large again.
     pub fn world_bounds(&self) -> Aabb {
-        let m = &self.transform;
-        self.mesh
-            .enclosure()
-            .iter()
-            .fold(Aabb::EMPTY, |b, &p| b.grow(m.transform_point3(p)))
+        self.mesh.enclosure().world_box(&self.transform)
     }
 
     /// The vertices in world space.
@@ -238,15 +241,17 @@ pub(crate) fn normal_to_world(to_local: &Affine3A) -> Mat3 {
 
 /// Whether `transform` is finite, affine and invertible, with an inverse that is finite, and
 /// keeps `bounds` finite; an error naming `what` otherwise.
-fn check_transform(transform: &Mat4, bounds: &Aabb, what: &str) -> Result<()> {
+fn check_transform(transform: &Mat4, bounds: &Aabb, what: &dyn Fn() -> String) -> Result<()> {
     if !transform.is_finite() {
         return Err(Error::InvalidInput(format!(
-            "{what} has a non-finite entry: {transform}"
+            "{} has a non-finite entry: {transform}",
+            what()
         )));
     }
     if transform.row(3) != Vec4::W {
         return Err(Error::InvalidInput(format!(
-            "{what} is not affine: its last row is {} (want 0 0 0 1)",
+            "{} is not affine: its last row is {} (want 0 0 0 1)",
+            what(),
             transform.row(3)
         )));
     }
@@ -258,8 +263,10 @@ fn check_transform(transform: &Mat4, bounds: &Aabb, what: &str) -> Result<()> {
             .fold(Aabb::EMPTY, |b, c| b.grow(transform.transform_point3(c)));
         if !(b.min.is_finite() && b.max.is_finite()) {
             return Err(Error::InvalidInput(format!(
-                "vertices after the {what} are not finite (box {:?} .. {:?})",
-                b.min, b.max
+                "vertices after the {} are not finite (box {:?} .. {:?})",
+                what(),
+                b.min,
+                b.max
             )));
         }
     }
@@ -268,7 +275,8 @@ fn check_transform(transform: &Mat4, bounds: &Aabb, what: &str) -> Result<()> {
     let inverse = affine.inverse();
     if det == 0.0 || !det.is_finite() || !inverse.is_finite() {
         return Err(Error::InvalidInput(format!(
-            "{what} cannot be inverted (determinant {det}): {transform}"
+            "{} cannot be inverted (determinant {det}): {transform}",
+            what()
         )));
     }
     Ok(())

@@ -59,7 +59,7 @@ impl QueryScene {
         let mut moved = Vec::with_capacity(ids.len());
         for (&id, &m) in ids.iter().zip(transforms) {
             let g = self.geometries.get(&id).ok_or_else(|| unknown(id))?;
-            moved.push(g.moved(m, &format!("transform of geometry {id}"))?);
+            moved.push(g.moved(m, &|| format!("transform of geometry {id}"))?);
         }
         for (&id, g) in ids.iter().zip(moved) {
             self.geometries.insert(id, g);

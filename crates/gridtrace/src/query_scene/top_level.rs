@@ -3,15 +3,14 @@
 //! ray enters to the caller (`two_level.rs`), which carries the ray into the instance's space
 //! and walks that mesh's own structure (the bottom level).
 //!
-//! The build splits at the median of the boxes' centres along the widest axis of the centres
-//! (`select_nth_unstable`, no sort): O(n log n), about 60 us for 1,000 instances on one core,
-//! so a move rebuilds it whole rather than refitting (a refit keeps a tree that moved
-//! instances make loose; a rebuild of this size costs what a refit's bookkeeping would). The
-//! binary tree is then collapsed to eight-wide nodes (`Node8`) for the CPU's walk: a node's
-//! eight boxes tested in two four-lane computations side by side. Measured on 100 randomly
-//! turned Stanford Bunnies and 1M random rays, the binary walk visited 18 nodes a ray and was
-//! the larger part of the two levels' time; four-wide nodes, 8.7. The GPU's walk takes the binary tree
-//! (`as_bvh`), built again from the boxes the leaves hold.
+//! The build cuts the instances into groups along the widest axis of their boxes' centres
+//! (`select_nth_unstable`, no sort), each group a full subtree of eight-wide nodes (`fill`):
+//! O(n log n), so a move rebuilds it whole rather than refitting (a refit keeps a tree that
+//! moved instances make loose; a rebuild of this size costs what a refit's bookkeeping would).
+//! A node's eight boxes are tested in two four-lane computations side by side. Measured on 100
+//! randomly turned Stanford Bunnies and 1M random rays, a binary walk visited 18 nodes a ray
+//! and was the larger part of the two levels' time; four-wide nodes, 8.7. The GPU's walk
+//! takes a binary tree (`as_bvh`: median splits, built again from the boxes the leaves hold).
 
 use glam::{Vec3, Vec4};
 
@@ -74,11 +73,12 @@ pub(crate) struct TopLevel {
 impl TopLevel {
     /// Builds over `boxes[i]` for every `i` (finite boxes: the caller checked the transforms).
     pub fn build(boxes: &[Aabb]) -> TopLevel {
-        let binary = Binary::build(boxes);
-        let mut nodes = Vec::with_capacity(boxes.len().div_ceil(2));
-        if !binary.nodes.is_empty() {
+        let mut nodes = Vec::with_capacity(boxes.len().div_ceil(WIDTH - 1) + 1);
+        if !boxes.is_empty() {
+            let centres: Vec<Vec3> = boxes.iter().map(|b| b.center()).collect();
+            let mut items: Vec<u32> = (0..boxes.len() as u32).collect();
             nodes.push(Node8::EMPTY);
-            collapse(&binary, boxes, 0, &mut nodes, 0);
+            fill(boxes, &centres, &mut items, &mut nodes, 0);
         }
         TopLevel {
             nodes,
@@ -114,58 +114,34 @@ impl Node8 {
     };
 }
 
-/// Fills `nodes[at]` from the binary tree's node `from`: its children, the largest box
-/// opened while there is room (a binary leaf opens into its instances), each remaining inner
-/// node collapsed the same way into a new four-wide node.
-fn collapse(binary: &Binary, boxes: &[Aabb], from: usize, nodes: &mut Vec<Node8>, at: usize) {
-    /// A slot's content while the node is filled: a binary node or an instance.
-    #[derive(Clone, Copy)]
-    enum Slot {
-        Node(usize),
-        Item(u32),
+/// Fills `nodes[at]` over `items` (at least one), and returns their box. Up to eight items
+/// are the node's slots; more are cut into groups of `cap` items, `cap` the smallest power of
+/// eight of which eight groups hold them all, each group (but the last) a full subtree: a slot
+/// of its own where it is one item, else a child node filled the same way.
+///
+/// Why groups of a power of eight: cutting at the median, as the binary tree does, leaves
+/// subtrees of two or three items at the bottom, each then a node of its own with six of its
+/// eight slots empty. Measured for 1,000 random boxes: median cuts collapsed to eight-wide
+/// nodes (the largest box opened first) made 489 nodes, 3.0 slots each, 117 bytes an
+/// instance; these groups fill all but about one node a level.
+fn fill(boxes: &[Aabb], centres: &[Vec3], items: &mut [u32], nodes: &mut Vec<Node8>, at: usize) -> Aabb {
+    let mut cap = 1;
+    while cap * WIDTH < items.len() {
+        cap *= WIDTH;
     }
-    let opened = |n: &Node| -> Vec<Slot> {
-        if n.count > 0 {
-            let first = n.first as usize;
-            binary.items[first..first + n.count as usize]
-                .iter()
-                .map(|&i| Slot::Item(i))
-                .collect()
-        } else {
-            vec![Slot::Node(n.first as usize), Slot::Node(n.first as usize + 1)]
-        }
-    };
-    let mut slots = opened(&binary.nodes[from]);
-    loop {
-        // The binary node with the largest box among the slots, if opening it fits.
-        let widest = slots
-            .iter()
-            .enumerate()
-            .filter_map(|(k, s)| match *s {
-                Slot::Node(n) => Some((k, n)),
-                Slot::Item(_) => None,
-            })
-            .filter(|&(_, n)| slots.len() - 1 + opened(&binary.nodes[n]).len() <= WIDTH)
-            .max_by(|a, b| {
-                let area = |n: usize| {
-                    let e = binary.nodes[n].bounds.extent();
-                    e.x * e.y + e.y * e.z + e.z * e.x
-                };
-                area(a.1).total_cmp(&area(b.1))
-            });
-        let Some((k, n)) = widest else { break };
-        slots.splice(k..=k, opened(&binary.nodes[n]));
-    }
+    let mut groups = Vec::with_capacity(WIDTH);
+    cut(centres, items, 0, cap, &mut groups);
     let mut node = Node8::EMPTY;
-    for (k, slot) in slots.into_iter().enumerate() {
-        let (bounds, child) = match slot {
-            Slot::Item(i) => (boxes[i as usize], i << 1 | 1),
-            Slot::Node(n) => {
-                let index = nodes.len();
-                nodes.push(Node8::EMPTY);
-                collapse(binary, boxes, n, nodes, index);
-                (binary.nodes[n].bounds, (index as u32) << 1)
-            }
+    let mut all = Aabb::EMPTY;
+    for (k, &(first, len)) in groups.iter().enumerate() {
+        let (bounds, child) = if len == 1 {
+            let i = items[first];
+            (boxes[i as usize], i << 1 | 1)
+        } else {
+            let index = nodes.len();
+            nodes.push(Node8::EMPTY);
+            let bounds = fill(boxes, centres, &mut items[first..first + len], nodes, index);
+            (bounds, (index as u32) << 1)
         };
         for a in 0..3 {
             node.min[a][k / 4][k % 4] = bounds.min[a];
@@ -173,8 +149,39 @@ fn collapse(binary: &Binary, boxes: &[Aabb], from: usize, nodes: &mut Vec<Node8>
         }
         node.child[k] = child;
         node.valid |= 1 << k;
+        all = all.union(bounds);
     }
     nodes[at] = node;
+    all
+}
+
+/// Cuts `items` (which start at `first` of the node's items) into groups of `cap` items, the
+/// last one short, appended to `groups` as `(first, count)` in order: at a multiple of `cap`
+/// near the middle, along the widest axis of the centres (`select_nth_unstable`, no sort).
+fn cut(centres: &[Vec3], items: &mut [u32], first: usize, cap: usize, groups: &mut Vec<(usize, usize)>) {
+    let n = items.len();
+    if n <= cap {
+        groups.push((first, n));
+        return;
+    }
+    let at = n.div_ceil(cap) / 2 * cap;
+    let spread = items
+        .iter()
+        .fold(Aabb::EMPTY, |b, &i| b.grow(centres[i as usize]))
+        .extent();
+    let axis = if spread.x >= spread.y && spread.x >= spread.z {
+        0
+    } else if spread.y >= spread.z {
+        1
+    } else {
+        2
+    };
+    items.select_nth_unstable_by(at, |&a, &b| {
+        centres[a as usize][axis].total_cmp(&centres[b as usize][axis])
+    });
+    let (left, right) = items.split_at_mut(at);
+    cut(centres, left, first, cap, groups);
+    cut(centres, right, first + at, cap, groups);
 }
 
 impl Binary {
@@ -535,6 +542,42 @@ mod tests {
                 mine.sort_unstable();
                 assert_eq!(&mine, seen, "n = {n}, ray {k}: the interleaved walks differ");
             }
+        }
+    }
+}
+#[cfg(test)]
+mod fill_tests {
+    use super::*;
+
+    /// The nodes are nearly full: a thousand random boxes take at most one node a level more
+    /// than a seventh of their count (each node's eight slots, one of them the way down).
+    #[test]
+    fn nodes_are_nearly_full() {
+        let mut r = crate::util::Rng::new(3);
+        for n in [1usize, 7, 9, 100, 1000, 4097] {
+            let boxes: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let c = Vec3::new(r.next_f32(), r.next_f32(), r.next_f32()) * 20.0;
+                    Aabb {
+                        min: c - 0.5,
+                        max: c + 0.5,
+                    }
+                })
+                .collect();
+            let t = TopLevel::build(&boxes);
+            let slots: u32 = t.nodes.iter().map(|n| n.valid.count_ones()).sum();
+            assert_eq!(
+                slots as usize,
+                n + t.nodes.len() - 1,
+                "n = {n}: every item and node once"
+            );
+            let levels = (n as f64).log(8.0).ceil() as usize + 1;
+            assert!(t.nodes.len() <= n / 7 + 2 * levels, "n = {n}: {} nodes", t.nodes.len());
+            let mut seen = t.boxes();
+            seen.sort_by(|a, b| a.min.x.total_cmp(&b.min.x));
+            let mut want = boxes.clone();
+            want.sort_by(|a, b| a.min.x.total_cmp(&b.min.x));
+            assert_eq!(seen, want, "n = {n}: each box in a leaf slot as given");
         }
     }
 }
