@@ -3,14 +3,16 @@
 //! ray enters to the caller (`two_level.rs`), which carries the ray into the instance's space
 //! and walks that mesh's own structure (the bottom level).
 //!
-//! The build cuts the instances into groups along the widest axis of their boxes' centres
-//! (`select_nth_unstable`, no sort), each group a full subtree of eight-wide nodes (`fill`):
-//! O(n log n), so a move rebuilds it whole rather than refitting (a refit keeps a tree that
-//! moved instances make loose; a rebuild of this size costs what a refit's bookkeeping would).
-//! A node's eight boxes are tested in two four-lane computations side by side. Measured on 100
-//! randomly turned Stanford Bunnies and 1M random rays, a binary walk visited 18 nodes a ray
-//! and was the larger part of the two levels' time; four-wide nodes, 8.7. The GPU's walk
-//! takes a binary tree (`as_bvh`: median splits, built again from the boxes the leaves hold).
+//! The build splits at the median of the boxes' centres along the widest axis of the centres
+//! (`select_nth_unstable`, no sort), up to eight instances a leaf: O(n log n), so a move
+//! rebuilds it whole rather than refitting (a refit keeps a tree that moved instances make
+//! loose; a rebuild of this size costs what a refit's bookkeeping would). The binary tree is
+//! then collapsed to eight-wide nodes (`Node8`, the largest box opened first) for the CPU's
+//! walk: a node's eight boxes tested in two four-lane computations side by side. Measured on
+//! 100 randomly turned Stanford Bunnies and 1M random rays, a binary walk visited 18 nodes a
+//! ray and was the larger part of the two levels' time; four-wide nodes, 8.7. The GPU's walk
+//! takes a binary tree (`as_bvh`, two instances a leaf, built again from the boxes the leaves
+//! hold).
 
 use glam::{Vec3, Vec4};
 
@@ -18,8 +20,15 @@ use crate::accel::Aabb;
 use crate::accel::bvh::safe_dir;
 use crate::accel::bvh::{Bvh, BvhNode};
 
-/// Instances a leaf holds at most.
-const LEAF: usize = 2;
+/// Instances a leaf of the binary tree holds at most: for the CPU's eight-wide nodes, eight,
+/// so that a leaf left a slot of its own (no room to open it) becomes a node of four to eight
+/// instances. With two a leaf, most nodes at the bottom held two or three (1,000 random
+/// boxes: 489 nodes, 3.0 slots each, 117 bytes an instance); a balanced cut into full groups
+/// of eight (every node full) cost the walk 10% (a root of two slots, 100 instances).
+const WIDE_LEAF: usize = 8;
+
+/// The same for the GPU's binary walk (`as_bvh`), whose leaves are tested one box at a time.
+const GPU_LEAF: usize = 2;
 
 /// A node: its box and either two children (`count == 0`: children at `first` and
 /// `first + 1`) or `count` instances (`items[first..first + count]`).
@@ -73,12 +82,11 @@ pub(crate) struct TopLevel {
 impl TopLevel {
     /// Builds over `boxes[i]` for every `i` (finite boxes: the caller checked the transforms).
     pub fn build(boxes: &[Aabb]) -> TopLevel {
-        let mut nodes = Vec::with_capacity(boxes.len().div_ceil(WIDTH - 1) + 1);
-        if !boxes.is_empty() {
-            let centres: Vec<Vec3> = boxes.iter().map(|b| b.center()).collect();
-            let mut items: Vec<u32> = (0..boxes.len() as u32).collect();
+        let binary = Binary::build(boxes, WIDE_LEAF);
+        let mut nodes = Vec::with_capacity(boxes.len().div_ceil(2));
+        if !binary.nodes.is_empty() {
             nodes.push(Node8::EMPTY);
-            fill(boxes, &centres, &mut items, &mut nodes, 0);
+            collapse(&binary, boxes, 0, &mut nodes, 0);
         }
         TopLevel {
             nodes,
@@ -114,34 +122,58 @@ impl Node8 {
     };
 }
 
-/// Fills `nodes[at]` over `items` (at least one), and returns their box. Up to eight items
-/// are the node's slots; more are cut into groups of `cap` items, `cap` the smallest power of
-/// eight of which eight groups hold them all, each group (but the last) a full subtree: a slot
-/// of its own where it is one item, else a child node filled the same way.
-///
-/// Why groups of a power of eight: cutting at the median, as the binary tree does, leaves
-/// subtrees of two or three items at the bottom, each then a node of its own with six of its
-/// eight slots empty. Measured for 1,000 random boxes: median cuts collapsed to eight-wide
-/// nodes (the largest box opened first) made 489 nodes, 3.0 slots each, 117 bytes an
-/// instance; these groups fill all but about one node a level.
-fn fill(boxes: &[Aabb], centres: &[Vec3], items: &mut [u32], nodes: &mut Vec<Node8>, at: usize) -> Aabb {
-    let mut cap = 1;
-    while cap * WIDTH < items.len() {
-        cap *= WIDTH;
+/// Fills `nodes[at]` from the binary tree's node `from`: its children, the largest box
+/// opened while there is room (a binary leaf opens into its instances), each remaining inner
+/// node collapsed the same way into a new four-wide node.
+fn collapse(binary: &Binary, boxes: &[Aabb], from: usize, nodes: &mut Vec<Node8>, at: usize) {
+    /// A slot's content while the node is filled: a binary node or an instance.
+    #[derive(Clone, Copy)]
+    enum Slot {
+        Node(usize),
+        Item(u32),
     }
-    let mut groups = Vec::with_capacity(WIDTH);
-    cut(centres, items, 0, cap, &mut groups);
-    let mut node = Node8::EMPTY;
-    let mut all = Aabb::EMPTY;
-    for (k, &(first, len)) in groups.iter().enumerate() {
-        let (bounds, child) = if len == 1 {
-            let i = items[first];
-            (boxes[i as usize], i << 1 | 1)
+    let opened = |n: &Node| -> Vec<Slot> {
+        if n.count > 0 {
+            let first = n.first as usize;
+            binary.items[first..first + n.count as usize]
+                .iter()
+                .map(|&i| Slot::Item(i))
+                .collect()
         } else {
-            let index = nodes.len();
-            nodes.push(Node8::EMPTY);
-            let bounds = fill(boxes, centres, &mut items[first..first + len], nodes, index);
-            (bounds, (index as u32) << 1)
+            vec![Slot::Node(n.first as usize), Slot::Node(n.first as usize + 1)]
+        }
+    };
+    let mut slots = opened(&binary.nodes[from]);
+    loop {
+        // The binary node with the largest box among the slots, if opening it fits.
+        let widest = slots
+            .iter()
+            .enumerate()
+            .filter_map(|(k, s)| match *s {
+                Slot::Node(n) => Some((k, n)),
+                Slot::Item(_) => None,
+            })
+            .filter(|&(_, n)| slots.len() - 1 + opened(&binary.nodes[n]).len() <= WIDTH)
+            .max_by(|a, b| {
+                let area = |n: usize| {
+                    let e = binary.nodes[n].bounds.extent();
+                    e.x * e.y + e.y * e.z + e.z * e.x
+                };
+                area(a.1).total_cmp(&area(b.1))
+            });
+        let Some((k, n)) = widest else { break };
+        slots.splice(k..=k, opened(&binary.nodes[n]));
+    }
+    let mut node = Node8::EMPTY;
+    for (k, slot) in slots.into_iter().enumerate() {
+        let (bounds, child) = match slot {
+            Slot::Item(i) => (boxes[i as usize], i << 1 | 1),
+            Slot::Node(n) => {
+                let index = nodes.len();
+                nodes.push(Node8::EMPTY);
+                collapse(binary, boxes, n, nodes, index);
+                (binary.nodes[n].bounds, (index as u32) << 1)
+            }
         };
         for a in 0..3 {
             node.min[a][k / 4][k % 4] = bounds.min[a];
@@ -149,44 +181,13 @@ fn fill(boxes: &[Aabb], centres: &[Vec3], items: &mut [u32], nodes: &mut Vec<Nod
         }
         node.child[k] = child;
         node.valid |= 1 << k;
-        all = all.union(bounds);
     }
     nodes[at] = node;
-    all
-}
-
-/// Cuts `items` (which start at `first` of the node's items) into groups of `cap` items, the
-/// last one short, appended to `groups` as `(first, count)` in order: at a multiple of `cap`
-/// near the middle, along the widest axis of the centres (`select_nth_unstable`, no sort).
-fn cut(centres: &[Vec3], items: &mut [u32], first: usize, cap: usize, groups: &mut Vec<(usize, usize)>) {
-    let n = items.len();
-    if n <= cap {
-        groups.push((first, n));
-        return;
-    }
-    let at = n.div_ceil(cap) / 2 * cap;
-    let spread = items
-        .iter()
-        .fold(Aabb::EMPTY, |b, &i| b.grow(centres[i as usize]))
-        .extent();
-    let axis = if spread.x >= spread.y && spread.x >= spread.z {
-        0
-    } else if spread.y >= spread.z {
-        1
-    } else {
-        2
-    };
-    items.select_nth_unstable_by(at, |&a, &b| {
-        centres[a as usize][axis].total_cmp(&centres[b as usize][axis])
-    });
-    let (left, right) = items.split_at_mut(at);
-    cut(centres, left, first, cap, groups);
-    cut(centres, right, first + at, cap, groups);
 }
 
 impl Binary {
-    /// Builds over `boxes[i]` for every `i`.
-    fn build(boxes: &[Aabb]) -> Binary {
+    /// Builds over `boxes[i]` for every `i`, up to `leaf` boxes a leaf.
+    fn build(boxes: &[Aabb], leaf: usize) -> Binary {
         let mut t = Binary {
             nodes: Vec::with_capacity(2 * boxes.len().max(1)),
             items: (0..boxes.len() as u32).collect(),
@@ -205,7 +206,7 @@ impl Binary {
         while let Some((node, first, count)) = todo.pop() {
             let items = &mut t.items[first..first + count];
             let bounds = items.iter().fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]));
-            if count <= LEAF {
+            if count <= leaf {
                 t.nodes[node] = Node {
                     bounds,
                     first: first as u32,
@@ -252,7 +253,7 @@ impl TopLevel {
     /// `first` and `first + 1`, leaves' items in `prims`), for the GPU's layout of it
     /// (`gpu::walks::two_level`). `None` for no instances.
     pub fn as_bvh(&self) -> Option<Bvh> {
-        let binary = Binary::build(&self.boxes());
+        let binary = Binary::build(&self.boxes(), GPU_LEAF);
         if binary.nodes.is_empty() {
             return None;
         }
@@ -549,8 +550,7 @@ mod tests {
 mod fill_tests {
     use super::*;
 
-    /// The nodes are nearly full: a thousand random boxes take at most one node a level more
-    /// than a seventh of their count (each node's eight slots, one of them the way down).
+    /// The nodes are not left nearly empty: at most one node for four boxes.
     #[test]
     fn nodes_are_nearly_full() {
         let mut r = crate::util::Rng::new(3);
@@ -571,8 +571,7 @@ mod fill_tests {
                 n + t.nodes.len() - 1,
                 "n = {n}: every item and node once"
             );
-            let levels = (n as f64).log(8.0).ceil() as usize + 1;
-            assert!(t.nodes.len() <= n / 7 + 2 * levels, "n = {n}: {} nodes", t.nodes.len());
+            assert!(t.nodes.len() <= n / 4 + 1, "n = {n}: {} nodes", t.nodes.len());
             let mut seen = t.boxes();
             seen.sort_by(|a, b| a.min.x.total_cmp(&b.min.x));
             let mut want = boxes.clone();
