@@ -19,6 +19,8 @@ use glam::{Vec3, Vec4};
 use crate::accel::Aabb;
 use crate::accel::bvh::safe_dir;
 use crate::accel::bvh::{Bvh, BvhNode};
+use crate::accel::lanes::{Lanes as _, Mask as _};
+use crate::accel::simd::{F8, has_wide};
 
 /// Instances a leaf of the binary tree holds at most: for the CPU's eight-wide nodes, eight,
 /// so that a leaf left a slot of its own (no room to open it) becomes a node of four to eight
@@ -56,7 +58,7 @@ const WIDTH: usize = 8;
 const STACK: usize = 7 * 32 + WIDTH;
 
 /// Eight children side by side: their boxes in structure-of-arrays form (`min[axis][half]`,
-/// one lane a child, slots 0-3 in the first half) and what each is (`child`: a node's index
+/// one lane a child; 32-byte aligned, each array one AVX register) and what each is (`child`: a node's index
 /// `<< 1`, or an instance's `<< 1 | 1`); `valid` has bit `k` for each slot in use.
 ///
 /// Eight, not four: the walk is a chain of dependent node visits (load, test, pick), so its
@@ -64,9 +66,10 @@ const STACK: usize = 7 * 32 + WIDTH;
 /// side by side, no AVX needed). Measured (2026-12-05, 100 randomly turned Bunnies, 1M random
 /// rays): four-wide, 8.7 node visits a ray.
 #[derive(Debug, Clone, Copy)]
+#[repr(C, align(32))]
 struct Node8 {
-    min: [[Vec4; 2]; 3],
-    max: [[Vec4; 2]; 3],
+    min: [[f32; WIDTH]; 3],
+    max: [[f32; WIDTH]; 3],
     child: [u32; WIDTH],
     valid: u32,
 }
@@ -101,10 +104,9 @@ impl TopLevel {
         for n in &self.nodes {
             for k in 0..WIDTH {
                 if n.valid >> k & 1 == 1 && n.child[k] & 1 == 1 {
-                    let (h, l) = (k / 4, k % 4);
                     boxes[(n.child[k] >> 1) as usize] = Aabb {
-                        min: Vec3::new(n.min[0][h][l], n.min[1][h][l], n.min[2][h][l]),
-                        max: Vec3::new(n.max[0][h][l], n.max[1][h][l], n.max[2][h][l]),
+                        min: Vec3::new(n.min[0][k], n.min[1][k], n.min[2][k]),
+                        max: Vec3::new(n.max[0][k], n.max[1][k], n.max[2][k]),
                     };
                 }
             }
@@ -115,8 +117,8 @@ impl TopLevel {
 
 impl Node8 {
     const EMPTY: Node8 = Node8 {
-        min: [[Vec4::INFINITY; 2]; 3],
-        max: [[Vec4::NEG_INFINITY; 2]; 3],
+        min: [[f32::INFINITY; WIDTH]; 3],
+        max: [[f32::NEG_INFINITY; WIDTH]; 3],
         child: [0; WIDTH],
         valid: 0,
     };
@@ -176,8 +178,8 @@ fn collapse(binary: &Binary, boxes: &[Aabb], from: usize, nodes: &mut Vec<Node8>
             }
         };
         for a in 0..3 {
-            node.min[a][k / 4][k % 4] = bounds.min[a];
-            node.max[a][k / 4][k % 4] = bounds.max[a];
+            node.min[a][k] = bounds.min[a];
+            node.max[a][k] = bounds.max[a];
         }
         node.child[k] = child;
         node.valid |= 1 << k;
@@ -325,7 +327,7 @@ impl TopLevel {
                 continue;
             }
             let node = &self.nodes[(child >> 1) as usize];
-            let (t, mut entered) = slabs.enter8(node, t_min, t_max);
+            let (t, mut entered) = slabs.enter8::<false>(node, t_min, t_max);
             // The entered children pushed farthest first, so that the nearest is popped next.
             let mut order = [(0u32, 0f32); WIDTH];
             let mut n = 0;
@@ -375,6 +377,37 @@ impl TopLevel {
     /// the two levels' time, about 20 ns a node visit.
     pub fn entered(
         &self,
+        rays: impl Iterator<Item = (u32, Vec3, Vec3)>,
+        t_min: f32,
+        t_max: f32,
+        out: &mut Vec<(f32, u32, u32)>,
+    ) {
+        if has_wide() {
+            // SAFETY: the CPU runs the eight-lane build, checked just above.
+            return unsafe { self.entered_wide(rays, t_min, t_max, out) };
+        }
+        self.entered_body::<false>(rays, t_min, t_max, out)
+    }
+
+    /// `entered` with each node's eight boxes tested in one AVX2 (or NEON) computation: the
+    /// same arithmetic lane by lane, so the same entries.
+    ///
+    /// # Safety
+    /// The CPU must run the eight-lane build (`simd::has_wide`).
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    unsafe fn entered_wide(
+        &self,
+        rays: impl Iterator<Item = (u32, Vec3, Vec3)>,
+        t_min: f32,
+        t_max: f32,
+        out: &mut Vec<(f32, u32, u32)>,
+    ) {
+        self.entered_body::<true>(rays, t_min, t_max, out)
+    }
+
+    #[inline(always)]
+    fn entered_body<const WIDE: bool>(
+        &self,
         mut rays: impl Iterator<Item = (u32, Vec3, Vec3)>,
         t_min: f32,
         t_max: f32,
@@ -409,7 +442,7 @@ impl TopLevel {
                 }
                 lane.top -= 1;
                 let node = &self.nodes[lane.stack[lane.top] as usize];
-                let (t, entered) = lane.slabs.enter8(node, t_min, t_max);
+                let (t, entered) = lane.slabs.enter8::<WIDE>(node, t_min, t_max);
                 out.reserve(WIDTH);
                 let len = out.len();
                 let spare = out.spare_capacity_mut();
@@ -437,9 +470,8 @@ impl TopLevel {
     }
 }
 
-/// A ray prepared for the eight-wide box test (two four-lane halves): origin and `1 / dir`,
-/// each coordinate in all four lanes, of the direction with components below `DIR_TINY` (in size) replaced by it, as the
-/// BVH's box test does (`BoxRay`). A ray along a slab's planes then gets entry and exit
+/// A ray prepared for the eight-wide box test: origin and `1 / dir`, of the direction with
+/// components below `DIR_TINY` (in size) replaced by it, as the BVH's box test does (`BoxRay`). A ray along a slab's planes then gets entry and exit
 /// distances of about +-1e30 times its offset from them instead of an infinity or a NaN: the
 /// same boxes entered, up to offsets below 1e-30 (a box entered by a hair too many is only a
 /// walk that misses). The binary walk this replaces, with `Aabb::clip` (three infinity tests a
@@ -447,31 +479,46 @@ impl TopLevel {
 /// ray, more than the merged mesh's whole walk.
 #[derive(Debug, Clone, Copy)]
 struct Slabs {
-    origin: [Vec4; 3],
-    inv_dir: [Vec4; 3],
+    origin: [f32; 3],
+    inv_dir: [f32; 3],
 }
 
 impl Slabs {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Slabs {
         Slabs {
-            origin: origin.to_array().map(Vec4::splat),
-            inv_dir: dir.to_array().map(|d| Vec4::splat(1.0 / safe_dir(d))),
+            origin: origin.to_array(),
+            inv_dir: dir.to_array().map(|d| 1.0 / safe_dir(d)),
         }
     }
 
     /// Where the ray enters each of `n`'s eight boxes within `[t_min, t_max]`, and the mask of
-    /// the slots it enters.
+    /// the slots it enters: in one eight-lane computation (`WIDE`: only in code compiled for
+    /// the eight-lane build, `simd::has_wide`) or two four-lane ones, with the same bits
+    /// (`min`, `max` and the compare follow SSE's rules in both).
     #[inline(always)]
-    fn enter8(&self, n: &Node8, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
+    fn enter8<const WIDE: bool>(&self, n: &Node8, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
+        if WIDE {
+            let mut t_enter = F8::splat(t_min);
+            let mut t_exit = F8::splat(t_max);
+            for a in 0..3 {
+                let (o, inv) = (F8::splat(self.origin[a]), F8::splat(self.inv_dir[a]));
+                let t0 = (F8::load(&n.min[a]) - o) * inv;
+                let t1 = (F8::load(&n.max[a]) - o) * inv;
+                t_enter = t_enter.max(t0.min(t1));
+                t_exit = t_exit.min(t0.max(t1));
+            }
+            return (t_enter.to_array(), t_enter.le(t_exit).bits() & n.valid);
+        }
         let mut t = [0f32; WIDTH];
         let mut mask = 0;
         for h in 0..2 {
             let mut t_enter = Vec4::splat(t_min);
             let mut t_exit = Vec4::splat(t_max);
             for a in 0..3 {
-                let t0 = (n.min[a][h] - self.origin[a]) * self.inv_dir[a];
-                let t1 = (n.max[a][h] - self.origin[a]) * self.inv_dir[a];
+                let (o, inv) = (Vec4::splat(self.origin[a]), Vec4::splat(self.inv_dir[a]));
+                let t0 = (Vec4::from_slice(&n.min[a][4 * h..]) - o) * inv;
+                let t1 = (Vec4::from_slice(&n.max[a][4 * h..]) - o) * inv;
                 t_enter = t_enter.max(t0.min(t1));
                 t_exit = t_exit.min(t0.max(t1));
             }
