@@ -114,6 +114,8 @@ fn plays_on_the_cpu() {
         "tumbling-bunnies",
         "--instances",
         "1",
+        "--frames",
+        "2",
         "--res",
         "4",
         "--backend",
@@ -122,6 +124,9 @@ fn plays_on_the_cpu() {
         dir.join("b.png").to_str().unwrap(),
     ]);
     if ok {
+        // One instance: no `add_instance`, still the two levels from the first query (one
+        // structure, not a merged mesh and then the two levels' mesh).
+        assert!(text.contains("structure builds 1 [1 instances"), "{text}");
         play("cpu", None, "cpu-bunny");
     } else {
         assert!(text.contains("bun_zipper.ply"), "{text}");

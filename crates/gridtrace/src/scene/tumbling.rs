@@ -165,6 +165,10 @@ impl Tumbling {
         for t in &transforms[1..] {
             ids.push(scene.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?);
         }
+        // A move marks the scene as one that moves (as `add_instance` does, which a single
+        // instance never calls): its CPU rays then walk the two levels from the first query,
+        // not a merged mesh that the first move would leave for a second structure.
+        scene.set_transforms(&ids, &transforms)?;
         Ok((scene, ids))
     }
 
