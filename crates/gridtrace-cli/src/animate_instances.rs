@@ -34,12 +34,12 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let instances = a.instances.unwrap_or(tumbling::DEFAULT_INSTANCES);
     let what = path.display().to_string();
     let scene_def = Tumbling::new(vertices, mesh.triangles, instances, &what)?;
-    let (placement, mut notes) = gridtrace::Placement::open(a.backend, a.gpu.gpu_variant.clone())?;
+    let (placement, mut notes) = gridtrace::Placement::open(a.backend, a.gpu.gpu_variant)?;
     let accel = accel_spec(a, &mut notes)?;
     let opts = QueryOptions {
         accel: accel.clone(),
         backend: a.backend,
-        gpu_variants: a.gpu.gpu_variant.clone(),
+        gpu_variants: a.gpu.gpu_variant,
     };
     if a.mode != Mode::Trace {
         notes.push(format!(
