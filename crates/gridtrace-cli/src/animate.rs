@@ -13,6 +13,16 @@ use gridtrace::Tracer;
 
 pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let name = a.scene.scene.as_deref().unwrap_or("animated");
+    // Rigid instances move the top level of two, not the vertices: a loop of their own.
+    if name == gridtrace::scene::tumbling::NAME {
+        return crate::animate_instances::run(a);
+    }
+    if a.instances.is_some() || a.instance_mesh.is_some() {
+        return Err(gridtrace::Error::InvalidInput(format!(
+            "--instances and --instance-mesh are for --scene {}, not {name}",
+            gridtrace::scene::tumbling::NAME
+        )));
+    }
     if a.scene.file.is_some() || a.scene.mesh.is_some() {
         return Err(gridtrace::Error::InvalidInput(
             "--animate plays a built-in animated scene (--scene NAME), not a file".into(),
@@ -20,8 +30,9 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     }
     let anim = Animation::by_name(name).ok_or_else(|| {
         gridtrace::Error::InvalidInput(format!(
-            "unknown animated scene '{name}'; animated scenes: {}",
-            Animation::NAMES.join(", ")
+            "unknown animated scene '{name}'; animated scenes: {}, {}",
+            Animation::NAMES.join(", "),
+            gridtrace::scene::tumbling::NAME
         ))
     })?;
     if !(a.fps.is_finite() && a.fps > 0.0) {

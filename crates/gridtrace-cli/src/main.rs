@@ -2,6 +2,7 @@
 //! library.
 
 mod animate;
+mod animate_instances;
 mod bench;
 mod common;
 mod info;

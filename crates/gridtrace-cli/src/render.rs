@@ -74,7 +74,8 @@ pub struct RenderArgs {
     /// Play an animated scene (--scene animated, twisting-knot or bouncing-spheres; default
     /// animated) over the frames: every frame moves the vertices, updates the structure (the
     /// grids rebuilt, on the GPU with the GPU backend; the BVH refitted) and traces. Prints each
-    /// frame's build and trace times.
+    /// frame's build and trace times. --scene tumbling-bunnies: --instances rigid Bunnies, each
+    /// frame moving them (the top level of two alone) and tracing eye rays, headlight-shaded.
     #[arg(long)]
     pub animate: bool,
     /// With --animate: frames per second of animation time.
@@ -83,6 +84,14 @@ pub struct RenderArgs {
     /// With --animate: also write every frame as DIR/frame_0000.png, ...
     #[arg(long, value_name = "DIR", requires = "animate")]
     pub sequence: Option<PathBuf>,
+    /// With --animate --scene tumbling-bunnies: how many instances tumble (default 1000).
+    #[arg(long, value_name = "N", requires = "animate", value_parser = clap::value_parser!(u32).range(1..=gridtrace::scene::tumbling::MAX_INSTANCES as i64), allow_hyphen_values = true)]
+    pub instances: Option<u32>,
+    /// With --animate --scene tumbling-bunnies: the mesh placed (default the Stanford Bunny,
+    /// bunny/bun_zipper.ply in the mesh folder: $GRIDTRACE_DATA_DIR, else shared/data/meshes
+    /// beside the checkout).
+    #[arg(long, value_name = "PATH", requires = "animate")]
+    pub instance_mesh: Option<PathBuf>,
     /// Output image: PNG, or JPEG for a .jpg or .jpeg name (the extension names the format).
     /// Checked before any work, with the folder it goes into.
     #[arg(short, long, default_value = "gridtrace.png", value_parser = parse_image_output)]

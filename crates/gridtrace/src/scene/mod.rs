@@ -6,6 +6,7 @@ pub mod camera;
 pub mod file;
 pub mod orbit;
 pub mod procedural;
+pub mod tumbling;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
