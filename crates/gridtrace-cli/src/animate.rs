@@ -53,15 +53,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         crate::common::describe_structure(&scene.accel),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    match &placement.device {
-        Some(ctx) => {
-            println!("backend gpu: {}", ctx.describe());
-            if ctx.is_software() {
-                println!("        (a software adapter: CPU speed, not GPU speed)");
-            }
-        }
-        None => println!("backend {}", gridtrace::backend::describe_cpu()),
-    }
+    crate::common::print_backend(&placement);
     let mut tracer = Tracer::open(scene, &placement, &mut notes)?;
     for n in notes {
         eprintln!("note: {n}");
@@ -95,27 +87,16 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             "{i:5}  {time:6.3}  {move_ms:7.2}  {:11.2}  {build_ms:8.2}  {trace_ms:8.2}  {total_ms:8.2}  {how}",
             up.geometry_ms
         );
-        rows.push((up.geometry_ms, build_ms, trace_ms));
+        rows.push([up.geometry_ms, build_ms, trace_ms]);
         let image = if a.mode == gridtrace::Mode::Heat {
             image.heat_to_color()
         } else {
             image
         };
-        if let Some(dir) = &a.sequence {
-            image.save_png(&dir.join(format!("frame_{i:04}.png")))?;
-        }
-        if i == 0 {
-            image.save_png(&a.output)?;
-        }
+        crate::common::save_frame(&image, i, a.sequence.as_deref(), &a.output)?;
     }
     if rows.len() > 1 {
-        // The first frame pays for first-use costs (buffer growth, caches): the median of the
-        // rest is the steady state.
-        let median = |k: usize| {
-            let mut v: Vec<f64> = rows[1..].iter().map(|r| [r.0, r.1, r.2][k]).collect();
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
+        let median = |k: usize| crate::common::median_after_first(&rows, k);
         // Named as the table numbers the frames (from 0), the last included.
         println!(
             "median of frames 1-{}: geometry {:.2} ms, build {:.2} ms, trace {:.2} ms [{} {} {}x{}]",

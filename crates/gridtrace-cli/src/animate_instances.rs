@@ -67,15 +67,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         tris * instances as usize,
         accel_name(&accel),
     );
-    match &placement.device {
-        Some(ctx) => {
-            println!("backend gpu: {}", ctx.describe());
-            if ctx.is_software() {
-                println!("        (a software adapter: CPU speed, not GPU speed)");
-            }
-        }
-        None => println!("backend {}", gridtrace::backend::describe_cpu()),
-    }
+    crate::common::print_backend(&placement);
     for n in notes {
         eprintln!("note: {n}");
     }
@@ -109,21 +101,10 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             println!("note: {n}");
         }
         rows.push([move_ms, trace_ms, shade_ms]);
-        if let Some(dir) = &a.sequence {
-            image.save_png(&dir.join(format!("frame_{i:04}.png")))?;
-        }
-        if i == 0 {
-            image.save_png(&a.output)?;
-        }
+        crate::common::save_frame(&image, i, a.sequence.as_deref(), &a.output)?;
     }
     if rows.len() > 1 {
-        // The first frame pays for first-use costs (buffer growth, caches): the median of the
-        // rest is the steady state.
-        let median = |k: usize| {
-            let mut v: Vec<f64> = rows[1..].iter().map(|r| r[k]).collect();
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
+        let median = |k: usize| crate::common::median_after_first(&rows, k);
         println!(
             "median of frames 1-{}: move {:.2} ms, trace {:.2} ms, shade {:.2} ms; structure builds {} \
              [{instances} instances {} {w}x{h}]",

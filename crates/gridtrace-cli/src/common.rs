@@ -323,3 +323,37 @@ pub fn print_gpu_figures(which: &str, f: &GpuFigures) -> Option<f64> {
     println!("stages  {} ms (GPU timestamps)", stages.join(", "));
     gpu_ms
 }
+
+/// Writes frame `i` of an animation where `--sequence` (every frame, numbered) and `-o` (the
+/// first frame) ask.
+pub fn save_frame(image: &gridtrace::Image, i: u32, sequence: Option<&Path>, output: &Path) -> gridtrace::Result<()> {
+    if let Some(dir) = sequence {
+        image.save_png(&dir.join(format!("frame_{i:04}.png")))?;
+    }
+    if i == 0 {
+        image.save_png(output)?;
+    }
+    Ok(())
+}
+
+/// The median of column `k` of an animation's frame rows after the first, which pays for
+/// first-use costs (buffer growth, caches): the steady state.
+pub fn median_after_first(rows: &[[f64; 3]], k: usize) -> f64 {
+    let mut v: Vec<f64> = rows[1..].iter().map(|r| r[k]).collect();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The `backend` line of an animation: the GPU's adapter (and whether it is a software one,
+/// whose speed is the CPU's) or the CPU's threads.
+pub fn print_backend(placement: &gridtrace::Placement) {
+    match &placement.device {
+        Some(ctx) => {
+            println!("backend gpu: {}", ctx.describe());
+            if ctx.is_software() {
+                println!("        (a software adapter: CPU speed, not GPU speed)");
+            }
+        }
+        None => println!("backend {}", gridtrace::backend::describe_cpu()),
+    }
+}

@@ -151,6 +151,8 @@ fn main() {
         Command::Render(a) if a.animate => animate::run(&a),
         Command::Render(a) => render::run(a),
         Command::Info(a) => info::run(a),
+        // `rays --counts` answers another query (every hit) on the same input.
+        Command::Rays(a) if a.counts && a.make.is_none() => rays_counts::run(a),
         Command::Rays(a) => rays::run(a),
         Command::Scan(a) => scan::run(a),
         Command::Bench(a) => bench::run(a),

@@ -8,10 +8,10 @@
 //! chunks, so memory stays bounded. On the GPU the rays go up as they are in the file, 24
 //! bytes each; the bytes each way are printed, also per ray. `--make camera|random` writes a
 //! ray file for a mesh instead (the auto-framed view's eye rays, or incoherent ones).
-//! `--counts` counts every hit along each ray instead (`rays_counts.rs`). After the queries a
-//! `query` line says which query ran, the device that answered it (the library's
-//! `last_query`: under `auto` the CPU once a GPU fault sent the work there) and, for GPU
-//! work, the bytes up and down.
+//! `--counts` counts every hit along each ray instead (`rays_counts.rs`, chosen in main.rs).
+//! After the queries a `query` line says which query ran, the device that answered it (the
+//! library's `last_query`: under `auto` the CPU once a GPU fault sent the work there) and, for
+//! GPU work, the bytes up and down.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -72,7 +72,7 @@ pub struct RaysArgs {
     /// at least --count pixels; or `random`, incoherent rays from a sphere of one bounding-box
     /// diagonal around the mesh aimed at random points of its box (the benchmarks' ray queries).
     #[arg(long, value_enum, value_name = "KIND")]
-    make: Option<MakeRays>,
+    pub(crate) make: Option<MakeRays>,
     /// With --make: how many rays.
     #[arg(long, default_value_t = 1_000_000, requires = "make", allow_hyphen_values = true,
           value_parser = clap::value_parser!(u32).range(1..=MAX_MADE_RAYS))]
@@ -128,36 +128,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     if let Some(kind) = a.make {
         return make_rays(&a, kind);
     }
-    let hits_out = a.hits_out.clone().expect("clap requires --hits-out without --make");
-    // Checked here, before any work: the CPU query path does not check the interval itself, and
-    // a negative --tmin would silently report hits behind the origins.
-    if a.tmin.is_nan() || a.tmax.is_nan() || a.tmin < 0.0 || a.tmin > a.tmax {
-        return Err(Error::InvalidInput(format!(
-            "need 0 <= --tmin <= --tmax, got --tmin {} --tmax {}",
-            a.tmin, a.tmax
-        )));
-    }
-    let meta = std::fs::metadata(&a.rays).map_err(|e| Error::io(&a.rays, e))?;
-    // As `render` says of a folder given for a mesh (a folder's size, 4096, means nothing here).
-    if meta.is_dir() {
-        return Err(Error::parse(
-            &a.rays,
-            gridtrace::Location::Whole,
-            "is a directory, not a ray file (float32 records ox oy oz dx dy dz)",
-        ));
-    }
-    let size = meta.len();
-    if size % 24 != 0 {
-        return Err(Error::parse(
-            &a.rays,
-            gridtrace::Location::Byte(size - size % 24),
-            format!("ray file is {size} bytes, not a whole number of 24-byte records (6 float32 per ray)"),
-        ));
-    }
-    let n = size / 24;
-    if a.counts {
-        return crate::rays_counts::run(&a, n, &hits_out);
-    }
+    let (n, hits_out) = checked_input(&a)?;
     let opts = QueryOptions {
         accel: a.accel_args.spec()?,
         backend: a.backend,
@@ -257,12 +228,51 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         trace_s * 1e3,
         n as f64 / trace_s.max(1e-9) / 1e6
     );
+    print_tail(&gpu, &line, &hits_out);
+    Ok(())
+}
+
+/// The ray file's record count and the hits file, after the checks every query of `rays`
+/// makes before any work (the interval, the file: a whole number of 24-byte records).
+pub(crate) fn checked_input(a: &RaysArgs) -> gridtrace::Result<(u64, std::path::PathBuf)> {
+    let hits_out = a.hits_out.clone().expect("clap requires --hits-out without --make");
+    // Checked here, before any work: the CPU query path does not check the interval itself, and
+    // a negative --tmin would silently report hits behind the origins.
+    if a.tmin.is_nan() || a.tmax.is_nan() || a.tmin < 0.0 || a.tmin > a.tmax {
+        return Err(Error::InvalidInput(format!(
+            "need 0 <= --tmin <= --tmax, got --tmin {} --tmax {}",
+            a.tmin, a.tmax
+        )));
+    }
+    let meta = std::fs::metadata(&a.rays).map_err(|e| Error::io(&a.rays, e))?;
+    // As `render` says of a folder given for a mesh (a folder's size, 4096, means nothing here).
+    if meta.is_dir() {
+        return Err(Error::parse(
+            &a.rays,
+            gridtrace::Location::Whole,
+            "is a directory, not a ray file (float32 records ox oy oz dx dy dz)",
+        ));
+    }
+    let size = meta.len();
+    if size % 24 != 0 {
+        return Err(Error::parse(
+            &a.rays,
+            gridtrace::Location::Byte(size - size % 24),
+            format!("ray file is {size} bytes, not a whole number of 24-byte records (6 float32 per ray)"),
+        ));
+    }
+    let n = size / 24;
+    Ok((n, hits_out))
+}
+
+/// What `rays` prints after a query's line: the GPU's batches (where it ran there), the query
+/// line and the file written.
+pub(crate) fn print_tail(gpu: &gridtrace::gpu::GpuQueryStats, line: &QueryLine, hits_out: &std::path::Path) {
     if gpu.round_trips > 0 {
-        print_gpu_batches(&gpu);
+        print_gpu_batches(gpu);
     }
     line.print();
     println!("wrote   {}", hits_out.display());
-    Ok(())
 }
 
 /// Reads the next `bytes.len() / 24` rays of the file `path` (ray `first` on) from `input`,

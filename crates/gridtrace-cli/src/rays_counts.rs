@@ -8,7 +8,6 @@
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Write};
-use std::path::Path;
 use std::time::Instant;
 
 use gridtrace::query::{CHUNK, QueryOptions};
@@ -16,10 +15,13 @@ use gridtrace::query_scene::{PerRay, RayOptions};
 use gridtrace::{Error, QueryScene};
 use rayon::prelude::*;
 
-use crate::rays::{QueryLine, RaysArgs, print_gpu_batches, read_rays};
+use crate::rays::{QueryLine, RaysArgs, checked_input, print_tail, read_rays};
 
-/// Counts the `n` rays of `a.rays` into `hits_out` (arguments checked by `rays::run`).
-pub fn run(a: &RaysArgs, n: u64, hits_out: &Path) -> gridtrace::Result<()> {
+/// Counts every hit of each ray of `a.rays` into `a.hits_out` (`rays --counts`; the input
+/// checked as every `rays` query checks it, `rays::checked_input`).
+pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
+    let (n, hits_out) = checked_input(&a)?;
+    let hits_out = hits_out.as_path();
     let opts = QueryOptions {
         accel: a.accel_args.spec()?,
         backend: a.backend,
@@ -89,10 +91,6 @@ pub fn run(a: &RaysArgs, n: u64, hits_out: &Path) -> gridtrace::Result<()> {
         trace_s * 1e3,
         n as f64 / trace_s.max(1e-9) / 1e6
     );
-    if gpu.round_trips > 0 {
-        print_gpu_batches(&gpu);
-    }
-    line.print();
-    println!("wrote   {}", hits_out.display());
+    print_tail(&gpu, &line, hits_out);
     Ok(())
 }
