@@ -31,16 +31,6 @@ use crate::accel::{Hit, Ray, binning};
 /// 191-192 ms, 4,096 200-209 ms (the flat scene 143-152 ms beside both).
 const BATCH: usize = 16384;
 
-/// The most instances for which the occlusion streams are taken over the per-ray walk.
-/// Measured for closest hits before the rounds and the four-wide top level (2026-11-28, two
-/// threads of a loaded machine, medians of 5 alternating rounds, 300,000 random rays at K
-/// randomly turned and scaled Stanford Bunnies, bvh), the per-ray walk's time over the
-/// streams': K = 1: 2.94, 2: 1.51, 4: 1.25, 8: 1.22, 16: 1.08, 100: 0.73 (each instance's
-/// share of a work item was then too few rays). For occlusion after the four-wide top level
-/// (2026-11-28, 1M random rays at 100 Bunnies, two threads, two alternating rounds): per ray
-/// 211-215 ms, streams 221-223 ms (the merged flat scene 120-138 ms), so the limit stays.
-pub(super) const STREAM_MAX_INSTANCES: usize = 16;
-
 /// A worker's buffers, kept from item to item.
 #[derive(Default)]
 struct Scratch {
