@@ -8,7 +8,7 @@ round, since the machine is shared):
 - `set_transforms`: 1,000 instances moved at once (the top level rebuilt; no mesh structure).
 - `two levels vs flat`: `--rays` random rays (origins on a sphere around the scene, aimed at
   uniform points of its box) over 100 instances, against the same world-space triangles
-  merged into one mesh (one structure, no instance).
+  merged into one mesh (one structure, no instance): closest hits, then occlusion.
 - `move + cast vs Open3D`: `--steps` steps of moving the 100 instances and casting
   `--step-rays` rays; Open3D's only way is a new `RaycastingScene` with every mesh re-added
   each step. Skipped with a message when `open3d` cannot be imported.
@@ -130,6 +130,18 @@ def main():
     print(
         f"{a.rays} random rays, 100 instances: two levels {med(ti) * 1e3:.0f} ms, flat {med(tf) * 1e3:.0f} ms: "
         f"{med(ti) / med(tf):.2f}x (goal <= 1.3x); {hi['t_hit'].size - agree.sum()} t differ beyond 1e-5"
+    )
+    # The same rays' occlusion (any hit), the two sides alternating as above.
+    oi, of = [], []
+    for r in range(a.reps + 1):
+        x, bi = timed(lambda: inst.test_occlusions(rays))
+        y, bf = timed(lambda: flat.test_occlusions(rays))
+        if r:
+            oi.append(x)
+            of.append(y)
+    print(
+        f"{a.rays} random rays, 100 instances, occlusion: two levels {med(oi) * 1e3:.0f} ms, flat {med(of) * 1e3:.0f} ms: "
+        f"{med(oi) / med(of):.2f}x; {(bi != bf).sum()} answers differ"
     )
 
     # A loop of move + cast against Open3D's only way: a new scene every step.
