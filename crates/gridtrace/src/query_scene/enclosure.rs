@@ -27,8 +27,8 @@ const SPREAD: usize = 38;
 
 /// The polytope's corners, or the mesh box's eight corners where the polytope could not be
 /// trusted (no vertex, or corners whose box does not hold the mesh's: a guard, never seen).
-pub(crate) fn dop_corners(vertices: &[[f32; 3]]) -> Vec<Vec3> {
-    let bounds = vertices.iter().fold(Aabb::EMPTY, |b, &v| b.grow(Vec3::from(v)));
+/// `bounds` is the vertices' box (the mesh keeps it).
+pub(crate) fn dop_corners(vertices: &[[f32; 3]], bounds: Aabb) -> Vec<Vec3> {
     if bounds.is_empty() {
         return Vec::new();
     }
@@ -184,6 +184,10 @@ mod tests {
     use super::*;
     use glam::{Mat4, Quat};
 
+    fn bounds_of(v: &[[f32; 3]]) -> Aabb {
+        v.iter().fold(Aabb::EMPTY, |b, &p| b.grow(Vec3::from(p)))
+    }
+
     /// Under any transform, the box of the corners holds the box of every vertex, and is not
     /// much larger (the Bunny-like blob here: within 15% a side).
     #[test]
@@ -201,7 +205,7 @@ mod tests {
             .collect();
         let flat: Vec<[f32; 3]> = (0..200).map(|_| [rng.next_f32(), rng.next_f32(), 0.5]).collect();
         for (name, mesh) in [("blob", &blob), ("flat", &flat)] {
-            let corners = dop_corners(mesh);
+            let corners = dop_corners(mesh, bounds_of(mesh));
             assert!(
                 corners.len() > 8 && corners.len() < 400,
                 "{name}: {} corners",
@@ -241,13 +245,15 @@ mod tests {
     #[test]
     fn an_untransformed_mesh_keeps_its_own_box() {
         let v = [[0.0, 0.0, 0.0], [1.0, 2.0, 0.5], [0.3, -1.0, 4.0], [2.0, 2.0, 2.0]];
-        let held = dop_corners(&v).iter().fold(Aabb::EMPTY, |b, &p| b.grow(p));
+        let held = dop_corners(&v, bounds_of(&v))
+            .iter()
+            .fold(Aabb::EMPTY, |b, &p| b.grow(p));
         assert_eq!(held.min, Vec3::new(0.0, -1.0, 0.0));
         assert_eq!(held.max, Vec3::new(2.0, 2.0, 4.0));
-        assert!(dop_corners(&[]).is_empty());
+        assert!(dop_corners(&[], Aabb::EMPTY).is_empty());
         // One point: a polytope of no size, all its corners that point.
         assert!(
-            dop_corners(&[[1.0, 2.0, 3.0]])
+            dop_corners(&[[1.0, 2.0, 3.0]], bounds_of(&[[1.0, 2.0, 3.0]]))
                 .iter()
                 .all(|&p| p == Vec3::new(1.0, 2.0, 3.0))
         );

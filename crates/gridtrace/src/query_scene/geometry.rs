@@ -64,7 +64,7 @@ impl SceneMesh {
     /// yet.
     fn enclosure(&self) -> &Enclosure {
         self.enclosure
-            .get_or_init(|| Enclosure::new(&super::enclosure::dop_corners(&self.vertices)))
+            .get_or_init(|| Enclosure::new(&super::enclosure::dop_corners(&self.vertices, self.bounds)))
     }
 
     /// The bottom level, built now (counted in `builds`) if it is not yet. Its structure is the

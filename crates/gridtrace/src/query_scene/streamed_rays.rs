@@ -40,14 +40,13 @@ struct Scratch {
     /// starts[k + 1]` are ray `k`'s), each ray's nearest first.
     entries: Vec<(f32, u32)>,
     starts: Vec<u32>,
-    /// The entries as the top level found them, `(t_enter, instance, ray)`, rays interleaved;
-    /// and where the next of each ray's goes while they are grouped.
+    /// The entries as the top level found them, `(t_enter, instance, ray)`, rays interleaved.
     found: Vec<(f32, u32, u32)>,
-    fill: Vec<u32>,
     /// `(instance, ray)`: the pairs of one round (or all of them, for occlusion), sorted by
     /// instance.
     pairs: Vec<(u32, u32)>,
-    /// The pairs of one round (or all of them) as `instance << 32 | ray`, before grouping.
+    /// The pairs of one round (or all of them) as `instance << 32 | ray`, before grouping; in
+    /// `meet`, the entries as `ray << 32 | entry`.
     keys: Vec<u64>,
     /// One instance's rays in its mesh's space, which of the item's rays each is, and how far
     /// each is walked (its closest hit so far).
@@ -75,24 +74,23 @@ impl Scratch {
             let rays = rays.filter_map(|(k, r)| r.as_ref().map(|r| (k as u32, r.origin, r.dir)));
             two.entries(rays, t_near, t_far, mask, &mut self.found);
         }
-        // Grouped by ray (a counting sort: `starts[k]..starts[k + 1]` are ray `k`'s), then each
-        // ray's few sorted, nearest first.
+        // Grouped by ray (the grids' counting sort, `binning`, keyed by ray with the entry's
+        // index: `starts[k]..starts[k + 1]` are ray `k`'s), then each ray's few sorted, nearest
+        // first.
+        self.keys.clear();
+        let found = &self.found;
+        self.keys
+            .extend(found.iter().enumerate().map(|(j, e)| u64::from(e.2) << 32 | j as u64));
+        let keys = std::slice::from_ref(&self.keys);
+        let counts = binning::count_by_cell(keys, rays.len());
+        self.entries = binning::place_by_cell(keys, &counts, |k| {
+            let (t, i, _) = found[k as u32 as usize];
+            (t, i)
+        });
         self.starts.clear();
-        self.starts.resize(rays.len() + 1, 0);
-        for &(_, _, k) in &self.found {
-            self.starts[k as usize + 1] += 1;
-        }
-        for k in 0..rays.len() {
-            self.starts[k + 1] += self.starts[k];
-        }
-        self.entries.clear();
-        self.entries.resize(self.found.len(), (0.0, 0));
-        self.fill.clear();
-        self.fill.extend_from_slice(&self.starts[..rays.len()]);
-        for &(t, i, k) in &self.found {
-            let at = &mut self.fill[k as usize];
-            self.entries[*at as usize] = (t, i);
-            *at += 1;
+        self.starts.push(0);
+        for &c in &counts {
+            self.starts.push(self.starts[self.starts.len() - 1] + c);
         }
         for w in self.starts.windows(2) {
             let entered = &mut self.entries[w[0] as usize..w[1] as usize];

@@ -8,7 +8,8 @@
 //! rebuilds it whole rather than refitting (a refit keeps a tree that moved instances make
 //! loose; a rebuild of this size costs what a refit's bookkeeping would). The binary tree is
 //! then collapsed to eight-wide nodes (`Node8`, the largest box opened first) for the CPU's
-//! walk: a node's eight boxes tested in two four-lane computations side by side. Measured on
+//! walk: a node's eight boxes tested in one eight-lane computation (AVX2 or NEON) or two
+//! four-lane ones (`Slabs::enter8`). Measured on
 //! 100 randomly turned Stanford Bunnies and 1M random rays, a binary walk visited 18 nodes a
 //! ray and was the larger part of the two levels' time; four-wide nodes, 8.7. The GPU's walk
 //! takes a binary tree (`as_bvh`, two instances a leaf, built again from the boxes the leaves
@@ -53,8 +54,8 @@ struct Binary {
 const WIDTH: usize = 8;
 
 /// The walks' stack: at most 7 entries left by each node on the way down, and room for a
-/// node's eight slots written at once (`entered`). A median split over n items (two a
-/// leaf) is at most 32 levels deep for any u32 count, and each node takes at least one level.
+/// node's eight slots written at once (`entered`). A median split over n items is at most 32
+/// levels deep for any u32 count, and each node takes at least one level.
 const STACK: usize = 7 * 32 + WIDTH;
 
 /// Eight children side by side: their boxes in structure-of-arrays form (`min[axis]`, one lane
@@ -471,9 +472,9 @@ impl TopLevel {
 
 /// A ray prepared for the eight-wide box test: origin and `1 / dir`, of the direction with
 /// components below `DIR_TINY` (in size) replaced by it, as the BVH's box test does
-/// (`BoxRay`). A ray along a slab's planes then gets entry and exit distances of about +-1e30 times its offset from them instead of an infinity or a NaN: the
-/// same boxes entered, up to offsets below 1e-30 (a box entered by a hair too many is only a
-/// walk that misses). The binary walk this replaces, with `Aabb::clip` (three infinity tests a
+/// (`BoxRay`). A ray along a slab's planes then gets entry and exit distances of about +-1e30
+/// times its offset from them instead of an infinity or a NaN: the same boxes entered, up to
+/// offsets below 1e-30 (a box entered by a hair too many is only a walk that misses). The binary walk this replaces, with `Aabb::clip` (three infinity tests a
 /// box, each box clipped again when popped), held 100 instances' top level to 1.4 us a random
 /// ray, more than the merged mesh's whole walk.
 #[derive(Debug, Clone, Copy)]
