@@ -36,23 +36,20 @@ impl QueryScene {
         if let Some(w) = slot.as_ref() {
             return Ok(Some(w.clone()));
         }
-        let tris: Vec<TriAccel> = self
-            .geometries
-            .values()
-            .collect::<Vec<_>>()
-            .par_iter()
-            .flat_map_iter(|g| {
-                let world = g.world_vertices();
-                g.faces()
-                    .iter()
-                    .filter(|&&f| !is_degenerate(&world, f))
-                    .map(|f| {
-                        let [a, b, c] = f.map(|k| glam::Vec3::from(world[k as usize]));
-                        TriAccel::new(a, b, c)
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        // Parallel over each geometry's faces, not over the geometries: a scene of one mesh
+        // (the common case) had converted its faces on one core (the Stanford Dragon's
+        // 871,414: about 30 ms of a 0.2 s build, the other core idle).
+        let mut tris: Vec<TriAccel> = Vec::new();
+        for g in self.geometries.values() {
+            let world = g.world_vertices();
+            let faces = g.faces();
+            tris.par_extend(faces.par_iter().with_min_len(4096).filter_map(|&f| {
+                (!is_degenerate(&world, f)).then(|| {
+                    let [a, b, c] = f.map(|k| glam::Vec3::from(world[k as usize]));
+                    TriAccel::new(a, b, c)
+                })
+            }));
+        }
         let tree = FastWinding::build(&tris);
         let w = Arc::new(WindingOnly { tris, tree });
         *slot = Some(w.clone());

@@ -1,10 +1,10 @@
 //! The eight-lane types in AVX2: one 256-bit register each.
 //!
-//! SAFETY (every `unsafe` block in this file): each is one AVX or AVX2 intrinsic on values in
-//! registers (loads and stores go through arrays or pointers of the right size, as each says).
-//! The types are used only inside functions compiled with `target_feature(enable = "avx2")`
-//! and entered after `has_wide()` said the CPU has it (`simd`), so the CPU has the
-//! instructions.
+//! SAFETY (every `unsafe` block in this file): each is one AVX, AVX2 or FMA intrinsic on
+//! values in registers (loads and stores go through arrays or pointers of the right size, as
+//! each says). The types are used only inside functions compiled with `target_feature(enable
+//! = "avx2")` (and `"avx2,fma"` where they call `mul_add`) and entered after `has_wide()` said
+//! the CPU has both (`simd`), so the CPU has the instructions.
 
 use std::arch::x86_64::*;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
@@ -134,6 +134,17 @@ impl Lanes<8> for F8 {
     #[inline(always)]
     fn sqrt(self) -> Self {
         F8(unsafe { _mm256_sqrt_ps(self.0) })
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        F8(unsafe { _mm256_fmadd_ps(self.0, b.0, c.0) })
+    }
+    #[inline(always)]
+    fn rsqrt(self) -> Self {
+        // `y (1.5 - 0.5 x y^2)`: Newton's step for `1 / y^2 = x` from the estimate.
+        let y = F8(unsafe { _mm256_rsqrt_ps(self.0) });
+        let half_x = self * F8::splat(0.5);
+        y * (half_x * y).mul_add(F8::splat(0.0) - y, F8::splat(1.5))
     }
     #[inline(always)]
     fn trunc_small(self) -> Self {

@@ -43,12 +43,13 @@ pub(crate) const WIDE_ISA: &str = if cfg!(target_arch = "x86_64") {
 
 /// Whether this CPU runs the eight-lane build of the traversal (the BVH's walks, box tests and
 /// packets, the irregular grid's and the winding tree's eight-lane packets). On x86-64 that is
-/// whether it has AVX2 (the standard library caches the answer); on aarch64 always (NEON is
-/// baseline there); elsewhere never.
+/// whether it has AVX2 and FMA (every AVX2 CPU has both; the lanes' `mul_add` is one FMA
+/// instruction, and a function that calls it enables `fma` beside `avx2`; the standard
+/// library caches the answers); on aarch64 always (NEON is baseline there); elsewhere never.
 #[inline(always)]
 pub(crate) fn has_wide() -> bool {
     #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx2");
+    return std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
     #[cfg(target_arch = "aarch64")]
     return true;
     #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]

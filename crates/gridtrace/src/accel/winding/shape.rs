@@ -104,16 +104,17 @@ impl Shape {
             return WideTree::from_parts(Vec::new(), Vec::new());
         }
         let run = |&(first, count): &(u32, u32)| &self.prims[first as usize..(first + count) as usize];
-        let blocks = self.leaves.par_iter().map(|l| wide::block(tris, run(l))).collect();
-        let leaves: Vec<(Moment, Aabb)> = self
+        // A leaf's block, moments and box in one pass: its triangles are read through
+        // `prims` (Morton or BVH order: a cache miss each), once for all three.
+        let (blocks, leaves): (Vec<_>, Vec<(Moment, Aabb)>) = self
             .leaves
             .par_iter()
             .map(|l| {
                 let prims = run(l).iter().map(|&t| &tris[t as usize]);
                 let bounds = prims.clone().flat_map(|t| t.vertices()).fold(Aabb::EMPTY, Aabb::grow);
-                (Moment::leaf(prims), bounds)
+                (wide::block(tris, run(l)), (Moment::leaf(prims), bounds))
             })
-            .collect();
+            .unzip();
         let mut inner = vec![(Moment::ZERO, Aabb::EMPTY); self.nodes.len()];
         for d in (0..self.depths.len() - 1).rev() {
             let (this, next) = (self.depths[d], self.depths[d + 1]);
