@@ -28,7 +28,8 @@ pub struct LastQuery {
     /// The query's name as the Python package calls it (`count_intersections`,
     /// `compute_winding_number`, `intersect`, ...); empty before the first.
     pub name: &'static str,
-    /// `"gpu"` or `"cpu"`: where it was answered (under `auto`, the CPU after a GPU fault).
+    /// `"gpu"` or `"cpu"`: where it was answered (under `auto`, the CPU after a GPU fault, or
+    /// for a query that met a device limit).
     pub device: &'static str,
     /// The GPU batch's statistics where the GPU answered (the last batch of the query).
     pub gpu: Option<GpuQueryStats>,
