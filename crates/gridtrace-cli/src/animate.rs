@@ -28,7 +28,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             "--animate plays a built-in animated scene (--scene NAME), not a file".into(),
         ));
     }
-    let anim = Animation::by_name(name).ok_or_else(|| {
+    let mut anim = Animation::by_name(name).ok_or_else(|| {
         gridtrace::Error::InvalidInput(format!(
             "unknown animated scene '{name}'; animated scenes: {}, {}",
             Animation::NAMES.join(", "),
@@ -45,6 +45,9 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let accel = a
         .accel_args
         .accel_for(placement.traced_on(), gridtrace::Work::Animate, &mut notes);
+    // --eye, --target, --up, --vfov and --light, as a still frame takes them: the frames
+    // below trace with the prepared scene's camera and lights.
+    crate::render::set_view(a, &mut anim.scene, name);
     let t0 = Instant::now();
     let scene = crate::common::prepare(&anim.scene, name, accel, &a.accel_args)?;
     println!(
@@ -61,7 +64,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     if let Some(dir) = &a.sequence {
         std::fs::create_dir_all(dir).map_err(|e| gridtrace::Error::io(dir, e))?;
     }
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode).with_pixels(PixelFormat::Srgb8);
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode()).with_pixels(PixelFormat::Srgb8);
     println!("frame  time_s  move_ms  geometry_ms  build_ms  trace_ms  total_ms  structure");
     let mut rows = Vec::with_capacity(a.frames as usize);
     for i in 0..a.frames {
@@ -88,7 +91,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             up.geometry_ms
         );
         rows.push([up.geometry_ms, build_ms, trace_ms]);
-        let image = if a.mode == gridtrace::Mode::Heat {
+        let image = if a.mode() == gridtrace::Mode::Heat {
             image.heat_to_color()
         } else {
             image
@@ -104,7 +107,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             median(0),
             median(1),
             median(2),
-            a.mode.name(),
+            a.mode().name(),
             accel.name(),
             a.res.0,
             a.res.1

@@ -2,14 +2,17 @@
 //! (`gridtrace::scene::tumbling`) played frame by frame through a `QueryScene`'s two levels.
 //! Each frame is timed as `animate.rs` times a rebuild: the move (the instances' matrices and
 //! `set_transforms`, which rebuilds the top level and nothing else), the trace (the eye rays
-//! through `cast_rays`, on the CPU or the GPU as --backend says; on the GPU this includes
+//! through `cast_rays`, and under --mode shadow or trace the shadow rays through
+//! `test_occlusions`, on the CPU or the GPU as --backend says; on the GPU this includes
 //! uploading the new top level) and the shade; and the structures built over triangles so far,
-//! which stays 1 (the one mesh's) after the first frame.
+//! which stays 1 (the one mesh's) after the first frame. The camera options and --light apply
+//! as in a still frame (`view`).
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use gridtrace::query::QueryOptions;
+use gridtrace::scene::PointLight;
 use gridtrace::scene::tumbling::{self, Tumbling};
 use gridtrace::{AccelChoice, AccelKind, AccelSpec, Error, Mode};
 
@@ -33,7 +36,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let vertices = mesh.positions.iter().map(|p| p.to_array()).collect();
     let instances = a.instances.unwrap_or(tumbling::DEFAULT_INSTANCES);
     let what = path.display().to_string();
-    let scene_def = Tumbling::new(vertices, mesh.triangles, instances, &what)?;
+    let mut scene_def = Tumbling::new(vertices, mesh.triangles, instances, &what)?;
     let (placement, mut notes) = gridtrace::Placement::open(a.backend, a.gpu.gpu_variant)?;
     let accel = accel_spec(a, &mut notes)?;
     let opts = QueryOptions {
@@ -41,13 +44,7 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         backend: a.backend,
         gpu_variants: a.gpu.gpu_variant,
     };
-    if a.mode != Mode::Trace {
-        notes.push(format!(
-            "{} shades eye rays with a headlight; --mode {} is not used",
-            tumbling::NAME,
-            a.mode.name()
-        ));
-    }
+    let view = view(a, &mut scene_def, &mut notes)?;
     let t0 = Instant::now();
     let (mut scene, ids) = scene_def.query_scene(opts, 0.0)?;
     if let Some(ctx) = &placement.device {
@@ -62,10 +59,12 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let tris = scene_def.faces.len();
     println!(
         "scene {} (animated): {instances} instances of {what} ({tris} triangles each, {} placed), {}; \
-         first build {first_build_ms:.1} ms",
+         first build {first_build_ms:.1} ms; mode {}, {}",
         tumbling::NAME,
         tris * instances as usize,
         accel_name(&accel),
+        view.mode.name(),
+        view.lighting(),
     );
     crate::common::print_backend(&placement);
     for n in notes {
@@ -86,9 +85,18 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
         let move_ms = t_frame.elapsed().as_secs_f64() * 1e3;
         let t_trace = Instant::now();
         let hits = scene.cast_rays(&rays)?;
+        // The shadow rays' walk is tracing too (the query's note, if any, is the last's).
+        let occluded = match view.mode {
+            Mode::Cast => None,
+            _ => Some(scene.test_occlusions(&scene_def.shadow_rays(&rays, &hits, &view.lights), 0.0, 1.0)?),
+        };
         let trace_ms = t_trace.elapsed().as_secs_f64() * 1e3;
         let t_shade = Instant::now();
-        let image = scene_def.shade(&rays, &hits, w, h);
+        let image = if view.lights.is_empty() {
+            scene_def.shade(&rays, &hits, w, h)
+        } else {
+            scene_def.shade_lit(&rays, &hits, &view.lights, occluded.as_deref(), w, h)
+        };
         let shade_ms = t_shade.elapsed().as_secs_f64() * 1e3;
         let total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
         let builds = scene.structure_builds();
@@ -134,6 +142,64 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     }
     println!("wrote   {}", a.output.display());
     Ok(())
+}
+
+/// How the frames are seen and lit: `--mode` (cast where none is given), the lights of
+/// `--light` (none: the headlight, a light at the eye).
+struct View {
+    mode: Mode,
+    lights: Vec<PointLight>,
+}
+
+impl View {
+    /// The lighting, in words for the scene's line.
+    fn lighting(&self) -> String {
+        match self.lights.len() {
+            0 => "lit by a headlight".into(),
+            n => format!(
+                "{n} light(s){}",
+                if self.mode == Mode::Cast { "" } else { " with shadows" }
+            ),
+        }
+    }
+}
+
+/// The camera `--eye`, `--target`, `--up` and `--vfov` set on `scene`, and the mode and lights
+/// the frames are shaded with. What cannot apply is refused naming the option: heat (the two
+/// levels' queries count no traversal work) and shadows without `--light` (the headlight's
+/// fall behind what it lights, out of sight); trace is shadow here, as nothing reflects.
+fn view(a: &RenderArgs, scene: &mut Tumbling, notes: &mut Vec<String>) -> gridtrace::Result<View> {
+    let center = scene.center();
+    scene.camera = a.camera_over(scene.camera);
+    scene
+        .camera
+        .validate()
+        .map_err(|e| Error::InvalidInput(format!("{}: {e}", a.camera_args())))?;
+    let lights = a.lights(center);
+    let mode = a.mode_given().unwrap_or(Mode::Cast);
+    match mode {
+        Mode::Heat => {
+            return Err(Error::InvalidInput(format!(
+                "--mode heat: {} traces through a QueryScene's two levels, which count no traversal work; \
+                 use --mode cast, shadow or trace",
+                tumbling::NAME
+            )));
+        }
+        Mode::Shadow | Mode::Trace if lights.is_empty() => {
+            return Err(Error::InvalidInput(format!(
+                "--mode {}: {} is lit by a headlight (a light at the eye), whose shadows fall behind what \
+                 it lights; give the lights to cast shadows with --light X,Y,Z",
+                mode.name(),
+                tumbling::NAME
+            )));
+        }
+        Mode::Trace => notes.push(format!(
+            "--mode trace: nothing in {} reflects, so its frames are --mode shadow's",
+            tumbling::NAME
+        )),
+        Mode::Cast | Mode::Shadow => {}
+    }
+    Ok(View { mode, lights })
 }
 
 /// `--instance-mesh`, else the Bunny in the mesh folder; a missing file is an error naming it

@@ -28,8 +28,9 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub accel_args: AccelArgs,
     /// cast (eye rays), shadow (+ shadow rays), trace (+ two levels of reflection), heat (cost).
-    #[arg(long, default_value = "trace", value_parser = mode_parser())]
-    pub mode: Mode,
+    /// Default trace; with --animate --scene tumbling-bunnies, cast.
+    #[arg(long, value_parser = mode_parser())]
+    mode: Option<Mode>,
     /// Image size in pixels: WxH, or N for a square N x N image.
     #[arg(long, value_name = "WxH|N", default_value = "512x512", value_parser = parse_res, allow_hyphen_values = true)]
     pub res: (u32, u32),
@@ -75,7 +76,8 @@ pub struct RenderArgs {
     /// animated) over the frames: every frame moves the vertices, updates the structure (the
     /// grids rebuilt, on the GPU with the GPU backend; the BVH refitted) and traces. Prints each
     /// frame's build and trace times. --scene tumbling-bunnies: --instances rigid Bunnies, each
-    /// frame moving them (the top level of two alone) and tracing eye rays, headlight-shaded.
+    /// frame moving them (the top level of two alone) and tracing eye rays, headlight-shaded,
+    /// or lit by --light (with shadow rays under --mode shadow or trace; heat is refused).
     #[arg(long)]
     pub animate: bool,
     /// With --animate: frames per second of animation time.
@@ -98,15 +100,62 @@ pub struct RenderArgs {
     pub output: PathBuf,
 }
 
+impl RenderArgs {
+    /// `--mode`, trace where none was given.
+    pub fn mode(&self) -> Mode {
+        self.mode.unwrap_or(Mode::Trace)
+    }
+
+    /// `--mode` as given (`None`: not given), for a scene whose default is not trace.
+    pub fn mode_given(&self) -> Option<Mode> {
+        self.mode
+    }
+
+    /// `camera` with what --eye, --target, --up and --vfov set in its place.
+    pub fn camera_over(&self, camera: gridtrace::scene::Camera) -> gridtrace::scene::Camera {
+        gridtrace::scene::Camera {
+            eye: self.eye.unwrap_or(camera.eye),
+            target: self.target.unwrap_or(camera.target),
+            up: self.up.unwrap_or(camera.up),
+            vfov_deg: self.vfov.unwrap_or(camera.vfov_deg),
+        }
+    }
+
+    /// The camera options given, as typed ("--eye 1,2,3 --vfov 30"), for errors about the
+    /// camera they make; empty where none was.
+    pub fn camera_args(&self) -> String {
+        let v = |p: Vec3| format!("{},{},{}", p.x, p.y, p.z);
+        [
+            self.eye.map(|p| format!("--eye {}", v(p))),
+            self.target.map(|p| format!("--target {}", v(p))),
+            self.up.map(|p| format!("--up {}", v(p))),
+            self.vfov.map(|d| format!("--vfov {d}")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect::<Vec<_>>()
+        .join(" ")
+    }
+
+    /// The `--light` lights (none where none was given): each at its point, with its intensity,
+    /// or where none is given one that lights `center` with unit irradiance.
+    pub fn lights(&self, center: Vec3) -> Vec<PointLight> {
+        self.light
+            .iter()
+            .map(|&(p, i)| PointLight::new(p, i.unwrap_or(Vec3::splat((p - center).length_squared()))))
+            .collect()
+    }
+}
+
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     let (mut scene, name) = a.scene.load(!a.no_floor)?;
     set_view(&a, &mut scene, &name);
     let (mut renderer, _) = open_tracer(&a, &scene, &name)?;
-    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode).with_pixels(PixelFormat::Srgb8);
+    let opts = RenderOptions::new(a.res.0, a.res.1, a.mode()).with_pixels(PixelFormat::Srgb8);
     let traced = trace_frames(&a, &mut renderer, &opts)?;
     report(&a, &renderer, &traced);
     let image = traced.first.image;
-    let out = if a.mode == Mode::Heat {
+    let out = if a.mode() == Mode::Heat {
         image.heat_to_color()
     } else {
         image
@@ -118,30 +167,14 @@ pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
 
 /// The camera and lights the options give in place of the scene's, and a warning for a scene
 /// left without lights.
-fn set_view(a: &RenderArgs, scene: &mut gridtrace::Scene, name: &str) {
-    if let Some(e) = a.eye {
-        scene.camera.eye = e;
-    }
-    if let Some(t) = a.target {
-        scene.camera.target = t;
-    }
-    if let Some(u) = a.up {
-        scene.camera.up = u;
-    }
-    if let Some(v) = a.vfov {
-        scene.camera.vfov_deg = v;
-    }
+pub(crate) fn set_view(a: &RenderArgs, scene: &mut gridtrace::Scene, name: &str) {
+    scene.camera = a.camera_over(scene.camera);
     if !a.light.is_empty() {
-        let c = scene.bounds().center();
-        scene.lights = a
-            .light
-            .iter()
-            .map(|&(p, i)| PointLight::new(p, i.unwrap_or(Vec3::splat((p - c).length_squared()))))
-            .collect();
+        scene.lights = a.lights(scene.bounds().center());
     }
     // Without lights only the ambient term shows (and shadow rays have nothing to test): a
     // nearly black image that looks like a bug unless we say why. Heat images do not shade.
-    if scene.lights.is_empty() && a.mode != Mode::Heat {
+    if scene.lights.is_empty() && a.mode() != Mode::Heat {
         eprintln!(
             "warning: scene {name} has no lights: only the ambient term lights it (add [[light]] \
              tables to the scene file, or --light X,Y,Z)"
@@ -293,7 +326,7 @@ fn report(a: &RenderArgs, renderer: &gridtrace::Tracer, t: &Traced) {
         r.shadow,
         r.reflection,
         stats.mrays_per_s(),
-        a.mode.name(),
+        a.mode().name(),
         renderer.scene.accel.kind().name(),
         a.res.0,
         a.res.1

@@ -1,8 +1,10 @@
 //! `render --animate --scene tumbling-bunnies`: rigid instances moved by the top level alone.
 //! Frames are played end to end on the CPU and on the GPU (lavapipe in CI): the structure
 //! builds stay 1 in every frame's row, the frames written differ (things move), and bad
-//! counts and missing meshes are errors naming the argument or the file. (That the frames
-//! equal the instances merged flat is `gridtrace`'s `tests/tumbling.rs`.)
+//! counts and missing meshes are errors naming the argument or the file. --mode, --light and
+//! the camera options change the frames (shadows only darken), and what cannot apply (heat,
+//! shadows of the headlight, a camera that makes no rays) is refused naming the option. (That
+//! the frames equal the instances merged flat is `gridtrace`'s `tests/tumbling.rs`.)
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -143,6 +145,13 @@ fn plays_on_the_gpu() {
     let dir = scratch("gpu-mesh");
     let text = play("gpu", Some(&write_mesh(&dir)), "gpu");
     assert!(text.contains("gpu     meshes uploaded 1 time(s)"), "{text}");
+    // The shadow rays on the GPU too: the CPU's frame but for a few pixels at the gems' edges
+    // (the GPU's triangle test rounds in f32 where the CPU decides exact zeros in f64).
+    let lit = ["--light", "0.5,3.5,0.5", "--mode", "shadow"];
+    let (ok, text, gpu) = frame_on("gpu", "gpu-shadow", &lit);
+    assert!(ok && text.contains("with shadows"), "{text}");
+    let (_, _, cpu) = frame("cpu-shadow", &lit);
+    assert!(differing(&cpu, &gpu) <= 20, "{} pixels differ", differing(&cpu, &gpu));
 }
 
 #[test]
@@ -210,4 +219,154 @@ fn bad_input_names_the_argument_or_file() {
         !ok && text.contains("--instances") && text.contains("tumbling-bunnies"),
         "{text}"
     );
+}
+
+/// One frame of 8 gems at 96x72 on the CPU with the options `more`: whether it ran, the text,
+/// and the frame's RGB bytes (empty where it failed).
+fn frame(tag: &str, more: &[&str]) -> (bool, String, Vec<u8>) {
+    frame_on("cpu", tag, more)
+}
+
+/// `frame` on `backend`.
+fn frame_on(backend: &str, tag: &str, more: &[&str]) -> (bool, String, Vec<u8>) {
+    let dir = scratch(tag);
+    let png = dir.join("f.png");
+    let mesh = write_mesh(&dir);
+    let mut args = vec![
+        "render",
+        "--animate",
+        "--scene",
+        "tumbling-bunnies",
+        "--instance-mesh",
+        mesh.to_str().unwrap(),
+        "--instances",
+        "8",
+        "--frames",
+        "1",
+        "--res",
+        "96x72",
+        "--backend",
+        backend,
+        "-o",
+        png.to_str().unwrap(),
+    ];
+    args.extend(more);
+    let (ok, text) = gridtrace(&args);
+    let rgb = if ok {
+        image::open(&png).unwrap().to_rgb8().into_raw()
+    } else {
+        Vec::new()
+    };
+    (ok, text, rgb)
+}
+
+/// Pixels (RGB triples) that differ between two frames.
+fn differing(a: &[u8], b: &[u8]) -> usize {
+    a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p != q).count()
+}
+
+/// Issue 52: the tumbling frames take --mode, --light and the camera as a still frame does.
+/// (The gems cover about 400 of the 6,912 pixels; the light shadows about 70 of them.)
+/// Cast is the default (the headlight); a light above the lattice (the upper gems over the
+/// lower ones) lights otherwise; its shadows only darken, somewhere; trace is shadow (nothing
+/// reflects, and the run says so); another eye sees another frame.
+#[test]
+fn mode_light_and_camera_change_the_frames() {
+    let ok_frame = |tag: &str, more: &[&str]| {
+        let (ok, text, rgb) = frame(tag, more);
+        assert!(ok, "{more:?}: {text}");
+        (text, rgb)
+    };
+    let (text, headlight) = ok_frame("default", &[]);
+    assert!(text.contains("mode cast, lit by a headlight"), "{text}");
+    assert_eq!(
+        ok_frame("cast", &["--mode", "cast"]).1,
+        headlight,
+        "cast is the default"
+    );
+    let light = ["--light", "0.5,3.5,0.5"];
+    let (text, lit) = ok_frame("lit", &light);
+    assert!(text.contains("mode cast, 1 light(s)"), "{text}");
+    assert!(differing(&headlight, &lit) > 150, "the light changes the frame");
+    let (text, shadowed) = ok_frame("shadow", &[&light[..], &["--mode", "shadow"]].concat());
+    assert!(text.contains("mode shadow, 1 light(s) with shadows"), "{text}");
+    let darker = lit
+        .chunks(3)
+        .zip(shadowed.chunks(3))
+        .filter(|(l, s)| {
+            assert!(
+                s.iter().zip(l.iter()).all(|(s, l)| s <= l),
+                "a shadow brightens: {l:?} {s:?}"
+            );
+            s != l
+        })
+        .count();
+    assert!(darker > 20, "{darker} pixels in shadow");
+    let (text, traced) = ok_frame("trace", &[&light[..], &["--mode", "trace"]].concat());
+    assert_eq!(traced, shadowed, "trace is shadow: nothing reflects");
+    assert!(text.contains("nothing in tumbling-bunnies reflects"), "{text}");
+    let (_, moved) = ok_frame("eye", &["--eye", "0.5,0.5,6"]);
+    assert!(differing(&headlight, &moved) > 150, "another eye");
+    let (_, narrow) = ok_frame("vfov", &["--vfov", "20"]);
+    assert!(differing(&headlight, &narrow) > 150, "another field of view");
+}
+
+/// What cannot apply is refused, naming the option: heat (no traversal counts through the two
+/// levels), shadows without --light (the headlight's are out of sight), a camera that makes
+/// no rays.
+#[test]
+fn modes_and_cameras_that_cannot_apply_are_refused() {
+    for (more, words) in [
+        (&["--mode", "heat"][..], &["--mode heat", "count no traversal work"][..]),
+        (&["--mode", "shadow"], &["--mode shadow", "--light X,Y,Z"]),
+        (&["--mode", "trace"], &["--mode trace", "--light X,Y,Z"]),
+        (
+            &["--eye", "1,2,3", "--target", "1,2,3"],
+            &["--eye 1,2,3 --target 1,2,3", "eye equals target"],
+        ),
+        (&["--vfov", "190"], &["--vfov 190", "(0, 180)"]),
+        // Straight down onto the lattice's middle (0.5, 0.5, 0.5), with y up.
+        (
+            &["--eye", "0.5,3,0.5", "--up", "0,1,0"],
+            &["--eye 0.5,3,0.5 --up 0,1,0", "parallel"],
+        ),
+    ] {
+        let (ok, text, _) = frame("bad-view", more);
+        assert!(!ok, "{more:?}: {text}");
+        for w in words {
+            assert!(text.contains(w), "{more:?}: lacks '{w}': {text}");
+        }
+        assert!(!text.contains("panicked"), "{text}");
+    }
+}
+
+/// The vertex animations take the camera options too (they traced the scene's own camera).
+#[test]
+fn vertex_animations_take_the_camera() {
+    let dir = scratch("spheres");
+    let run = |tag: &str, more: &[&str]| {
+        let png = dir.join(format!("{tag}.png"));
+        let mut args = vec![
+            "render",
+            "--animate",
+            "--scene",
+            "bouncing-spheres",
+            "--frames",
+            "1",
+            "--res",
+            "48x36",
+            "--mode",
+            "cast",
+            "--backend",
+            "cpu",
+            "-o",
+            png.to_str().unwrap(),
+        ];
+        args.extend(more);
+        let (ok, text) = gridtrace(&args);
+        assert!(ok, "{more:?}: {text}");
+        image::open(&png).unwrap().to_rgb8().into_raw()
+    };
+    let (a, b) = (run("own", &[]), run("narrow", &["--vfov", "15"]));
+    assert!(differing(&a, &b) > 200, "--vfov changes the frame");
 }

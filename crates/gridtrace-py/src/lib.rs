@@ -25,7 +25,7 @@ fn to_py(e: Error) -> PyErr {
         Error::InvalidInput(m) => PyValueError::new_err(m),
         Error::Parse { .. } | Error::Scene(_) => PyValueError::new_err(e.to_string()),
         Error::Io { .. } => pyo3::exceptions::PyOSError::new_err(e.to_string()),
-        Error::Gpu(_) => PyRuntimeError::new_err(e.to_string()),
+        Error::Gpu(_) | Error::Limit { .. } => PyRuntimeError::new_err(e.to_string()),
     }
 }
 

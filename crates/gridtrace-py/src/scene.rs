@@ -342,8 +342,8 @@ impl NativeScene {
     }
 
     /// What the last query did (a dict: `name`, `device`, for GPU work `gpu`, the batch as
-    /// `last_gpu_batch` gives it, and `note` after a GPU fault), or None before the first
-    /// (`QueryScene::last_query`, `stats::last_query`).
+    /// `last_gpu_batch` gives it, and `note` after a GPU fault or a device limit), or None
+    /// before the first (`QueryScene::last_query`, `stats::last_query`).
     fn last_query<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         crate::stats::last_query(py, &self.read().last_query())
     }

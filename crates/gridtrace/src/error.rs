@@ -39,8 +39,22 @@ pub enum Error {
     Scene(String),
     /// A caller passed bad arguments (bad ray data, bad grid dims, ...).
     InvalidInput(String),
-    /// The GPU backend failed (no adapter, limits exceeded, device lost, ...).
+    /// The GPU backend failed (no adapter, a scene over the device's limits, device lost, ...).
     Gpu(String),
+    /// One query asked more of the device than one of its limits allows (a ray with more hits
+    /// than one list pass holds). Not a fault: the device works and the next query may fit,
+    /// so under `auto` the CPU answers this query alone and the scene stays on the GPU.
+    Limit {
+        /// The limit met, as wgpu's `Limits` names it (`max_storage_buffer_binding_size`).
+        limit: &'static str,
+        /// What asked for more, in the units of `asked` and `allowed` ("ray 3's hits in one
+        /// list pass").
+        what: String,
+        /// How much it asked.
+        asked: u64,
+        /// How much the limit allows on this device.
+        allowed: u64,
+    },
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -82,6 +96,15 @@ impl fmt::Display for Error {
             Error::Scene(m) => write!(f, "scene: {m}"),
             Error::InvalidInput(m) => write!(f, "invalid input: {m}"),
             Error::Gpu(m) => write!(f, "gpu: {m}"),
+            Error::Limit {
+                limit,
+                what,
+                asked,
+                allowed,
+            } => write!(
+                f,
+                "gpu: {what}: {asked} asked, {allowed} allowed on this device (limit {limit})"
+            ),
         }
     }
 }

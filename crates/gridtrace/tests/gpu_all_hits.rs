@@ -4,14 +4,14 @@
 //! merged mesh's renderer; the two levels, with instances that move and per-ray intervals and
 //! masks), with bad rays, ties at shared diagonals and ties of different geometries at one `t`;
 //! a list split over several passes equals one pass; a ray with more hits than a pass holds is
-//! refused, naming the limit.
+//! refused with `Error::Limit`, naming the limit (what the scenes do with it: gpu_faults.rs).
 
 use std::sync::{Arc, Mutex};
 
 use glam::{Mat4, Quat, Vec3};
 use gridtrace::QueryScene;
 use gridtrace::accel::{AccelKind, Resolution};
-use gridtrace::gpu::{AllHits, GpuContext, GpuRenderer, GpuVariants, RaySlice};
+use gridtrace::gpu::{AllHits, GpuContext, GpuRenderer, GpuVariants, LIST_PASS_LIMIT, RaySlice};
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{InstanceOf, Intersections, PerRay, RayOptions};
 use gridtrace::scene::builtin;
@@ -201,7 +201,7 @@ fn counts_follow_a_move() {
 /// The renderer's lists: cut into chunks and into passes of as few hits as the longest list,
 /// they equal one
 /// chunk in one pass bit for bit, with one round trip for each chunk's counts and one for each
-/// pass; a ray with more hits than a pass holds is refused, naming the limit.
+/// pass; a ray with more hits than a pass holds is refused with `Error::Limit`, naming the limit.
 #[test]
 fn lists_split_over_passes_equal_one_pass() {
     let _g = GPU_LOCK.lock().unwrap_or_else(|p| p.into_inner());
@@ -231,9 +231,16 @@ fn lists_split_over_passes_equal_one_pass() {
     assert_eq!(counts, want_counts);
     let most = *want_counts.iter().max().unwrap();
     split.set_max_list_hits(most - 1);
-    let e = run(&mut split, AllHits::Lists).unwrap_err().to_string();
-    let limit = format!("more than one list pass holds on this device ({})", most - 1);
-    assert!(e.contains(&limit), "{e}");
+    // A size, not a fault (`Error::Limit`): the ray, its hits, what a pass holds, the limit.
+    match run(&mut split, AllHits::Lists) {
+        Err(e @ gridtrace::Error::Limit { .. }) => {
+            let m = e.to_string();
+            let ray = want_counts.iter().position(|&c| c == most).unwrap();
+            let words = format!("ray {ray}'s hits in one list pass: {most} asked, {} allowed", most - 1);
+            assert!(m.contains(&words) && m.contains(LIST_PASS_LIMIT), "{m}");
+        }
+        other => panic!("expected the list pass's limit, got {:?}", other.map(|_| ())),
+    }
     split.set_max_list_hits(most);
     let (counts, hits) = run(&mut split, AllHits::Lists).unwrap();
     assert_eq!((counts, hits), (want_counts, want_hits.clone()));

@@ -4,8 +4,10 @@
 //! the fault is an error that names it; the query meshes (`TraceMesh`) and scenes
 //! (`QueryScene`: counts, lists, winding numbers, signed distance, on both GPU paths) follow
 //! the same rule, and a scene's `last_query` says which device answered and carries the note.
-//! A scene over the device's limits is
-//! `backend_sends_a_scene_the_device_cannot_hold_to_the_cpu` in gpu.rs.
+//! A list over a device limit is no fault (`Error::Limit`): under `auto` the CPU answers that
+//! query alone and the next goes to the GPU; under `gpu` the error names the limit. A scene
+//! over the device's limits is `backend_sends_a_scene_the_device_cannot_hold_to_the_cpu` in
+//! gpu.rs.
 //!
 //! Fails, not skips, without an adapter (lavapipe in CI); GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
@@ -392,5 +394,116 @@ fn scene_queries_report_the_fault_under_gpu() {
                 }
             }
         }
+    }
+}
+
+/// Each ray's hits of `rays` on the CPU scene of `accel` (how the limit tests pick a limit one
+/// ray's list meets and a batch that stays under it).
+fn cpu_counts(accel: &str, rays: &[[f32; 6]]) -> Vec<u32> {
+    fault_scene(gridtrace::query::Backend::Cpu, accel)
+        .count_intersections(rays)
+        .unwrap()
+}
+
+/// A list longer than one pass holds (`GpuContext::lower_list_hits`, as a device with smaller
+/// bindings would) is a limit, not a fault: under `auto` the CPU answers that query alone
+/// (the CPU scene's lists exactly; `last_query` "cpu" with a note naming the limit), the
+/// scene keeps its GPU (`gpu_failure` none), the next query that fits runs on the GPU, and a
+/// long list again is answered on the CPU again with the note. On both GPU paths.
+#[test]
+fn scene_lists_over_a_limit_are_answered_on_the_cpu_for_that_query_under_auto() {
+    use gridtrace::gpu::LIST_PASS_LIMIT;
+    use gridtrace::query::Backend;
+    if skip_gpu() {
+        return;
+    }
+    let (rays, _) = fault_rays_and_points();
+    for accel in ["bvh", "irregular"] {
+        let counts = cpu_counts(accel, &rays);
+        let most = *counts.iter().max().unwrap();
+        // The rays whose lists fit a pass of `most - 1` hits.
+        let short: Vec<[f32; 6]> = rays
+            .iter()
+            .zip(&counts)
+            .filter(|&(_, &c)| c < most)
+            .map(|(r, _)| *r)
+            .collect();
+        let cpu = fault_scene(Backend::Cpu, accel);
+        let (want, want_short) = (
+            cpu.list_intersections(&rays).unwrap(),
+            cpu.list_intersections(&short).unwrap(),
+        );
+        let mut s = fault_scene(Backend::Auto, accel);
+        let ctx = ctx();
+        s.adopt_device(ctx.clone());
+        ctx.lower_list_hits(most - 1);
+        for round in 0..2 {
+            let what = format!("{accel}, round {round}");
+            let got = s.list_intersections(&rays).unwrap();
+            assert!(got == want, "{what}: the CPU's answers differ");
+            let last = s.last_query();
+            assert_eq!((last.name, last.device), ("list_intersections", "cpu"), "{what}");
+            assert!(last.gpu.is_none(), "{what}");
+            let note = last.note.unwrap_or_else(|| panic!("{what}: no note"));
+            assert!(
+                note.contains(LIST_PASS_LIMIT) && note.contains(&format!("{most} asked, {} allowed", most - 1)),
+                "{what}: {note}"
+            );
+            assert!(note.contains("the next query goes to the GPU again"), "{what}: {note}");
+            assert!(s.gpu_failure().is_none(), "{what}: the scene failed over");
+            // The next query that fits is the GPU's, without a note.
+            let got_short = s.list_intersections(&short).unwrap();
+            let last = s.last_query();
+            assert_eq!(last.device, "gpu", "{what}: the short list");
+            assert!(last.note.is_none() && last.gpu.is_some(), "{what}: the short list");
+            assert_eq!(got_short.ray_splits, want_short.ray_splits, "{what}: the short list");
+            assert_eq!(
+                got_short.primitive_ids, want_short.primitive_ids,
+                "{what}: the short list"
+            );
+            // Counts meet no list pass: every ray's, on the GPU.
+            assert_eq!(s.count_intersections(&rays).unwrap(), counts, "{what}");
+            assert_eq!(s.last_query().device, "gpu", "{what}: the counts");
+        }
+    }
+}
+
+/// Under `gpu` the same limit is the caller's error (`Error::Limit`, naming the limit, the
+/// hits asked and the hits a pass allows), and the next query that fits runs on the GPU.
+#[test]
+fn scene_lists_over_a_limit_report_the_limit_under_gpu() {
+    use gridtrace::gpu::LIST_PASS_LIMIT;
+    use gridtrace::query::Backend;
+    if skip_gpu() {
+        return;
+    }
+    let (rays, _) = fault_rays_and_points();
+    for accel in ["bvh", "irregular"] {
+        let counts = cpu_counts(accel, &rays);
+        let most = *counts.iter().max().unwrap();
+        let mut s = fault_scene(Backend::Gpu, accel);
+        let ctx = ctx();
+        s.adopt_device(ctx.clone());
+        ctx.lower_list_hits(most - 1);
+        match s.list_intersections(&rays) {
+            Err(e @ Error::Limit { .. }) => {
+                let m = e.to_string();
+                let Error::Limit {
+                    limit, asked, allowed, ..
+                } = e
+                else {
+                    unreachable!()
+                };
+                assert_eq!(
+                    (limit, asked, allowed),
+                    (LIST_PASS_LIMIT, u64::from(most), u64::from(most - 1))
+                );
+                assert!(m.contains(LIST_PASS_LIMIT) && m.contains("list pass"), "{accel}: {m}");
+            }
+            other => panic!("{accel}: expected the limit, got {:?}", other.map(|_| ())),
+        }
+        assert!(s.gpu_failure().is_none(), "{accel}");
+        s.count_intersections(&rays).unwrap();
+        assert_eq!(s.last_query().device, "gpu", "{accel}: the next query");
     }
 }

@@ -305,7 +305,9 @@ class Scene:
         GPU fault) and ``gpu`` (for GPU work, the batch as ``last_gpu_batch`` gives it: bytes up
         and down, submissions, wall and GPU time; else ``None``) and ``note`` (on the query
         that met a GPU fault under ``backend="auto"``: what failed, and that the scene's queries
-        run on the CPU from now on; else ``None``). Every query runs on the GPU
+        run on the CPU from now on; on a query that met a device limit under ``"auto"``, such
+        as a ray with more hits than one list pass holds: the limit, and that the CPU answered
+        this query alone; else ``None``). Every query runs on the GPU
         where the scene's backend traces there: rays, counts and lists of every hit, closest
         points, winding numbers and the signs of signed distance and occupancy (``accuracy=inf``,
         the exact sum, on the CPU)."""

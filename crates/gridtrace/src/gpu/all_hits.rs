@@ -8,7 +8,9 @@
 //!   each (t, triangle, u, v), written where the sum places them. The host learns the list's
 //!   length from the ends before the second pass, so the answers buffer is sized to it; a list
 //!   longer than the device's bindings hold goes down in several passes over runs of rays,
-//!   never cut short (one ray with more hits than a binding holds is refused, naming the limit).
+//!   never cut short. One ray with more hits than a binding holds is refused with
+//!   `Error::Limit` naming the limit: a size, not a fault, which the scenes answer on the CPU
+//!   under `auto` for that query alone (`query/fallback.rs`).
 //!
 //! Each hit is the structure's closest-hit walk after the hit before it in (t, triangle) order
 //! (`NEXT_HIT`, common.wgsl): every structure, and the two levels, without a second walk
@@ -37,6 +39,10 @@ use crate::{Error, Result};
 /// Words of the hits table before the geometries' first triangles (all_hits.wgsl's
 /// `HITS_TABLE_HEAD`): their count, the rays a list pass lists (from, to), one unused.
 const TABLE_HEAD: usize = 4;
+
+/// The device limit one list pass's hits meet: the answers are one storage binding (the
+/// smaller of this and `max_buffer_size`, `max_binding_bytes`).
+pub const LIST_PASS_LIMIT: &str = "max_storage_buffer_binding_size";
 
 /// Which every-hit answer a batch brings down.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -91,13 +97,15 @@ impl GpuRenderer {
     }
 
     /// Hits one list pass may bring down with `n` rays in the chunk: what a binding of the
-    /// answers buffer holds after the counts and ends (or what a test set).
+    /// answers buffer holds after the counts and ends (or what a test set, on this renderer
+    /// or on its device).
     fn list_hits_max(&self, n: u64) -> u64 {
         let words = max_binding_bytes(&self.ctx.limits()) / size_of::<u32>() as u64;
         let by_device = words.saturating_sub(2 * n) / 4;
-        self.batches
-            .max_list_hits
-            .map_or(by_device, |m| by_device.min(u64::from(m)))
+        [self.batches.max_list_hits, self.ctx.list_hits_cap()]
+            .into_iter()
+            .flatten()
+            .fold(by_device, |most, m| most.min(u64::from(m)))
     }
 
     /// Lowers the hits one list pass brings down (at least 1): tests split lists with it.
@@ -161,11 +169,14 @@ impl GpuRenderer {
             // The longest run of rays from `from` whose hits fit one pass.
             let to = from + ends[from..].partition_point(|&e| u64::from(e - base) <= most);
             if to == from {
-                return Err(Error::Gpu(format!(
-                    "ray {} has {} hits, more than one list pass holds on this device ({most})",
-                    items.start + from,
-                    counts[from]
-                )));
+                // A size, not a fault: the device works, and the caller may answer this query
+                // elsewhere and come back (`Error::Limit`).
+                return Err(Error::Limit {
+                    limit: LIST_PASS_LIMIT,
+                    what: format!("ray {}'s hits in one list pass", items.start + from),
+                    asked: u64::from(counts[from]),
+                    allowed: most,
+                });
             }
             let hits = u64::from(ends[to - 1] - base);
             // The counts and their sums stay: the list pass reads them.

@@ -3,6 +3,7 @@
 
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -49,6 +50,9 @@ pub struct GpuContext {
     /// What is compiled once per device and shared (the tracer's kernels, the grid build's),
     /// by type: built by the first user (`cached`), so that this file names none of them.
     cache: Mutex<HashMap<TypeId, Arc<dyn Any + Send + Sync>>>,
+    /// Hits one list pass may hold on this device, lowered by a test (`lower_list_hits`; 0:
+    /// what the bindings hold): the scenes' renderers are out of a test's reach.
+    list_hits_cap: AtomicU32,
 }
 
 /// The most bytes one storage binding may hold on a device of `limits`: the binding limit, or
@@ -191,6 +195,7 @@ impl GpuContext {
             errors,
             lost,
             cache: Mutex::new(HashMap::new()),
+            list_hits_cap: AtomicU32::new(0),
         })
     }
 
@@ -295,6 +300,19 @@ impl GpuContext {
                 slot.get_or_insert_with(|| "Out of Memory (injected by a test)".into());
             }
         }
+    }
+
+    /// Makes every list pass on this device hold at most `hits` hits (at least 1), as a device
+    /// with smaller bindings would: how tests make a list meet a device limit
+    /// (`Error::Limit`) through the scenes' own renderers, as `inject_fault` makes faults.
+    #[doc(hidden)]
+    pub fn lower_list_hits(&self, hits: u32) {
+        self.list_hits_cap.store(hits.max(1), Ordering::Relaxed);
+    }
+
+    /// The hits a test allowed one list pass (`lower_list_hits`), if it lowered them.
+    pub(crate) fn list_hits_cap(&self) -> Option<u32> {
+        Some(self.list_hits_cap.load(Ordering::Relaxed)).filter(|&h| h > 0)
     }
 
     /// Waits for all submitted work, with a time limit: a hung or lost device is an error.

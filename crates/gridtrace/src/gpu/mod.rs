@@ -56,7 +56,7 @@ mod wavefront;
 mod winding;
 mod wire;
 
-pub use all_hits::AllHits;
+pub use all_hits::{AllHits, LIST_PASS_LIMIT};
 pub use context::check_scene_fits;
 pub use context::{Fault, GpuContext};
 pub use device_image::DeviceImage;

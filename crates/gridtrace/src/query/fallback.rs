@@ -2,8 +2,11 @@
 //! `Tracer` follows, for the query meshes (`rays`, Python's `Mesh` and `Scene`). Under `auto`
 //! a GPU fault (a lost device, memory gone) hands the mesh to the CPU for good, the query that
 //! met it is answered there, and `gpu_failure` says what happened; under `gpu` the fault is the
-//! caller's error. Every query goes through `on_backend`, which also keeps its record
-//! (`last_query`: the scene's `LastQuery`).
+//! caller's error. A device limit one query meets (`Error::Limit`: a ray with more hits than
+//! a list pass holds) is no fault: under `auto` the CPU answers that query, its record notes
+//! the limit, and the next query goes to the GPU again; under `gpu` the limit is the caller's
+//! error. Every query goes through `on_backend`, which also keeps its record (`last_query`:
+//! the scene's `LastQuery`).
 
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -20,6 +23,15 @@ pub(crate) enum Answered {
     /// On the CPU; `fault` is the GPU's error where the GPU failed under `auto` and the CPU
     /// took the query over (this query only: later ones go to the CPU without one).
     Cpu { fault: Option<String> },
+    /// On the CPU, this query alone, because under `auto` its GPU work met a device limit:
+    /// the note that says so (`limit_note`).
+    OverLimit(String),
+}
+
+/// The note of a query that met a device limit under `auto` (`error`, an `Error::Limit`,
+/// names the limit) and was answered on the CPU.
+pub(crate) fn limit_note(error: &Error) -> String {
+    format!("this query was answered on the CPU ({error}); the next query goes to the GPU again")
 }
 
 impl TraceMesh {
@@ -48,6 +60,12 @@ impl TraceMesh {
                 gpu: None,
                 note: fault.and_then(|_| self.gpu_failure()),
             },
+            Answered::OverLimit(note) => LastQuery {
+                name,
+                device: "cpu",
+                gpu: None,
+                note: Some(note),
+            },
         };
         *self.last.lock().unwrap_or_else(|p| p.into_inner()) = record;
         Ok(answer)
@@ -67,6 +85,14 @@ impl TraceMesh {
         let mut g = locked(gpu);
         match on_gpu(&mut g) {
             Ok(answer) => Ok((answer, Answered::Gpu(g.last_query_stats().clone()))),
+            Err(limit @ Error::Limit { .. }) if backend == Backend::Auto => {
+                drop(g);
+                // As for a fault below: without the CPU's structure the limit is the caller's.
+                if self.scene.accel.check_current().is_err() {
+                    return Err(limit);
+                }
+                Ok((on_cpu()?, Answered::OverLimit(limit_note(&limit))))
+            }
             Err(Error::Gpu(e)) if backend == Backend::Auto => {
                 drop(g);
                 // A grid the GPU rebuilt after `update_vertices` is not the CPU's to trace:
@@ -87,8 +113,9 @@ impl TraceMesh {
 
     /// What the last answered query did: its name (`intersect`, `occluded`,
     /// `closest_points`), the device, the GPU batch's statistics, and on the query that met
-    /// a GPU fault under `auto` the note that the CPU took over (`LastQuery`); the default
-    /// before the first. A query that failed leaves the previous record.
+    /// a GPU fault or a device limit under `auto` the note that the CPU answered
+    /// (`LastQuery`); the default before the first. A query that failed leaves the previous
+    /// record.
     pub fn last_query(&self) -> LastQuery {
         self.last.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }

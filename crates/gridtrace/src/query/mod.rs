@@ -47,7 +47,7 @@ mod wire;
 /// What a mesh's last query did (`TraceMesh::last_query`): the scene's record.
 pub use crate::query_scene::LastQuery;
 pub use batch::CHUNK;
-pub(crate) use fallback::Answered;
+pub(crate) use fallback::{Answered, limit_note};
 pub use hits::Hits;
 
 /// Where ray queries run (the same choice as rendering's).

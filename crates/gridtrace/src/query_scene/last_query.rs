@@ -10,11 +10,14 @@
 //! fault (a lost device, memory gone) hands the scene to the CPU for good, the query that met
 //! it is answered there and its record carries the note; later queries run on the CPU
 //! without one (`gpu_failure` keeps the reason). Under `gpu` the fault is the caller's error.
+//! A device limit (`Error::Limit`: a ray with more hits than a list pass holds) is no fault:
+//! under `auto` the CPU answers the query that met it, its record's note names the limit, and
+//! the next query goes to the GPU again; under `gpu` the limit is the caller's error.
 
 use std::sync::Arc;
 
 use crate::gpu::{GpuContext, GpuQueryStats, GpuRenderer};
-use crate::query::{Answered, Backend, TraceMesh};
+use crate::query::{Answered, Backend, TraceMesh, limit_note};
 use crate::{Error, Result};
 
 use super::QueryScene;
@@ -25,13 +28,16 @@ pub struct LastQuery {
     /// The query's name as the Python package calls it (`count_intersections`,
     /// `compute_winding_number`, `intersect`, ...); empty before the first.
     pub name: &'static str,
-    /// `"gpu"` or `"cpu"`: where it was answered (under `auto`, the CPU after a GPU fault).
+    /// `"gpu"` or `"cpu"`: where it was answered (under `auto`, the CPU after a GPU fault, or
+    /// for a query that met a device limit).
     pub device: &'static str,
     /// The GPU batch's statistics where the GPU answered (the last batch of the query).
     pub gpu: Option<GpuQueryStats>,
     /// Set on the query that met a GPU fault under `auto` and was answered on the CPU: what
     /// failed, and that the CPU answers from now on. `None` on every other query, the later
-    /// ones on the CPU included (the reason stays in `gpu_failure`).
+    /// ones on the CPU included (the reason stays in `gpu_failure`). Set too on a query that
+    /// met a device limit under `auto` (`Error::Limit`), naming the limit: the CPU answered
+    /// that query alone.
     pub note: Option<String>,
 }
 
@@ -84,12 +90,14 @@ impl QueryScene {
             Answered::Gpu(stats) => self.answered_on_gpu(&stats),
             Answered::Cpu { fault: Some(why) } => self.gpu_fault(&why),
             Answered::Cpu { fault: None } => {}
+            Answered::OverLimit(note) => self.over_limit(note),
         }
         Ok(answer)
     }
 
     /// The query `on_gpu` on the GPU's two levels; under `auto`, a GPU that fails hands the
-    /// scene to the CPU (`gpu_fault`) and the query to `on_cpu`, as the merged mesh's queries
+    /// scene to the CPU (`gpu_fault`) and the query to `on_cpu`, and a device limit the query
+    /// meets hands this query alone to `on_cpu` (`over_limit`), as the merged mesh's queries
     /// do (`on_mesh`).
     pub(super) fn gpu_or_cpu<T>(
         &self,
@@ -97,12 +105,22 @@ impl QueryScene {
         on_cpu: impl FnOnce() -> Result<T>,
     ) -> Result<T> {
         match on_gpu() {
+            Err(limit @ Error::Limit { .. }) if self.opts.backend == Backend::Auto => {
+                self.over_limit(limit_note(&limit));
+                on_cpu()
+            }
             Err(Error::Gpu(e)) if self.opts.backend == Backend::Auto => {
                 self.gpu_fault(&e);
                 on_cpu()
             }
             r => r,
         }
+    }
+
+    /// The open query met a device limit under `auto` and is answered on the CPU: its record
+    /// says so with `note` (which names the limit); the scene stays on the GPU.
+    fn over_limit(&self, note: String) {
+        self.records().note.get_or_insert(note);
     }
 
     /// The GPU failed under `auto` with `why` (the error's words): the scene's queries run on

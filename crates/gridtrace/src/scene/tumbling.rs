@@ -2,7 +2,8 @@
 //! tumbling about its own axis at its own rate and bobbing a little, for the two levels'
 //! dynamic path: a frame moves every instance (`QueryScene::set_transforms`, the top level
 //! rebuilt, no mesh structure), casts the camera's primary rays (`QueryScene::cast_rays`) and
-//! shades the hits with a headlight. Unlike `animated.rs` no vertex moves, so the one mesh
+//! shades the hits with a headlight (`shade`), or with point lights (`shade_lit`), their
+//! shadows from `shadow_rays` through `QueryScene::test_occlusions`. Unlike `animated.rs` no vertex moves, so the one mesh
 //! structure is built once, however many frames are played.
 //!
 //! The instances sit on a cubic lattice of unit spacing (x fastest, then y, then z), each
@@ -15,7 +16,7 @@ use std::f32::consts::TAU;
 use glam::{Mat4, Quat, Vec3};
 use rayon::prelude::*;
 
-use super::Camera;
+use super::{Camera, PointLight};
 use crate::query::QueryOptions;
 use crate::query_scene::{INVALID_ID, InstanceOf, QueryScene, RayHits};
 use crate::render::Image;
@@ -213,10 +214,9 @@ impl Tumbling {
             .map(|i| {
                 let id = hits.geometry_ids[i];
                 if id == INVALID_ID {
-                    let up = 1.0 - (i as u32 / width) as f32 / height.max(1) as f32;
-                    return Vec3::new(0.55, 0.62, 0.72).lerp(Vec3::new(0.85, 0.9, 0.97), up);
+                    return sky(i, width, height);
                 }
-                let tint = self.bodies.get(id as usize).map_or(Vec3::ONE, |b| b.tint);
+                let tint = self.tint(id);
                 let r = &rays[i];
                 let cos = Vec3::from(hits.primitive_normals[i])
                     .dot(Vec3::new(r[3], r[4], r[5]))
@@ -226,6 +226,112 @@ impl Tumbling {
             .collect();
         Image::from_pixels(width, height, pixels)
     }
+}
+
+/// How far a shadow ray starts off its hit point along the face's normal, relative to the
+/// point's largest coordinate (at least 1): past the rounding of `origin + t * dir`, which is
+/// about an ulp of the coordinates, so that a face does not shadow itself.
+const SHADOW_OFFSET: f32 = 1e-4;
+
+impl Tumbling {
+    /// The middle of the lattice, where the camera looks (`--light` sets a light's intensity
+    /// by its distance to it, as `render` does by the scene's centre).
+    pub fn center(&self) -> Vec3 {
+        let (lo, hi) = self
+            .bodies
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), b| {
+                (l.min(b.center), h.max(b.center))
+            });
+        (lo + hi) * 0.5
+    }
+
+    /// One shadow ray for each of `rays`' hits and each of `lights` (ray `i`'s toward light
+    /// `k` at `i * lights.len() + k`), for `QueryScene::test_occlusions` over `0 < t < 1`:
+    /// from the hit, off the face on the side the eye sees, to the light (the direction's
+    /// length the distance). A miss, or a face turned from the light, gets a zero direction,
+    /// which nothing occludes (and `shade_lit` adds no light there).
+    pub fn shadow_rays(&self, rays: &[[f32; 6]], hits: &RayHits, lights: &[PointLight]) -> Vec<[f32; 6]> {
+        (0..rays.len())
+            .into_par_iter()
+            .with_min_len(4096)
+            .flat_map_iter(|i| {
+                let seen = seen_point(&rays[i], hits, i);
+                lights.iter().map(move |l| {
+                    let Some((p, n)) = seen else {
+                        return [0.0; 6];
+                    };
+                    let from = p + n * SHADOW_OFFSET * p.abs().max_element().max(1.0);
+                    let to = Vec3::from(l.position) - from;
+                    if to.dot(n) <= 0.0 {
+                        return [0.0; 6];
+                    }
+                    [from.x, from.y, from.z, to.x, to.y, to.z]
+                })
+            })
+            .collect()
+    }
+
+    /// The image of `hits` lit by point `lights` in place of the headlight: each hit its
+    /// instance's tint over `AMBIENT`, plus each light's irradiance on the face's side the eye
+    /// sees (intensity x cosine / distance squared) where `occluded` (`shadow_rays`' answers;
+    /// `None`: no shadows) does not say the light is blocked; misses the sky as in `shade`.
+    pub fn shade_lit(
+        &self,
+        rays: &[[f32; 6]],
+        hits: &RayHits,
+        lights: &[PointLight],
+        occluded: Option<&[bool]>,
+        width: u32,
+        height: u32,
+    ) -> Image {
+        let pixels: Vec<Vec3> = (0..rays.len())
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|i| {
+                let Some((p, n)) = seen_point(&rays[i], hits, i) else {
+                    return sky(i, width, height);
+                };
+                let tint = self.tint(hits.geometry_ids[i]);
+                let mut irradiance = Vec3::ZERO;
+                for (k, l) in lights.iter().enumerate() {
+                    if occluded.is_some_and(|o| o[i * lights.len() + k]) {
+                        continue;
+                    }
+                    let to = Vec3::from(l.position) - p;
+                    let d2 = to.length_squared();
+                    let cos = n.dot(to) / d2.sqrt();
+                    if cos > 0.0 && d2 > 0.0 {
+                        irradiance += Vec3::from(l.intensity) * (cos / d2);
+                    }
+                }
+                tint * (Vec3::splat(AMBIENT) + (1.0 - AMBIENT) * irradiance)
+            })
+            .collect();
+        Image::from_pixels(width, height, pixels)
+    }
+
+    /// Instance `id`'s tint (white for an id no body has).
+    fn tint(&self, id: u32) -> Vec3 {
+        self.bodies.get(id as usize).map_or(Vec3::ONE, |b| b.tint)
+    }
+}
+
+/// Ray `i`'s hit point (world space) and its face's unit normal turned toward the ray's
+/// origin (the side the eye sees: the faces are lit on either side); `None` for a miss.
+fn seen_point(ray: &[f32; 6], hits: &RayHits, i: usize) -> Option<(Vec3, Vec3)> {
+    if hits.geometry_ids[i] == INVALID_ID {
+        return None;
+    }
+    let (o, d) = (Vec3::new(ray[0], ray[1], ray[2]), Vec3::new(ray[3], ray[4], ray[5]));
+    let n = Vec3::from(hits.primitive_normals[i]);
+    Some((o + d * hits.t_hit[i], if n.dot(d) > 0.0 { -n } else { n }))
+}
+
+/// Pixel `i`'s sky: a gradient by row, lighter toward the top.
+fn sky(i: usize, width: u32, height: u32) -> Vec3 {
+    let up = 1.0 - (i as u32 / width) as f32 / height.max(1) as f32;
+    Vec3::new(0.55, 0.62, 0.72).lerp(Vec3::new(0.85, 0.9, 0.97), up)
 }
 
 /// A camera that sees every lattice point with its instance whatever its pose: from above and
