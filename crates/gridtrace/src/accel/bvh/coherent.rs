@@ -143,8 +143,33 @@ fn dot3(a: [F8; 3], b: [F8; 3]) -> F8 {
 /// interleaved single walks in one build (docs/benchmarks.md). The answers are the same
 /// either way.
 pub(super) fn packets_enabled() -> bool {
-    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| std::env::var_os("GRIDTRACE_BVH_PACKETS").is_none_or(|v| v != "0"))
+    packets_switch() != Switch::Off
+}
+
+/// Whether batches with a limit per ray (`TMax::Each`, the two levels' streams) may take the
+/// packet route too: only where the environment sets `GRIDTRACE_BVH_PACKETS=all`, a switch for
+/// measuring them (`BvhAccel::traced` says why they walk singly otherwise;
+/// `examples/carried_packets.rs`). The answers are the same either way.
+pub(super) fn packets_for_limits_per_ray() -> bool {
+    packets_switch() == Switch::All
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Switch {
+    Off,
+    On,
+    All,
+}
+
+/// `GRIDTRACE_BVH_PACKETS`, read once: `0` off, `all` for every batch, anything else (or
+/// unset) the default route.
+fn packets_switch() -> Switch {
+    static SWITCH: std::sync::OnceLock<Switch> = std::sync::OnceLock::new();
+    *SWITCH.get_or_init(|| match std::env::var_os("GRIDTRACE_BVH_PACKETS") {
+        Some(v) if v == "0" => Switch::Off,
+        Some(v) if v == "all" => Switch::All,
+        _ => Switch::On,
+    })
 }
 
 /// Transposes an 8x8 bit matrix held row by row in bytes (bit `8 * r + c` to `8 * c + r`):

@@ -142,12 +142,30 @@ impl BvhAccel {
     /// for memory overlaps the others' work (incoherent rays spend most of their time waiting
     /// for nodes and triangles, one dependent load after another). The same answers either way.
     fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: TMax<'_>, mut finish: impl FnMut(usize, &Hit)) {
-        // Not for a limit per ray (the two levels' streams, `TMax::Each`): measured (2026-12-05,
-        // 320x240 camera rays at 10 Bunny instances, rays carried into each instance), the
-        // packets took 65 us a packet, 30x the interleaved single walks' time for the same
-        // rays, where the same camera's packets on the flat mesh take 0.3 us; the cause is not
-        // found yet (translated-only instances show it too), so those batches walk singly.
-        let limits_per_ray = matches!(t_max, TMax::Each(_));
+        // Not for a limit per ray (`TMax::Each`: the two levels' streams) unless
+        // `GRIDTRACE_BVH_PACKETS=all`: those batches are one instance's share of a work item's
+        // rays, in ray order, and a camera's rays there are not coherent at the scale of the
+        // mesh's leaves. Measured (2026-12-05, issue 52, `examples/carried_packets.rs`: 10
+        // translated Stanford Bunnies, 320x240 camera rays from 8 diagonals, nodes and
+        // triangles counted per packet and for the same rays' single walks): an instance's
+        // rays are its rows' runs over its box one after the other, so 203 of the 1,322 packets
+        // spanned a row's end and the next row's start (pixels 36 apart, yet within the 8
+        // degree cone of `coherent`: the Bunny is 5 degrees wide), and each such packet's
+        // interval test covered the Bunny's width: 1,119 nodes and leaves and 3,096 triangle
+        // tests a packet, where the same 8 rays' single walks test 17 triangles (78% of all
+        // the packets' tests). The packets within a row lose too: 76 nodes and leaves and 162
+        // triangle tests a packet against 42 nodes and 40 triangles for the 8 single walks,
+        // because a pixel there covers about 120 of the Bunny's triangles: neighbouring rays
+        // end in different leaves, and the packet, searched as far as its farthest ray (one
+        // that misses searches to infinity), enters more. Time, the two levels' cast: 30-45 ms
+        // with the packets, 5.1-11.3 ms without (medians, alternating, a loaded 2-core
+        // machine). Not the limits themselves (in the first round every limit is `t_far`, as
+        // on the flat path; the answers are equal), nor the carried directions (translated
+        // only), nor ties (no ray redone). From 1.5 diagonals, where a packet's rays share
+        // leaves (13 nodes and leaves and 20 triangle tests a packet against the singles' 33
+        // and 30), the packets were still 5-8% slower (11.5-16.1 against 10.8-15.3 ms). The
+        // flat mesh's camera packets are cheap on average because most cross empty space.
+        let limits_per_ray = matches!(t_max, TMax::Each(_)) && !coherent::packets_for_limits_per_ray();
         if crate::accel::simd::has_wide() && rays.len() >= PACKET && coherent::packets_enabled() && !limits_per_ray {
             let extent = self.extent();
             // Indices of the rays left to the interleaved walks (u32: a batch is cut into
