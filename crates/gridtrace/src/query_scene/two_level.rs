@@ -174,6 +174,12 @@ impl TwoLevel {
         (named, n)
     }
 
+    /// The index among its mesh's faces as given of triangle `tri` of instance `i`'s structure.
+    #[inline]
+    pub fn prim_of(&self, i: u32, tri: u32) -> u32 {
+        self.mesh_of(&self.placed[i as usize]).original_index(tri)
+    }
+
     /// The structure of instance `i`'s mesh.
     #[inline]
     pub fn accel_of(&self, i: u32) -> &crate::accel::Accel {
