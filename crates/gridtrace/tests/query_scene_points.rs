@@ -234,3 +234,124 @@ fn two_levels_answer_points_as_merged_and_brute_force() {
         }
     }
 }
+
+/// Winding numbers on the two levels (each instance's tree, summed; mirrors flipping the sign)
+/// equal the merged scene's: exactly summed (`accuracy = inf`) within float rounding of the
+/// sum and brute force's; at the default accuracy within the far-field terms' bound (points
+/// off the faces by 1e-3 or more); signed distances with the merged sign away from the surface
+/// (|w - 0.5| > 0.05) and the distance within 1e-5; occupancy the same there. No mesh
+/// structure built for them.
+#[test]
+fn two_levels_winding_numbers_and_signs_as_merged() {
+    use gridtrace::accel::winding::winding_number_brute;
+    let scene = instanced(cpu(AccelKind::Bvh), 60, 3);
+    let (flat, tris, _, _) = flat(&scene, cpu(AccelKind::Bvh));
+    let mut pts = points(&tris, 2000, 4);
+    // And the instances' centres and points about them (inside the spheres).
+    let mut rng = Rng::new(1);
+    for id in scene.ids() {
+        let c = scene.geometry(id).unwrap().transform().w_axis.truncate();
+        for _ in 0..4 {
+            let d = Vec3::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
+            pts.push((c + d).to_array());
+        }
+    }
+    let exact = scene.winding_numbers_at(&pts, f64::INFINITY).unwrap();
+    let fast = scene.winding_numbers(&pts).unwrap();
+    let (flat_exact, flat_fast) = (
+        flat.winding_numbers_at(&pts, f64::INFINITY).unwrap(),
+        flat.winding_numbers(&pts).unwrap(),
+    );
+    let sd = scene.compute_signed_distance(&pts).unwrap();
+    let flat_sd = flat.compute_signed_distance(&pts).unwrap();
+    let occ = scene.compute_occupancy(&pts).unwrap();
+    let flat_occ = flat.compute_occupancy(&pts).unwrap();
+    assert_eq!(scene.structure_builds(), 3, "one structure a mesh, no merged mesh");
+    let (mut worst_exact, mut worst_fast, mut inside) = (0f32, 0f32, 0);
+    for (i, p) in pts.iter().enumerate() {
+        let what = format!("point {i} {p:?}");
+        if !Vec3::from(*p).is_finite() {
+            assert!(
+                exact[i].is_nan() && fast[i].is_nan() && sd[i].is_nan() && occ[i].is_nan(),
+                "{what}"
+            );
+            continue;
+        }
+        if flat_sd[i].abs() < 1e-3 {
+            continue; // on a face: the winding number jumps there
+        }
+        if i % 10 == 0 {
+            let brute = winding_number_brute(&tris, Vec3::from(*p));
+            assert!(
+                (exact[i] - brute).abs() <= 1e-4,
+                "{what}: {} vs brute force {brute}",
+                exact[i]
+            );
+        }
+        worst_exact = worst_exact.max((exact[i] - flat_exact[i]).abs());
+        worst_fast = worst_fast.max((fast[i] - flat_fast[i]).abs());
+        if (flat_fast[i] - 0.5).abs() > 0.05 {
+            inside += usize::from(flat_fast[i] > 0.5);
+            assert_eq!(sd[i].is_sign_negative(), flat_sd[i].is_sign_negative(), "{what}: sign");
+            assert!(
+                close(sd[i].abs(), flat_sd[i].abs()),
+                "{what}: {} vs {}",
+                sd[i],
+                flat_sd[i]
+            );
+            assert_eq!(occ[i], flat_occ[i], "{what}: occupancy");
+        }
+    }
+    eprintln!("winding numbers apart from the merged scene's: exact {worst_exact}, fast {worst_fast}; {inside} inside");
+    assert!(worst_exact <= 1e-4, "exact sums apart by {worst_exact}");
+    assert!(worst_fast <= 0.02, "fast sums apart by {worst_fast}");
+    assert!(inside > 40, "only {inside} points inside");
+}
+
+/// A scene with one instance under an uneven scale answers its point queries on the merged
+/// mesh, bit for bit the flat scene's (the same world-space mesh), and builds that mesh after
+/// each move; made all similarities again, it answers on the two levels.
+#[test]
+fn other_transforms_answer_on_the_merged_mesh() {
+    let mut scene = instanced(cpu(AccelKind::Bvh), 30, 5);
+    let ids: Vec<u32> = scene.ids().collect();
+    let uneven = Mat4::from_scale(Vec3::new(1.0, 1.5, 0.8)) * scene.geometry(ids[4]).unwrap().transform();
+    scene.set_transform(ids[4], uneven).unwrap();
+    assert!(scene.geometry(ids[4]).unwrap().similarity().is_none());
+    assert!(scene.geometry(ids[5]).unwrap().similarity().is_some());
+    for step in 0..2 {
+        let (flat, tris, _, _) = flat(&scene, cpu(AccelKind::Bvh));
+        let pts = points(&tris, 800, 6);
+        let before = scene.structure_builds();
+        let (a, b) = (
+            scene.compute_closest_points(&pts).unwrap(),
+            flat.compute_closest_points(&pts).unwrap(),
+        );
+        assert_eq!(
+            scene.structure_builds(),
+            before + 1,
+            "step {step}: the merged mesh built"
+        );
+        assert_eq!(format!("{:?}", a.points), format!("{:?}", b.points), "step {step}");
+        let d = scene.compute_distance(&pts).unwrap();
+        let e = flat.compute_distance(&pts).unwrap();
+        assert!(d.iter().zip(&e).all(|(x, y)| x.to_bits() == y.to_bits()), "step {step}");
+        let sd = scene.compute_signed_distance(&pts).unwrap();
+        let flat_sd = flat.compute_signed_distance(&pts).unwrap();
+        assert!(
+            sd.iter().zip(&flat_sd).all(|(x, y)| x.to_bits() == y.to_bits()),
+            "step {step}"
+        );
+        let moved = Mat4::from_translation(Vec3::X * 0.3) * scene.geometry(ids[4]).unwrap().transform();
+        scene.set_transform(ids[4], moved).unwrap();
+    }
+    // Back to a similarity: the two levels answer, and a move builds nothing more.
+    scene.set_transform(ids[4], Mat4::from_rotation_z(0.3)).unwrap();
+    scene.compute_distance(&[[0.0; 3]]).unwrap();
+    let builds = scene.structure_builds();
+    scene.set_transform(ids[4], Mat4::from_rotation_z(0.6)).unwrap();
+    let d = scene.compute_distance(&[[0.0, 0.0, 9.0]]).unwrap();
+    assert_eq!(scene.structure_builds(), builds);
+    let (flat, _, _, _) = flat(&scene, cpu(AccelKind::Bvh));
+    assert!(close(d[0], flat.compute_distance(&[[0.0, 0.0, 9.0]]).unwrap()[0]));
+}

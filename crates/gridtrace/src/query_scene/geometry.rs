@@ -9,7 +9,8 @@ use std::sync::{Arc, OnceLock};
 use glam::{Affine3A, Mat3, Mat4, Vec3, Vec4};
 
 use super::enclosure::Enclosure;
-use crate::accel::{Aabb, Ray};
+use crate::accel::winding::FastWinding;
+use crate::accel::{Aabb, Ray, Structure};
 use crate::query::{Backend, QueryOptions, TraceMesh};
 use crate::{Error, Result};
 
@@ -26,6 +27,9 @@ pub struct SceneMesh {
     /// The bottom level: the structure over the mesh's own-space triangles, on the CPU
     /// (`None`: no face with non-zero area, so nothing to hit). Built once, whatever moves.
     bottom: OnceLock<Option<TraceMesh>>,
+    /// The fast winding tree over the bottom level's triangles, built on first use by the
+    /// two levels' winding numbers (`two_level_points.rs`). Built once, whatever moves.
+    winding: OnceLock<FastWinding>,
 }
 
 impl std::fmt::Debug for SceneMesh {
@@ -57,6 +61,7 @@ impl SceneMesh {
             bounds,
             enclosure: OnceLock::new(),
             bottom: OnceLock::new(),
+            winding: OnceLock::new(),
         })
     }
 
@@ -94,6 +99,18 @@ impl SceneMesh {
     /// The bottom level if it was built.
     pub(crate) fn built(&self) -> Option<&TraceMesh> {
         self.bottom.get().and_then(|b| b.as_ref())
+    }
+
+    /// The fast winding tree over the bottom level's triangles (the bottom level's order:
+    /// `Accel::tris`), built now if it is not yet: over the bottom level's BVH where it is
+    /// one, else a tree of its own (as the merged mesh's, `Merged::winding`). `None` where the
+    /// bottom level is not built or has no triangle.
+    pub(crate) fn winding(&self) -> Option<&FastWinding> {
+        let accel = &self.built()?.prepared().accel;
+        Some(self.winding.get_or_init(|| match &accel.structure {
+            Structure::Bvh(b) => FastWinding::from_bvh(&b.bvh, &accel.tris),
+            _ => FastWinding::build(&accel.tris),
+        }))
     }
 
     /// Bytes held: the arrays as given and, once built, the structure and its triangles.

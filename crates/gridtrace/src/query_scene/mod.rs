@@ -57,9 +57,9 @@
 //! irregular grid, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
 //! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
 //! do the point queries (closest points, distances, signed distances, occupancy, winding
-//! numbers), except closest points and distances (signed distances' too) of a moving scene on
-//! the CPU whose every instance is placed by a similarity, which walk the two levels
-//! (`two_level_points.rs`): a change marks it stale and the next such query rebuilds it,
+//! numbers), except on the CPU in a moving scene whose every instance is placed by a
+//! similarity, where they all run on the two levels (`two_level_points.rs`): a change marks
+//! the merged mesh stale and the next query that uses it rebuilds it,
 //! except `update_vertices` on a built scene, which moves the vertices of the built mesh (the
 //! BVH refits) when that gives what a rebuild would. `ray_path` is where that is decided.
 

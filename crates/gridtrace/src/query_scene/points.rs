@@ -182,9 +182,14 @@ impl QueryScene {
         self.scene_winding_numbers(points, accuracy)
     }
 
-    /// The winding numbers at `points`: the faces' own tree where the merged mesh is not built
-    /// (`winding_only.rs`: no ray structure built for them), else the merged mesh's.
+    /// The winding numbers at `points`: on the two levels where the nearest points are
+    /// (`point_levels`: each instance's own tree, summed), else the faces' own tree where the
+    /// merged mesh is not built (`winding_only.rs`: no ray structure built for them), else the
+    /// merged mesh's.
     fn scene_winding_numbers(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        if let Some(levels) = self.point_levels()? {
+            return Ok(levels.winding_numbers(points, accuracy));
+        }
         if let Some(w) = self.winding_only()? {
             return Ok(w.tree.winding_numbers_at(&w.tris, points, accuracy));
         }

@@ -180,6 +180,15 @@ impl TwoLevel {
         self.mesh_of(&self.placed[i as usize]).original_index(tri)
     }
 
+    /// The fast winding tree of instance `i`'s mesh, over `accel_of(i).tris` (built on first
+    /// use, once a mesh: `SceneMesh::winding`).
+    #[inline]
+    pub fn winding_of(&self, i: u32) -> &crate::accel::winding::FastWinding {
+        self.meshes[self.placed[i as usize].mesh as usize]
+            .winding()
+            .expect("TwoLevel::build built every bottom level it keeps")
+    }
+
     /// The structure of instance `i`'s mesh.
     #[inline]
     pub fn accel_of(&self, i: u32) -> &crate::accel::Accel {

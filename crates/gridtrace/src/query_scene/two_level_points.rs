@@ -121,6 +121,42 @@ impl PointLevels {
         best
     }
 
+    /// The winding number of every instance's faces together at each of `points` (NaN for a
+    /// point that is not finite), on all cores: each instance's own winding tree at the point
+    /// carried into its space, summed, with the sign flipped for a mirroring instance (a
+    /// mirror turns a face's orientation, and so its solid angle's sign; any other invertible
+    /// affine map keeps the exact winding number). The far-field sums are taken in each
+    /// mesh's own space, so the answer is the merged tree's within the accuracy's bound, not
+    /// to the bit. Each point visits every instance (an open mesh far away still winds
+    /// around it a little); a distant instance is one far-field term at its tree's root.
+    pub fn winding_numbers(&self, points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
+        let placed = &self.two.placed;
+        let sign: Vec<f32> = placed
+            .iter()
+            .map(|p| p.to_local.matrix3.determinant().signum())
+            .collect();
+        for i in 0..placed.len() as u32 {
+            self.two.winding_of(i); // built before the workers share it
+        }
+        points
+            .par_iter()
+            .with_min_len(BATCH)
+            .map_init(Vec::new, |stack, &p| {
+                let p = Vec3::from(p);
+                if !p.is_finite() {
+                    return f32::NAN;
+                }
+                (0..placed.len() as u32)
+                    .map(|i| {
+                        let local = placed[i as usize].to_local.transform_point3(p);
+                        let tris = &self.two.accel_of(i).tris;
+                        sign[i as usize] * self.two.winding_of(i).winding_number_with(tris, local, accuracy, stack)
+                    })
+                    .sum()
+            })
+            .collect()
+    }
+
     /// A found point's geometry id, its face's index in that geometry's faces, and the face's
     /// world-space unit geometric normal.
     pub fn name(&self, c: &LevelPoint) -> (u32, u32, Vec3) {
