@@ -68,3 +68,62 @@ fn box_dist_sq8(n: &Node8, p: Vec3) -> [f32; WIDTH] {
     }
     d2
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::Aabb;
+    use crate::accel::closest::box_dist_sq;
+    use crate::util::Rng;
+
+    /// With each instance's distance its box's own (the nearest an instance could be), the
+    /// walk finds the nearest box a scan finds and visits every box as near as that (ties);
+    /// with no pruning (`best` kept at inf) it visits every box once; a point that is not
+    /// finite visits none.
+    #[test]
+    fn nearest_finds_the_nearest_box_a_scan_finds() {
+        let mut rng = Rng::new(5);
+        for n in [0usize, 1, 2, 9, 64, 300] {
+            let boxes: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let c = Vec3::new(rng.range(-10.0, 10.0), rng.range(-10.0, 10.0), rng.range(-10.0, 10.0));
+                    let h = Vec3::new(rng.range(0.1, 1.0), rng.range(0.1, 1.0), rng.range(0.1, 1.0));
+                    Aabb { min: c - h, max: c + h }
+                })
+                .collect();
+            let t = TopLevel::build(&boxes);
+            for _ in 0..200 {
+                let p = Vec3::new(rng.range(-14.0, 14.0), rng.range(-14.0, 14.0), rng.range(-14.0, 14.0));
+                let d: Vec<f32> = boxes.iter().map(|b| box_dist_sq(p, b.min, b.max)).collect();
+                let scan = d.iter().copied().fold(f32::INFINITY, f32::min);
+                let (mut found, mut seen) = (f32::INFINITY, Vec::new());
+                t.nearest(p, |i, d2, best| {
+                    assert_eq!(d2, d[i as usize], "the box's distance handed over");
+                    seen.push(i);
+                    found = found.min(d2);
+                    best.min(d2)
+                });
+                assert_eq!(found, scan, "{n} boxes, point {p}");
+                let ties = d.iter().filter(|&&x| x == scan).count();
+                assert!(seen.iter().filter(|&&i| d[i as usize] == scan).count() == ties);
+                let mut all = Vec::new();
+                t.nearest(p, |i, _, best| {
+                    all.push(i);
+                    best
+                });
+                all.sort_unstable();
+                assert_eq!(all, (0..n as u32).collect::<Vec<_>>());
+            }
+            assert!(
+                n == 0 || {
+                    let mut none = 0;
+                    t.nearest(Vec3::new(f32::NAN, 0.0, 0.0), |_, _, b| {
+                        none += 1;
+                        b
+                    });
+                    none == 0
+                }
+            );
+        }
+    }
+}
