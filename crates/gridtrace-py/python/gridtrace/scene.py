@@ -191,8 +191,11 @@ class Scene:
     two levels there too with the BVH, the grid (and pc) and brute force (a move uploads the top
     level alone);
     with the other structures the ray queries with one interval that see every geometry, and on
-    every backend the point queries, run on the instances merged into one mesh, rebuilt by the
-    next such query after a change. Queries
+    a GPU backend the point queries, run on the instances merged into one mesh, rebuilt by the
+    next such query after a change. On the CPU a moving scene's point queries walk the two
+    levels where every instance is placed by a similarity (rotation, mirror, uniform scale,
+    translation), so a move builds nothing for them; otherwise (a static scene, an uneven scale
+    or shear) they run on the merged mesh. Queries
     release the GIL and may be called from several threads at once on one scene. Scenes pickle
     (each mesh once, instances with transforms and masks, ids and parameters; structures are
     rebuilt on first use after loading).

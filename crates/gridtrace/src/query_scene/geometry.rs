@@ -9,7 +9,8 @@ use std::sync::{Arc, OnceLock};
 use glam::{Affine3A, Mat3, Mat4, Vec3, Vec4};
 
 use super::enclosure::Enclosure;
-use crate::accel::{Aabb, Ray};
+use crate::accel::winding::FastWinding;
+use crate::accel::{Aabb, Ray, Structure};
 use crate::query::{Backend, QueryOptions, TraceMesh};
 use crate::{Error, Result};
 
@@ -26,6 +27,9 @@ pub struct SceneMesh {
     /// The bottom level: the structure over the mesh's own-space triangles, on the CPU
     /// (`None`: no face with non-zero area, so nothing to hit). Built once, whatever moves.
     bottom: OnceLock<Option<TraceMesh>>,
+    /// The fast winding tree over the bottom level's triangles, built on first use by the
+    /// two levels' winding numbers (`two_level_points.rs`). Built once, whatever moves.
+    winding: OnceLock<FastWinding>,
 }
 
 impl std::fmt::Debug for SceneMesh {
@@ -57,6 +61,7 @@ impl SceneMesh {
             bounds,
             enclosure: OnceLock::new(),
             bottom: OnceLock::new(),
+            winding: OnceLock::new(),
         })
     }
 
@@ -96,6 +101,18 @@ impl SceneMesh {
         self.bottom.get().and_then(|b| b.as_ref())
     }
 
+    /// The fast winding tree over the bottom level's triangles (the bottom level's order:
+    /// `Accel::tris`), built now if it is not yet: over the bottom level's BVH where it is
+    /// one, else a tree of its own (as the merged mesh's, `Merged::winding`). `None` where the
+    /// bottom level is not built or has no triangle.
+    pub(crate) fn winding(&self) -> Option<&FastWinding> {
+        let accel = &self.built()?.prepared().accel;
+        Some(self.winding.get_or_init(|| match &accel.structure {
+            Structure::Bvh(b) => FastWinding::from_bvh(&b.bvh, &accel.tris),
+            _ => FastWinding::build(&accel.tris),
+        }))
+    }
+
     /// Bytes held: the arrays as given and, once built, the structure and its triangles.
     pub fn memory_bytes(&self) -> usize {
         let given = std::mem::size_of_val(self.vertices.as_slice()) + std::mem::size_of_val(self.faces.as_slice());
@@ -115,6 +132,10 @@ pub struct Geometry {
     /// Own space to world space (affine, invertible: checked).
     transform: Mat4,
     mask: u32,
+    /// The transform's uniform scale where it is a similarity (`similarity_scale`), found when
+    /// the transform is set: the point queries walk the two levels only where every instance
+    /// has one (`two_level_points.rs`).
+    scale: Option<f32>,
 }
 
 impl Geometry {
@@ -136,7 +157,12 @@ impl Geometry {
     /// instances names none).
     fn place_named(mesh: Arc<SceneMesh>, transform: Mat4, mask: u32, what: &dyn Fn() -> String) -> Result<Geometry> {
         check_transform(&transform, &mesh.bounds, what)?;
-        Ok(Geometry { mesh, transform, mask })
+        Ok(Geometry {
+            mesh,
+            transform,
+            mask,
+            scale: similarity_scale(&transform),
+        })
     }
 
     /// The same mesh placed by `transform` instead (checked as `place` checks it; `what` names
@@ -164,6 +190,13 @@ impl Geometry {
 
     pub fn mask(&self) -> u32 {
         self.mask
+    }
+
+    /// The transform's uniform scale `s` where it is a similarity (rotation, reflection,
+    /// uniform scale and translation: own-space distances times `s` are world distances), else
+    /// `None` (`similarity_scale`).
+    pub fn similarity(&self) -> Option<f32> {
+        self.scale
     }
 
     pub(crate) fn set_mask(&mut self, mask: u32) {
@@ -237,6 +270,31 @@ pub(crate) fn normal_to_world(to_local: &Affine3A) -> Mat3 {
     let inv = Mat3::from(to_local.matrix3);
     // det(A^-1) = 1 / det(A): the sign is what matters, the length is normalised after.
     inv.transpose() * inv.determinant().signum()
+}
+
+/// Relative tolerance of `similarity_scale`: how far `A^T A` of the linear part `A` may be from
+/// `s^2 I`, in units of `s^2`. A rotation made in `f32` (a quaternion turned into a matrix) is
+/// orthogonal to a few ulps; 1e-5 takes that and refuses any scale uneven by more than about
+/// 5e-6.
+pub(crate) const SIMILARITY_TOLERANCE: f64 = 1e-5;
+
+/// The uniform scale `s` of an affine `transform` that is a similarity (`A^T A = s^2 I` within
+/// `SIMILARITY_TOLERANCE`, `A` its linear part: rotations, reflections, uniform scales, and any
+/// translation), else `None`. Under a similarity the nearest point of a mesh in its own space
+/// is, carried to world space, the nearest point of the placed mesh, at `s` times the distance.
+pub(crate) fn similarity_scale(transform: &Mat4) -> Option<f32> {
+    let a = glam::DMat3::from_mat4(transform.as_dmat4());
+    let ata = a.transpose() * a;
+    let s2 = (ata.x_axis.x + ata.y_axis.y + ata.z_axis.z) / 3.0;
+    if !(s2 > 0.0 && s2.is_finite()) {
+        return None;
+    }
+    let cols = [ata.x_axis, ata.y_axis, ata.z_axis];
+    let off = (0..3)
+        .flat_map(|i| (0..3).map(move |j| (i, j)))
+        .map(|(i, j)| (cols[i][j] - if i == j { s2 } else { 0.0 }).abs())
+        .fold(0.0, f64::max);
+    (off <= SIMILARITY_TOLERANCE * s2).then(|| s2.sqrt() as f32)
 }
 
 /// Whether `transform` is finite, affine and invertible, with an inverse that is finite, and

@@ -56,8 +56,10 @@
 //! **The merged path.** Where the backend traces on a GPU and the structure is another (the
 //! irregular grid, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
 //! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
-//! do the point queries on every backend (closest points, distances, signed distances,
-//! occupancy, winding numbers): a change marks it stale and the next such query rebuilds it,
+//! do the point queries (closest points, distances, signed distances, occupancy, winding
+//! numbers), except on the CPU in a moving scene whose every instance is placed by a
+//! similarity, where they all run on the two levels (`two_level_points.rs`): a change marks
+//! the merged mesh stale and the next query that uses it rebuilds it,
 //! except `update_vertices` on a built scene, which moves the vertices of the built mesh (the
 //! BVH refits) when that gives what a rebuild would. `ray_path` is where that is decided.
 
@@ -88,6 +90,7 @@ mod rays;
 mod streamed_rays;
 mod top_level;
 mod two_level;
+mod two_level_points;
 mod winding_only;
 
 pub use all_hits::Intersections;

@@ -1,5 +1,8 @@
 //! Point queries (`compute_closest_points`, `compute_distance`, `compute_signed_distance`,
-//! `compute_occupancy`): nearest points through the structure's own search, on the CPU's cores
+//! `compute_occupancy`). A moving scene on the CPU whose instances are all placed by
+//! similarities finds its nearest points on the two levels (`two_level_points.rs`: no merged
+//! mesh built after a move); otherwise, on the merged mesh: nearest points through the
+//! structure's own search, on the CPU's cores
 //! (`AccelStructure::closest_points_batch`: shells of cells on the grids, branch and bound on
 //! the BVH, eight searches interleaved; the brute-force answer, tie rule included,
 //! `accel::closest`) or, where the backend traces on a GPU, there (`GpuRenderer::closest_points`:
@@ -49,7 +52,6 @@ impl QueryScene {
     /// The nearest point of the scene to each query point.
     pub fn compute_closest_points(&self, points: &[[f32; 3]]) -> Result<ClosestPoints> {
         let _record = self.recording("compute_closest_points");
-        let m = self.merged()?;
         let n = points.len();
         let mut out = ClosestPoints {
             points: vec![[f32::NAN; 3]; n],
@@ -58,6 +60,30 @@ impl QueryScene {
             primitive_uvs: vec![[0.0; 2]; n],
             primitive_normals: vec![[0.0; 3]; n],
         };
+        if let Some(levels) = self.point_levels()? {
+            let closest = levels.nearest_all(points);
+            (
+                &mut out.points[..],
+                &mut out.geometry_ids[..],
+                &mut out.primitive_ids[..],
+                &mut out.primitive_uvs[..],
+                &mut out.primitive_normals[..],
+            )
+                .into_par_iter()
+                .zip(&closest[..])
+                .with_min_len(BATCH)
+                .for_each(|((p, g, id, uv, n), c)| {
+                    if c.world.is_found() {
+                        let (geometry, prim, normal) = levels.name(c);
+                        *p = c.world.point.to_array();
+                        (*g, *id) = (geometry, prim);
+                        *uv = [c.world.u, c.world.v];
+                        *n = normal.to_array();
+                    }
+                });
+            return Ok(out);
+        }
+        let m = self.merged()?;
         let closest = self.closest(&m, points)?;
         (
             &mut out.points[..],
@@ -86,6 +112,9 @@ impl QueryScene {
     /// an empty scene.
     pub fn compute_distance(&self, points: &[[f32; 3]]) -> Result<Vec<f32>> {
         let _record = self.recording("compute_distance");
+        if let Some(levels) = self.point_levels()? {
+            return Ok(levels.nearest_all(points).iter().map(|c| c.world.distance()).collect());
+        }
         let m = self.merged()?;
         Ok(self.closest(&m, points)?.iter().map(ClosestPoint::distance).collect())
     }
@@ -101,13 +130,22 @@ impl QueryScene {
     pub fn compute_signed_distance_at(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
         let _record = self.recording("compute_signed_distance");
         let accuracy = check_accuracy(accuracy)?;
-        let m = self.merged()?;
-        let closest = self.closest(&m, points)?;
-        let winding = winding_numbers(self, &m, points, accuracy)?;
-        Ok(closest
-            .iter()
+        let (distance, winding) = match self.point_levels()? {
+            Some(levels) => (
+                levels.nearest_all(points).iter().map(|c| c.world.distance()).collect(),
+                self.scene_winding_numbers(points, accuracy)?,
+            ),
+            None => {
+                let m = self.merged()?;
+                let closest = self.closest(&m, points)?;
+                let distance: Vec<f32> = closest.iter().map(ClosestPoint::distance).collect();
+                (distance, winding_numbers(self, &m, points, accuracy)?)
+            }
+        };
+        Ok(distance
+            .into_iter()
             .zip(winding)
-            .map(|(c, w)| if is_inside(w) { -c.distance() } else { c.distance() })
+            .map(|(d, w)| if is_inside(w) { -d } else { d })
             .collect())
     }
 
@@ -144,9 +182,14 @@ impl QueryScene {
         self.scene_winding_numbers(points, accuracy)
     }
 
-    /// The winding numbers at `points`: the faces' own tree where the merged mesh is not built
-    /// (`winding_only.rs`: no ray structure built for them), else the merged mesh's.
+    /// The winding numbers at `points`: on the two levels where the nearest points are
+    /// (`point_levels`: each instance's own tree, summed), else the faces' own tree where the
+    /// merged mesh is not built (`winding_only.rs`: no ray structure built for them), else the
+    /// merged mesh's.
     fn scene_winding_numbers(&self, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
+        if let Some(levels) = self.point_levels()? {
+            return Ok(levels.winding_numbers(points, accuracy));
+        }
         if let Some(w) = self.winding_only()? {
             return Ok(w.tree.winding_numbers_at(&w.tris, points, accuracy));
         }

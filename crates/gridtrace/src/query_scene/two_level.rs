@@ -174,6 +174,21 @@ impl TwoLevel {
         (named, n)
     }
 
+    /// The index among its mesh's faces as given of triangle `tri` of instance `i`'s structure.
+    #[inline]
+    pub fn prim_of(&self, i: u32, tri: u32) -> u32 {
+        self.mesh_of(&self.placed[i as usize]).original_index(tri)
+    }
+
+    /// The fast winding tree of instance `i`'s mesh, over `accel_of(i).tris` (built on first
+    /// use, once a mesh: `SceneMesh::winding`).
+    #[inline]
+    pub fn winding_of(&self, i: u32) -> &crate::accel::winding::FastWinding {
+        self.meshes[self.placed[i as usize].mesh as usize]
+            .winding()
+            .expect("TwoLevel::build built every bottom level it keeps")
+    }
+
     /// The structure of instance `i`'s mesh.
     #[inline]
     pub fn accel_of(&self, i: u32) -> &crate::accel::Accel {

@@ -529,5 +529,7 @@ impl Slabs {
     }
 }
 
+mod nearest;
+
 #[cfg(test)]
 mod tests;
