@@ -25,6 +25,7 @@ pub mod irregular;
 pub mod lanes;
 pub mod lattice;
 pub mod params;
+pub(crate) mod point_order;
 pub mod ray;
 pub mod registry;
 pub mod resolution;

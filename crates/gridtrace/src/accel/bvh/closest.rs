@@ -60,13 +60,24 @@ impl BvhAccel {
             &mut walks,
             |w, done| {
                 if let Some(i) = done {
+                    if w.seeded && !w.best.is_found() {
+                        // Nothing within the neighbour's bound (rounding at a surface): the
+                        // search again, unbounded.
+                        w.reset(w.p);
+                        return Some(i);
+                    }
                     out[i] = w.best;
                 }
-                // The next finite point's search; non-finite ones are answered on the way.
+                // The next finite point's search, bounded by the distance to the answer this
+                // lane just found (a point of the mesh); non-finite ones are answered on the way.
+                let neighbour = w.best;
                 for (i, p) in points_left.by_ref() {
                     let p = Vec3::from(*p);
                     if p.is_finite() {
                         w.reset(p);
+                        if neighbour.is_found() {
+                            w.seed(neighbour.point);
+                        }
                         return Some(i);
                     }
                     out[i] = ClosestPoint::INVALID;
@@ -140,6 +151,8 @@ struct PointWalk {
     len: usize,
     /// The entry the next step opens.
     current: (f32, ChildRef),
+    /// Whether `best` started as a bound (`seed`), not at infinity.
+    seeded: bool,
 }
 
 impl PointWalk {
@@ -151,6 +164,25 @@ impl PointWalk {
             len: 0,
             // The root as a node at distance 0.
             current: (0.0, ChildRef(0)),
+            seeded: false,
+        }
+    }
+
+    /// Bounds the search by the distance to `q`, a point of the mesh (a neighbour's nearest
+    /// point): nothing farther is opened. Every triangle within the bound is still tested
+    /// and pruning stays strict, so the answer is the unbounded search's whenever it lies
+    /// within the bound; where rounding puts it just outside (the bound is widened by a
+    /// thousandth against that), nothing is found and the batch searches again without one.
+    /// With Morton-ordered points (`accel::closest::closest_points`) the bound is near the
+    /// answer: 200,000 points uniform in the Stanford Dragon's box grown by a tenth took
+    /// 0.82 s against 1.03 s unbounded (`examples/closest_phases.rs`, 2-core Xeon; the
+    /// Morton order alone changed nothing).
+    #[inline(always)]
+    fn seed(&mut self, q: Vec3) {
+        let bound = (self.p - q).length_squared() * 1.001;
+        if bound.is_finite() && bound > 0.0 {
+            self.best.dist_sq = bound;
+            self.seeded = true;
         }
     }
 
@@ -161,6 +193,7 @@ impl PointWalk {
         self.best = ClosestPoint::NONE;
         self.len = 0;
         self.current = (0.0, ChildRef(0));
+        self.seeded = false;
     }
 
     /// Opens `current` (a leaf's triangles, or a node's children worth opening, pushed far to

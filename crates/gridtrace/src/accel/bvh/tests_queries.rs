@@ -97,3 +97,48 @@ fn closest_point_batches_equal_single_searches_and_brute_force() {
         "non-finite points are INVALID"
     );
 }
+
+/// A batch's searches bounded by their neighbours' answers (`PointWalk::seed`) where the bound
+/// is tightest: points on the mesh (its vertices, points inside faces), each twice in a row
+/// (a bound of 0: no seed), and the same points moved by a few ulps, so that a neighbour's
+/// answer is within rounding of the point's own. Every answer is the lone search's and brute
+/// force's, bit for bit: a bound that rounding put just short finds nothing and is searched
+/// again.
+#[test]
+fn closest_point_batches_bounded_by_neighbours_at_the_surface() {
+    use crate::accel::closest::{ClosestPoint, closest_point_brute};
+    let mut rng = crate::util::Rng::new(0x5EED);
+    let (positions, triangles) = random_mesh(&mut rng, 1500);
+    let tris = tris_of(&positions, &triangles);
+    let accel = BvhAccel::build(&tris);
+    let mut points: Vec<[f32; 3]> = Vec::new();
+    for (k, t) in tris.iter().enumerate().take(400) {
+        let (u, v) = (rng.range(0.0, 0.5), rng.range(0.0, 0.5));
+        let on_face =
+            Vec3::from(t.v0) + (Vec3::from(t.v1) - Vec3::from(t.v0)) * u + (Vec3::from(t.v2) - Vec3::from(t.v0)) * v;
+        let nudge = |p: Vec3, k: usize| {
+            p.to_array()
+                .map(|x| f32::from_bits(x.to_bits().wrapping_add(k as u32 % 5)))
+        };
+        for p in [Vec3::from(t.v0), on_face] {
+            points.extend([p.to_array(), p.to_array(), nudge(p, k + 1), nudge(p, k + 3)]);
+        }
+    }
+    let mut got = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_batch(&points, &mut got);
+    for (i, (p, g)) in points.iter().zip(&got).enumerate() {
+        let p = Vec3::from(*p);
+        let lone = accel.closest_point(p);
+        assert_eq!(
+            (g.tri, g.dist_sq.to_bits(), g.u.to_bits(), g.v.to_bits()),
+            (lone.tri, lone.dist_sq.to_bits(), lone.u.to_bits(), lone.v.to_bits()),
+            "point {i}: batch against single"
+        );
+        let truth = closest_point_brute(&tris, p);
+        assert_eq!(
+            (g.tri, g.dist_sq.to_bits()),
+            (truth.tri, truth.dist_sq.to_bits()),
+            "point {i}: brute force"
+        );
+    }
+}

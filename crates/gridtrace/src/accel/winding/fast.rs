@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use super::shape::Shape;
 use super::wide::WideTree;
 use super::{morton, solid_angle};
-use crate::accel::{Aabb, Bvh, TriAccel};
+use crate::accel::{Bvh, TriAccel};
 
 /// A node is summed as its expansion when the point is farther than `BETA` times its radius
 /// (the paper's accuracy parameter; 2 is its default and libigl's, and the queries' default
@@ -109,7 +109,7 @@ impl FastWinding {
     /// in Morton order (module notes), each worker with one stack (`winding_number_with`);
     /// the answers come back in the points' order.
     pub fn winding_numbers_at(&self, tris: &[TriAccel], points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
-        let order = morton_order(points);
+        let order = crate::accel::point_order::morton_order(points);
         let sorted: Vec<f32> = order
             .par_iter()
             .with_min_len(64)
@@ -165,43 +165,6 @@ impl FastWinding {
     pub(crate) fn id(&self) -> u64 {
         self.id
     }
-}
-
-/// The indices of `points` sorted by their Morton codes (ten bits an axis over the finite
-/// points' bounding box; a point that is not finite sorts first, its code 0).
-fn morton_order(points: &[[f32; 3]]) -> Vec<u32> {
-    let finite = |p: &[f32; 3]| p.iter().all(|x| x.is_finite());
-    let bounds = points
-        .par_iter()
-        .filter(|p| finite(p))
-        .fold(|| Aabb::EMPTY, |b, p| b.grow(Vec3::from(*p)))
-        .reduce(|| Aabb::EMPTY, Aabb::union);
-    // A flat or single-point batch has no extent on some axis: those bits stay 0.
-    let extent = bounds.extent();
-    let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), 1023.0 / extent, Vec3::ZERO);
-    let spread = |x: u32| {
-        // Bits 0..10 to every third bit.
-        let mut x = x & 0x3ff;
-        x = (x | (x << 16)) & 0x0300_00ff;
-        x = (x | (x << 8)) & 0x0300_f00f;
-        x = (x | (x << 4)) & 0x030c_30c3;
-        (x | (x << 2)) & 0x0924_9249
-    };
-    let mut keyed: Vec<(u32, u32)> = points
-        .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let code = if finite(p) {
-                let c = ((Vec3::from(*p) - bounds.min) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
-                spread(c.x as u32) | spread(c.y as u32) << 1 | spread(c.z as u32) << 2
-            } else {
-                0
-            };
-            (code, i as u32)
-        })
-        .collect();
-    keyed.par_sort_unstable();
-    keyed.into_iter().map(|(_, i)| i).collect()
 }
 
 #[cfg(test)]
