@@ -63,6 +63,14 @@ pub(super) struct PacketAnswers {
 /// matter of speed: the packet walk gives every ray its single-walk answer whatever the rays.
 /// Camera and sensor rays of neighbouring pixels pass; random rays do not.
 pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
+    coherent_within(rays, extent, COHERENT_COS * COHERENT_COS)
+}
+
+/// `coherent` with a cone of `cos_sq` (the square of its half angle's cosine) where that is
+/// narrower than `COHERENT_COS` (`footprint::cone_cos_sq`: the spread the BVH's leaves allow
+/// at the packet's distance from the scene).
+pub(super) fn coherent_within(rays: &[Ray], extent: f32, cos_sq: f32) -> bool {
+    let cos_sq = cos_sq.max(COHERENT_COS * COHERENT_COS);
     let Some(first) = rays.first() else { return false };
     let d0 = first.dir;
     // cos(8 degrees): camera rays of neighbouring pixels are well within it; the nodes near the
@@ -72,7 +80,7 @@ pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
     let close = |r: &Ray| {
         let dot = r.dir.dot(d0);
         dot > 0.0
-            && dot * dot >= COHERENT_COS * COHERENT_COS * r.dir.length_squared() * len0_sq
+            && dot * dot >= cos_sq * r.dir.length_squared() * len0_sq
             && (r.origin - first.origin).length_squared() <= near * near
     };
     if let (Ok(group), true) = (<&[Ray; PACKET]>::try_from(rays), crate::accel::simd::has_wide()) {
@@ -80,7 +88,7 @@ pub(super) fn coherent(rays: &[Ray], extent: f32) -> bool {
         // Without it random rays cost 11 instructions a ray more (990 against 979,
         // cachegrind); with it eye and camera rays 6 more (366 against 360 for eye rays).
         // SAFETY: the CPU runs the eight-lane build, checked just above.
-        return close(&group[PACKET - 1]) && unsafe { coherent_wide(group, extent) };
+        return close(&group[PACKET - 1]) && unsafe { coherent_wide(group, extent, cos_sq) };
     }
     rays.iter().all(close)
 }
@@ -97,7 +105,7 @@ const COHERENT_COS: f32 = 0.990;
 /// # Safety
 /// The CPU must run the eight-lane build (`simd::has_wide`).
 #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-unsafe fn coherent_wide(rays: &[Ray; PACKET], extent: f32) -> bool {
+unsafe fn coherent_wide(rays: &[Ray; PACKET], extent: f32, cos_sq: f32) -> bool {
     let d = [
         ray_lanes(rays, |r| r.dir.x),
         ray_lanes(rays, |r| r.dir.y),
@@ -105,7 +113,7 @@ unsafe fn coherent_wide(rays: &[Ray; PACKET], extent: f32) -> bool {
     ];
     let (d0, o0) = (rays[0].dir, rays[0].origin);
     let dot = dot3(d, splat3(d0.to_array()));
-    let cone = F8::splat(COHERENT_COS * COHERENT_COS) * dot3(d, d) * F8::splat(d0.length_squared());
+    let cone = F8::splat(cos_sq) * dot3(d, d) * F8::splat(d0.length_squared());
     let o = [
         ray_lanes(rays, |r| r.origin.x) - F8::splat(o0.x),
         ray_lanes(rays, |r| r.origin.y) - F8::splat(o0.y),

@@ -24,6 +24,7 @@ mod box_test;
 mod build;
 mod closest;
 mod coherent;
+mod footprint;
 mod interleave;
 mod interval;
 mod packet;
@@ -74,6 +75,9 @@ pub struct BvhAccel {
     /// Index (in the triangles given to `build`) of lane `k` of block `b`, at `4 * b + k`;
     /// `u32::MAX` for an unused lane.
     pub lane_prims: HugePageArray<u32>,
+    /// The mean diagonal of the leaves' boxes, for the packet route's decision
+    /// (`footprint::cone_cos_sq`).
+    leaf_size: f32,
 }
 
 impl BvhAccel {
@@ -83,6 +87,7 @@ impl BvhAccel {
         let bvh = Bvh::build(&boxes, &centers);
         let (nodes, blocks, lane_prims) = collapse(&bvh, tris);
         BvhAccel {
+            leaf_size: footprint::leaf_size(&bvh),
             bvh,
             nodes: HugePageArray::from_slice(&nodes),
             blocks: HugePageArray::from_slice(&blocks),
@@ -168,12 +173,21 @@ impl BvhAccel {
         let limits_per_ray = matches!(t_max, TMax::Each(_)) && !coherent::packets_for_limits_per_ray();
         if crate::accel::simd::has_wide() && rays.len() >= PACKET && coherent::packets_enabled() && !limits_per_ray {
             let extent = self.extent();
+            let (lo, hi) = self
+                .bvh
+                .nodes
+                .first()
+                .map_or((Vec3::ZERO, Vec3::ZERO), |n| (n.min.into(), n.max.into()));
             // Indices of the rays left to the interleaved walks (u32: a batch is cut into
             // work items far smaller than 2^32 rays; checked).
             let mut rest: Vec<u32> = Vec::new();
             for (g, group) in rays.chunks(PACKET).enumerate() {
                 let start = g * PACKET;
-                if group.len() == PACKET && coherent::coherent(group, extent) {
+                // The cone narrowed to what the leaves allow at the packet's distance from the
+                // scene (`footprint`: far cameras' packets walk singly, 10 Bunnies 8 diagonals
+                // away 11.2-15.4 -> 3.6-4.2 ms).
+                let cos_sq = footprint::cone_cos_sq(group[0].origin, lo, hi, self.leaf_size);
+                if group.len() == PACKET && coherent::coherent_within(group, extent, cos_sq) {
                     let limits = std::array::from_fn(|k| t_max.of(start + k));
                     // SAFETY: the CPU runs the eight-lane build, checked above.
                     let a = unsafe { self.walk_coherent::<ANY>(group, t_min, limits) };

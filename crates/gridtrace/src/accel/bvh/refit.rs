@@ -77,6 +77,7 @@ impl BvhAccel {
             "refit needs the triangles the BVH was built over, in the same order"
         );
         self.bvh.refit(&padded_boxes(tris));
+        self.leaf_size = super::footprint::leaf_size(&self.bvh);
         let (nodes, blocks, lane_prims) = collapse(&self.bvh, tris);
         self.nodes = HugePageArray::from_slice(&nodes);
         self.blocks = HugePageArray::from_slice(&blocks);

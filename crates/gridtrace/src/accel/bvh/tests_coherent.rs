@@ -411,3 +411,63 @@ fn pinhole_packets_near_edges_miss_and_hit_as_aimed() {
         "{packets} packets, {rays_in} head-on rays"
     );
 }
+
+/// The packet route's second test (`footprint::narrow`): a camera near the mesh keeps its
+/// packets, the same camera far away (its rows within `coherent`'s cone, its pixels many
+/// leaves apart at the mesh) walks them singly, and a camera inside the scene's box keeps
+/// them; the batch answers are the single walks' every time.
+#[test]
+fn far_cameras_walk_singly_with_single_ray_answers() {
+    let mut rng = Rng::new(0xFA12);
+    let (positions, triangles) = random_mesh(&mut rng, 3000);
+    let accel = BvhAccel::build(&tris_of(&positions, &triangles));
+    let root = &accel.bvh.nodes[0];
+    let (lo, hi) = (Vec3::from(root.min), Vec3::from(root.max));
+    assert!(accel.leaf_size > 0.0 && accel.leaf_size < (hi - lo).length());
+    let (w, h) = (64, 48);
+    // A pinhole at `eye` looking along +z, `fov` the image's width over its distance.
+    let camera = |eye: Vec3, fov: f32| -> Vec<Ray> {
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 / w as f32 - 0.5, (i / w) as f32 / h as f32 - 0.5);
+                Ray::new(eye, Vec3::new(x * fov, y * fov * 0.75, 1.0))
+            })
+            .collect()
+    };
+    let centre = (lo + hi) * 0.5;
+    let extent = accel.extent();
+    // Far: a packet's eight pixels (seven steps of `fov / w`) three times the allowed
+    // footprint apart where they reach the box (the mesh then spans about four pixels).
+    let (far_fov, step) = (0.05, 7.0 * 0.05 / w as f32);
+    let far = 3.0 * super::footprint::FOOTPRINT_LEAVES * accel.leaf_size / step + extent;
+    for (eye, fov, want_narrow) in [
+        (centre - Vec3::Z * extent, 0.8, true),
+        (centre - Vec3::Z * far, far_fov, false),
+        (centre, 0.8, true),
+    ] {
+        let rays = camera(eye, fov);
+        let groups: Vec<&[Ray; PACKET]> = rays.chunks(PACKET).map(|g| g.try_into().unwrap()).collect();
+        assert!(
+            groups.iter().all(|g| coherent(&g[..], extent)),
+            "eye {eye}: in the cone"
+        );
+        let cos_sq = super::footprint::cone_cos_sq(eye, lo, hi, accel.leaf_size);
+        let narrow = groups
+            .iter()
+            .filter(|g| super::coherent::coherent_within(&g[..], extent, cos_sq))
+            .count();
+        let want = if want_narrow { groups.len() } else { 0 };
+        assert_eq!(narrow, want, "eye {eye}, fov {fov}: narrow packets");
+        let mut got = vec![Hit::MISS; rays.len()];
+        accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut got);
+        let mut blocked = vec![false; rays.len()];
+        accel.occluded_batch(&rays, 0.0, f32::INFINITY, &mut blocked);
+        for (i, ray) in rays.iter().enumerate() {
+            let want = accel.intersect(ray, 0.0, f32::INFINITY, &mut NoCounters);
+            assert_eq!(bits(&got[i]), bits(&want), "eye {eye} ray {i}");
+            assert_eq!(blocked[i], want.is_hit(), "eye {eye} any ray {i}");
+        }
+        let hit = got.iter().filter(|h| h.is_hit()).count();
+        assert!(hit > 0, "eye {eye}: {hit} hit");
+    }
+}
