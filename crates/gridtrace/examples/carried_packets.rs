@@ -26,10 +26,7 @@ fn main() -> gridtrace::Result<()> {
     let dist: f32 = args.get(6).map_or(8.0, |s| s.parse().expect("a distance"));
     let mesh = gridtrace::io::load_mesh(std::path::Path::new(path))?;
     let verts: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(p), h.max(p)));
+    let (lo, hi) = mesh.bounds();
     let size = (hi - lo).length();
     let centre = (lo + hi) * 0.5;
     let transforms: Vec<Mat4> = (0..k)

@@ -15,19 +15,11 @@ fn main() -> gridtrace::Result<()> {
     // The triangles a scene traces (zero-area ones dropped: they are never hit).
     let tris = TriAccel::from_mesh(&mesh);
     let accel = BvhAccel::build(&tris);
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(p), h.max(p)));
+    let (lo, hi) = mesh.bounds();
     let (centre, diag) = ((lo + hi) * 0.5, (hi - lo).length());
-    // xorshift64*: the same rays on every build.
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut unit = move || {
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    };
+    // The examples' one stream (`util::Xorshift`): the same draws on every build.
+    let mut rng = gridtrace::util::Xorshift::default();
+    let mut unit = move || rng.unit();
     let (mut hits, mut outside) = (0u64, [0u64; 3]);
     let limits = [1e-6, 1e-4, 1e-3];
     for _ in 0..n {

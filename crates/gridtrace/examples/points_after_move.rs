@@ -34,19 +34,11 @@ fn main() -> gridtrace::Result<()> {
     let (k, n, steps) = (arg(2, 100), arg(3, 10_000), arg(4, 5));
     let mesh = gridtrace::io::load_mesh(std::path::Path::new(path))?;
     let verts: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(p), h.max(p)));
+    let (lo, hi) = mesh.bounds();
     let size = (hi - lo).length();
-    // xorshift64*: the same scene, moves and points on every build.
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut unit = move || {
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    };
+    // The examples' one stream (`util::Xorshift`): the same draws on every build.
+    let mut rng = gridtrace::util::Xorshift::default();
+    let mut unit = move || rng.unit();
     let mut transforms: Vec<Mat4> = (0..k)
         .map(|_| {
             let q = Quat::from_xyzw(unit() - 0.5, unit() - 0.5, unit() - 0.5, unit() - 0.5).normalize();

@@ -29,21 +29,8 @@ fn main() -> gridtrace::Result<()> {
             )
         })
         .collect();
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(p), h.max(p)));
-    let pad = (hi - lo) * 0.1;
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut unit = move || {
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    };
-    let points: Vec<[f32; 3]> = (0..n)
-        .map(|_| (lo - pad + Vec3::new(unit(), unit(), unit()) * (hi - lo + 2.0 * pad)).to_array())
-        .collect();
+    // The examples' one stream (`util::Xorshift`): the same points on every build.
+    let points = gridtrace::util::Xorshift::default().points_around(mesh.bounds(), 0.1, n);
     let mut tree = None;
     for _ in 0..rounds {
         let t0 = Instant::now();

@@ -42,6 +42,13 @@ impl Mesh {
         self.triangles.len()
     }
 
+    /// The box of the positions: `(min, max)` corners (infinite, inverted, for no positions).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.positions
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(p), h.max(p)))
+    }
+
     pub fn material_of(&self, tri: usize) -> u32 {
         self.triangle_materials.get(tri).copied().unwrap_or(0)
     }

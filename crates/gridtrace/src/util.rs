@@ -25,6 +25,39 @@ pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
     }
 }
 
+/// xorshift64*, the stream the examples draw their scenes, rays and points from
+/// (`crates/gridtrace/examples/`): one generator, so that the figures docs/benchmarks.md
+/// records from them stay reproducible. Uniform `f32` in `[0, 1)` from the top 24 bits.
+#[derive(Debug, Clone)]
+pub struct Xorshift(u64);
+
+impl Default for Xorshift {
+    fn default() -> Self {
+        Xorshift(0x9E37_79B9_7F4A_7C15)
+    }
+}
+
+impl Xorshift {
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f32 {
+        let s = &mut self.0;
+        *s ^= *s >> 12;
+        *s ^= *s << 25;
+        *s ^= *s >> 27;
+        (s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// `n` points uniform in the box `lo..hi` grown by `pad` times its size on each side (the
+    /// point queries' benchmarks: a tenth).
+    pub fn points_around(&mut self, (lo, hi): (glam::Vec3, glam::Vec3), pad: f32, n: usize) -> Vec<[f32; 3]> {
+        let grow = (hi - lo) * pad;
+        let (lo, size) = (lo - grow, hi - lo + 2.0 * grow);
+        (0..n)
+            .map(|_| (lo + glam::Vec3::new(self.unit(), self.unit(), self.unit()) * size).to_array())
+            .collect()
+    }
+}
+
 /// A tiny deterministic PRNG (SplitMix64) for tests, benchmarks and procedural scenes, so
 /// results are reproducible without pulling a random-number crate into the library.
 #[derive(Debug, Clone)]

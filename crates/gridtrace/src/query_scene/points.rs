@@ -52,60 +52,28 @@ impl QueryScene {
     /// The nearest point of the scene to each query point.
     pub fn compute_closest_points(&self, points: &[[f32; 3]]) -> Result<ClosestPoints> {
         let _record = self.recording("compute_closest_points");
-        let n = points.len();
-        let mut out = ClosestPoints {
-            points: vec![[f32::NAN; 3]; n],
-            geometry_ids: vec![INVALID_ID; n],
-            primitive_ids: vec![INVALID_ID; n],
-            primitive_uvs: vec![[0.0; 2]; n],
-            primitive_normals: vec![[0.0; 3]; n],
-        };
         if let Some(levels) = self.point_levels()? {
             let closest = levels.nearest_all(points);
-            (
-                &mut out.points[..],
-                &mut out.geometry_ids[..],
-                &mut out.primitive_ids[..],
-                &mut out.primitive_uvs[..],
-                &mut out.primitive_normals[..],
-            )
-                .into_par_iter()
-                .zip(&closest[..])
-                .with_min_len(BATCH)
-                .for_each(|((p, g, id, uv, n), c)| {
-                    if c.world.is_found() {
-                        let (geometry, prim, normal) = levels.name(c);
-                        *p = c.world.point.to_array();
-                        (*g, *id) = (geometry, prim);
-                        *uv = [c.world.u, c.world.v];
-                        *n = normal.to_array();
-                    }
-                });
-            return Ok(out);
+            return Ok(answers(&closest, |c| {
+                c.world.is_found().then(|| {
+                    let (geometry, prim, normal) = levels.name(c);
+                    (c.world, geometry, prim, normal)
+                })
+            }));
         }
         let m = self.merged()?;
         let closest = self.closest(&m, points)?;
-        (
-            &mut out.points[..],
-            &mut out.geometry_ids[..],
-            &mut out.primitive_ids[..],
-            &mut out.primitive_uvs[..],
-            &mut out.primitive_normals[..],
-        )
-            .into_par_iter()
-            .zip(&closest[..])
-            .with_min_len(BATCH)
-            .for_each(|((p, g, id, uv, n), c)| {
-                if c.is_found() {
-                    let (geometry, prim) = m.name(c.tri);
-                    *p = c.point.to_array();
-                    *g = geometry;
-                    *id = prim;
-                    *uv = [c.u, c.v];
-                    *n = m.tris()[c.tri as usize].normal().normalize_or_zero().to_array();
-                }
-            });
-        Ok(out)
+        Ok(answers(&closest, |c| {
+            c.is_found().then(|| {
+                let (geometry, prim) = m.name(c.tri);
+                (
+                    *c,
+                    geometry,
+                    prim,
+                    m.tris()[c.tri as usize].normal().normalize_or_zero(),
+                )
+            })
+        }))
     }
 
     /// The distance from each point to the scene: NaN for a point that is not finite, inf in
@@ -236,4 +204,39 @@ fn winding_numbers(s: &QueryScene, m: &Merged, points: &[[f32; 3]], accuracy: f6
         }
         Some(_) => on_cpu(),
     }
+}
+
+/// The closest points' arrays from one answer a point: `found(c)` names the world answer, its
+/// geometry, primitive and unit normal, or `None` for a miss (NaN point, `INVALID_ID`s).
+fn answers<T: Sync>(
+    closest: &[T],
+    found: impl Fn(&T) -> Option<(ClosestPoint, u32, u32, glam::Vec3)> + Sync,
+) -> ClosestPoints {
+    let n = closest.len();
+    let mut out = ClosestPoints {
+        points: vec![[f32::NAN; 3]; n],
+        geometry_ids: vec![INVALID_ID; n],
+        primitive_ids: vec![INVALID_ID; n],
+        primitive_uvs: vec![[0.0; 2]; n],
+        primitive_normals: vec![[0.0; 3]; n],
+    };
+    (
+        &mut out.points[..],
+        &mut out.geometry_ids[..],
+        &mut out.primitive_ids[..],
+        &mut out.primitive_uvs[..],
+        &mut out.primitive_normals[..],
+    )
+        .into_par_iter()
+        .zip(closest)
+        .with_min_len(BATCH)
+        .for_each(|((p, g, id, uv, normal), c)| {
+            if let Some((c, geometry, prim, n)) = found(c) {
+                *p = c.point.to_array();
+                (*g, *id) = (geometry, prim);
+                *uv = [c.u, c.v];
+                *normal = n.to_array();
+            }
+        });
+    out
 }
