@@ -1,7 +1,7 @@
-//! Nearest points on the Stanford Bunny, per structure: a million random points in the
-//! bunny's bounding box through `closest::closest_points` (all cores), one run each, Mpts/s,
+//! Nearest points on the Stanford Bunny (or MESH), per structure: a million random points in
+//! its bounding box through `closest::closest_points` (all cores), one run each, Mpts/s,
 //! after a check of the first 200 answers against brute force:
-//! `cargo run --release -p gridtrace-bench --example closest_points [-- POINTS [KINDS]]`
+//! `cargo run --release -p gridtrace-bench --example closest_points [-- POINTS [KINDS [MESH]]]`
 //! (KINDS: a comma-separated subset of `grid,bvh,irregular`)
 //! (the mesh folder found as `gridtrace bench` finds it: `GRIDTRACE_DATA_DIR`, else
 //! `shared/data/meshes` beside the checkout). Then signed distances (nearest points on the BVH,
@@ -30,7 +30,10 @@ fn main() -> gridtrace::Result<()> {
     };
     let data = gridtrace_bench::scenes::find_data_dir(None)
         .ok_or_else(|| gridtrace::Error::InvalidInput("no mesh folder (set GRIDTRACE_DATA_DIR)".into()))?;
-    let mesh = gridtrace::io::load_mesh(&data.join("bunny/bun_zipper.ply"))?;
+    let path = std::env::args()
+        .nth(3)
+        .map_or_else(|| data.join("bunny/bun_zipper.ply"), std::path::PathBuf::from);
+    let mesh = gridtrace::io::load_mesh(&path)?;
     let tris = TriAccel::from_mesh(&mesh);
     let bounds = Aabb::from_points(&mesh.positions);
     let mut rng = Rng::new(2026);
@@ -41,7 +44,8 @@ fn main() -> gridtrace::Result<()> {
         })
         .collect();
     println!(
-        "Stanford Bunny: {} triangles, {n} random points in its bounding box, {} threads",
+        "{}: {} triangles, {n} random points in its bounding box, {} threads",
+        path.display(),
         tris.len(),
         rayon::current_num_threads()
     );

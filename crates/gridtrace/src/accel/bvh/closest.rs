@@ -175,7 +175,7 @@ impl PointWalk {
     /// thousandth against that), nothing is found and the batch searches again without one.
     /// With Morton-ordered points (`accel::closest::closest_points`) the bound is near the
     /// answer: 200,000 points uniform in the Stanford Dragon's box grown by a tenth took
-    /// 0.82 s against 1.03 s unbounded (`examples/closest_phases.rs`, 2-core Xeon; the
+    /// 0.82 s against 1.03 s unbounded (`QueryScene::compute_distance`, 2-core Xeon; the
     /// Morton order alone changed nothing).
     #[inline(always)]
     fn seed(&mut self, q: Vec3) {

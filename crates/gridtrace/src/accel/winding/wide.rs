@@ -206,7 +206,7 @@ fn far_field<const N: usize, L: Lanes<N>>(node: &WideNode, base: usize, p: [L; 3
     }
     // `rsqrt` and FMAs: the Dragon's 1M points (29 nodes a point, nearly all with far
     // children) took 0.55-0.57 s with a division, a root and separate multiplies and adds,
-    // 0.49-0.50 s so (winding_phases example, 2-core Xeon). The estimate's Newton step keeps
+    // 0.49-0.50 s so (the build and the query timed apart, 2-core Xeon). The estimate's Newton step keeps
     // `1e-6` relative, far below the expansion's own error. A point at a centre (`d2 = 0`)
     // gives NaN here, which `take` below opens.
     let inv1 = d2.rsqrt();
