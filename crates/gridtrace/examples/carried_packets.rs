@@ -13,7 +13,6 @@
 use std::time::Instant;
 
 use glam::{Mat4, Vec3};
-use gridtrace::query_scene::InstanceOf;
 use gridtrace::{AccelSpec, Backend, QueryScene};
 
 fn main() -> gridtrace::Result<()> {
@@ -41,10 +40,7 @@ fn main() -> gridtrace::Result<()> {
         ..Default::default()
     };
     let mut inst = QueryScene::new(opts.clone());
-    let first = inst.add_triangles(verts.clone(), mesh.triangles.clone(), Some(transforms[0]))?;
-    for t in &transforms[1..] {
-        inst.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?;
-    }
+    let first = inst.add_placed(verts.clone(), mesh.triangles.clone(), &transforms)?[0];
     // A moved scene walks the two levels even with one instance (a static one of a single
     // geometry would be traced as the merged mesh).
     inst.set_transform(first, transforms[0])?;

@@ -8,8 +8,7 @@
 //! (defaults 100 instances, 1,000,000 rays, 5 rounds).
 use std::time::Instant;
 
-use glam::{Mat4, Quat, Vec3};
-use gridtrace::query_scene::InstanceOf;
+use glam::{Mat4, Vec3};
 use gridtrace::{AccelSpec, Backend, QueryScene};
 
 fn main() -> gridtrace::Result<()> {
@@ -23,32 +22,20 @@ fn main() -> gridtrace::Result<()> {
     let size = (hi - lo).length();
     // The examples' one stream (`util::Xorshift`): the same draws on every build.
     let mut rng = gridtrace::util::Xorshift::default();
+    let transforms: Vec<Mat4> = (0..k).map(|_| rng.similarity(6.0 * size)).collect();
     let mut unit = move || rng.unit();
-    let transforms: Vec<Mat4> = (0..k)
-        .map(|_| {
-            let q = Quat::from_xyzw(unit() - 0.5, unit() - 0.5, unit() - 0.5, unit() - 0.5).normalize();
-            let s = 0.5 + unit();
-            let t = (Vec3::new(unit(), unit(), unit()) - 0.5) * (6.0 * size);
-            Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)
-        })
-        .collect();
     let opts = gridtrace::query::QueryOptions {
         accel: "bvh".parse::<AccelSpec>().expect("bvh"),
         backend: Backend::Cpu,
         ..Default::default()
     };
     let mut inst = QueryScene::new(opts.clone());
-    let first = inst.add_triangles(verts.clone(), mesh.triangles.clone(), Some(transforms[0]))?;
-    for t in &transforms[1..] {
-        inst.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?;
-    }
+    inst.add_placed(verts.clone(), mesh.triangles.clone(), &transforms)?;
     // What an instance costs: 1,000 instances' scene less one instance's, per instance.
     let held = |k: usize| -> gridtrace::Result<usize> {
         let mut s = QueryScene::new(opts.clone());
-        let first = s.add_triangles(verts.clone(), mesh.triangles.clone(), Some(transforms[0]))?;
-        for t in transforms.iter().cycle().skip(1).take(k - 1) {
-            s.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?;
-        }
+        let placed: Vec<Mat4> = transforms.iter().cycle().take(k).copied().collect();
+        let first = s.add_placed(verts.clone(), mesh.triangles.clone(), &placed)?[0];
         s.set_transform(first, transforms[0])?;
         s.cast_rays(&[[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]])?;
         Ok(s.memory_bytes())

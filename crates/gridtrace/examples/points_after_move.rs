@@ -19,7 +19,6 @@
 use std::time::Instant;
 
 use glam::{Mat4, Quat, Vec3};
-use gridtrace::query_scene::InstanceOf;
 use gridtrace::{AccelSpec, Backend, QueryScene};
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -38,26 +37,15 @@ fn main() -> gridtrace::Result<()> {
     let size = (hi - lo).length();
     // The examples' one stream (`util::Xorshift`): the same draws on every build.
     let mut rng = gridtrace::util::Xorshift::default();
+    let mut transforms: Vec<Mat4> = (0..k).map(|_| rng.similarity(6.0 * size)).collect();
     let mut unit = move || rng.unit();
-    let mut transforms: Vec<Mat4> = (0..k)
-        .map(|_| {
-            let q = Quat::from_xyzw(unit() - 0.5, unit() - 0.5, unit() - 0.5, unit() - 0.5).normalize();
-            let s = 0.5 + unit();
-            let t = (Vec3::new(unit(), unit(), unit()) - 0.5) * (6.0 * size);
-            Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)
-        })
-        .collect();
     let opts = gridtrace::query::QueryOptions {
         accel: "bvh".parse::<AccelSpec>().expect("bvh"),
         backend: Backend::Cpu,
         ..Default::default()
     };
     let mut inst = QueryScene::new(opts.clone());
-    let first = inst.add_triangles(verts.clone(), mesh.triangles.clone(), Some(transforms[0]))?;
-    for t in &transforms[1..] {
-        inst.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?;
-    }
-    let ids: Vec<u32> = inst.ids().collect();
+    let ids = inst.add_placed(verts.clone(), mesh.triangles.clone(), &transforms)?;
     let merged = |transforms: &[Mat4]| -> gridtrace::Result<QueryScene> {
         let mut flat = QueryScene::new(opts.clone());
         let (mut wv, mut wf) = (Vec::new(), Vec::new());

@@ -47,6 +47,22 @@ impl Xorshift {
         (s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
     }
 
+    /// A random similarity: a uniformly spread rotation, a uniform scale in `0.5..1.5` and a
+    /// translation in a cube of side `spread` about the origin (the instance benchmarks' scenes).
+    pub fn similarity(&mut self, spread: f32) -> glam::Mat4 {
+        use glam::{Quat, Vec3};
+        let q = Quat::from_xyzw(
+            self.unit() - 0.5,
+            self.unit() - 0.5,
+            self.unit() - 0.5,
+            self.unit() - 0.5,
+        )
+        .normalize();
+        let s = 0.5 + self.unit();
+        let t = (Vec3::new(self.unit(), self.unit(), self.unit()) - 0.5) * spread;
+        glam::Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)
+    }
+
     /// `n` points uniform in the box `lo..hi` grown by `pad` times its size on each side (the
     /// point queries' benchmarks: a tenth).
     pub fn points_around(&mut self, (lo, hi): (glam::Vec3, glam::Vec3), pad: f32, n: usize) -> Vec<[f32; 3]> {

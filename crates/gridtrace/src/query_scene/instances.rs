@@ -38,6 +38,27 @@ impl QueryScene {
         self.push(g)
     }
 
+    /// Places one mesh (`vertices`, `faces`) once per transform, all masks full: the mesh added
+    /// by the first (`add_triangles`), the others instances of it. Returns the geometry ids in
+    /// the transforms' order (`set_transforms` takes them). An error adds what came before it.
+    pub fn add_placed(
+        &mut self,
+        vertices: Vec<[f32; 3]>,
+        faces: Vec<[u32; 3]>,
+        transforms: &[Mat4],
+    ) -> Result<Vec<u32>> {
+        let Some((head, rest)) = transforms.split_first() else {
+            return Ok(Vec::new());
+        };
+        let first = self.add_triangles(vertices, faces, Some(*head))?;
+        let mut ids = Vec::with_capacity(transforms.len());
+        ids.push(first);
+        for t in rest {
+            ids.push(self.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?);
+        }
+        Ok(ids)
+    }
+
     /// Moves geometry `id` (`set_transforms` with one).
     pub fn set_transform(&mut self, id: u32, transform: Mat4) -> Result<()> {
         self.set_transforms(&[id], &[transform])

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::{Camera, PointLight};
 use crate::query::QueryOptions;
-use crate::query_scene::{INVALID_ID, InstanceOf, QueryScene, RayHits};
+use crate::query_scene::{INVALID_ID, QueryScene, RayHits};
 use crate::render::Image;
 use crate::util::Rng;
 use crate::{Error, Result};
@@ -160,12 +160,7 @@ impl Tumbling {
     pub fn query_scene(&self, opts: QueryOptions, time: f32) -> Result<(QueryScene, Vec<u32>)> {
         let transforms = self.transforms_at(time);
         let mut scene = QueryScene::new(opts);
-        let first = scene.add_triangles(self.vertices.clone(), self.faces.clone(), Some(transforms[0]))?;
-        let mut ids = Vec::with_capacity(transforms.len());
-        ids.push(first);
-        for t in &transforms[1..] {
-            ids.push(scene.add_instance(InstanceOf::Geometry(first), Some(*t), u32::MAX)?);
-        }
+        let ids = scene.add_placed(self.vertices.clone(), self.faces.clone(), &transforms)?;
         // A move marks the scene as one that moves (as `add_instance` does, which a single
         // instance never calls): its CPU rays then walk the two levels from the first query,
         // not a merged mesh that the first move would leave for a second structure.
