@@ -56,8 +56,9 @@ pub struct RenderArgs {
     pub backend: Backend,
     #[command(flatten)]
     pub gpu: GpuVariantArgs,
-    /// Count traversal work (cells, jumps, triangle tests) and print it.
-    #[arg(long)]
+    /// Count traversal work (cells, jumps, triangle tests) and print it. Not with --animate
+    /// (its frames print their build and trace times; the counts are not kept there).
+    #[arg(long, conflicts_with = "animate")]
     stats: bool,
     /// Frames to render (the first is written): the first frame's time and the median and best
     /// of the rest are reported, so the figure compares with `bench` (warm, not one cold frame).
@@ -65,12 +66,14 @@ pub struct RenderArgs {
     pub frames: u32,
     /// With --frames: frames the GPU may have in flight. 2 (the default) prepares and submits
     /// frame N+1 before it reads back frame N; 1 traces them one by one. The CPU makes frames one
-    /// by one (each takes every core).
-    #[arg(long, default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT, value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize), allow_hyphen_values = true)]
+    /// by one (each takes every core). Not with --animate (each frame's structure update waits
+    /// for the frame before).
+    #[arg(long, conflicts_with = "animate", default_value_t = gridtrace::frames::DEFAULT_IN_FLIGHT, value_parser = clap::value_parser!(u64).range(1..=16).map(|n| n as usize), allow_hyphen_values = true)]
     pub in_flight: usize,
     /// Move the camera along a circle around its target over the frames (about the up axis,
-    /// one turn in all): the paper's dynamic camera.
-    #[arg(long)]
+    /// one turn in all): the paper's dynamic camera. Not with --animate (its camera stays put
+    /// while the scene moves).
+    #[arg(long, conflicts_with = "animate")]
     orbit: bool,
     /// Play an animated scene (--scene animated, twisting-knot or bouncing-spheres; default
     /// animated) over the frames: every frame moves the vertices, updates the structure (the

@@ -313,7 +313,8 @@ fn mode_light_and_camera_change_the_frames() {
 
 /// What cannot apply is refused, naming the option: heat (no traversal counts through the two
 /// levels), shadows without --light (the headlight's are out of sight), a camera that makes
-/// no rays.
+/// no rays, and the still renders' --orbit, --stats and --in-flight (clap's conflict, naming
+/// both options: they were silently ignored).
 #[test]
 fn modes_and_cameras_that_cannot_apply_are_refused() {
     for (more, words) in [
@@ -329,6 +330,12 @@ fn modes_and_cameras_that_cannot_apply_are_refused() {
         (
             &["--eye", "0.5,3,0.5", "--up", "0,1,0"],
             &["--eye 0.5,3,0.5 --up 0,1,0", "parallel"],
+        ),
+        (&["--orbit"], &["--orbit", "--animate", "cannot be used with"]),
+        (&["--stats"], &["--stats", "--animate", "cannot be used with"]),
+        (
+            &["--in-flight", "1"],
+            &["--in-flight", "--animate", "cannot be used with"],
         ),
     ] {
         let (ok, text, _) = frame("bad-view", more);
