@@ -22,6 +22,7 @@ use crate::Result;
 mod expansion;
 mod fast;
 mod morton;
+mod packet;
 mod shape;
 mod wide;
 pub use fast::{BETA, FastWinding, check_accuracy};

@@ -24,6 +24,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::packet::{Entry, PACKET};
 use super::shape::Shape;
 use super::wide::WideTree;
 use super::{morton, solid_angle};
@@ -51,7 +52,7 @@ pub fn check_accuracy(accuracy: f64) -> crate::Result<f64> {
 /// (`winding_number` takes the same slice `build` did), collapsed to eight children a node.
 #[derive(Debug, Clone)]
 pub struct FastWinding {
-    wide: WideTree,
+    pub(super) wide: WideTree,
     triangles: usize,
     /// Which tree this is: a number no other tree built in this process has (a clone keeps
     /// it: the same tree). The GPU keeps the tree it was last given by it (`gpu/winding.rs`).
@@ -106,17 +107,30 @@ impl FastWinding {
     /// The winding numbers of a batch of points, on all cores, a node summed as its expansion
     /// where the point is farther than `accuracy` times its radius (`check_accuracy`; `inf`:
     /// never, the exact sum of every triangle's solid angle in `f64`). The points are walked
-    /// in Morton order (module notes), each worker with one stack (`winding_number_with`);
-    /// the answers come back in the points' order.
+    /// in Morton order (module notes), eight neighbours at a time through one walk
+    /// (`packet.rs`; the exact sum point by point, `winding_number_with`), each worker with
+    /// one stack; the answers come back in the points' order.
     pub fn winding_numbers_at(&self, tris: &[TriAccel], points: &[[f32; 3]], accuracy: f64) -> Vec<f32> {
         let order = crate::accel::point_order::morton_order(points);
-        let sorted: Vec<f32> = order
-            .par_iter()
-            .with_min_len(64)
-            .map_init(Vec::new, |stack, &i| {
-                self.winding_number_with(tris, Vec3::from(points[i as usize]), accuracy, stack)
-            })
-            .collect();
+        let sorted: Vec<f32> = if accuracy.is_finite() {
+            let mut sorted = vec![0.0; order.len()];
+            sorted
+                .par_chunks_mut(PACKET)
+                .zip(order.par_chunks(PACKET))
+                .with_min_len(8)
+                .for_each_init(Vec::new, |stack, (out, ids)| {
+                    self.winding_packet(tris, points, ids, accuracy, stack, out);
+                });
+            sorted
+        } else {
+            order
+                .par_iter()
+                .with_min_len(64)
+                .map_init(Vec::new, |stack, &i| {
+                    self.winding_number_with(tris, Vec3::from(points[i as usize]), accuracy, stack)
+                })
+                .collect()
+        };
         let mut out = vec![0.0; points.len()];
         for (&i, w) in order.iter().zip(sorted) {
             out[i as usize] = w;
@@ -146,6 +160,42 @@ impl FastWinding {
             self.exact_solid_angle(tris, p)
         };
         (sum / (4.0 * std::f64::consts::PI)) as f32
+    }
+
+    /// The winding numbers of the points `ids` (up to `PACKET`) into `out`, at a finite
+    /// `accuracy`, through one walk (`packet.rs`): the answers of `winding_number_with`, the
+    /// terms summed in another order. A point that is not finite is NaN and walks with none.
+    fn winding_packet(
+        &self,
+        tris: &[TriAccel],
+        points: &[[f32; 3]],
+        ids: &[u32],
+        accuracy: f64,
+        stack: &mut Vec<Entry>,
+        out: &mut [f32],
+    ) {
+        assert_eq!(tris.len(), self.triangles, "the triangles the tree was built over");
+        let mut walked = [Vec3::ZERO; PACKET];
+        let mut slot = [usize::MAX; PACKET];
+        let mut n = 0;
+        for (k, &i) in ids.iter().enumerate() {
+            let p = Vec3::from(points[i as usize]);
+            if p.is_finite() {
+                (walked[n], slot[n]) = (p, k);
+                n += 1;
+            }
+            out[k] = if p.is_finite() { 0.0 } else { f32::NAN };
+        }
+        if tris.is_empty() || n == 0 {
+            return;
+        }
+        // As `winding_number_with` squares it: in `f64`, then `f32` (infinite past its range).
+        let sums = self
+            .wide
+            .solid_angles(&walked[..n], (accuracy * accuracy) as f32, stack);
+        for (s, k) in sums.iter().zip(&slot[..n]) {
+            out[*k] = (s / (4.0 * std::f64::consts::PI)) as f32;
+        }
     }
 
     /// Every triangle's solid angle at `p`, summed in `f64` (what `winding_number_brute`

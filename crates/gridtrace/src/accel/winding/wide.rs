@@ -28,8 +28,8 @@ const _: () = assert!(crate::accel::bvh::MAX_LEAF <= WIDTH);
 
 /// A child reference: a node's index, or `LEAF | block`, or `EMPTY` (the GPU's walk reads
 /// them too: `DEVICE_LEAF`, `DEVICE_EMPTY`).
-const LEAF: u32 = 1 << 31;
-const EMPTY: u32 = u32::MAX;
+pub(super) const LEAF: u32 = 1 << 31;
+pub(super) const EMPTY: u32 = u32::MAX;
 pub(crate) const DEVICE_LEAF: u32 = LEAF;
 pub(crate) const DEVICE_EMPTY: u32 = EMPTY;
 
@@ -38,8 +38,8 @@ pub(crate) const DEVICE_EMPTY: u32 = EMPTY;
 #[derive(Debug, Clone)]
 #[repr(C, align(32))]
 pub(super) struct WideNode {
-    rows: [[f32; WIDTH]; FIELDS],
-    child: [u32; WIDTH],
+    pub(super) rows: [[f32; WIDTH]; FIELDS],
+    pub(super) child: [u32; WIDTH],
 }
 
 /// A leaf's triangles, up to eight, a lane each: `v0, v1, v2`, `[x, y, z]` rows. An unused lane
@@ -48,14 +48,14 @@ pub(super) struct WideNode {
 #[derive(Debug, Clone)]
 #[repr(C, align(32))]
 pub(super) struct Block {
-    v: [[[f32; WIDTH]; 3]; 3],
+    pub(super) v: [[[f32; WIDTH]; 3]; 3],
 }
 
 /// The tree.
 #[derive(Debug, Clone)]
 pub(super) struct WideTree {
-    nodes: Vec<WideNode>,
-    blocks: Vec<Block>,
+    pub(super) nodes: Vec<WideNode>,
+    pub(super) blocks: Vec<Block>,
 }
 
 impl WideTree {
@@ -204,11 +204,24 @@ fn far_field<const N: usize, L: Lanes<N>>(node: &WideNode, base: usize, p: [L; 3
         // expansion's 22 other rows are not read.
         return (L::ZERO, all);
     }
+    let omega = expansion::<N, L>(r, q, d2);
+    // `abs < inf` is false for NaN and infinities alike.
+    let take = far & omega.abs().lt(L::INFINITY);
+    (L::select(take, omega, L::ZERO), !take.bits() & all)
+}
+
+/// The solid angle a cluster subtends at a point, by its second-order expansion: `r(f)` is
+/// field `f` of the cluster's coefficients (`expansion::FIELDS`), `q` its centre relative to
+/// the point and `d2` that distance squared, a lane each (eight children at one point in the
+/// per-point walk, one child at eight points in `packet.rs`: the same arithmetic, so the same
+/// bits lane by lane).
+#[inline(always)]
+pub(super) fn expansion<const N: usize, L: Lanes<N>>(r: impl Fn(usize) -> L, q: [L; 3], d2: L) -> L {
     // `rsqrt` and FMAs: the Dragon's 1M points (29 nodes a point, nearly all with far
     // children) took 0.55-0.57 s with a division, a root and separate multiplies and adds,
     // 0.49-0.50 s so (the build and the query timed apart, 2-core Xeon). The estimate's Newton step keeps
     // `1e-6` relative, far below the expansion's own error. A point at a centre (`d2 = 0`)
-    // gives NaN here, which `take` below opens.
+    // gives NaN here, which the callers' finiteness test opens.
     let inv1 = d2.rsqrt();
     let inv2 = inv1 * inv1;
     let (x, y, z) = (q[0] * inv1, q[1] * inv1, q[2] * inv1);
@@ -227,10 +240,7 @@ fn far_field<const N: usize, L: Lanes<N>>(node: &WideNode, base: usize, p: [L; 3
     let cz = r(18).mul_add(zz, r(23) * zx);
     let cubic = cx.mul_add(x, cy.mul_add(y, cz * z));
     let order2 = L::splat(7.5).mul_add(cubic, L::splat(-1.5) * lin) * (inv2 * inv2);
-    let omega = order0 + order1 + order2;
-    // `abs < inf` is false for NaN and infinities alike.
-    let take = far & omega.abs().lt(L::INFINITY);
-    (L::select(take, omega, L::ZERO), !take.bits() & all)
+    order0 + order1 + order2
 }
 
 /// The exact solid angles of a block's lanes `base..base + N` at `p` (Van Oosterom and
@@ -238,7 +248,14 @@ fn far_field<const N: usize, L: Lanes<N>>(node: &WideNode, base: usize, p: [L; 3
 /// product).
 #[inline(always)]
 fn block_angles<const N: usize, L: Lanes<N>>(b: &Block, base: usize, p: [L; 3]) -> L {
-    let v = |c: usize, a: usize| lanes::<N, L>(&b.v[c][a], base);
+    triangle_angles::<N, L>(|c, a| lanes::<N, L>(&b.v[c][a], base), p)
+}
+
+/// The exact solid angles at `p` of triangles whose vertex `c`'s coordinate `a` is `v(c, a)`,
+/// a lane each (a block's eight triangles at one point, or one triangle at eight points in
+/// `packet.rs`).
+#[inline(always)]
+pub(super) fn triangle_angles<const N: usize, L: Lanes<N>>(v: impl Fn(usize, usize) -> L, p: [L; 3]) -> L {
     let a = [v(0, 0) - p[0], v(0, 1) - p[1], v(0, 2) - p[2]];
     let bb = [v(1, 0) - p[0], v(1, 1) - p[1], v(1, 2) - p[2]];
     let c = [v(2, 0) - p[0], v(2, 1) - p[1], v(2, 2) - p[2]];
