@@ -46,6 +46,10 @@ impl BvhAccel {
     /// leaf its search visits next, so that one search's wait overlaps the others' work (as the
     /// ray batches do, `walk.rs`). Each search keeps its own stack and order: the same answer,
     /// bit for bit.
+    ///
+    /// Where the CPU runs eight lanes, eight consecutive points share one walk instead
+    /// (`closest_packet.rs`): the same answers. 200,000 points uniform in the Stanford Dragon's
+    /// box: 0.80 s interleaved, 0.51 s in packets (2-core Xeon, `closest_points` example, 2026-12-05).
     pub fn closest_points_batch(&self, points: &[[f32; 3]], out: &mut [ClosestPoint]) {
         assert_eq!(points.len(), out.len(), "one answer per point");
         if self.blocks.is_empty() {
@@ -54,6 +58,17 @@ impl BvhAccel {
             }
             return;
         }
+        if crate::accel::simd::has_wide() {
+            // SAFETY: the CPU runs AVX2, checked just above.
+            unsafe { self.closest_points_packets(points, out) };
+            return;
+        }
+        self.closest_points_interleaved(points, out);
+    }
+
+    /// `closest_points_batch` point by point, `LANES` searches interleaved (the path without
+    /// AVX2; the tests hold both to the lone search).
+    pub(super) fn closest_points_interleaved(&self, points: &[[f32; 3]], out: &mut [ClosestPoint]) {
         let mut walks: [PointWalk; LANES] = std::array::from_fn(|_| PointWalk::new(Vec3::ZERO));
         let mut points_left = points.iter().enumerate();
         interleave(

@@ -23,6 +23,7 @@ mod all_hits;
 mod box_test;
 mod build;
 mod closest;
+mod closest_packet;
 mod coherent;
 mod footprint;
 mod interleave;

@@ -69,6 +69,8 @@ fn closest_point_batches_equal_single_searches_and_brute_force() {
     points[8] = [0.0, f32::INFINITY, 0.0];
     let mut got = vec![ClosestPoint::NONE; points.len()];
     accel.closest_points_batch(&points, &mut got);
+    let mut interleaved = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_interleaved(&points, &mut interleaved);
     let bits = |c: &ClosestPoint| {
         (
             c.point.to_array().map(f32::to_bits),
@@ -85,6 +87,7 @@ fn closest_point_batches_equal_single_searches_and_brute_force() {
             bits(&accel.closest_point(p)),
             "point {i}: batch against single"
         );
+        assert_eq!(bits(g), bits(&interleaved[i]), "point {i}: packets against interleaved");
         let truth = closest_point_brute(&tris, p);
         assert_eq!(
             (g.tri, g.dist_sq.to_bits()),
@@ -139,6 +142,56 @@ fn closest_point_batches_bounded_by_neighbours_at_the_surface() {
             (g.tri, g.dist_sq.to_bits()),
             (truth.tri, truth.dist_sq.to_bits()),
             "point {i}: brute force"
+        );
+    }
+}
+
+/// Packets of nearest-point searches (`closest_packet.rs`) at degenerate triangles: zero-area
+/// ones (a point, a segment, three collinear vertices) and slivers among ordinary ones, with
+/// points around and on them. Every answer is the lone search's and the interleaved batch's,
+/// bit for bit.
+#[test]
+fn closest_point_packets_at_degenerate_triangles() {
+    use crate::accel::closest::ClosestPoint;
+    let mut rng = crate::util::Rng::new(0xDE6E);
+    let (positions, triangles) = random_mesh(&mut rng, 600);
+    let mut tris = tris_of(&positions, &triangles);
+    for _ in 0..200 {
+        let a = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        let d = Vec3::new(rng.range(-0.1, 0.1), rng.range(-0.1, 0.1), rng.range(-0.1, 0.1));
+        let off = Vec3::splat(rng.range(-1e-7, 1e-7));
+        tris.extend([
+            TriAccel::new(a, a, a),
+            TriAccel::new(a, a + d, a + d),
+            TriAccel::new(a, a + d, a + d * 2.0),
+            TriAccel::new(a, a + d, a + d * 0.5 + off),
+        ]);
+    }
+    let accel = BvhAccel::build(&tris);
+    let mut points: Vec<[f32; 3]> = (0..800)
+        .map(|_| [rng.range(-1.3, 1.3), rng.range(-1.3, 1.3), rng.range(-1.3, 1.3)])
+        .collect();
+    points.extend(tris.iter().rev().take(200).map(|t| t.v1));
+    let mut got = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_batch(&points, &mut got);
+    let mut interleaved = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_interleaved(&points, &mut interleaved);
+    let bits = |c: &ClosestPoint| {
+        (
+            c.point.to_array().map(f32::to_bits),
+            c.dist_sq.to_bits(),
+            c.tri,
+            c.u.to_bits(),
+            c.v.to_bits(),
+        )
+    };
+    for (i, p) in points.iter().enumerate() {
+        let lone = accel.closest_point(Vec3::from(*p));
+        assert_eq!(bits(&got[i]), bits(&lone), "point {i}: batch against single");
+        assert_eq!(
+            bits(&interleaved[i]),
+            bits(&lone),
+            "point {i}: interleaved against single"
         );
     }
 }
