@@ -203,3 +203,65 @@ fn gpu_winding_numbers_follow_a_move() {
     assert!(worst(&want, &got) <= 1e-4);
     assert!(worst(&first, &got) > 0.5, "the move changed the answers");
 }
+
+/// A winding tree deeper than the GPU walk's stack (`GpuContext::lower_wind_stack`, as a mesh
+/// deeper than `WIND_STACK` would be) is a limit, not a fault. Under `auto` the CPU answers
+/// that query alone (the merged mesh's winding numbers exactly; `last_query` "cpu", a note
+/// naming the limit) and the scene keeps its GPU: the next distance query runs there. Under
+/// `gpu` it is the caller's error, `Error::Limit` naming the stack, what the tree asks and
+/// what the walk allows.
+#[test]
+fn winding_trees_over_the_walks_stack_are_a_limit() {
+    use gridtrace::Error;
+    use gridtrace::gpu::{GpuContext, WIND_STACK_LIMIT};
+    if skip_gpu() {
+        return;
+    }
+    let _gpu = GPU_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let points: Vec<[f32; 3]> = {
+        let mut rng = Rng::new(77);
+        (0..300)
+            .map(|_| [rng.range(-1.5, 1.5), rng.range(-1.5, 3.5), rng.range(-1.5, 1.5)])
+            .collect()
+    };
+    let ctx = std::sync::Arc::new(GpuContext::new().expect("a GPU adapter (lavapipe in CI)"));
+    let (mut s, _) = scene(Backend::Auto, AccelKind::Bvh);
+    // The merged mesh's tree over its BVH (built by a distance query first), which the GPU
+    // walks and the query falls back to.
+    let flat = merged_on_cpu(&s, AccelKind::Bvh);
+    flat.compute_distance(&points).unwrap();
+    let want = flat.winding_numbers(&points).unwrap();
+    s.adopt_device(ctx.clone());
+    ctx.lower_wind_stack(1);
+    for round in 0..2 {
+        let got = s.winding_numbers(&points).unwrap();
+        let same = got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(same, "round {round}: not the CPU scene's answers");
+        let last = s.last_query();
+        assert_eq!(
+            (last.name, last.device),
+            ("compute_winding_number", "cpu"),
+            "round {round}"
+        );
+        let note = last.note.unwrap_or_else(|| panic!("round {round}: no note"));
+        assert!(
+            note.contains(WIND_STACK_LIMIT) && note.contains("1 allowed"),
+            "round {round}: {note}"
+        );
+        assert!(s.gpu_failure().is_none(), "round {round}: the scene failed over");
+        s.compute_distance(&points).unwrap();
+        assert_eq!(s.last_query().device, "gpu", "round {round}: the next query");
+    }
+    let (mut s, _) = scene(Backend::Gpu, AccelKind::Bvh);
+    s.adopt_device(ctx.clone());
+    match s.winding_numbers(&points) {
+        Err(Error::Limit {
+            limit, asked, allowed, ..
+        }) => {
+            assert_eq!((limit, allowed), (WIND_STACK_LIMIT, 1));
+            assert!(asked > 1, "the tree asks {asked}");
+        }
+        other => panic!("expected the limit, got {:?}", other.map(|_| ())),
+    }
+    assert!(s.gpu_failure().is_none());
+}

@@ -53,6 +53,9 @@ pub struct GpuContext {
     /// Hits one list pass may hold on this device, lowered by a test (`lower_list_hits`; 0:
     /// what the bindings hold): the scenes' renderers are out of a test's reach.
     list_hits_cap: AtomicU32,
+    /// Entries the winding walk's stack may hold, lowered by a test (`lower_wind_stack`; 0:
+    /// `WIND_STACK`).
+    wind_stack_cap: AtomicU32,
 }
 
 /// The most bytes one storage binding may hold on a device of `limits`: the binding limit, or
@@ -196,6 +199,7 @@ impl GpuContext {
             lost,
             cache: Mutex::new(HashMap::new()),
             list_hits_cap: AtomicU32::new(0),
+            wind_stack_cap: AtomicU32::new(0),
         })
     }
 
@@ -308,6 +312,20 @@ impl GpuContext {
     #[doc(hidden)]
     pub fn lower_list_hits(&self, hits: u32) {
         self.list_hits_cap.store(hits.max(1), Ordering::Relaxed);
+    }
+
+    /// Makes the winding walk's stack on this device hold at most `entries` (at least 1) as
+    /// far as the host's check goes: how tests make a winding tree meet the walk's limit
+    /// (`Error::Limit`) without a mesh deep enough for `WIND_STACK`.
+    #[doc(hidden)]
+    pub fn lower_wind_stack(&self, entries: u32) {
+        self.wind_stack_cap.store(entries.max(1), Ordering::Relaxed);
+    }
+
+    /// The stack entries a test allowed the winding walk (`lower_wind_stack`), if it lowered
+    /// them.
+    pub(crate) fn wind_stack_cap(&self) -> Option<u32> {
+        Some(self.wind_stack_cap.load(Ordering::Relaxed)).filter(|&h| h > 0)
     }
 
     /// The hits a test allowed one list pass (`lower_list_hits`), if it lowered them.

@@ -72,3 +72,4 @@ pub use variants::GpuVariants;
 pub use walks::bvh::binary as bvh;
 pub use walks::grid::build::{GpuBuildStats, GpuGrid};
 pub use wavefront::{FrameInFlight, GpuRenderStats, PrepareParts};
+pub use winding::WIND_STACK_LIMIT;

@@ -19,21 +19,31 @@ use super::renderer::GpuRenderer;
 use crate::accel::winding::{DeviceTree, FastWinding};
 use crate::{Error, Result};
 
+/// The limit a winding tree too deep for the GPU walk meets (`Error::Limit`): the walk's own
+/// stack, a constant of its shader, not one of the device's limits.
+pub const WIND_STACK_LIMIT: &str = "WIND_STACK (the winding walk's stack, winding.wgsl)";
+
 impl GpuRenderer {
     /// The winding number at each of `points` over `tree` (built over this renderer's mesh),
     /// far nodes summed as their expansion where the point is farther than `accuracy` (finite,
     /// above 0) times their radius, as `FastWinding::winding_numbers_at`. A point that is not
-    /// finite gets NaN. A tree too deep for the walk's stack is refused.
+    /// finite gets NaN. A tree too deep for the walk's stack is refused (`Error::Limit`,
+    /// `WIND_STACK_LIMIT`).
     pub fn winding_numbers(&mut self, tree: &FastWinding, points: &[[f32; 3]], accuracy: f64) -> Result<Vec<f32>> {
         let device = tree.device();
         if device.nodes.is_empty() {
             return Ok(points.iter().map(|p| if finite(p) { 0.0 } else { f32::NAN }).collect());
         }
-        if device.stack > WIND_STACK as usize {
-            return Err(Error::Gpu(format!(
-                "the winding tree needs a stack of {} entries; the GPU walk's holds {WIND_STACK}",
-                device.stack
-            )));
+        // A size, not a fault (`Error::Limit`): under `auto` the CPU answers this query and
+        // the scene keeps its GPU.
+        let allowed = self.ctx.wind_stack_cap().map_or(WIND_STACK, |c| c.min(WIND_STACK));
+        if device.stack > allowed as usize {
+            return Err(Error::Limit {
+                limit: WIND_STACK_LIMIT,
+                what: "the winding tree's walk, in stack entries".into(),
+                asked: device.stack as u64,
+                allowed: allowed.into(),
+            });
         }
         let uploaded = self.upload_winding(tree.id(), &device);
         // Squared in f64: an accuracy beyond f32's range is infinite here, and opens every

@@ -60,7 +60,7 @@ impl BvhAccel {
     ///
     /// # Safety
     /// The CPU runs AVX2 (`simd::has_wide`).
-    #[target_feature(enable = "avx2")]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     pub(super) unsafe fn closest_points_packets(&self, points: &[[f32; 3]], out: &mut [ClosestPoint]) {
         let mut stack: Vec<(f32, ChildRef)> = Vec::with_capacity(256);
         let mut before: [Option<Vec3>; PACKET] = [None; PACKET];
@@ -329,7 +329,7 @@ mod tests {
         println!("lanes left to the fallback: {fallbacks}");
     }
 
-    #[target_feature(enable = "avx2")]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     unsafe fn check_lanes() -> usize {
         let mut rng = Rng::new(0x1A4E);
         let mut r = |s: f32| Vec3::new(rng.range(-s, s), rng.range(-s, s), rng.range(-s, s));
