@@ -228,13 +228,7 @@ impl PointWalk {
                 // An unused slot has the empty box (low > high); its distance says nothing.
                 let used = node.planes[0][0][k] <= node.planes[1][0][k];
                 if used && d <= self.best.dist_sq {
-                    let mut at = n;
-                    while at > 0 && open[at - 1].0 < d {
-                        open[at] = open[at - 1];
-                        at -= 1;
-                    }
-                    open[at] = (d, node.child[k]);
-                    n += 1;
+                    insert_far_first(&mut open, &mut n, (d, node.child[k]));
                 }
             }
             self.stack[self.len..self.len + n].copy_from_slice(&open[..n]);
@@ -250,6 +244,19 @@ impl PointWalk {
         }
         true
     }
+}
+
+/// Puts `entry` among the first `n` of `open` (sorted far to near by their distance, so that
+/// the nearest is pushed last and popped first) and counts it.
+#[inline(always)]
+pub(super) fn insert_far_first(open: &mut [(f32, ChildRef); WIDTH], n: &mut usize, entry: (f32, ChildRef)) {
+    let mut at = *n;
+    while at > 0 && open[at - 1].0 < entry.0 {
+        open[at] = open[at - 1];
+        at -= 1;
+    }
+    open[at] = entry;
+    *n += 1;
 }
 
 /// Squared distance from `p` to each child box of `node` (0 inside), lane by lane: eight

@@ -16,6 +16,7 @@ use glam::Vec3;
 
 use super::BvhAccel;
 use super::build::LEAF_BLOCK;
+use super::closest::insert_far_first;
 use super::wide::{ChildRef, WIDTH};
 use crate::accel::TriAccel;
 use crate::accel::closest::{ClosestPoint, TriPoint, closest_on_triangle};
@@ -152,13 +153,7 @@ impl BvhAccel {
                     .to_array()
                     .into_iter()
                     .fold(f32::INFINITY, f32::min);
-                let mut at = n;
-                while at > 0 && open[at - 1].0 < key {
-                    open[at] = open[at - 1];
-                    at -= 1;
-                }
-                open[at] = (key, node.child[k]);
-                n += 1;
+                insert_far_first(&mut open, &mut n, (key, node.child[k]));
             }
             stack.extend_from_slice(&open[..n]);
         }

@@ -54,7 +54,7 @@ fn counting_equals_listing_and_brute_force() {
 /// place, the searches around them unaffected).
 #[test]
 fn closest_point_batches_equal_single_searches_and_brute_force() {
-    use crate::accel::closest::{ClosestPoint, closest_point_brute};
+    use crate::accel::closest::closest_point_brute;
     let mut rng = crate::util::Rng::new(0xC105E);
     let (positions, triangles) = random_mesh(&mut rng, 2000);
     let tris = tris_of(&positions, &triangles);
@@ -67,19 +67,7 @@ fn closest_point_batches_equal_single_searches_and_brute_force() {
         .collect();
     points[7] = [f32::NAN, 0.0, 0.0];
     points[8] = [0.0, f32::INFINITY, 0.0];
-    let mut got = vec![ClosestPoint::NONE; points.len()];
-    accel.closest_points_batch(&points, &mut got);
-    let mut interleaved = vec![ClosestPoint::NONE; points.len()];
-    accel.closest_points_interleaved(&points, &mut interleaved);
-    let bits = |c: &ClosestPoint| {
-        (
-            c.point.to_array().map(f32::to_bits),
-            c.dist_sq.to_bits(),
-            c.tri,
-            c.u.to_bits(),
-            c.v.to_bits(),
-        )
-    };
+    let (got, interleaved) = both_batches(&accel, &points);
     for (i, (p, g)) in points.iter().zip(&got).enumerate() {
         let p = Vec3::from(*p);
         assert_eq!(
@@ -152,7 +140,6 @@ fn closest_point_batches_bounded_by_neighbours_at_the_surface() {
 /// bit for bit.
 #[test]
 fn closest_point_packets_at_degenerate_triangles() {
-    use crate::accel::closest::ClosestPoint;
     let mut rng = crate::util::Rng::new(0xDE6E);
     let (positions, triangles) = random_mesh(&mut rng, 600);
     let mut tris = tris_of(&positions, &triangles);
@@ -172,19 +159,7 @@ fn closest_point_packets_at_degenerate_triangles() {
         .map(|_| [rng.range(-1.3, 1.3), rng.range(-1.3, 1.3), rng.range(-1.3, 1.3)])
         .collect();
     points.extend(tris.iter().rev().take(200).map(|t| t.v1));
-    let mut got = vec![ClosestPoint::NONE; points.len()];
-    accel.closest_points_batch(&points, &mut got);
-    let mut interleaved = vec![ClosestPoint::NONE; points.len()];
-    accel.closest_points_interleaved(&points, &mut interleaved);
-    let bits = |c: &ClosestPoint| {
-        (
-            c.point.to_array().map(f32::to_bits),
-            c.dist_sq.to_bits(),
-            c.tri,
-            c.u.to_bits(),
-            c.v.to_bits(),
-        )
-    };
+    let (got, interleaved) = both_batches(&accel, &points);
     for (i, p) in points.iter().enumerate() {
         let lone = accel.closest_point(Vec3::from(*p));
         assert_eq!(bits(&got[i]), bits(&lone), "point {i}: batch against single");
@@ -194,4 +169,32 @@ fn closest_point_packets_at_degenerate_triangles() {
             "point {i}: interleaved against single"
         );
     }
+}
+
+/// The nearest points of `points` by `closest_points_batch` (packets where the CPU has AVX2)
+/// and by the interleaved per-point batch.
+fn both_batches(
+    accel: &BvhAccel,
+    points: &[[f32; 3]],
+) -> (
+    Vec<crate::accel::closest::ClosestPoint>,
+    Vec<crate::accel::closest::ClosestPoint>,
+) {
+    use crate::accel::closest::ClosestPoint;
+    let mut got = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_batch(points, &mut got);
+    let mut interleaved = vec![ClosestPoint::NONE; points.len()];
+    accel.closest_points_interleaved(points, &mut interleaved);
+    (got, interleaved)
+}
+
+/// Every field of a nearest point as bits, for answers that must be equal bit for bit.
+fn bits(c: &crate::accel::closest::ClosestPoint) -> ([u32; 3], u32, u32, u32, u32) {
+    (
+        c.point.to_array().map(f32::to_bits),
+        c.dist_sq.to_bits(),
+        c.tri,
+        c.u.to_bits(),
+        c.v.to_bits(),
+    )
 }
