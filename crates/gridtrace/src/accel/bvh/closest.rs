@@ -20,6 +20,7 @@ use super::walk::LANES;
 use super::wide::{ChildRef, WIDTH, WideNode};
 use crate::accel::TriAccel4;
 use crate::accel::closest::ClosestPoint;
+use crate::accel::lanes::{Lanes, Mask};
 
 /// Entries the stack can hold: a node pops one entry and pushes at most `WIDTH`, and no path
 /// has more than `STACK` nodes.
@@ -131,28 +132,43 @@ impl BvhAccel {
 }
 
 /// The lanes of `block` whose triangle's box may hold a point within `dist_sq` of `p`, bit `k`
-/// for lane `k`. The box comes from the stored vertices, and the test must
-/// never drop a triangle whose *computed* distance is at most `dist_sq` (ties included), so
-/// it is widened: a lane is dropped only when its box is farther than the best distance by
-/// more than a rounding bound of the coordinates involved (16 ulps of the largest).
+/// for lane `k` (`box_near_bits`, the boxes from the stored vertices).
 #[inline(always)]
 fn tri_box_near_mask(block: &TriAccel4, p: Vec3, dist_sq: f32) -> u32 {
-    let mut d2 = Vec4::ZERO;
-    let mut scale = Vec4::ZERO;
+    let lo = [0, 1, 2].map(|a| block.v0[a].min(block.v1[a]).min(block.v2[a]));
+    let hi = [0, 1, 2].map(|a| block.v0[a].max(block.v1[a]).max(block.v2[a]));
+    let p = [0, 1, 2].map(|a| Vec4::splat(p[a]));
+    box_near_bits::<4, Vec4>(lo, hi, p, Vec4::splat(dist_sq))
+}
+
+/// The lanes whose box `lo..hi` may hold a point within `dist_sq` of `p` (a triangle's box in
+/// each lane at one point, or one box at a point in each lane: `closest_packet.rs`), bit `k`
+/// for lane `k`. The test must never drop a triangle whose *computed* distance is at most
+/// `dist_sq` (ties included), so it is widened: a lane is dropped only when its box is
+/// farther than the best distance by more than a rounding bound of the coordinates involved
+/// (16 ulps of the largest).
+#[inline(always)]
+pub(super) fn box_near_bits<const N: usize, L: Lanes<N>>(lo: [L; 3], hi: [L; 3], p: [L; 3], dist_sq: L) -> u32 {
+    let mut d2 = L::ZERO;
+    let mut scale = L::ZERO;
     for a in 0..3 {
-        let v0 = block.v0[a];
-        let (v1, v2) = (block.v1[a], block.v2[a]);
-        let (lo, hi) = (v0.min(v1).min(v2), v0.max(v1).max(v2));
-        let pa = Vec4::splat(p[a]);
-        let d = (lo - pa).max(pa - hi).max(Vec4::ZERO);
-        d2 += d * d;
-        scale = scale.max(lo.abs()).max(hi.abs()).max(pa.abs());
+        let d = (lo[a] - p[a]).max(p[a] - hi[a]).max(L::ZERO);
+        d2 = d2 + d * d;
+        scale = scale.max(lo[a].abs()).max(hi[a].abs()).max(p[a].abs());
     }
-    let slack = scale * (16.0 * f32::EPSILON);
+    let slack = scale * L::splat(16.0 * f32::EPSILON);
     // `!(far)`, so that NaN (never, for finite input) would keep the lane.
-    let reach = Vec4::splat(dist_sq.sqrt()) + slack;
-    let far = d2.cmpgt(reach * reach);
-    !far.bitmask() & 0xf
+    let reach = dist_sq.sqrt() + slack;
+    !d2.gt(reach * reach).bits() & ((1u32 << N) - 1)
+}
+
+/// The squared distance a search from `p` starts bounded by, given `q`, a point of the mesh
+/// (a neighbour's nearest point): `|p - q|^2` a thousandth wider against rounding (`seed`).
+/// None where it bounds nothing useful (0: `p` is `q`; not finite).
+#[inline(always)]
+pub(super) fn seed_bound(p: Vec3, q: Vec3) -> Option<f32> {
+    let bound = (p - q).length_squared() * 1.001;
+    (bound.is_finite() && bound > 0.0).then_some(bound)
 }
 
 /// One point's branch and bound, resumable one node or leaf at a time (so that a batch can
@@ -194,8 +210,7 @@ impl PointWalk {
     /// Morton order alone changed nothing).
     #[inline(always)]
     fn seed(&mut self, q: Vec3) {
-        let bound = (self.p - q).length_squared() * 1.001;
-        if bound.is_finite() && bound > 0.0 {
+        if let Some(bound) = seed_bound(self.p, q) {
             self.best.dist_sq = bound;
             self.seeded = true;
         }

@@ -16,7 +16,7 @@ use glam::Vec3;
 
 use super::BvhAccel;
 use super::build::LEAF_BLOCK;
-use super::closest::insert_far_first;
+use super::closest::{box_near_bits, insert_far_first, seed_bound};
 use super::wide::{ChildRef, WIDTH};
 use crate::accel::TriAccel;
 use crate::accel::closest::{ClosestPoint, TriPoint, closest_on_triangle};
@@ -93,13 +93,9 @@ impl BvhAccel {
             for k in 0..PACKET {
                 if k >= n {
                     pk.points[k] = pk.points[0];
-                } else if let Some(q) = before[k] {
-                    // As `PointWalk::seed`: a thousandth wider against rounding.
-                    let bound = (pk.points[k] - q).length_squared() * 1.001;
-                    if bound.is_finite() && bound > 0.0 {
-                        pk.best[k].dist_sq = bound;
-                        seeded[k] = true;
-                    }
+                } else if let Some(bound) = before[k].and_then(|q| seed_bound(pk.points[k], q)) {
+                    pk.best[k].dist_sq = bound;
+                    seeded[k] = true;
                 }
             }
             pk.p = [0, 1, 2].map(|a| F8::from_array(std::array::from_fn(|k| pk.points[k][a])));
@@ -172,19 +168,9 @@ impl BvhAccel {
                     continue;
                 }
                 // `tri_box_near_mask`'s test and slack, a lane a point.
-                let mut d2 = F8::ZERO;
-                let mut scale = F8::ZERO;
-                for a in 0..3 {
-                    let (v0, v1, v2) = (block.v0[a][t], block.v1[a][t], block.v2[a][t]);
-                    let (lo, hi) = (F8::splat(v0.min(v1).min(v2)), F8::splat(v0.max(v1).max(v2)));
-                    let pa = pk.p[a];
-                    let d = (lo - pa).max(pa - hi).max(F8::ZERO);
-                    d2 = d2 + d * d;
-                    scale = scale.max(lo.abs()).max(hi.abs()).max(pa.abs());
-                }
-                let slack = scale * F8::splat(16.0 * f32::EPSILON);
-                let reach = pk.best_d2.sqrt() + slack;
-                let near = !d2.gt(reach * reach).bits() & pk.live;
+                let lo = [0, 1, 2].map(|a| F8::splat(block.v0[a][t].min(block.v1[a][t]).min(block.v2[a][t])));
+                let hi = [0, 1, 2].map(|a| F8::splat(block.v0[a][t].max(block.v1[a][t]).max(block.v2[a][t])));
+                let near = box_near_bits::<8, F8>(lo, hi, pk.p, pk.best_d2) & pk.live;
                 if near == 0 {
                     continue;
                 }
