@@ -98,3 +98,36 @@ pub fn occupancy(accel: &Accel, points: &[[f32; 3]]) -> Result<Vec<f32>> {
         })
         .collect())
 }
+
+/// The winding tests' scenes: an open soup and points near and far from it.
+#[cfg(test)]
+mod test_soup {
+    use glam::Vec3;
+
+    use crate::accel::TriAccel;
+    use crate::util::Rng;
+
+    /// A point uniform in the unit cube.
+    pub(super) fn unit(rng: &mut Rng) -> Vec3 {
+        Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32())
+    }
+
+    /// `n` small random triangles in the unit cube, an open soup: their area vectors do not
+    /// cancel, the expansion's worst case.
+    pub(super) fn open_soup(rng: &mut Rng, n: usize) -> Vec<TriAccel> {
+        (0..n)
+            .map(|_| {
+                let a = unit(rng);
+                TriAccel::new(a, a + (unit(rng) - 0.5) * 0.1, a + (unit(rng) - 0.5) * 0.1)
+            })
+            .collect()
+    }
+
+    /// `n` points about the unit cube's centre, uniform in cubes of side 1.5, 3 and `far` in
+    /// turn: in the soup, around it and far from it.
+    pub(super) fn points_about(rng: &mut Rng, n: usize, far: f32) -> Vec<[f32; 3]> {
+        (0..n)
+            .map(|i| ((unit(rng) - 0.5) * [1.5, 3.0, far][i % 3] + 0.5).to_array())
+            .collect()
+    }
+}

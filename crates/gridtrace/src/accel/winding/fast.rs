@@ -220,6 +220,7 @@ impl FastWinding {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::winding::test_soup::{open_soup, points_about};
     use crate::accel::winding::winding_number_brute;
     use crate::util::Rng;
 
@@ -232,16 +233,8 @@ mod tests {
     #[test]
     fn lane_widths_agree_with_brute_force() {
         let mut rng = Rng::new(55);
-        let mut unit = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-        let tris: Vec<TriAccel> = (0..3000)
-            .map(|_| {
-                let a = unit();
-                TriAccel::new(a, a + (unit() - 0.5) * 0.1, a + (unit() - 0.5) * 0.1)
-            })
-            .collect();
-        let points: Vec<[f32; 3]> = (0..400)
-            .map(|i| ((unit() - 0.5) * [1.5, 3.0, 40.0][i % 3] + 0.5).to_array())
-            .collect();
+        let tris = open_soup(&mut rng, 3000);
+        let points = points_about(&mut rng, 400, 40.0);
         let exact: Vec<f32> = points
             .iter()
             .map(|p| winding_number_brute(&tris, Vec3::from(*p)))

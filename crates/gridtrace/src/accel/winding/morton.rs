@@ -118,6 +118,7 @@ fn spread(x: u32) -> u64 {
 mod tests {
     use super::*;
     use crate::accel::bvh::BvhAccel;
+    use crate::accel::winding::test_soup::{open_soup, points_about, unit};
     use crate::accel::winding::{FastWinding, winding_number_brute};
     use crate::util::Rng;
 
@@ -133,19 +134,11 @@ mod tests {
     #[test]
     fn morton_tree_follows_brute_force_and_the_sah_tree() {
         let mut rng = Rng::new(31);
-        let mut unit = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-        let mut tris: Vec<TriAccel> = (0..2500)
-            .map(|_| {
-                let a = unit();
-                TriAccel::new(a, a + (unit() - 0.5) * 0.1, a + (unit() - 0.5) * 0.1)
-            })
-            .collect();
-        let (p, q) = (unit(), unit());
+        let mut tris = open_soup(&mut rng, 2500);
+        let (p, q) = (unit(&mut rng), unit(&mut rng));
         tris.extend([TriAccel::new(p, p, p), TriAccel::new(p, q, p + (q - p) * 0.5)]);
-        tris.extend(std::iter::repeat_n(TriAccel::new(p, q, unit()), 12));
-        let points: Vec<[f32; 3]> = (0..300)
-            .map(|i| ((unit() - 0.5) * [1.5, 3.0, 20.0][i % 3] + 0.5).to_array())
-            .collect();
+        tris.extend(std::iter::repeat_n(TriAccel::new(p, q, unit(&mut rng)), 12));
+        let points = points_about(&mut rng, 300, 20.0);
         let exact: Vec<f32> = points
             .iter()
             .map(|p| winding_number_brute(&tris, Vec3::from(*p)))

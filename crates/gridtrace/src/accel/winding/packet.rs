@@ -131,8 +131,8 @@ impl WideTree {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::accel::TriAccel;
     use crate::accel::winding::FastWinding;
+    use crate::accel::winding::test_soup::{open_soup, points_about};
     use crate::util::Rng;
 
     /// Packets sum what the per-point walk sums: over an open soup (the expansion's worst
@@ -145,16 +145,8 @@ mod tests {
     #[test]
     fn packets_sum_what_single_points_sum() {
         let mut rng = Rng::new(34);
-        let mut unit = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-        let tris: Vec<TriAccel> = (0..2000)
-            .map(|_| {
-                let a = unit();
-                TriAccel::new(a, a + (unit() - 0.5) * 0.1, a + (unit() - 0.5) * 0.1)
-            })
-            .collect();
-        let mut points: Vec<[f32; 3]> = (0..390)
-            .map(|i| ((unit() - 0.5) * [1.5, 3.0, 40.0][i % 3] + 0.5).to_array())
-            .collect();
+        let tris = open_soup(&mut rng, 2000);
+        let mut points = points_about(&mut rng, 390, 40.0);
         points.extend(tris[..10].iter().map(|t| t.v0));
         points.extend([
             [f32::NAN, 0.5, 0.5],
