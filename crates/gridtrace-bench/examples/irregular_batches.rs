@@ -22,7 +22,7 @@ fn main() -> gridtrace::Result<()> {
             let prepared = scene.prepare_for(kind, &gridtrace::AccelParams::NONE)?;
             let accel = &prepared.accel;
             let mut hits = vec![Hit::MISS; eye.len()];
-            let eye_ms = gridtrace_bench::best_of_ms(5, || accel.intersect_batch(&eye, 0.0, f32::INFINITY, &mut hits));
+            let eye_ms = gridtrace_bench::best_of_ms(5, || accel.intersect_batch(&eye, &mut hits));
             // From just off each hit towards the light, in image order.
             let shadow: Vec<Ray> = eye
                 .iter()
@@ -30,11 +30,11 @@ fn main() -> gridtrace::Result<()> {
                 .filter(|(_, h)| h.is_hit())
                 .map(|(r, h)| {
                     let p = r.at(h.t * 0.999);
-                    Ray::new(p, (light - p).normalize())
+                    Ray::new(p, (light - p).normalize()).within(0.0, 1e30)
                 })
                 .collect();
             let mut occluded = vec![false; shadow.len()];
-            let shadow_ms = gridtrace_bench::best_of_ms(5, || accel.occluded_batch(&shadow, 0.0, 1e30, &mut occluded));
+            let shadow_ms = gridtrace_bench::best_of_ms(5, || accel.occluded_batch(&shadow, &mut occluded));
             line += &format!("  {:<9} camera {eye_ms:7.2} ms  shadow {shadow_ms:7.2} ms", kind.name());
             answers.push((hits.iter().map(|h| h.t).collect::<Vec<_>>(), occluded));
         }

@@ -29,7 +29,7 @@ fn main() -> gridtrace::Result<()> {
             let mut visits: Vec<u64> = Vec::new();
             let mut counters = TraversalCounters::default();
             let mut first_cell_tested = None;
-            grid.walk(&ray, 0.0, f32::INFINITY, &mut counters, |refs, t_cell_exit, c| {
+            grid.walk(&ray, &mut counters, |refs, t_cell_exit, c| {
                 first_cell_tested.get_or_insert(c.cells == 1);
                 for &t in refs {
                     if let Some(h) = tris[t as usize].intersect(ray.origin, ray.dir, 0.0, best.t) {

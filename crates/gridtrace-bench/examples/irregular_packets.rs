@@ -36,9 +36,9 @@ fn packets(
     for (chunk, at) in rays.chunks(PACKET).zip(pixel.chunks(PACKET)) {
         let c = &mut [NoCounters; PACKET][..chunk.len()];
         let got = if fours {
-            g.packet_in_fours::<false, _>(tris, chunk, 0.0, [f32::INFINITY; PACKET], c)
+            g.packet_in_fours::<false, _>(tris, chunk, c)
         } else {
-            g.intersect_packet(tris, chunk, 0.0, f32::INFINITY, c)
+            g.intersect_packet(tris, chunk, c)
         };
         for (k, &p) in at.iter().enumerate() {
             hits[p] = got[k];
@@ -59,7 +59,7 @@ fn main() -> gridtrace::Result<()> {
         let mut want = vec![Hit::MISS; n];
         let bvh_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in want.iter_mut().zip(&eye) {
-                *h = bvh.accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+                *h = bvh.accel.intersect(r, &mut NoCounters);
             }
         });
         let prepared = scene.prepare_for(AccelKind::Irregular, &gridtrace::AccelParams::NONE)?;
@@ -70,7 +70,7 @@ fn main() -> gridtrace::Result<()> {
         let mut single = vec![Hit::MISS; n];
         let single_ms = gridtrace_bench::best_of_ms(5, || {
             for (h, r) in single.iter_mut().zip(&eye) {
-                *h = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+                *h = accel.intersect(r, &mut NoCounters);
             }
         });
         let (mut four, mut eight) = (vec![Hit::MISS; n], vec![Hit::MISS; n]);

@@ -95,13 +95,13 @@ pub fn irregular_sweep(
                 ray_vec
                     .par_chunks(4096)
                     .zip(out.par_chunks_mut(4096))
-                    .for_each(|(r, h)| accel.intersect_batch(r, 0.0, f32::INFINITY, h));
+                    .for_each(|(r, h)| accel.intersect_batch(r, h));
                 Ok((t0.elapsed().as_secs_f64() * 1e3, ()))
             })?;
             let sample = ray_vec.len().min(100_000);
             let mut c = TraversalCounters::default();
             for r in &ray_vec[..sample] {
-                accel.intersect(r, 0.0, f32::INFINITY, &mut c);
+                accel.intersect(r, &mut c);
             }
             let n = tris.len().max(1) as f64;
             let structure_bytes: usize = accel

@@ -77,7 +77,7 @@ fn work_per_ray(tm: &gridtrace::query::TraceMesh, gpu_bvh_walk: bool, o: &[[f32;
                 gridtrace::gpu::bvh::walk::<false, _>(nodes, prims, &scene.accel.tris, &r, 0.0, f32::INFINITY, &mut c);
             }
             None => {
-                scene.accel.intersect(&r, 0.0, f32::INFINITY, &mut c);
+                scene.accel.intersect(&r, &mut c);
             }
         }
     }
@@ -136,7 +136,7 @@ pub fn query_study(
                     .collect();
                 let (times, hits) = repeat(warmup, reps, || {
                     let t0 = std::time::Instant::now();
-                    let h = r.intersect(&ray_vec, 0.0, f32::INFINITY)?;
+                    let h = r.intersect(&ray_vec)?;
                     Ok((ms_since(t0), h.iter().filter(|h| h.is_hit()).count()))
                 })?;
                 runs.push(("gpu", times, hits[0]));

@@ -116,7 +116,7 @@ impl RayObserver for Recorder<'_> {
     /// the closest occluder's `t` (infinity when the light is visible).
     fn shadow(&mut self, ray: &Ray, dist: f32, occluded: bool) {
         let t = if occluded {
-            let h = self.scene.accel.intersect(ray, 0.0, dist, &mut NoCounters);
+            let h = self.scene.accel.intersect(&ray.within(0.0, dist), &mut NoCounters);
             if h.is_hit() { h.t } else { dist }
         } else {
             f32::INFINITY

@@ -162,11 +162,11 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let mut line = QueryLine::default();
     while done < n {
         let count = (n - done).min(CHUNK as u64) as usize;
-        let rays = read_rays(&mut input, &mut buf[..count * 24], &a.rays, done)?;
+        let rays = read_rays(&mut input, &mut buf[..count * 24], (&a.rays, done), (a.tmin, a.tmax))?;
         if a.occluded {
             for s in pass_s.iter_mut() {
                 let t0 = Instant::now();
-                mesh.occluded_rays_into(mesh.backend(), &rays, a.tmin, a.tmax, &mut occ)?;
+                mesh.occluded_rays_into(mesh.backend(), &rays, &mut occ)?;
                 *s += t0.elapsed().as_secs_f64();
             }
             hits += occ.par_iter().filter(|o| **o).count() as u64;
@@ -175,7 +175,7 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
         } else {
             for s in pass_s.iter_mut() {
                 let t0 = Instant::now();
-                mesh.intersect_rays_into(mesh.backend(), &rays, a.tmin, a.tmax, !a.no_uv, &mut found)?;
+                mesh.intersect_rays_into(mesh.backend(), &rays, !a.no_uv, &mut found)?;
                 *s += t0.elapsed().as_secs_f64();
             }
             // Records written in parallel into a zeroed buffer (fresh pages, first touched by
@@ -282,8 +282,8 @@ pub(crate) fn print_tail(gpu: &gridtrace::gpu::GpuQueryStats, line: &QueryLine, 
 pub(crate) fn read_rays(
     input: &mut impl Read,
     bytes: &mut [u8],
-    path: &std::path::Path,
-    first: u64,
+    (path, first): (&std::path::Path, u64),
+    (t_min, t_max): (f32, f32),
 ) -> gridtrace::Result<Vec<Ray>> {
     input.read_exact(bytes).map_err(|e| Error::io(path, e))?;
     let mut rays = Vec::with_capacity(bytes.len() / 24);
@@ -291,7 +291,7 @@ pub(crate) fn read_rays(
         .par_chunks_exact(24)
         .map(|r| {
             let f = |k: usize| f32::from_le_bytes([r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]]);
-            Ray::new(glam::Vec3::new(f(0), f(1), f(2)), glam::Vec3::new(f(3), f(4), f(5)))
+            Ray::new(glam::Vec3::new(f(0), f(1), f(2)), glam::Vec3::new(f(3), f(4), f(5))).within(t_min, t_max)
         })
         .collect_into_vec(&mut rays);
     let bad = |r: &Ray| !r.origin.is_finite() || !r.dir.is_finite() || r.dir == glam::Vec3::ZERO;

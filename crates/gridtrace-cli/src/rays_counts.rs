@@ -55,11 +55,8 @@ pub fn run(a: RaysArgs) -> gridtrace::Result<()> {
     let mut line = QueryLine::default();
     while done < n {
         let count = (n - done).min(CHUNK as u64) as usize;
-        let rays = read_rays(&mut input, &mut buf[..count * 24], &a.rays, done)?;
-        let rows: Vec<[f32; 6]> = rays
-            .par_iter()
-            .map(|r| [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z])
-            .collect();
+        let rays = read_rays(&mut input, &mut buf[..count * 24], (&a.rays, done), (a.tmin, a.tmax))?;
+        let rows: Vec<[f32; 6]> = rays.par_iter().map(gridtrace::accel::Ray::wire).collect();
         let mut counts = Vec::new();
         for s in pass_s.iter_mut() {
             let t0 = Instant::now();

@@ -46,7 +46,7 @@ fn main() -> gridtrace::Result<()> {
             } else {
                 f32::INFINITY
             };
-            gpu.cast(&RaySlice { rays: &rays }, (0.0, t_max), answer, |_, a| {
+            gpu.cast(&RaySlice::new(&rays), (0.0, t_max), answer, |_, a| {
                 answered += std::hint::black_box(match a {
                     gridtrace::gpu::ChunkAnswers::Hits(h) => h.len(),
                     gridtrace::gpu::ChunkAnswers::HitsUv(h) => h.len(),

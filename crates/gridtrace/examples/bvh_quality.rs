@@ -111,7 +111,7 @@ fn main() -> gridtrace::Result<()> {
             let mut best_s = f64::INFINITY;
             for _ in 0..passes {
                 let t0 = thread_cpu_seconds();
-                accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut out);
+                accel.intersect_batch(&rays, &mut out);
                 best_s = best_s.min(thread_cpu_seconds() - t0);
             }
             println!(
@@ -123,7 +123,7 @@ fn main() -> gridtrace::Result<()> {
         }
         if batch_only {
             let mut out = vec![Hit::MISS; rays.len()];
-            accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut out);
+            accel.intersect_batch(&rays, &mut out);
             println!("  {file}: {} hits", out.iter().filter(|h| h.is_hit()).count());
             continue;
         }
@@ -135,7 +135,7 @@ fn main() -> gridtrace::Result<()> {
         };
         let mut single = Vec::with_capacity(rays.len());
         for r in &rays {
-            let h = accel.intersect(r, 0.0, f32::INFINITY, &mut c);
+            let h = accel.intersect(r, &mut c);
             for x in [h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()] {
                 mix(x);
             }
@@ -145,7 +145,7 @@ fn main() -> gridtrace::Result<()> {
         let mut best_s = f64::INFINITY;
         for _ in 0..3 {
             let t0 = Instant::now();
-            accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut out);
+            accel.intersect_batch(&rays, &mut out);
             best_s = best_s.min(t0.elapsed().as_secs_f64());
         }
         assert!(out == single, "the batch's answers differ from the single walk's");
@@ -153,7 +153,7 @@ fn main() -> gridtrace::Result<()> {
         for _ in 0..3 {
             let t0 = Instant::now();
             for (r, o) in rays.iter().zip(out.iter_mut()) {
-                *o = accel.intersect(r, 0.0, f32::INFINITY, &mut gridtrace::accel::NoCounters);
+                *o = accel.intersect(r, &mut gridtrace::accel::NoCounters);
             }
             one_s = one_s.min(t0.elapsed().as_secs_f64());
         }

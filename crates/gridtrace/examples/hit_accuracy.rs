@@ -32,7 +32,7 @@ fn main() -> gridtrace::Result<()> {
         let origin = centre + on_sphere * (2.5 * diag);
         let target = lo + (hi - lo) * Vec3::new(unit(), unit(), unit());
         let ray = Ray::new(origin, target - origin);
-        let h = accel.intersect(&ray, 0.0, f32::INFINITY, &mut NoCounters);
+        let h = accel.intersect(&ray, &mut NoCounters);
         if !h.is_hit() {
             continue;
         }

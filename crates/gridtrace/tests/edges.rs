@@ -181,14 +181,14 @@ fn cpu_leaks(packets: bool) -> (usize, Vec<String>) {
                 .enumerate()
                 .map(|(i, r)| {
                     if !packets {
-                        return scene.accel.intersect(&r.ray, 0.0, f32::INFINITY, &mut NoCounters);
+                        return scene.accel.intersect(&r.ray, &mut NoCounters);
                     }
                     let k = i % PACKET;
                     let side = r.ray.dir.any_orthonormal_vector() * r.ray.dir.length() * 1e-3;
                     let lanes: [Ray; PACKET] =
                         std::array::from_fn(|j| Ray::new(r.ray.origin, r.ray.dir + side * (j as f32 - k as f32)));
                     let mut none = [NoCounters; PACKET];
-                    scene.accel.intersect_packet(&lanes, 0.0, f32::INFINITY, &mut none)[k]
+                    scene.accel.intersect_packet(&lanes, &mut none)[k]
                 })
                 .collect();
             let bad = leaks(&rays, &hits, &tris);
@@ -260,7 +260,7 @@ fn gpu_edges_and_vertices_do_not_leak() {
             gpu.set_traversal(kind).unwrap();
             let rays = rays_for(kind, &rays, ctx.is_software());
             let plain: Vec<_> = rays.iter().map(|r| r.ray).collect();
-            let hits = gpu.intersect(&plain, 0.0, f32::INFINITY).unwrap();
+            let hits = gpu.intersect(&plain).unwrap();
             let bad = leaks(&rays, &hits, &tris);
             eprintln!("GPU {name} {}: {} of {} rays leak", kind.name(), bad.len(), rays.len());
             // `hwrt` is the driver's triangle test, not ours: its leaks are measured and held
@@ -306,7 +306,7 @@ fn gpu_near_misses_miss_and_near_hits_hit() {
     assert!(kinds.len() >= 4, "{kinds:?}");
     for kind in kinds {
         let mesh = gridtrace::testing::gpu_mesh(&vertices, &faces, kind);
-        let hits = mesh.intersect_rays(&plain, 0.0, f32::INFINITY).unwrap();
+        let hits = mesh.intersect_rays(&plain).unwrap();
         for (m, h) in rays.iter().zip(&hits) {
             assert_eq!(h.is_hit(), m.hits, "GPU {}: {m:?} got {h:?}", kind.name());
             if let Some(t) = m.t {

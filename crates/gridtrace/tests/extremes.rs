@@ -24,11 +24,11 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         let bad: Vec<(Ray, Hit, Hit)> = rays
             .par_iter()
             .filter_map(|r| {
-                let want = brute_force_intersect(&all.grid.tris, r, 0.0, f32::INFINITY);
-                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+                let want = brute_force_intersect(&all.grid.tris, r);
+                let got = all.get(kind).intersect(r, &mut NoCounters);
                 let ok = got.is_hit() == want.is_hit()
                     && (!want.is_hit() || (got.t - want.t).abs() <= 1e-6 * want.t.abs())
-                    && all.get(kind).occluded(r, 0.0, f32::INFINITY, &mut NoCounters) == want.is_hit();
+                    && all.get(kind).occluded(r, &mut NoCounters) == want.is_hit();
                 (!ok).then_some((*r, got, want))
             })
             .collect();
@@ -48,12 +48,7 @@ fn single_triangle() {
     check("single", vec![t], Resolution::default());
     check("single-fine", vec![t], Resolution::Fixed([9, 9, 1]));
     let accel = Accel::build(vec![t], AccelKind::ProximityCloud, &AccelParams::NONE).unwrap();
-    let h = accel.intersect(
-        &Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z),
-        0.0,
-        f32::INFINITY,
-        &mut NoCounters,
-    );
+    let h = accel.intersect(&Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z), &mut NoCounters);
     assert_eq!((h.tri, h.t), (0, 1.0));
 }
 
@@ -185,7 +180,7 @@ fn no_shadow_acne_at_grazing_light() {
             for y in 0..h {
                 for x in 0..w {
                     let r = frame.ray(x, y);
-                    let hit = p.accel.intersect(&r, 0.0, f32::INFINITY, &mut NoCounters);
+                    let hit = p.accel.intersect(&r, &mut NoCounters);
                     if !hit.is_hit() {
                         continue;
                     }
@@ -205,7 +200,7 @@ fn no_shadow_acne_at_grazing_light() {
                     let up = l.cross(side);
                     let clear = [Vec3::ZERO, side, -side, up, -up].iter().all(|&d| {
                         let ray = Ray::new(surf.position, light + d - surf.position);
-                        !brute_force_occluded(others, &ray, 1e-4, 1.0)
+                        !brute_force_occluded(others, &gridtrace::testing::within(&ray, 1e-4, 1.0))
                     });
                     if !clear {
                         continue;

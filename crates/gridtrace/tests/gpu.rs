@@ -109,11 +109,8 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
     for kind in kinds_of(&p) {
         let (scene, gpu) = for_kind(&mut p, kind);
         let accel = &scene.accel;
-        let cpu_hits: Vec<Hit> = rays
-            .iter()
-            .map(|r| accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters))
-            .collect();
-        let gpu_hits = gpu.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+        let cpu_hits: Vec<Hit> = rays.iter().map(|r| accel.intersect(r, &mut NoCounters)).collect();
+        let gpu_hits = gpu.intersect(&rays).unwrap();
         assert_eq!(gpu_hits.len(), rays.len());
         let bad: Vec<_> = (0..rays.len())
             .filter(|&i| !agree(accel, &rays[i], &cpu_hits[i], &gpu_hits[i]))
@@ -142,11 +139,8 @@ fn per_ray_agreement(scene_name: &str, res: Resolution) {
         let hits = cpu_hits.iter().filter(|h| h.is_hit()).count();
         assert!(hits > rays.len() / 10);
         // Any hit, with t_max at the CPU's closest hit (+-) and unbounded.
-        let cpu_occ: Vec<bool> = rays
-            .iter()
-            .map(|r| accel.occluded(r, 0.0, f32::INFINITY, &mut NoCounters))
-            .collect();
-        let gpu_occ = gpu.occluded(&rays, 0.0, f32::INFINITY).unwrap();
+        let cpu_occ: Vec<bool> = rays.iter().map(|r| accel.occluded(r, &mut NoCounters)).collect();
+        let gpu_occ = gpu.occluded(&rays).unwrap();
         let bad_occ = cpu_occ.iter().zip(&gpu_occ).filter(|(a, b)| a != b).count();
         assert!(
             bad_occ <= allowed,
@@ -223,7 +217,7 @@ fn uploads_serve_their_kinds_only() {
                 Err(e) => assert!(e.to_string().contains(&format!("'{}'", kind.name())), "{e}"),
                 Ok(()) => {
                     assert_eq!(gpu.kind(), kind);
-                    assert!(gpu.intersect(&rays, 0.0, f32::INFINITY).is_ok());
+                    assert!(gpu.intersect(&rays).is_ok());
                 }
             }
         }
@@ -660,9 +654,9 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
     let kind = AccelKind::ProximityCloud;
     whole.set_traversal(kind).unwrap();
     chunked.set_traversal(kind).unwrap();
-    let want = whole.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+    let want = whole.intersect(&rays).unwrap();
     assert_eq!(whole.last_query_stats().chunks, 1);
-    let got = chunked.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+    let got = chunked.intersect(&rays).unwrap();
     let same = |a: &Hit, b: &Hit| {
         a.tri == b.tri
             && a.t.to_bits() == b.t.to_bits()
@@ -701,7 +695,7 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
     let mut pairs = vec![TriHit { t: 0.0, tri: 0 }; rays.len()];
     chunked
         .cast(
-            &RaySlice { rays: &rays },
+            &RaySlice::new(&rays),
             (0.0, f32::INFINITY),
             Answer::Hits { uv: false },
             |first, a| {
@@ -721,8 +715,8 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
     assert_eq!(s.downloaded_bytes, 2500 * 8 + stamps(&s, 4));
 
     // Occlusion: one bit a ray down, the one-chunk batch's answers, and the closest hits'.
-    let want_occ = whole.occluded(&rays, 0.0, 10.0).unwrap();
-    let got_occ = chunked.occluded(&rays, 0.0, 10.0).unwrap();
+    let want_occ = whole.occluded(&gridtrace::testing::within(&rays, 0.0, 10.0)).unwrap();
+    let got_occ = chunked.occluded(&gridtrace::testing::within(&rays, 0.0, 10.0)).unwrap();
     assert_eq!(want_occ, got_occ);
     assert!(want_occ.iter().any(|&o| o) && want_occ.iter().any(|&o| !o));
     for (h, &o) in want.iter().zip(&want_occ) {
@@ -752,7 +746,7 @@ fn a_pipelined_batch_of_many_chunks_equals_one_chunk() {
             gridtrace::gpu::unpack_bits(bits, &mut occ[first..end]);
         })
         .unwrap();
-    let narrow = whole.occluded(&rays, 2.0, 8.0).unwrap();
+    let narrow = whole.occluded(&gridtrace::testing::within(&rays, 2.0, 8.0)).unwrap();
     for i in 0..rays.len() {
         assert_eq!(occ[i], if i % 2 == 0 { want_occ[i] } else { narrow[i] }, "ray {i}");
     }
@@ -781,8 +775,8 @@ fn consecutive_batches_answer_as_fresh_ones() {
         fresh.set_max_tile_pixels(700);
         fresh.set_traversal(kind).unwrap();
         if k % 2 == 0 {
-            let got = kept.intersect(batch, 0.0, f32::INFINITY).unwrap();
-            let want = fresh.intersect(batch, 0.0, f32::INFINITY).unwrap();
+            let got = kept.intersect(batch).unwrap();
+            let want = fresh.intersect(batch).unwrap();
             assert_eq!(got.len(), n);
             let same = got
                 .iter()
@@ -793,8 +787,8 @@ fn consecutive_batches_answer_as_fresh_ones() {
                 "batch {k} ({n} rays from {first}) differs from a fresh renderer's"
             );
         } else {
-            let got = kept.occluded(batch, 0.0, 10.0).unwrap();
-            let want = fresh.occluded(batch, 0.0, 10.0).unwrap();
+            let got = kept.occluded(&gridtrace::testing::within(batch, 0.0, 10.0)).unwrap();
+            let want = fresh.occluded(&gridtrace::testing::within(batch, 0.0, 10.0)).unwrap();
             assert_eq!(got, want, "batch {k} ({n} rays from {first})");
         }
         assert_eq!(kept.last_query_stats().rays, n as u64);

@@ -212,7 +212,7 @@ fn lists_split_over_passes_equal_one_pass() {
     let mut split = GpuRenderer::new(ctx, &scene, &GpuVariants::default()).unwrap();
     split.set_max_tile_pixels(300);
     let rays = ray_set(&scene.accel, 1000, 5);
-    let source = RaySlice { rays: &rays };
+    let source = RaySlice::new(&rays);
     let run = |r: &mut GpuRenderer, answer| {
         let mut counts = Vec::new();
         let mut hits = Vec::new();

@@ -36,14 +36,9 @@ fn rays_for(mesh: &TraceMesh, n: usize, seed: u64) -> Vec<Ray> {
 /// At most `rays / 10,000` rays may disagree otherwise (as in tests/gpu.rs).
 fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
     let tris = &mesh.prepared().accel.tris;
-    let want: Vec<Hit> = rays
-        .par_iter()
-        .map(|r| brute_force_intersect(tris, r, 0.0, f32::INFINITY))
-        .collect();
-    let got = mesh
-        .intersect_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY)
-        .unwrap();
-    let occ = mesh.occluded_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY).unwrap();
+    let want: Vec<Hit> = rays.par_iter().map(|r| brute_force_intersect(tris, r)).collect();
+    let got = mesh.intersect_rays_with(Backend::Gpu, rays).unwrap();
+    let occ = mesh.occluded_rays_with(Backend::Gpu, rays).unwrap();
     let (bad, excused) = gpu_disagreements(rays, &want, &got, &occ);
     // The excuse must stay an exception (a GPU test that misses every edge would pass it).
     assert!(
@@ -72,11 +67,13 @@ fn check(name: &str, mesh: &TraceMesh, rays: &[Ray]) {
     for chunk in hit_rays.chunk_by(|a, b| a.1 == b.1) {
         let rs: Vec<Ray> = chunk.iter().map(|c| c.0).collect();
         let t_max = chunk[0].1;
-        let o = mesh.occluded_rays_with(Backend::Gpu, &rs, 0.0, t_max).unwrap();
+        let o = mesh
+            .occluded_rays_with(Backend::Gpu, &gridtrace::testing::within(&rs, 0.0, t_max))
+            .unwrap();
         let wrong = rs
             .iter()
             .zip(&o)
-            .filter(|(r, o)| **o != brute_force_occluded(tris, r, 0.0, t_max))
+            .filter(|(r, o)| **o != brute_force_occluded(tris, &gridtrace::testing::within(r, 0.0, t_max)))
             .count();
         assert!(wrong <= allowed, "{name}: {wrong} bounded any-hit results disagree");
     }
@@ -157,12 +154,8 @@ fn a_million_copies_of_one_triangle() {
         rays.push(Ray::new(Vec3::new(1.0 + s, 1.0, 2.0), Vec3::new(0.0, 0.0, -1.0)));
         rays.push(Ray::new(Vec3::new(-1.0, 0.2 + s * 0.01, 0.0), Vec3::new(1.0, 0.0, 0.0)));
     }
-    let got = mesh
-        .intersect_rays_with(Backend::Gpu, &rays, 0.0, f32::INFINITY)
-        .unwrap();
-    let occ = mesh
-        .occluded_rays_with(Backend::Gpu, &rays, 0.0, f32::INFINITY)
-        .unwrap();
+    let got = mesh.intersect_rays_with(Backend::Gpu, &rays).unwrap();
+    let occ = mesh.occluded_rays_with(Backend::Gpu, &rays).unwrap();
     let tri = TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y);
     for (i, r) in rays.iter().enumerate() {
         let want = tri.intersect(r.origin, r.dir, 0.0, f32::INFINITY);

@@ -46,11 +46,11 @@ fn two_d_dispatches_equal_one_d() {
             );
             assert_eq!(sa.render.rays, sb.render.rays, "{} {mode:?}", accel.name());
         }
-        let ha = a.intersect(&rays, 0.0, f32::INFINITY).unwrap();
-        let hb = b.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+        let ha = a.intersect(&rays).unwrap();
+        let hb = b.intersect(&rays).unwrap();
         assert!(ha == hb, "{}: 2-D dispatch changed the hits", accel.name());
-        let oa = a.occluded(&rays, 0.0, f32::INFINITY).unwrap();
-        let ob = b.occluded(&rays, 0.0, f32::INFINITY).unwrap();
+        let oa = a.occluded(&rays).unwrap();
+        let ob = b.occluded(&rays).unwrap();
         assert_eq!(oa, ob, "{}: 2-D dispatch changed occlusion", accel.name());
     }
     let tris = grid.accel.tris;

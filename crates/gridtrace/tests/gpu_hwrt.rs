@@ -154,10 +154,10 @@ fn hits_name_the_cpus_triangle_and_barycentrics() {
     // Rays are drawn from a grid's cells over the same triangles.
     let grid = builtin::knot_box().prepare(Resolution::default()).unwrap();
     let rays = ray_set(&grid.accel, 20_000, 11);
-    let got = gpu.intersect(&rays, 0.0, f32::INFINITY).unwrap();
+    let got = gpu.intersect(&rays).unwrap();
     let mut interior = 0;
     for (r, g) in rays.iter().zip(&got) {
-        let c: Hit = scene.accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+        let c: Hit = scene.accel.intersect(r, &mut NoCounters);
         if !c.is_hit() || c.u.min(c.v).min(1.0 - c.u - c.v) < 1e-3 {
             continue;
         }

@@ -106,20 +106,20 @@ trait GpuQueries {
 
 impl GpuQueries for &TraceMesh {
     fn closest(&mut self, rays: &[Ray]) -> Vec<Hit> {
-        self.intersect_rays_with(Backend::Gpu, rays, 0.0, f32::INFINITY)
-            .unwrap()
+        self.intersect_rays_with(Backend::Gpu, rays).unwrap()
     }
     fn any(&mut self, rays: &[Ray], t_max: f32) -> Vec<bool> {
-        self.occluded_rays_with(Backend::Gpu, rays, 0.0, t_max).unwrap()
+        self.occluded_rays_with(Backend::Gpu, &gridtrace::testing::within(rays, 0.0, t_max))
+            .unwrap()
     }
 }
 
 impl GpuQueries for GpuRenderer {
     fn closest(&mut self, rays: &[Ray]) -> Vec<Hit> {
-        self.intersect(rays, 0.0, f32::INFINITY).unwrap()
+        self.intersect(rays).unwrap()
     }
     fn any(&mut self, rays: &[Ray], t_max: f32) -> Vec<bool> {
-        self.occluded(rays, 0.0, t_max).unwrap()
+        self.occluded(&gridtrace::testing::within(rays, 0.0, t_max)).unwrap()
     }
 }
 
@@ -138,18 +138,9 @@ impl GpuQueries for GpuRenderer {
 fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
     assert!(accel.irregular().is_some(), "{name}: not an irregular grid");
     let tris = &accel.tris;
-    let want: Vec<Hit> = rays
-        .par_iter()
-        .map(|r| brute_force_intersect(tris, r, 0.0, f32::INFINITY))
-        .collect();
-    let cpu: Vec<Hit> = rays
-        .par_iter()
-        .map(|r| accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters))
-        .collect();
-    let cpu_occ: Vec<bool> = rays
-        .par_iter()
-        .map(|r| accel.occluded(r, 0.0, f32::INFINITY, &mut NoCounters))
-        .collect();
+    let want: Vec<Hit> = rays.par_iter().map(|r| brute_force_intersect(tris, r)).collect();
+    let cpu: Vec<Hit> = rays.par_iter().map(|r| accel.intersect(r, &mut NoCounters)).collect();
+    let cpu_occ: Vec<bool> = rays.par_iter().map(|r| accel.occluded(r, &mut NoCounters)).collect();
     let cpu_bad: Vec<usize> = (0..rays.len())
         .filter(|&i| {
             let (w, c) = (&want[i], &cpu[i]);
@@ -237,7 +228,7 @@ fn check(name: &str, accel: &Accel, gpu: &mut impl GpuQueries, rays: &[Ray]) {
         wrong += rs
             .iter()
             .zip(&o)
-            .filter(|(r, o)| **o != brute_force_occluded(tris, r, 0.0, t_max))
+            .filter(|(r, o)| **o != brute_force_occluded(tris, &gridtrace::testing::within(r, 0.0, t_max)))
             .count();
     }
     assert!(wrong <= allowed, "{name}: {wrong} bounded any-hit results disagree");

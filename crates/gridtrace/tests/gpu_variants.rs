@@ -212,14 +212,14 @@ fn variants_give_the_default_hits() {
     for (kind, scene) in per_structure(&ctx, &scene) {
         let structure = kind.structure_name();
         let mut base = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
-        let want = base.intersect(&rays, 0.0, f32::INFINITY).unwrap();
-        let want_any = base.occluded(&rays, 0.0, f32::INFINITY).unwrap();
+        let want = base.intersect(&rays).unwrap();
+        let want_any = base.occluded(&rays).unwrap();
         let hits = want.iter().filter(|h| h.is_hit()).count();
         assert!(hits > rays.len() / 10, "{structure}: the rays must hit");
         for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
             let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &var).unwrap();
-            let got = gpu.intersect(&rays, 0.0, f32::INFINITY).unwrap();
-            let got_any = gpu.occluded(&rays, 0.0, f32::INFINITY).unwrap();
+            let got = gpu.intersect(&rays).unwrap();
+            let got_any = gpu.occluded(&rays).unwrap();
             let what = format!("{structure} {}", var.changes());
             assert_eq!(got_any, want_any, "{what}: any hit");
             if !tie_order_differs(&var, structure) {

@@ -65,15 +65,15 @@ proptest! {
                 continue;
             }
             let r = Ray::new(o, d);
-            let want = brute_force_intersect(&all.grid.tris, &r, 0.0, f32::INFINITY);
+            let want = brute_force_intersect(&all.grid.tris, &r);
             for kind in AccelKind::ALL {
-                let got = all.get(kind).intersect(&r, 0.0, f32::INFINITY, &mut NoCounters);
+                let got = all.get(kind).intersect(&r, &mut NoCounters);
                 prop_assert_eq!(got.is_hit(), want.is_hit(), "{:?} {:?}: got {:?} want {:?}", kind, r, got, want);
                 if want.is_hit() {
                     prop_assert!((got.t - want.t).abs() <= 1e-6 * want.t.abs().max(1e-30),
                         "{:?} {:?}: got {:?} want {:?}", kind, r, got, want);
                 }
-                let occ = all.get(kind).occluded(&r, 0.0, f32::INFINITY, &mut NoCounters);
+                let occ = all.get(kind).occluded(&r, &mut NoCounters);
                 prop_assert_eq!(occ, want.is_hit(), "{:?} {:?}", kind, r);
             }
         }

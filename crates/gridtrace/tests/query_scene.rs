@@ -171,13 +171,13 @@ fn brute_truth(parts: &[Part], rays: &[[f32; 6]]) -> Vec<(Hit, bool, Vec<Hit>)> 
                         ..h
                     };
                     let mut hits = Vec::new();
-                    all_hits_brute(tris, &q, 0.0, f32::INFINITY, &mut hits);
+                    all_hits_brute(tris, &q, &mut hits);
                     all.extend(hits.into_iter().map(name));
-                    let h = brute_force_intersect(tris, &q, 0.0, best.t);
+                    let h = brute_force_intersect(tris, &q.within(0.0, best.t));
                     if h.is_hit() && h.t < best.t {
                         best = name(h);
                     }
-                    occluded |= brute_force_occluded(tris, &q, 0.0, 1.5);
+                    occluded |= brute_force_occluded(tris, &gridtrace::testing::within(&q, 0.0, 1.5));
                 }
                 all.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.tri.cmp(&b.tri)));
                 // Open3D's rule: a hit with the geometry and `t` of the previous one kept is
@@ -556,7 +556,7 @@ fn gpu_rays_equal_cpu() {
             // nearer hit lies on its face's own boundary (f64 exact zeros on the CPU, f32 on
             // the GPU: `testing::on_triangle_boundary`). Both counted, held to 1%.
             if !close(c.t_hit[i], g.t_hit[i]) {
-                let flat = ray(q).map_or(Hit::MISS, |q| brute_force_intersect(&r.tris, &q, 0.0, f32::INFINITY));
+                let flat = ray(q).map_or(Hit::MISS, |q| brute_force_intersect(&r.tris, &q));
                 if close(flat.t, g.t_hit[i]) {
                     two_level_rounding += 1;
                     continue;

@@ -32,7 +32,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
     let rays = ray_set(&all.grid, RAYS, 0xC0FFEE ^ name.len() as u64);
     let truth: Vec<Hit> = rays
         .par_iter()
-        .map(|r| brute_force_intersect(&all.grid.tris, r, 0.0, f32::INFINITY))
+        .map(|r| brute_force_intersect(&all.grid.tris, r))
         .collect();
     let hits = truth.iter().filter(|h| h.is_hit()).count();
     assert!(
@@ -44,7 +44,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .par_iter()
             .zip(&truth)
             .filter_map(|(r, want)| {
-                let got = all.get(kind).intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+                let got = all.get(kind).intersect(r, &mut NoCounters);
                 let mut errs = Vec::new();
                 if !agree(&got, want) {
                     errs.push(format!("closest {got:?} want {want:?}"));
@@ -56,15 +56,19 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                         errs.push("tie partner not hit".into());
                     }
                 }
-                let occ = all.get(kind).occluded(r, 0.0, f32::INFINITY, &mut NoCounters);
+                let occ = all.get(kind).occluded(r, &mut NoCounters);
                 if occ != want.is_hit() {
                     errs.push(format!("occluded {occ} but closest {want:?}"));
                 }
                 if want.is_hit() {
                     // Nothing strictly before the closest hit; something just past it.
-                    let before = all.get(kind).occluded(r, 0.0, want.t * (1.0 - 1e-5), &mut NoCounters);
-                    let past = all.get(kind).occluded(r, 0.0, want.t * (1.0 + 1e-5), &mut NoCounters);
-                    if before != brute_force_occluded(&all.grid.tris, r, 0.0, want.t * (1.0 - 1e-5)) || !past {
+                    let before = all
+                        .get(kind)
+                        .occluded(&r.within(0.0, want.t * (1.0 - 1e-5)), &mut NoCounters);
+                    let past = all
+                        .get(kind)
+                        .occluded(&r.within(0.0, want.t * (1.0 + 1e-5)), &mut NoCounters);
+                    if before != brute_force_occluded(&all.grid.tris, &r.within(0.0, want.t * (1.0 - 1e-5))) || !past {
                         errs.push(format!("occluded window wrong: before {before} past {past}"));
                     }
                 }
@@ -73,18 +77,17 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .collect();
         // The batch queries (interleaved rays for the BVH) give exactly the per-ray answers.
         let mut batch = vec![Hit::MISS; rays.len()];
-        all.get(kind).intersect_batch(&rays, 0.0, f32::INFINITY, &mut batch);
+        all.get(kind).intersect_batch(&rays, &mut batch);
         let mut occ_batch = vec![false; rays.len()];
-        all.get(kind).occluded_batch(&rays, 0.0, f32::INFINITY, &mut occ_batch);
+        all.get(kind).occluded_batch(&rays, &mut occ_batch);
         // With normals (the BVH takes them from the triangle it hits): the same hits, and each
         // normal the hit triangle's.
         let mut with_normals = vec![Hit::MISS; rays.len()];
         let mut normals = vec![Vec3::NAN; rays.len()];
-        all.get(kind)
-            .intersect_batch_each(&rays, 0.0, f32::INFINITY, |i, hit, normal| {
-                with_normals[i] = hit;
-                normals[i] = normal;
-            });
+        all.get(kind).intersect_batch_each(&rays, |i, hit, normal| {
+            with_normals[i] = hit;
+            normals[i] = normal;
+        });
         assert_eq!(with_normals, batch, "{name} {}: batch with normals", kind.name());
         for (h, n) in batch.iter().zip(&normals) {
             let want = if h.is_hit() {
@@ -97,7 +100,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
         for (i, r) in rays.iter().enumerate() {
             assert_eq!(
                 batch[i],
-                all.get(kind).intersect(r, 0.0, f32::INFINITY, &mut NoCounters),
+                all.get(kind).intersect(r, &mut NoCounters),
                 "{name} {} batch {r:?}",
                 kind.name()
             );
@@ -128,13 +131,14 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             let packet = &rays[at..(at + len).min(rays.len())];
             let n = packet.len();
             let mut counted = vec![TraversalCounters::default(); n];
-            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, &mut counted);
+            let got = accel.intersect_packet(packet, &mut counted);
             let limits: [f32; PACKET] = std::array::from_fn(|k| [f32::INFINITY, 1.0, 0.25][(at + k) % 3]);
             let mut counted_any = vec![TraversalCounters::default(); n];
-            let blocked = accel.occluded_packet(packet, 0.0, limits, &mut counted_any);
+            let blocked =
+                accel.occluded_packet(&gridtrace::testing::within_each(packet, 0.0, &limits), &mut counted_any);
             for (k, r) in packet.iter().enumerate() {
                 let mut c = TraversalCounters::default();
-                let want = accel.intersect(r, 0.0, f32::INFINITY, &mut c);
+                let want = accel.intersect(r, &mut c);
                 assert_eq!(
                     (
                         got[k].t.to_bits(),
@@ -148,7 +152,7 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
                     kind.name()
                 );
                 let mut c = TraversalCounters::default();
-                let want = accel.occluded(r, 0.0, limits[k], &mut c);
+                let want = accel.occluded(&gridtrace::testing::within(r, 0.0, limits[k]), &mut c);
                 assert_eq!(
                     (blocked[k], counted_any[k]),
                     (want, c),
@@ -176,19 +180,19 @@ fn check(name: &str, tris: Vec<TriAccel>, res: Resolution) {
             .collect();
         let bits = |h: &Hit| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits());
         let mut batch = vec![Hit::MISS; coherent.len()];
-        accel.intersect_batch(&coherent, 0.0, f32::INFINITY, &mut batch);
+        accel.intersect_batch(&coherent, &mut batch);
         let mut occ_batch = vec![false; coherent.len()];
-        accel.occluded_batch(&coherent, 0.0, 1.0, &mut occ_batch);
+        accel.occluded_batch(&gridtrace::testing::within(&coherent, 0.0, 1.0), &mut occ_batch);
         for (p, packet) in coherent.chunks(PACKET).enumerate() {
             let mut none = [NoCounters; PACKET];
-            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, &mut none);
-            let blocked = accel.occluded_packet(packet, 0.0, [1.0; PACKET], &mut none);
+            let got = accel.intersect_packet(packet, &mut none);
+            let blocked = accel.occluded_packet(&gridtrace::testing::within(packet, 0.0, 1.0), &mut none);
             for (k, r) in packet.iter().enumerate() {
-                let want = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+                let want = accel.intersect(r, &mut NoCounters);
                 let what = format!("{name} {}: coherent packet {p}, ray {k}, {r:?}", kind.name());
                 assert_eq!(bits(&got[k]), bits(&want), "{what}");
                 assert_eq!(bits(&batch[PACKET * p + k]), bits(&want), "{what} (batch)");
-                let want = accel.occluded(r, 0.0, 1.0, &mut NoCounters);
+                let want = accel.occluded(&gridtrace::testing::within(r, 0.0, 1.0), &mut NoCounters);
                 assert_eq!(blocked[k], want, "{what}: any hit");
                 assert_eq!(occ_batch[PACKET * p + k], want, "{what}: any hit (batch)");
             }
@@ -260,8 +264,8 @@ fn proximity_cloud_visits_fewer_cells() {
     let rays = ray_set(&accel, 20_000, 9);
     let (mut g, mut p) = (TraversalCounters::default(), TraversalCounters::default());
     for r in &rays {
-        accel.intersect(r, 0.0, f32::INFINITY, &mut g);
-        pc.intersect(r, 0.0, f32::INFINITY, &mut p);
+        accel.intersect(r, &mut g);
+        pc.intersect(r, &mut p);
     }
     assert_eq!(g.jumps, 0);
     assert!(p.jumps > 0);

@@ -125,7 +125,7 @@ pub fn ray_study(
                     variant: variant.to_string(),
                 };
                 let cpu = cpu_tm.as_ref().unwrap_or(&tm);
-                let (cpu_times, cpu_hits) = timed(plan.reps, || cpu.intersect_rays(&rays, 0.0, f32::INFINITY))?;
+                let (cpu_times, cpu_hits) = timed(plan.reps, || cpu.intersect_rays(&rays))?;
                 let row = RowHead {
                     accel: on_cpu,
                     ..head("cpu", "-")
@@ -202,9 +202,9 @@ pub fn ray_study(
 /// u, v those are 0; occlusion answers as a hit at t = 0 or a miss (checked against the
 /// CPU's hits: occluded where the CPU hits anything).
 fn ask(r: &mut GpuRenderer, rays: &[Ray], asked: Asked) -> Result<Vec<Hit>> {
-    let rays_of = gridtrace::gpu::RaySlice { rays };
+    let rays_of = gridtrace::gpu::RaySlice::new(rays);
     match asked {
-        Asked::HitsUv => r.intersect(rays, 0.0, f32::INFINITY),
+        Asked::HitsUv => r.intersect(rays),
         Asked::Hits => r.intersect_of(&rays_of, (0.0, 1e30), false),
         Asked::Occlusion => Ok(r.occluded_of(&rays_of, (0.0, 1e30))?.into_iter().map(any_hit).collect()),
         Asked::Counts | Asked::Lists => {

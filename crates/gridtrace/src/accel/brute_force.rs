@@ -2,11 +2,14 @@
 
 use super::{Hit, Ray, TriAccel};
 
-/// Reference closest hit: every triangle tested. The ground truth for all traversal tests.
-pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> Hit {
-    let mut best = Hit { t: t_max, ..Hit::MISS };
+/// Reference closest hit in the ray's interval: every triangle tested. The ground truth for all traversal tests.
+pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray) -> Hit {
+    let mut best = Hit {
+        t: ray.t_max,
+        ..Hit::MISS
+    };
     for (i, tri) in tris.iter().enumerate() {
-        if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
+        if let Some(h) = tri.intersect(ray.origin, ray.dir, ray.t_min, best.t) {
             best = h.on(i as u32);
         }
     }
@@ -14,7 +17,7 @@ pub fn brute_force_intersect(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f3
 }
 
 /// Reference any hit.
-pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32) -> bool {
+pub fn brute_force_occluded(tris: &[TriAccel], ray: &Ray) -> bool {
     tris.iter()
-        .any(|t| t.intersect(ray.origin, ray.dir, t_min, t_max).is_some())
+        .any(|t| t.intersect(ray.origin, ray.dir, ray.t_min, ray.t_max).is_some())
 }

@@ -14,15 +14,12 @@ use super::closest::{ClosestPoint, closest_point_brute};
 use super::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel};
 use crate::Result;
 
-/// One acceleration structure over triangles: its build, its update when the triangles move,
-/// what it reports, and its closest-hit and any-hit walks for single rays, packets and batches.
+/// One acceleration structure over triangles: its build, its update when the triangles move and
+/// what it reports. Its walks are `Walks`, apart: a structure may leave them to another it keeps
+/// (`hwrt`, whose CPU-side walks are its BVH's; `Accel`'s `walk!` says which).
 ///
 /// A structure knows the traversal it serves (`Structure::kind`): only the uniform grid serves
 /// two (`grid` steps every cell, `pc` jumps), and it keeps which in its `stepping`.
-///
-/// The packet and batch defaults run the single-ray walk ray by ray; a structure overrides them
-/// when it has something faster that gives the same hits and counts bit for bit (the shared
-/// tests check it for every structure).
 pub trait AccelStructure: Sized {
     /// Builds over `tris` (checked finite by the caller or refused by the build), reading its
     /// own keys of `params` (`AccelParams::read`: an unknown key or a bad value is an error that
@@ -60,60 +57,56 @@ pub trait AccelStructure: Sized {
     fn info_lines(&self, _tris: &[TriAccel]) -> Result<Vec<(String, String)>> {
         Ok(vec![("structure".into(), self.summary())])
     }
+}
 
-    /// Closest hit with `t_min <= t < t_max`, `Hit::MISS` for none.
-    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit;
+/// A structure's walks over the triangles it was built over (pbrt-v4's `Intersect` and
+/// `IntersectP`, plus the counts, lists and nearest points): each ray in its own interval
+/// (`Ray::t_min`, `Ray::t_max`; the mask is the top level's, not read here).
+///
+/// The packet and batch defaults run the single-ray walk ray by ray; a structure overrides them
+/// when it has something faster that gives the same hits and counts bit for bit (the shared
+/// tests check it for every structure).
+pub trait Walks {
+    /// Closest hit in the ray's interval (`ray.t_min <= t < ray.t_max`), `Hit::MISS` for none.
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> Hit;
 
-    /// Whether anything is hit with `t_min <= t < t_max` (stops at the first hit found).
-    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool;
+    /// Whether anything is hit in the ray's interval (stops at the first hit found).
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> bool;
 
-    /// Closest hits of up to `PACKET` coherent rays (a 4x2 block of pixels), each counted into
-    /// its own `counters[i]`; misses past `rays.len()`.
-    fn intersect_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
+    /// Closest hits of up to `PACKET` coherent rays (a 4x2 block of pixels), each in its own
+    /// interval and counted into its own `counters[i]`; misses past `rays.len()`.
+    fn intersect_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
         check_packet(rays.len(), counters.len());
         let mut out = [Hit::MISS; PACKET];
         for ((o, r), c) in out.iter_mut().zip(rays).zip(counters.iter_mut()) {
-            *o = self.intersect(tris, r, t_min, t_max, c);
+            *o = self.intersect(tris, r, c);
         }
         out
     }
 
-    /// Any hits of up to `PACKET` rays, each with its own `t_max[i]`; false past `rays.len()`.
-    fn occluded_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
+    /// Any hits of up to `PACKET` rays, each in its own interval; false past `rays.len()`.
+    fn occluded_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
         check_packet(rays.len(), counters.len());
         let mut out = [false; PACKET];
         for (i, (r, c)) in rays.iter().zip(counters.iter_mut()).enumerate() {
-            out[i] = self.occluded(tris, r, t_min, t_max[i], c);
+            out[i] = self.occluded(tris, r, c);
         }
         out
     }
 
     /// Closest hits of a batch handed to `f(i, hit, normal)` in any order, with the hit
-    /// triangle's unnormalised geometric normal (zero for a miss); ray `i` up to
-    /// `t_max.of(i)`. On this thread.
-    fn intersect_batch_each(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: TMax<'_>,
-        f: impl FnMut(usize, Hit, Vec3),
-    ) {
-        intersect_ray_by_ray(self, tris, rays, t_min, t_max, f)
+    /// triangle's unnormalised geometric normal (zero for a miss); each ray in its own
+    /// interval. On this thread.
+    fn intersect_batch_each(&self, tris: &[TriAccel], rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        intersect_ray_by_ray(self, tris, rays, f)
+    }
+
+    /// `intersect_batch_each` for the two levels' streams (`query_scene/streamed_rays.rs`):
+    /// one instance's share of a work item's rays, in ray order, each up to its closest hit so
+    /// far. A structure whose batch walk bets on neighbouring rays being coherent (the BVH's
+    /// packets) says here that these are not.
+    fn intersect_stream_each(&self, tris: &[TriAccel], rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        self.intersect_batch_each(tris, rays, f)
     }
 
     /// The point of the mesh nearest to `p` (`closest.rs`: the nearest, then the smallest
@@ -132,71 +125,57 @@ pub trait AccelStructure: Sized {
         }
     }
 
-    /// Every hit with `t_min <= t < t_max`, each triangle at most once, appended to `out` in no
+    /// Every hit in the ray's interval, each triangle at most once, appended to `out` in no
     /// particular order (count and list queries: `query_scene`). A ray through an edge or a
     /// vertex shared by several triangles hits each of them that the triangle test accepts
     /// (`TriAccel::intersect` widens its bounds so that at least one does). Default: every
     /// triangle tested (`all_hits_brute`); a structure overrides it with its own walk, which
     /// must report the very hits brute force reports (the same triangle test, so the same
     /// bits).
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
-        all_hits_brute(tris, ray, t_min, t_max, out)
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, out: &mut Vec<Hit>) {
+        all_hits_brute(tris, ray, out)
     }
 
-    /// How many triangles each ray of a batch hits with `t_min <= t < t_max`, into `out`
-    /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists. On this thread. Default:
-    /// `all_hits` ray by ray; a structure overrides it with a walk that counts without listing.
-    fn count_hits_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+    /// How many triangles each ray of a batch hits in its interval, into `out` (`out[i]` for
+    /// `rays[i]`): the number of hits `all_hits` lists. On this thread. Default: `all_hits` ray
+    /// by ray; a structure overrides it with a walk that counts without listing.
+    fn count_hits_batch(&self, tris: &[TriAccel], rays: &[Ray], out: &mut [u32]) {
         let mut hits = Vec::new();
         for (r, o) in rays.iter().zip(out) {
             hits.clear();
-            self.all_hits(tris, r, t_min, t_max, &mut hits);
+            self.all_hits(tris, r, &mut hits);
             *o = hits.len() as u32;
         }
     }
 
     /// Any-hit answers of a batch into `out` (`out[i]` for `rays[i]`). On this thread.
-    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
+    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], out: &mut [bool]) {
         for (r, o) in rays.iter().zip(out) {
-            *o = self.occluded(tris, r, t_min, t_max, &mut NoCounters);
-        }
-    }
-}
-
-/// How far each ray of a batch is walked (`t < t_max`): one limit for all, or one a ray,
-/// indexed as the batch's rays (the two levels' streams: each ray up to its closest hit in the
-/// instances already walked).
-#[derive(Debug, Clone, Copy)]
-pub enum TMax<'a> {
-    One(f32),
-    Each(&'a [f32]),
-}
-
-impl TMax<'_> {
-    /// The limit of the batch's ray `i`.
-    #[inline(always)]
-    pub fn of(self, i: usize) -> f32 {
-        match self {
-            TMax::One(t) => t,
-            TMax::Each(t) => t[i],
+            *o = self.occluded(tris, r, &mut NoCounters);
         }
     }
 }
 
 /// `intersect_batch_each` one ray at a time (`intersect`): the default, and what a structure
-/// whose batch walk assumes one limit for all takes for a limit a ray.
-pub(crate) fn intersect_ray_by_ray<S: AccelStructure>(
+/// whose batch walk does not apply takes.
+pub(crate) fn intersect_ray_by_ray<S: Walks + ?Sized>(
     s: &S,
     tris: &[TriAccel],
     rays: &[Ray],
-    t_min: f32,
-    t_max: TMax<'_>,
     mut f: impl FnMut(usize, Hit, Vec3),
 ) {
     for (i, r) in rays.iter().enumerate() {
-        let hit = s.intersect(tris, r, t_min, t_max.of(i), &mut NoCounters);
+        let hit = s.intersect(tris, r, &mut NoCounters);
         f(i, hit, hit_normal(tris, &hit));
     }
+}
+
+/// Whether the rays share the start of their intervals, which a packet walk that tests its
+/// lanes from one `t_min` needs (a NaN start is shared with nothing: such rays walk singly,
+/// and miss).
+#[inline]
+pub(crate) fn same_start(rays: &[Ray]) -> bool {
+    rays.iter().all(|r| r.t_min == rays[0].t_min)
 }
 
 /// The packet rules every packet walk checks: at most `PACKET` rays, a counter each.
@@ -218,9 +197,9 @@ pub fn hit_normal(tris: &[TriAccel], hit: &Hit) -> Vec3 {
 }
 
 /// The oracle of `AccelStructure::all_hits`: every triangle tested, hits in triangle order.
-pub fn all_hits_brute(tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+pub fn all_hits_brute(tris: &[TriAccel], ray: &Ray, out: &mut Vec<Hit>) {
     for (i, t) in tris.iter().enumerate() {
-        if let Some(h) = t.intersect(ray.origin, ray.dir, t_min, t_max) {
+        if let Some(h) = t.intersect(ray.origin, ray.dir, ray.t_min, ray.t_max) {
             out.push(h.on(i as u32));
         }
     }

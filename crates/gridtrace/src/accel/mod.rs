@@ -41,7 +41,7 @@ pub use binning::grid_bounds;
 pub use brute::Brute;
 pub use brute_force::{brute_force_intersect, brute_force_occluded};
 pub use bvh::{Bvh, BvhAccel, BvhNode};
-pub use contract::{AccelStructure, TMax};
+pub use contract::{AccelStructure, Walks};
 pub use grid::{Cell, Grid, GridLattice, GridStats, Stepping};
 pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
 pub use params::AccelParams;
@@ -80,6 +80,20 @@ macro_rules! dispatch {
             Structure::Irregular($s) => $body,
             Structure::Brute($s) => $body,
             Structure::Hwrt($s) => $body,
+        }
+    };
+}
+
+/// Runs `$body` with `$s` bound to what walks rays for the structure inside `$structure`:
+/// itself, or for `hwrt` the BVH it keeps (its CPU-side walks: counts, lists, nearest points,
+/// the tests' references; `Accel::check_cpu_traces` keeps its closest hits off the CPU).
+macro_rules! walk {
+    ($structure:expr, $s:ident => $body:expr) => {
+        match $structure {
+            Structure::Grid($s) => $body,
+            Structure::Bvh($s) | Structure::Hwrt(hwrt::Hwrt { bvh: $s, .. }) => $body,
+            Structure::Irregular($s) => $body,
+            Structure::Brute($s) => $body,
         }
     };
 }
@@ -318,107 +332,92 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::info_lines(s, &self.tris))
     }
 
-    /// Closest hit with `t_min <= t < t_max`, by the traversal the structure serves (`kind`: the
+    /// Closest hit in the ray's interval, by the traversal the structure serves (`kind`: the
     /// grid's `grid` and `pc` differ only in how they cross empty space).
     #[inline]
-    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        dispatch!(&self.structure, s => AccelStructure::intersect(s, &self.tris, ray, t_min, t_max, counters))
+    pub fn intersect<C: Counters>(&self, ray: &Ray, counters: &mut C) -> Hit {
+        walk!(&self.structure, s => Walks::intersect(s, &self.tris, ray, counters))
     }
 
-    /// Any hit with `t_min <= t < t_max` (shadow rays): stops at the first one found.
+    /// Any hit in the ray's interval (shadow rays): stops at the first one found.
     #[inline]
-    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
-        dispatch!(&self.structure, s => AccelStructure::occluded(s, &self.tris, ray, t_min, t_max, counters))
+    pub fn occluded<C: Counters>(&self, ray: &Ray, counters: &mut C) -> bool {
+        walk!(&self.structure, s => Walks::occluded(s, &self.tris, ray, counters))
     }
 
     /// Closest hits of a packet of up to `PACKET` coherent rays (a 4x2 block of pixels' rays:
-    /// the CPU renderer's, `cpu/blocks.rs`), each counted into its own `counters[i]`: the same
-    /// hits and counts as `intersect` ray by ray. The irregular grid walks the packet's rays
-    /// together, a ray per SIMD lane; the BVH and the uniform grids interleave the rays' own
-    /// walks, a step each in turn, so that one ray's chain of dependent steps overlaps the
-    /// others'. Hits past `rays.len()` are misses.
+    /// the CPU renderer's, `cpu/blocks.rs`), each in its own interval and counted into its own
+    /// `counters[i]`: the same hits and counts as `intersect` ray by ray. The irregular grid
+    /// walks the packet's rays together, a ray per SIMD lane; the BVH and the uniform grids
+    /// interleave the rays' own walks, a step each in turn, so that one ray's chain of
+    /// dependent steps overlaps the others'. Hits past `rays.len()` are misses.
     #[inline]
-    pub fn intersect_packet<C: Counters>(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
-        dispatch!(&self.structure, s => AccelStructure::intersect_packet(s, &self.tris, rays, t_min, t_max, counters))
+    pub fn intersect_packet<C: Counters>(&self, rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
+        walk!(&self.structure, s => Walks::intersect_packet(s, &self.tris, rays, counters))
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]` (the
-    /// shadow rays of a 4x2 block towards one light), each counted into its own `counters[i]`:
-    /// the same answers and counts as `occluded` ray by ray. False past `rays.len()`.
+    /// Whether each of up to `PACKET` rays hits anything in its interval (the shadow rays of a
+    /// 4x2 block towards one light), each counted into its own `counters[i]`: the same answers
+    /// and counts as `occluded` ray by ray. False past `rays.len()`.
     #[inline]
-    pub fn occluded_packet<C: Counters>(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
-        dispatch!(&self.structure, s => AccelStructure::occluded_packet(s, &self.tris, rays, t_min, t_max, counters))
+    pub fn occluded_packet<C: Counters>(&self, rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
+        walk!(&self.structure, s => Walks::occluded_packet(s, &self.tris, rays, counters))
     }
 
-    /// The batch query: closest hits of `rays` handed to `f(i, hit, normal)` for each ray
-    /// `rays[i]`, in no particular order, with the hit's geometric normal (`TriAccel::normal`,
-    /// unnormalised; zero for a miss). On this thread: callers split large batches across
-    /// threads. The BVH interleaves the rays to hide memory latency and takes the normal from
-    /// the hit's block while it is still in cache; the irregular grid takes runs of coherent
-    /// rays as packets.
+    /// The batch query: closest hits of `rays`, each in its own interval, handed to
+    /// `f(i, hit, normal)` for each ray `rays[i]`, in no particular order, with the hit's
+    /// geometric normal (`TriAccel::normal`, unnormalised; zero for a miss). On this thread:
+    /// callers split large batches across threads. The BVH interleaves the rays to hide memory
+    /// latency and takes the normal from the hit's block while it is still in cache; the
+    /// irregular grid takes runs of coherent rays as packets.
     #[inline]
-    pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: f32, f: impl FnMut(usize, Hit, Vec3)) {
-        let t_max = TMax::One(t_max);
-        dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, f))
+    pub fn intersect_batch_each(&self, rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        walk!(&self.structure, s => Walks::intersect_batch_each(s, &self.tris, rays, f))
     }
 
-    /// `intersect_batch_each` with each ray's own far limit, `rays[i]` up to `t_max[i]`.
+    /// `intersect_batch_each` for the two levels' streams (`Walks::intersect_stream_each`).
     #[inline]
-    pub fn intersect_batch_upto(&self, rays: &[Ray], t_min: f32, t_max: &[f32], f: impl FnMut(usize, Hit, Vec3)) {
-        assert_eq!(rays.len(), t_max.len(), "one limit per ray");
-        let t_max = TMax::Each(t_max);
-        dispatch!(&self.structure, s => AccelStructure::intersect_batch_each(s, &self.tris, rays, t_min, t_max, f))
+    pub fn intersect_stream_each(&self, rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        walk!(&self.structure, s => Walks::intersect_stream_each(s, &self.tris, rays, f))
     }
 
     /// Closest hits of a batch into `out` (`out[i]` for `rays[i]`), like `intersect_batch_each`.
-    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
+    pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Hit]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        self.intersect_batch_each(rays, t_min, t_max, |i, hit, _| out[i] = hit);
+        self.intersect_batch_each(rays, |i, hit, _| out[i] = hit);
     }
 
     /// Any-hit results of a batch into `out` (`out[i]` for `rays[i]`).
-    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
+    pub fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        dispatch!(&self.structure, s => AccelStructure::occluded_batch(s, &self.tris, rays, t_min, t_max, out))
+        walk!(&self.structure, s => Walks::occluded_batch(s, &self.tris, rays, out))
     }
 
-    /// Every hit with `t_min <= t < t_max`, each triangle once, appended to `out` in no
-    /// particular order (`AccelStructure::all_hits`).
+    /// Every hit in the ray's interval, each triangle once, appended to `out` in no particular
+    /// order (`Walks::all_hits`).
     #[inline]
-    pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
-        dispatch!(&self.structure, s => AccelStructure::all_hits(s, &self.tris, ray, t_min, t_max, out))
+    pub fn all_hits(&self, ray: &Ray, out: &mut Vec<Hit>) {
+        walk!(&self.structure, s => Walks::all_hits(s, &self.tris, ray, out))
     }
 
-    /// How many triangles each ray of a batch hits with `t_min <= t < t_max` (`out[i]` for
-    /// `rays[i]`; `AccelStructure::count_hits_batch`): the number of hits `all_hits` lists.
-    pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+    /// How many triangles each ray of a batch hits in its interval (`out[i]` for `rays[i]`;
+    /// `Walks::count_hits_batch`): the number of hits `all_hits` lists.
+    pub fn count_hits_batch(&self, rays: &[Ray], out: &mut [u32]) {
         assert_eq!(rays.len(), out.len(), "one count per ray");
-        dispatch!(&self.structure, s => AccelStructure::count_hits_batch(s, &self.tris, rays, t_min, t_max, out))
+        walk!(&self.structure, s => Walks::count_hits_batch(s, &self.tris, rays, out))
     }
 
     /// The point of the mesh nearest to `p`, through the structure's own search
-    /// (`AccelStructure::closest_point`; brute force where it has none).
+    /// (`Walks::closest_point`; brute force where it has none).
     pub fn closest_point(&self, p: Vec3) -> closest::ClosestPoint {
-        dispatch!(&self.structure, s => AccelStructure::closest_point(s, &self.tris, p))
+        walk!(&self.structure, s => Walks::closest_point(s, &self.tris, p))
     }
 
     /// The nearest points of a batch, `out[i]` for `points[i]`, on this thread
-    /// (`AccelStructure::closest_points_batch`): `closest_point`'s answers.
+    /// (`Walks::closest_points_batch`): `closest_point`'s answers.
     pub fn closest_points_batch(&self, points: &[[f32; 3]], out: &mut [closest::ClosestPoint]) {
         assert_eq!(points.len(), out.len(), "one answer per point");
-        dispatch!(&self.structure, s => AccelStructure::closest_points_batch(s, &self.tris, points, out))
+        walk!(&self.structure, s => Walks::closest_points_batch(s, &self.tris, points, out))
     }
 
     /// The geometric normal (`TriAccel::normal`, unnormalised) of a hit's triangle; zero for a

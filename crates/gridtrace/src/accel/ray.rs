@@ -2,22 +2,65 @@
 
 use glam::Vec3;
 
-/// A ray `origin + t * dir`. `dir` need not be normalised: `t` is in units of its length.
-/// `repr(C)`: six floats, origin then direction, the layout of ray files and Open3D's rows, so
-/// that a slice of rays goes to the GPU as it is (`gpu::queries`).
+/// A ray `origin + t * dir` and what it asks: hits with `t_min <= t < t_max`, in the instances
+/// whose mask shares a bit with `mask` (`ray.mask & instance.mask != 0`: Embree's, OptiX's and
+/// Vulkan's rule). `dir` need not be normalised: `t` is in units of its length. An interval
+/// with `t_min > t_max` (or NaN) is empty, so the ray misses (Embree's rule). A structure over
+/// one mesh reads the interval and ignores the mask; the top level of a scene applies the
+/// mask (`query_scene/top_level/`).
+///
+/// The 24 bytes the GPU's wire and ray files take are the origin and direction alone
+/// (`Ray::wire`): a batch's interval and mask travel once per batch, not once per ray.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+    pub mask: u32,
 }
 
 impl Ray {
-    pub fn new(origin: Vec3, dir: Vec3) -> Ray {
-        Ray { origin, dir }
+    /// Every hit in front of the origin (`0 <= t < INFINITY`), every instance seen.
+    #[inline]
+    pub const fn new(origin: Vec3, dir: Vec3) -> Ray {
+        Ray {
+            origin,
+            dir,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+            mask: u32::MAX,
+        }
     }
+
+    /// This ray with hits asked for in `t_min <= t < t_max`.
+    #[inline]
+    pub const fn within(self, t_min: f32, t_max: f32) -> Ray {
+        Ray { t_min, t_max, ..self }
+    }
+
+    /// This ray up to `t_max` (the interval's start kept).
+    #[inline]
+    pub const fn upto(self, t_max: f32) -> Ray {
+        Ray { t_max, ..self }
+    }
+
+    /// This ray seeing only the instances whose mask shares a bit with `mask`.
+    #[inline]
+    pub const fn with_mask(self, mask: u32) -> Ray {
+        Ray { mask, ..self }
+    }
+
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + self.dir * t
+    }
+
+    /// The origin and direction as the GPU's wire and ray files lay them out: six floats.
+    #[inline]
+    pub fn wire(&self) -> [f32; 6] {
+        let (o, d) = (self.origin, self.dir);
+        [o.x, o.y, o.z, d.x, d.y, d.z]
     }
 }
 

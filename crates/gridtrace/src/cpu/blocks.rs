@@ -25,10 +25,7 @@ const BLOCK_W: usize = 4;
 const BLOCK_H: usize = PACKET / BLOCK_W;
 
 /// A ray for the unused lanes of a packet (never traced: packets are cut to their length).
-const IDLE: Ray = Ray {
-    origin: Vec3::ZERO,
-    dir: Vec3::X,
-};
+const IDLE: Ray = Ray::new(Vec3::ZERO, Vec3::X);
 
 /// Traces the pixels of a band of rows (frame rows `first_y..`, `rows` holding them) block by
 /// block, adding what it traced to `rays` and its work to `total`.
@@ -87,9 +84,7 @@ fn trace_paths<C: Collect>(
             m += 1;
         }
         let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
-        let hits = scene
-            .accel
-            .intersect_packet(&traced[..m], 0.0, f32::INFINITY, &mut counted[..m]);
+        let hits = scene.accel.intersect_packet(&traced[..m], &mut counted[..m]);
         for (j, counted) in counted.into_iter().take(m).enumerate() {
             let k = lane_of[j];
             counters[k].absorb(counted);
@@ -101,14 +96,14 @@ fn trace_paths<C: Collect>(
         for light in lights {
             // The shadow rays towards this light, packed; with the light's contribution each
             // adds if nothing occludes it.
-            let (mut shadow, mut dist, mut adds, mut m) = ([IDLE; PACKET], [0.0; PACKET], [(0, Vec3::ZERO); PACKET], 0);
+            let (mut shadow, mut adds, mut m) = ([IDLE; PACKET], [(0, Vec3::ZERO); PACKET], 0);
             for k in set_bits(live) {
                 let shading = shadings[k].as_ref().expect("a live path has a shading");
                 let Some((contribution, ray, d)) = shading.light(light) else {
                     continue;
                 };
                 if opts.mode.shadows() {
-                    (shadow[m], dist[m], adds[m]) = (ray, d, (k, contribution));
+                    (shadow[m], adds[m]) = (ray.within(0.0, d), (k, contribution));
                     m += 1;
                 } else {
                     paths[k].lit(shading, contribution);
@@ -121,9 +116,9 @@ fn trace_paths<C: Collect>(
             let mut counted: [C; PACKET] = std::array::from_fn(|_| C::default());
             let occluded = if opts.ablation.shadow_closest_hit {
                 // The ablation traces shadow rays as closest-hit queries, one by one.
-                std::array::from_fn(|j| j < m && shadow_query(scene, opts, &shadow[j], dist[j], &mut counted[j]))
+                std::array::from_fn(|j| j < m && shadow_query(scene, opts, &shadow[j], &mut counted[j]))
             } else {
-                scene.accel.occluded_packet(&shadow[..m], 0.0, dist, &mut counted[..m])
+                scene.accel.occluded_packet(&shadow[..m], &mut counted[..m])
             };
             for (j, counted) in counted.into_iter().take(m).enumerate() {
                 let (k, contribution) = adds[j];

@@ -204,19 +204,13 @@ pub(super) fn pixel_value<C: Collect>(opts: &RenderOptions, color: Vec3, counter
     }
 }
 
-/// Whether a shadow ray is occluded before `dist`: an any-hit query, or a closest-hit one
-/// under the ablation that measures what any-hit queries save.
+/// Whether a shadow ray is occluded in its interval (up to the light): an any-hit query, or a
+/// closest-hit one under the ablation that measures what any-hit queries save.
 #[inline]
-pub(super) fn shadow_query<C: Counters>(
-    scene: &PreparedScene,
-    opts: &RenderOptions,
-    ray: &Ray,
-    dist: f32,
-    c: &mut C,
-) -> bool {
+pub(super) fn shadow_query<C: Counters>(scene: &PreparedScene, opts: &RenderOptions, ray: &Ray, c: &mut C) -> bool {
     if opts.ablation.shadow_closest_hit {
-        scene.accel.intersect(ray, 0.0, dist, c).is_hit()
+        scene.accel.intersect(ray, c).is_hit()
     } else {
-        scene.accel.occluded(ray, 0.0, dist, c)
+        scene.accel.occluded(ray, c)
     }
 }

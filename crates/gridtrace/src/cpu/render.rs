@@ -156,7 +156,7 @@ fn trace_pixel<C: Counters, O: RayObserver>(
     let mut path = Path::new(cam.ray(x, y));
     rays.eye += 1;
     loop {
-        let hit = scene.accel.intersect(&path.ray, 0.0, f32::INFINITY, counters);
+        let hit = scene.accel.intersect(&path.ray, counters);
         observer.closest(path.kind, &path.ray, &hit);
         let Some(shading) = path.shade(scene, opts, &hit) else {
             break;
@@ -167,7 +167,7 @@ fn trace_pixel<C: Counters, O: RayObserver>(
             };
             if opts.mode.shadows() {
                 rays.shadow += 1;
-                let occluded = shadow_query(scene, opts, &shadow, dist, counters);
+                let occluded = shadow_query(scene, opts, &shadow.within(0.0, dist), counters);
                 observer.shadow(&shadow, dist, occluded);
                 if occluded {
                     continue;
@@ -228,7 +228,7 @@ mod tests {
                     let (x, y) = (i as u32 % opts.width, first + i as u32 / opts.width);
                     let want = if mode == Mode::Heat {
                         let mut c = TraversalCounters::default();
-                        prepared.accel.intersect(&cam.ray(x, y), 0.0, f32::INFINITY, &mut c);
+                        prepared.accel.intersect(&cam.ray(x, y), &mut c);
                         Vec3::splat(c.cost() as f32)
                     } else {
                         let tally = (&mut expected_rays, &mut NoCounters);

@@ -141,9 +141,11 @@ struct InFlight {
 }
 
 impl GpuRenderer {
-    /// Closest hits (with barycentrics) for a batch of rays already checked by the caller.
-    pub fn intersect(&mut self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
-        self.intersect_of(&RaySlice { rays }, (t_min, t_max), true)
+    /// Closest hits (with barycentrics) for a batch of rays already checked by the caller,
+    /// which share one interval (`RaySlice`).
+    pub fn intersect(&mut self, rays: &[Ray]) -> Result<Vec<Hit>> {
+        let rays = RaySlice::new(rays);
+        self.intersect_of(&rays, rays.interval, true)
     }
 
     /// Closest hits for the rays of `rays` (`interval` as `cast` takes it), with their
@@ -167,8 +169,9 @@ impl GpuRenderer {
     }
 
     /// Any-hit occlusion for a batch of rays already checked by the caller.
-    pub fn occluded(&mut self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
-        self.occluded_of(&RaySlice { rays }, (t_min, t_max))
+    pub fn occluded(&mut self, rays: &[Ray]) -> Result<Vec<bool>> {
+        let rays = RaySlice::new(rays);
+        self.occluded_of(&rays, rays.interval)
     }
 
     /// Any-hit occlusion for the rays of `rays` (`interval` as `cast` takes it): one bit a ray

@@ -53,10 +53,26 @@ pub struct SensorLayout {
     pub pose_cols: u32,
 }
 
-/// Rays the caller has already checked (`Ray` is `repr(C)`: origin, direction, 24 bytes),
-/// copied to the wire as they are, with one interval for all.
+/// Rays the caller has already checked, their origins and directions on the wire (24 bytes a
+/// ray, `Ray::wire`) and their interval once for the batch (`interval`, what `cast` takes): a
+/// batch's rays must share it, which `write` checks as it copies (a ray that asks another is
+/// an error naming it, `invalid`). Their masks are not sent: one mesh has no instances.
 pub struct RaySlice<'a> {
     pub rays: &'a [Ray],
+    /// The first ray's interval (`[0, inf)` for no rays), every ray's.
+    pub interval: (f32, f32),
+}
+
+impl<'a> RaySlice<'a> {
+    pub fn new(rays: &'a [Ray]) -> RaySlice<'a> {
+        let interval = rays.first().map_or((0.0, f32::INFINITY), |r| (r.t_min, r.t_max));
+        RaySlice { rays, interval }
+    }
+
+    /// Whether `r` asks the batch's interval (bit for bit: a NaN matches nothing).
+    fn shares_interval(&self, r: &Ray) -> bool {
+        r.t_min.to_bits() == self.interval.0.to_bits() && r.t_max.to_bits() == self.interval.1.to_bits()
+    }
 }
 
 impl WireSource for RaySlice<'_> {
@@ -66,13 +82,26 @@ impl WireSource for RaySlice<'_> {
     fn stride(&self) -> usize {
         6
     }
-    fn write(&self, first: usize, mut out: wgpu::WriteOnly<'_, [u8]>) -> bool {
-        let n = out.len() / size_of::<Ray>();
-        out.copy_from_slice(bytemuck::cast_slice(&self.rays[first..first + n]));
-        true
+    fn write(&self, first: usize, out: wgpu::WriteOnly<'_, [u8]>) -> bool {
+        let (out, _) = out.into_chunks::<24>();
+        let count = out.len();
+        let mut shared = true;
+        out.write_iter(self.rays[first..first + count].iter().map(|r| {
+            shared &= self.shares_interval(r);
+            bytemuck::cast::<[f32; 6], [u8; 24]>(r.wire())
+        }));
+        shared
     }
     fn invalid(&self) -> Error {
-        Error::InvalidInput("a ray batch's rays were checked by its caller".into())
+        let (t_min, t_max) = self.interval;
+        match self.rays.iter().position(|r| !self.shares_interval(r)) {
+            Some(i) => Error::InvalidInput(format!(
+                "a GPU batch takes one interval for all its rays (ray 0's: [{t_min}, {t_max})), but ray {i} asks \
+                 [{}, {}): trace rays of different intervals on the CPU, or in batches of one interval",
+                self.rays[i].t_min, self.rays[i].t_max
+            )),
+            None => Error::InvalidInput("a ray batch's rays were checked by its caller".into()),
+        }
     }
 }
 

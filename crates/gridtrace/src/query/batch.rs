@@ -18,12 +18,12 @@ pub const CHUNK: usize = 1 << 20;
 pub(super) const CPU_BATCH: usize = 1024;
 
 /// Runs `f` on the CPU for every `CPU_BATCH` rays of a (possibly broadcast, checked) batch of
-/// `n`, in parallel, each with its piece of the output (`pieces` yields one per `CPU_BATCH`
-/// rays).
+/// `n`, each ray asking `interval`, in parallel, each with its piece of the output (`pieces`
+/// yields one per `CPU_BATCH` rays).
 pub(super) fn on_cpu_batches<P: Send>(
-    origins: &[[f32; 3]],
-    dirs: &[[f32; 3]],
+    (origins, dirs): (&[[f32; 3]], &[[f32; 3]]),
     n: usize,
+    (t_min, t_max): (f32, f32),
     pieces: impl IndexedParallelIterator<Item = P>,
     f: impl Fn(&[Ray], P) + Sync + Send,
 ) -> Result<()> {
@@ -37,7 +37,7 @@ pub(super) fn on_cpu_batches<P: Send>(
             for i in b * CPU_BATCH..((b + 1) * CPU_BATCH).min(n) {
                 let (o, d) = ray_parts(origins, dirs, i);
                 all_good &= is_valid_ray(o, d);
-                rays.push(Ray::new(o, d));
+                rays.push(Ray::new(o, d).within(t_min, t_max));
             }
             if !all_good {
                 return None;

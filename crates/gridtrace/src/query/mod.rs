@@ -448,11 +448,8 @@ mod tests {
             let mut hit_count = 0;
             for i in 0..origins.len() {
                 let ray = Ray::new(origins[i].into(), dirs[i].into());
-                let want = brute_force_intersect(tris, &ray, 0.0, f32::INFINITY);
-                let got = mesh
-                    .prepared()
-                    .accel
-                    .intersect(&ray, 0.0, f32::INFINITY, &mut NoCounters);
+                let want = brute_force_intersect(tris, &ray);
+                let got = mesh.prepared().accel.intersect(&ray, &mut NoCounters);
                 assert_eq!(hits.t[i], got.t, "{} ray {i}", accel.name());
                 assert!(
                     (got.t - want.t).abs() <= 1e-6 * want.t.abs() || got.t == want.t,
@@ -499,11 +496,16 @@ mod tests {
             let (mut hits, mut occ) = (vec![Hit::MISS; 7000], vec![true; 7000]);
             for len in [5000, 1200, 3000] {
                 let batch = &rays[..len];
-                mesh.intersect_rays_into(backend, batch, 0.0, 1.5, true, &mut hits)
+                mesh.intersect_rays_into(backend, &crate::testing::within(batch, 0.0, 1.5), true, &mut hits)
                     .unwrap();
-                mesh.occluded_rays_into(backend, batch, 0.0, 1.5, &mut occ).unwrap();
-                let fresh = mesh.intersect_rays_with(backend, batch, 0.0, 1.5).unwrap();
-                let fresh_occ = mesh.occluded_rays_with(backend, batch, 0.0, 1.5).unwrap();
+                mesh.occluded_rays_into(backend, &crate::testing::within(batch, 0.0, 1.5), &mut occ)
+                    .unwrap();
+                let fresh = mesh
+                    .intersect_rays_with(backend, &crate::testing::within(batch, 0.0, 1.5))
+                    .unwrap();
+                let fresh_occ = mesh
+                    .occluded_rays_with(backend, &crate::testing::within(batch, 0.0, 1.5))
+                    .unwrap();
                 assert_eq!(hits.len(), len, "{backend:?}");
                 assert!(
                     hits.iter()

@@ -37,12 +37,11 @@ impl TraceMesh {
             || {
                 self.scene.accel.check_cpu_traces()?;
                 let mut out = Hits::zeroed(n);
-                on_cpu_batches(origins, dirs, n, out.pieces(0..n, CPU_BATCH), |rays, mut piece| {
+                let pieces = out.pieces(0..n, CPU_BATCH);
+                on_cpu_batches((origins, dirs), n, (t_min, t_max), pieces, |rays, mut piece| {
                     // Each hit goes straight into the output as its ray is done.
                     let accel = &self.scene.accel;
-                    accel.intersect_batch_each(rays, t_min, t_max, |i, hit, normal| {
-                        self.write_hit(&mut piece, i, hit, normal)
-                    });
+                    accel.intersect_batch_each(rays, |i, hit, normal| self.write_hit(&mut piece, i, hit, normal));
                 })?;
                 Ok(out)
             },
@@ -123,23 +122,25 @@ impl TraceMesh {
             || {
                 self.scene.accel.check_cpu_traces()?;
                 let mut out = vec![false; n];
-                on_cpu_batches(origins, dirs, n, out.par_chunks_mut(CPU_BATCH), |rays, piece| {
-                    self.scene.accel.occluded_batch(rays, t_min, t_max, piece)
+                let pieces = out.par_chunks_mut(CPU_BATCH);
+                on_cpu_batches((origins, dirs), n, (t_min, t_max), pieces, |rays, piece| {
+                    self.scene.accel.occluded_batch(rays, piece)
                 })?;
                 Ok(out)
             },
         )
     }
 
-    /// Closest hits for prepared rays; triangle indices are the kept triangles' (see
+    /// Closest hits for prepared rays, each in its own interval (on the GPU a batch's rays
+    /// share one: `gpu::RaySlice`); triangle indices are the kept triangles' (see
     /// `original_index`).
-    pub fn intersect_rays(&self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
-        self.intersect_rays_with(self.backend, rays, t_min, t_max)
+    pub fn intersect_rays(&self, rays: &[Ray]) -> Result<Vec<Hit>> {
+        self.intersect_rays_with(self.backend, rays)
     }
 
-    pub fn intersect_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<Hit>> {
+    pub fn intersect_rays_with(&self, backend: Backend, rays: &[Ray]) -> Result<Vec<Hit>> {
         let mut out = Vec::new();
-        self.intersect_rays_into(backend, rays, t_min, t_max, true, &mut out)?;
+        self.intersect_rays_into(backend, rays, true, &mut out)?;
         Ok(out)
     }
 
@@ -149,22 +150,16 @@ impl TraceMesh {
     /// after batch (a sensor's frames, a benchmark's passes) keeps one buffer, whose pages are
     /// then already mapped. A fresh 16 MB answer for 1M rays costs about 1,900 page faults a
     /// batch (perf stat), which the workers take inside the traced time.
-    pub fn intersect_rays_into(
-        &self,
-        backend: Backend,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        uv: bool,
-        out: &mut Vec<Hit>,
-    ) -> Result<()> {
+    pub fn intersect_rays_into(&self, backend: Backend, rays: &[Ray], uv: bool, out: &mut Vec<Hit>) -> Result<()> {
         self.run_into(
-            "intersect",
-            backend,
+            ("intersect", backend),
             rays,
-            |g| g.intersect_of(&crate::gpu::RaySlice { rays }, (t_min, t_max), uv),
+            |g| {
+                let slice = crate::gpu::RaySlice::new(rays);
+                g.intersect_of(&slice, slice.interval, uv)
+            },
             |r, out| {
-                self.scene.accel.intersect_batch(r, t_min, t_max, out);
+                self.scene.accel.intersect_batch(r, out);
                 if !uv {
                     out.iter_mut().for_each(|h| (h.u, h.v) = (0.0, 0.0));
                 }
@@ -174,31 +169,24 @@ impl TraceMesh {
         )
     }
 
-    pub fn occluded_rays(&self, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
-        self.occluded_rays_with(self.backend, rays, t_min, t_max)
+    /// Whether anything is hit in each prepared ray's interval (as `intersect_rays`).
+    pub fn occluded_rays(&self, rays: &[Ray]) -> Result<Vec<bool>> {
+        self.occluded_rays_with(self.backend, rays)
     }
 
-    pub fn occluded_rays_with(&self, backend: Backend, rays: &[Ray], t_min: f32, t_max: f32) -> Result<Vec<bool>> {
+    pub fn occluded_rays_with(&self, backend: Backend, rays: &[Ray]) -> Result<Vec<bool>> {
         let mut out = Vec::new();
-        self.occluded_rays_into(backend, rays, t_min, t_max, &mut out)?;
+        self.occluded_rays_into(backend, rays, &mut out)?;
         Ok(out)
     }
 
     /// `occluded_rays_with` into `out`, reusing its memory (as `intersect_rays_into`).
-    pub fn occluded_rays_into(
-        &self,
-        backend: Backend,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        out: &mut Vec<bool>,
-    ) -> Result<()> {
+    pub fn occluded_rays_into(&self, backend: Backend, rays: &[Ray], out: &mut Vec<bool>) -> Result<()> {
         self.run_into(
-            "occluded",
-            backend,
+            ("occluded", backend),
             rays,
-            |g| g.occluded(rays, t_min, t_max),
-            |r, out| self.scene.accel.occluded_batch(r, t_min, t_max, out),
+            |g| g.occluded(rays),
+            |r, out| self.scene.accel.occluded_batch(r, out),
             false,
             out,
         )
@@ -207,11 +195,9 @@ impl TraceMesh {
     /// One query over a batch into `out` (cleared, then one answer per ray): on the GPU
     /// renderer for `backend`, else on the CPU, in parallel over sub-batches of `CPU_BATCH`
     /// rays.
-    #[allow(clippy::too_many_arguments)]
     fn run_into<T: Send + Sync + Copy>(
         &self,
-        name: &'static str,
-        backend: Backend,
+        (name, backend): (&'static str, Backend),
         rays: &[Ray],
         on_gpu: impl FnOnce(&mut GpuRenderer) -> Result<Vec<T>>,
         on_cpu: impl Fn(&[Ray], &mut [T]) + Sync + Send,

@@ -69,8 +69,8 @@ impl QueryScene {
             .for_each_init(
                 || (Vec::with_capacity(COUNT_BATCH), Vec::new()),
                 |(made, hits), (o, r)| {
-                    let bad = make_into(r, made);
-                    accel.count_hits_batch(made, 0.0, f32::INFINITY, o);
+                    let bad = make_into(r, (0.0, f32::INFINITY), made);
+                    accel.count_hits_batch(made, o);
                     // The counting walk keeps no hit's t or geometry, which the rule needs.
                     // Only a ray with two hits or more can hold a tie, so those rays are
                     // listed again under the rule: the same answer on every structure without
@@ -172,7 +172,7 @@ fn ray_hits(m: &Merged, r: &[f32; 6], out: &mut Vec<Hit>) {
         return;
     };
     let from = out.len();
-    mesh.prepared().accel.all_hits(&ray, 0.0, f32::INFINITY, out);
+    mesh.prepared().accel.all_hits(&ray, out);
     open3d_rule(m, out, from);
 }
 
@@ -242,11 +242,7 @@ mod tests {
             // rule these rays count [4, 2, 0].
             let mut all = Vec::new();
             let ray = ray_of(&RAYS[0]).unwrap();
-            s.merged()
-                .unwrap()
-                .accel()
-                .unwrap()
-                .all_hits(&ray, 0.0, f32::INFINITY, &mut all);
+            s.merged().unwrap().accel().unwrap().all_hits(&ray, &mut all);
             assert!(
                 all.len() > 2,
                 "{}: {} hits, no tie for the rule to skip",

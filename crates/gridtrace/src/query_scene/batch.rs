@@ -152,10 +152,7 @@ pub(crate) fn ray_of(r: &[f32; 6]) -> Option<Ray> {
 
 /// A ray that stands in for one that cannot hit anything, so that the batch stays whole; its
 /// answer is replaced by a miss.
-pub(crate) const STAND_IN: Ray = Ray {
-    origin: Vec3::ZERO,
-    dir: Vec3::X,
-};
+pub(crate) const STAND_IN: Ray = Ray::new(Vec3::ZERO, Vec3::X);
 
 /// One value for every ray of a batch, or one each.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -229,6 +226,13 @@ impl RayOptions<'_> {
     #[inline(always)]
     pub fn of(&self, i: usize) -> (f32, f32, u32) {
         (self.t_near.at(i), self.t_far.at(i), self.mask.at(i))
+    }
+
+    /// `ray` asking ray `i`'s interval and mask.
+    #[inline(always)]
+    pub fn on(&self, i: usize, ray: Ray) -> Ray {
+        let (t_near, t_far, mask) = self.of(i);
+        ray.within(t_near, t_far).with_mask(mask)
     }
 
     /// `(t_near, t_far, mask)` when every ray has the same.

@@ -16,29 +16,31 @@ use crate::query::TraceMesh;
 /// small enough to balance the cores.
 const BATCH: usize = 1024;
 
-/// Rays `r` for the tracer into `made`; whether any was replaced by the stand-in.
+/// Rays `r` for the tracer, each asking `t_near <= t < t_far`, into `made`; whether any was
+/// replaced by the stand-in.
 #[inline]
-pub(super) fn make_into(r: &[[f32; 6]], made: &mut Vec<Ray>) -> bool {
+pub(super) fn make_into(r: &[[f32; 6]], (t_near, t_far): (f32, f32), made: &mut Vec<Ray>) -> bool {
     made.clear();
     let mut bad = false;
     for q in r {
-        made.push(ray_of(q).unwrap_or_else(|| {
+        let ray = ray_of(q).unwrap_or_else(|| {
             bad = true;
             STAND_IN
-        }));
+        });
+        made.push(ray.within(t_near, t_far));
     }
     bad
 }
 
 /// Closest hits of `rays` into `out`: `t` and the ids written for every ray, uv and normal for
 /// hits only (a miss keeps the zeros of `RayHits::zeroed`).
-pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], (t_near, t_far): (f32, f32), out: &mut RayHits) {
+pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], interval: (f32, f32), out: &mut RayHits) {
     let accel = &mesh.prepared().accel;
     out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
         || Vec::with_capacity(BATCH),
         |made, ((t, g, p, uv, n), r)| {
-            let bad = make_into(r, made);
-            accel.intersect_batch_each(made, t_near, t_far, |i, hit, normal| {
+            let bad = make_into(r, interval, made);
+            accel.intersect_batch_each(made, |i, hit, normal| {
                 if hit.is_hit() {
                     let (id, prim) = m.name(hit.tri);
                     t[i] = hit.t;
@@ -62,13 +64,13 @@ pub(super) fn cast(m: &Merged, mesh: &TraceMesh, rays: &[[f32; 6]], (t_near, t_f
 }
 
 /// Whether each ray hits anything with `t_near < t < t_far`, into `out`.
-pub(super) fn occluded(mesh: &TraceMesh, rays: &[[f32; 6]], t_near: f32, t_far: f32, out: &mut [bool]) {
+pub(super) fn occluded(mesh: &TraceMesh, rays: &[[f32; 6]], interval: (f32, f32), out: &mut [bool]) {
     let accel = &mesh.prepared().accel;
     out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
         || Vec::with_capacity(BATCH),
         |made, (o, r)| {
-            let bad = make_into(r, made);
-            accel.occluded_batch(made, t_near, t_far, o);
+            let bad = make_into(r, interval, made);
+            accel.occluded_batch(made, o);
             if bad {
                 for (o, q) in o.iter_mut().zip(r) {
                     *o &= ray_of(q).is_some();

@@ -256,10 +256,13 @@ impl Geometry {
 /// `ray` through `to_local` (see `Geometry::ray_to_local`).
 #[inline(always)]
 pub(crate) fn carry(to_local: &Affine3A, ray: &Ray) -> Ray {
-    Ray::new(
-        to_local.transform_point3(ray.origin),
-        to_local.transform_vector3(ray.dir),
-    )
+    // The interval and the mask stay: the direction is carried without normalising, so a
+    // point at `t` in world space is the point at the same `t` in the instance's.
+    Ray {
+        origin: to_local.transform_point3(ray.origin),
+        dir: to_local.transform_vector3(ray.dir),
+        ..*ray
+    }
 }
 
 /// The matrix that takes an own-space geometric normal `(v1 - v0) x (v2 - v0)` to the world

@@ -77,8 +77,7 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut 
         .enumerate()
         .for_each(|(b, ((t, g, p, uv, n), r))| {
             for (k, q) in r.iter().enumerate() {
-                let (t_near, t_far, mask) = o.of(b * BATCH + k);
-                match ray_of(q).and_then(|ray| two.closest(&ray, t_near, t_far, mask)) {
+                match ray_of(q).and_then(|ray| two.closest(&o.on(b * BATCH + k, ray))) {
                     Some((h, normal)) => {
                         (t[k], g[k], p[k]) = (h.t, h.id, h.prim);
                         uv[k] = [h.u, h.v];
@@ -106,8 +105,7 @@ pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &
         .enumerate()
         .for_each(|(b, (out, r))| {
             for (k, (hit, q)) in out.iter_mut().zip(r).enumerate() {
-                let (t_near, t_far, mask) = o.of(b * BATCH + k);
-                *hit = ray_of(q).is_some_and(|ray| two.occluded(&ray, t_near, t_far, mask));
+                *hit = ray_of(q).is_some_and(|ray| two.occluded(&o.on(b * BATCH + k, ray)));
             }
         });
 }
@@ -131,8 +129,7 @@ fn count(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions, out: &mut [u32]) {
                 for (k, (c, q)) in out.iter_mut().zip(r).enumerate() {
                     hits.clear();
                     if let Some(ray) = ray_of(q) {
-                        let (t_near, t_far, mask) = o.of(b * BATCH + k);
-                        two.all_hits(&ray, t_near, t_far, mask, scratch, hits);
+                        two.all_hits(&o.on(b * BATCH + k, ray), scratch, hits);
                     }
                     open3d_rule(hits, 0);
                     *c = hits.len() as u32;
@@ -155,8 +152,7 @@ fn list(two: &TwoLevel, rays: &[[f32; 6]], o: &RayOptions) -> Intersections {
             for (k, q) in r.iter().enumerate() {
                 let from = hits.len();
                 if let Some(ray) = ray_of(q) {
-                    let (t_near, t_far, mask) = o.of(b * LIST_BATCH + k);
-                    two.all_hits(&ray, t_near, t_far, mask, scratch, &mut hits);
+                    two.all_hits(&o.on(b * LIST_BATCH + k, ray), scratch, &mut hits);
                 }
                 open3d_rule(&mut hits, from);
                 counts.push((hits.len() - from) as u32);

@@ -159,7 +159,7 @@ impl QueryScene {
         let on_cpu = || {
             mesh.prepared().accel.check_cpu_traces()?;
             let mut out = vec![false; rays.len()];
-            cpu_rays::occluded(mesh, rays, t_near, t_far, &mut out);
+            cpu_rays::occluded(mesh, rays, (t_near, t_far), &mut out);
             Ok(out)
         };
         // The mesh decides where its queries run (`TraceMesh::on_backend`), by the scene's

@@ -48,11 +48,10 @@ struct Scratch {
     /// The pairs of one round (or all of them) as `instance << 32 | ray`, before grouping; in
     /// `meet`, the entries as `ray << 32 | entry`.
     keys: Vec<u64>,
-    /// One instance's rays in its mesh's space, which of the item's rays each is, and how far
-    /// each is walked (its closest hit so far).
+    /// One instance's rays in its mesh's space (each walked up to its closest hit so far:
+    /// its `t_max`) and which of the item's rays each is.
     local: Vec<Ray>,
     which: Vec<u32>,
-    limits: Vec<f32>,
     /// The closest hit so far of each ray (`t` the limit: `t_far` before any), its instance
     /// (`u32::MAX`: none) and its own-space geometric normal (handed over by the batch walk
     /// while the face is in cache: looking the face up again afterwards cost random rays a
@@ -66,7 +65,10 @@ impl Scratch {
     /// The item's rays and, for each, the instance boxes it enters, nearest first.
     fn meet(&mut self, two: &TwoLevel, rays: &[[f32; 6]], (t_near, t_far, mask): (f32, f32, u32)) {
         self.world.clear();
-        self.world.extend(rays.iter().map(ray_of));
+        self.world.extend(
+            rays.iter()
+                .map(|r| ray_of(r).map(|r| r.within(t_near, t_far).with_mask(mask))),
+        );
         self.found.clear();
         // `tnear > tfar` (or NaN) misses (Embree's rule): nothing to enter.
         if !(t_near > t_far || t_near.is_nan() || t_far.is_nan()) {
@@ -163,7 +165,7 @@ impl Scratch {
 /// hits at the same `t` in two instances, the nearer box's is kept (the later one's walk
 /// stops short of it).
 pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out: &mut RayHits) {
-    let (t_near, t_far, _) = opts;
+    let t_far = opts.1;
     out.par_chunks_mut(BATCH).zip(rays.par_chunks(BATCH)).for_each_init(
         Scratch::default,
         |s, ((t, g, p, uv, n), r)| {
@@ -177,16 +179,16 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out
                 for group in pairs.chunk_by(|a, b| a.0 == b.0) {
                     let i = group[0].0;
                     s.carry_group(two, group, |_| true);
-                    s.limits.clear();
-                    s.limits.extend(s.which.iter().map(|&k| s.best[k as usize].0.t));
+                    for (r, &k) in s.local.iter_mut().zip(&s.which) {
+                        r.t_max = s.best[k as usize].0.t;
+                    }
                     let best = &mut s.best;
                     let which = &s.which;
-                    two.accel_of(i)
-                        .intersect_batch_upto(&s.local, t_near, &s.limits, |j, hit, normal| {
-                            if hit.is_hit() {
-                                best[which[j] as usize] = (hit, i, normal);
-                            }
-                        });
+                    two.accel_of(i).intersect_stream_each(&s.local, |j, hit, normal| {
+                        if hit.is_hit() {
+                            best[which[j] as usize] = (hit, i, normal);
+                        }
+                    });
                 }
                 s.pairs = pairs;
                 round += 1;
@@ -209,7 +211,6 @@ pub(super) fn cast(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out
 /// Whether each ray hits anything with `t_near <= t < t_far` among instances whose mask shares
 /// a bit with `mask`, into `out`.
 pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32), out: &mut [bool]) {
-    let (t_near, t_far, _) = opts;
     out.par_chunks_mut(BATCH)
         .zip(rays.par_chunks(BATCH))
         .for_each_init(Scratch::default, |s, (o, r)| {
@@ -225,8 +226,7 @@ pub(super) fn occluded(two: &TwoLevel, rays: &[[f32; 6]], opts: (f32, f32, u32),
                 }
                 s.any.clear();
                 s.any.resize(s.local.len(), false);
-                two.accel_of(group[0].0)
-                    .occluded_batch(&s.local, t_near, t_far, &mut s.any);
+                two.accel_of(group[0].0).occluded_batch(&s.local, &mut s.any);
                 for (j, hit) in s.any.iter().enumerate() {
                     o[s.which[j] as usize] |= hit;
                 }

@@ -119,23 +119,20 @@ impl TwoLevel {
             + self.top.memory_bytes()
     }
 
-    /// The closest hit with `t_near < t < t_far` of instances whose mask shares a bit with
-    /// `mask`, and the instance hit; with the world-space unit normal.
+    /// The closest hit in the ray's interval of instances whose mask shares a bit with the
+    /// ray's, and the instance hit; with the world-space unit normal.
     #[inline]
-    pub fn closest(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32) -> Option<(NamedHit, Vec3)> {
+    pub fn closest(&self, ray: &Ray) -> Option<(NamedHit, Vec3)> {
         let mut best = Hit::MISS;
         let mut who = usize::MAX;
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, _, t_max| {
+        self.top.walk(ray, |i, _, t_max| {
             let p = &self.placed[i as usize];
-            if p.mask & mask == 0 {
+            if p.mask & ray.mask == 0 {
                 return t_max;
             }
-            let local = carry(&p.to_local, ray);
-            let h = self
-                .mesh_of(p)
-                .prepared()
-                .accel
-                .intersect(&local, t_near, t_max, &mut NoCounters);
+            // Up to the closest hit so far, in the instances already walked.
+            let local = carry(&p.to_local, ray).upto(t_max);
+            let h = self.mesh_of(p).prepared().accel.intersect(&local, &mut NoCounters);
             if h.is_hit() && h.t < t_max {
                 best = h;
                 who = i as usize;
@@ -237,23 +234,18 @@ impl TwoLevel {
         &self.top
     }
 
-    /// Whether anything with `t_near < t < t_far` is hit among instances whose mask shares a
-    /// bit with `mask`.
+    /// Whether anything in the ray's interval is hit among instances whose mask shares a bit
+    /// with the ray's.
     #[inline]
-    pub fn occluded(&self, ray: &Ray, t_near: f32, t_far: f32, mask: u32) -> bool {
+    pub fn occluded(&self, ray: &Ray) -> bool {
         let mut any = false;
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, _, t_max| {
+        self.top.walk(ray, |i, _, t_max| {
             let p = &self.placed[i as usize];
-            if p.mask & mask == 0 {
+            if p.mask & ray.mask == 0 {
                 return t_max;
             }
             let local = carry(&p.to_local, ray);
-            if self
-                .mesh_of(p)
-                .prepared()
-                .accel
-                .occluded(&local, t_near, t_max, &mut NoCounters)
-            {
+            if self.mesh_of(p).prepared().accel.occluded(&local, &mut NoCounters) {
                 any = true;
                 return f32::NEG_INFINITY;
             }
@@ -262,28 +254,18 @@ impl TwoLevel {
         any
     }
 
-    /// Every hit with `t_near < t < t_far` among instances whose mask shares a bit with
-    /// `mask`, appended to `out` in no particular order; `scratch` is the bottom levels' list.
+    /// Every hit in the ray's interval among instances whose mask shares a bit with the ray's,
+    /// appended to `out` in no particular order; `scratch` is the bottom levels' list.
     #[inline]
-    pub fn all_hits(
-        &self,
-        ray: &Ray,
-        t_near: f32,
-        t_far: f32,
-        mask: u32,
-        scratch: &mut Vec<Hit>,
-        out: &mut Vec<NamedHit>,
-    ) {
-        self.top.walk(ray.origin, ray.dir, t_near, t_far, |i, _, t_max| {
+    pub fn all_hits(&self, ray: &Ray, scratch: &mut Vec<Hit>, out: &mut Vec<NamedHit>) {
+        self.top.walk(ray, |i, _, t_max| {
             let p = &self.placed[i as usize];
-            if p.mask & mask == 0 {
+            if p.mask & ray.mask == 0 {
                 return t_max;
             }
             let mesh = self.mesh_of(p);
             scratch.clear();
-            mesh.prepared()
-                .accel
-                .all_hits(&carry(&p.to_local, ray), t_near, t_far, scratch);
+            mesh.prepared().accel.all_hits(&carry(&p.to_local, ray), scratch);
             out.extend(scratch.iter().map(|h| NamedHit {
                 t: h.t,
                 id: p.id,

@@ -92,10 +92,7 @@ impl CameraFrame {
         let px = 2.0 * (x as f32 + 0.5) / self.width as f32 - 1.0;
         let py = 1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32;
         let dir = Vec3::from(self.forward) + px * Vec3::from(self.right_scaled) + py * Vec3::from(self.up_scaled);
-        Ray {
-            origin: Vec3::from(self.eye),
-            dir: dir.normalize(),
-        }
+        Ray::new(Vec3::from(self.eye), dir.normalize())
     }
 }
 

@@ -8,8 +8,10 @@ use crate::scene::procedural;
 use crate::util::Rng;
 
 mod bad_input;
+mod intervals;
 mod shapes;
 pub use bad_input::{BadFile, bad_input_corpus};
+pub use intervals::{WithInterval, within, within_each};
 pub use shapes::{cuboid, open3d_cube};
 
 /// A random triangle soup: `n` triangles with sizes from slivers to large, in a unit-ish cube.

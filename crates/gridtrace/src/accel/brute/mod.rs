@@ -8,7 +8,7 @@
 
 use crate::Result;
 use crate::accel::AccelParams;
-use crate::accel::contract::AccelStructure;
+use crate::accel::contract::{AccelStructure, Walks};
 use crate::accel::{Counters, Hit, Ray, TriAccel};
 
 /// Nothing is built: the walk is the triangle list.
@@ -31,15 +31,20 @@ impl AccelStructure for Brute {
     fn summary(&self) -> String {
         format!("brute force: {} triangle tests per ray", self.triangles)
     }
+}
 
+impl Walks for Brute {
     /// The closest of every triangle's hit, the first in triangle order on equal `t` (as every
     /// structure's walk, which tests a cell's references in ascending order).
     #[inline]
-    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        let mut best = Hit { t: t_max, ..Hit::MISS };
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> Hit {
+        let mut best = Hit {
+            t: ray.t_max,
+            ..Hit::MISS
+        };
         for (i, tri) in tris.iter().enumerate() {
             counters.tri_test();
-            if let Some(h) = tri.intersect(ray.origin, ray.dir, t_min, best.t) {
+            if let Some(h) = tri.intersect(ray.origin, ray.dir, ray.t_min, best.t) {
                 best = h.on(i as u32);
             }
         }
@@ -47,10 +52,10 @@ impl AccelStructure for Brute {
     }
 
     #[inline]
-    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> bool {
         tris.iter().any(|tri| {
             counters.tri_test();
-            tri.intersect(ray.origin, ray.dir, t_min, t_max).is_some()
+            tri.intersect(ray.origin, ray.dir, ray.t_min, ray.t_max).is_some()
         })
     }
 }

@@ -25,12 +25,13 @@ use crate::accel::{Hit, Ray};
 const CAPACITY: usize = STACK * (WIDTH - 1) + 1;
 
 impl BvhAccel {
-    /// Every hit with `t_min <= t < t_max`, appended to `out`; `tri` indexes the triangles the
+    /// Every hit in the ray's interval, appended to `out`; `tri` indexes the triangles the
     /// BVH was built over.
-    pub fn all_hits(&self, ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+    pub fn all_hits(&self, ray: &Ray, out: &mut Vec<Hit>) {
         if self.blocks.is_empty() {
             return;
         }
+        let (t_min, t_max) = (ray.t_min, ray.t_max);
         let r = BoxRay::new(ray);
         let origin = ray.origin.to_array().map(Vec4::splat);
         let dir = ray.dir.to_array().map(Vec4::splat);
@@ -67,12 +68,12 @@ impl BvhAccel {
 }
 
 impl BvhAccel {
-    /// How many triangles each ray of a batch hits with `t_min <= t < t_max`, into `out`
+    /// How many triangles each ray of a batch hits in its interval, into `out`
     /// (`out[i]` for `rays[i]`): the number of hits `all_hits` lists, by the same walk (the same
     /// box test, so the same leaves; the same triangle test, so the same hits), without listing
     /// them. `COUNT_LANES` rays are walked interleaved, each step prefetching what its ray
     /// visits next (as `intersect_batch`), in the eight-lane build where the CPU runs it (`simd::has_wide`).
-    pub fn count_hits_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+    pub fn count_hits_batch(&self, rays: &[Ray], out: &mut [u32]) {
         assert_eq!(rays.len(), out.len(), "one count per ray");
         if self.blocks.is_empty() {
             out.fill(0);
@@ -80,24 +81,26 @@ impl BvhAccel {
         }
         if has_wide() {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
-            return unsafe { self.count_hits_wide(rays, t_min, t_max, out) };
+            return unsafe { self.count_hits_wide(rays, out) };
         }
-        self.count_hits_body::<false>(rays, t_min, t_max, out)
+        self.count_hits_body::<false>(rays, out)
     }
 
     #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-    unsafe fn count_hits_wide(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
-        self.count_hits_body::<true>(rays, t_min, t_max, out)
+    unsafe fn count_hits_wide(&self, rays: &[Ray], out: &mut [u32]) {
+        self.count_hits_body::<true>(rays, out)
     }
 
     #[inline(always)]
-    pub(super) fn count_hits_body<const WIDE: bool>(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
+    pub(super) fn count_hits_body<const WIDE: bool>(&self, rays: &[Ray], out: &mut [u32]) {
         let idle = Ray::new(Vec3::ZERO, Vec3::X);
         let mut walks: [CountWalk; COUNT_LANES] = std::array::from_fn(|_| {
             let mut w = CountWalk {
                 r: BoxRay::new(&idle),
                 origin: [Vec4::ZERO; 3],
                 dir: [Vec4::ZERO; 3],
+                t_min: 0.0,
+                t_max: 0.0,
                 stack: [ChildRef(0); CAPACITY],
                 len: 0,
                 current: ChildRef(0),
@@ -117,7 +120,7 @@ impl BvhAccel {
                 w.reset(r);
                 Some(i)
             },
-            |w| w.step::<WIDE>(self, t_min, t_max),
+            |w| w.step::<WIDE>(self),
             |w| {
                 self.prefetch(&Pending {
                     child: w.current,
@@ -138,6 +141,9 @@ struct CountWalk {
     r: BoxRay,
     origin: [Vec4; 3],
     dir: [Vec4; 3],
+    /// The ray's interval.
+    t_min: f32,
+    t_max: f32,
     /// Entries below `len` are written before they are read.
     stack: [ChildRef; CAPACITY],
     len: usize,
@@ -152,6 +158,7 @@ impl CountWalk {
         self.r = BoxRay::new(ray);
         self.origin = ray.origin.to_array().map(Vec4::splat);
         self.dir = ray.dir.to_array().map(Vec4::splat);
+        (self.t_min, self.t_max) = (ray.t_min, ray.t_max);
         self.len = 0;
         self.current = ChildRef(0);
         self.count = 0;
@@ -159,7 +166,8 @@ impl CountWalk {
 
     /// Visits `current` and pops the next entry; true when the walk is over.
     #[inline(always)]
-    fn step<const WIDE: bool>(&mut self, accel: &BvhAccel, t_min: f32, t_max: f32) -> bool {
+    fn step<const WIDE: bool>(&mut self, accel: &BvhAccel) -> bool {
+        let (t_min, t_max) = (self.t_min, self.t_max);
         let child = self.current;
         if child.count() == 0 {
             let node = &accel.nodes[child.index() as usize];

@@ -154,11 +154,11 @@ pub(super) fn packets_enabled() -> bool {
     packets_switch() != Switch::Off
 }
 
-/// Whether batches with a limit per ray (`TMax::Each`, the two levels' streams) may take the
+/// Whether the two levels' streams (`Walks::intersect_stream_each`) may take the
 /// packet route too: only where the environment sets `GRIDTRACE_BVH_PACKETS=all`, a switch for
 /// measuring them (`BvhAccel::traced` says why they walk singly otherwise;
 /// `examples/carried_packets.rs`). The answers are the same either way.
-pub(super) fn packets_for_limits_per_ray() -> bool {
+pub(super) fn packets_for_streams() -> bool {
     packets_switch() == Switch::All
 }
 
@@ -222,18 +222,19 @@ impl BvhAccel {
     /// The CPU must run the eight-lane build (`simd::has_wide`).
     #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     #[inline]
-    pub(super) unsafe fn walk_coherent<const ANY: bool>(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-    ) -> PacketAnswers {
+    pub(super) unsafe fn walk_coherent<const ANY: bool>(&self, rays: &[Ray]) -> PacketAnswers {
         let n = rays.len();
         debug_assert!((1..=PACKET).contains(&n));
+        debug_assert!(
+            crate::accel::contract::same_start(rays),
+            "a packet's rays share their interval's start"
+        );
         let all = (1u32 << n) - 1;
         // Lanes past `n` repeat ray 0; they are in no mask, and their triangle tests run up
         // to `t_min`, which no hit passes.
         let ray = |i: usize| &rays[if i < n { i } else { 0 }];
+        let t_min = rays[0].t_min;
+        let t_max: [f32; PACKET] = std::array::from_fn(|i| ray(i).t_max);
         let mut origin = [[0.0; PACKET]; 3];
         let mut dir = [[0.0; PACKET]; 3];
         for i in 0..PACKET {

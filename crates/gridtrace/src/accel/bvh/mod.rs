@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use super::huge::HugePageArray;
 use super::triangle::slack_pad;
-use super::{Aabb, Counters, Hit, PACKET, Ray, TMax, TriAccel, TriAccel4};
+use super::{Aabb, Counters, Hit, PACKET, Ray, TriAccel, TriAccel4};
 
 mod all_hits;
 mod box_test;
@@ -98,23 +98,23 @@ impl BvhAccel {
 
     /// Closest hit with `t_min <= t < t_max`; `tri` indexes the triangles given to `build`.
     /// `counters.cell()` counts nodes visited.
-    pub fn intersect<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        let mut w = Walk::new(ray, t_min, t_max);
+    pub fn intersect<C: Counters>(&self, ray: &Ray, counters: &mut C) -> Hit {
+        let mut w = Walk::new(ray);
         self.walk::<false, C>(&mut w, counters);
         self.result(&w.best)
     }
 
-    /// Any hit with `t_min <= t < t_max`.
-    pub fn occluded<C: Counters>(&self, ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
-        let mut w = Walk::new(ray, t_min, t_max);
+    /// Any hit in the ray's interval.
+    pub fn occluded<C: Counters>(&self, ray: &Ray, counters: &mut C) -> bool {
+        let mut w = Walk::new(ray);
         self.walk::<true, C>(&mut w, counters);
         w.best.is_hit()
     }
 
     /// Closest hits of a batch of rays, `out[i]` for `rays[i]`: the same answers as `intersect`,
     /// faster (`traced`).
-    pub fn intersect_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [Hit]) {
-        self.traced::<false>(rays, t_min, TMax::One(t_max), |i, best| out[i] = self.result(best));
+    pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Hit]) {
+        self.traced::<false>(rays, Route::Batch, |i, best| out[i] = self.result(best));
     }
 
     /// Closest hits of a batch handed to `f(i, hit, normal)` as each ray `rays[i]` is done, in
@@ -123,8 +123,19 @@ impl BvhAccel {
     /// and still in cache. A caller can write its own output format here, without a pass over
     /// an intermediate array.
     #[inline]
-    pub fn intersect_batch_each(&self, rays: &[Ray], t_min: f32, t_max: TMax<'_>, mut f: impl FnMut(usize, Hit, Vec3)) {
-        self.traced::<false>(rays, t_min, t_max, |i, best| {
+    pub fn intersect_batch_each(&self, rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        self.traced_each(rays, Route::Batch, f)
+    }
+
+    /// `intersect_batch_each` for the two levels' streams (`Walks::intersect_stream_each`):
+    /// the interleaved single walks alone (`traced` says why).
+    pub fn intersect_stream_each(&self, rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        self.traced_each(rays, Route::Stream, f)
+    }
+
+    #[inline]
+    fn traced_each(&self, rays: &[Ray], route: Route, mut f: impl FnMut(usize, Hit, Vec3)) {
+        self.traced::<false>(rays, route, |i, best| {
             let normal = if best.is_hit() {
                 let tri = best.tri as usize;
                 self.blocks[tri / LEAF_BLOCK].normal(tri % LEAF_BLOCK)
@@ -136,8 +147,8 @@ impl BvhAccel {
     }
 
     /// Any-hit results of a batch of rays (as `intersect_batch`).
-    pub fn occluded_batch(&self, rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
-        self.traced::<true>(rays, t_min, TMax::One(t_max), |i, best| out[i] = best.is_hit());
+    pub fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        self.traced::<true>(rays, Route::Batch, |i, best| out[i] = best.is_hit());
     }
 
     /// Traces a batch, handing each ray's walk result (`Walk::best`) to `finish(i, best)`.
@@ -147,8 +158,8 @@ impl BvhAccel {
     /// interleaved, each step prefetching what its ray touches next, so that one ray's wait
     /// for memory overlaps the others' work (incoherent rays spend most of their time waiting
     /// for nodes and triangles, one dependent load after another). The same answers either way.
-    fn traced<const ANY: bool>(&self, rays: &[Ray], t_min: f32, t_max: TMax<'_>, mut finish: impl FnMut(usize, &Hit)) {
-        // Not for a limit per ray (`TMax::Each`: the two levels' streams) unless
+    fn traced<const ANY: bool>(&self, rays: &[Ray], route: Route, mut finish: impl FnMut(usize, &Hit)) {
+        // Not for the two levels' streams (`Route::Stream`) unless
         // `GRIDTRACE_BVH_PACKETS=all`: those batches are one instance's share of a work item's
         // rays, in ray order, and a camera's rays there are not coherent at the scale of the
         // mesh's leaves. Measured (2026-12-05, issue 52, `examples/carried_packets.rs`: 10
@@ -171,8 +182,8 @@ impl BvhAccel {
         // leaves (13 nodes and leaves and 20 triangle tests a packet against the singles' 33
         // and 30), the packets were still 5-8% slower (11.5-16.1 against 10.8-15.3 ms). The
         // flat mesh's camera packets are cheap on average because most cross empty space.
-        let limits_per_ray = matches!(t_max, TMax::Each(_)) && !coherent::packets_for_limits_per_ray();
-        if crate::accel::simd::has_wide() && rays.len() >= PACKET && coherent::packets_enabled() && !limits_per_ray {
+        let stream = route == Route::Stream && !coherent::packets_for_streams();
+        if crate::accel::simd::has_wide() && rays.len() >= PACKET && coherent::packets_enabled() && !stream {
             let extent = self.extent();
             let (lo, hi) = self
                 .bvh
@@ -188,13 +199,15 @@ impl BvhAccel {
                 // scene (`footprint`: far cameras' packets walk singly, 10 Bunnies 8 diagonals
                 // away 11.2-15.4 -> 3.6-4.2 ms).
                 let cos_sq = footprint::cone_cos_sq(group[0].origin, lo, hi, self.leaf_size);
-                if group.len() == PACKET && coherent::coherent_within(group, extent, cos_sq) {
-                    let limits = std::array::from_fn(|k| t_max.of(start + k));
+                if group.len() == PACKET
+                    && crate::accel::contract::same_start(group)
+                    && coherent::coherent_within(group, extent, cos_sq)
+                {
                     // SAFETY: the CPU runs the eight-lane build, checked above.
-                    let a = unsafe { self.walk_coherent::<ANY>(group, t_min, limits) };
+                    let a = unsafe { self.walk_coherent::<ANY>(group) };
                     for (k, best) in a.best.iter().enumerate() {
                         if a.redo >> k & 1 != 0 {
-                            finish(start + k, &self.walk_best::<ANY>(&group[k], t_min, limits[k]));
+                            finish(start + k, &self.walk_best::<ANY>(&group[k]));
                         } else {
                             finish(start + k, best);
                         }
@@ -205,14 +218,14 @@ impl BvhAccel {
                 }
             }
             let rest = rest.iter().map(|&i| (i as usize, &rays[i as usize]));
-            return self.interleaved::<ANY>(rest, t_min, t_max, |i, w| finish(i, &w.best));
+            return self.interleaved::<ANY>(rest, |i, w| finish(i, &w.best));
         }
-        self.interleaved::<ANY>(rays.iter().enumerate(), t_min, t_max, |i, w| finish(i, &w.best))
+        self.interleaved::<ANY>(rays.iter().enumerate(), |i, w| finish(i, &w.best))
     }
 
     /// One ray's single walk, its result as `Walk::best` (a packet's ray with a tie).
-    fn walk_best<const ANY: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> Hit {
-        let mut w = Walk::new(ray, t_min, t_max);
+    fn walk_best<const ANY: bool>(&self, ray: &Ray) -> Hit {
+        let mut w = Walk::new(ray);
         self.walk::<ANY, _>(&mut w, &mut crate::accel::NoCounters);
         w.best
     }
@@ -223,4 +236,14 @@ impl BvhAccel {
             + std::mem::size_of_val(&self.blocks[..])
             + std::mem::size_of_val(&self.lane_prims[..])
     }
+}
+
+/// Where a batch's rays come from, as `BvhAccel::traced` weighs its packets: a caller's batch
+/// (a camera's or a sensor's neighbouring rays, coherent ones walked as packets) or the two
+/// levels' streams (one instance's share of a work item's rays, not coherent at its leaves'
+/// scale).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Route {
+    Batch,
+    Stream,
 }

@@ -24,32 +24,17 @@ use crate::accel::simd::has_wide;
 impl BvhAccel {
     /// Closest hits of up to `PACKET` rays, each counted into its own `counters[i]`: the same
     /// hits and counts as `intersect` ray by ray. Hits past `rays.len()` are misses.
-    pub fn intersect_packet<C: Counters>(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
+    pub fn intersect_packet<C: Counters>(&self, rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
         let mut hits = [Hit::MISS; PACKET];
-        self.packet::<false, C>(rays, t_min, [t_max; PACKET], counters, |i, best| {
-            hits[i] = self.result(best)
-        });
+        self.packet::<false, C>(rays, counters, |i, best| hits[i] = self.result(best));
         hits
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]`, each
-    /// counted into its own `counters[i]`: the same answers and counts as `occluded` ray by ray.
+    /// Whether each of up to `PACKET` rays hits anything in its interval, each counted into its own `counters[i]`: the same answers and counts as `occluded` ray by ray.
     /// False past `rays.len()`.
-    pub fn occluded_packet<C: Counters>(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
+    pub fn occluded_packet<C: Counters>(&self, rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
         let mut hits = [false; PACKET];
-        self.packet::<true, C>(rays, t_min, t_max, counters, |i, best| hits[i] = best.is_hit());
+        self.packet::<true, C>(rays, counters, |i, best| hits[i] = best.is_hit());
         hits
     }
 
@@ -59,8 +44,6 @@ impl BvhAccel {
     fn packet<const ANY: bool, C: Counters>(
         &self,
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
         mut finish: impl FnMut(usize, &Hit),
     ) {
@@ -74,13 +57,14 @@ impl BvhAccel {
             && !rays.is_empty()
             && has_wide()
             && super::coherent::packets_enabled()
+            && crate::accel::contract::same_start(rays)
             && super::coherent::coherent(rays, self.extent())
         {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
-            let a = unsafe { self.walk_coherent::<ANY>(rays, t_min, t_max) };
+            let a = unsafe { self.walk_coherent::<ANY>(rays) };
             for (k, ray) in rays.iter().enumerate() {
                 if a.redo >> k & 1 != 0 {
-                    finish(k, &self.walk_best::<ANY>(ray, t_min, t_max[k]));
+                    finish(k, &self.walk_best::<ANY>(ray));
                 } else {
                     finish(k, &a.best[k]);
                 }
@@ -89,29 +73,25 @@ impl BvhAccel {
         }
         if has_wide() {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
-            return unsafe { self.packet_wide::<ANY, C>(rays, t_min, t_max, counters, finish) };
+            return unsafe { self.packet_wide::<ANY, C>(rays, counters, finish) };
         }
-        self.packet_body::<ANY, false, C>(rays, t_min, t_max, counters, finish)
+        self.packet_body::<ANY, false, C>(rays, counters, finish)
     }
 
     #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     unsafe fn packet_wide<const ANY: bool, C: Counters>(
         &self,
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
         finish: impl FnMut(usize, &Hit),
     ) {
-        self.packet_body::<ANY, true, C>(rays, t_min, t_max, counters, finish)
+        self.packet_body::<ANY, true, C>(rays, counters, finish)
     }
 
     #[inline(always)]
     fn packet_body<const ANY: bool, const WIDE: bool, C: Counters>(
         &self,
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
         mut finish: impl FnMut(usize, &Hit),
     ) {
@@ -119,7 +99,7 @@ impl BvhAccel {
         // Only the walks in use are set up (a walk's stack is left uninitialised, `Walk`).
         let mut walks: [MaybeUninit<Walk>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         for i in 0..n {
-            Walk::start_in(&mut walks[i], &rays[i], t_min, t_max[i]);
+            Walk::start_in(&mut walks[i], &rays[i]);
         }
         // SAFETY: the first `n` walks were written just above (`n <= PACKET`, asserted in
         // `packet`; `walks[i]` would panic first anyway), and `MaybeUninit<Walk>` has the layout

@@ -6,8 +6,8 @@ use glam::Vec3;
 use super::BvhAccel;
 use crate::Result;
 use crate::accel::AccelParams;
-use crate::accel::contract::AccelStructure;
-use crate::accel::{Counters, Hit, PACKET, Ray, TMax, TriAccel};
+use crate::accel::contract::{AccelStructure, Walks};
+use crate::accel::{Counters, Hit, PACKET, Ray, TriAccel};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for BvhAccel {
@@ -36,67 +36,57 @@ impl AccelStructure for BvhAccel {
             fmt_bytes(BvhAccel::memory(self))
         )
     }
+}
 
+/// The BVH's walks, written in its own files (`walk.rs`, `packet.rs`, `all_hits.rs`,
+/// `closest.rs`) as methods that need not the triangles `Accel` holds: its leaf blocks keep
+/// their own copy.
+impl Walks for BvhAccel {
     #[inline]
-    fn intersect<C: Counters>(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        BvhAccel::intersect(self, ray, t_min, t_max, counters)
+    fn intersect<C: Counters>(&self, _tris: &[TriAccel], ray: &Ray, counters: &mut C) -> Hit {
+        BvhAccel::intersect(self, ray, counters)
     }
 
     #[inline]
-    fn occluded<C: Counters>(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
-        BvhAccel::occluded(self, ray, t_min, t_max, counters)
+    fn occluded<C: Counters>(&self, _tris: &[TriAccel], ray: &Ray, counters: &mut C) -> bool {
+        BvhAccel::occluded(self, ray, counters)
     }
 
     #[inline]
-    fn intersect_packet<C: Counters>(
-        &self,
-        _tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
-        BvhAccel::intersect_packet(self, rays, t_min, t_max, counters)
+    fn intersect_packet<C: Counters>(&self, _tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
+        BvhAccel::intersect_packet(self, rays, counters)
     }
 
     #[inline]
-    fn occluded_packet<C: Counters>(
-        &self,
-        _tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
-        BvhAccel::occluded_packet(self, rays, t_min, t_max, counters)
+    fn occluded_packet<C: Counters>(&self, _tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
+        BvhAccel::occluded_packet(self, rays, counters)
     }
 
     /// The rays interleaved with prefetching; the normal taken from the hit's block while it
     /// is still in cache (looked up afterwards it is a cache miss per hit).
     #[inline]
-    fn intersect_batch_each(
-        &self,
-        _tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: TMax<'_>,
-        f: impl FnMut(usize, Hit, Vec3),
-    ) {
-        BvhAccel::intersect_batch_each(self, rays, t_min, t_max, f)
+    fn intersect_batch_each(&self, _tris: &[TriAccel], rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        BvhAccel::intersect_batch_each(self, rays, f)
     }
 
-    fn occluded_batch(&self, _tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
-        BvhAccel::occluded_batch(self, rays, t_min, t_max, out)
+    /// The interleaved single walks alone: a stream's rays are not coherent at the leaves'
+    /// scale (`BvhAccel::traced` has the figures).
+    fn intersect_stream_each(&self, _tris: &[TriAccel], rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        BvhAccel::intersect_stream_each(self, rays, f)
+    }
+
+    fn occluded_batch(&self, _tris: &[TriAccel], rays: &[Ray], out: &mut [bool]) {
+        BvhAccel::occluded_batch(self, rays, out)
     }
 
     /// The tree walked with no early exit (`all_hits.rs`); a triangle is in one leaf only.
-    fn all_hits(&self, _tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
-        BvhAccel::all_hits(self, ray, t_min, t_max, out)
+    fn all_hits(&self, _tris: &[TriAccel], ray: &Ray, out: &mut Vec<Hit>) {
+        BvhAccel::all_hits(self, ray, out)
     }
 
     /// The all-hits walk counting instead of listing, rays interleaved (`all_hits.rs`).
-    fn count_hits_batch(&self, _tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
-        BvhAccel::count_hits_batch(self, rays, t_min, t_max, out)
+    fn count_hits_batch(&self, _tris: &[TriAccel], rays: &[Ray], out: &mut [u32]) {
+        BvhAccel::count_hits_batch(self, rays, out)
     }
 
     /// The searches interleaved with prefetching (`closest.rs`).

@@ -290,20 +290,21 @@ fn avx_and_baseline_traversals_agree() {
         let finish = |i: usize, w: &Walk| out[i] = accel.result(&w.best);
         if avx {
             // SAFETY: the CPU runs the eight-lane build, checked above.
-            unsafe { accel.interleaved_wide::<false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish) }
+            unsafe { accel.interleaved_wide::<false>(rays.iter().enumerate(), finish) }
         } else {
-            accel.interleaved_body::<false, false>(rays.iter().enumerate(), 0.0, TMax::One(f32::INFINITY), finish)
+            accel.interleaved_body::<false, false>(rays.iter().enumerate(), finish)
         }
         out
     };
+    let short = crate::testing::within(&rays, 0.0, 1.0);
     let any = |avx: bool| {
         let mut out = vec![false; rays.len()];
         let finish = |i: usize, w: &Walk| out[i] = w.best.is_hit();
         if avx {
             // SAFETY: the CPU runs the eight-lane build, checked above.
-            unsafe { accel.interleaved_wide::<true>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish) }
+            unsafe { accel.interleaved_wide::<true>(short.iter().enumerate(), finish) }
         } else {
-            accel.interleaved_body::<true, false>(rays.iter().enumerate(), 0.0, TMax::One(1.0), finish)
+            accel.interleaved_body::<true, false>(short.iter().enumerate(), finish)
         }
         out
     };
@@ -446,13 +447,13 @@ fn refit_traversal_equals_brute_force() {
             })
             .collect();
         let mut batch = vec![Hit::MISS; rays.len()];
-        accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut batch);
+        accel.intersect_batch(&rays, &mut batch);
         let mut occ_batch = vec![false; rays.len()];
-        accel.occluded_batch(&rays, 0.0, f32::INFINITY, &mut occ_batch);
+        accel.occluded_batch(&rays, &mut occ_batch);
         let mut hits = 0;
         for (i, r) in rays.iter().enumerate() {
-            let want = brute_force_intersect(&tris, r, 0.0, f32::INFINITY);
-            let got = accel.intersect(r, 0.0, f32::INFINITY, &mut NoCounters);
+            let want = brute_force_intersect(&tris, r);
+            let got = accel.intersect(r, &mut NoCounters);
             assert_eq!(
                 got.is_hit(),
                 want.is_hit(),
@@ -461,7 +462,7 @@ fn refit_traversal_equals_brute_force() {
             assert_eq!(batch[i], got, "{name}, ray {i}: batch");
             assert_eq!(occ_batch[i], want.is_hit(), "{name}, ray {i}: batch any hit");
             assert_eq!(
-                accel.occluded(r, 0.0, f32::INFINITY, &mut NoCounters),
+                accel.occluded(r, &mut NoCounters),
                 want.is_hit(),
                 "{name}, ray {i}: any hit"
             );
@@ -477,8 +478,8 @@ fn refit_traversal_equals_brute_force() {
             }
             let before = want.t * (1.0 - 1e-5);
             assert_eq!(
-                accel.occluded(r, 0.0, before, &mut NoCounters),
-                brute_force_occluded(&tris, r, 0.0, before),
+                accel.occluded(&r.within(0.0, before), &mut NoCounters),
+                brute_force_occluded(&tris, &r.within(0.0, before)),
                 "{name}, ray {i}: any hit before the closest"
             );
         }
@@ -522,10 +523,10 @@ fn packets_equal_single_rays() {
         };
         let t_max: [f32; PACKET] = std::array::from_fn(|_| rng.range(0.5, 6.0));
         let mut counted = vec![TraversalCounters::default(); n];
-        let got = accel.intersect_packet(&rays, 0.0, f32::INFINITY, &mut counted);
+        let got = accel.intersect_packet(&rays, &mut counted);
         for (k, ray) in rays.iter().enumerate() {
             let mut c = TraversalCounters::default();
-            let want = accel.intersect(ray, 0.0, f32::INFINITY, &mut c);
+            let want = accel.intersect(ray, &mut c);
             assert_eq!(bits(&got[k]), bits(&want), "round {round}, ray {k}: closest hit");
             assert_eq!(counted[k], c, "round {round}, ray {k}: closest-hit counts");
             hits += want.is_hit() as usize;
@@ -535,10 +536,10 @@ fn packets_equal_single_rays() {
             "round {round}: lanes past the packet miss"
         );
         let mut counted = vec![TraversalCounters::default(); n];
-        let got = accel.occluded_packet(&rays, 0.0, t_max, &mut counted);
+        let got = accel.occluded_packet(&crate::testing::within_each(&rays, 0.0, &t_max), &mut counted);
         for (k, ray) in rays.iter().enumerate() {
             let mut c = TraversalCounters::default();
-            let want = accel.occluded(ray, 0.0, t_max[k], &mut c);
+            let want = accel.occluded(&crate::testing::within(ray, 0.0, t_max[k]), &mut c);
             assert_eq!(got[k], want, "round {round}, ray {k}: any hit before {}", t_max[k]);
             assert_eq!(counted[k], c, "round {round}, ray {k}: any-hit counts");
             blocked += want as usize;

@@ -19,15 +19,16 @@ fn bits(h: &Hit) -> (u32, u32, u32, u32) {
 /// The packet walk forced on `rays` (whatever `coherent` says), ties redone by the single walk
 /// as the queries do; the closest hits as answered, and how many rays needed the redo.
 fn forced(accel: &BvhAccel, rays: &[Ray], t_min: f32, t_max: [f32; PACKET]) -> (Vec<Hit>, Vec<bool>, u32) {
+    let rays = crate::testing::within_each(rays, t_min, &t_max);
     // SAFETY: the callers checked that the CPU runs the eight-lane build.
-    let closest = unsafe { accel.walk_coherent::<false>(rays, t_min, t_max) };
+    let closest = unsafe { accel.walk_coherent::<false>(&rays) };
     // SAFETY: as above.
-    let any = unsafe { accel.walk_coherent::<true>(rays, t_min, t_max) };
+    let any = unsafe { accel.walk_coherent::<true>(&rays) };
     assert_eq!(any.redo, 0, "any-hit answers have no ties");
     let hits = (0..rays.len())
         .map(|k| {
             if closest.redo >> k & 1 != 0 {
-                accel.intersect(&rays[k], t_min, t_max[k], &mut NoCounters)
+                accel.intersect(&crate::testing::within(&rays[k], t_min, t_max[k]), &mut NoCounters)
             } else {
                 accel.result(&closest.best[k])
             }
@@ -42,9 +43,9 @@ fn check(accel: &BvhAccel, rays: &[Ray], t_min: f32, t_max: [f32; PACKET], what:
     let (got, blocked, redone) = forced(accel, rays, t_min, t_max);
     let mut hits = 0;
     for (k, ray) in rays.iter().enumerate() {
-        let want = accel.intersect(ray, t_min, t_max[k], &mut NoCounters);
+        let want = accel.intersect(&crate::testing::within(ray, t_min, t_max[k]), &mut NoCounters);
         assert_eq!(bits(&got[k]), bits(&want), "{what}, ray {k} {ray:?}: closest hit");
-        let want_any = accel.occluded(ray, t_min, t_max[k], &mut NoCounters);
+        let want_any = accel.occluded(&crate::testing::within(ray, t_min, t_max[k]), &mut NoCounters);
         assert_eq!(blocked[k], want_any, "{what}, ray {k} {ray:?}: any hit");
         hits += want.is_hit() as usize;
     }
@@ -247,18 +248,20 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
     for (rays, what) in [(&camera, "camera"), (&random, "random")] {
         for (t_min, t_max) in [(0.0, f32::INFINITY), (3.5, 4.5)] {
             let mut got = vec![Hit::MISS; rays.len()];
-            accel.intersect_batch(rays, t_min, t_max, &mut got);
+            accel.intersect_batch(&crate::testing::within(rays, t_min, t_max), &mut got);
             let mut blocked = vec![false; rays.len()];
-            accel.occluded_batch(rays, t_min, t_max, &mut blocked);
+            accel.occluded_batch(&crate::testing::within(rays, t_min, t_max), &mut blocked);
             let mut each = vec![(Hit::MISS, Vec3::NAN); rays.len()];
-            accel.intersect_batch_each(rays, t_min, TMax::One(t_max), |i, hit, normal| each[i] = (hit, normal));
+            accel.intersect_batch_each(&crate::testing::within(rays, t_min, t_max), |i, hit, normal| {
+                each[i] = (hit, normal)
+            });
             for (i, ray) in rays.iter().enumerate() {
-                let want = accel.intersect(ray, t_min, t_max, &mut NoCounters);
+                let want = accel.intersect(&crate::testing::within(ray, t_min, t_max), &mut NoCounters);
                 assert_eq!(bits(&got[i]), bits(&want), "{what} batch ray {i}");
                 assert_eq!(bits(&each[i].0), bits(&want), "{what} batch_each ray {i}");
                 assert_eq!(
                     blocked[i],
-                    accel.occluded(ray, t_min, t_max, &mut NoCounters),
+                    accel.occluded(&crate::testing::within(ray, t_min, t_max), &mut NoCounters),
                     "{what} any ray {i}"
                 );
             }
@@ -271,15 +274,15 @@ fn batches_and_packets_take_the_coherent_walk_with_single_ray_answers() {
         }
         for (p, packet) in rays.chunks(PACKET).enumerate() {
             let mut none = vec![NoCounters; packet.len()];
-            let got = accel.intersect_packet(packet, 0.0, f32::INFINITY, &mut none);
+            let got = accel.intersect_packet(packet, &mut none);
             let t_max: [f32; PACKET] = std::array::from_fn(|k| 3.0 + k as f32 * 0.25);
-            let blocked = accel.occluded_packet(packet, 0.0, t_max, &mut none);
+            let blocked = accel.occluded_packet(&crate::testing::within_each(packet, 0.0, &t_max), &mut none);
             for (k, ray) in packet.iter().enumerate() {
-                let want = accel.intersect(ray, 0.0, f32::INFINITY, &mut NoCounters);
+                let want = accel.intersect(ray, &mut NoCounters);
                 assert_eq!(bits(&got[k]), bits(&want), "{what} packet {p} ray {k}");
                 assert_eq!(
                     blocked[k],
-                    accel.occluded(ray, 0.0, t_max[k], &mut NoCounters),
+                    accel.occluded(&crate::testing::within(ray, 0.0, t_max[k]), &mut NoCounters),
                     "{what} packet {p} any {k}"
                 );
             }
@@ -459,11 +462,11 @@ fn far_cameras_walk_singly_with_single_ray_answers() {
         let want = if want_narrow { groups.len() } else { 0 };
         assert_eq!(narrow, want, "eye {eye}, fov {fov}: narrow packets");
         let mut got = vec![Hit::MISS; rays.len()];
-        accel.intersect_batch(&rays, 0.0, f32::INFINITY, &mut got);
+        accel.intersect_batch(&rays, &mut got);
         let mut blocked = vec![false; rays.len()];
-        accel.occluded_batch(&rays, 0.0, f32::INFINITY, &mut blocked);
+        accel.occluded_batch(&rays, &mut blocked);
         for (i, ray) in rays.iter().enumerate() {
-            let want = accel.intersect(ray, 0.0, f32::INFINITY, &mut NoCounters);
+            let want = accel.intersect(ray, &mut NoCounters);
             assert_eq!(bits(&got[i]), bits(&want), "eye {eye} ray {i}");
             assert_eq!(blocked[i], want.is_hit(), "eye {eye} any ray {i}");
         }

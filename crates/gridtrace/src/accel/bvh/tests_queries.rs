@@ -28,15 +28,15 @@ fn counting_equals_listing_and_brute_force() {
     let (mut many, mut hits) = (0, Vec::new());
     for (t_min, t_max) in [(0.0, f32::INFINITY), (0.5, 2.5)] {
         let mut counted = vec![u32::MAX; rays.len()];
-        accel.count_hits_batch(&rays, t_min, t_max, &mut counted);
+        accel.count_hits_batch(&crate::testing::within(&rays, t_min, t_max), &mut counted);
         let mut baseline = vec![u32::MAX; rays.len()];
-        accel.count_hits_body::<false>(&rays, t_min, t_max, &mut baseline);
+        accel.count_hits_body::<false>(&crate::testing::within(&rays, t_min, t_max), &mut baseline);
         for (i, r) in rays.iter().enumerate() {
             hits.clear();
-            all_hits_brute(&tris, r, t_min, t_max, &mut hits);
+            all_hits_brute(&tris, &crate::testing::within(r, t_min, t_max), &mut hits);
             let want = hits.len() as u32;
             hits.clear();
-            accel.all_hits(r, t_min, t_max, &mut hits);
+            accel.all_hits(&crate::testing::within(r, t_min, t_max), &mut hits);
             assert_eq!(hits.len() as u32, want, "ray {i}: listed");
             assert_eq!(counted[i], want, "ray {i} in ({t_min}, {t_max}): counted");
             assert_eq!(baseline[i], want, "ray {i} in ({t_min}, {t_max}): counted (baseline)");
@@ -45,7 +45,7 @@ fn counting_equals_listing_and_brute_force() {
     }
     assert!(many > 500, "only {many} rays cross more than one triangle");
     // An empty batch counts nothing and touches nothing.
-    accel.count_hits_batch(&[], 0.0, f32::INFINITY, &mut []);
+    accel.count_hits_batch(&[], &mut []);
 }
 
 /// The interleaved nearest-point searches (`closest_points_batch`) give each point the answer

@@ -7,7 +7,7 @@ use glam::{Vec3, Vec4};
 
 use crate::accel::simd::{has_wide, prefetch};
 use crate::accel::triangle::{LaneRay, ShearedRay, intersect_lanes_cull};
-use crate::accel::{Counters, Hit, NoCounters, Ray, TMax};
+use crate::accel::{Counters, Hit, NoCounters, Ray};
 
 use super::BvhAccel;
 use super::box_test::{BoxRay, Pending, T_SLOP};
@@ -39,15 +39,13 @@ impl BvhAccel {
     pub(super) fn interleaved<'r, const ANY: bool>(
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
-        t_min: f32,
-        t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
         if has_wide() {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
-            return unsafe { self.interleaved_wide::<ANY>(rays, t_min, t_max, finish) };
+            return unsafe { self.interleaved_wide::<ANY>(rays, finish) };
         }
-        self.interleaved_portable::<ANY>(rays, t_min, t_max, finish)
+        self.interleaved_portable::<ANY>(rays, finish)
     }
 
     /// The batch traversal without the eight-lane build, out of line as `interleaved_wide` is: inlined, its
@@ -57,22 +55,18 @@ impl BvhAccel {
     fn interleaved_portable<'r, const ANY: bool>(
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
-        t_min: f32,
-        t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
-        self.interleaved_body::<ANY, false>(rays, t_min, t_max, finish)
+        self.interleaved_body::<ANY, false>(rays, finish)
     }
 
     #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     pub(super) unsafe fn interleaved_wide<'r, const ANY: bool>(
         &self,
         rays: impl Iterator<Item = (usize, &'r Ray)>,
-        t_min: f32,
-        t_max: TMax<'_>,
         finish: impl FnMut(usize, &Walk),
     ) {
-        self.interleaved_body::<ANY, true>(rays, t_min, t_max, finish)
+        self.interleaved_body::<ANY, true>(rays, finish)
     }
 
     /// The batch schedule (as `interleave.rs`'s, written out for the ray walks): `LANES`
@@ -89,18 +83,16 @@ impl BvhAccel {
     pub(super) fn interleaved_body<'r, const ANY: bool, const WIDE: bool>(
         &self,
         mut rays: impl Iterator<Item = (usize, &'r Ray)>,
-        t_min: f32,
-        t_max: TMax<'_>,
         mut finish: impl FnMut(usize, &Walk),
     ) {
         // The walks are set up and reset in place for each new ray: a walk holds a few KiB of
         // stack, which is never copied. (Made by `Walk::new` and moved into the array, the
         // eight cost a 44 KiB `memmove` a batch: a sixth of the two levels' time, whose
         // batches are each instance's few rays.)
-        let idle = Ray::new(Vec3::ZERO, Vec3::X);
+        let idle = Ray::new(Vec3::ZERO, Vec3::X).within(0.0, 0.0);
         let mut slots: [MaybeUninit<Walk>; LANES] = [const { MaybeUninit::uninit() }; LANES];
         for slot in &mut slots {
-            Walk::start_in(slot, &idle, t_min, 0.0);
+            Walk::start_in(slot, &idle);
         }
         // SAFETY: every slot was initialised just above (`start_in` writes every field but the
         // stack, an array of `MaybeUninit`), and `MaybeUninit<Walk>` has `Walk`'s layout.
@@ -109,7 +101,7 @@ impl BvhAccel {
         let mut live = 0u32;
         for (k, w) in walks.iter_mut().enumerate() {
             let Some((i, r)) = rays.next() else { break };
-            w.reset(r, t_min, t_max.of(i));
+            w.reset(r);
             item[k] = i;
             live |= 1 << k;
         }
@@ -126,7 +118,7 @@ impl BvhAccel {
                         live &= !(1 << k);
                         break;
                     };
-                    w.reset(r, t_min, t_max.of(i));
+                    w.reset(r);
                     item[k] = i;
                 }
                 self.prefetch(&w.current);
@@ -229,7 +221,8 @@ pub(super) struct Walk {
 impl Walk {
     /// Starts `ray` over, keeping the (uninitialised) stack where it is.
     #[inline(always)]
-    pub(super) fn reset(&mut self, ray: &Ray, t_min: f32, t_max: f32) {
+    pub(super) fn reset(&mut self, ray: &Ray) {
+        let (t_min, t_max) = (ray.t_min, ray.t_max);
         self.sheared = ShearedRay::new(ray.origin, ray.dir);
         self.r = BoxRay::new(ray);
         self.t_min = t_min;
@@ -248,7 +241,8 @@ impl Walk {
     /// (5.5 KiB), which the compiler does with a `memmove` (measured: a third of a render's time
     /// when packets of eight rays were set up that way).
     #[inline(always)]
-    pub(super) fn start_in<'w>(slot: &'w mut MaybeUninit<Walk>, ray: &Ray, t_min: f32, t_max: f32) -> &'w mut Walk {
+    pub(super) fn start_in<'w>(slot: &'w mut MaybeUninit<Walk>, ray: &Ray) -> &'w mut Walk {
+        let (t_min, t_max) = (ray.t_min, ray.t_max);
         let w = slot.as_mut_ptr();
         // SAFETY: `w` points to memory of a `Walk`; every field is written through a raw
         // pointer (`ptr::write`: the old contents are neither read nor dropped) before the
@@ -270,7 +264,8 @@ impl Walk {
         }
     }
 
-    pub(super) fn new(ray: &Ray, t_min: f32, t_max: f32) -> Walk {
+    pub(super) fn new(ray: &Ray) -> Walk {
+        let (t_min, t_max) = (ray.t_min, ray.t_max);
         Walk {
             sheared: ShearedRay::new(ray.origin, ray.dir),
             r: BoxRay::new(ray),

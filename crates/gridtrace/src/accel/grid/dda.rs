@@ -25,19 +25,14 @@ pub enum Stepping {
 }
 
 impl Grid {
-    /// Closest hit with `t_min <= t < t_max`.
-    pub fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        stepping: Stepping,
-        counters: &mut C,
-    ) -> Hit {
-        let mut best = Hit { t: t_max, ..Hit::MISS };
-        self.walk(ray, t_min, t_max, stepping, counters, |refs, t_cell_exit, counters| {
-            closest_in(tris, refs, ray, t_min, &mut best, counters);
+    /// Closest hit in the ray's interval.
+    pub fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, stepping: Stepping, counters: &mut C) -> Hit {
+        let mut best = Hit {
+            t: ray.t_max,
+            ..Hit::MISS
+        };
+        self.walk(ray, stepping, counters, |refs, t_cell_exit, counters| {
+            closest_in(tris, refs, ray, &mut best, counters);
             // A hit beyond this cell's exit may be beaten by a triangle in a later cell; only a
             // hit inside the cell (or before it) is final.
             if best.tri != u32::MAX && best.t <= t_cell_exit {
@@ -49,19 +44,11 @@ impl Grid {
         if best.tri == u32::MAX { Hit::MISS } else { best }
     }
 
-    /// Any hit with `t_min <= t < t_max` (shadow rays): stops at the first one found.
-    pub fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        stepping: Stepping,
-        counters: &mut C,
-    ) -> bool {
+    /// Any hit in the ray's interval (shadow rays): stops at the first one found.
+    pub fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, stepping: Stepping, counters: &mut C) -> bool {
         let mut hit = false;
-        self.walk(ray, t_min, t_max, stepping, counters, |refs, _, counters| {
-            hit = any_in(tris, refs, ray, t_min, t_max, counters);
+        self.walk(ray, stepping, counters, |refs, _, counters| {
+            hit = any_in(tris, refs, ray, counters);
             if hit {
                 ControlFlow::Break(())
             } else {
@@ -71,21 +58,19 @@ impl Grid {
         hit
     }
 
-    /// Visits the non-empty cells pierced by the ray within `[t_min, t_max]`, front to back,
+    /// Visits the non-empty cells pierced by the ray within its interval, front to back,
     /// calling `visit(refs, t_cell_exit)` until it breaks. Proximity jumps are taken for
     /// `Stepping::ProximityJumps` only.
     #[inline]
     pub fn walk<C: Counters>(
         &self,
         ray: &Ray,
-        t_min: f32,
-        t_max: f32,
         stepping: Stepping,
         counters: &mut C,
         mut visit: impl FnMut(&[u32], f32, &mut C) -> ControlFlow<()>,
     ) {
         let g = self.lattice();
-        let Some(mut c) = g.cursor(ray, t_min, t_max) else {
+        let Some(mut c) = g.cursor(ray) else {
             return;
         };
         loop {
@@ -141,9 +126,9 @@ impl Lattice {
     /// (`t = (grid_min + k * cell_size - origin) / dir`) instead of accumulating `t_delta`, so
     /// they do not drift, and re-entering the DDA after a proximity jump is the same computation.
     #[inline(always)]
-    pub(super) fn cursor(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<DdaCursor> {
+    pub(super) fn cursor(&self, ray: &Ray) -> Option<DdaCursor> {
         let inv_dir = ray.dir.recip();
-        let (t_enter, t_leave) = self.bounds.clip(ray.origin, inv_dir, t_min, t_max)?;
+        let (t_enter, t_leave) = self.bounds.clip(ray.origin, inv_dir, ray.t_min, ray.t_max)?;
         let dims = IVec3::from(self.dims);
         let step = [sign(ray.dir.x), sign(ray.dir.y), sign(ray.dir.z)];
         let mut c = DdaCursor {

@@ -18,47 +18,37 @@ use crate::accel::{Counters, Hit, PACKET, Ray, TriAccel};
 impl Grid {
     /// Closest hits of up to `PACKET` rays, each counted into its own `counters[i]`: the same
     /// hits and counts as `intersect` ray by ray. Hits past `rays.len()` are misses.
-    #[allow(clippy::too_many_arguments)]
     pub fn intersect_packet<C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
         stepping: Stepping,
         counters: &mut [C],
     ) -> [Hit; PACKET] {
-        let mut best = [Hit { t: t_max, ..Hit::MISS }; PACKET];
-        self.packet(
-            rays,
-            t_min,
-            [t_max; PACKET],
-            stepping,
-            counters,
-            |i, refs, t_cell_exit, c| {
-                closest_in(tris, refs, &rays[i], t_min, &mut best[i], c);
-                best[i].tri != u32::MAX && best[i].t <= t_cell_exit
-            },
-        );
+        let mut best: [Hit; PACKET] = std::array::from_fn(|i| Hit {
+            t: rays.get(i).map_or(0.0, |r| r.t_max),
+            ..Hit::MISS
+        });
+        self.packet(rays, stepping, counters, |i, refs, t_cell_exit, c| {
+            closest_in(tris, refs, &rays[i], &mut best[i], c);
+            best[i].tri != u32::MAX && best[i].t <= t_cell_exit
+        });
         best.map(|h| if h.tri == u32::MAX { Hit::MISS } else { h })
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]`, each
-    /// counted into its own `counters[i]`: the same answers and counts as `occluded` ray by ray.
-    /// False past `rays.len()`.
-    #[allow(clippy::too_many_arguments)]
+    /// Whether each of up to `PACKET` rays hits anything in its interval, each counted into
+    /// its own `counters[i]`: the same answers and counts as `occluded` ray by ray. False past
+    /// `rays.len()`.
     pub fn occluded_packet<C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         stepping: Stepping,
         counters: &mut [C],
     ) -> [bool; PACKET] {
         let mut hit = [false; PACKET];
-        self.packet(rays, t_min, t_max, stepping, counters, |i, refs, _, c| {
-            hit[i] = any_in(tris, refs, &rays[i], t_min, t_max[i], c);
+        self.packet(rays, stepping, counters, |i, refs, _, c| {
+            hit[i] = any_in(tris, refs, &rays[i], c);
             hit[i]
         });
         hit
@@ -70,8 +60,6 @@ impl Grid {
     fn packet<C: Counters>(
         &self,
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         stepping: Stepping,
         counters: &mut [C],
         mut visit: impl FnMut(usize, &[u32], f32, &mut C) -> bool,
@@ -84,7 +72,7 @@ impl Grid {
         let mut cursors = [MaybeUninit::<DdaCursor>::uninit(); PACKET];
         let mut live = 0u32;
         for (i, ray) in rays.iter().enumerate() {
-            if let Some(c) = g.cursor(ray, t_min, t_max[i]) {
+            if let Some(c) = g.cursor(ray) {
                 cursors[i].write(c);
                 live |= 1 << i;
             }

@@ -3,7 +3,7 @@
 
 use super::Grid;
 use crate::Result;
-use crate::accel::contract::{AccelStructure, dedup_hits};
+use crate::accel::contract::{AccelStructure, Walks, dedup_hits};
 use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, Resolution, TriAccel, dims_str};
 
 /// The grid's build parameters for this resolution (`res=...`; none for the default): what
@@ -87,49 +87,38 @@ impl AccelStructure for Grid {
             ("build".into(), format!("{:.2} ms", s.build_ms)),
         ])
     }
+}
 
+/// The grid's walks (`dda.rs`, `packet.rs`), by its `stepping`: cell by cell or by jumps.
+impl Walks for Grid {
     #[inline]
-    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        Grid::intersect(self, tris, ray, t_min, t_max, self.stepping, counters)
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> Hit {
+        Grid::intersect(self, tris, ray, self.stepping, counters)
     }
 
     #[inline]
-    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
-        Grid::occluded(self, tris, ray, t_min, t_max, self.stepping, counters)
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> bool {
+        Grid::occluded(self, tris, ray, self.stepping, counters)
     }
 
     #[inline]
-    fn intersect_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
-        Grid::intersect_packet(self, tris, rays, t_min, t_max, self.stepping, counters)
+    fn intersect_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
+        Grid::intersect_packet(self, tris, rays, self.stepping, counters)
     }
 
     #[inline]
-    fn occluded_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
-        Grid::occluded_packet(self, tris, rays, t_min, t_max, self.stepping, counters)
+    fn occluded_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
+        Grid::occluded_packet(self, tris, rays, self.stepping, counters)
     }
 
     /// Every cell the ray crosses (no early exit), each triangle tested where it is met;
     /// a triangle in several cells is kept once (`dedup_hits`). The grid finds every hit
     /// brute force finds (enlarged cell boxes), so this is brute force's set.
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, out: &mut Vec<Hit>) {
         let from = out.len();
-        self.walk(ray, t_min, t_max, self.stepping, &mut NoCounters, |refs, _, _| {
+        self.walk(ray, self.stepping, &mut NoCounters, |refs, _, _| {
             for &r in refs {
-                if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, t_min, t_max) {
+                if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, ray.t_min, ray.t_max) {
                     out.push(h.on(r));
                 }
             }

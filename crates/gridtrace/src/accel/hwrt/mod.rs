@@ -9,16 +9,14 @@
 //! counts and lists, the tests' reference walks). It is the one structure that builds on
 //! another: the ray queries replace the BVH's ray walk, nothing else of it. The backends refuse
 //! to *trace* `hwrt` on the CPU (the registry's `cpu` column is false): asking for it there is
-//! asking for the hardware.
-
-use glam::Vec3;
+//! asking for the hardware. It implements no `Walks` of its own: `Accel`'s `walk!` hands its
+//! CPU-side walks to the BVH.
 
 use crate::Result;
 use crate::accel::AccelParams;
+use crate::accel::TriAccel;
 use crate::accel::bvh::BvhAccel;
-use crate::accel::closest::ClosestPoint;
 use crate::accel::contract::AccelStructure;
-use crate::accel::{Counters, Hit, PACKET, Ray, TMax, TriAccel};
 
 /// The BVH kept beside the device's acceleration structures (see the module's note).
 #[derive(Debug, Clone)]
@@ -56,66 +54,5 @@ impl AccelStructure for Hwrt {
             self.triangles,
             AccelStructure::summary(&self.bvh)
         )
-    }
-
-    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        AccelStructure::intersect(&self.bvh, tris, ray, t_min, t_max, counters)
-    }
-
-    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
-        AccelStructure::occluded(&self.bvh, tris, ray, t_min, t_max, counters)
-    }
-
-    fn intersect_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
-        AccelStructure::intersect_packet(&self.bvh, tris, rays, t_min, t_max, counters)
-    }
-
-    fn occluded_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
-        AccelStructure::occluded_packet(&self.bvh, tris, rays, t_min, t_max, counters)
-    }
-
-    fn intersect_batch_each(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: TMax<'_>,
-        f: impl FnMut(usize, Hit, Vec3),
-    ) {
-        AccelStructure::intersect_batch_each(&self.bvh, tris, rays, t_min, t_max, f)
-    }
-
-    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
-        AccelStructure::occluded_batch(&self.bvh, tris, rays, t_min, t_max, out)
-    }
-
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
-        AccelStructure::all_hits(&self.bvh, tris, ray, t_min, t_max, out)
-    }
-
-    fn count_hits_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [u32]) {
-        AccelStructure::count_hits_batch(&self.bvh, tris, rays, t_min, t_max, out)
-    }
-
-    fn closest_point(&self, tris: &[TriAccel], p: Vec3) -> ClosestPoint {
-        AccelStructure::closest_point(&self.bvh, tris, p)
-    }
-
-    fn closest_points_batch(&self, tris: &[TriAccel], points: &[[f32; 3]], out: &mut [ClosestPoint]) {
-        AccelStructure::closest_points_batch(&self.bvh, tris, points, out)
     }
 }

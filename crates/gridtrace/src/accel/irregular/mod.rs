@@ -334,36 +334,25 @@ impl IrregularGrid {
         ]
     }
 
-    /// Closest hit with `t_min <= t < t_max`.
-    pub fn intersect<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        counters: &mut C,
-    ) -> Hit {
-        let mut best = Hit { t: t_max, ..Hit::MISS };
-        self.walk(ray, t_min, t_max, counters, |refs, t_cell_exit, counters| {
-            closest_in(tris, refs, ray, t_min, &mut best, counters);
+    /// Closest hit in the ray's interval.
+    pub fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> Hit {
+        let mut best = Hit {
+            t: ray.t_max,
+            ..Hit::MISS
+        };
+        self.walk(ray, counters, |refs, t_cell_exit, counters| {
+            closest_in(tris, refs, ray, &mut best, counters);
             // As in the uniform grid: a hit is final only inside the (grown) cell.
             best.tri != u32::MAX && best.t <= t_cell_exit
         });
         if best.tri == u32::MAX { Hit::MISS } else { best }
     }
 
-    /// Any hit with `t_min <= t < t_max`.
-    pub fn occluded<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        counters: &mut C,
-    ) -> bool {
+    /// Any hit in the ray's interval.
+    pub fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> bool {
         let mut hit = false;
-        self.walk(ray, t_min, t_max, counters, |refs, _, counters| {
-            hit = any_in(tris, refs, ray, t_min, t_max, counters);
+        self.walk(ray, counters, |refs, _, counters| {
+            hit = any_in(tris, refs, ray, counters);
             hit
         });
         hit

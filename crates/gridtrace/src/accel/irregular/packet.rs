@@ -27,6 +27,7 @@
 use super::IrregularGrid;
 use glam::Vec4;
 
+use crate::accel::contract::same_start;
 use crate::accel::lanes::{Lanes, Mask, load3, splat3};
 use crate::accel::{Counters, Hit, LaneRay, NoCounters, PACKET, Ray, TriAccel, intersect_lanes};
 use crate::util::set_bits as bits;
@@ -54,48 +55,32 @@ fn min_lanes<const N: usize, L: Lanes<N>>(a: L, b: L) -> L {
 }
 
 impl IrregularGrid {
-    /// Closest hits with `t_min <= t < t_max` of up to `PACKET` rays (`rays.len()`), each
+    /// Closest hits of up to `PACKET` rays (`rays.len()`), each in its own interval and
     /// counted into its own `counters[i]`: the same hits and counts as `intersect` ray by ray,
     /// faster when the rays are coherent. The hits past `rays.len()` are misses.
-    pub fn intersect_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
-        self.walk_packet::<false, C>(tris, rays, t_min, [t_max; PACKET], counters, false)
+    pub fn intersect_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
+        self.walk_packet::<false, C>(tris, rays, counters, false)
     }
 
-    /// Whether each of up to `PACKET` rays hits anything with `t_min <= t < t_max[i]` (shadow
-    /// rays towards a light, each with its own distance): the same answers and counts as
-    /// `occluded` ray by ray. Past `rays.len()`: false.
-    pub fn occluded_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
-        self.walk_packet::<true, C>(tris, rays, t_min, t_max, counters, false)
+    /// Whether each of up to `PACKET` rays hits anything in its interval (shadow rays towards
+    /// a light, each with its own distance): the same answers and counts as `occluded` ray by
+    /// ray. Past `rays.len()`: false.
+    pub fn occluded_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
+        self.walk_packet::<true, C>(tris, rays, counters, false)
             .map(|h| h.is_hit())
     }
 
     /// A packet walked as two packets of four (what CPUs without AVX2 run), whatever the CPU:
-    /// closest hits, or (`ANY`) any hits (as `Hit::is_hit`), each ray up to its `t_max`. For
+    /// closest hits, or (`ANY`) any hits (as `Hit::is_hit`), each ray in its interval. For
     /// tests, and for measuring the widths against each other (`--example irregular_packets`).
     #[doc(hidden)]
     pub fn packet_in_fours<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
     ) -> [Hit; PACKET] {
-        self.walk_packet::<ANY, C>(tris, rays, t_min, t_max, counters, true)
+        self.walk_packet::<ANY, C>(tris, rays, counters, true)
     }
 
     /// The packet walk: eight rays in eight lanes where the CPU runs them (`simd::has_wide`;
@@ -103,13 +88,13 @@ impl IrregularGrid {
     /// three-operand instructions, the same bits, as the BVH's `interleaved` explains), else
     /// (or with `fours`) as two packets of four in SSE registers. Hits and counts are the
     /// single-ray walk's either way.
-    #[allow(clippy::too_many_arguments)]
+    ///
+    /// The lanes test triangles from one `t_min` (the packet's; each lane has its own far
+    /// limit): rays whose intervals start apart walk singly (`walk_singly`).
     fn walk_packet<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
         fours: bool,
     ) -> [Hit; PACKET] {
@@ -118,6 +103,12 @@ impl IrregularGrid {
             rays.len() <= PACKET && counters.len() == rays.len(),
             "a packet is up to {PACKET} rays, a counter each"
         );
+        if !same_start(rays) {
+            return self.walk_singly::<ANY, C>(tris, rays, counters);
+        }
+        let t_min = rays.first().map_or(0.0, |r| r.t_min);
+        // Lanes past the rays' count search nothing (`t_max = t_min`: an empty interval).
+        let t_max = std::array::from_fn(|i| rays.get(i).map_or(t_min, |r| r.t_max));
         if crate::accel::simd::has_wide() {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
             return unsafe { self.walk_packet_wide::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
@@ -141,6 +132,29 @@ impl IrregularGrid {
         }
         // `F8` is for the eight-lane build only: this function is compiled for it.
         self.walk_lanes::<PACKET, crate::accel::lanes::F8, ANY, C>(tris, rays, t_min, t_max, counters)
+    }
+
+    /// The packet's rays walked one by one (`intersect`, `occluded`), with `walk_packet`'s
+    /// answers: for `ANY` a hit stands for "occluded" (`Hit::is_hit`), at the interval's start.
+    fn walk_singly<const ANY: bool, C: Counters>(
+        &self,
+        tris: &[TriAccel],
+        rays: &[Ray],
+        counters: &mut [C],
+    ) -> [Hit; PACKET] {
+        let mut hits = [Hit::MISS; PACKET];
+        for ((h, r), c) in hits.iter_mut().zip(rays).zip(counters.iter_mut()) {
+            *h = match ANY {
+                false => self.intersect(tris, r, c),
+                true if self.occluded(tris, r, c) => Hit {
+                    t: r.t_min,
+                    tri: 0,
+                    ..Hit::MISS
+                },
+                true => Hit::MISS,
+            };
+        }
+        hits
     }
 
     /// A packet as two packets of four (`Vec4` lanes).
@@ -246,7 +260,7 @@ impl IrregularGrid {
                 origin[a][i] = ray.origin[a];
                 dir[a][i] = ray.dir[a];
             }
-            if let Some(c) = self.cursor(ray, t_min, t_max[i]) {
+            if let Some(c) = self.cursor(&ray.within(t_min, t_max[i])) {
                 for a in 0..3 {
                     inv[a][i] = c.inv[a];
                     up[a] |= ((c.step[a] > 0) as u32) << i;
@@ -471,21 +485,15 @@ impl IrregularGrid {
     /// together (`coherent`: an image's rays in row order from Python, their shadow rays
     /// towards a light) go as packets, the rest through the interleaved single-ray walk. The
     /// same answers either way.
-    pub(crate) fn batch<const ANY: bool>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        mut finish: impl FnMut(usize, Hit),
-    ) {
-        let packet_at = |i: usize| i + PACKET <= rays.len() && self.coherent(&rays[i..i + PACKET]);
+    pub(crate) fn batch<const ANY: bool>(&self, tris: &[TriAccel], rays: &[Ray], mut finish: impl FnMut(usize, Hit)) {
+        let packet_at = |i: usize| {
+            i + PACKET <= rays.len() && same_start(&rays[i..i + PACKET]) && self.coherent(&rays[i..i + PACKET])
+        };
         let mut i = 0;
         while i < rays.len() {
             while packet_at(i) {
                 let mut c = [NoCounters; PACKET];
-                let hits =
-                    self.walk_packet::<ANY, _>(tris, &rays[i..i + PACKET], t_min, [t_max; PACKET], &mut c, false);
+                let hits = self.walk_packet::<ANY, _>(tris, &rays[i..i + PACKET], &mut c, false);
                 for (k, hit) in hits.into_iter().enumerate() {
                     finish(i + k, hit);
                 }
@@ -495,7 +503,7 @@ impl IrregularGrid {
             while i < rays.len() && !packet_at(i) {
                 i += 1;
             }
-            self.interleaved::<ANY>(tris, &rays[start..i], t_min, t_max, |j, hit| finish(start + j, hit));
+            self.interleaved::<ANY>(tris, &rays[start..i], |j, hit| finish(start + j, hit));
         }
     }
 }

@@ -5,8 +5,8 @@ use glam::Vec3;
 
 use super::{IrregularGrid, IrregularParams, IrregularStats};
 use crate::Result;
-use crate::accel::contract::{AccelStructure, dedup_hits, hit_normal, intersect_ray_by_ray};
-use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TMax, TriAccel, dims_str};
+use crate::accel::contract::{AccelStructure, Walks, dedup_hits, hit_normal, intersect_ray_by_ray};
+use crate::accel::{Aabb, AccelParams, Counters, Hit, NoCounters, PACKET, Ray, TriAccel, dims_str};
 use crate::util::fmt_bytes;
 
 impl AccelStructure for IrregularGrid {
@@ -87,70 +87,54 @@ impl AccelStructure for IrregularGrid {
         ));
         Ok(lines)
     }
+}
 
+/// The irregular grid's walks: packets in SIMD lanes (`packet.rs`), batches that take runs of
+/// coherent rays as packets and interleave the rest (`walk.rs`).
+impl Walks for IrregularGrid {
     #[inline]
-    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> Hit {
-        IrregularGrid::intersect(self, tris, ray, t_min, t_max, counters)
+    fn intersect<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> Hit {
+        IrregularGrid::intersect(self, tris, ray, counters)
     }
 
     #[inline]
-    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, counters: &mut C) -> bool {
-        IrregularGrid::occluded(self, tris, ray, t_min, t_max, counters)
+    fn occluded<C: Counters>(&self, tris: &[TriAccel], ray: &Ray, counters: &mut C) -> bool {
+        IrregularGrid::occluded(self, tris, ray, counters)
     }
 
     #[inline]
-    fn intersect_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
-        counters: &mut [C],
-    ) -> [Hit; PACKET] {
-        IrregularGrid::intersect_packet(self, tris, rays, t_min, t_max, counters)
+    fn intersect_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [Hit; PACKET] {
+        IrregularGrid::intersect_packet(self, tris, rays, counters)
     }
 
     #[inline]
-    fn occluded_packet<C: Counters>(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
-        counters: &mut [C],
-    ) -> [bool; PACKET] {
-        IrregularGrid::occluded_packet(self, tris, rays, t_min, t_max, counters)
+    fn occluded_packet<C: Counters>(&self, tris: &[TriAccel], rays: &[Ray], counters: &mut [C]) -> [bool; PACKET] {
+        IrregularGrid::occluded_packet(self, tris, rays, counters)
     }
 
     #[inline]
-    fn intersect_batch_each(
-        &self,
-        tris: &[TriAccel],
-        rays: &[Ray],
-        t_min: f32,
-        t_max: TMax<'_>,
-        mut f: impl FnMut(usize, Hit, Vec3),
-    ) {
-        match t_max {
-            TMax::One(t_max) => {
-                self.batch::<false>(tris, rays, t_min, t_max, |i, hit| f(i, hit, hit_normal(tris, &hit)))
-            }
-            // A limit a ray: the packets assume one (the two levels' streams; ray by ray).
-            TMax::Each(_) => intersect_ray_by_ray(self, tris, rays, t_min, t_max, f),
-        }
+    fn intersect_batch_each(&self, tris: &[TriAccel], rays: &[Ray], mut f: impl FnMut(usize, Hit, Vec3)) {
+        self.batch::<false>(tris, rays, |i, hit| f(i, hit, hit_normal(tris, &hit)))
     }
 
-    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], t_min: f32, t_max: f32, out: &mut [bool]) {
-        self.batch::<true>(tris, rays, t_min, t_max, |i, hit| out[i] = hit.is_hit())
+    /// Ray by ray: a stream's rays are one instance's share of a work item's, each up to its
+    /// own closest hit so far, which the packets (one limit for all, when they were measured)
+    /// were not made for.
+    fn intersect_stream_each(&self, tris: &[TriAccel], rays: &[Ray], f: impl FnMut(usize, Hit, Vec3)) {
+        intersect_ray_by_ray(self, tris, rays, f)
+    }
+
+    fn occluded_batch(&self, tris: &[TriAccel], rays: &[Ray], out: &mut [bool]) {
+        self.batch::<true>(tris, rays, |i, hit| out[i] = hit.is_hit())
     }
 
     /// Every cell the ray crosses (no early exit), each triangle tested where it is met, kept
     /// once (`dedup_hits`): brute force's set, as the closest-hit walk finds brute force's hit.
-    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, t_min: f32, t_max: f32, out: &mut Vec<Hit>) {
+    fn all_hits(&self, tris: &[TriAccel], ray: &Ray, out: &mut Vec<Hit>) {
         let from = out.len();
-        self.walk(ray, t_min, t_max, &mut NoCounters, |refs, _, _| {
+        self.walk(ray, &mut NoCounters, |refs, _, _| {
             for &r in refs {
-                if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, t_min, t_max) {
+                if let Some(h) = tris[r as usize].intersect(ray.origin, ray.dir, ray.t_min, ray.t_max) {
                     out.push(h.on(r));
                 }
             }

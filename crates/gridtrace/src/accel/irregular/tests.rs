@@ -165,8 +165,8 @@ fn traversal_equals_brute_force() {
                 d.y = 0.0;
             }
             let r = Ray::new(o, d);
-            let want = brute_force_intersect(&tris, &r, 0.0, f32::INFINITY);
-            let got: Hit = g.intersect(&tris, &r, 0.0, f32::INFINITY, &mut NoCounters);
+            let want = brute_force_intersect(&tris, &r);
+            let got: Hit = g.intersect(&tris, &r, &mut NoCounters);
             assert_eq!(got.is_hit(), want.is_hit(), "{r:?} got {got:?} want {want:?}");
             if want.is_hit() {
                 assert!(
@@ -175,14 +175,11 @@ fn traversal_equals_brute_force() {
                 );
                 let t_max = want.t * 0.999;
                 assert_eq!(
-                    g.occluded(&tris, &r, 0.0, t_max, &mut NoCounters),
-                    brute_force_occluded(&tris, &r, 0.0, t_max)
+                    g.occluded(&tris, &crate::testing::within(&r, 0.0, t_max), &mut NoCounters),
+                    brute_force_occluded(&tris, &crate::testing::within(&r, 0.0, t_max))
                 );
             }
-            assert_eq!(
-                g.occluded(&tris, &r, 0.0, f32::INFINITY, &mut NoCounters),
-                want.is_hit()
-            );
+            assert_eq!(g.occluded(&tris, &r, &mut NoCounters), want.is_hit());
         }
     }
 }
@@ -231,9 +228,10 @@ fn packets_equal_single_rays() {
                 .collect();
             let (t_min, t_max) = [(0.0, f32::INFINITY), (0.5, 6.0), (0.0, 1.0)][i % 3];
             let mut counted = vec![TraversalCounters::default(); n];
-            let got = g.intersect_packet(&tris, &rays, t_min, t_max, &mut counted);
+            let got = g.intersect_packet(&tris, &crate::testing::within(&rays, t_min, t_max), &mut counted);
             let mut counted_fours = vec![TraversalCounters::default(); n];
-            let fours = g.packet_in_fours::<false, _>(&tris, &rays, t_min, [t_max; PACKET], &mut counted_fours);
+            let fours =
+                g.packet_in_fours::<false, _>(&tris, &crate::testing::within(&rays, t_min, t_max), &mut counted_fours);
             assert_eq!(
                 (fours.map(|h| (h.t.to_bits(), h.tri)), &counted_fours),
                 (got.map(|h| (h.t.to_bits(), h.tri)), &counted),
@@ -241,7 +239,7 @@ fn packets_equal_single_rays() {
             );
             for (k, r) in rays.iter().enumerate() {
                 let mut alone = TraversalCounters::default();
-                let want = g.intersect(&tris, r, t_min, t_max, &mut alone);
+                let want = g.intersect(&tris, &crate::testing::within(r, t_min, t_max), &mut alone);
                 assert_eq!(
                     (got[k].t.to_bits(), got[k].tri, got[k].u.to_bits(), got[k].v.to_bits()),
                     (want.t.to_bits(), want.tri, want.u.to_bits(), want.v.to_bits()),
@@ -255,9 +253,10 @@ fn packets_equal_single_rays() {
             // Any hits, each ray up to its own distance (shadow rays towards a light).
             let limits: [f32; PACKET] = std::array::from_fn(|k| [t_max, 3.0, 0.7, 12.0][(i + k) % 4]);
             let mut counted = vec![TraversalCounters::default(); n];
-            let got = g.occluded_packet(&tris, &rays, t_min, limits, &mut counted);
+            let shadow = crate::testing::within_each(&rays, t_min, &limits);
+            let got = g.occluded_packet(&tris, &shadow, &mut counted);
             let mut counted_fours = vec![TraversalCounters::default(); n];
-            let fours = g.packet_in_fours::<true, _>(&tris, &rays, t_min, limits, &mut counted_fours);
+            let fours = g.packet_in_fours::<true, _>(&tris, &shadow, &mut counted_fours);
             assert_eq!(
                 (fours.map(|h| h.is_hit()), &counted_fours),
                 (got, &counted),
@@ -265,7 +264,7 @@ fn packets_equal_single_rays() {
             );
             for (k, r) in rays.iter().enumerate() {
                 let mut alone = TraversalCounters::default();
-                let want = g.occluded(&tris, r, t_min, limits[k], &mut alone);
+                let want = g.occluded(&tris, &crate::testing::within(r, t_min, limits[k]), &mut alone);
                 assert_eq!(
                     (got[k], counted[k]),
                     (want, alone),
@@ -303,7 +302,7 @@ fn batches_with_camera_rows_equal_single_rays() {
             .collect();
         // Their shadow rays, in the same order, from just off each hit towards the light.
         for r in &camera {
-            let hit = g.intersect(&tris, r, 0.0, f32::INFINITY, &mut NoCounters);
+            let hit = g.intersect(&tris, r, &mut NoCounters);
             if hit.is_hit() {
                 let p = r.at(hit.t * 0.999);
                 rays.push(Ray::new(p, (light - p).normalize()));
@@ -329,23 +328,24 @@ fn batches_with_camera_rows_equal_single_rays() {
     rays.extend(shuffled);
     let (t_min, t_max) = (0.0, 14.0);
     let mut closest = vec![None; rays.len()];
-    g.batch::<false>(&tris, &rays, t_min, t_max, |i, hit| {
+    let rays = crate::testing::within(&rays, t_min, t_max);
+    g.batch::<false>(&tris, &rays, |i, hit| {
         assert!(closest[i].replace(hit).is_none(), "ray {i} answered twice");
     });
     let mut any = vec![None; rays.len()];
-    g.batch::<true>(&tris, &rays, t_min, t_max, |i, hit| {
+    g.batch::<true>(&tris, &rays, |i, hit| {
         assert!(any[i].replace(hit.is_hit()).is_none(), "ray {i} answered twice");
     });
     let (mut hits, mut occluded) = (0, 0);
     for (i, r) in rays.iter().enumerate() {
-        let want = g.intersect(&tris, r, t_min, t_max, &mut NoCounters);
+        let want = g.intersect(&tris, &crate::testing::within(r, t_min, t_max), &mut NoCounters);
         let got = closest[i].unwrap_or_else(|| panic!("ray {i} not answered"));
         assert_eq!(
             (got.t.to_bits(), got.tri, got.u.to_bits(), got.v.to_bits()),
             (want.t.to_bits(), want.tri, want.u.to_bits(), want.v.to_bits()),
             "ray {i}: {r:?}"
         );
-        let want_any = g.occluded(&tris, r, t_min, t_max, &mut NoCounters);
+        let want_any = g.occluded(&tris, &crate::testing::within(r, t_min, t_max), &mut NoCounters);
         assert_eq!(any[i], Some(want_any), "ray {i}: {r:?}");
         hits += want.is_hit() as usize;
         occluded += want_any as usize;
@@ -392,9 +392,9 @@ fn bad_parameters_are_errors() {
 fn no_triangles_and_one() {
     let g = IrregularGrid::build(&[], IrregularParams::default()).unwrap();
     let r = Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X);
-    assert!(!g.intersect(&[], &r, 0.0, f32::INFINITY, &mut NoCounters).is_hit());
+    assert!(!g.intersect(&[], &r, &mut NoCounters).is_hit());
     let tri = [TriAccel::new(Vec3::ZERO, Vec3::X, Vec3::Y)];
     let g = IrregularGrid::build(&tri, IrregularParams::default()).unwrap();
     let r = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z);
-    assert_eq!(g.intersect(&tri, &r, 0.0, f32::INFINITY, &mut NoCounters).t, 1.0);
+    assert_eq!(g.intersect(&tri, &r, &mut NoCounters).t, 1.0);
 }

@@ -65,7 +65,8 @@ struct Lane {
 impl IrregularGrid {
     /// The cursor at the ray's entry into the grid, or `None` if it misses the grid.
     #[inline(always)]
-    pub(super) fn cursor(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Cursor> {
+    pub(super) fn cursor(&self, ray: &Ray) -> Option<Cursor> {
+        let (t_min, t_max) = (ray.t_min, ray.t_max);
         let inv_dir = ray.dir.recip();
         let (t_enter, t_leave) = self.bounds.clip(ray.origin, inv_dir, t_min, t_max)?;
         let dims = self.voxel_dims().as_ivec3().to_array();
@@ -150,18 +151,11 @@ impl IrregularGrid {
         c.budget > 0
     }
 
-    /// Visits the non-empty cells along the ray within `[t_min, t_max]`, front to back, calling
+    /// Visits the non-empty cells along the ray within its interval, front to back, calling
     /// `visit(refs, t_cell_exit)` until it returns true.
     #[inline]
-    pub fn walk<C: Counters>(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        counters: &mut C,
-        mut visit: impl FnMut(&[u32], f32, &mut C) -> bool,
-    ) {
-        let Some(mut c) = self.cursor(ray, t_min, t_max) else {
+    pub fn walk<C: Counters>(&self, ray: &Ray, counters: &mut C, mut visit: impl FnMut(&[u32], f32, &mut C) -> bool) {
+        let Some(mut c) = self.cursor(ray) else {
             return;
         };
         loop {
@@ -192,8 +186,6 @@ impl IrregularGrid {
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: f32,
         mut finish: impl FnMut(usize, Hit),
     ) {
         let mut next = 0;
@@ -202,13 +194,16 @@ impl IrregularGrid {
             while *next < rays.len() {
                 let i = *next;
                 *next += 1;
-                if let Some(c) = self.cursor(&rays[i], t_min, t_max) {
+                if let Some(c) = self.cursor(&rays[i]) {
                     let slot = self.slot(c.v);
                     prefetch(self.voxel_map.as_ptr().wrapping_add(slot) as *const i8);
                     return Some(Lane {
                         ray: i,
                         c,
-                        best: Hit { t: t_max, ..Hit::MISS },
+                        best: Hit {
+                            t: rays[i].t_max,
+                            ..Hit::MISS
+                        },
                         stage: Stage::Map(slot),
                     });
                 }
@@ -262,8 +257,9 @@ impl IrregularGrid {
                             for (f, &tri) in four.iter_mut().zip(chunk) {
                                 *f = tris[tri as usize];
                             }
-                            let t_far = if ANY { t_max } else { l.best.t };
-                            let hits = TriAccel4::pack(&four[..chunk.len()]).intersect(&o4, &d4, t_min, t_far);
+                            let ray = &rays[l.ray];
+                            let t_far = if ANY { ray.t_max } else { l.best.t };
+                            let hits = TriAccel4::pack(&four[..chunk.len()]).intersect(&o4, &d4, ray.t_min, t_far);
                             let mut mask = hits.mask();
                             while mask != 0 {
                                 let k = mask.trailing_zeros() as usize;

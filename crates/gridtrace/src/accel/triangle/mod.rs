@@ -270,33 +270,27 @@ pub(crate) fn closest_in<C: super::Counters>(
     tris: &[TriAccel],
     refs: &[u32],
     ray: &super::Ray,
-    t_min: f32,
     best: &mut super::Hit,
     counters: &mut C,
 ) {
     let sheared = ShearedRay::new(ray.origin, ray.dir);
     for &tri in refs {
         counters.tri_test();
-        if let Some(h) = tris[tri as usize].intersect_sheared(&sheared, t_min, best.t) {
+        if let Some(h) = tris[tri as usize].intersect_sheared(&sheared, ray.t_min, best.t) {
             *best = h.on(tri);
         }
     }
 }
 
-/// Whether any triangle `refs` names is hit with `t_min <= t < t_max` (stops at the first).
+/// Whether any triangle `refs` names is hit in the ray's interval (stops at the first).
 #[inline(always)]
-pub(crate) fn any_in<C: super::Counters>(
-    tris: &[TriAccel],
-    refs: &[u32],
-    ray: &super::Ray,
-    t_min: f32,
-    t_max: f32,
-    counters: &mut C,
-) -> bool {
+pub(crate) fn any_in<C: super::Counters>(tris: &[TriAccel], refs: &[u32], ray: &super::Ray, counters: &mut C) -> bool {
     let sheared = ShearedRay::new(ray.origin, ray.dir);
     refs.iter().any(|&tri| {
         counters.tri_test();
-        tris[tri as usize].intersect_sheared(&sheared, t_min, t_max).is_some()
+        tris[tri as usize]
+            .intersect_sheared(&sheared, ray.t_min, ray.t_max)
+            .is_some()
     })
 }
 

@@ -17,11 +17,11 @@
 
 use glam::{Vec3, Vec4};
 
-use crate::accel::Aabb;
 use crate::accel::bvh::safe_dir;
 use crate::accel::bvh::{Bvh, BvhNode};
 use crate::accel::lanes::{Lanes as _, Mask as _};
 use crate::accel::simd::{F8, has_wide};
+use crate::accel::{Aabb, Ray};
 
 /// Instances a leaf of the binary tree holds at most: for the CPU's eight-wide nodes, eight,
 /// so that a leaf left a slot of its own (no room to open it) becomes a node of four to eight
@@ -290,19 +290,14 @@ impl TopLevel {
         std::mem::size_of_val(self.nodes.as_slice())
     }
 
-    /// Hands `visit` each instance whose box the ray `origin + t * dir` enters with
-    /// `t_min <= t <= t_max`, once, nearer boxes first where the walk can tell, with where the
-    /// ray enters it. `visit(instance, t_enter, t_max)` returns the new `t_max` (the closest
-    /// hit so far, or `-inf` to stop: an any-hit query found one); boxes past it are skipped.
+    /// Hands `visit` each instance whose box the ray enters within its interval (`t_min <= t
+    /// <= t_max`), once, nearer boxes first where the walk can tell, with where the ray enters
+    /// it. `visit(instance, t_enter, t_max)` returns the new `t_max` (the closest hit so far,
+    /// or `-inf` to stop: an any-hit query found one); boxes past it are skipped. The ray's
+    /// mask is the caller's to apply.
     #[inline]
-    pub fn walk(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        mut t_max: f32,
-        mut visit: impl FnMut(u32, f32, f32) -> f32,
-    ) {
+    pub fn walk(&self, ray: &Ray, mut visit: impl FnMut(u32, f32, f32) -> f32) {
+        let (origin, dir, t_min, mut t_max) = (ray.origin, ray.dir, ray.t_min, ray.t_max);
         if self.nodes.is_empty() || t_max.is_nan() || t_max < t_min {
             return;
         }

@@ -27,7 +27,7 @@ fn walk_visits_every_box_a_scan_finds_once() {
             let o = Vec3::new(r(), r(), r()) * 15.0;
             let d = Vec3::new(r(), r(), r());
             let mut seen = Vec::new();
-            t.walk(o, d, 0.0, f32::INFINITY, |i, _, t_max| {
+            t.walk(&Ray::new(o, d), |i, _, t_max| {
                 seen.push(i);
                 t_max
             });

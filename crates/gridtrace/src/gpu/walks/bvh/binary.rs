@@ -350,7 +350,7 @@ mod tests {
             let accel = BvhAccel::build(&tris);
             let nodes = gpu_nodes(&accel.bvh).unwrap();
             for r in ray_set(&grid, 5000, seed) {
-                let want = brute_force_intersect(&tris, &r, 0.0, f32::INFINITY);
+                let want = brute_force_intersect(&tris, &r);
                 let got = walk::<false, _>(&nodes, &accel.bvh.prims, &tris, &r, 0.0, f32::INFINITY, &mut NoCounters);
                 assert_eq!(got.is_hit(), want.is_hit(), "{r:?}");
                 if want.is_hit() {

@@ -476,7 +476,7 @@ mod tests {
             let w = Wide8::build(&BvhAccel::build(&tris)).unwrap();
             let mut work = Wide8Work::default();
             for r in ray_set(&grid, 5000, seed) {
-                let want = brute_force_intersect(&tris, &r, 0.0, f32::INFINITY);
+                let want = brute_force_intersect(&tris, &r);
                 let got = walk::<false, _>(&w, &tris, &r, 0.0, f32::INFINITY, &mut NoCounters, &mut work);
                 assert_eq!(got.is_hit(), want.is_hit(), "{r:?}");
                 if want.is_hit() {
