@@ -1024,7 +1024,6 @@ fn gpu_two_levels_equal_cpu_two_levels() {
             accel: kind.into(),
             backend: Backend::Gpu,
             gpu_variants: variants.parse().unwrap(),
-            ..Default::default()
         };
         let name = format!("{} {variants}", kind.name());
         let name = name.trim_end();

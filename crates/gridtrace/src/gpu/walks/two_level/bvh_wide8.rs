@@ -3,7 +3,7 @@
 //! another in the wide walk's own arrays, each moved to its place there (`Wide8::offset`); a
 //! mesh's header names its root. The walk is bvh8.wgsl's, from that root.
 
-use super::{TOP_LEVEL, TOP_LEVEL_ARRAY, WGSL_CONSTANTS};
+use super::{Laid, TOP_LEVEL, TOP_LEVEL_ARRAY, WGSL_CONSTANTS};
 use crate::accel::{Accel, Structure};
 use crate::gpu::layout::GpuTri;
 use crate::gpu::walks::WalkSpec;
@@ -40,9 +40,9 @@ pub const BVH_WIDE8_SHORT: WalkSpec = WalkSpec {
 
 /// The bottom walk's arrays for meshes of BVHs in the wide layout (nodes, triangle indices in
 /// leaf order, the triangles in that order: `ARRAYS` but the top level's) and each mesh's
-/// header (its root node). The indices stay each mesh's own: an answer names the mesh's
+/// header (its root node), as `Laid`. The indices stay each mesh's own: an answer names the mesh's
 /// triangle, numbered in the answers from its instance's first (`key_base`).
-pub(super) fn layout(meshes: &[&Accel]) -> Result<(Vec<Vec<u8>>, Vec<[u32; 2]>)> {
+pub(super) fn layout(meshes: &[&Accel]) -> Result<Laid> {
     let (mut nodes, mut prims, mut leaf_tris) = (Vec::new(), Vec::new(), Vec::new());
     let mut headers = Vec::with_capacity(meshes.len());
     for m in meshes {
@@ -70,7 +70,13 @@ pub(super) fn layout(meshes: &[&Accel]) -> Result<(Vec<Vec<u8>>, Vec<[u32; 2]>)>
         bytemuck::cast_slice(&prims).to_vec(),
         bytemuck::cast_slice(&leaf_tris).to_vec(),
     ];
-    Ok((arrays, headers))
+    // The walk reads its triangles in leaf order (`bvh8_tris`): group 0's `tris` holds one
+    // zero triangle (a binding holds at least one element).
+    Ok(Laid {
+        arrays,
+        tris: vec![bytemuck::Zeroable::zeroed()],
+        headers,
+    })
 }
 
 #[cfg(test)]

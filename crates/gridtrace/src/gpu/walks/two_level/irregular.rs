@@ -3,7 +3,7 @@
 //! lattice of virtual voxels a row of a table that the mesh's header names, as the uniform
 //! grid's is (`GRID`).
 
-use super::{LatticeRow, TOP_LEVEL, TOP_LEVEL_ARRAY, WGSL_CONSTANTS};
+use super::{Laid, LatticeRow, TOP_LEVEL, TOP_LEVEL_ARRAY, WGSL_CONSTANTS};
 use crate::accel::{Accel, IrrCell, Structure};
 use crate::gpu::layout::GpuTri;
 use crate::gpu::walks::{POINT_RING, WalkSpec, irregular};
@@ -36,14 +36,15 @@ pub const IRREGULAR: WalkSpec = WalkSpec {
 };
 
 /// The bottom walk's arrays for meshes of irregular grids (`IRREGULAR.arrays` but the top
-/// level's), the shared triangles, and each mesh's header (its row of the lattice table).
+/// level's), the shared triangles (every mesh's), and each mesh's header (its row of the
+/// lattice table).
 ///
 /// A mesh's words are its entries (kept: a top cell's `begin` counts from its own voxel maps,
 /// which its row's `first_map` names), then its voxel maps (each cell moved by the cells before
 /// the mesh's), then its references (each triangle moved by the triangles before it); its cells'
 /// starts moved to where its references lie among the words. Its cells keep their sentinel, so
 /// a cell's references end where the next cell's start, the mesh's last cell's included.
-pub(super) fn layout(meshes: &[&Accel]) -> Result<(Vec<Vec<u8>>, Vec<GpuTri>, Vec<[u32; 2]>)> {
+pub(super) fn layout(meshes: &[&Accel]) -> Result<Laid> {
     let too_many = || {
         Error::InvalidInput("the scene's irregular grids have more than 2^32 words, cells or triangles together".into())
     };
@@ -92,5 +93,5 @@ pub(super) fn layout(meshes: &[&Accel]) -> Result<(Vec<Vec<u8>>, Vec<GpuTri>, Ve
         bytemuck::cast_slice(&cells).to_vec(),
         bytemuck::cast_slice(&rows).to_vec(),
     ];
-    Ok((arrays, tris, headers))
+    Ok(Laid { arrays, tris, headers })
 }

@@ -201,6 +201,14 @@ impl BottomLevels {
     }
 }
 
+/// A bottom structure's part of `BottomLevels` (the layouts in their own files): its arrays,
+/// the triangles group 0 binds and each mesh's header.
+struct Laid {
+    arrays: Vec<Vec<u8>>,
+    tris: Vec<GpuTri>,
+    headers: Vec<[u32; 2]>,
+}
+
 /// The meshes' structures (`meshes[k]`, each built on the CPU in its own space) laid out for
 /// the two-level walk `walk_for` picks for them, or `None` where it picks none (a structure
 /// not carried, or meshes of different structures). Builds no structure over triangles: the
@@ -287,24 +295,17 @@ pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLe
             tri_counts,
         }));
     }
-    if matches!(first.structure, Structure::Irregular(_)) {
-        let (arrays, tris, headers) = irregular::layout(meshes)?;
+    let laid = match first.structure {
+        Structure::Irregular(_) => Some(irregular::layout(meshes)?),
+        Structure::Bvh(_) if walk.layout == BvhLayout::Wide8 => Some(bvh_wide8::layout(meshes)?),
+        _ => None,
+    };
+    if let Some(Laid { arrays, tris, headers }) = laid {
         return Ok(Some(BottomLevels {
             spec,
             kind,
             arrays,
             tris,
-            headers,
-            tri_counts,
-        }));
-    }
-    if walk.layout == BvhLayout::Wide8 {
-        let (arrays, headers) = bvh_wide8::layout(meshes)?;
-        return Ok(Some(BottomLevels {
-            spec,
-            kind,
-            arrays,
-            tris: vec![GpuTri::zeroed()],
             headers,
             tri_counts,
         }));
