@@ -255,8 +255,9 @@ impl SceneQuery {
 }
 
 /// A soup (many hits a ray) and a closed box around part of it (points inside: winding number
-/// 1), static: with the BVH the rays walk the GPU's two levels, with the irregular grid the
-/// merged mesh's renderer; the point queries run on the merged mesh's renderer either way.
+/// 1), static: with the BVH and with the irregular grid the rays walk the GPU's two levels
+/// (their bottom walks differ: binary nodes, grid cells); the point queries run on the merged
+/// mesh's renderer either way.
 fn fault_scene(backend: gridtrace::query::Backend, accel: &str) -> gridtrace::QueryScene {
     use gridtrace::testing::{cuboid, soup_arrays, triangle_soup};
     let mut s = gridtrace::QueryScene::new(gridtrace::query::QueryOptions {
@@ -409,7 +410,7 @@ fn cpu_counts(accel: &str, rays: &[[f32; 6]]) -> Vec<u32> {
 /// bindings would) is a limit, not a fault: under `auto` the CPU answers that query alone
 /// (the CPU scene's lists exactly; `last_query` "cpu" with a note naming the limit), the
 /// scene keeps its GPU (`gpu_failure` none), the next query that fits runs on the GPU, and a
-/// long list again is answered on the CPU again with the note. On both GPU paths.
+/// long list again is answered on the CPU again with the note. With both structures' walks.
 #[test]
 fn scene_lists_over_a_limit_are_answered_on_the_cpu_for_that_query_under_auto() {
     use gridtrace::gpu::LIST_PASS_LIMIT;

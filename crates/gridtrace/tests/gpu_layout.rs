@@ -117,7 +117,9 @@ fn wgsl_structs_match_rust() {
         m,
         LatticeRow,
         "Lattice",
-        [lo, first_cell, hi, first_tri, cell, shift, inv_cell, _pad0, dims, _pad1]
+        [
+            lo, first_cell, hi, first_tri, cell, shift, inv_cell, first_map, dims, _pad1
+        ]
     );
     check!(m, GpuBvhNode, "BvhNode", [xy0, xy1, z01, child]);
     check!(m, GpuBvh8Node, "Bvh8Node", [p_e, info, q0, q1, q2]);

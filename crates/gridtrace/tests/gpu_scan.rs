@@ -1,8 +1,9 @@
 //! Scans on the GPU (lavapipe in CI): the sensor's rays made on the device from its table and
 //! poses (`GpuRenderer::scan`) answer as `cast_rays` on the explicit rays does, and as the CPU's
-//! scan does, for a LiDAR and a camera, one pose and a batch, on both GPU paths (the two levels
-//! for the BVH, the merged mesh's renderer for the irregular grid); what crosses the bus is the
-//! poses (the table once) and 4 bytes a ray for a range.
+//! scan does, for a LiDAR and a camera, one pose and a batch, on the GPU's two levels (the BVH's
+//! and the irregular grid's bottom walks; the merged mesh's renderer answers where the GPU
+//! carries no two levels: `hwrt`, in `gpu_scans_on_every_structure`); what crosses the bus is
+//! the poses (the table once) and 4 bytes a ray for a range.
 
 use glam::{Affine3A, Quat, Vec3};
 use gridtrace::QueryScene;
@@ -126,7 +127,7 @@ fn gpu_scans_answer_as_cast_rays_on_their_rays() {
     }
     let lidar = Sensor::from(preset("vlp16", Some(360)).unwrap());
     let cam = Sensor::from(Camera::from_fov(70.0, 48, 36).unwrap());
-    // The BVH walks two levels on the GPU, the irregular grid the merged mesh's renderer.
+    // Both walk two levels on the GPU, each with its own bottom walk (nodes, grid cells).
     for accel in [AccelKind::Bvh, AccelKind::Irregular] {
         let gpu = room(Backend::Gpu, accel);
         assert!(gpu.device().unwrap().starts_with("gpu"), "{}", gpu.device().unwrap());

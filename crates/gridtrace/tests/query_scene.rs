@@ -548,8 +548,9 @@ fn gpu_rays_equal_cpu() {
                 driver_leaks += 1;
                 continue;
             }
-            // The GPU walks the geometries merged flat in world space (but the BVH and brute
-            // force, which it walks in two levels), the CPU the two levels (each ray carried
+            // The GPU walks the geometries merged flat in world space (`hwrt`; the structures
+            // it carries under a top level, every other, it walks in two levels: then both
+            // round alike), the CPU the two levels (each ray carried
             // into its mesh's space): the two round the geometry apart. Where
             // they differ, the GPU is held to brute force over the same flat triangles; a ray
             // aimed at a silhouette's edge or vertex may still go either way there, when the
@@ -595,7 +596,7 @@ fn gpu_rays_equal_cpu() {
             let q = ray(q).unwrap();
             // The face is hit at the GPU's t: in world space where the GPU walks the merged
             // mesh, in its mesh's space (the ray carried in) where it walks the two levels
-            // (the BVH, brute force: `gpu_two_levels_equal_cpu_two_levels`).
+            // (`gpu_two_levels_equal_cpu_two_levels`).
             let (geom, own, own_names) = &r.local[g.geometry_ids[i] as usize];
             let own_k = own_names
                 .iter()
@@ -968,15 +969,17 @@ fn rays_with_intervals(rng: &mut Rng, n: usize, bad: bool) -> (Vec<[f32; 6]>, Ve
 }
 
 /// The GPU's two levels (lavapipe in CI) answer as the CPU's, for each structure the GPU
-/// carries under a top level (the BVH, brute force, the grid with and without proximity
-/// clouds): 100 instances under random rotations,
+/// carries under a top level (the BVH in both layouts and with both stacks, brute force, the
+/// grid with and without proximity clouds, the irregular grid): 100 instances under random
+/// rotations,
 /// uneven scales and mirrors, random masks and intervals per ray. t within 1e-5 relative, or
 /// within the CPU's and GPU's triangle tests' rounding (`testing::t_close`: counted,
 /// bounded); the same instance and face but where the hit lies on its face's boundary
 /// (`testing::on_triangle_boundary`: counted, bounded); hit or miss as
-/// `testing::gpu_disagreements` allows. Then moves: the bytes written to the device are the
-/// top level's alone (64 a node and an instance record), no mesh structure is built or
-/// uploaded again, and the answers are a fresh scene's, bit for bit.
+/// `testing::gpu_disagreements` allows. A static scene's rays that see every instance walk the
+/// two levels too, not a merged mesh (none is built). Then moves: the bytes written to the
+/// device are the top level's alone (64 a node and an instance record), no mesh structure is
+/// built or uploaded again, and the answers are a fresh scene's, bit for bit.
 #[test]
 fn gpu_two_levels_equal_cpu_two_levels() {
     if skip_gpu() {
@@ -1007,19 +1010,32 @@ fn gpu_two_levels_equal_cpu_two_levels() {
     };
     let stand_in = Ray::new(Vec3::ZERO, Vec3::X);
     let ray_list: Vec<Ray> = rays.iter().map(|q| ray(q).unwrap_or(stand_in)).collect();
-    for kind in [
-        AccelKind::Bvh,
-        AccelKind::Brute,
-        AccelKind::Grid,
-        AccelKind::ProximityCloud,
+    for (kind, variants) in [
+        (AccelKind::Bvh, "bvh=binary,stack=private"),
+        (AccelKind::Bvh, "bvh=binary,stack=short"),
+        (AccelKind::Bvh, "bvh=wide8,stack=private"),
+        (AccelKind::Bvh, "bvh=wide8,stack=short"),
+        (AccelKind::Brute, ""),
+        (AccelKind::Grid, ""),
+        (AccelKind::ProximityCloud, ""),
+        (AccelKind::Irregular, ""),
     ] {
         let gpu = QueryOptions {
             accel: kind.into(),
             backend: Backend::Gpu,
-            ..Default::default()
+            gpu_variants: variants.parse().unwrap(),
         };
+        let name = format!("{} {variants}", kind.name());
+        let name = name.trim_end();
         let (on_cpu, _) = instanced(cpu(kind), 3);
         let (mut on_gpu, _) = instanced(gpu.clone(), 3);
+        // Rays that see every instance (no per-ray interval or mask: what a merged mesh could
+        // answer) walk the two levels on the GPU: the two meshes' structures built, a
+        // structure each, and no merged mesh.
+        on_gpu.cast_rays(&rays).unwrap();
+        assert_eq!(on_gpu.last_query().device, "gpu", "{name}");
+        assert!(on_gpu.gpu_uploads().is_some(), "{name}: not on the GPU's two levels");
+        assert_eq!(on_gpu.structure_builds(), 2, "{name}: a merged mesh built");
         let (mut hits, mut rounding, mut boundary, mut excused) = (0, 0, 0, 0);
         for o in [&each, &shared] {
             let (c, g) = (
@@ -1031,10 +1047,10 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                 occ,
                 on_cpu.test_occlusions_with(&rays, o).unwrap(),
                 "{}: occlusion",
-                kind.name()
+                name
             );
             let (bad, ex) = gridtrace::testing::gpu_disagreements(&ray_list, &as_hits(&c), &as_hits(&g), &occ);
-            assert!(bad.is_empty(), "{}: rays {bad:?} disagree", kind.name());
+            assert!(bad.is_empty(), "{}: rays {bad:?} disagree", name);
             excused += ex;
             for (i, r) in ray_list.iter().enumerate() {
                 if !(c.t_hit[i].is_finite() && g.t_hit[i].is_finite()) {
@@ -1043,11 +1059,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                 hits += 1;
                 let (a, b) = (c.t_hit[i], g.t_hit[i]);
                 if (a - b).abs() > 1e-5 * a.abs().max(b.abs()) {
-                    assert!(
-                        gridtrace::testing::t_close(r, a, b),
-                        "{} ray {i}: t {a} vs {b}",
-                        kind.name()
-                    );
+                    assert!(gridtrace::testing::t_close(r, a, b), "{} ray {i}: t {a} vs {b}", name);
                     rounding += 1;
                 }
                 if (c.geometry_ids[i], c.primitive_ids[i]) != (g.geometry_ids[i], g.primitive_ids[i]) {
@@ -1062,27 +1074,25 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                     assert!(
                         on_edge,
                         "{} ray {i}: cpu {:?} gpu {:?}",
-                        kind.name(),
-                        c.geometry_ids[i],
-                        g.geometry_ids[i]
+                        name, c.geometry_ids[i], g.geometry_ids[i]
                     );
                     boundary += 1;
                 } else {
                     let (nc, ng) = (Vec3::from(c.primitive_normals[i]), Vec3::from(g.primitive_normals[i]));
-                    assert!(nc.abs_diff_eq(ng, 1e-5), "{} ray {i}: normal", kind.name());
+                    assert!(nc.abs_diff_eq(ng, 1e-5), "{} ray {i}: normal", name);
                 }
             }
         }
         eprintln!(
             "{}: {hits} hits compared, {rounding} t beyond 1e-5 within rounding, {boundary} other faces on a \
              boundary, {excused} hit-or-miss on a boundary",
-            kind.name()
+            name
         );
-        assert!(hits > 600, "{}: only {hits} hits", kind.name());
+        assert!(hits > 600, "{}: only {hits} hits", name);
         assert!(
             rounding * 100 <= hits && boundary * 100 <= hits && excused * 100 <= 2 * n,
             "{}: {rounding} rounding, {boundary} boundary, {excused} excused",
-            kind.name()
+            name
         );
 
         // Moves: every instance moved, one masked out, then a query.
@@ -1107,45 +1117,36 @@ fn gpu_two_levels_equal_cpu_two_levels() {
             on_gpu.set_mask(ids[3], 0).unwrap();
             let g = on_gpu.cast_rays_with(&rays, &each).unwrap();
             let occ = on_gpu.test_occlusions_with(&rays, &each).unwrap();
+            assert_eq!(on_gpu.last_query().device, "gpu", "{name} step {step}");
             let after = on_gpu.gpu_uploads().unwrap();
-            assert_eq!(
-                after.mesh_uploads,
-                1,
-                "{} step {step}: meshes uploaded again",
-                kind.name()
-            );
+            assert_eq!(after.mesh_uploads, 1, "{} step {step}: meshes uploaded again", name);
             assert_eq!(after.mesh_bytes, before.mesh_bytes);
             assert_eq!(
                 after.written_bytes - before.written_bytes,
                 64 * (top_nodes(100) + 100) as u64,
                 "{} step {step}: a move writes the top level's nodes and records alone",
-                kind.name()
+                name
             );
             assert_eq!(
                 on_gpu.structure_builds(),
                 builds,
                 "{} step {step}: a move built a structure",
-                kind.name()
+                name
             );
             let (meshes, instances) = on_gpu.parts();
             let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
             let fresh = QueryScene::from_parts(gpu.clone(), on_gpu.next_id(), meshes, instances).unwrap();
-            assert_eq!(
-                g,
-                fresh.cast_rays_with(&rays, &each).unwrap(),
-                "{} step {step}",
-                kind.name()
-            );
+            assert_eq!(g, fresh.cast_rays_with(&rays, &each).unwrap(), "{} step {step}", name);
             assert_eq!(
                 occ,
                 fresh.test_occlusions_with(&rays, &each).unwrap(),
                 "{} step {step}",
-                kind.name()
+                name
             );
             assert!(g.geometry_ids.iter().all(|&id| id != ids[3]), "masked out");
             eprintln!(
                 "{} step {step}: a move wrote {} bytes ({} nodes, {} records); the meshes' {} bytes stay",
-                kind.name(),
+                name,
                 after.written_bytes - before.written_bytes,
                 after.top_nodes,
                 after.top_records,
@@ -1164,7 +1165,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
             .unwrap();
         let g = on_gpu.cast_rays_with(&rays, &each).unwrap();
         let after = on_gpu.gpu_uploads().unwrap();
-        assert_eq!((after.mesh_uploads, after.top_records), (1, 101), "{}", kind.name());
+        assert_eq!((after.mesh_uploads, after.top_records), (1, 101), "{}", name);
         assert_eq!(
             after.written_bytes - before.written_bytes,
             64 * (top_nodes(101) + 101) as u64
@@ -1176,7 +1177,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
             g,
             fresh.cast_rays_with(&rays, &each).unwrap(),
             "{}: added {added}",
-            kind.name()
+            name
         );
     }
 }

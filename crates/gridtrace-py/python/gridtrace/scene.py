@@ -188,9 +188,9 @@ class Scene:
     CPU the ray queries walk these two levels, with a ray carried into an instance's space
     without normalising its direction (so ``t`` is the same ``t``); each ray may have its own
     ``tnear``, ``tfar`` and ``mask``. Where the backend traces on a GPU the ray queries walk the
-    two levels there too with the BVH, the grid (and pc) and brute force (a move uploads the top
-    level alone);
-    with the other structures the ray queries with one interval that see every geometry, and on
+    two levels there too with the BVH, the grid (and pc), the irregular grid and brute force (a
+    move uploads the top level alone);
+    with ``hwrt`` the ray queries with one interval that see every geometry, and on
     a GPU backend the point queries, run on the instances merged into one mesh, rebuilt by the
     next such query after a change. On the CPU a moving scene's point queries walk the two
     levels where every instance is placed by a similarity (rotation, mirror, uniform scale,
@@ -318,7 +318,7 @@ class Scene:
 
     def gpu_uploads(self):
         """What the GPU's two levels hold and have written, or ``None`` before their first ray
-        query (a GPU backend with the BVH, the grid, pc or brute force): a dict of
+        query (a GPU backend with any structure but ``hwrt``): a dict of
         ``mesh_bytes`` (the meshes' structures on the device), ``mesh_uploads`` (once, and
         again only after a mesh was added or removed), ``top_nodes`` and ``top_records`` (the
         top level: 64 bytes each, all a move uploads) and ``written_bytes`` (every byte

@@ -187,7 +187,7 @@ impl WireSource for OptionRows<'_> {
 impl QueryScene {
     /// Whether the ray queries of `two` run on the GPU's two levels: a backend that traces on
     /// a GPU, and meshes whose structure the GPU carries under a top level
-    /// (`two_level::walk_for`: the BVH, the grid and brute force today).
+    /// (`two_level::walk_for`: every structure but `hwrt` today).
     pub(super) fn gpu_carries(&self, two: &TwoLevel) -> bool {
         let walk = self.opts.gpu_variants.bvh_walk();
         let mut specs = two.meshes().map(|(_, a)| two_level::walk_for(&a.structure, walk));

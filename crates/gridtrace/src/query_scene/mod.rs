@@ -49,12 +49,12 @@
 //! forms).
 //!
 //! **On the GPU** (`gpu_rays.rs`): where the backend traces on a GPU and the meshes' structure is
-//! the BVH, the grid (or pc) or brute force, closest hits and occlusion walk the two levels there too
-//! (`gpu::walks::two_level`): each mesh's structure uploaded once, a move uploads the top level
-//! alone (`gpu_uploads` reports the bytes).
+//! the BVH (either layout), the grid (or pc), the irregular grid or brute force, closest hits and
+//! occlusion walk the two levels there too (`gpu::walks::two_level`): each mesh's structure
+//! uploaded once, a move uploads the top level alone (`gpu_uploads` reports the bytes).
 //!
-//! **The merged path.** Where the backend traces on a GPU and the structure is another (the
-//! irregular grid, `bvh=wide8`, `hwrt`), the ray queries whose rays all share one interval and see every
+//! **The merged path.** Where the backend traces on a GPU and the structure is another
+//! (`hwrt`), the ray queries whose rays all share one interval and see every
 //! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
 //! do the point queries (closest points, distances, signed distances, occupancy, winding
 //! numbers), except on the CPU in a moving scene whose every instance is placed by a

@@ -232,12 +232,14 @@ fn intersect_tri(tri: GpuTri, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32
 // A regular lattice over a box (the uniform grid's cells, the irregular grid's virtual voxels):
 // the scene uniform's (`scene_lattice`), or, in a scene of two levels, one mesh's row of the
 // grid's lattice table (gpu/walks/two_level/), where `first_cell` and `first_tri` say where the
-// mesh's cells and triangles start in the shared arrays (`LatticeRow` on the host).
+// mesh's cells (the irregular grid's: its top cells' entries) and triangles start in the shared
+// arrays, and `first_map` where its voxel maps do (the irregular grid's; 0 for the grid)
+// (`LatticeRow` on the host).
 struct Lattice {
     lo: vec3<f32>, first_cell: u32,
     hi: vec3<f32>, first_tri: u32,
     cell: vec3<f32>, shift: u32,
-    inv_cell: vec3<f32>, _pad0: u32,
+    inv_cell: vec3<f32>, first_map: u32,
     dims: vec3<u32>, _pad1: u32,
 }
 

@@ -112,7 +112,7 @@ impl WalkSpec {
 
 /// Every GPU walk: each structure's default first, then the BVH's variants
 /// (`gpu::variants`), then the walks of two levels (`two_level`).
-pub const WALKS: [&WalkSpec; 12] = [
+pub const WALKS: [&WalkSpec; 15] = [
     &grid::SPEC,
     &bvh::SPEC,
     &irregular::SPEC,
@@ -125,6 +125,9 @@ pub const WALKS: [&WalkSpec; 12] = [
     &two_level::BVH_SHORT,
     &two_level::BRUTE,
     &two_level::GRID,
+    &two_level::IRREGULAR,
+    &two_level::BVH_WIDE8,
+    &two_level::BVH_WIDE8_SHORT,
 ];
 
 // Every walk's arrays fit what a device is asked to allow for them (a walk with more fails to

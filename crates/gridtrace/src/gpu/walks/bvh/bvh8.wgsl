@@ -80,19 +80,22 @@ fn bvh8_tris_below(counts: u32, slot: u32) -> u32 {
     return (pairs * 0x01010101u) >> 24u;
 }
 
-// The walk, closest hit or (`any`) the first hit found, with t_min <= t < t_max. A group is
+// The walk of one mesh's tree, whose header names its root (`h.first`: the scene's one tree,
+// node 0; a scene of two levels, where the mesh's nodes start in the shared arrays, every first
+// child, first triangle and parent position already offset there by the upload,
+// `Wide8::offset`), closest hit or (`any`) the first hit found, with t_min <= t < t_max. A group is
 // `node << 8 | mask`: the node and its children still to visit (`bvh8_hits`' order). Choosing
 // among a node's children needs only its `info` and inner-child mask (20 of its 80 bytes):
 // the whole node is read when the walk enters it (its boxes are tested), and only those words
 // when a group of it is popped (its boxes were tested on entry). On incoherent rays the pops
 // were a third of the walk's node bytes when they read the whole node.
-fn bvh8_walk(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, any: bool, work: ptr<function, u32>) -> GpuHit {
+fn bvh8_walk(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, any: bool, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
     let inv = bvh8_inv_dir(d);
     let oct = bvh8_octant(inv);
     var st = bvh8_stack_new();
-    var node = 0u;
-    let root = bvh8_nodes[0];
+    var node = h.first;
+    let root = bvh8_nodes[h.first];
     var info = root.info;
     var inner = root.p_e.w >> 24u;
     if (COUNT_WORK) { *work += 1u; }
@@ -137,12 +140,20 @@ fn bvh8_walk(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, any: bool, work
 }
 
 fn bvh8_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
-    return bvh8_walk(o, d, t_min, t_max, false, work);
+    return bvh8_closest_in(MeshHeader(0u, 0u), o, d, t_min, t_max, work);
+}
+
+fn bvh8_closest_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    return bvh8_walk(h, o, d, t_min, t_max, false, work);
 }
 
 fn bvh8_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    return bvh8_any_in(MeshHeader(0u, 0u), o, d, t_min, t_max);
+}
+
+fn bvh8_any_in(h: MeshHeader, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     var work = 0u;
-    return bvh8_walk(o, d, t_min, t_max, true, &work).tri != MISS;
+    return bvh8_walk(h, o, d, t_min, t_max, true, &work).tri != MISS;
 }
 
 // ---- Closest points (accel/bvh/closest.rs) ----

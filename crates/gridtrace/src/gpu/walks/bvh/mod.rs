@@ -68,16 +68,16 @@ pub(super) const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
 pub(super) const BINARY: &str = include_str!("bvh.wgsl");
 pub(super) const BINARY_PRIVATE: &str = include_str!("bvh_stack_private.wgsl");
 pub(super) const BINARY_SHORT: &str = include_str!("bvh_stack_short.wgsl");
-const WIDE8: &str = include_str!("bvh8.wgsl");
-const WIDE8_PRIVATE: &str = include_str!("bvh8_stack_private.wgsl");
-const WIDE8_SHORT: &str = include_str!("bvh8_stack_short.wgsl");
+pub(super) const WIDE8: &str = include_str!("bvh8.wgsl");
+pub(super) const WIDE8_PRIVATE: &str = include_str!("bvh8_stack_private.wgsl");
+pub(super) const WIDE8_SHORT: &str = include_str!("bvh8_stack_short.wgsl");
 
 pub(super) const BINARY_ARRAYS: &[(&str, &str)] = &[
     ("bvh_nodes", "bvh_nodes"),
     ("refs", "bvh_prims"),
     ("leaf triangles", "bvh_tris"),
 ];
-const WIDE8_ARRAYS: &[(&str, &str)] = &[
+pub(super) const WIDE8_ARRAYS: &[(&str, &str)] = &[
     ("bvh8_nodes", "bvh8_nodes"),
     ("refs", "bvh8_prims"),
     ("leaf triangles", "bvh8_tris"),

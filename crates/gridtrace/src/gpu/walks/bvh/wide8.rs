@@ -218,6 +218,36 @@ impl Wide8 {
         }
         Ok(Wide8 { nodes, prims })
     }
+
+    /// Moves the tree to start at node `node_base` and triangle `prim_base` of arrays that hold
+    /// other trees before it (a scene of two levels, `two_level/bvh_wide8.rs`): each node's
+    /// first child, first triangle and parent position offset, the root's parent left as
+    /// `STACK_DONE` (where the short stack's climb ends). The triangle indices (`prims`) stay
+    /// the mesh's own. Errors if a node would pass `MAX_NODES` (a stack group is
+    /// `node << 8 | mask`) or a triangle 2^32.
+    pub fn offset(&mut self, node_base: u32, prim_base: u32) -> Result<()> {
+        let too_far = || {
+            Error::InvalidInput(format!(
+                "the shared wide GPU BVH arrays address at most {MAX_NODES} nodes and 2^32 triangles \
+                 (use --gpu-variant bvh=binary)"
+            ))
+        };
+        let end = node_base as usize + self.nodes.len();
+        u32::try_from(prim_base as usize + self.prims.len()).map_err(|_| too_far())?;
+        if end > MAX_NODES {
+            return Err(too_far());
+        }
+        for n in &mut self.nodes {
+            // A node without inner children keeps the count of nodes at its making as its first
+            // child, never read: moved all the same, it stays below `end`.
+            n.info[0] += node_base;
+            n.info[1] += prim_base;
+            if n.info[3] != STACK_DONE {
+                n.info[3] = ((n.info[3] >> 3) + node_base) << 3 | (n.info[3] & 7);
+            }
+        }
+        Ok(())
+    }
 }
 
 impl GpuBvh8Node {

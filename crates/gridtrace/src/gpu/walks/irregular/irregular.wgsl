@@ -3,9 +3,10 @@
 //
 // No DDA: the walk looks up the cell under its current voxel (the top cell's entry, then that
 // top cell's voxel map), tests the cell's triangles, and leaves the cell's grown box in one
-// step. The scene uniform's lattice fields are the virtual voxels here (`dims` voxels per axis
-// of `cell_size`, `scene.shift` levels below the top cells), so `world_to_grid` maps a point
-// to its voxel exactly as the CPU's `world_to_voxel` does (same host-computed reciprocal).
+// step. The walk's lattice (the scene uniform's lattice fields, or a mesh's row of the lattice
+// table in a scene of two levels) is the virtual voxels here (`dims` voxels per axis of
+// `cell`, `shift` levels below the top cells), so `lattice_cell` maps a point to its voxel
+// exactly as the CPU's `world_to_voxel` does (same host-computed reciprocal).
 //
 // Why it terminates and misses nothing in floating point (walk.rs says it at length): the next
 // voxel is never found by rounding the exit point alone. On the exit axis it is the voxel just
@@ -22,14 +23,16 @@
 // this is the Rust layout: 16 bytes, one load. `irr_cell` unpacks it.
 struct IrrCell { bounds: vec3<u32>, start: u32 }
 
-// Group 1 as gpu/walks/irregular/mod.rs uploads it: one entry per top cell (`begin << IRR_LEVEL_BITS
-// | level`), the voxel map of every top cell, the cells, and their triangle lists.
-@group(1) @binding(0) var<storage, read> irr_entries: array<u32>;
-@group(1) @binding(1) var<storage, read> irr_voxels: array<u32>;
-@group(1) @binding(2) var<storage, read> irr_cells: array<IrrCell>;
-@group(1) @binding(3) var<storage, read> irr_refs: array<u32>;
+// Group 1 is declared by the file after this one, with the functions that read it: the cells
+// (`irr_cells`), a top cell's entry (`irr_entry`: `begin << IRR_LEVEL_BITS | level`), a voxel
+// map's entry (`irr_voxel`) and a reference (`irr_ref`). One level: arrays.wgsl, the scene's
+// four arrays; two levels: two_level/irregular_rows.wgsl, every mesh's in shared arrays with
+// its lattice in a row of a table.
 
+// The walk's state. `lat` is the grid's lattice of virtual voxels: the scene's, or one mesh's in
+// a scene of two levels (`irr_closest_in`).
 struct IrrWalk {
+    lat: Lattice,
     o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>,
     // The voxel the walk is in, and the sign of the direction per axis (0: parallel).
     v: vec3<i32>, step: vec3<i32>,
@@ -47,37 +50,39 @@ fn irr_cell(id: u32) -> IrrBox {
     return IrrBox(lo, hi, c.start, end - c.start);
 }
 
-// The index of the cell holding voxel `v` (inside the grid); mirrors IrregularGrid::cell_at.
-fn irr_cell_at(v: vec3<u32>) -> u32 {
-    let s = scene.shift;
+// The index of the cell holding voxel `v` (inside the grid of `l`); mirrors
+// IrregularGrid::cell_at.
+fn irr_cell_at(l: Lattice, v: vec3<u32>) -> u32 {
+    let s = l.shift;
     let top = v >> vec3<u32>(s);
-    let t = scene.dims >> vec3<u32>(s);
-    let entry = irr_entries[top.x + t.x * (top.y + t.y * top.z)];
+    let t = l.dims >> vec3<u32>(s);
+    let entry = irr_entry(l, top.x + t.x * (top.y + t.y * top.z));
     let level = entry & ((1u << IRR_LEVEL_BITS) - 1u);
     let begin = entry >> IRR_LEVEL_BITS;
     let local = (v & vec3<u32>((1u << s) - 1u)) >> vec3<u32>(s - level);
-    return irr_voxels[begin + local.x + (local.y << level) + (local.z << (2u * level))];
+    return irr_voxel(l, begin + local.x + (local.y << level) + (local.z << (2u * level)));
 }
 
 // The parameter where the ray crosses voxel plane `k` of `axis`: from the integer plane index
 // each time, as the DDA's `boundary_t`, so nothing accumulates; infinite along a parallel axis.
 fn irr_plane_t(w: ptr<function, IrrWalk>, axis: i32, k: u32) -> f32 {
     if ((*w).step[axis] == 0) { return inf(); }
-    return (scene.bounds_min[axis] + f32(k) * scene.cell_size[axis] - (*w).o[axis]) * (*w).inv_d[axis];
+    return ((*w).lat.lo[axis] + f32(k) * (*w).lat.cell[axis] - (*w).o[axis]) * (*w).inv_d[axis];
 }
 
 // Starts the walk at the voxel of the entry point, clamped into the grid (the entry point lies
 // on the box within rounding); false if the ray misses the grid within [t_min, t_max].
-fn irr_start(w: ptr<function, IrrWalk>, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+fn irr_start(w: ptr<function, IrrWalk>, lat: Lattice, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    (*w).lat = lat;
     (*w).o = o;
     (*w).d = d;
     (*w).inv_d = 1.0 / d;
-    let c = clip_box(o, (*w).inv_d, d, t_min, t_max);
+    let c = clip_lattice(lat, o, (*w).inv_d, d, t_min, t_max);
     if (c.z == 0.0) { return false; }
     (*w).t_leave = c.y;
     (*w).step = vec3<i32>(sign(d));
-    let dims = vec3<i32>(scene.dims);
-    (*w).v = clamp(world_to_grid(o + d * c.x), vec3<i32>(0), dims - 1);
+    let dims = vec3<i32>(lat.dims);
+    (*w).v = clamp(lattice_cell(lat, o + d * c.x), vec3<i32>(0), dims - 1);
     (*w).budget = u32(dims.x + dims.y + dims.z) + 8u;
     return true;
 }
@@ -95,7 +100,7 @@ fn irr_advance(w: ptr<function, IrrWalk>, cell: IrrBox, t_faces: vec3<f32>) -> b
     let t_exit = min3(t_faces);
     if (t_exit >= (*w).t_leave) { return false; }
     let axis = min_position(t_faces);
-    let at_exit = world_to_grid((*w).o + (*w).d * t_exit);
+    let at_exit = lattice_cell((*w).lat, (*w).o + (*w).d * t_exit);
     let lo = vec3<i32>(cell.min);
     let hi = vec3<i32>(cell.max) - 1;
     let v = (*w).v;
@@ -112,29 +117,30 @@ fn irr_advance(w: ptr<function, IrrWalk>, cell: IrrBox, t_faces: vec3<f32>) -> b
             next[a] = select(min(inside, v[a]), max(inside, v[a]), step[a] > 0);
         }
     }
-    if (next[axis] < 0 || next[axis] >= i32(scene.dims[axis])) { return false; }
+    if (next[axis] < 0 || next[axis] >= i32((*w).lat.dims[axis])) { return false; }
     (*w).v = next;
     if ((*w).budget <= 1u) { return false; }
     (*w).budget -= 1u;
     return true;
 }
 
-// Closest hit with t_min <= t < t_max; mirrors IrregularGrid::intersect. `work` gets the cost
-// (cells visited + triangle tests) when COUNT_WORK is set, as the CPU's counters count it.
-fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+// Closest hit with t_min <= t < t_max in the grid of `lat`; mirrors IrregularGrid::intersect.
+// `work` gets the cost (cells visited + triangle tests) when COUNT_WORK is set, as the CPU's
+// counters count it. The triangle is the lattice's mesh's own (`tris` from `lat.first_tri` on).
+fn irr_closest_at(lat: Lattice, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
     var best = GpuHit(t_max, MISS, 0.0, 0.0);
     var w: IrrWalk;
-    if (!irr_start(&w, o, d, t_min, t_max)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    if (!irr_start(&w, lat, o, d, t_min, t_max)) { return GpuHit(inf(), MISS, 0.0, 0.0); }
     loop {
         if (COUNT_WORK) { *work += 1u; }
-        let cell = irr_cell(irr_cell_at(vec3<u32>(w.v)));
+        let cell = irr_cell(irr_cell_at(lat, vec3<u32>(w.v)));
         let t_faces = irr_faces(&w, cell);
         if (cell.count > 0u) {
             for (var i = cell.start; i < cell.start + cell.count; i++) {
                 if (COUNT_WORK) { *work += 1u; }
-                let tri = irr_refs[i];
+                let tri = irr_ref(i);
                 let h = intersect_tri(tris[tri], o, d, t_min, leaf_bound(best.t));
-                if (h.w != 0.0 && leaf_takes(h.x, tri, best, 0u)) { best = GpuHit(h.x, tri, h.y, h.z); }
+                if (h.w != 0.0 && leaf_takes(h.x, tri, best, lat.first_tri)) { best = GpuHit(h.x, tri, h.y, h.z); }
             }
             // As in the grid: a hit is final only inside the (grown) cell; a triangle that
             // reaches beyond it may hide a nearer one in a later cell.
@@ -143,21 +149,33 @@ fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<fun
         if (!irr_advance(&w, cell, t_faces)) { break; }
     }
     if (best.tri == MISS) { return GpuHit(inf(), MISS, 0.0, 0.0); }
+    best.tri -= lat.first_tri;
     return best;
 }
 
-// Any hit with t_min <= t < t_max; mirrors IrregularGrid::occluded.
-fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+// Any hit with t_min <= t < t_max in the grid of `lat`; mirrors IrregularGrid::occluded.
+fn irr_any_at(lat: Lattice, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     var w: IrrWalk;
-    if (!irr_start(&w, o, d, t_min, t_max)) { return false; }
+    if (!irr_start(&w, lat, o, d, t_min, t_max)) { return false; }
     loop {
-        let cell = irr_cell(irr_cell_at(vec3<u32>(w.v)));
+        let cell = irr_cell(irr_cell_at(lat, vec3<u32>(w.v)));
         for (var i = cell.start; i < cell.start + cell.count; i++) {
-            if (intersect_tri(tris[irr_refs[i]], o, d, t_min, t_max).w != 0.0) { return true; }
+            if (intersect_tri(tris[irr_ref(i)], o, d, t_min, t_max).w != 0.0) { return true; }
         }
         if (!irr_advance(&w, cell, irr_faces(&w, cell))) { break; }
     }
     return false;
+}
+
+// The walk's two entry points (gpu/walks/mod.rs calls them from walk_closest and walk_any),
+// over the scene's lattice; a scene of two levels calls `irr_closest_at` and `irr_any_at` with
+// each mesh's (two_level/irregular_rows.wgsl: `irr_closest_in`, `irr_any_in`).
+fn irr_closest(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, work: ptr<function, u32>) -> GpuHit {
+    return irr_closest_at(scene_lattice(), o, d, t_min, t_max, work);
+}
+
+fn irr_any(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    return irr_any_at(scene_lattice(), o, d, t_min, t_max);
 }
 
 // ---- Closest points (accel/irregular/closest.rs) ----
@@ -187,7 +205,7 @@ fn irr_point_cell(id: u32, p: vec3<f32>, margin: vec3<f32>, best: ptr<function, 
     for (var i = cell.start; i < cell.start + cell.count; i++) {
         *work += 1u;
         point_steps += 1u;
-        point_offer(best, irr_refs[i], p);
+        point_offer(best, irr_ref(i), p);
     }
     return cell.max.x;
 }
@@ -200,12 +218,12 @@ fn irr_point_top(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<functio
     if (point_box_dist_sq(p, lo - l.margin, lo + l.cell + l.margin) > (*best).t) { return; }
     let t = vec3<u32>(l.dims);
     let tcu = vec3<u32>(tc);
-    let entry = irr_entries[tcu.x + t.x * (tcu.y + t.y * tcu.z)];
+    let entry = irr_entry(scene_lattice(), tcu.x + t.x * (tcu.y + t.y * tcu.z));
     let level = entry & ((1u << IRR_LEVEL_BITS) - 1u);
     let begin = entry >> IRR_LEVEL_BITS;
     // One cell (empty space, most top cells): no loops (iterations count, point_ring.wgsl).
     if (level == 0u) {
-        irr_point_cell(irr_voxels[begin], p, l.margin, best, work);
+        irr_point_cell(irr_voxel(scene_lattice(), begin), p, l.margin, best, work);
         return;
     }
     let n = i32(1u << level);
@@ -232,7 +250,7 @@ fn irr_point_top(l: PointLattice, p: vec3<f32>, tc: vec3<i32>, best: ptr<functio
             while (x <= x1) {
                 point_steps += 1u;
                 // A merged cell covers the entries up to its end: the row goes on from there.
-                let end = irr_point_cell(irr_voxels[row + u32(x)], p, l.margin, best, work);
+                let end = irr_point_cell(irr_voxel(scene_lattice(), row + u32(x)), p, l.margin, best, work);
                 x = max(x + 1, i32((end - (tcu.x << scene.shift)) >> (scene.shift - level)));
             }
         }

@@ -1,5 +1,6 @@
 //! The irregular grid on the GPU, uploaded as the CPU builds it; the walk is
-//! `irregular.wgsl`.
+//! `irregular.wgsl`, over the arrays `arrays.wgsl` declares (a scene of two levels declares its
+//! own: `two_level/irregular.rs`).
 
 use super::{Lattice, WalkSpec, WalkUpload, bytes};
 use crate::accel::IrregularGrid;
@@ -14,10 +15,13 @@ const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
     ("IRR_COORD_MASK", WgslConst::U32(COORD_MASK)),
 ];
 
+/// The walk, without its arrays (the file after it declares them and how they are read).
+pub(super) const WALK: &str = include_str!("irregular.wgsl");
+
 pub const SPEC: WalkSpec = WalkSpec {
     structure: "irregular",
     name: "irregular",
-    wgsl: &[include_str!("irregular.wgsl"), super::POINT_RING],
+    wgsl: &[WALK, include_str!("arrays.wgsl"), super::POINT_RING],
     prefix: "irr",
     arrays: &[
         ("irr_entries", "irr_entries"),

@@ -11,14 +11,24 @@
 //! its arrays can hold several meshes one after another (a mesh's entries offset by its part's
 //! start), and `bottom_levels` below concatenates them and makes each mesh's header; then one
 //! `WalkSpec` here (its arrays, then `TOP_LEVEL_ARRAY`) and one arm of `walk_for`. Carried
-//! today: the BVH (binary nodes, either stack), brute force and the uniform grid (grid, pc:
-//! its lattice, one per scene in the scene uniform for one level, is a row of a table here,
-//! which the mesh's header names). Not yet: the irregular grid, the BVH's 8-wide layout, and
-//! `hwrt` (the driver's instances): `walk_for` answers `None` for them and the scene's GPU
+//! today: the BVH in either layout (binary nodes; the 8-wide nodes, `bvh_wide8.rs`, each
+//! mesh's wide tree quantized once at upload) with either stack, brute force, the uniform grid
+//! (grid, pc: its lattice, one per scene in the scene uniform for one level, is a row of a
+//! table here, which the mesh's header names) and the irregular grid (`irregular.rs`: its
+//! lattice of virtual voxels a row of a table the same way, and its entries, voxel maps and
+//! references one array of words, to stay within the structure's budget of bindings). Not
+//! yet: `hwrt` (the driver's instances): `walk_for` answers `None` for it and the scene's GPU
 //! rays stay on its merged mesh.
 //!
-//! A move (`QueryScene::set_transforms`, `set_mask`) uploads the top level alone: 64 bytes a
-//! node and 64 an instance (`TopRec`); the meshes' arrays stay on the device.
+//! A move (`QueryScene::set_transforms`, `set_mask`) uploads the top level alone, whatever the
+//! meshes' structure: 64 bytes a node and 64 an instance (`TopRec`); the meshes' arrays stay
+//! on the device.
+
+mod bvh_wide8;
+mod irregular;
+
+pub use bvh_wide8::{BVH_WIDE8, BVH_WIDE8_SHORT};
+pub use irregular::IRREGULAR;
 
 use bytemuck::{Pod, Zeroable};
 use glam::Affine3A;
@@ -111,7 +121,8 @@ pub struct LatticeRow {
     pub cell: [f32; 3],
     pub shift: u32,
     pub inv_cell: [f32; 3],
-    pub _pad0: u32,
+    /// Where the mesh's voxel maps start (the irregular grid's, `irregular.rs`; 0 for the grid).
+    pub first_map: u32,
     pub dims: [u32; 3],
     pub _pad1: u32,
 }
@@ -140,8 +151,11 @@ pub fn walk_for(structure: &Structure, walk: BvhWalk) -> Option<&'static WalkSpe
     match (structure, walk.layout, walk.stack) {
         (Structure::Bvh(_), BvhLayout::Binary, BvhStack::Private) => Some(&BVH),
         (Structure::Bvh(_), BvhLayout::Binary, BvhStack::Short(_)) => Some(&BVH_SHORT),
+        (Structure::Bvh(_), BvhLayout::Wide8, BvhStack::Private) => Some(&BVH_WIDE8),
+        (Structure::Bvh(_), BvhLayout::Wide8, BvhStack::Short(_)) => Some(&BVH_WIDE8_SHORT),
         (Structure::Brute(_), _, _) => Some(&BRUTE),
         (Structure::Grid(_), _, _) => Some(&GRID),
+        (Structure::Irregular(_), _, _) => Some(&IRREGULAR),
         _ => None,
     }
 }
@@ -187,10 +201,19 @@ impl BottomLevels {
     }
 }
 
+/// A bottom structure's part of `BottomLevels` (the layouts in their own files): its arrays,
+/// the triangles group 0 binds and each mesh's header.
+struct Laid {
+    arrays: Vec<Vec<u8>>,
+    tris: Vec<GpuTri>,
+    headers: Vec<[u32; 2]>,
+}
+
 /// The meshes' structures (`meshes[k]`, each built on the CPU in its own space) laid out for
 /// the two-level walk `walk_for` picks for them, or `None` where it picks none (a structure
-/// not carried, or meshes of different structures). Builds nothing: the BVH's binary tree is
-/// the one the CPU keeps.
+/// not carried, or meshes of different structures). Builds no structure over triangles: the
+/// BVH's binary tree is the one the CPU keeps, its wide layout quantized from the CPU's 8-wide
+/// tree.
 pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLevels>> {
     let Some(first) = meshes.first() else {
         return Ok(None);
@@ -245,7 +268,7 @@ pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLe
                 cell: g.cell_size.to_array(),
                 shift: 0,
                 inv_cell: g.inv_cell_size.to_array(),
-                _pad0: 0,
+                first_map: 0,
                 dims: g.dims.to_array(),
                 _pad1: 0,
             });
@@ -267,6 +290,21 @@ pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLe
                 bytemuck::cast_slice(&refs).to_vec(),
                 bytemuck::cast_slice(&rows).to_vec(),
             ],
+            tris,
+            headers,
+            tri_counts,
+        }));
+    }
+    let laid = match first.structure {
+        Structure::Irregular(_) => Some(irregular::layout(meshes)?),
+        Structure::Bvh(_) if walk.layout == BvhLayout::Wide8 => Some(bvh_wide8::layout(meshes)?),
+        _ => None,
+    };
+    if let Some(Laid { arrays, tris, headers }) = laid {
+        return Ok(Some(BottomLevels {
+            spec,
+            kind,
+            arrays,
             tris,
             headers,
             tri_counts,
