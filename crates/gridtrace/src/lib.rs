@@ -10,6 +10,7 @@ pub mod frames;
 pub mod gpu;
 pub mod io;
 pub mod mesh;
+pub mod placement;
 pub mod query;
 pub mod query_scene;
 pub mod render;
@@ -20,7 +21,8 @@ pub mod testing;
 pub mod util;
 
 pub use accel::{Accel, AccelChoice, AccelKind, AccelParams, AccelSpec, Hit, Ray, Resolution, TracedOn, Work};
-pub use backend::{Backend, Frame, Placement, Rendered, Tracer};
+pub use backend::{Backend, Frame, Rendered, Tracer};
+pub use placement::{OpenedScene, Placement, open_scene};
 pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};
 pub use frames::{FramesOptions, FramesStats};
