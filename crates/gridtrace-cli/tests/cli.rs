@@ -1282,4 +1282,3 @@ fn animate_runs_the_gpu_variant_asked_for() {
         );
     }
 }
-

@@ -22,11 +22,11 @@ pub mod util;
 
 pub use accel::{Accel, AccelChoice, AccelKind, AccelParams, AccelSpec, Hit, Ray, Resolution, TracedOn, Work};
 pub use backend::{Backend, Frame, Rendered, Tracer};
-pub use placement::{OpenedScene, Placement, open_scene};
 pub use build_info::cpu_features;
 pub use error::{Error, Location, Result};
 pub use frames::{FramesOptions, FramesStats};
 pub use mesh::{Material, Mesh};
+pub use placement::{OpenedScene, Placement, open_scene};
 pub use query_scene::QueryScene;
 pub use render::{Image, Mode, PixelFormat, RenderOptions, RenderStats};
 pub use scene::{PreparedScene, Scene};

@@ -4,7 +4,8 @@
 //! Python's `render` and the browser page go through that path (the viewer and the page through
 //! its parts, `Placement::pick` and `Placement::open_scene`, since they keep their placement for
 //! later scenes), so that none of them drops a part of the request (`--gpu-variant`, `auto`'s
-//! note).
+//! note). The query meshes and scenes place their work here too, their device opened on first
+//! need (`QueryPlacement`), so that `auto`'s rules are written once.
 //!
 //! ```
 //! use gridtrace::{scene::builtin, AccelSpec, Backend, Work};
@@ -17,13 +18,14 @@
 //! # Ok::<(), gridtrace::Error>(())
 //! ```
 
-use std::sync::Arc;
-use crate::util::Instant;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 
 use crate::accel::{AccelChoice, AccelKind, AccelParams, AccelSpec, TracedOn, Work};
 use crate::backend::{Backend, Tracer, traced_on};
 use crate::gpu::{GpuContext, GpuRenderer, GpuVariants};
 use crate::scene::{PreparedScene, Scene};
+use crate::util::Instant;
 use crate::{Error, Result};
 
 /// Where work is traced, decided once and carried whole: the backend asked for, the device it
@@ -123,7 +125,6 @@ impl Placement {
     }
 }
 
-
 /// A scene opened along the one path (`open_scene`).
 pub struct OpenedScene {
     pub tracer: Tracer,
@@ -196,3 +197,98 @@ pub fn prepare(scene: &Scene, accel: AccelKind, spec: &AccelSpec) -> Result<Prep
     scene.prepare_for(accel, &params)
 }
 
+/// Where a query mesh or scene places its work, its device opened on first need: a program
+/// whose queries run on the CPU never opens one, and `auto` opens one only where the machine
+/// has a hardware adapter (`hardware_adapter_present`, probed once a process), so that a
+/// software adapter is passed over before anything is compiled for it, as `Placement::open`
+/// passes it over. A query may ask another backend than its mesh's (`intersect_with`): the
+/// device is opened once, for whichever asked first, and shared; a scene's merged meshes and
+/// its two levels share their scene's.
+pub(crate) struct QueryPlacement {
+    backend: Backend,
+    variants: GpuVariants,
+    /// The device, opened by the first query that went to a GPU (or given), or why it could
+    /// not be opened.
+    device: OnceLock<std::result::Result<Arc<GpuContext>, String>>,
+    /// A device was given (`given`, `give`): `auto` traces on it even where it is a software
+    /// adapter (how the fault tests use lavapipe), as `Tracer::open` does on a placement made
+    /// with one.
+    given: AtomicBool,
+}
+
+impl QueryPlacement {
+    pub fn new(backend: Backend, variants: GpuVariants) -> QueryPlacement {
+        QueryPlacement {
+            backend,
+            variants,
+            device: OnceLock::new(),
+            given: AtomicBool::new(false),
+        }
+    }
+
+    /// Work placed on `ctx`'s device (`give`).
+    pub fn given(backend: Backend, variants: GpuVariants, ctx: Arc<GpuContext>) -> QueryPlacement {
+        let p = QueryPlacement::new(backend, variants);
+        p.give(ctx).expect("a new placement has no device yet");
+        p
+    }
+
+    /// Places the work on `ctx`'s device; an error where a device was opened or given already.
+    pub fn give(&self, ctx: Arc<GpuContext>) -> Result<()> {
+        self.device
+            .set(Ok(ctx))
+            .map_err(|_| Error::InvalidInput("this mesh has opened its GPU already".into()))?;
+        self.given.store(true, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Whether a device was given (`give`).
+    pub fn is_given(&self) -> bool {
+        self.given.load(Ordering::Relaxed)
+    }
+
+    /// The backend the work asked for unless a query says otherwise.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// Where `auto` weighs the work before any device is open (`Backend::traced_on`).
+    pub fn traced_on(&self) -> TracedOn {
+        self.backend.traced_on()
+    }
+
+    /// Whether work asked on `backend` goes to a GPU, without opening one: `gpu` always, `cpu`
+    /// never, `auto` where the machine has a hardware adapter or a device was given.
+    pub fn traces_on_gpu(&self, backend: Backend) -> bool {
+        match backend {
+            Backend::Auto => self.is_given() || backend.traces_on_gpu(),
+            b => b.traces_on_gpu(),
+        }
+    }
+
+    /// Where work asked on `backend` runs: on the device (opened now by the first to need it,
+    /// by `Backend::open_device`'s rules), or on the CPU where it does not go to a GPU
+    /// (`traces_on_gpu`). `gpu` without a device is an error; `auto` without one goes to the
+    /// CPU, the reason in `notes`.
+    pub fn placement(&self, backend: Backend, notes: &mut Vec<String>) -> Result<Placement> {
+        let mut placement = Placement {
+            backend,
+            device: None,
+            variants: self.variants,
+        };
+        if !self.traces_on_gpu(backend) {
+            return Ok(placement);
+        }
+        let device = self.device.get_or_init(|| match backend.open_device() {
+            Ok((Some(ctx), _)) => Ok(ctx),
+            Ok((None, why)) => Err(why.join("; ")),
+            Err(e) => Err(e.to_string()),
+        });
+        match (device, backend) {
+            (Ok(ctx), _) => placement.device = Some(ctx.clone()),
+            (Err(e), Backend::Gpu) => return Err(Error::Gpu(e.clone())),
+            (Err(e), _) => notes.push(e.clone()),
+        }
+        Ok(placement)
+    }
+}

@@ -8,7 +8,6 @@
 //! frames excepted, which are coloured on the host): what is timed is what the viewer waits.
 //! `--readback` brings every frame to the host instead, as `render` does.
 
-
 use glam::{Quat, Vec3};
 use gridtrace::gpu::DeviceImage;
 use gridtrace::scene::{PointLight, Scene};
