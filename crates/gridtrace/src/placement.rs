@@ -292,3 +292,35 @@ impl QueryPlacement {
         Ok(placement)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Queries on the CPU open no device, nor does `auto` on a machine without a hardware
+    /// adapter; a device given is where `auto` and `gpu` trace, even a software one.
+    #[test]
+    fn queries_open_a_device_only_where_they_trace_on_one() {
+        let mut notes = Vec::new();
+        let cpu = QueryPlacement::new(Backend::Cpu, GpuVariants::default());
+        assert!(cpu.placement(Backend::Cpu, &mut notes).unwrap().device.is_none());
+        assert!(cpu.device.get().is_none(), "the CPU opened a device");
+        let auto = QueryPlacement::new(Backend::Auto, GpuVariants::default());
+        if !crate::backend::hardware_adapter_present() {
+            assert!(auto.placement(Backend::Auto, &mut notes).unwrap().device.is_none());
+            assert!(auto.device.get().is_none(), "auto opened a software adapter");
+        }
+        assert!(notes.is_empty(), "{notes:?}");
+        let Ok(ctx) = GpuContext::new() else {
+            return;
+        };
+        let ctx = Arc::new(ctx);
+        let given = QueryPlacement::given(Backend::Auto, GpuVariants::default(), ctx.clone());
+        for backend in [Backend::Auto, Backend::Gpu] {
+            let device = given.placement(backend, &mut notes).unwrap().device;
+            assert!(device.is_some_and(|d| Arc::ptr_eq(&d, &ctx)), "{backend:?}");
+        }
+        assert!(given.placement(Backend::Cpu, &mut notes).unwrap().device.is_none());
+        assert!(given.give(ctx).is_err(), "a second device given");
+    }
+}
