@@ -9,7 +9,6 @@ use gridtrace::scene::animated::Animation;
 use gridtrace::{PixelFormat, RenderOptions};
 
 use crate::render::RenderArgs;
-use gridtrace::Tracer;
 
 pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
     let name = a.scene.scene.as_deref().unwrap_or("animated");
@@ -41,26 +40,19 @@ pub fn run(a: &RenderArgs) -> gridtrace::Result<()> {
             a.fps
         )));
     }
-    let (placement, mut notes) = gridtrace::Placement::open(a.backend, Default::default())?;
-    let accel = a
-        .accel_args
-        .accel_for(placement.traced_on(), gridtrace::Work::Animate, &mut notes);
     // --eye, --target, --up, --vfov and --light, as a still frame takes them: the frames
     // below trace with the prepared scene's camera and lights.
     crate::render::set_view(a, &mut anim.scene, name);
-    let t0 = Instant::now();
-    let scene = crate::common::prepare(&anim.scene, name, accel, &a.accel_args)?;
+    // Opened as a still frame's scene is (`--gpu-variant` with the rest), for animation.
+    let opened = crate::render::open_scene(a, &anim.scene, name, gridtrace::Work::Animate)?;
+    let (mut tracer, accel) = (opened.tracer, opened.accel);
     println!(
         "scene {name} (animated): {} triangles, {}; first build {:.1} ms",
-        scene.accel.tris.len(),
-        crate::common::describe_structure(&scene.accel),
-        t0.elapsed().as_secs_f64() * 1e3
+        tracer.scene.accel.tris.len(),
+        crate::common::describe_structure(&tracer.scene.accel),
+        opened.build_ms
     );
-    crate::common::print_backend(&placement);
-    let mut tracer = Tracer::open(scene, &placement, &mut notes)?;
-    for n in notes {
-        eprintln!("note: {n}");
-    }
+    crate::render::print_tracer(&tracer, &opened.notes);
     if let Some(dir) = &a.sequence {
         std::fs::create_dir_all(dir).map_err(|e| gridtrace::Error::io(dir, e))?;
     }

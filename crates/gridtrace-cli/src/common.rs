@@ -64,17 +64,6 @@ impl AccelArgs {
         notes.extend(note);
         kind
     }
-
-    /// The build parameters for a structure serving `kind`: the ones given, when `--accel`
-    /// named a traversal of that structure; its defaults otherwise (the viewer's G cycle moves
-    /// to structures the parameters were not written for).
-    pub fn params_for(&self, kind: AccelKind) -> gridtrace::Result<AccelParams> {
-        let spec = self.spec()?;
-        Ok(match spec.choice {
-            AccelChoice::Kind(named) if named.structure_name() == kind.structure_name() => spec.params,
-            _ => AccelParams::NONE,
-        })
-    }
 }
 
 /// `--accel`'s help: the form, then each name with what it is and the parameters it reads.
@@ -267,7 +256,7 @@ pub use gridtrace::query::Backend;
 
 /// The scene prepared with the structure that serves `accel` (which may differ from
 /// `args.accel`: the viewer switches), built with the parameters given for it
-/// (`AccelArgs::params_for`), and a scene-level error (nothing to trace, NaN camera...) naming
+/// (`gridtrace::placement::prepare`), and a scene-level error (nothing to trace, NaN camera...) naming
 /// the scene or file it came from.
 pub fn prepare(
     scene: &Scene,
@@ -275,10 +264,15 @@ pub fn prepare(
     accel: AccelKind,
     args: &AccelArgs,
 ) -> gridtrace::Result<gridtrace::PreparedScene> {
-    scene.prepare_for(accel, &args.params_for(accel)?).map_err(|e| match e {
+    gridtrace::placement::prepare(scene, accel, &args.spec()?).map_err(|e| named(name, e))
+}
+
+/// A scene's error with the scene's name in front, as every command reports it.
+pub fn named(name: &str, e: gridtrace::Error) -> gridtrace::Error {
+    match e {
         gridtrace::Error::Scene(m) => gridtrace::Error::Scene(format!("{name}: {m}")),
         e => e,
-    })
+    }
 }
 
 /// The structure in a few words: a grid's dimensions and references per triangle, a BVH's

@@ -2,7 +2,6 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::time::Instant;
 
 use clap::Args;
 use clap::builder::TypedValueParser;
@@ -153,7 +152,7 @@ impl RenderArgs {
 pub fn run(a: RenderArgs) -> gridtrace::Result<()> {
     let (mut scene, name) = a.scene.load(!a.no_floor)?;
     set_view(&a, &mut scene, &name);
-    let (mut renderer, _) = open_tracer(&a, &scene, &name)?;
+    let mut renderer = open_tracer(&a, &scene, &name)?;
     let opts = RenderOptions::new(a.res.0, a.res.1, a.mode()).with_pixels(PixelFormat::Srgb8);
     let traced = trace_frames(&a, &mut renderer, &opts)?;
     report(&a, &renderer, &traced);
@@ -185,32 +184,26 @@ pub(crate) fn set_view(a: &RenderArgs, scene: &mut gridtrace::Scene, name: &str)
     }
 }
 
-/// The scene prepared for the structure `--accel` resolves to, on the device `--backend`
-/// gives, with what was chosen printed.
-fn open_tracer(
+/// The scene opened along the library's one path (`gridtrace::open_scene`) with `--accel`,
+/// `--backend` and `--gpu-variant`, for `work`: a still frame's (`render`) or an animation's
+/// (`render --animate`), which both open theirs here so that neither drops an option.
+pub(crate) fn open_scene(
     a: &RenderArgs,
     scene: &gridtrace::Scene,
     name: &str,
-) -> gridtrace::Result<(gridtrace::Tracer, gridtrace::AccelKind)> {
-    let (placement, mut notes) = gridtrace::Placement::open(a.backend, a.gpu.gpu_variant)?;
-    let accel = a
-        .accel_args
-        .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
-    let t_build = Instant::now();
-    let prepared = crate::common::prepare(scene, name, accel, &a.accel_args)?;
-    let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
-    println!(
-        "scene {name}: {} triangles ({} degenerate dropped), {}",
-        prepared.accel.tris.len(),
-        prepared.degenerate_dropped,
-        crate::common::describe_structure(&prepared.accel)
-    );
-    println!("build   {build_ms:.1} ms");
-    let renderer = gridtrace::Tracer::open(prepared, &placement, &mut notes)?;
+    work: gridtrace::Work,
+) -> gridtrace::Result<gridtrace::OpenedScene> {
+    let spec = a.accel_args.spec()?;
+    gridtrace::open_scene(scene, &spec, work, a.backend, a.gpu.gpu_variant).map_err(|e| crate::common::named(name, e))
+}
+
+/// The notes of opening a tracer, then its `backend` line: the GPU's adapter (whether it is a
+/// software one, whose speed is the CPU's, and the GPU variants it runs) or the CPU's threads.
+pub(crate) fn print_tracer(tracer: &gridtrace::Tracer, notes: &[String]) {
     for n in notes {
         eprintln!("note: {n}");
     }
-    match renderer.gpu() {
+    match tracer.gpu() {
         Some(gpu) => {
             println!("backend gpu: {}", gpu.context().describe());
             if gpu.context().is_software() {
@@ -220,7 +213,22 @@ fn open_tracer(
         }
         None => println!("backend {}", gridtrace::backend::describe_cpu()),
     }
-    Ok((renderer, accel))
+}
+
+/// The scene prepared for the structure `--accel` resolves to, on the device `--backend`
+/// gives, with what was chosen printed.
+fn open_tracer(a: &RenderArgs, scene: &gridtrace::Scene, name: &str) -> gridtrace::Result<gridtrace::Tracer> {
+    let opened = open_scene(a, scene, name, gridtrace::Work::Render)?;
+    let prepared = &opened.tracer.scene;
+    println!(
+        "scene {name}: {} triangles ({} degenerate dropped), {}",
+        prepared.accel.tris.len(),
+        prepared.degenerate_dropped,
+        crate::common::describe_structure(&prepared.accel)
+    );
+    println!("build   {:.1} ms", opened.build_ms);
+    print_tracer(&opened.tracer, &opened.notes);
+    Ok(opened.tracer)
 }
 
 /// The frames of a run: the first (the one written), every frame's figures, the last GPU

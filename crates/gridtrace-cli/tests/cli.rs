@@ -1250,3 +1250,35 @@ fn animate_median_names_the_table_frames() {
     assert_eq!(frames, [0, 1, 2], "{text}");
     assert!(text.contains("median of frames 1-2:"), "{text}");
 }
+
+/// `render --animate` opens its tracer as a still frame does: `--gpu-variant` reaches the GPU
+/// (it once opened the device with the default variants, whatever was asked), and the
+/// `backend` line names the variants as `render`'s does.
+#[test]
+fn animate_runs_the_gpu_variant_asked_for() {
+    if std::env::var_os("GRIDTRACE_SKIP_GPU").is_some() {
+        eprintln!("GRIDTRACE_SKIP_GPU is set: skipping");
+        return;
+    }
+    let dir = scratch("animate-variant");
+    let args = |animate: bool| {
+        let scene = if animate { "bouncing-spheres" } else { "knot-box" };
+        let mut v = vec!["render", "--scene", scene, "--res", "8", "--backend", "gpu"];
+        v.extend(["--accel", "bvh", "--gpu-variant", "bvh=wide8,stack=private"]);
+        if animate {
+            v.extend(["--animate", "--frames", "2"]);
+        }
+        v
+    };
+    for animate in [false, true] {
+        let mut a = args(animate);
+        let png = dir.join(format!("{animate}.png"));
+        a.extend(["-o", png.to_str().unwrap()]);
+        let (code, text) = gridtrace_status(&a);
+        assert_eq!(code, Some(0), "{text}");
+        assert!(
+            text.contains("gpu variants: bvh=wide8,stack=private"),
+            "animate {animate}: {text}"
+        );
+    }
+}

@@ -307,8 +307,8 @@ fn render<'py>(
     let spec = accel_spec(accel, accel_params)?;
     let backend = parse::<Backend>("backend", backend)?;
     let scene_name = scene.to_string();
-    let (rgb, frame) = py
-        .detach(move || -> gridtrace::Result<(Vec<u8>, gridtrace::Frame)> {
+    let (rgb, frame, accel_name, notes) = py
+        .detach(move || -> gridtrace::Result<(Vec<u8>, gridtrace::Frame, String, Vec<String>)> {
             let mut s = match gridtrace::scene::builtin::scene(&scene_name) {
                 Some(s) => s,
                 None => {
@@ -335,13 +335,13 @@ fn render<'py>(
             if let Some(t) = target {
                 s.camera.target = t.into();
             }
-            let (placement, mut notes) = gridtrace::Placement::open(backend, variants)?;
-            let (accel, _why) = spec.resolve(placement.traced_on(), gridtrace::Work::Render);
-            let prepared = s.prepare_for(accel, &spec.params)?;
+            // The CLI's path: the device, `auto`'s pick (its note kept), the scene, its upload.
+            let opened = gridtrace::open_scene(&s, &spec, gridtrace::Work::Render, backend, variants)?;
+            let (mut tracer, mut notes, accel) = (opened.tracer, opened.notes, opened.accel);
             let opts = RenderOptions::new(width, height, mode).with_pixels(PixelFormat::Srgb8);
-            let (camera, lights) = (prepared.camera, prepared.lights.clone());
-            let mut tracer = gridtrace::Tracer::open(prepared, &placement, &mut notes)?;
+            let (camera, lights) = (tracer.scene.camera, tracer.scene.lights.clone());
             let mut frame = tracer.render(&camera, &lights, &opts)?;
+            notes.extend(tracer.take_notes());
             // The image goes to Python as bytes; the figures stay.
             let image = std::mem::replace(&mut frame.image, gridtrace::Image::new(1, 1));
             let image = if mode == Mode::Heat {
@@ -349,10 +349,14 @@ fn render<'py>(
             } else {
                 image
             };
-            Ok((image.to_rgb8(), frame))
+            Ok((image.to_rgb8(), frame, accel.name().to_string(), notes))
         })
         .map_err(to_py)?;
     let stats = stats::frame(py, &frame)?;
+    // What was chosen, as the CLI prints it: the structure, and `auto`'s pick and why with
+    // every other choice that was not the one asked for.
+    stats.set_item("accel", accel_name)?;
+    stats.set_item("notes", notes)?;
     Ok((
         rgb.into_pyarray(py).reshape([height as usize, width as usize, 3])?,
         stats,

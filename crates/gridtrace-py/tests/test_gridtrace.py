@@ -294,6 +294,16 @@ def test_render_reports_its_frame():
     assert (np.abs(gimg.astype(int) - img.astype(int)) > 2).any(axis=2).mean() < 0.01
 
 
+def test_render_names_what_auto_picked():
+    # As the CLI's `note:` line: `auto`'s pick and why, and the structure traced.
+    _, s = gridtrace.render("knot-box", 16, 12, backend="cpu", stats=True)
+    assert s["accel"] in gridtrace.ACCELS and s["accel"] != "auto", s
+    assert any(s["accel"] in n and "auto" in n for n in s["notes"]), s["notes"]
+    # A structure named is no pick: no note.
+    _, s = gridtrace.render("knot-box", 16, 12, accel="bvh", backend="cpu", stats=True)
+    assert (s["accel"], s["notes"]) == ("bvh", []), s
+
+
 def test_broadcasting_and_dtypes():
     vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
     faces = [[0, 1, 2], [0, 2, 3]]

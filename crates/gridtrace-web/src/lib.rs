@@ -217,23 +217,17 @@ impl Page {
                 variants: GpuVariants::default(),
             },
         };
-        let (kind, note) = params.accel.resolve(placement.traced_on(), Work::Render);
-        let mut notes: Vec<String> = note.into_iter().collect();
-        let accel_params = match params.accel.choice {
-            gridtrace::AccelChoice::Kind(k) if k.structure_name() == kind.structure_name() => {
-                params.accel.params.clone()
-            }
-            _ => gridtrace::AccelParams::NONE,
-        };
-        let t_build = Instant::now();
-        let prepared = scene.prepare_for(kind, &accel_params).map_err(js_error)?;
-        let build_ms = t_build.elapsed().as_secs_f64() * 1e3;
+        // The library's path, in its parts (the device was opened asynchronously above).
+        let mut notes = Vec::new();
+        let kind = placement.pick(&params.accel, Work::Render, &mut notes);
+        let (tracer, build_ms) = placement
+            .open_scene(&scene, kind, &params.accel, &mut notes)
+            .map_err(js_error)?;
         let summary = format!(
             "{name}: {} triangles, {}, built in {build_ms:.1} ms",
-            prepared.accel.tris.len(),
-            prepared.accel.summary()
+            tracer.scene.accel.tris.len(),
+            tracer.scene.accel.summary()
         );
-        let tracer = Tracer::open(prepared, &placement, &mut notes).map_err(js_error)?;
         let camera = params.camera(&tracer.scene.camera);
         let lights = tracer.scene.lights.clone();
         Ok(Page {

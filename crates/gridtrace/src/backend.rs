@@ -2,8 +2,9 @@
 //! has (an adapter, whether it is a software one, room for the scene) into a CPU or a GPU
 //! tracer, with a note for the user on every choice that was not the one asked for. `Tracer`
 //! is the one type that owns a prepared scene with where it is traced; render, animate, the
-//! viewer and Python trace through it, and the ray queries (`query/`) and the benchmarks
-//! open their device here.
+//! viewer and Python trace through it (`placement.rs`: `Placement`, and `open_scene`, the one
+//! path from a scene to its tracer), and the ray queries (`query/`, through `placement.rs`) and
+//! the benchmarks open their device here.
 //!
 //! ```
 //! use gridtrace::{scene::builtin, AccelKind, AccelParams, Backend, Mode, RenderOptions, Tracer};
@@ -25,6 +26,9 @@ use crate::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVarian
 use crate::render::{Image, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
 use crate::{Error, Result};
+
+/// Where work is traced, carried whole (moved to `placement.rs`; named here as before).
+pub use crate::placement::Placement;
 
 /// Where rays are traced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -110,103 +114,6 @@ impl Backend {
             }
         } else {
             TracedOn::Cpu
-        }
-    }
-}
-
-/// Where work is traced, decided once and carried whole: the backend asked for, the device it
-/// opened (`None`: the CPU) and the GPU variants the kernels are compiled with. Frames
-/// (`Tracer::open`), the CLI, the viewer and Python's `render` place their work through it.
-#[derive(Clone, Default)]
-pub struct Placement {
-    pub backend: Backend,
-    /// The device `backend` opened (`Backend::open_device`); `None`: the CPU.
-    pub device: Option<Arc<GpuContext>>,
-    /// The GPU kernels and layouts (`--gpu-variant`), where the work runs on a GPU.
-    pub variants: GpuVariants,
-}
-
-impl Placement {
-    /// Opens the device `backend` asks for (`Backend::open_device`), with notes for the user on
-    /// every choice that was not the one asked for.
-    pub fn open(backend: Backend, variants: GpuVariants) -> Result<(Placement, Vec<String>)> {
-        Placement::open_with(backend, variants, wgpu::InstanceDescriptor::new_without_display_handle)
-    }
-
-    /// `open`, the device's instance made from `desc()` (`Backend::open_device_with`): the
-    /// viewer's knows the window's display, so that it can present from the tracer's device.
-    pub fn open_with(
-        backend: Backend,
-        variants: GpuVariants,
-        desc: impl FnOnce() -> wgpu::InstanceDescriptor,
-    ) -> Result<(Placement, Vec<String>)> {
-        let (device, notes) = backend.open_device_with(desc)?;
-        Ok((
-            Placement {
-                backend,
-                device,
-                variants,
-            },
-            notes,
-        ))
-    }
-
-    /// `backend` on a device the caller opened, with the default GPU variants.
-    pub fn on_device(backend: Backend, device: Arc<GpuContext>) -> Placement {
-        Placement {
-            backend,
-            device: Some(device),
-            variants: GpuVariants::default(),
-        }
-    }
-
-    /// Everything on the CPU.
-    pub fn cpu() -> Placement {
-        Placement {
-            backend: Backend::Cpu,
-            ..Placement::default()
-        }
-    }
-
-    /// Where its work runs, as `AccelChoice::resolve` weighs it.
-    pub fn traced_on(&self) -> TracedOn {
-        traced_on(self.device.as_deref())
-    }
-
-    /// The scene uploaded to the device, or `None` to trace it on the CPU (no device, or, with
-    /// `auto`, a scene the GPU cannot hold: over its buffer limits, or a structure without a
-    /// GPU walk, with a note); with `gpu` the latter are errors that say so.
-    pub fn upload(&self, scene: &PreparedScene, notes: &mut Vec<String>) -> Result<Option<GpuRenderer>> {
-        let Some(ctx) = &self.device else {
-            return Ok(None);
-        };
-        let kind = scene.accel.structure_name();
-        if !crate::accel::registry::ENTRIES
-            .iter()
-            .any(|e| e.structure == kind && e.gpu)
-        {
-            let why = format!("'{kind}' has no GPU walk");
-            return match self.backend {
-                Backend::Auto => {
-                    notes.push(format!("{why}; using the CPU"));
-                    Ok(None)
-                }
-                _ => Err(Error::Gpu(format!(
-                    "{why}; use --backend cpu (or auto) to trace it on the CPU"
-                ))),
-            };
-        }
-        let cpu_traces = scene.accel.check_cpu_kind().is_ok();
-        match GpuRenderer::new(ctx.clone(), scene, &self.variants) {
-            Ok(gpu) => Ok(Some(gpu)),
-            Err(e) if self.backend == Backend::Auto && cpu_traces => {
-                notes.push(format!("the GPU cannot trace this scene ({e}); using the CPU"));
-                Ok(None)
-            }
-            Err(Error::Gpu(m)) => Err(Error::Gpu(format!(
-                "{m}; use --backend cpu (or auto) to trace it on the CPU"
-            ))),
-            Err(e) => Err(e),
         }
     }
 }

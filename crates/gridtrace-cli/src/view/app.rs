@@ -30,8 +30,11 @@ impl App {
             Some(i) => i,
             None => {
                 let t0 = Instant::now();
-                let scene = crate::common::prepare(&self.src, &self.name, self.accel, &self.accel_args)?;
-                let tracer = Tracer::open(scene, &self.placement, &mut self.notes)?;
+                let spec = self.accel_args.spec()?;
+                let (tracer, _) = self
+                    .placement
+                    .open_scene(&self.src, self.accel, &spec, &mut self.notes)
+                    .map_err(|e| crate::common::named(&self.name, e))?;
                 eprintln!(
                     "{} prepared in {:.0} ms; tracing on {}",
                     structure,

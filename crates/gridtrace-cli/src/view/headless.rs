@@ -8,16 +8,13 @@
 //! frames excepted, which are coloured on the host): what is timed is what the viewer waits.
 //! `--readback` brings every frame to the host instead, as `render` does.
 
-use std::time::Instant;
-
 use glam::{Quat, Vec3};
 use gridtrace::gpu::DeviceImage;
 use gridtrace::scene::{PointLight, Scene};
-use gridtrace::{FramesOptions, Mode, PixelFormat, Placement, RenderOptions};
+use gridtrace::{FramesOptions, Mode, PixelFormat, RenderOptions};
 
 use super::ViewArgs;
 use crate::render::orbit;
-use gridtrace::Tracer;
 
 /// The lights `turn` of the way round the other way, about the camera's up axis through `centre`.
 fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Vec<PointLight> {
@@ -34,20 +31,17 @@ fn circle_lights(lights: &[PointLight], up: Vec3, centre: Vec3, turn: f32) -> Ve
 }
 
 pub fn run(a: &ViewArgs, src: Scene, name: &str) -> gridtrace::Result<()> {
-    let (placement, mut notes) = Placement::open(a.backend, a.gpu.gpu_variant)?;
-    let accel = a
-        .accel_args
-        .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
-    let t0 = Instant::now();
-    let scene = crate::common::prepare(&src, name, accel, &a.accel_args)?;
+    let spec = a.accel_args.spec()?;
+    let opened = gridtrace::open_scene(&src, &spec, gridtrace::Work::Render, a.backend, a.gpu.gpu_variant)
+        .map_err(|e| crate::common::named(name, e))?;
+    let (mut tracer, accel) = (opened.tracer, opened.accel);
     println!(
         "scene {name}: {} triangles, {} (prepared in {:.0} ms)",
-        scene.accel.tris.len(),
-        crate::common::describe_structure(&scene.accel),
-        t0.elapsed().as_secs_f64() * 1e3
+        tracer.scene.accel.tris.len(),
+        crate::common::describe_structure(&tracer.scene.accel),
+        opened.build_ms
     );
-    let mut tracer = Tracer::open(scene, &placement, &mut notes)?;
-    for n in notes {
+    for n in opened.notes {
         eprintln!("note: {n}");
     }
     println!("tracer {}", tracer.describe());

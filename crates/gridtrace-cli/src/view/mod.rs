@@ -139,9 +139,7 @@ pub fn run(a: ViewArgs) -> gridtrace::Result<()> {
     let (placement, mut notes) = Placement::open_with(a.backend, a.gpu.gpu_variant, || {
         wgpu::InstanceDescriptor::new_with_display_handle(Box::new(display))
     })?;
-    let accel = a
-        .accel_args
-        .accel_for(placement.traced_on(), gridtrace::Work::Render, &mut notes);
+    let accel = placement.pick(&a.accel_args.spec()?, gridtrace::Work::Render, &mut notes);
     for n in &notes {
         eprintln!("note: {n}");
     }

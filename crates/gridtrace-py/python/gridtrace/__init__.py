@@ -298,7 +298,10 @@ def render(scene: Union[str, PathLike] = "knot-box", width: int = 512, height: i
     ``backend`` (``"gpu"`` or ``"cpu"``), ``wall_ms`` (upload to image in host memory),
     ``gpu_ms`` (the device's timestamps; ``None`` without them and on the CPU),
     ``round_trips``, ``uploaded_bytes``, ``downloaded_bytes``, ``tiles``, ``stages_ms``,
-    ``rays`` (eye, shadow, reflection) and ``mrays_per_s``."""
+    ``rays`` (eye, shadow, reflection) and ``mrays_per_s``; and what was chosen, as the CLI
+    prints it: ``accel`` (the structure traced, ``auto`` resolved) and ``notes`` (``auto``'s
+    pick and why, and every choice that was not the one asked for, such as a software adapter
+    passed over for the CPU)."""
     if width <= 0 or height <= 0:
         raise ValueError(f"image size must be positive, got {width}x{height}")
     e = None if eye is None else [float(x) for x in eye]

@@ -8,7 +8,6 @@
 //! error. Every query goes through `on_backend`, which also keeps its record (`last_query`:
 //! the scene's `LastQuery`).
 
-use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
 use super::{Backend, TraceMesh, locked};
@@ -135,12 +134,21 @@ impl TraceMesh {
     /// `Tracer::open` with a device given). An error if the mesh has opened its GPU already.
     #[doc(hidden)]
     pub fn adopt_device_for_auto(&self, ctx: Arc<GpuContext>) -> Result<()> {
-        let d = format!("gpu: {}", ctx.describe());
-        let r = GpuRenderer::new(ctx, &self.scene, &self.gpu_variants)?;
+        self.placement.give(ctx)?;
+        self.upload_given()
+    }
+
+    /// The renderer on the device given to the mesh's placement, made now: an error here (a
+    /// device that fails) is the caller's, under `auto` too.
+    pub(super) fn upload_given(&self) -> Result<()> {
+        let mut notes = Vec::new();
+        let placement = self.placement.placement(Backend::Gpu, &mut notes)?;
+        let r = placement
+            .upload(&self.scene, &mut notes)?
+            .ok_or_else(|| Error::Gpu(notes.join("; ")))?;
+        let d = format!("gpu: {}", r.context().describe());
         self.gpu
             .set(Ok((Mutex::new(r), d)))
-            .map_err(|_| Error::InvalidInput("this mesh has opened its GPU already".into()))?;
-        self.auto_on_adopted.store(true, Ordering::Relaxed);
-        Ok(())
+            .map_err(|_| Error::InvalidInput("this mesh has opened its GPU already".into()))
     }
 }

@@ -33,7 +33,8 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use glam::{Mat4, Vec3};
 
 use crate::accel::{AccelKind, AccelSpec, Work};
-use crate::gpu::{GpuContext, GpuRenderer, GpuVariants};
+use crate::gpu::{GpuRenderer, GpuVariants};
+use crate::placement::QueryPlacement;
 use crate::scene::{Mesh, PreparedScene, RebuildOn, Scene};
 use crate::{Error, Result};
 
@@ -82,16 +83,15 @@ pub struct TraceMesh {
     original: Option<Vec<u32>>,
     /// What was chosen for the caller (`auto`'s pick), in words.
     notes: Vec<String>,
+    /// The backend its queries run on unless told otherwise (`placement`'s).
     backend: Backend,
-    /// The GPU variants its GPU renderer is compiled with.
-    gpu_variants: GpuVariants,
+    /// Where its work goes, the device opened on first need (a scene's, shared by its meshes).
+    placement: Arc<QueryPlacement>,
     /// The GPU renderer, opened on first use (or the reason it could not be).
     gpu: OnceLock<std::result::Result<(Mutex<GpuRenderer>, String), String>>,
     /// Why `auto` queries left the GPU for good, once a GPU fault sent them to the CPU
     /// (`fallback.rs`).
     gpu_failed: Mutex<Option<String>>,
-    /// `auto` traces on the renderer a test gave it (`adopt_device_for_auto`).
-    auto_on_adopted: std::sync::atomic::AtomicBool,
     /// What the last answered query did (`fallback.rs`, `last_query`).
     last: Mutex<LastQuery>,
 }
@@ -104,13 +104,13 @@ impl TraceMesh {
         Self::from_arrays_on(vertices, faces, opts, None)
     }
 
-    /// `from_arrays` with its GPU work on `device` where one is given, instead of a device
-    /// it opens (`QueryScene::adopt_device`: how the fault tests put a scene on lavapipe).
+    /// `from_arrays` with its GPU work placed by `placement` where one is given (a scene's,
+    /// shared by its meshes), instead of a placement of its own.
     pub(crate) fn from_arrays_on(
         vertices: &[[f32; 3]],
         faces: &[[u32; 3]],
         opts: &QueryOptions,
-        device: Option<Arc<GpuContext>>,
+        placement: Option<Arc<QueryPlacement>>,
     ) -> Result<TraceMesh> {
         let n = vertices.len() as u32;
         if let Some(i) = vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
@@ -130,7 +130,7 @@ impl TraceMesh {
             triangles: faces.to_vec(),
             ..Default::default()
         };
-        Self::from_mesh_on(mesh, opts, device)
+        Self::from_mesh_on(mesh, opts, placement)
     }
 
     /// Loads a mesh file (OBJ, PLY, glTF/GLB, STL, OFF).
@@ -142,7 +142,7 @@ impl TraceMesh {
         Self::from_mesh_on(mesh, opts, None)
     }
 
-    fn from_mesh_on(mesh: Mesh, opts: &QueryOptions, device: Option<Arc<GpuContext>>) -> Result<TraceMesh> {
+    fn from_mesh_on(mesh: Mesh, opts: &QueryOptions, placement: Option<Arc<QueryPlacement>>) -> Result<TraceMesh> {
         // Keep the input face order: drop degenerate faces here and remember where each kept
         // one came from, so hits report input indices.
         let mesh_faces = mesh.triangles.len();
@@ -176,7 +176,8 @@ impl TraceMesh {
         let b = scene.bounds();
         scene.camera.target = b.center();
         scene.camera.eye = b.center() + Vec3::new(0.0, 0.0, b.diagonal().max(1.0));
-        let (accel, note) = opts.accel.resolve(opts.backend.traced_on(), Work::Rays);
+        let placement = placement.unwrap_or_else(|| Arc::new(QueryPlacement::new(opts.backend, opts.gpu_variants)));
+        let (accel, note) = opts.accel.resolve(placement.traced_on(), Work::Rays);
         let prepared = scene.prepare_for(accel, &opts.accel.params)?;
         debug_assert_eq!(prepared.accel.tris.len(), original.len());
         let all_kept = original.len() == mesh_faces;
@@ -184,15 +185,16 @@ impl TraceMesh {
             scene: prepared,
             original: (!all_kept).then_some(original),
             notes: note.into_iter().collect(),
-            backend: opts.backend,
-            gpu_variants: opts.gpu_variants,
+            backend: placement.backend(),
+            placement,
             gpu: OnceLock::new(),
             gpu_failed: Mutex::new(None),
-            auto_on_adopted: Default::default(),
             last: Mutex::default(),
         };
-        if let Some(ctx) = device {
-            mesh.adopt_device_for_auto(ctx)?;
+        if mesh.placement.is_given() {
+            // On a device given, opened now: a device that fails there is the caller's fault
+            // to handle (`QueryScene::merged`), as it is when the device is given to the mesh.
+            mesh.upload_given()?;
         }
         // Open the GPU now when it was asked for, so a missing adapter is reported at once.
         if opts.backend == Backend::Gpu {
@@ -228,23 +230,35 @@ impl TraceMesh {
     }
 
     fn open_renderer(&self, backend: Backend) -> Result<Option<&Mutex<GpuRenderer>>> {
-        // `auto` passes a software adapter over for the CPU tracer (`Backend::open_device`),
-        // before compiling or uploading anything to it; and leaves a GPU that failed.
-        let adopted = backend == Backend::Auto && self.auto_on_adopted.load(std::sync::atomic::Ordering::Relaxed);
-        if (!backend.traces_on_gpu() && !adopted) || (backend == Backend::Auto && self.failed_over()) {
+        // `auto` passes a software adapter over for the CPU tracer before compiling or
+        // uploading anything to it (`QueryPlacement::traces_on_gpu`); and leaves a GPU that
+        // failed.
+        if !self.placement.traces_on_gpu(backend) || (backend == Backend::Auto && self.failed_over()) {
             return Ok(None);
         }
-        let opened = self.gpu.get_or_init(|| {
-            let ctx = GpuContext::new().map_err(|e| e.to_string())?;
-            let d = format!("gpu: {}", ctx.describe());
-            GpuRenderer::new(Arc::new(ctx), &self.scene, &self.gpu_variants)
-                .map(|r| (Mutex::new(r), d))
-                .map_err(|e| e.to_string())
-        });
+        let opened = self.gpu.get_or_init(|| self.upload(backend));
         match (opened, backend) {
             (Ok((r, _)), _) => Ok(Some(r)),
             (Err(e), Backend::Gpu) => Err(Error::Gpu(e.clone())),
             (Err(_), _) => Ok(None),
+        }
+    }
+
+    /// The mesh on the device its placement gives for `backend` (`QueryPlacement::placement`,
+    /// then `Placement::upload`: the rules frames follow), with where in words; or why not.
+    fn upload(&self, backend: Backend) -> std::result::Result<(Mutex<GpuRenderer>, String), String> {
+        let mut notes = Vec::new();
+        let placement = self
+            .placement
+            .placement(backend, &mut notes)
+            .map_err(|e| e.to_string())?;
+        match placement.upload(&self.scene, &mut notes) {
+            Ok(Some(r)) => {
+                let d = format!("gpu: {}", r.context().describe());
+                Ok((Mutex::new(r), d))
+            }
+            Ok(None) => Err(notes.join("; ")),
+            Err(e) => Err(e.to_string()),
         }
     }
 

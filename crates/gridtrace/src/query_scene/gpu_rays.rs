@@ -230,10 +230,11 @@ impl QueryScene {
                 let (ctx, uploads) = match old {
                     Some(g) => (g.renderer.context().clone(), g.uploads),
                     None => {
-                        let ctx = match &self.adopted {
-                            Some(ctx) => ctx.clone(),
-                            None => Arc::new(GpuContext::new()?),
-                        };
+                        // The scene's device (`QueryPlacement`): under `auto` one that could
+                        // not be opened is a fault, which sends the scene to the CPU.
+                        let mut notes = Vec::new();
+                        let placement = self.placement.placement(self.opts.backend, &mut notes)?;
+                        let ctx = placement.device.ok_or_else(|| Error::Gpu(notes.join("; ")))?;
                         (ctx, GpuUploads::default())
                     }
                 };

@@ -36,12 +36,11 @@ pub(super) fn scan_with(
 }
 
 impl QueryScene {
-    /// Whether the scene's queries trace on a GPU: its backend's choice (`auto` may still fall
-    /// back to the CPU), or a device a test gave `auto`; not once a GPU fault sent `auto` to
-    /// the CPU.
+    /// Whether the scene's queries trace on a GPU: its placement's choice
+    /// (`QueryPlacement::traces_on_gpu`: `auto` may still fall back to the CPU, or trace on a
+    /// device a test gave it); not once a GPU fault sent `auto` to the CPU.
     pub(crate) fn traces_on_gpu(&self) -> bool {
-        let auto = self.opts.backend == crate::query::Backend::Auto;
-        (self.opts.backend.traces_on_gpu() || (auto && self.adopted.is_some())) && !self.failed_over()
+        self.placement.traces_on_gpu(self.opts.backend) && !self.failed_over()
     }
 
     /// What the last ray batch on this scene's GPU took (wall and GPU time, submissions, bytes

@@ -17,6 +17,7 @@
 use std::sync::Arc;
 
 use crate::gpu::{GpuContext, GpuQueryStats, GpuRenderer};
+use crate::placement::QueryPlacement;
 use crate::query::{Answered, Backend, TraceMesh, limit_note};
 use crate::{Error, Result};
 
@@ -163,7 +164,7 @@ impl QueryScene {
     /// renderer and the merged mesh's (made on it when the mesh is built).
     #[doc(hidden)]
     pub fn adopt_device(&mut self, ctx: Arc<GpuContext>) {
-        self.adopted = Some(ctx);
+        self.placement = Arc::new(QueryPlacement::given(self.opts.backend, self.opts.gpu_variants, ctx));
         // A merged mesh built before traces where it was told to: build it again.
         *self.merged.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
     }

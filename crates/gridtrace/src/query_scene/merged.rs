@@ -11,7 +11,7 @@ use std::sync::{Arc, OnceLock};
 
 use crate::accel::winding::FastWinding;
 use crate::accel::{Accel, Structure, TriAccel};
-use crate::gpu::GpuContext;
+use crate::placement::QueryPlacement;
 use crate::query::{QueryOptions, TraceMesh};
 use crate::{Error, Result};
 
@@ -45,12 +45,12 @@ pub(crate) struct Merged {
 }
 
 impl Merged {
-    /// Merges `geometries` (ascending id) and builds the mesh, its GPU work on `device` where
-    /// one is given (`QueryScene::adopt_device`).
+    /// Merges `geometries` (ascending id) and builds the mesh, its GPU work placed by
+    /// `placement` (the scene's).
     pub fn build(
         geometries: &BTreeMap<u32, Geometry>,
         opts: &QueryOptions,
-        device: Option<Arc<GpuContext>>,
+        placement: Arc<QueryPlacement>,
     ) -> Result<Merged> {
         let mut spans = Vec::with_capacity(geometries.len());
         let mut world = Vec::new();
@@ -75,7 +75,7 @@ impl Merged {
         let mesh = if degenerate.iter().all(|&d| d) {
             None
         } else {
-            Some(TraceMesh::from_arrays_on(&world, &faces, opts, device)?)
+            Some(TraceMesh::from_arrays_on(&world, &faces, opts, Some(placement))?)
         };
         Ok(Merged {
             mesh,

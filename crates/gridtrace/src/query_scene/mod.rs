@@ -70,6 +70,7 @@ use std::sync::{Arc, Mutex};
 
 use glam::Mat4;
 
+use crate::placement::QueryPlacement;
 use crate::query::QueryOptions;
 use crate::{Error, Result};
 
@@ -133,8 +134,9 @@ pub struct QueryScene {
     /// The winding numbers' faces and tree while the merged mesh is not built
     /// (`winding_only.rs`); `None` when a change made them stale.
     winding_only: Mutex<Option<Arc<winding_only::WindingOnly>>>,
-    /// The device `auto` traces on where a test gave one (`adopt_device_for_auto`).
-    adopted: Option<Arc<crate::gpu::GpuContext>>,
+    /// Where its GPU work goes, the device opened on first need (or given: `adopt_device`),
+    /// shared by the two levels and the merged meshes.
+    placement: Arc<QueryPlacement>,
 }
 
 /// Where a ray query runs (`QueryScene::ray_path`).
@@ -153,7 +155,6 @@ impl QueryScene {
     /// backend).
     pub fn new(opts: QueryOptions) -> QueryScene {
         QueryScene {
-            opts,
             geometries: BTreeMap::new(),
             next_id: 0,
             merged: Mutex::new(None),
@@ -163,7 +164,8 @@ impl QueryScene {
             moving: false,
             records: Mutex::default(),
             winding_only: Mutex::new(None),
-            adopted: None,
+            placement: Arc::new(QueryPlacement::new(opts.backend, opts.gpu_variants)),
+            opts,
         }
     }
 
@@ -334,14 +336,20 @@ impl QueryScene {
         if let Some(m) = slot.as_ref() {
             return Ok(m.clone());
         }
-        // On the device a test gave (`adopt_device`), unless a fault sent the scene to the CPU.
-        let device = self.adopted.clone().filter(|_| !self.failed_over());
-        let m = match Merged::build(&self.geometries, &self.opts, device) {
+        // Where the scene places its work, unless a fault sent the scene to the CPU: then a
+        // placement of the mesh's own, which its queries never use (`on_mesh`).
+        let own = || Arc::new(QueryPlacement::new(self.opts.backend, self.opts.gpu_variants));
+        let placement = if self.failed_over() {
+            own()
+        } else {
+            self.placement.clone()
+        };
+        let m = match Merged::build(&self.geometries, &self.opts, placement) {
             // Opening the renderer on a device that failed is a fault like any other: under
             // `auto` the scene's queries then run on the CPU, the mesh with them.
             Err(Error::Gpu(e)) if self.opts.backend == crate::query::Backend::Auto => {
                 self.gpu_fault(&e);
-                Merged::build(&self.geometries, &self.opts, None)?
+                Merged::build(&self.geometries, &self.opts, own())?
             }
             r => r?,
         };
