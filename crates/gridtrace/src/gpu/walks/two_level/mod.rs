@@ -13,12 +13,15 @@
 //! `WalkSpec` here (its arrays, then `TOP_LEVEL_ARRAY`) and one arm of `walk_for`. Carried
 //! today: the BVH (binary nodes, either stack), brute force and the uniform grid (grid, pc:
 //! its lattice, one per scene in the scene uniform for one level, is a row of a table here,
-//! which the mesh's header names). Not yet: the irregular grid, the BVH's 8-wide layout, and
-//! `hwrt` (the driver's instances): `walk_for` answers `None` for them and the scene's GPU
-//! rays stay on its merged mesh.
+//! which the mesh's header names) and `hwrt`, whose top and bottom levels are the driver's (a
+//! TLAS instance a scene instance over a BLAS a mesh, `hwrt::INSTANCES`; its "top level"
+//! array is its instance table). Not yet: the irregular grid and the BVH's 8-wide layout:
+//! `walk_for` answers `None` for them and the scene's GPU rays stay on its merged mesh.
 //!
 //! A move (`QueryScene::set_transforms`, `set_mask`) uploads the top level alone: 64 bytes a
-//! node and 64 an instance (`TopRec`); the meshes' arrays stay on the device.
+//! node and 64 an instance (`TopRec`); the meshes' arrays stay on the device. For `hwrt` it
+//! rebuilds the TLAS alone (64 bytes an instance uploaded) and writes the instance table where
+//! it changed.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Affine3A;
@@ -142,6 +145,7 @@ pub fn walk_for(structure: &Structure, walk: BvhWalk) -> Option<&'static WalkSpe
         (Structure::Bvh(_), BvhLayout::Binary, BvhStack::Short(_)) => Some(&BVH_SHORT),
         (Structure::Brute(_), _, _) => Some(&BRUTE),
         (Structure::Grid(_), _, _) => Some(&GRID),
+        (Structure::Hwrt(_), _, _) => Some(&super::hwrt::INSTANCES),
         _ => None,
     }
 }
@@ -208,6 +212,10 @@ pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLe
     let too_many = || Error::InvalidInput("the scene's meshes have more than 2^32 triangles together".into());
     let mut headers = Vec::with_capacity(meshes.len());
     let kind = first.kind();
+    if matches!(first.structure, Structure::Hwrt(_)) {
+        // The driver's BLASes, built from the meshes' triangles at upload: no arrays of ours.
+        return Ok(Some(super::hwrt::instances::bottom_levels(spec, kind, tri_counts)));
+    }
     if matches!(first.structure, Structure::Brute(_)) {
         let mut tris = Vec::new();
         for m in meshes {
