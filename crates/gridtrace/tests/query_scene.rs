@@ -512,8 +512,8 @@ fn gpu_rays_equal_cpu() {
     let rays = rays(&r, 2000, 6);
     let ctx = gridtrace::gpu::GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
     for kind in gridtrace::testing::gpu_kinds(&ctx) {
-        // `hwrt` (the GPU's ray queries, its geometries merged into one bottom-level
-        // structure) against the CPU's BVH.
+        // `hwrt` (the GPU's ray queries, over the driver's instances of the geometries)
+        // against the CPU's BVH.
         let mut on_cpu = scene_of(&geoms, cpu(if kind.entry().cpu { kind } else { AccelKind::Bvh }));
         // A move (the same mask again): the CPU walks its two levels, as the GPU does for the
         // structures it carries under a top level (a static scene's CPU rays walk the merged
