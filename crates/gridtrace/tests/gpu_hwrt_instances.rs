@@ -174,9 +174,10 @@ fn driver_instances_equal_cpu_two_levels() {
     let (rays, t_near, t_far) = rays_with_intervals(&mut rng, n);
     let few = |rng: &mut Rng| 1u32 << rng.below(4);
     let many = |rng: &mut Rng| (1u32 << rng.below(32)) | (1u32 << rng.below(32));
-    for (name, masks, seed) in [
-        ("few masks", &few as &dyn Fn(&mut Rng) -> u32, 3),
-        ("many masks", &many, 4),
+    for (name, masks, seed, least) in [
+        ("few masks", &few as &dyn Fn(&mut Rng) -> u32, 3, 600),
+        // Two bits of 32 see fewer instances: fewer hits to compare.
+        ("many masks", &many, 4, 300),
     ] {
         let ray_masks: Vec<u32> = (0..n)
             .map(|i| match i % 4 {
@@ -214,7 +215,7 @@ fn driver_instances_equal_cpu_two_levels() {
             "hwrt, {name}: {hits} hits compared, {rounding} t beyond 1e-5 within rounding, {boundary} other \
              faces on a boundary, {excused} hit-or-miss on a boundary"
         );
-        assert!(hits > 600, "{name}: only {hits} hits");
+        assert!(hits > least, "{name}: only {hits} hits");
         assert!(
             rounding * 100 <= hits && boundary * 100 <= hits && excused * 100 <= 2 * n,
             "{name}: {rounding} rounding, {boundary} boundary, {excused} excused"
