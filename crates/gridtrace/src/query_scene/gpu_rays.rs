@@ -142,7 +142,9 @@ impl GpuTwoLevel {
         let (top, placements) = top_of(two, &self.bottoms)?.expect("a scene with no instance does not reach the GPU");
         match (placements, self.driver.as_mut()) {
             (Some(p), Some(d)) => {
-                if top.recs != self.top.recs {
+                // By bytes: the table's words are no floats (an all-ones mask reads as NaN).
+                let bytes = |t: &TopLevel| bytemuck::cast_slice::<_, u8>(&t.recs).to_vec();
+                if bytes(&top) != bytes(&self.top) {
                     self.renderer.set_top_level(&top)?;
                 }
                 self.renderer.rebuild_tlas(|ctx, tlas| d.set_instances(ctx, tlas, &p))?;
