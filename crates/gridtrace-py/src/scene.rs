@@ -360,6 +360,8 @@ impl NativeScene {
         d.set_item("top_nodes", u.top_nodes)?;
         d.set_item("top_records", u.top_records)?;
         d.set_item("written_bytes", u.written_bytes)?;
+        d.set_item("blas_builds", u.blas_builds)?;
+        d.set_item("tlas_builds", u.tlas_builds)?;
         Ok(Some(d))
     }
 

@@ -512,8 +512,8 @@ fn gpu_rays_equal_cpu() {
     let rays = rays(&r, 2000, 6);
     let ctx = gridtrace::gpu::GpuContext::new().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
     for kind in gridtrace::testing::gpu_kinds(&ctx) {
-        // `hwrt` (the GPU's ray queries, its geometries merged into one bottom-level
-        // structure) against the CPU's BVH.
+        // `hwrt` (the GPU's ray queries, over the driver's instances of the geometries)
+        // against the CPU's BVH.
         let mut on_cpu = scene_of(&geoms, cpu(if kind.entry().cpu { kind } else { AccelKind::Bvh }));
         // A move (the same mask again): the CPU walks its two levels, as the GPU does for the
         // structures it carries under a top level (a static scene's CPU rays walk the merged
@@ -538,7 +538,7 @@ fn gpu_rays_equal_cpu() {
         // aimed exactly at shared vertices and edges through (17 of these 2,003, 2026-11-27);
         // counted, printed, held to 1%.
         let driver = !kind.entry().cpu;
-        let (mut driver_leaks, mut boundary, mut two_level_rounding) = (0, 0, 0);
+        let (mut driver_leaks, mut boundary, mut two_level_rounding, mut driver_ties) = (0, 0, 0, 0);
         for (i, q) in rays.iter().enumerate() {
             // GPU arithmetic may fuse multiply-adds: t within rounding; the face named may be
             // another of those at equal t (rays aimed at vertices and edges), but it must be one
@@ -611,9 +611,23 @@ fn gpu_rays_equal_cpu() {
                         .map(|h| h.t),
                 )
             {
-                // At the edge of the CPU test's slack the GPU's rounding may accept a face the
-                // CPU's rejects: rare.
-                odd += 1;
+                let on_edge = gridtrace::testing::on_triangle_boundary(&Hit {
+                    t: g.t_hit[i],
+                    tri: 0,
+                    u: g.primitive_uvs[i][0],
+                    v: g.primitive_uvs[i][1],
+                });
+                if driver && on_edge {
+                    // The driver's instances: the driver carries the ray in by its own inverse
+                    // and tests by its own rule, so at a vertex or edge the rays aim at, a tie
+                    // between the faces there may go to one the CPU's carried ray misses by a
+                    // rounding: counted, bounded below.
+                    driver_ties += 1;
+                } else {
+                    // At the edge of the CPU test's slack the GPU's rounding may accept a face
+                    // the CPU's rejects: rare.
+                    odd += 1;
+                }
             }
         }
         assert!(
@@ -634,10 +648,16 @@ fn gpu_rays_equal_cpu() {
             kind.name()
         );
         assert!(
-            driver_leaks * 100 <= rays.len(),
-            "{}: {driver_leaks} rays leak",
+            driver_leaks * 100 <= rays.len() && driver_ties * 50 <= rays.len(),
+            "{}: {driver_leaks} rays leak, {driver_ties} ties on an edge or vertex",
             kind.name()
         );
+        if driver {
+            eprintln!(
+                "{}: {driver_ties} ties on an edge or vertex to another face",
+                kind.name()
+            );
+        }
         let (c, g) = (
             on_cpu.test_occlusions(&rays, 0.0, 1.5).unwrap(),
             on_gpu.test_occlusions(&rays, 0.0, 1.5).unwrap(),

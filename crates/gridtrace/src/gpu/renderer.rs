@@ -16,7 +16,7 @@ use super::timing::{GpuQueryStats, StageTimer, Timestamps};
 use super::variants::GpuVariants;
 use super::walks::grid::build::GpuBuildStats;
 use super::walks::two_level::{BottomLevels, TOP_LEVEL_ARRAY, TopLevel};
-use super::walks::{self, DeviceBuilder};
+use super::walks::{self, DeviceBuilder, DeviceStructure};
 use crate::accel::AccelKind;
 use crate::render::{Ablation, Mode};
 use crate::scene::{CameraFrame, PointLight, PreparedScene};
@@ -165,14 +165,30 @@ impl GpuRenderer {
     /// A renderer of a scene of two levels (`walks::two_level`), for ray batches only: each
     /// mesh's structure as `bottoms` lays it out, uploaded once, and the top level `top`,
     /// which `set_top_level` replaces when instances move.
+    /// `device`: the TLAS of a walk by ray query (`hwrt`'s driver instances), built by the
+    /// caller.
     pub(crate) fn two_level(
         ctx: Arc<GpuContext>,
         bottoms: &BottomLevels,
         top: &TopLevel,
         variants: &GpuVariants,
+        device: Option<DeviceStructure>,
     ) -> Result<GpuRenderer> {
-        let scene = SceneBuffers::upload_two_level(&ctx, bottoms, top, variants)?;
+        let scene = SceneBuffers::upload_two_level(&ctx, bottoms, top, variants, device)?;
         Self::with_scene(ctx, scene, bottoms.kind, variants)
+    }
+
+    /// Rebuilds the top-level acceleration structure a walk by ray query binds (`hwrt`'s
+    /// driver instances moved) with `rebuild`, which may replace it and returns the bytes it
+    /// uploaded (counted in `scene_upload_bytes`); group 1 is bound again.
+    pub(crate) fn rebuild_tlas(
+        &mut self,
+        rebuild: impl FnOnce(&GpuContext, &mut Option<wgpu::Tlas>) -> Result<u64>,
+    ) -> Result<u64> {
+        let bytes = rebuild(&self.ctx, &mut self.scene.tlas)?;
+        self.scene.rebind(&self.ctx.device);
+        self.scene.uploaded_bytes += bytes;
+        Ok(bytes)
     }
 
     /// Uploads a new top level over the one a renderer of two levels has (instances moved,

@@ -117,12 +117,15 @@ impl SceneBuffers {
     }
 
     /// Uploads a scene of two levels (`walks::two_level`): the meshes' structures, laid out by
-    /// `bottoms`, and the top level `top`. Rays only: no shading data, one stand-in material.
+    /// `bottoms`, and the top level `top`; `device`, the TLAS of a walk by ray query (`hwrt`'s
+    /// driver instances, built by the caller). Rays only: no shading data, one stand-in
+    /// material.
     pub fn upload_two_level(
         ctx: &GpuContext,
         bottoms: &BottomLevels,
         top: &TopLevel,
         variants: &GpuVariants,
+        device: Option<DeviceStructure>,
     ) -> Result<SceneBuffers> {
         let stand_in_shade = [TriShade {
             n0: [0.0; 3],
@@ -153,7 +156,7 @@ impl SceneBuffers {
             },
             reachable_tris: top.answers as usize,
         };
-        Self::from_arrays(ctx, parts, variants, || Ok(None))
+        Self::from_arrays(ctx, parts, variants, || Ok(device))
     }
 
     /// The upload itself: checks, the walk's pipelines, the buffers, the bind group, and the
@@ -249,6 +252,11 @@ impl SceneBuffers {
         }
         self.uploaded_bytes += data.len() as u64;
         Ok(data.len() as u64)
+    }
+
+    /// Binds group 1 again (its top-level acceleration structure replaced).
+    pub fn rebind(&mut self, dev: &wgpu::Device) {
+        self.structure_group = structure_group(dev, &self.walk, &self.structure, self.tlas.as_ref());
     }
 
     /// Replaces the structure's array `label` (the grid's GPU build writes new cells and

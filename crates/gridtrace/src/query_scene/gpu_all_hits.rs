@@ -125,6 +125,7 @@ impl QueryScene {
         }
         match self.ray_path(o)? {
             RayPath::Cpu(_) => Ok(None),
+            RayPath::Gpu(two) if self.gpu_walks_by_ray_query(&two) => Ok(None),
             RayPath::Gpu(two) => self.gpu_or_cpu(|| self.gpu_all_hits(&two, rays, o, answer).map(Some), || Ok(None)),
             RayPath::Merged => {
                 let (t_near, t_far, _) = o.uniform().expect("the merged path's rays share one interval");

@@ -3,7 +3,10 @@
 //! bottom levels (built once, in each mesh's own space), laid out one after another and
 //! uploaded once; the top level (nodes and instance records) is uploaded again after a move
 //! (`set_transforms`, `set_mask`, an instance added of a mesh already there), and nothing else.
-//! A mesh added or removed uploads the meshes again.
+//! A mesh added or removed uploads the meshes again. For `hwrt` the two levels are the
+//! driver's (`gpu::walks::hwrt::instances`): a BLAS a mesh, built once at the upload, and a
+//! TLAS that a move rebuilds alone (its instances' bytes, and the instance table where a mask
+//! changed).
 //!
 //! The wire: rows that share one interval and mask go up as 24 bytes a ray, the interval and
 //! mask in the batch's uniform; rows with their own go up as 36 (origin, t_near, direction,
@@ -22,6 +25,7 @@ use super::rays::{RowRays, occlusion_into};
 use super::two_level::{NamedHit, TwoLevel};
 use crate::accel::{Accel, Hit};
 use crate::gpu::layout::GpuHit;
+use crate::gpu::walks::hwrt::instances::{DriverInstances, Placement, instance_table};
 use crate::gpu::walks::two_level::{self, BottomLevels, Instance, TopLevel};
 use crate::gpu::{AllHits, Answer, ChunkAnswers, GpuContext, GpuRenderer, WireSource};
 use crate::{Error, Result};
@@ -35,9 +39,14 @@ pub struct GpuUploads {
     /// How many times the meshes' structures were uploaded: once, and again only after a mesh
     /// was added or removed.
     pub mesh_uploads: u32,
-    /// Nodes of the top level on the device, and instance records after them (64 bytes each).
+    /// Nodes of the top level on the device, and instance records after them (64 bytes each;
+    /// `hwrt`: no nodes, the driver's TLAS instances, 64 bytes each, and its instance table).
     pub top_nodes: u32,
     pub top_records: u32,
+    /// `hwrt` (the driver's instances): BLASes built (one a mesh, at the meshes' upload) and
+    /// TLAS builds (that upload and each move); 0 for the other structures.
+    pub blas_builds: u32,
+    pub tlas_builds: u32,
     /// Bytes written to the device's scene arrays by this scene's renderer (meshes, top
     /// levels), as the renderer counts its writes (`GpuRenderer::scene_upload_bytes`).
     pub written_bytes: u64,
@@ -53,6 +62,8 @@ pub(super) struct GpuTwoLevel {
     /// The two levels whose top is on the device, and that top's layout.
     two: Arc<TwoLevel>,
     top: TopLevel,
+    /// `hwrt`: the meshes' BLASes and the TLAS's builds.
+    driver: Option<DriverInstances>,
     uploads: GpuUploads,
 }
 
@@ -61,8 +72,9 @@ fn accels(two: &TwoLevel) -> Vec<&Accel> {
     two.meshes().map(|(_, a)| a).collect()
 }
 
-/// The top level of `two` laid out over `bottoms` (no instances: `None`).
-fn top_of(two: &TwoLevel, bottoms: &BottomLevels) -> Result<Option<TopLevel>> {
+/// The top level of `two` laid out over `bottoms` (no instances: `None`), and for a walk by
+/// ray query (`hwrt`) the TLAS's instances, its top level the instance table.
+fn top_of(two: &TwoLevel, bottoms: &BottomLevels) -> Result<Option<(TopLevel, Option<Vec<Placement>>)>> {
     let Some(tree) = two.top().as_bvh() else {
         return Ok(None);
     };
@@ -75,7 +87,11 @@ fn top_of(two: &TwoLevel, bottoms: &BottomLevels) -> Result<Option<TopLevel>> {
             mesh: p.mesh,
         })
         .collect();
-    TopLevel::new(&tree, &instances, bottoms).map(Some)
+    if bottoms.spec.tlas.is_some() {
+        let (top, placements) = instance_table(&instances, bottoms)?;
+        return Ok(Some((top, Some(placements))));
+    }
+    Ok(Some((TopLevel::new(&tree, &instances, bottoms)?, None)))
 }
 
 impl GpuTwoLevel {
@@ -87,10 +103,22 @@ impl GpuTwoLevel {
         scene: &QueryScene,
         mut uploads: GpuUploads,
     ) -> Result<GpuTwoLevel> {
-        let top = top_of(two, &bottoms)?.expect("a scene with no instance does not reach the GPU");
-        let renderer = GpuRenderer::two_level(ctx, &bottoms, &top, &scene.opts.gpu_variants)?;
-        uploads.mesh_bytes = bottoms.bytes();
+        let (top, placements) = top_of(two, &bottoms)?.expect("a scene with no instance does not reach the GPU");
+        let (driver, device) = match placements {
+            Some(p) => {
+                let tris: Vec<&[crate::accel::TriAccel]> = accels(two).iter().map(|a| &a.tris[..]).collect();
+                let (d, device) = DriverInstances::build(&ctx, &tris, &p)?;
+                (Some(d), Some(device))
+            }
+            None => (None, None),
+        };
+        let renderer = GpuRenderer::two_level(ctx, &bottoms, &top, &scene.opts.gpu_variants, device)?;
+        uploads.mesh_bytes = bottoms.bytes() + driver.as_ref().map_or(0, |d| d.input_bytes);
         uploads.mesh_uploads += 1;
+        if let Some(d) = &driver {
+            uploads.blas_builds += d.blas_builds;
+            uploads.tlas_builds += 1;
+        }
         let mut g = GpuTwoLevel {
             renderer,
             meshes: two.meshes().map(|(m, _)| m.clone()).collect(),
@@ -101,16 +129,31 @@ impl GpuTwoLevel {
             },
             two: two.clone(),
             top,
+            driver,
             uploads,
         };
         g.count_top();
         Ok(g)
     }
 
-    /// Brings the top level up to `two` (same meshes): uploads it alone.
+    /// Brings the top level up to `two` (same meshes): uploads it alone (`hwrt`: rebuilds the
+    /// TLAS, and writes the instance table where it changed).
     fn move_to(&mut self, two: &Arc<TwoLevel>) -> Result<()> {
-        let top = top_of(two, &self.bottoms)?.expect("a scene with no instance does not reach the GPU");
-        self.renderer.set_top_level(&top)?;
+        let (top, placements) = top_of(two, &self.bottoms)?.expect("a scene with no instance does not reach the GPU");
+        match (placements, self.driver.as_mut()) {
+            (Some(p), Some(d)) => {
+                // By bytes: the table's words are no floats (an all-ones mask reads as NaN).
+                let bytes = |t: &TopLevel| bytemuck::cast_slice::<_, u8>(&t.recs).to_vec();
+                if bytes(&top) != bytes(&self.top) {
+                    self.renderer.set_top_level(&top)?;
+                }
+                self.renderer.rebuild_tlas(|ctx, tlas| d.set_instances(ctx, tlas, &p))?;
+                self.uploads.tlas_builds += 1;
+            }
+            _ => {
+                self.renderer.set_top_level(&top)?;
+            }
+        }
         self.top = top;
         self.two = two.clone();
         self.count_top();
@@ -119,7 +162,7 @@ impl GpuTwoLevel {
 
     fn count_top(&mut self) {
         self.uploads.top_nodes = self.top.nodes as u32;
-        self.uploads.top_records = (self.top.recs.len() - self.top.nodes) as u32;
+        self.uploads.top_records = self.top.order.len() as u32;
         self.uploads.written_bytes = self.renderer.scene_upload_bytes();
     }
 
@@ -196,6 +239,15 @@ impl QueryScene {
         self.traces_on_gpu()
             && !two.placed.is_empty()
             && first.is_some_and(|f| specs.all(|s| s.is_some_and(|s| std::ptr::eq(s, f))))
+    }
+
+    /// Whether the GPU's two levels of `two` are walked by ray query (`hwrt`'s driver
+    /// instances): their counts and lists of hits run on the CPU's two levels, by
+    /// `intersect_tri`, as `hwrt`'s are listed on one level (by its BVH).
+    pub(super) fn gpu_walks_by_ray_query(&self, two: &TwoLevel) -> bool {
+        let walk = self.opts.gpu_variants.bvh_walk();
+        two.meshes()
+            .any(|(_, a)| two_level::walk_for(&a.structure, walk).is_some_and(|w| w.tlas.is_some()))
     }
 
     /// What the last ray batch on the GPU's two levels took; `None` before the first.

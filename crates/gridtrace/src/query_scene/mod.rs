@@ -48,13 +48,15 @@
 //! level only. Every ray query takes each ray's interval and mask (`RayOptions`: the `_with`
 //! forms).
 //!
-//! **On the GPU** (`gpu_rays.rs`): where the backend traces on a GPU and the meshes' structure is
-//! the BVH (either layout), the grid (or pc), the irregular grid or brute force, closest hits and
-//! occlusion walk the two levels there too (`gpu::walks::two_level`): each mesh's structure
-//! uploaded once, a move uploads the top level alone (`gpu_uploads` reports the bytes).
+//! **On the GPU** (`gpu_rays.rs`): where the backend traces on a GPU, whatever the meshes' structure,
+//! closest hits and occlusion walk the two levels there too
+//! (`gpu::walks::two_level`): each mesh's structure uploaded once, a move uploads the top level
+//! alone (`gpu_uploads` reports the bytes). With `hwrt` the two levels are the driver's (a BLAS
+//! a mesh, built once; a TLAS instance a scene instance, rebuilt alone by a move:
+//! `gpu::walks::hwrt::instances`).
 //!
-//! **The merged path.** Where the backend traces on a GPU and the structure is another
-//! (`hwrt`), the ray queries whose rays all share one interval and see every
+//! **The merged path.** Where the backend traces on a GPU and the structure has no two-level
+//! walk (none today), the ray queries whose rays all share one interval and see every
 //! geometry still run on one world-space mesh of every geometry's triangles (`merged.rs`), as
 //! do the point queries (closest points, distances, signed distances, occupancy, winding
 //! numbers), except on the CPU in a moving scene whose every instance is placed by a

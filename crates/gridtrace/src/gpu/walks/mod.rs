@@ -15,7 +15,7 @@
 mod brute;
 pub mod bvh;
 pub mod grid;
-mod hwrt;
+pub(crate) mod hwrt;
 mod irregular;
 pub mod two_level;
 
@@ -70,7 +70,8 @@ pub struct WalkSpec {
     /// For a walk of two levels (`two_level/`): the bottom structure's prefix, whose
     /// `{bottom}_closest_in` and `{bottom}_any_in` walk one mesh's part of the shared arrays,
     /// named by the mesh's header (`MeshHeader`), under the top level's walk; its last array is
-    /// the top level's (`two_level::TOP_LEVEL_ARRAY`). `None`: a walk of one level.
+    /// the top level's (`two_level::TOP_LEVEL_ARRAY`). `None`: a walk of one level. A walk of
+    /// two levels with a `tlas` (`hwrt::INSTANCES`) has the driver walk both levels.
     pub bottom: Option<&'static str>,
 }
 
@@ -89,6 +90,9 @@ impl WalkSpec {
             m_last = if self.bottom.is_some() { ", mask" } else { "" },
         );
         match self.bottom {
+            // Two levels the driver walks (`hwrt::INSTANCES`): its TLAS is the top level and
+            // the meshes' BLASes the bottom, so no top-level array or bottom walk of ours.
+            Some(_) if self.tlas.is_some() => rays,
             None => format!(
                 "{rays}fn walk_closest_point(point: vec3<f32>, work: ptr<function, u32>) -> GpuHit {{ return {p}_closest_point(point, work); }}\n"
             ),
@@ -112,7 +116,7 @@ impl WalkSpec {
 
 /// Every GPU walk: each structure's default first, then the BVH's variants
 /// (`gpu::variants`), then the walks of two levels (`two_level`).
-pub const WALKS: [&WalkSpec; 15] = [
+pub const WALKS: [&WalkSpec; 16] = [
     &grid::SPEC,
     &bvh::SPEC,
     &irregular::SPEC,
@@ -128,6 +132,7 @@ pub const WALKS: [&WalkSpec; 15] = [
     &two_level::IRREGULAR,
     &two_level::BVH_WIDE8,
     &two_level::BVH_WIDE8_SHORT,
+    &hwrt::INSTANCES,
 ];
 
 // Every walk's arrays fit what a device is asked to allow for them (a walk with more fails to

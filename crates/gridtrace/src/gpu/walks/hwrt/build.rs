@@ -26,48 +26,9 @@ const IDENTITY_3X4: [f32; 12] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.
 /// or a mesh over its limits, is an error that names the adapter and the limit.
 pub fn build_on_device(ctx: &GpuContext, tris: &[TriAccel]) -> Result<DeviceStructure> {
     ctx.check_ray_queries("hwrt")?;
-    let limits = ctx.limits();
-    let n = tris.len() as u64;
-    if n > limits.max_blas_primitive_count as u64 {
-        return Err(Error::Gpu(format!(
-            "'hwrt' needs a bottom-level structure of {n} triangles; adapter '{}' allows {} \
-             (limit max_blas_primitive_count)",
-            ctx.info.name, limits.max_blas_primitive_count
-        )));
-    }
-    let vertices: Vec<[f32; 3]> = tris.iter().flat_map(|t| [t.v0, t.v1, t.v2]).collect();
-    let input_bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
-    if input_bytes > limits.max_buffer_size {
-        return Err(Error::Gpu(format!(
-            "'hwrt' needs {input_bytes} bytes of vertices; adapter '{}' allows {} per buffer (limit max_buffer_size)",
-            ctx.info.name, limits.max_buffer_size
-        )));
-    }
     let dev = &ctx.device;
     let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let vertex_buffer = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("hwrt vertices"),
-        contents: bytemuck::cast_slice(&vertices),
-        usage: wgpu::BufferUsages::BLAS_INPUT,
-    });
-    let size = wgpu::BlasTriangleGeometrySizeDescriptor {
-        vertex_format: wgpu::VertexFormat::Float32x3,
-        vertex_count: 3 * tris.len() as u32,
-        index_format: None,
-        index_count: None,
-        // Opaque: the hardware commits every hit itself; no shader sees candidates.
-        flags: wgpu::AccelerationStructureGeometryFlags::OPAQUE,
-    };
-    let blas = dev.create_blas(
-        &wgpu::CreateBlasDescriptor {
-            label: Some("hwrt triangles"),
-            flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
-            update_mode: wgpu::AccelerationStructureUpdateMode::Build,
-        },
-        wgpu::BlasGeometrySizeDescriptors::Triangles {
-            descriptors: vec![size.clone()],
-        },
-    );
+    let input = BlasInput::new(ctx, tris)?;
     let mut tlas = dev.create_tlas(&wgpu::CreateTlasDescriptor {
         label: Some("hwrt instances"),
         max_instances: 1,
@@ -75,16 +36,88 @@ pub fn build_on_device(ctx: &GpuContext, tris: &[TriAccel]) -> Result<DeviceStru
         update_mode: wgpu::AccelerationStructureUpdateMode::Build,
     });
     // Custom data 0 and mask 0xff: the walk's ray queries ask for every instance.
-    tlas[0] = Some(wgpu::TlasInstance::new(&blas, IDENTITY_3X4, 0, 0xff));
+    tlas[0] = Some(wgpu::TlasInstance::new(&input.blas, IDENTITY_3X4, 0, 0xff));
     let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("hwrt build"),
     });
-    enc.build_acceleration_structures(
-        std::iter::once(&wgpu::BlasBuildEntry {
-            blas: &blas,
+    enc.build_acceleration_structures(std::iter::once(&input.entry()), std::iter::once(&tlas));
+    submit_checked(ctx, scope, enc)?;
+    Ok(DeviceStructure {
+        tlas,
+        input_bytes: input.bytes,
+    })
+}
+
+/// One mesh's BLAS before its build: the structure, its size and the vertex buffer it is built
+/// from (three vertices a triangle in the tracer's order, no index buffer).
+pub(super) struct BlasInput {
+    pub blas: wgpu::Blas,
+    size: wgpu::BlasTriangleGeometrySizeDescriptor,
+    vertices: wgpu::Buffer,
+    /// Bytes of the vertex buffer.
+    pub bytes: u64,
+}
+
+impl BlasInput {
+    /// The BLAS of `tris` (at least one), checked against the adapter's limits.
+    pub fn new(ctx: &GpuContext, tris: &[TriAccel]) -> Result<BlasInput> {
+        let limits = ctx.limits();
+        let n = tris.len() as u64;
+        if n > limits.max_blas_primitive_count as u64 {
+            return Err(Error::Gpu(format!(
+                "'hwrt' needs a bottom-level structure of {n} triangles; adapter '{}' allows {} \
+                 (limit max_blas_primitive_count)",
+                ctx.info.name, limits.max_blas_primitive_count
+            )));
+        }
+        let vertices: Vec<[f32; 3]> = tris.iter().flat_map(|t| [t.v0, t.v1, t.v2]).collect();
+        let bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
+        if bytes > limits.max_buffer_size {
+            return Err(Error::Gpu(format!(
+                "'hwrt' needs {bytes} bytes of vertices; adapter '{}' allows {} per buffer (limit max_buffer_size)",
+                ctx.info.name, limits.max_buffer_size
+            )));
+        }
+        let dev = &ctx.device;
+        let vertices = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("hwrt vertices"),
+            contents: bytemuck::cast_slice(&vertices),
+            usage: wgpu::BufferUsages::BLAS_INPUT,
+        });
+        let size = wgpu::BlasTriangleGeometrySizeDescriptor {
+            vertex_format: wgpu::VertexFormat::Float32x3,
+            vertex_count: 3 * tris.len() as u32,
+            index_format: None,
+            index_count: None,
+            // Opaque: the hardware commits every hit itself; no shader sees candidates (unless
+            // a ray forces it non-opaque: the driver's instances under folded masks).
+            flags: wgpu::AccelerationStructureGeometryFlags::OPAQUE,
+        };
+        let blas = dev.create_blas(
+            &wgpu::CreateBlasDescriptor {
+                label: Some("hwrt triangles"),
+                flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
+                update_mode: wgpu::AccelerationStructureUpdateMode::Build,
+            },
+            wgpu::BlasGeometrySizeDescriptors::Triangles {
+                descriptors: vec![size.clone()],
+            },
+        );
+        Ok(BlasInput {
+            blas,
+            size,
+            vertices,
+            bytes,
+        })
+    }
+
+    /// The build entry of `build_acceleration_structures`.
+    pub fn entry(&self) -> wgpu::BlasBuildEntry<'_> {
+        wgpu::BlasBuildEntry {
+            blas: &self.blas,
             geometry: wgpu::BlasGeometries::TriangleGeometries(vec![wgpu::BlasTriangleGeometry {
-                size: &size,
-                vertex_buffer: &vertex_buffer,
+                size: &self.size,
+                vertex_buffer: &self.vertices,
                 first_vertex: 0,
                 vertex_stride: std::mem::size_of::<[f32; 3]>() as u64,
                 index_buffer: None,
@@ -92,9 +125,12 @@ pub fn build_on_device(ctx: &GpuContext, tris: &[TriAccel]) -> Result<DeviceStru
                 transform_buffer: None,
                 transform_buffer_offset: None,
             }]),
-        }),
-        std::iter::once(&tlas),
-    );
+        }
+    }
+}
+
+/// Submits the build in `enc` and reports a validation error of the scope as the build's.
+pub(super) fn submit_checked(ctx: &GpuContext, scope: wgpu::ErrorScopeGuard, enc: wgpu::CommandEncoder) -> Result<()> {
     ctx.queue.submit([enc.finish()]);
     if let Some(e) = pollster::block_on(scope.pop()) {
         return Err(Error::Gpu(format!(
@@ -102,6 +138,5 @@ pub fn build_on_device(ctx: &GpuContext, tris: &[TriAccel]) -> Result<DeviceStru
             ctx.info.name
         )));
     }
-    ctx.check_errors()?;
-    Ok(DeviceStructure { tlas, input_bytes })
+    ctx.check_errors()
 }

@@ -11,18 +11,20 @@
 //! its arrays can hold several meshes one after another (a mesh's entries offset by its part's
 //! start), and `bottom_levels` below concatenates them and makes each mesh's header; then one
 //! `WalkSpec` here (its arrays, then `TOP_LEVEL_ARRAY`) and one arm of `walk_for`. Carried
-//! today: the BVH in either layout (binary nodes; the 8-wide nodes, `bvh_wide8.rs`, each
-//! mesh's wide tree quantized once at upload) with either stack, brute force, the uniform grid
-//! (grid, pc: its lattice, one per scene in the scene uniform for one level, is a row of a
-//! table here, which the mesh's header names) and the irregular grid (`irregular.rs`: its
-//! lattice of virtual voxels a row of a table the same way, and its entries, voxel maps and
-//! references one array of words, to stay within the structure's budget of bindings). Not
-//! yet: `hwrt` (the driver's instances): `walk_for` answers `None` for it and the scene's GPU
-//! rays stay on its merged mesh.
+//! today: every structure. The BVH in either layout (binary nodes; the 8-wide nodes,
+//! `bvh_wide8.rs`, each mesh's wide tree quantized once at upload) with either stack, brute
+//! force, the uniform grid (grid, pc: its lattice, one per scene in the scene uniform for one
+//! level, is a row of a table here, which the mesh's header names), the irregular grid
+//! (`irregular.rs`: its lattice of virtual voxels a row of a table the same way, and its
+//! entries, voxel maps and references one array of words, to stay within the structure's
+//! budget of bindings) and `hwrt`, whose top and bottom levels are the driver's (a TLAS
+//! instance a scene instance over a BLAS a mesh, `hwrt::INSTANCES`; its "top level" array is
+//! its instance table).
 //!
 //! A move (`QueryScene::set_transforms`, `set_mask`) uploads the top level alone, whatever the
 //! meshes' structure: 64 bytes a node and 64 an instance (`TopRec`); the meshes' arrays stay
-//! on the device.
+//! on the device. For `hwrt` it rebuilds the TLAS alone (64 bytes an instance uploaded) and
+//! writes the instance table where it changed.
 
 mod bvh_wide8;
 mod irregular;
@@ -145,8 +147,9 @@ pub const BRUTE: WalkSpec = WalkSpec {
 };
 
 /// The two-level walk for meshes of `structure`, as the variants choose (`walk`), or `None`
-/// where the structure's GPU side is not carried under a top level yet: the one place that
-/// says which are.
+/// where the structure's GPU side is not carried under a top level (every structure is today;
+/// a new one answers `None` until it is, and its scenes' GPU rays take the merged mesh): the
+/// one place that says which are.
 pub fn walk_for(structure: &Structure, walk: BvhWalk) -> Option<&'static WalkSpec> {
     match (structure, walk.layout, walk.stack) {
         (Structure::Bvh(_), BvhLayout::Binary, BvhStack::Private) => Some(&BVH),
@@ -156,7 +159,7 @@ pub fn walk_for(structure: &Structure, walk: BvhWalk) -> Option<&'static WalkSpe
         (Structure::Brute(_), _, _) => Some(&BRUTE),
         (Structure::Grid(_), _, _) => Some(&GRID),
         (Structure::Irregular(_), _, _) => Some(&IRREGULAR),
-        _ => None,
+        (Structure::Hwrt(_), _, _) => Some(&super::hwrt::INSTANCES),
     }
 }
 
@@ -231,6 +234,10 @@ pub fn bottom_levels(meshes: &[&Accel], walk: BvhWalk) -> Result<Option<BottomLe
     let too_many = || Error::InvalidInput("the scene's meshes have more than 2^32 triangles together".into());
     let mut headers = Vec::with_capacity(meshes.len());
     let kind = first.kind();
+    if matches!(first.structure, Structure::Hwrt(_)) {
+        // The driver's BLASes, built from the meshes' triangles at upload: no arrays of ours.
+        return Ok(Some(super::hwrt::instances::bottom_levels(spec, kind, tri_counts)));
+    }
     if matches!(first.structure, Structure::Brute(_)) {
         let mut tris = Vec::new();
         for m in meshes {
