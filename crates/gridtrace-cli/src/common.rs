@@ -186,7 +186,8 @@ fn gpu_variant_long_help() -> String {
             let only = if r.structures.is_empty() {
                 String::new()
             } else {
-                format!(" (--accel {} only)", r.structures.join(", "))
+                let names: Vec<&str> = r.structures.iter().map(|s| s.name()).collect();
+                format!(" (--accel {} only)", names.join(", "))
             };
             format!("- {}={}: {}{only}", r.key, r.values_text(), r.help)
         })

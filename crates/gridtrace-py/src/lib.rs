@@ -401,7 +401,7 @@ fn gpu_variants(py: Python<'_>) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
         row.set_item("values", pyo3::types::PyTuple::new(py, r.values().collect::<Vec<_>>())?)?;
         row.set_item("numbered", r.numbered.map(|n| (n.prefix, n.min, n.max)))?;
         row.set_item("default", r.default_value())?;
-        let structures = (!r.structures.is_empty()).then(|| r.structures.to_vec());
+        let structures = (!r.structures.is_empty()).then(|| r.structures.iter().map(|s| s.name()).collect::<Vec<_>>());
         row.set_item(
             "structures",
             structures.map(|s| pyo3::types::PyTuple::new(py, s)).transpose()?,

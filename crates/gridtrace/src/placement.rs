@@ -94,7 +94,7 @@ impl Placement {
         let Some(ctx) = &self.device else {
             return Ok(None);
         };
-        let kind = scene.accel.structure_name();
+        let kind = scene.accel.structure_id();
         if !crate::accel::registry::ENTRIES
             .iter()
             .any(|e| e.structure == kind && e.gpu)
@@ -191,7 +191,7 @@ impl Placement {
 /// structures the parameters were not written for).
 pub fn prepare(scene: &Scene, accel: AccelKind, spec: &AccelSpec) -> Result<PreparedScene> {
     let params = match spec.choice {
-        AccelChoice::Kind(named) if named.structure_name() == accel.structure_name() => spec.params.clone(),
+        AccelChoice::Kind(named) if named.structure() == accel.structure() => spec.params.clone(),
         _ => AccelParams::NONE,
     };
     scene.prepare_for(accel, &params)

@@ -168,7 +168,7 @@ fn cpu_leaks(packets: bool) -> (usize, Vec<String>) {
         for kind in AccelKind::ALL.into_iter().filter(|k| k.entry().cpu) {
             let scene = &scenes
                 .iter()
-                .find(|s| s.accel.structure_name() == kind.structure_name())
+                .find(|s| s.accel.structure_id() == kind.structure())
                 .unwrap()
                 .with_accel(kind, &gridtrace::AccelParams::NONE)
                 .unwrap();
@@ -245,7 +245,7 @@ fn gpu_edges_and_vertices_do_not_leak() {
         let kinds = gridtrace::testing::gpu_kinds(&ctx);
         let mut gpus: Vec<(PreparedScene, gridtrace::gpu::GpuRenderer)> = all_structures(scene)
             .into_iter()
-            .filter(|s| kinds.iter().any(|&k| s.accel.structure_name() == k.structure_name()))
+            .filter(|s| kinds.iter().any(|&k| s.accel.structure_id() == k.structure()))
             .map(|s| {
                 let g =
                     gridtrace::gpu::GpuRenderer::new(ctx.clone(), &s, &gridtrace::gpu::GpuVariants::default()).unwrap();
@@ -255,7 +255,7 @@ fn gpu_edges_and_vertices_do_not_leak() {
         for &kind in &kinds {
             let (_, gpu) = gpus
                 .iter_mut()
-                .find(|(s, _)| s.accel.structure_name() == kind.structure_name())
+                .find(|(s, _)| s.accel.structure_id() == kind.structure())
                 .unwrap();
             gpu.set_traversal(kind).unwrap();
             let rays = rays_for(kind, &rays, ctx.is_software());

@@ -81,7 +81,7 @@ fn builtin_prepared(name: &str) -> Option<Prepared> {
 fn kinds_of(p: &Prepared) -> Vec<AccelKind> {
     AccelKind::ALL
         .into_iter()
-        .filter(|k| p.iter().any(|(s, _)| s.accel.structure_name() == k.structure_name()))
+        .filter(|k| p.iter().any(|(s, _)| s.accel.structure_id() == k.structure()))
         .collect()
 }
 
@@ -90,7 +90,7 @@ fn kinds_of(p: &Prepared) -> Vec<AccelKind> {
 fn for_kind(p: &mut Prepared, kind: AccelKind) -> (&PreparedScene, &mut GpuRenderer) {
     let (s, g) = p
         .iter_mut()
-        .find(|(s, _)| s.accel.structure_name() == kind.structure_name())
+        .find(|(s, _)| s.accel.structure_id() == kind.structure())
         .unwrap_or_else(|| panic!("no prepared scene serves {}", kind.name()));
     s.accel.set_traversal(kind).unwrap();
     let g = g.as_mut().unwrap();
@@ -196,7 +196,7 @@ fn uploads_serve_their_kinds_only() {
     for (s, g) in &mut p {
         let gpu = g.as_mut().unwrap();
         for kind in AccelKind::ALL {
-            let serves = s.accel.structure_name() == kind.structure_name();
+            let serves = s.accel.structure_id() == kind.structure();
             let switched = gpu.set_traversal(kind);
             assert_eq!(
                 switched.is_ok(),

@@ -13,6 +13,7 @@
 //! Fails, not skips, without an adapter; GRIDTRACE_SKIP_GPU=1 skips knowingly.
 
 use gridtrace::AccelParams;
+use gridtrace::accel::StructureId;
 use std::sync::{Arc, Mutex};
 
 use gridtrace::accel::{Accel, AccelKind, Hit, Resolution};
@@ -86,8 +87,8 @@ fn subgroup_appends_need_the_adapters_subgroups() {
 }
 
 /// Whether `v`'s results may differ from the default's at ties (the wide BVH's visiting order).
-fn tie_order_differs(v: &GpuVariants, structure: &str) -> bool {
-    structure == "bvh" && v.bvh == BvhLayout::Wide8
+fn tie_order_differs(v: &GpuVariants, structure: StructureId) -> bool {
+    structure == StructureId::Bvh && v.bvh == BvhLayout::Wide8
 }
 
 /// The scene prepared for every structure the GPU has (the grid serves `grid` and `pc`).
@@ -136,8 +137,8 @@ fn variants_render_the_default_images() {
     for name in ["knot-box", "mirror-spheres"] {
         let scene = builtin::scene(name).unwrap().prepare(Resolution::default()).unwrap();
         for (kind, scene) in per_structure(&ctx, &scene) {
-            let structure = kind.structure_name();
-            if structure == "brute" && name != "knot-box" {
+            let structure = kind.structure();
+            if structure == StructureId::Brute && name != "knot-box" {
                 // Brute force on the spheres' triangles takes minutes on lavapipe; the knot
                 // box checks its kernels with every variant.
                 continue;
@@ -147,7 +148,7 @@ fn variants_render_the_default_images() {
             for var in variants(&ctx).into_iter().filter(|v| v.applies_to(structure)) {
                 let mut gpu = GpuRenderer::new(ctx.clone(), &scene, &var).unwrap();
                 assert_eq!(gpu.variants(), var);
-                let walk_changed = structure == "bvh"
+                let walk_changed = structure == StructureId::Bvh
                     && (var.bvh != GpuVariants::default().bvh || var.stack != GpuVariants::default().stack);
                 for mode in Mode::ALL.into_iter().filter(|m| *m != Mode::Heat || !walk_changed) {
                     // Without compaction the queues keep slots by invocation (ray order, the
@@ -210,7 +211,7 @@ fn variants_give_the_default_hits() {
     let grid = Accel::build(scene.accel.tris.clone(), AccelKind::Grid, &AccelParams::NONE).unwrap();
     let rays = ray_set(&grid, 40_000, 0x5EED);
     for (kind, scene) in per_structure(&ctx, &scene) {
-        let structure = kind.structure_name();
+        let structure = kind.structure();
         let mut base = GpuRenderer::new(ctx.clone(), &scene, &GpuVariants::default()).unwrap();
         let want = base.intersect(&rays).unwrap();
         let want_any = base.occluded(&rays).unwrap();

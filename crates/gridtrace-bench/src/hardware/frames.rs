@@ -90,7 +90,7 @@ pub fn frame_accels(gpu: &GpuContext) -> Vec<AccelKind> {
 
 /// Why `accel` is left out on `gpu`, if it is: `hwrt` on an adapter without ray queries.
 pub fn not_offered(gpu: &GpuContext, accel: AccelKind) -> Option<String> {
-    let structure = accel.structure_name();
+    let structure = accel.structure();
     let needs_rq = gridtrace::gpu::walks::WALKS
         .iter()
         .any(|w| w.structure == structure && w.tlas.is_some());
@@ -120,7 +120,7 @@ pub fn open_gpu(ctx: &Arc<GpuContext>, prepared: &PreparedScene, variant: &GpuVa
 pub fn variants_for(variants: &[GpuVariants], accel: AccelKind) -> impl Iterator<Item = &GpuVariants> {
     variants
         .iter()
-        .filter(move |v| **v == GpuVariants::default() || v.applies_to(accel.structure_name()))
+        .filter(move |v| **v == GpuVariants::default() || v.applies_to(accel.structure()))
 }
 
 /// Every scene x structure x variant x mode, as long as the budget lasts.

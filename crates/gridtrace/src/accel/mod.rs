@@ -46,7 +46,7 @@ pub use grid::{Cell, Grid, GridLattice, GridStats, Stepping};
 pub use irregular::{IrrCell, IrregularGrid, IrregularParams, MemoryBound};
 pub use params::AccelParams;
 pub use ray::{Counters, Hit, NoCounters, Ray, TraversalCounters};
-pub use registry::{AccelChoice, AccelEntry, AccelKind, AccelSpec, TracedOn, Work};
+pub use registry::{AccelChoice, AccelEntry, AccelKind, AccelSpec, StructureId, TracedOn, Work};
 pub use resolution::{DEFAULT_LAMBDA, MAX_CELLS, Resolution, dims_str};
 pub use simd::PACKET;
 pub use triangle::{LaneHits, LaneRay, ShearedRay, TriAccel, TriAccel4, TriHit, TriHit4, intersect_lanes};
@@ -111,22 +111,22 @@ impl Structure {
     /// functions), without building: front ends refuse a bad key or value with their other
     /// argument errors, before a mesh is loaded (`gridtrace render --accel grid:res=0`).
     pub fn check_params(kind: AccelKind, params: &AccelParams) -> Result<()> {
-        match kind.structure_name() {
-            "grid" => Grid::resolution_from(params).map(drop),
-            "irregular" => IrregularParams::from_params(params).map(drop),
-            name @ ("bvh" | "brute" | "hwrt") => params.read(name, &[], |_, _| Ok(())),
-            other => unreachable!("registry names structure '{other}', which Structure::check_params lacks"),
+        match kind.structure() {
+            StructureId::Grid => Grid::resolution_from(params).map(drop),
+            StructureId::Irregular => IrregularParams::from_params(params).map(drop),
+            id @ (StructureId::Bvh | StructureId::Brute | StructureId::Hwrt) => {
+                params.read(id.name(), &[], |_, _| Ok(()))
+            }
         }
     }
 
     fn build_structure(kind: AccelKind, tris: &[TriAccel], params: &AccelParams) -> Result<Structure> {
-        Ok(match kind.structure_name() {
-            "grid" => Structure::Grid(AccelStructure::build(tris, params)?),
-            "bvh" => Structure::Bvh(AccelStructure::build(tris, params)?),
-            "irregular" => Structure::Irregular(AccelStructure::build(tris, params)?),
-            "brute" => Structure::Brute(AccelStructure::build(tris, params)?),
-            "hwrt" => Structure::Hwrt(AccelStructure::build(tris, params)?),
-            other => unreachable!("registry names structure '{other}', which Structure::build lacks"),
+        Ok(match kind.structure() {
+            StructureId::Grid => Structure::Grid(AccelStructure::build(tris, params)?),
+            StructureId::Bvh => Structure::Bvh(AccelStructure::build(tris, params)?),
+            StructureId::Irregular => Structure::Irregular(AccelStructure::build(tris, params)?),
+            StructureId::Brute => Structure::Brute(AccelStructure::build(tris, params)?),
+            StructureId::Hwrt => Structure::Hwrt(AccelStructure::build(tris, params)?),
         })
     }
 
@@ -142,16 +142,21 @@ impl Structure {
         }
     }
 
-    /// The structure's name, as the registry's `structure` column spells it.
+    /// Which structure it is (the registry's `structure` column).
+    pub fn id(&self) -> StructureId {
+        self.kind().structure()
+    }
+
+    /// The structure's name, for messages.
     pub fn name(&self) -> &'static str {
-        self.kind().structure_name()
+        self.id().name()
     }
 
     /// Serves `kind` from now on: another traversal of the same structure (the grid's `grid`
     /// and `pc`, which share every array), so nothing is built. An error for a kind of another
     /// structure, which needs a build (`PreparedScene::with_accel`).
     pub fn set_traversal(&mut self, kind: AccelKind) -> Result<()> {
-        kind.check_walks(self.name(), "scene prepared")?;
+        kind.check_walks(self.id(), "scene prepared")?;
         if let Structure::Grid(g) = self {
             g.stepping = match kind {
                 AccelKind::ProximityCloud => Stepping::ProximityJumps,
@@ -260,7 +265,7 @@ impl Accel {
     /// structure's rays (a stale grid it may, once rebuilt: what a tracer does when its GPU
     /// fails).
     pub fn check_cpu_kind(&self) -> Result<()> {
-        match registry::ENTRIES.iter().find(|e| e.structure == self.structure_name()) {
+        match registry::ENTRIES.iter().find(|e| e.structure == self.structure_id()) {
             Some(e) if !e.cpu => Err(Error::InvalidInput(format!(
                 "accel '{}' traces rays only on a GPU with ray queries (its ray-tracing hardware), not on the \
                  CPU: use --backend gpu on such a GPU, or another structure (--accel bvh) on the CPU",
@@ -300,7 +305,12 @@ impl Accel {
         dispatch!(&self.structure, s => AccelStructure::bounds(s, &self.tris))
     }
 
-    /// The structure's name, as the registry's `structure` column spells it.
+    /// Which structure it is (the registry's `structure` column).
+    pub fn structure_id(&self) -> StructureId {
+        self.structure.id()
+    }
+
+    /// The structure's name, for messages.
     pub fn structure_name(&self) -> &'static str {
         self.structure.name()
     }

@@ -4,8 +4,9 @@
 //! values and help, Python's accepted names, the viewer's G
 //! cycle, the benchmarks' columns and the tests' "every structure" all come from here.
 //!
-//! Adding a structure: its folder (implementing `contract::AccelStructure`), one `AccelKind`
-//! variant and one `ENTRIES` row here, one arm of `Structure` in `mod.rs`.
+//! Adding a structure: its folder (implementing `contract::AccelStructure` and `Walks`), one
+//! `StructureId` and one `AccelKind` variant and one `ENTRIES` row here, one arm of `Structure`
+//! in `mod.rs` (whose matches on `StructureId` are exhaustive: the compiler lists what is left).
 
 use super::AccelParams;
 
@@ -26,6 +27,37 @@ pub enum AccelKind {
     Hwrt,
 }
 
+/// A structure, typed once here: what every comparison of structures takes (traversals with
+/// the same structure share one build: `grid` and `pc`), and `Structure`'s arms match. Its
+/// name is for messages and reports only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum StructureId {
+    Grid,
+    Bvh,
+    Irregular,
+    Brute,
+    Hwrt,
+}
+
+impl StructureId {
+    /// The structure's name in messages, reports and GPU labels.
+    pub const fn name(self) -> &'static str {
+        match self {
+            StructureId::Grid => "grid",
+            StructureId::Bvh => "bvh",
+            StructureId::Irregular => "irregular",
+            StructureId::Brute => "brute",
+            StructureId::Hwrt => "hwrt",
+        }
+    }
+}
+
+impl std::fmt::Display for StructureId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// One row of the registry.
 #[derive(Debug, Clone, Copy)]
 pub struct AccelEntry {
@@ -34,9 +66,9 @@ pub struct AccelEntry {
     pub name: &'static str,
     /// Other accepted spellings.
     pub aliases: &'static [&'static str],
-    /// The structure this traversal walks, as `Accel::structure_name` names it: traversals
-    /// with the same structure share one build (`grid` and `pc`).
-    pub structure: &'static str,
+    /// The structure this traversal walks: traversals with the same structure share one build
+    /// (`grid` and `pc`).
+    pub structure: StructureId,
     /// One line for help texts.
     pub about: &'static str,
     /// The build parameters its structure reads, for help texts (`NAME:KEY=VALUE,...`); the
@@ -62,7 +94,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         kind: AccelKind::Grid,
         name: "grid",
         aliases: &["g"],
-        structure: "grid",
+        structure: StructureId::Grid,
         about: "the paper's uniform grid, one DDA step per cell",
         params: "res=auto|auto:LAMBDA|N|AxBxC (cells: auto at LAMBDA=4 cells per triangle)",
         every_triangle: false,
@@ -74,7 +106,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         kind: AccelKind::ProximityCloud,
         name: "pc",
         aliases: &["proximity"],
-        structure: "grid",
+        structure: StructureId::Grid,
         about: "the uniform grid with proximity clouds: jumps over empty cells",
         params: "res=auto|auto:LAMBDA|N|AxBxC (cells: auto at LAMBDA=4 cells per triangle)",
         every_triangle: false,
@@ -86,7 +118,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         kind: AccelKind::Bvh,
         name: "bvh",
         aliases: &[],
-        structure: "bvh",
+        structure: StructureId::Bvh,
         about: "an eight-wide SAH bounding volume hierarchy (fastest for incoherent rays)",
         params: "",
         every_triangle: false,
@@ -98,7 +130,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         kind: AccelKind::Irregular,
         name: "irregular",
         aliases: &["irr"],
-        structure: "irregular",
+        structure: StructureId::Irregular,
         about: "an irregular grid: merged and expanded cells, point lookups instead of a DDA",
         params: "top=0.12,cell=2,alpha=1,merge=8,expand=3 (top cells per triangle, cells per reference, merge alpha, merge and expansion passes)",
         every_triangle: false,
@@ -110,7 +142,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         kind: AccelKind::Brute,
         name: "brute",
         aliases: &["brute-force"],
-        structure: "brute",
+        structure: StructureId::Brute,
         about: "no structure: every triangle per ray (the oracle; small meshes and checks)",
         params: "",
         every_triangle: true,
@@ -122,7 +154,7 @@ pub const ENTRIES: [AccelEntry; 6] = [
         kind: AccelKind::Hwrt,
         name: "hwrt",
         aliases: &["ray-query"],
-        structure: "hwrt",
+        structure: StructureId::Hwrt,
         about: "the GPU's ray-tracing hardware by ray query (GPU only; closest points by a BVH)",
         params: "",
         every_triangle: false,
@@ -165,19 +197,24 @@ impl AccelKind {
 
     /// Whether this kind runs on the uniform grid (`grid` and `pc` share one).
     pub fn uses_grid(self) -> bool {
-        self.structure_name() == "grid"
+        self.structure() == StructureId::Grid
     }
 
-    /// The structure this kind traverses, as `Accel::structure_name` names it.
-    pub fn structure_name(self) -> &'static str {
+    /// The structure this kind traverses.
+    pub fn structure(self) -> StructureId {
         self.entry().structure
+    }
+
+    /// Its name, for messages (`StructureId::name`).
+    pub fn structure_name(self) -> &'static str {
+        self.structure().name()
     }
 
     /// An error unless this kind walks `structure` (the registry's `structure` column): the one
     /// check of every switch of traversal (`set_traversal` on the CPU's structure and on a GPU's
     /// upload); `what` names the scene in the message ("scene prepared").
-    pub fn check_walks(self, structure: &str, what: &str) -> crate::Result<()> {
-        if self.structure_name() == structure {
+    pub fn check_walks(self, structure: StructureId, what: &str) -> crate::Result<()> {
+        if self.structure() == structure {
             return Ok(());
         }
         Err(crate::Error::InvalidInput(format!(

@@ -371,7 +371,7 @@ impl Kernels {
             });
         }
         let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(spec.structure),
+            label: Some(spec.structure.name()),
             entries: &entries,
         });
         let pipelines = compile(
@@ -379,7 +379,7 @@ impl Kernels {
             &self.variants,
             |s| {
                 dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some(spec.structure),
+                    label: Some(spec.structure.name()),
                     bind_group_layouts: &[Some(&self.frame_layouts[s.kernel as usize]), Some(&layout)],
                     immediate_size: 0,
                 })
@@ -409,7 +409,7 @@ impl Kernels {
             &self.variants,
             |s| {
                 dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some(walk.spec.structure),
+                    label: Some(walk.spec.structure.name()),
                     bind_group_layouts: &[
                         Some(&self.frame_layouts[s.kernel as usize]),
                         Some(&walk.layout),

@@ -189,7 +189,7 @@ impl SceneBuffers {
         }
         if spec.tlas.is_some() {
             // Before compiling: the walk's module needs the feature this names.
-            ctx.check_ray_queries(spec.structure)?;
+            ctx.check_ray_queries(spec.structure.name())?;
         }
         let pipelines = Kernels::of(ctx, variants)?.walk(dev, spec)?;
         let structure: Vec<wgpu::Buffer> = named[..spec.arrays.len()]
@@ -297,7 +297,7 @@ fn structure_group(
         });
     }
     dev.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(walk.spec.structure),
+        label: Some(walk.spec.structure.name()),
         layout: &walk.layout,
         entries: &entries,
     })

@@ -366,7 +366,7 @@ mod tests {
         for accel in AccelKind::ALL {
             let backends = [Backend::Cpu, Backend::Gpu].into_iter().filter(|&b| match b {
                 Backend::Cpu => accel.entry().cpu,
-                _ => ray_queries || !crate::gpu::walks::needs_ray_queries(accel.structure_name()),
+                _ => ray_queries || !crate::gpu::walks::needs_ray_queries(accel.structure()),
             });
             for backend in backends {
                 let opts = QueryOptions {

@@ -286,7 +286,7 @@ impl PreparedScene {
     /// serves it too (`Accel::set_traversal`: the grid's `grid` and `pc`), else rebuilt with
     /// `params`.
     pub fn with_accel(&self, accel: AccelKind, params: &AccelParams) -> Result<PreparedScene> {
-        if accel.structure_name() == self.accel.structure_name() {
+        if accel.structure() == self.accel.structure_id() {
             return Ok(PreparedScene {
                 accel: self.accel.clone().with_traversal(accel)?,
                 ..self.clone()

@@ -332,7 +332,7 @@ impl AllAccels {
         let pc = grid.clone().with_traversal(AccelKind::ProximityCloud)?;
         let mut others: Vec<Accel> = Vec::new();
         for kind in AccelKind::ALL.into_iter().filter(|k| !k.uses_grid()) {
-            if !others.iter().any(|a| a.structure_name() == kind.structure_name()) {
+            if !others.iter().any(|a| a.structure_id() == kind.structure()) {
                 others.push(Accel::build(tris.clone(), kind, &AccelParams::NONE)?);
             }
         }
@@ -427,7 +427,7 @@ pub fn gpu_runs(ctx: &crate::gpu::GpuContext, kind: AccelKind) -> bool {
     if !kind.entry().gpu {
         return false;
     }
-    if ctx.ray_query || !crate::gpu::walks::needs_ray_queries(kind.structure_name()) {
+    if ctx.ray_query || !crate::gpu::walks::needs_ray_queries(kind.structure()) {
         return true;
     }
     let why = ctx.check_ray_queries(kind.name()).unwrap_err();

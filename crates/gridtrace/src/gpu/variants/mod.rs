@@ -51,6 +51,7 @@
 //!   workgroup memory: every index the kernels make is in bounds by construction (the SAFETY
 //!   note in `kernels.rs`). Bounds checks cost a compare and select per storage access.
 
+use crate::accel::StructureId;
 use std::fmt;
 use std::str::FromStr;
 
@@ -119,9 +120,9 @@ pub struct VariantSpec {
     first_written: &'static str,
     /// The values the hardware suite runs, each as the one change from the default, in order.
     suite: &'static [&'static str],
-    /// The structures (the registry's structure names) whose walk it changes; empty: every
+    /// The structures whose walk it changes; empty: every
     /// structure's kernels.
-    pub structures: &'static [&'static str],
+    pub structures: &'static [StructureId],
     /// One line for help texts.
     pub help: &'static str,
     /// The pipeline-overridable constant of common.wgsl it sets.
@@ -146,7 +147,7 @@ pub const VARIANTS: [VariantSpec; 6] = [
         numbered: None,
         first_written: "binary",
         suite: &["wide8"],
-        structures: &["bvh"],
+        structures: &[StructureId::Bvh],
         help: "the BVH's GPU layout: two-child nodes (binary), or Ylitie et al.'s 8-wide compressed nodes (wide8)",
         wgsl_override: None,
     },
@@ -164,7 +165,7 @@ pub const VARIANTS: [VariantSpec; 6] = [
         }),
         first_written: "private",
         suite: &["private"],
-        structures: &["bvh"],
+        structures: &[StructureId::Bvh],
         help: "the BVH walk's stack: a ring of 8 (shortN: N) entries in workgroup memory that climbs by \
                parent links when it runs dry, or a private array per thread",
         wgsl_override: Some(WgslOverride {
@@ -403,9 +404,9 @@ impl GpuVariants {
         }
     }
 
-    /// Whether these variants change the walk of `structure` (the registry's structure name):
-    /// the BVH's layout and stack apply to the BVH only (`VariantSpec::structures`).
-    pub fn applies_to(&self, structure: &str) -> bool {
+    /// Whether these variants change the walk of `structure`: the BVH's layout and stack apply
+    /// to the BVH only (`VariantSpec::structures`).
+    pub fn applies_to(&self, structure: StructureId) -> bool {
         self.changed()
             .any(|(r, _)| r.structures.is_empty() || r.structures.contains(&structure))
     }

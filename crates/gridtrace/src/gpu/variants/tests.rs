@@ -1,6 +1,7 @@
 //! The variants table's tests: parsing, printing, defaults, the suite's order, the overrides.
 
 use super::*;
+use crate::accel::StructureId;
 
 /// Every value of every key parses and prints back to the same text; partial strings keep
 /// the other keys default; bad keys and values are errors that name them and the valid set.
@@ -83,9 +84,9 @@ fn suite_is_default_plus_single_changes() {
     );
     labels.dedup();
     assert_eq!(labels.len(), s.len());
-    assert!(!s[1].applies_to("grid") && s[1].applies_to("bvh"));
-    assert!(!s[2].applies_to("irregular") && s[2].applies_to("bvh"));
-    assert!(s[3].applies_to("grid"));
+    assert!(!s[1].applies_to(StructureId::Grid) && s[1].applies_to(StructureId::Bvh));
+    assert!(!s[2].applies_to(StructureId::Irregular) && s[2].applies_to(StructureId::Bvh));
+    assert!(s[3].applies_to(StructureId::Grid));
 }
 
 /// The table's rows set every field: the default and the kernels as first written are the

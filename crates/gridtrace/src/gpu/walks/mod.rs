@@ -19,6 +19,7 @@ pub(crate) mod hwrt;
 mod irregular;
 pub mod two_level;
 
+use crate::accel::StructureId;
 use std::borrow::Cow;
 use std::sync::Arc;
 
@@ -39,8 +40,8 @@ const POINT_RING: &str = include_str!("point_ring.wgsl");
 /// What the GPU needs to know of a structure before any scene: its walk and its arrays' names.
 #[derive(Debug)]
 pub struct WalkSpec {
-    /// The structure, as the registry's `structure` column names it.
-    pub structure: &'static str,
+    /// The structure it walks (the registry's `structure` column).
+    pub structure: StructureId,
     /// The walk's own name: the structure's, or the structure's with the variant that chose
     /// it (`bvh (wide8)`); compiled pipelines are cached by it.
     pub name: &'static str,
@@ -170,7 +171,7 @@ pub fn wgsl_prelude() -> String {
 
 /// Whether the structure named `structure` traces by ray query (`WalkSpec::tlas`): it runs
 /// only on an adapter with ray queries (`GpuContext::ray_query`).
-pub fn needs_ray_queries(structure: &str) -> bool {
+pub fn needs_ray_queries(structure: StructureId) -> bool {
     WALKS.iter().any(|w| w.structure == structure && w.tlas.is_some())
 }
 

@@ -3,9 +3,10 @@
 
 use super::{Lattice, WalkSpec, WalkUpload};
 use crate::accel::Aabb;
+use crate::accel::StructureId;
 
 pub const SPEC: WalkSpec = WalkSpec {
-    structure: "brute",
+    structure: StructureId::Brute,
     name: "brute",
     wgsl: &[include_str!("brute.wgsl")],
     prefix: "brute",

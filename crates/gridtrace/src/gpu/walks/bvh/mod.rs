@@ -9,6 +9,7 @@
 pub mod binary;
 pub mod wide8;
 
+use crate::accel::StructureId;
 use std::borrow::Cow;
 
 use super::{Lattice, WalkSpec, WalkUpload, bytes};
@@ -85,7 +86,7 @@ pub(super) const WIDE8_ARRAYS: &[(&str, &str)] = &[
 
 /// Binary nodes, private stack (`stack=private`; the default is `SPEC_SHORT` since the H200 runs).
 pub const SPEC: WalkSpec = WalkSpec {
-    structure: "bvh",
+    structure: StructureId::Bvh,
     name: "bvh",
     wgsl: &[BINARY, BINARY_PRIVATE],
     prefix: "bvh",

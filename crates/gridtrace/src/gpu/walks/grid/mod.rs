@@ -5,6 +5,7 @@ pub mod build;
 
 use super::{DeviceBuilt, Lattice, WalkSpec, WalkUpload, bytes};
 use crate::Result;
+use crate::accel::StructureId;
 use crate::accel::triangle::SLACK_PAD;
 use crate::accel::{Grid, GridLattice, Resolution, TriAccel};
 use crate::gpu::constants::WgslConst;
@@ -21,7 +22,7 @@ const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
 ];
 
 pub const SPEC: WalkSpec = WalkSpec {
-    structure: "grid",
+    structure: StructureId::Grid,
     name: "grid",
     wgsl: &[include_str!("grid.wgsl"), super::POINT_RING],
     prefix: "grid",

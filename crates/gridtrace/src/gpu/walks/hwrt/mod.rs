@@ -19,12 +19,13 @@ use super::bvh::{self, BvhLayout, BvhStack, BvhWalk};
 use super::two_level::TOP_LEVEL_ARRAY;
 use super::{WalkSpec, WalkUpload};
 use crate::Result;
+use crate::accel::StructureId;
 use crate::accel::hwrt::Hwrt;
 use crate::accel::{Aabb, TriAccel};
 use crate::gpu::constants::WgslConst;
 
 pub const SPEC: WalkSpec = WalkSpec {
-    structure: "hwrt",
+    structure: StructureId::Hwrt,
     name: "hwrt",
     // The BVH's walk for the closest points, then the ray queries.
     wgsl: &[bvh::BINARY, bvh::BINARY_PRIVATE, include_str!("hwrt.wgsl")],
@@ -44,7 +45,7 @@ pub const SPEC: WalkSpec = WalkSpec {
 /// levels bind their top level (a move writes it by that label), the TLAS after it. Rays
 /// only (no closest points: a scene's point queries run on its merged mesh).
 pub const INSTANCES: WalkSpec = WalkSpec {
-    structure: "hwrt",
+    structure: StructureId::Hwrt,
     name: "hwrt (driver instances)",
     wgsl: &[include_str!("instances.wgsl")],
     prefix: "driver",

@@ -4,6 +4,7 @@
 
 use super::{Lattice, WalkSpec, WalkUpload, bytes};
 use crate::accel::IrregularGrid;
+use crate::accel::StructureId;
 use crate::accel::irregular::{COORD_BITS, COORD_MASK, LEVEL_BITS};
 use crate::gpu::constants::WgslConst;
 
@@ -19,7 +20,7 @@ const WGSL_CONSTANTS: &[(&str, WgslConst)] = &[
 pub(super) const WALK: &str = include_str!("irregular.wgsl");
 
 pub const SPEC: WalkSpec = WalkSpec {
-    structure: "irregular",
+    structure: StructureId::Irregular,
     name: "irregular",
     wgsl: &[WALK, include_str!("arrays.wgsl"), super::POINT_RING],
     prefix: "irr",

@@ -4,6 +4,7 @@
 //! mesh's header names its root. The walk is bvh8.wgsl's, from that root.
 
 use super::{Laid, TOP_LEVEL, TOP_LEVEL_ARRAY, WGSL_CONSTANTS};
+use crate::accel::StructureId;
 use crate::accel::{Accel, Structure};
 use crate::gpu::layout::GpuTri;
 use crate::gpu::walks::WalkSpec;
@@ -19,7 +20,7 @@ const ARRAYS: &[(&str, &str)] = &[
 
 /// The meshes' wide BVHs (private stack) under the top level.
 pub const BVH_WIDE8: WalkSpec = WalkSpec {
-    structure: "bvh",
+    structure: StructureId::Bvh,
     name: "bvh (two levels, wide8)",
     wgsl: &[bvh::WIDE8, bvh::WIDE8_PRIVATE, TOP_LEVEL],
     prefix: "top",

@@ -4,6 +4,7 @@
 //! grid's is (`GRID`).
 
 use super::{Laid, LatticeRow, TOP_LEVEL, TOP_LEVEL_ARRAY, WGSL_CONSTANTS};
+use crate::accel::StructureId;
 use crate::accel::{Accel, IrrCell, Structure};
 use crate::gpu::layout::GpuTri;
 use crate::gpu::walks::{POINT_RING, WalkSpec, irregular};
@@ -13,7 +14,7 @@ use crate::{Error, Result};
 /// in one array of words, their cells one mesh after another, their lattices in a table, their
 /// triangles in the shared `tris`.
 pub const IRREGULAR: WalkSpec = WalkSpec {
-    structure: "irregular",
+    structure: StructureId::Irregular,
     name: "irregular (two levels)",
     wgsl: &[
         irregular::WALK,

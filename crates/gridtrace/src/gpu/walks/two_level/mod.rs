@@ -32,6 +32,7 @@ mod irregular;
 pub use bvh_wide8::{BVH_WIDE8, BVH_WIDE8_SHORT};
 pub use irregular::IRREGULAR;
 
+use crate::accel::StructureId;
 use bytemuck::{Pod, Zeroable};
 use glam::Affine3A;
 
@@ -66,7 +67,7 @@ const BVH_ARRAYS: &[(&str, &str)] = &[
 
 /// The meshes' binary BVHs (private stack) under the top level.
 pub const BVH: WalkSpec = WalkSpec {
-    structure: "bvh",
+    structure: StructureId::Bvh,
     name: "bvh (two levels)",
     wgsl: &[bvh::BINARY, bvh::BINARY_PRIVATE, TOP_LEVEL],
     prefix: "top",
@@ -89,7 +90,7 @@ pub const BVH_SHORT: WalkSpec = WalkSpec {
 /// top level: their cells and references one mesh after another, their lattices in a table
 /// (`LatticeRow`) whose row a mesh's header names, their triangles in the shared `tris`.
 pub const GRID: WalkSpec = WalkSpec {
-    structure: "grid",
+    structure: StructureId::Grid,
     name: "grid (two levels)",
     wgsl: &[
         grid::SPEC.wgsl[0],
@@ -132,7 +133,7 @@ pub struct LatticeRow {
 /// Every mesh's triangles, brute force, under the top level: no arrays of its own (the shared
 /// triangles, `tris`, hold every mesh's, one after another).
 pub const BRUTE: WalkSpec = WalkSpec {
-    structure: "brute",
+    structure: StructureId::Brute,
     name: "brute (two levels)",
     wgsl: &[brute::SPEC.wgsl[0], TOP_LEVEL],
     prefix: "top",
