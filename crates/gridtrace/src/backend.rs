@@ -22,13 +22,10 @@
 use std::sync::Arc;
 
 use crate::accel::{AccelKind, TracedOn};
-use crate::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer, GpuVariants};
+use crate::gpu::{DeviceImage, GpuContext, GpuRenderStats, GpuRenderer};
 use crate::render::{Image, RenderOptions, RenderStats};
 use crate::scene::{Camera, PointLight, PreparedScene, RebuildOn};
 use crate::{Error, Result};
-
-/// Where work is traced, carried whole (moved to `placement.rs`; named here as before).
-pub use crate::placement::Placement;
 
 /// Where rays are traced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -242,36 +239,15 @@ pub struct Update {
 }
 
 impl Tracer {
-    /// The scene traced where `placement` says: on its device, or the CPU without one. With
-    /// `auto` a scene the device cannot hold (over its buffer limits, or a structure without a
-    /// GPU walk) goes to the CPU, with a note (`Placement::upload`).
-    pub fn open(scene: PreparedScene, placement: &Placement, notes: &mut Vec<String>) -> Result<Tracer> {
-        let gpu = placement.upload(&scene, notes)?;
-        let backend = placement.backend;
-        if gpu.is_none() {
-            // A structure only a GPU traces (`hwrt`) is refused here, before any frame.
-            scene.accel.check_cpu_kind().map_err(|e| match backend {
-                Backend::Auto => Error::InvalidInput(format!(
-                    "{e} (backend auto found no hardware GPU to trace it: {})",
-                    notes.join("; ")
-                )),
-                _ => e,
-            })?;
-        }
-        Ok(Tracer {
+    /// A tracer of `scene` on `gpu` (`None`: the CPU), as `Tracer::open` (`placement.rs`)
+    /// makes it once the scene is placed.
+    pub(crate) fn from_parts(scene: PreparedScene, gpu: Option<GpuRenderer>, backend: Backend) -> Tracer {
+        Tracer {
             scene,
             gpu,
             backend,
             notes: Vec::new(),
-        })
-    }
-
-    /// Opens the device `backend` asks for and the scene on it, with the default GPU
-    /// variants: `Placement::open`, then `open`.
-    pub fn open_with(backend: Backend, scene: PreparedScene) -> Result<(Tracer, Vec<String>)> {
-        let (placement, mut notes) = Placement::open(backend, GpuVariants::default())?;
-        let tracer = Tracer::open(scene, &placement, &mut notes)?;
-        Ok((tracer, notes))
+        }
     }
 
     pub fn gpu(&self) -> Option<&GpuRenderer> {

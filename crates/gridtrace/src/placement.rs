@@ -293,6 +293,37 @@ impl QueryPlacement {
     }
 }
 
+/// A tracer opened on a placement: here, beside `Placement`, so that `backend.rs` (the
+/// backends and the tracer) needs nothing of this file.
+impl Tracer {
+    /// The scene traced where `placement` says: on its device, or the CPU without one. With
+    /// `auto` a scene the device cannot hold (over its buffer limits, or a structure without a
+    /// GPU walk) goes to the CPU, with a note (`Placement::upload`).
+    pub fn open(scene: PreparedScene, placement: &Placement, notes: &mut Vec<String>) -> Result<Tracer> {
+        let gpu = placement.upload(&scene, notes)?;
+        let backend = placement.backend;
+        if gpu.is_none() {
+            // A structure only a GPU traces (`hwrt`) is refused here, before any frame.
+            scene.accel.check_cpu_kind().map_err(|e| match backend {
+                Backend::Auto => Error::InvalidInput(format!(
+                    "{e} (backend auto found no hardware GPU to trace it: {})",
+                    notes.join("; ")
+                )),
+                _ => e,
+            })?;
+        }
+        Ok(Tracer::from_parts(scene, gpu, backend))
+    }
+
+    /// Opens the device `backend` asks for and the scene on it, with the default GPU
+    /// variants: `Placement::open`, then `open`.
+    pub fn open_with(backend: Backend, scene: PreparedScene) -> Result<(Tracer, Vec<String>)> {
+        let (placement, mut notes) = Placement::open(backend, GpuVariants::default())?;
+        let tracer = Tracer::open(scene, &placement, &mut notes)?;
+        Ok((tracer, notes))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -27,7 +27,7 @@ use super::masks::{CLASSES, hardware_masks};
 use crate::accel::{AccelKind, TriAccel};
 use crate::gpu::context::GpuContext;
 use crate::gpu::layout::GpuTri;
-use crate::gpu::walks::two_level::{BottomLevels, Instance, TopLevel, TopRec};
+use crate::gpu::walks::two_level::records::{BottomLevels, Instance, TopLevel, TopRec};
 use crate::gpu::walks::{DeviceStructure, WalkSpec};
 use crate::{Error, Result};
 

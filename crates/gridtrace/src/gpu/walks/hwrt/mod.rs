@@ -16,7 +16,7 @@ pub mod masks;
 pub use build::build_on_device;
 
 use super::bvh::{self, BvhLayout, BvhStack, BvhWalk};
-use super::two_level::TOP_LEVEL_ARRAY;
+use super::two_level::records::TOP_LEVEL_ARRAY;
 use super::{WalkSpec, WalkUpload};
 use crate::Result;
 use crate::accel::StructureId;
