@@ -123,9 +123,18 @@ impl QueryScene {
         if !self.traces_on_gpu() {
             return Ok(None);
         }
-        match self.ray_path(o)? {
+        let path = match self.ray_path(o)? {
+            // The driver's instances (`hwrt`) find closest and any hits only; counts and lists
+            // take the merged mesh on the GPU, as before the driver's instances (its BVH's
+            // all-hits walk), where it answers these rays, else the CPU's two levels.
+            RayPath::Gpu(two) if self.gpu_walks_by_ray_query(&two) => match self.merged_answers(o) {
+                true => RayPath::Merged,
+                false => return Ok(None),
+            },
+            path => path,
+        };
+        match path {
             RayPath::Cpu(_) => Ok(None),
-            RayPath::Gpu(two) if self.gpu_walks_by_ray_query(&two) => Ok(None),
             RayPath::Gpu(two) => self.gpu_or_cpu(|| self.gpu_all_hits(&two, rays, o, answer).map(Some), || Ok(None)),
             RayPath::Merged => {
                 let (t_near, t_far, _) = o.uniform().expect("the merged path's rays share one interval");

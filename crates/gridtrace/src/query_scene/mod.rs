@@ -381,11 +381,7 @@ impl QueryScene {
     /// triangle: a room and five Bunnies' camera rays took 2.4x as long through two levels),
     /// the others on the CPU's two levels (`moving`).
     fn ray_path(&self, o: &RayOptions) -> Result<RayPath> {
-        let merged_answers = || {
-            o.uniform().is_some_and(|(t_near, t_far, mask)| {
-                t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
-            })
-        };
+        let merged_answers = || self.merged_answers(o);
         if !self.traces_on_gpu() {
             if !self.moving && merged_answers() {
                 return Ok(RayPath::Merged);
@@ -400,6 +396,14 @@ impl QueryScene {
             RayPath::Merged
         } else {
             RayPath::Cpu(two)
+        })
+    }
+
+    /// Whether the merged mesh answers rays with `o`: one interval, not empty, and a mask that
+    /// sees every geometry.
+    pub(super) fn merged_answers(&self, o: &RayOptions) -> bool {
+        o.uniform().is_some_and(|(t_near, t_far, mask)| {
+            t_near <= t_far && self.geometries.values().all(|g| g.mask() & mask != 0)
         })
     }
 
