@@ -6,12 +6,10 @@
 //! checked on its 32 bits). Then moves: no BLAS built again, the bytes written the TLAS's
 //! instances (and the instance table where a mask changed), answers a fresh scene's.
 
-use glam::{Mat4, Quat, Vec3};
-use gridtrace::Mesh;
+use glam::{Mat4, Vec3};
 use gridtrace::accel::{AccelKind, Hit, Ray};
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{InstanceOf, PerRay, QueryScene, RayHits, RayOptions};
-use gridtrace::scene::procedural;
 use gridtrace::testing::skip_gpu;
 use gridtrace::util::Rng;
 
@@ -22,44 +20,9 @@ fn table_bytes(n: u64) -> u64 {
     (16 + 2 * n).div_ceil(16) * 64
 }
 
-fn arrays(m: &Mesh) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    (m.positions.iter().map(|p| p.to_array()).collect(), m.triangles.clone())
-}
-
-/// `INSTANCES` instances of two meshes (an icosphere, a torus knot) under random rotations,
-/// scales (a third uneven, a seventh mirrored) and moves, each with `mask(rng)`.
+/// `INSTANCES` instances of two meshes, each with `mask(rng)` (`testing::instanced_scene`).
 fn instanced(opts: QueryOptions, seed: u64, mask: impl Fn(&mut Rng) -> u32) -> QueryScene {
-    let mut rng = Rng::new(seed);
-    let meshes = [
-        arrays(&procedural::icosphere(Vec3::ZERO, 0.6, 1)),
-        arrays(&procedural::torus_knot(2, 3, 0.15, 24, 5)),
-    ];
-    let mut s = QueryScene::new(opts);
-    let first = [
-        s.add_triangles(meshes[0].0.clone(), meshes[0].1.clone(), None).unwrap(),
-        s.add_triangles(meshes[1].0.clone(), meshes[1].1.clone(), None).unwrap(),
-    ];
-    for i in 0..INSTANCES {
-        let axis = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize_or(Vec3::Z);
-        let mut scale = Vec3::splat(rng.range(0.4, 2.0));
-        if i % 3 == 0 {
-            scale *= Vec3::new(1.0, rng.range(0.5, 1.5), rng.range(0.5, 1.5));
-        }
-        if i % 7 == 0 {
-            scale.x = -scale.x;
-        }
-        let m = Mat4::from_scale_rotation_translation(
-            scale,
-            Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU)),
-            Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0)),
-        );
-        let m_i = mask(&mut rng);
-        s.add_instance(InstanceOf::Geometry(first[(i % 2) as usize]), Some(m), m_i)
-            .unwrap();
-    }
-    s.remove(first[0]).unwrap();
-    s.remove(first[1]).unwrap();
-    s
+    gridtrace::testing::instanced_scene(opts, seed, INSTANCES, mask)
 }
 
 /// `n` random rays towards the instances' region, each with its interval (a quarter from 0, a

@@ -669,43 +669,10 @@ fn gpu_rays_equal_cpu() {
 }
 
 /// 100 instances of two small meshes under random rotations, scales (uneven ones and mirrors
-/// among them) and translations, each with a mask of one of four bits.
-fn instanced(opts: QueryOptions, seed: u64) -> (QueryScene, Vec<(Vec<[f32; 3]>, Vec<[u32; 3]>)>) {
-    let mut rng = Rng::new(seed);
-    let meshes = vec![
-        arrays(&procedural::icosphere(Vec3::ZERO, 0.6, 1)),
-        arrays(&procedural::torus_knot(2, 3, 0.15, 24, 5)),
-    ];
-    let mut s = QueryScene::new(opts);
-    let first = [
-        s.add_triangles(meshes[0].0.clone(), meshes[0].1.clone(), None).unwrap(),
-        s.add_triangles(meshes[1].0.clone(), meshes[1].1.clone(), None).unwrap(),
-    ];
-    for i in 0..100u32 {
-        let axis = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize_or(Vec3::Z);
-        let mut scale = Vec3::splat(rng.range(0.4, 2.0));
-        if i % 3 == 0 {
-            scale *= Vec3::new(1.0, rng.range(0.5, 1.5), rng.range(0.5, 1.5));
-        }
-        if i % 7 == 0 {
-            scale.x = -scale.x;
-        }
-        let m = Mat4::from_scale_rotation_translation(
-            scale,
-            Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU)),
-            Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0)),
-        );
-        let mask = 1 << rng.below(4);
-        let id = s
-            .add_instance(InstanceOf::Geometry(first[(i % 2) as usize]), Some(m), mask)
-            .unwrap();
-        assert_eq!(id, i + 2);
-    }
-    // The two geometries placed first served only as the instances' source: removed, their
-    // meshes live on in the instances.
-    s.remove(first[0]).unwrap();
-    s.remove(first[1]).unwrap();
-    (s, meshes)
+/// among them) and translations, each with a mask of one of four bits
+/// (`testing::instanced_scene`).
+fn instanced(opts: QueryOptions, seed: u64) -> QueryScene {
+    gridtrace::testing::instanced_scene(opts, seed, 100, |rng| 1 << rng.below(4))
 }
 
 /// The world-space triangles of the geometries whose mask shares a bit with `mask`, as one
@@ -743,7 +710,7 @@ fn instances_answer_as_the_scene_merged_flat() {
     let (rays, t_near, t_far) = rays_with_intervals(&mut rng, 1500, false);
     let n = rays.len();
     for kind in kinds() {
-        let (scene, _) = instanced(cpu(kind), 3);
+        let scene = instanced(cpu(kind), 3);
         let mut compared = 0;
         let (mut ties, mut edges, mut grazing) = (0, 0, 0);
         for mask in [1u32, 2, 4 | 8, u32::MAX] {
@@ -838,7 +805,7 @@ fn instances_answer_as_the_scene_merged_flat() {
 /// scene answers as a scene built fresh with the new transforms, bit for bit.
 #[test]
 fn moves_build_no_mesh_structure() {
-    let (mut scene, _) = instanced(cpu(AccelKind::Bvh), 5);
+    let mut scene = instanced(cpu(AccelKind::Bvh), 5);
     let mut rng = Rng::new(2);
     let rays: Vec<[f32; 6]> = (0..500)
         .map(|_| {
@@ -893,7 +860,7 @@ fn moves_build_no_mesh_structure() {
 /// Bad transforms, ids and per-ray arguments are errors naming them, and change nothing.
 #[test]
 fn instance_errors_name_the_culprit_and_change_nothing() {
-    let (mut scene, _) = instanced(cpu(AccelKind::Bvh), 9);
+    let mut scene = instanced(cpu(AccelKind::Bvh), 9);
     let before = scene.geometry(5).unwrap().transform();
     let mut nan = Mat4::IDENTITY;
     nan.x_axis.y = f32::NAN;
@@ -1047,8 +1014,8 @@ fn gpu_two_levels_equal_cpu_two_levels() {
         };
         let name = format!("{} {variants}", kind.name());
         let name = name.trim_end();
-        let (on_cpu, _) = instanced(cpu(kind), 3);
-        let (mut on_gpu, _) = instanced(gpu.clone(), 3);
+        let on_cpu = instanced(cpu(kind), 3);
+        let mut on_gpu = instanced(gpu.clone(), 3);
         // Rays that see every instance (no per-ray interval or mask: what a merged mesh could
         // answer) walk the two levels on the GPU: the two meshes' structures built, a
         // structure each, and no merged mesh.

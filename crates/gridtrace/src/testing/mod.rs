@@ -8,9 +8,11 @@ use crate::scene::procedural;
 use crate::util::Rng;
 
 mod bad_input;
+mod instances;
 mod intervals;
 mod shapes;
 pub use bad_input::{BadFile, bad_input_corpus};
+pub use instances::instanced_scene;
 pub use intervals::{WithInterval, within, within_each};
 pub use shapes::{cuboid, open3d_cube};
 

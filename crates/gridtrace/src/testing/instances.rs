@@ -1,0 +1,54 @@
+//! The two-level tests' scene: many instances of two small meshes, each under its own random
+//! transform and mask, so that the CPU's two levels, the GPU's and the driver's instances are
+//! held to each other on the same draws.
+
+use glam::{Mat4, Quat, Vec3};
+
+use crate::query::QueryOptions;
+use crate::query_scene::{InstanceOf, QueryScene};
+use crate::scene::procedural;
+use crate::util::Rng;
+
+/// `n` instances of two meshes (an icosphere, a torus knot, in turn) under random rotations,
+/// scales (a third uneven, a seventh mirrored) and translations in a cube of side 16, each
+/// with `mask(rng)` (drawn after its transform). The two geometries placed first serve only as
+/// the instances' source and are removed: their meshes live on in the instances, whose ids are
+/// `2..n + 2`.
+pub fn instanced_scene(opts: QueryOptions, seed: u64, n: u32, mask: impl Fn(&mut Rng) -> u32) -> QueryScene {
+    let mut rng = Rng::new(seed);
+    let arrays = |m: &crate::Mesh| -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        (m.positions.iter().map(|p| p.to_array()).collect(), m.triangles.clone())
+    };
+    let meshes = [
+        arrays(&procedural::icosphere(Vec3::ZERO, 0.6, 1)),
+        arrays(&procedural::torus_knot(2, 3, 0.15, 24, 5)),
+    ];
+    let mut s = QueryScene::new(opts);
+    let first = [
+        s.add_triangles(meshes[0].0.clone(), meshes[0].1.clone(), None).unwrap(),
+        s.add_triangles(meshes[1].0.clone(), meshes[1].1.clone(), None).unwrap(),
+    ];
+    for i in 0..n {
+        let axis = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize_or(Vec3::Z);
+        let mut scale = Vec3::splat(rng.range(0.4, 2.0));
+        if i % 3 == 0 {
+            scale *= Vec3::new(1.0, rng.range(0.5, 1.5), rng.range(0.5, 1.5));
+        }
+        if i % 7 == 0 {
+            scale.x = -scale.x;
+        }
+        let m = Mat4::from_scale_rotation_translation(
+            scale,
+            Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU)),
+            Vec3::new(rng.range(-8.0, 8.0), rng.range(-8.0, 8.0), rng.range(-8.0, 8.0)),
+        );
+        let m_i = mask(&mut rng);
+        let id = s
+            .add_instance(InstanceOf::Geometry(first[(i % 2) as usize]), Some(m), m_i)
+            .unwrap();
+        assert_eq!(id, i + 2, "instances are numbered after the two geometries");
+    }
+    s.remove(first[0]).unwrap();
+    s.remove(first[1]).unwrap();
+    s
+}
