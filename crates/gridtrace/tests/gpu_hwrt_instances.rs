@@ -10,7 +10,7 @@ use glam::{Mat4, Vec3};
 use gridtrace::accel::{AccelKind, Hit, Ray};
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{InstanceOf, PerRay, QueryScene, RayHits, RayOptions};
-use gridtrace::testing::skip_gpu;
+use gridtrace::testing::{move_step, rebuilt, skip_gpu};
 use gridtrace::util::Rng;
 
 /// Instances placed, and the bytes of the instance table for them: 16 header words and two an
@@ -216,23 +216,9 @@ fn a_move_rebuilds_the_tlas_alone() {
     assert_eq!((first.mesh_uploads, first.blas_builds, first.tlas_builds), (1, 2, 1));
     let builds = on_gpu.structure_builds();
     let ids: Vec<u32> = on_gpu.ids().collect();
-    let fresh_of = |s: &QueryScene| {
-        let (meshes, instances) = s.parts();
-        let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
-        QueryScene::from_parts(gpu.clone(), s.next_id(), meshes, instances).unwrap()
-    };
     for step in 1..=2u32 {
         let before = on_gpu.gpu_uploads().unwrap();
-        let moved: Vec<Mat4> = ids
-            .iter()
-            .map(|&id| {
-                Mat4::from_rotation_z(0.3 * step as f32)
-                    * Mat4::from_translation(Vec3::new(0.5, -0.2, 0.1 * step as f32))
-                    * on_gpu.geometry(id).unwrap().transform()
-            })
-            .collect();
-        on_gpu.set_transforms(&ids, &moved).unwrap();
-        on_gpu.set_mask(ids[3], 0).unwrap();
+        move_step(&mut on_gpu, &ids, step);
         let g = on_gpu.cast_rays_with(&rays, &each).unwrap();
         let occ = on_gpu.test_occlusions_with(&rays, &each).unwrap();
         let after = on_gpu.gpu_uploads().unwrap();
@@ -252,7 +238,7 @@ fn a_move_rebuilds_the_tlas_alone() {
         let table = if step == 1 { table_bytes(INSTANCES as u64) } else { 0 };
         let written = after.written_bytes - before.written_bytes;
         assert_eq!(written, 64 * INSTANCES as u64 + table, "step {step}");
-        let fresh = fresh_of(&on_gpu);
+        let fresh = rebuilt(&on_gpu, gpu.clone());
         assert_eq!(g, fresh.cast_rays_with(&rays, &each).unwrap(), "step {step}");
         assert_eq!(occ, fresh.test_occlusions_with(&rays, &each).unwrap(), "step {step}");
         assert!(g.geometry_ids.iter().all(|&id| id != ids[3]), "masked out");
@@ -280,7 +266,7 @@ fn a_move_rebuilds_the_tlas_alone() {
         after.written_bytes - before.written_bytes,
         64 * (INSTANCES as u64 + 1) + table_bytes(INSTANCES as u64 + 1)
     );
-    assert_eq!(g, fresh_of(&on_gpu).cast_rays_with(&rays, &each).unwrap());
+    assert_eq!(g, rebuilt(&on_gpu, gpu.clone()).cast_rays_with(&rays, &each).unwrap());
 }
 
 /// Counts and lists of hits of a scene of driver instances are the CPU's two levels' (by

@@ -18,7 +18,7 @@ use gridtrace::accel::{AccelKind, Hit, Ray, TriAccel, brute_force_intersect, bru
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{Geometry, INVALID_ID, InstanceOf, PerRay, QueryScene, RayOptions};
 use gridtrace::scene::procedural;
-use gridtrace::testing::skip_gpu;
+use gridtrace::testing::{move_step, rebuilt, skip_gpu};
 use gridtrace::util::Rng;
 use rayon::prelude::*;
 
@@ -840,9 +840,7 @@ fn moves_build_no_mesh_structure() {
         scene.count_intersections(&rays).unwrap();
         scene.test_occlusions(&rays, 0.0, 30.0).unwrap();
         assert_eq!(scene.structure_builds(), 2, "step {step}: a move built a structure");
-        let (meshes, instances) = scene.parts();
-        let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
-        let fresh = QueryScene::from_parts(cpu(AccelKind::Bvh), scene.next_id(), meshes, instances).unwrap();
+        let fresh = rebuilt(&scene, cpu(AccelKind::Bvh));
         assert_eq!(hits, fresh.cast_rays(&rays).unwrap(), "step {step}");
         assert!(hits.geometry_ids.iter().all(|&g| g != 7), "masked out");
     }
@@ -1092,16 +1090,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
         let ids: Vec<u32> = on_gpu.ids().collect();
         for step in 1..=2 {
             let before = on_gpu.gpu_uploads().unwrap();
-            let moved: Vec<Mat4> = ids
-                .iter()
-                .map(|&id| {
-                    Mat4::from_rotation_z(0.3 * step as f32)
-                        * Mat4::from_translation(Vec3::new(0.5, -0.2, 0.1 * step as f32))
-                        * on_gpu.geometry(id).unwrap().transform()
-                })
-                .collect();
-            on_gpu.set_transforms(&ids, &moved).unwrap();
-            on_gpu.set_mask(ids[3], 0).unwrap();
+            move_step(&mut on_gpu, &ids, step);
             let g = on_gpu.cast_rays_with(&rays, &each).unwrap();
             let occ = on_gpu.test_occlusions_with(&rays, &each).unwrap();
             assert_eq!(on_gpu.last_query().device, "gpu", "{name} step {step}");
@@ -1120,9 +1109,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                 "{} step {step}: a move built a structure",
                 name
             );
-            let (meshes, instances) = on_gpu.parts();
-            let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
-            let fresh = QueryScene::from_parts(gpu.clone(), on_gpu.next_id(), meshes, instances).unwrap();
+            let fresh = rebuilt(&on_gpu, gpu.clone());
             assert_eq!(g, fresh.cast_rays_with(&rays, &each).unwrap(), "{} step {step}", name);
             assert_eq!(
                 occ,
@@ -1157,9 +1144,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
             after.written_bytes - before.written_bytes,
             64 * (top_nodes(101) + 101) as u64
         );
-        let (meshes, instances) = on_gpu.parts();
-        let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
-        let fresh = QueryScene::from_parts(gpu.clone(), on_gpu.next_id(), meshes, instances).unwrap();
+        let fresh = rebuilt(&on_gpu, gpu.clone());
         assert_eq!(
             g,
             fresh.cast_rays_with(&rays, &each).unwrap(),

@@ -242,8 +242,9 @@ impl QueryScene {
     }
 
     /// Whether the GPU's two levels of `two` are walked by ray query (`hwrt`'s driver
-    /// instances): their counts and lists of hits run on the CPU's two levels, by
-    /// `intersect_tri`, as `hwrt`'s are listed on one level (by its BVH).
+    /// instances), which find closest and any hits only: their counts and lists of hits take
+    /// the merged mesh's GPU walk where it answers the rays, else the CPU's two levels
+    /// (`all_hits_on_gpu`).
     pub(super) fn gpu_walks_by_ray_query(&self, two: &TwoLevel) -> bool {
         let walk = self.opts.gpu_variants.bvh_walk();
         two.meshes()

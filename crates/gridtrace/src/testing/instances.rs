@@ -52,3 +52,26 @@ pub fn instanced_scene(opts: QueryOptions, seed: u64, n: u32, mask: impl Fn(&mut
     s.remove(first[1]).unwrap();
     s
 }
+
+/// `scene` made again from its parts (`QueryScene::parts`, `from_parts`) with `opts`: a fresh
+/// scene in the moved scene's state, whose answers a move must give bit for bit.
+pub fn rebuilt(scene: &QueryScene, opts: QueryOptions) -> QueryScene {
+    let (meshes, instances) = scene.parts();
+    let meshes = meshes.iter().map(|m| (m.vertices.clone(), m.faces.clone())).collect();
+    QueryScene::from_parts(opts, scene.next_id(), meshes, instances).unwrap()
+}
+
+/// Move `step` (from 1) of the two-level tests: each of `ids` turned by `0.3 * step` about z
+/// and shifted, after its own transform (one `set_transforms`), and `ids[3]` masked out.
+pub fn move_step(scene: &mut QueryScene, ids: &[u32], step: u32) {
+    let moved: Vec<Mat4> = ids
+        .iter()
+        .map(|&id| {
+            Mat4::from_rotation_z(0.3 * step as f32)
+                * Mat4::from_translation(Vec3::new(0.5, -0.2, 0.1 * step as f32))
+                * scene.geometry(id).unwrap().transform()
+        })
+        .collect();
+    scene.set_transforms(ids, &moved).unwrap();
+    scene.set_mask(ids[3], 0).unwrap();
+}
