@@ -212,11 +212,11 @@ impl BvhAccel {
         }
     }
 
-    /// Walks up to `PACKET` rays (`rays.len()`, at least one) as one packet: closest hits with
-    /// `t_min <= t < t_max[i]`, or with `ANY` whether there is one. A node's entered children go
-    /// on the packet's stack (`push_children`), a leaf's triangles are tested against its rays
-    /// (`test_leaf`), and the walk goes on with the nearest pending child some ray can still
-    /// use (`pop_live`).
+    /// Walks up to `PACKET` rays (`rays.len()`, at least one) as one packet: closest hits in
+    /// each ray's interval (one `t_min` for all: `contract::same_start`), or with `ANY` whether
+    /// there is one. A node's entered children go on the packet's stack (`push_children`), a
+    /// leaf's triangles are tested against its rays (`test_leaf`), and the walk goes on with
+    /// the nearest pending child some ray can still use (`pop_live`).
     ///
     /// # Safety
     /// The CPU must run the eight-lane build (`simd::has_wide`).

@@ -96,7 +96,7 @@ impl BvhAccel {
         }
     }
 
-    /// Closest hit with `t_min <= t < t_max`; `tri` indexes the triangles given to `build`.
+    /// Closest hit in the ray's interval; `tri` indexes the triangles given to `build`.
     /// `counters.cell()` counts nodes visited.
     pub fn intersect<C: Counters>(&self, ray: &Ray, counters: &mut C) -> Hit {
         let mut w = Walk::new(ray);

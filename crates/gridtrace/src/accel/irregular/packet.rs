@@ -106,32 +106,26 @@ impl IrregularGrid {
         if !same_start(rays) {
             return self.walk_singly::<ANY, C>(tris, rays, counters);
         }
-        let t_min = rays.first().map_or(0.0, |r| r.t_min);
-        // Lanes past the rays' count search nothing (`t_max = t_min`: an empty interval).
-        let t_max = std::array::from_fn(|i| rays.get(i).map_or(t_min, |r| r.t_max));
         if crate::accel::simd::has_wide() {
             // SAFETY: the CPU runs the eight-lane build, checked just above.
-            return unsafe { self.walk_packet_wide::<ANY, C>(tris, rays, t_min, t_max, counters, fours) };
+            return unsafe { self.walk_packet_wide::<ANY, C>(tris, rays, counters, fours) };
         }
-        self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters)
+        self.walk_fours::<ANY, C>(tris, rays, counters)
     }
 
     #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-    #[allow(clippy::too_many_arguments)]
     unsafe fn walk_packet_wide<const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
         fours: bool,
     ) -> [Hit; PACKET] {
         if fours {
-            return self.walk_fours::<ANY, C>(tris, rays, t_min, t_max, counters);
+            return self.walk_fours::<ANY, C>(tris, rays, counters);
         }
         // `F8` is for the eight-lane build only: this function is compiled for it.
-        self.walk_lanes::<PACKET, crate::accel::lanes::F8, ANY, C>(tris, rays, t_min, t_max, counters)
+        self.walk_lanes::<PACKET, crate::accel::lanes::F8, ANY, C>(tris, rays, counters)
     }
 
     /// The packet's rays walked one by one (`intersect`, `occluded`), with `walk_packet`'s
@@ -163,14 +157,11 @@ impl IrregularGrid {
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; PACKET],
         counters: &mut [C],
     ) -> [Hit; PACKET] {
         let mut hits = [Hit::MISS; PACKET];
         for (h, (rays, counters)) in rays.chunks(4).zip(counters.chunks_mut(4)).enumerate() {
-            let limits = [t_max[4 * h], t_max[4 * h + 1], t_max[4 * h + 2], t_max[4 * h + 3]];
-            let got = self.walk_lanes::<4, Vec4, ANY, C>(tris, rays, t_min, limits, counters);
+            let got = self.walk_lanes::<4, Vec4, ANY, C>(tris, rays, counters);
             hits[4 * h..4 * h + 4].copy_from_slice(&got);
         }
         hits
@@ -179,25 +170,26 @@ impl IrregularGrid {
     /// The packet walk: closest hits, or (`ANY`) any hit per ray, which ends that ray's walk
     /// and its tests at once, as `any_in` does. A round takes the cell of the first ray still
     /// walking: its rays test the cell's triangles together (`test_cell_lanes`) and step to
-    /// their next voxels together (`next_voxels`, `move_lanes`).
+    /// their next voxels together (`next_voxels`, `move_lanes`). The rays share their
+    /// intervals' start (`walk_packet` checks), which the lanes' triangle tests take as one.
     #[inline(always)]
     fn walk_lanes<const N: usize, L: Lanes<N>, const ANY: bool, C: Counters>(
         &self,
         tris: &[TriAccel],
         rays: &[Ray],
-        t_min: f32,
-        t_max: [f32; N],
         counters: &mut [C],
     ) -> [Hit; N] {
         assert!(
             rays.len() <= N && counters.len() == rays.len(),
             "a packet is up to {N} rays, a counter each"
         );
+        let t_min = rays.first().map_or(0.0, |r| r.t_min);
+        // Lanes past the rays' count search nothing (`t_max = t_min`: an empty interval).
         let mut best: [Hit; N] = std::array::from_fn(|i| Hit {
-            t: t_max[i],
+            t: rays.get(i).map_or(t_min, |r| r.t_max),
             ..Hit::MISS
         });
-        let (mut l, mut cell_of, mut walking) = self.start_lanes::<N, L>(rays, t_min, &t_max);
+        let (mut l, mut cell_of, mut walking) = self.start_lanes::<N, L>(rays);
         let lattice = VoxelLanes {
             bounds_min: splat3(self.bounds.min.to_array()),
             voxel_size: splat3(self.voxel_size.to_array()),
@@ -244,12 +236,7 @@ impl IrregularGrid {
     /// cell and the rays that walk (bit i for `rays[i]`; a ray that misses the box does not).
     /// Unused lanes hold a ray along +x at the origin and never walk.
     #[inline(always)]
-    fn start_lanes<const N: usize, L: Lanes<N>>(
-        &self,
-        rays: &[Ray],
-        t_min: f32,
-        t_max: &[f32; N],
-    ) -> (Walkers<N, L>, [u32; N], u32) {
+    fn start_lanes<const N: usize, L: Lanes<N>>(&self, rays: &[Ray]) -> (Walkers<N, L>, [u32; N], u32) {
         let (mut origin, mut dir, mut inv, mut v) = ([[0.0; N]; 3], [[0.0; N]; 3], [[1.0; N]; 3], [[0.0; N]; 3]);
         dir[0] = [1.0; N];
         let (mut up, mut down, mut t_leave, mut budget) = ([0u32; 3], [0u32; 3], [0.0; N], [0u32; N]);
@@ -260,7 +247,7 @@ impl IrregularGrid {
                 origin[a][i] = ray.origin[a];
                 dir[a][i] = ray.dir[a];
             }
-            if let Some(c) = self.cursor(&ray.within(t_min, t_max[i])) {
+            if let Some(c) = self.cursor(ray) {
                 for a in 0..3 {
                     inv[a][i] = c.inv[a];
                     up[a] |= ((c.step[a] > 0) as u32) << i;
