@@ -1010,8 +1010,11 @@ fn rays_on_the_gpu_answer_as_on_the_cpu_and_report_the_batch() {
     }
 }
 
+/// A run's exit code (`None` when a signal ended it) and its stdout then stderr.
+type Status = (Option<i32>, String);
+
 /// Runs the `gridtrace` binary; its exit status and its stdout then stderr.
-fn gridtrace_status(args: &[&str]) -> (Option<i32>, String) {
+fn gridtrace_status(args: &[&str]) -> Status {
     let out = Command::new(env!("CARGO_BIN_EXE_gridtrace"))
         .args(args)
         .output()
@@ -1035,8 +1038,8 @@ fn mistakes_are_refused_before_any_work_in_plain_words() {
     };
     let missing = dir.join("no-such-folder").join("x.png");
     let hits = dir.join("hits.bin");
-    // (what, arguments, the words the error must hold)
-    let cases: Vec<(&str, (Option<i32>, String), &str)> = vec![
+    // (what, (exit code, what the command printed), the words the error must hold)
+    let cases: Vec<(&str, Status, &str)> = vec![
         (
             "a size above the tracers' largest",
             render(&["--res", "100000x100000", "-o", png]),

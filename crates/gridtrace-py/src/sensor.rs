@@ -135,6 +135,10 @@ pub(crate) fn scan<'py>(
     Ok(d)
 }
 
+/// A LiDAR's table as Python reads it: `(elevations_deg, azimuth_steps, azimuth_range_deg,
+/// min_range, max_range)`.
+type LidarTable = (Vec<f32>, u32, (f32, f32), f32, f32);
+
 #[pymethods]
 impl NativeSensor {
     #[staticmethod]
@@ -193,7 +197,7 @@ impl NativeSensor {
 
     /// The LiDAR's table as the Python class shows it: `(elevations_deg, azimuth_steps,
     /// azimuth_range_deg, min_range, max_range)`; `None` for a camera.
-    fn lidar_table(&self) -> Option<(Vec<f32>, u32, (f32, f32), f32, f32)> {
+    fn lidar_table(&self) -> Option<LidarTable> {
         match &self.inner {
             Sensor::Lidar(l) => Some((
                 l.elevations_deg.clone(),

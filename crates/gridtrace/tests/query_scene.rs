@@ -28,10 +28,13 @@ struct Reference {
     tris: Vec<TriAccel>,
     names: Vec<(u32, u32)>,
     /// Each geometry with its non-degenerate own-space faces, named: what the two levels walk.
-    local: Vec<(Geometry, Vec<TriAccel>, Vec<(u32, u32)>)>,
+    local: Vec<Local>,
     /// Whether each geometry (by position in `geoms`) is closed.
     closed_only: bool,
 }
+
+/// A geometry with its non-degenerate own-space faces, each named (geometry id, face index).
+type Local = (Geometry, Vec<TriAccel>, Vec<(u32, u32)>);
 
 /// A geometry as `add_triangles` takes it: vertices, faces, transform.
 type Geom = (Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Mat4>);

@@ -121,6 +121,19 @@ fn split<T>(s: Option<&mut [T]>, at: usize) -> (Option<&mut [T]>, Option<&mut [T
 }
 
 impl<'a> Out<'a> {
+    /// Every output of `r` that was asked for, whole.
+    fn of(r: &'a mut ScanResult) -> Out<'a> {
+        Out {
+            range: r.range.as_deref_mut(),
+            depth: r.depth.as_deref_mut(),
+            points: r.points.as_deref_mut(),
+            geometry_ids: r.geometry_ids.as_deref_mut(),
+            primitive_ids: r.primitive_ids.as_deref_mut(),
+            normals: r.normals.as_deref_mut(),
+            incidence: r.incidence.as_deref_mut(),
+        }
+    }
+
     fn split_at(self, at: usize) -> (Out<'a>, Out<'a>) {
         let (range, range_b) = split(self.range, at);
         let (depth, depth_b) = split(self.depth, at);
@@ -221,6 +234,72 @@ pub fn scan(
     poses_end: Option<&[Pose]>,
     outputs: ScanOutputs,
 ) -> Result<ScanResult> {
+    let count = check_scan(sensor, poses, poses_end, outputs)?;
+    let (rows, cols) = sensor.shape();
+    let cells = rows * cols;
+    // Each environment's column poses: a few dozen bytes a column.
+    let columns: Vec<Pose> = poses
+        .iter()
+        .enumerate()
+        .flat_map(|(e, p)| column_poses(p, poses_end.map(|end| &end[e]), cols))
+        .collect();
+    let mut result = ScanResult::allocate(poses.len(), rows, cols, outputs);
+    let mut chunks = Vec::with_capacity(count.div_ceil(CHUNK));
+    let mut rest = Out::of(&mut result);
+    for start in (0..count).step_by(CHUNK) {
+        let (head, tail) = rest.split_at(CHUNK.min(count - start));
+        chunks.push((start, head));
+        rest = tail;
+    }
+
+    // On a GPU the rays are made where they are traced, all in one batch (`scan_on_gpu`):
+    // only `t` comes down unless ids or normals are asked for.
+    let range_only = !(outputs.geometry_ids || outputs.primitive_ids || outputs.normals || outputs.incidence);
+    let on_gpu = if scene.traces_on_gpu() {
+        scan_on_gpu(scene, sensor, &columns, poses_end.is_some(), range_only)?
+    } else {
+        None
+    };
+    // The world rays, made on the host where the CPU traces them or an output needs them.
+    let rays_needed = on_gpu.is_none() || outputs.points == Some(Frame::World) || outputs.incidence;
+    let writer = Writer {
+        sensor,
+        outputs,
+        cols,
+        cells,
+        limits: sensor.range_limits(),
+    };
+    chunks.into_par_iter().try_for_each_init(
+        || Vec::with_capacity(CHUNK),
+        |rays: &mut Vec<[f32; 6]>, (start, mut out)| -> Result<()> {
+            let n = CHUNK.min(count - start);
+            rays.clear();
+            if rays_needed {
+                rays.extend((start..start + n).map(|i| {
+                    let (e, cell) = (i / cells, i % cells);
+                    let (row, col) = (cell / cols, cell % cols);
+                    sensor.ray_in_world(&columns[e * cols + col], row, col)
+                }));
+            }
+            let cast;
+            let hits = match &on_gpu {
+                Some(all) => Hits::of(all, start, n),
+                None => {
+                    cast = scene.cast_rays(rays)?;
+                    Hits::of(&cast, 0, n)
+                }
+            };
+            writer.write(&mut out, &hits, rays, start);
+            Ok(())
+        },
+    )?;
+    Ok(result)
+}
+
+/// Refuses a scan before anything is allocated: no poses, a `poses_end` of another length,
+/// depth from a LiDAR, no output asked for, or more output than this machine's memory, each
+/// naming its argument. Returns the number of rays (environments x rows x columns).
+fn check_scan(sensor: &Sensor, poses: &[Pose], poses_end: Option<&[Pose]>, outputs: ScanOutputs) -> Result<usize> {
     if poses.is_empty() {
         return Err(Error::InvalidInput("pose: no poses given".into()));
     }
@@ -248,126 +327,86 @@ pub fn scan(
         .and_then(|n| n.checked_mul(cols))
         .ok_or_else(|| Error::InvalidInput(format!("outputs: {envs} x {rows} x {cols} rays overflow")))?;
     check_size("outputs", count, outputs.bytes_per_ray())?;
+    Ok(count)
+}
 
-    // Each environment's column poses: a few dozen bytes a column.
-    let columns: Vec<Pose> = poses
-        .iter()
-        .enumerate()
-        .flat_map(|(e, p)| column_poses(p, poses_end.map(|end| &end[e]), cols))
-        .collect();
-
-    let alloc = |on: bool| on.then(|| vec![0.0f32; count]);
-    let mut range = alloc(outputs.range);
-    let mut depth = alloc(outputs.depth);
-    let mut points = outputs.points.map(|_| vec![[0.0f32; 3]; count]);
-    let mut geometry_ids = outputs.geometry_ids.then(|| vec![0u32; count]);
-    let mut primitive_ids = outputs.primitive_ids.then(|| vec![0u32; count]);
-    let mut normals = outputs.normals.then(|| vec![[0.0f32; 3]; count]);
-    let mut incidence = alloc(outputs.incidence);
-
-    let mut chunks = Vec::with_capacity(count.div_ceil(CHUNK));
-    let mut rest = Out {
-        range: range.as_deref_mut(),
-        depth: depth.as_deref_mut(),
-        points: points.as_deref_mut(),
-        geometry_ids: geometry_ids.as_deref_mut(),
-        primitive_ids: primitive_ids.as_deref_mut(),
-        normals: normals.as_deref_mut(),
-        incidence: incidence.as_deref_mut(),
-    };
-    for start in (0..count).step_by(CHUNK) {
-        let (head, tail) = rest.split_at(CHUNK.min(count - start));
-        chunks.push((start, head));
-        rest = tail;
+impl ScanResult {
+    /// The outputs asked for, allocated for `envs x rows x cols` rays (`check_scan` has
+    /// measured them against this machine's memory); the rest `None`.
+    fn allocate(envs: usize, rows: usize, cols: usize, outputs: ScanOutputs) -> ScanResult {
+        let count = envs * rows * cols;
+        let alloc = |on: bool| on.then(|| vec![0.0f32; count]);
+        ScanResult {
+            envs,
+            rows,
+            cols,
+            range: alloc(outputs.range),
+            depth: alloc(outputs.depth),
+            points: outputs.points.map(|_| vec![[0.0f32; 3]; count]),
+            geometry_ids: outputs.geometry_ids.then(|| vec![0u32; count]),
+            primitive_ids: outputs.primitive_ids.then(|| vec![0u32; count]),
+            normals: outputs.normals.then(|| vec![[0.0f32; 3]; count]),
+            incidence: alloc(outputs.incidence),
+        }
     }
+}
 
-    let (min_range, max_range) = sensor.range_limits();
-    let cells = rows * cols;
-    // On a GPU the rays are made where they are traced, all in one batch (`scan_on_gpu`):
-    // only `t` comes down unless ids or normals are asked for.
-    let range_only = !(outputs.geometry_ids || outputs.primitive_ids || outputs.normals || outputs.incidence);
-    let on_gpu = if scene.traces_on_gpu() {
-        scan_on_gpu(scene, sensor, &columns, poses_end.is_some(), range_only)?
-    } else {
-        None
-    };
-    // The world rays, made on the host where the CPU traces them or an output needs them.
-    let rays_needed = on_gpu.is_none() || outputs.points == Some(Frame::World) || outputs.incidence;
-    chunks.into_par_iter().try_for_each_init(
-        || Vec::with_capacity(CHUNK),
-        |rays: &mut Vec<[f32; 6]>, (start, mut out)| -> Result<()> {
-            let n = CHUNK.min(count - start);
-            rays.clear();
-            if rays_needed {
-                rays.extend((start..start + n).map(|i| {
-                    let (e, cell) = (i / cells, i % cells);
-                    let (row, col) = (cell / cols, cell % cols);
-                    sensor.ray_in_world(&columns[e * cols + col], row, col)
-                }));
+/// Writes a chunk's hits into its outputs: what a scan's every chunk shares.
+struct Writer<'s> {
+    sensor: &'s Sensor,
+    outputs: ScanOutputs,
+    cols: usize,
+    /// Rays an environment: rows x columns.
+    cells: usize,
+    /// The sensor's `[min_range, max_range]`: a return outside is a miss.
+    limits: (f32, f32),
+}
+
+impl Writer<'_> {
+    /// Writes the `hits` of the chunk's rays, the scan's rays `start..` (`rays`, their world
+    /// origins and directions, where the host made them), into `out`.
+    fn write(&self, out: &mut Out, hits: &Hits, rays: &[[f32; 6]], start: usize) {
+        let (min_range, max_range) = self.limits;
+        for j in 0..hits.t_hit.len() {
+            let t = hits.t_hit[j];
+            let hit = t >= min_range && t <= max_range;
+            let cell = (start + j) % self.cells;
+            let (row, col) = (cell / self.cols, cell % self.cols);
+            if let Some(o) = out.range.as_deref_mut() {
+                o[j] = if hit { t } else { f32::INFINITY };
             }
-            let cast;
-            let hits = match &on_gpu {
-                Some(all) => Hits::of(all, start, n),
-                None => {
-                    cast = scene.cast_rays(rays)?;
-                    Hits::of(&cast, 0, n)
-                }
-            };
-            for j in 0..n {
-                let t = hits.t_hit[j];
-                let hit = t >= min_range && t <= max_range;
-                let cell = (start + j) % cells;
-                let (row, col) = (cell / cols, cell % cols);
-                if let Some(o) = out.range.as_deref_mut() {
-                    o[j] = if hit { t } else { f32::INFINITY };
-                }
-                if let Some(o) = out.depth.as_deref_mut() {
-                    let (_, d) = sensor.ray_in_sensor(row, col);
-                    o[j] = if hit { t * d.z } else { f32::INFINITY };
-                }
-                if let Some(o) = out.points.as_deref_mut() {
-                    o[j] = if !hit {
-                        [f32::NAN; 3]
-                    } else if outputs.points == Some(Frame::World) {
-                        let r = &rays[j];
-                        [r[0] + t * r[3], r[1] + t * r[4], r[2] + t * r[5]]
-                    } else {
-                        let (so, sd) = sensor.ray_in_sensor(row, col);
-                        (so + t * sd).to_array()
-                    };
-                }
-                if let Some(o) = out.geometry_ids.as_deref_mut() {
-                    o[j] = if hit { hits.geometry_ids[j] } else { INVALID_ID };
-                }
-                if let Some(o) = out.primitive_ids.as_deref_mut() {
-                    o[j] = if hit { hits.primitive_ids[j] } else { INVALID_ID };
-                }
-                let normal = hits.primitive_normals[j];
-                if let Some(o) = out.normals.as_deref_mut() {
-                    o[j] = if hit { normal } else { [0.0; 3] };
-                }
-                if let Some(o) = out.incidence.as_deref_mut() {
+            if let Some(o) = out.depth.as_deref_mut() {
+                let (_, d) = self.sensor.ray_in_sensor(row, col);
+                o[j] = if hit { t * d.z } else { f32::INFINITY };
+            }
+            if let Some(o) = out.points.as_deref_mut() {
+                o[j] = if !hit {
+                    [f32::NAN; 3]
+                } else if self.outputs.points == Some(Frame::World) {
                     let r = &rays[j];
-                    let cos = r[3] * normal[0] + r[4] * normal[1] + r[5] * normal[2];
-                    o[j] = if hit { cos.abs().min(1.0) } else { 0.0 };
-                }
+                    [r[0] + t * r[3], r[1] + t * r[4], r[2] + t * r[5]]
+                } else {
+                    let (so, sd) = self.sensor.ray_in_sensor(row, col);
+                    (so + t * sd).to_array()
+                };
             }
-            Ok(())
-        },
-    )?;
-
-    Ok(ScanResult {
-        envs,
-        rows,
-        cols,
-        range,
-        depth,
-        points,
-        geometry_ids,
-        primitive_ids,
-        normals,
-        incidence,
-    })
+            if let Some(o) = out.geometry_ids.as_deref_mut() {
+                o[j] = if hit { hits.geometry_ids[j] } else { INVALID_ID };
+            }
+            if let Some(o) = out.primitive_ids.as_deref_mut() {
+                o[j] = if hit { hits.primitive_ids[j] } else { INVALID_ID };
+            }
+            let normal = hits.primitive_normals[j];
+            if let Some(o) = out.normals.as_deref_mut() {
+                o[j] = if hit { normal } else { [0.0; 3] };
+            }
+            if let Some(o) = out.incidence.as_deref_mut() {
+                let r = &rays[j];
+                let cos = r[3] * normal[0] + r[4] * normal[1] + r[5] * normal[2];
+                o[j] = if hit { cos.abs().min(1.0) } else { 0.0 };
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -425,9 +464,10 @@ mod tests {
         for (e, pose) in poses.iter().enumerate() {
             let rays = sensor.rays(pose, ends.map(|x| &x[e])).unwrap();
             let want = scene.cast_rays(&rays).unwrap();
-            for i in 0..cells {
+            assert_eq!(rays.len(), cells);
+            for (i, r) in rays.iter().enumerate() {
                 let k = e * cells + i;
-                let (t, r) = (want.t_hit[i], &rays[i]);
+                let t = want.t_hit[i];
                 let range = got.range.as_ref().unwrap()[k];
                 assert!(
                     range == t || (range - t).abs() <= 1e-6 * t,
