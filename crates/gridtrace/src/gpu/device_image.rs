@@ -10,7 +10,7 @@
 use std::sync::Arc;
 
 use super::context::{GpuContext, max_binding_bytes};
-use super::renderer::PACKED_TEXEL_BYTES;
+use super::work::PACKED_TEXEL_BYTES;
 use crate::render::Image;
 use crate::{Error, Result};
 

@@ -55,6 +55,7 @@ pub mod walks;
 mod wavefront;
 mod winding;
 mod wire;
+mod work;
 
 pub use all_hits::{AllHits, LIST_PASS_LIMIT};
 pub use context::check_scene_fits;

@@ -13,8 +13,9 @@ use super::constants::{SLOT_REFLECT_TOTAL, SLOT_SHADOW, SLOT_SHADOW_TOTAL};
 use super::context::PendingRead;
 use super::device_image::DeviceImage;
 use super::kernels::{Kernel, PassRecorder};
-use super::renderer::{ACCUM_TEXEL_BYTES, COUNTERS_BYTES, GpuRenderer, PACKED_TEXEL_BYTES, TILE_UNIFORM_BYTES};
+use super::renderer::{COUNTERS_BYTES, GpuRenderer, TILE_UNIFORM_BYTES};
 use super::timing::{HostPhases, MAX_TIMESTAMPS_BYTES, parse_stages};
+use super::work::{ACCUM_TEXEL_BYTES, PACKED_TEXEL_BYTES};
 use crate::Result;
 use crate::render::{Image, Mode, PixelFormat, RenderOptions};
 

@@ -217,7 +217,7 @@ impl GpuRenderer {
         let rows = opts.row_range();
         let (first, pixels) = (rows.start * opts.width, rows.end * opts.width);
         let tile = self.tile_capacity(n_lights).min(pixels - first);
-        self.ensure_work(tile, n_lights, super::renderer::WorkUse::FRAME);
+        self.ensure_work(tile, n_lights, super::work::WorkUse::FRAME);
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         let mut parts = PrepareParts {
             buffers_ms: ms(t0),
