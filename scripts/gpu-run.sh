@@ -12,7 +12,8 @@
 # batches, grid builds; hardware.md/json), 1M-ray batches beside Embree 3 on the same rays
 # (rays.txt), the CPU BVH's scaling at 1-16 threads beside Embree (cpu-scaling.md), the paper
 # matrix on the GPU and the CPU cores (paper.md/json), a 1080p camera orbit one frame at a time
-# and with two frames in flight, and an animated mesh (summary.txt). The ray batches' lines give the bytes a ray each way and the host's phases
+# and with two frames in flight, an animated mesh, and 1,000 moving instances on each
+# structure's two levels (summary.txt). The ray batches' lines give the bytes a ray each way and the host's phases
 # (prepare, wait, readout) of the pipelined chunks. The first H200 runs (2026-11-26) used it; their
 # output is under docs/results/h200-2026-11-26*. LOCAL=1 QUICK=1 runs it on this machine's
 # lavapipe for a check of the script (no packages unpacked, the suite's --quick plan).
@@ -101,4 +102,13 @@ for rb in "" "--readback"; do for fl in 1 2; do
 done; done
 say "== 4. animated mesh, grid rebuilt on the GPU every frame [left $(left)s]"
 [ "$(left)" -gt 15 ] && timeout 12 $B render --animate --scene animated --frames 30 --mode shadow --accel pc --backend gpu --res 1024x1024 -o /tmp/anim.png 2>&1 | tail -3 | tee -a "$log"
+say "== 4b. moving instances (issue 52): 1,000 tumbling Bunnies, 1080p eye rays, each structure's two levels [left $(left)s]"
+# hwrt walks the driver's instances (one BLAS, a TLAS rebuilt a move); the others the software
+# top level over each mesh's own walk. Per frame: the move, the trace (with the top level's
+# upload), and the bytes a move uploads.
+for accel in hwrt bvh pc irregular; do
+  [ "$(left)" -gt 25 ] || break
+  timeout 20 $B render --animate --scene tumbling-bunnies --frames 30 --mode cast --res 1920x1080 --backend gpu --accel $accel -o /tmp/tumble.png 2>&1 | grep -E '^(median|gpu|error|Error)' | sed "s/^/tumbling gpu $accel: /" | tee -a "$log"
+done
+[ "$(left)" -gt 25 ] && timeout 20 $B render --animate --scene tumbling-bunnies --frames 10 --mode cast --res 1920x1080 --backend cpu --accel bvh -o /tmp/tumble.png 2>&1 | grep -E '^(median|error|Error)' | sed "s/^/tumbling cpu bvh: /" | tee -a "$log"
 say "== done [t=$(( $(date +%s)-T0 ))s]"
