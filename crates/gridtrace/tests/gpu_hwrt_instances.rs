@@ -7,10 +7,10 @@
 //! instances (and the instance table where a mask changed), answers a fresh scene's.
 
 use glam::{Mat4, Vec3};
-use gridtrace::accel::{AccelKind, Hit, Ray};
+use gridtrace::accel::{AccelKind, Ray};
 use gridtrace::query::{Backend, QueryOptions};
-use gridtrace::query_scene::{InstanceOf, PerRay, QueryScene, RayHits, RayOptions};
-use gridtrace::testing::{move_step, rebuilt, skip_gpu};
+use gridtrace::query_scene::{InstanceOf, PerRay, QueryScene, RayOptions};
+use gridtrace::testing::{compare_hits, move_step, rebuilt, skip_gpu};
 use gridtrace::util::Rng;
 
 /// Instances placed, and the bytes of the instance table for them: 16 header words and two an
@@ -49,17 +49,6 @@ fn rays_with_intervals(rng: &mut Rng, n: usize) -> (Vec<[f32; 6]>, Vec<f32>, Vec
     (rays, t_near, t_far)
 }
 
-fn as_hits(h: &RayHits) -> Vec<Hit> {
-    (0..h.len())
-        .map(|i| Hit {
-            t: h.t_hit[i],
-            tri: h.primitive_ids[i],
-            u: h.primitive_uvs[i][0],
-            v: h.primitive_uvs[i][1],
-        })
-        .collect()
-}
-
 fn opts(accel: AccelKind, backend: Backend) -> QueryOptions {
     QueryOptions {
         accel: accel.into(),
@@ -78,51 +67,6 @@ fn hwrt_runs() -> bool {
     gridtrace::testing::gpu_runs(&ctx, AccelKind::Hwrt)
 }
 
-/// The GPU's answers (`g`, `occ`) against the CPU's (`c`): t within 1e-5 relative or the two
-/// triangle tests' rounding (`t_close`), the same instance and face but on a face's boundary,
-/// the same normal, hit or miss as `gpu_disagreements` allows. Returns (hits, rounding,
-/// boundary, excused).
-fn compare(what: &str, rays: &[[f32; 6]], c: &RayHits, g: &RayHits, occ: &[bool]) -> [usize; 4] {
-    let rays: Vec<Ray> = rays
-        .iter()
-        .map(|q| Ray::new(Vec3::new(q[0], q[1], q[2]), Vec3::new(q[3], q[4], q[5])))
-        .collect();
-    let (bad, excused) = gridtrace::testing::gpu_disagreements(&rays, &as_hits(c), &as_hits(g), occ);
-    assert!(bad.is_empty(), "{what}: rays {bad:?} disagree");
-    let (mut hits, mut rounding, mut boundary) = (0, 0, 0);
-    for (i, r) in rays.iter().enumerate() {
-        if !(c.t_hit[i].is_finite() && g.t_hit[i].is_finite()) {
-            continue;
-        }
-        hits += 1;
-        let (a, b) = (c.t_hit[i], g.t_hit[i]);
-        if (a - b).abs() > 1e-5 * a.abs().max(b.abs()) {
-            assert!(gridtrace::testing::t_close(r, a, b), "{what} ray {i}: t {a} vs {b}");
-            rounding += 1;
-        }
-        if (c.geometry_ids[i], c.primitive_ids[i]) != (g.geometry_ids[i], g.primitive_ids[i]) {
-            let on_edge = [c, g].iter().any(|h| {
-                gridtrace::testing::on_triangle_boundary(&Hit {
-                    t: h.t_hit[i],
-                    tri: 0,
-                    u: h.primitive_uvs[i][0],
-                    v: h.primitive_uvs[i][1],
-                })
-            });
-            assert!(
-                on_edge,
-                "{what} ray {i}: cpu {} gpu {}",
-                c.geometry_ids[i], g.geometry_ids[i]
-            );
-            boundary += 1;
-        } else {
-            let (nc, ng) = (Vec3::from(c.primitive_normals[i]), Vec3::from(g.primitive_normals[i]));
-            assert!(nc.abs_diff_eq(ng, 1e-5), "{what} ray {i}: normal {nc} vs {ng}");
-        }
-    }
-    [hits, rounding, boundary, excused]
-}
-
 /// The driver's instances answer as the CPU's two levels: masks on the driver's opaque path
 /// (four distinct, exact in its 8 bits) and on its folded one (two random bits of 32 each:
 /// candidates checked on their 32 bits), rays with their own intervals and masks, and rays
@@ -135,6 +79,10 @@ fn driver_instances_equal_cpu_two_levels() {
     let mut rng = Rng::new(33);
     let n = 1500;
     let (rays, t_near, t_far) = rays_with_intervals(&mut rng, n);
+    let ray_list: Vec<Ray> = rays
+        .iter()
+        .map(|q| Ray::new(Vec3::new(q[0], q[1], q[2]), Vec3::new(q[3], q[4], q[5])))
+        .collect();
     let few = |rng: &mut Rng| 1u32 << rng.below(4);
     let many = |rng: &mut Rng| (1u32 << rng.below(32)) | (1u32 << rng.below(32));
     for (name, masks, seed, least) in [
@@ -168,7 +116,7 @@ fn driver_instances_equal_cpu_two_levels() {
                 on_gpu.cast_rays_with(&rays, o).unwrap(),
             );
             let occ = on_gpu.test_occlusions_with(&rays, o).unwrap();
-            let counts = compare(&format!("{name}, {which}"), &rays, &c, &g, &occ);
+            let counts = compare_hits(&format!("{name}, {which}"), &ray_list, &c, &g, &occ);
             for (t, k) in total.iter_mut().zip(counts) {
                 *t += k;
             }

@@ -18,7 +18,7 @@ use gridtrace::accel::{AccelKind, Hit, Ray, TriAccel, brute_force_intersect, bru
 use gridtrace::query::{Backend, QueryOptions};
 use gridtrace::query_scene::{Geometry, INVALID_ID, InstanceOf, PerRay, QueryScene, RayOptions};
 use gridtrace::scene::procedural;
-use gridtrace::testing::{move_step, rebuilt, skip_gpu};
+use gridtrace::testing::{compare_hits, move_step, rebuilt, skip_gpu};
 use gridtrace::util::Rng;
 use rayon::prelude::*;
 
@@ -986,16 +986,6 @@ fn gpu_two_levels_equal_cpu_two_levels() {
         mask: PerRay::All(2 | 4),
         ..Default::default()
     };
-    let as_hits = |h: &gridtrace::query_scene::RayHits| -> Vec<Hit> {
-        (0..h.len())
-            .map(|i| Hit {
-                t: h.t_hit[i],
-                tri: h.primitive_ids[i],
-                u: h.primitive_uvs[i][0],
-                v: h.primitive_uvs[i][1],
-            })
-            .collect()
-    };
     let stand_in = Ray::new(Vec3::ZERO, Vec3::X);
     let ray_list: Vec<Ray> = rays.iter().map(|q| ray(q).unwrap_or(stand_in)).collect();
     for (kind, variants) in [
@@ -1024,7 +1014,7 @@ fn gpu_two_levels_equal_cpu_two_levels() {
         assert_eq!(on_gpu.last_query().device, "gpu", "{name}");
         assert!(on_gpu.gpu_uploads().is_some(), "{name}: not on the GPU's two levels");
         assert_eq!(on_gpu.structure_builds(), 2, "{name}: a merged mesh built");
-        let (mut hits, mut rounding, mut boundary, mut excused) = (0, 0, 0, 0);
+        let mut total = [0; 4];
         for o in [&each, &shared] {
             let (c, g) = (
                 on_cpu.cast_rays_with(&rays, o).unwrap(),
@@ -1037,40 +1027,11 @@ fn gpu_two_levels_equal_cpu_two_levels() {
                 "{}: occlusion",
                 name
             );
-            let (bad, ex) = gridtrace::testing::gpu_disagreements(&ray_list, &as_hits(&c), &as_hits(&g), &occ);
-            assert!(bad.is_empty(), "{}: rays {bad:?} disagree", name);
-            excused += ex;
-            for (i, r) in ray_list.iter().enumerate() {
-                if !(c.t_hit[i].is_finite() && g.t_hit[i].is_finite()) {
-                    continue;
-                }
-                hits += 1;
-                let (a, b) = (c.t_hit[i], g.t_hit[i]);
-                if (a - b).abs() > 1e-5 * a.abs().max(b.abs()) {
-                    assert!(gridtrace::testing::t_close(r, a, b), "{} ray {i}: t {a} vs {b}", name);
-                    rounding += 1;
-                }
-                if (c.geometry_ids[i], c.primitive_ids[i]) != (g.geometry_ids[i], g.primitive_ids[i]) {
-                    let on_edge = [&c, &g].iter().any(|h| {
-                        gridtrace::testing::on_triangle_boundary(&Hit {
-                            t: h.t_hit[i],
-                            tri: 0,
-                            u: h.primitive_uvs[i][0],
-                            v: h.primitive_uvs[i][1],
-                        })
-                    });
-                    assert!(
-                        on_edge,
-                        "{} ray {i}: cpu {:?} gpu {:?}",
-                        name, c.geometry_ids[i], g.geometry_ids[i]
-                    );
-                    boundary += 1;
-                } else {
-                    let (nc, ng) = (Vec3::from(c.primitive_normals[i]), Vec3::from(g.primitive_normals[i]));
-                    assert!(nc.abs_diff_eq(ng, 1e-5), "{} ray {i}: normal", name);
-                }
+            for (t, k) in total.iter_mut().zip(compare_hits(name, &ray_list, &c, &g, &occ)) {
+                *t += k;
             }
         }
+        let [hits, rounding, boundary, excused] = total;
         eprintln!(
             "{}: {hits} hits compared, {rounding} t beyond 1e-5 within rounding, {boundary} other faces on a \
              boundary, {excused} hit-or-miss on a boundary",

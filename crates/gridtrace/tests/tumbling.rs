@@ -12,8 +12,8 @@ use gridtrace::query_scene::{INVALID_ID, RayHits};
 use gridtrace::render::differing_pixels;
 use gridtrace::scene::procedural::torus_knot;
 use gridtrace::scene::tumbling::Tumbling;
-use gridtrace::testing::{on_triangle_boundary, skip_gpu, t_close};
-use gridtrace::{AccelKind, Hit, QueryScene, Ray};
+use gridtrace::testing::{on_triangle_boundary, ray_hit, skip_gpu, t_close};
+use gridtrace::{AccelKind, QueryScene, Ray};
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -42,15 +42,6 @@ fn as_instances(flat: &RayHits, faces: usize) -> RayHits {
     h
 }
 
-fn hit(h: &RayHits, i: usize) -> Hit {
-    Hit {
-        t: h.t_hit[i],
-        tri: h.primitive_ids[i],
-        u: h.primitive_uvs[i][0],
-        v: h.primitive_uvs[i][1],
-    }
-}
-
 /// What a frame's comparison found.
 #[derive(Default, Debug)]
 struct Tally {
@@ -68,7 +59,7 @@ struct Tally {
 fn compare(rays: &[[f32; 6]], two: &RayHits, flat: &RayHits, what: &str) -> Tally {
     let mut tally = Tally::default();
     for (i, q) in rays.iter().enumerate() {
-        let (a, b) = (hit(two, i), hit(flat, i));
+        let (a, b) = (ray_hit(two, i), ray_hit(flat, i));
         let same = (two.geometry_ids[i], two.primitive_ids[i]) == (flat.geometry_ids[i], flat.primitive_ids[i]);
         if same && two.geometry_ids[i] == INVALID_ID {
             continue;

@@ -1,11 +1,13 @@
 //! The two-level tests' scene: many instances of two small meshes, each under its own random
 //! transform and mask, so that the CPU's two levels, the GPU's and the driver's instances are
-//! held to each other on the same draws.
+//! held to each other on the same draws (`compare_hits`).
 
 use glam::{Mat4, Quat, Vec3};
 
+use super::{gpu_disagreements, on_triangle_boundary, t_close};
+use crate::accel::{Hit, Ray};
 use crate::query::QueryOptions;
-use crate::query_scene::{InstanceOf, QueryScene};
+use crate::query_scene::{InstanceOf, QueryScene, RayHits};
 use crate::scene::procedural;
 use crate::util::Rng;
 
@@ -74,4 +76,51 @@ pub fn move_step(scene: &mut QueryScene, ids: &[u32], step: u32) {
         .collect();
     scene.set_transforms(ids, &moved).unwrap();
     scene.set_mask(ids[3], 0).unwrap();
+}
+
+/// Ray `i`'s answer in a batch as a `Hit` (`t`, the face within its geometry, `u`, `v`; a miss
+/// `tri = u32::MAX`, as `INVALID_ID`).
+pub fn ray_hit(h: &RayHits, i: usize) -> Hit {
+    Hit {
+        t: h.t_hit[i],
+        tri: h.primitive_ids[i],
+        u: h.primitive_uvs[i][0],
+        v: h.primitive_uvs[i][1],
+    }
+}
+
+/// The GPU's answers (`g`, `occ`) to `rays` against the CPU's (`c`): hit or miss as
+/// `gpu_disagreements` allows, t within 1e-5 relative or the two triangle tests' rounding
+/// (`t_close`), the same instance and face or else a face's boundary, and the same normal.
+/// Returns (hits compared, t within rounding only, other faces on a boundary, hit-or-miss
+/// excused), for the caller to bound.
+pub fn compare_hits(what: &str, rays: &[Ray], c: &RayHits, g: &RayHits, occ: &[bool]) -> [usize; 4] {
+    let as_hits = |h: &RayHits| -> Vec<Hit> { (0..h.len()).map(|i| ray_hit(h, i)).collect() };
+    let (bad, excused) = gpu_disagreements(rays, &as_hits(c), &as_hits(g), occ);
+    assert!(bad.is_empty(), "{what}: rays {bad:?} disagree");
+    let (mut hits, mut rounding, mut boundary) = (0, 0, 0);
+    for (i, r) in rays.iter().enumerate() {
+        if !(c.t_hit[i].is_finite() && g.t_hit[i].is_finite()) {
+            continue;
+        }
+        hits += 1;
+        let (a, b) = (c.t_hit[i], g.t_hit[i]);
+        if (a - b).abs() > 1e-5 * a.abs().max(b.abs()) {
+            assert!(t_close(r, a, b), "{what} ray {i}: t {a} vs {b}");
+            rounding += 1;
+        }
+        if (c.geometry_ids[i], c.primitive_ids[i]) != (g.geometry_ids[i], g.primitive_ids[i]) {
+            let on_edge = [c, g].iter().any(|h| on_triangle_boundary(&ray_hit(h, i)));
+            assert!(
+                on_edge,
+                "{what} ray {i}: cpu {} gpu {}",
+                c.geometry_ids[i], g.geometry_ids[i]
+            );
+            boundary += 1;
+        } else {
+            let (nc, ng) = (Vec3::from(c.primitive_normals[i]), Vec3::from(g.primitive_normals[i]));
+            assert!(nc.abs_diff_eq(ng, 1e-5), "{what} ray {i}: normal {nc} vs {ng}");
+        }
+    }
+    [hits, rounding, boundary, excused]
 }

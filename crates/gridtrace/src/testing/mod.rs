@@ -12,7 +12,7 @@ mod instances;
 mod intervals;
 mod shapes;
 pub use bad_input::{BadFile, bad_input_corpus};
-pub use instances::{instanced_scene, move_step, rebuilt};
+pub use instances::{compare_hits, instanced_scene, move_step, ray_hit, rebuilt};
 pub use intervals::{WithInterval, within, within_each};
 pub use shapes::{cuboid, open3d_cube};
 
