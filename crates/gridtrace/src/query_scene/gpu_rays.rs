@@ -143,8 +143,7 @@ impl GpuTwoLevel {
         match (placements, self.driver.as_mut()) {
             (Some(p), Some(d)) => {
                 // By bytes: the table's words are no floats (an all-ones mask reads as NaN).
-                let bytes = |t: &TopLevel| bytemuck::cast_slice::<_, u8>(&t.recs).to_vec();
-                if bytes(&top) != bytes(&self.top) {
+                if bytemuck::cast_slice::<_, u8>(&top.recs) != bytemuck::cast_slice::<_, u8>(&self.top.recs) {
                     self.renderer.set_top_level(&top)?;
                 }
                 self.renderer.rebuild_tlas(|ctx, tlas| d.set_instances(ctx, tlas, &p))?;
