@@ -27,7 +27,7 @@ use super::masks::{CLASSES, hardware_masks};
 use crate::accel::{AccelKind, TriAccel};
 use crate::gpu::context::GpuContext;
 use crate::gpu::layout::GpuTri;
-use crate::gpu::walks::two_level::records::{BottomLevels, Instance, TopLevel, TopRec};
+use crate::gpu::walks::two_level::records::{BottomLevels, Instance, TopLevel, TopRec, number_answers};
 use crate::gpu::walks::{DeviceStructure, WalkSpec};
 use crate::{Error, Result};
 
@@ -70,25 +70,17 @@ pub fn instance_table(instances: &[Instance], bottoms: &BottomLevels) -> Result<
     let mut words = vec![0u32; DRIVER_FIRST_RECORD as usize];
     words[..CLASSES].copy_from_slice(&hw.classes);
     words[DRIVER_EXACT_WORD as usize] = hw.exact as u32;
-    let (mut first_answer, mut placements) = (Vec::with_capacity(instances.len()), Vec::new());
-    let mut next = 0u32;
-    for (k, inst) in instances.iter().enumerate() {
-        words.extend([inst.mask, next]);
-        first_answer.push(next);
+    let (first_answer, answers) = number_answers(instances.iter().map(|i| i.mesh), bottoms)?;
+    let mut placements = Vec::with_capacity(instances.len());
+    for ((inst, &first), &mask) in instances.iter().zip(&first_answer).zip(&hw.instance) {
+        words.extend([inst.mask, first]);
         placements.push(Placement {
             // The transform's inverse of the kept inverse: within rounding of the geometry's
             // own (the software walks carry rays by the kept inverse itself).
             to_world: inst.to_local.inverse(),
             mesh: inst.mesh,
-            mask: hw.instance[k],
+            mask,
         });
-        // MISS (u32::MAX) is no triangle's number.
-        next = next
-            .checked_add(bottoms.tri_counts[inst.mesh as usize])
-            .filter(|&x| x < u32::MAX)
-            .ok_or_else(|| {
-                Error::InvalidInput("the scene's instances have more than 2^32 - 2 triangles together".into())
-            })?;
     }
     let per_rec = size_of::<TopRec>() / 4;
     words.resize(words.len().div_ceil(per_rec) * per_rec, 0);
@@ -97,7 +89,7 @@ pub fn instance_table(instances: &[Instance], bottoms: &BottomLevels) -> Result<
         nodes: 0,
         order: (0..instances.len() as u32).collect(),
         first_answer,
-        answers: next,
+        answers,
     };
     Ok((top, placements))
 }

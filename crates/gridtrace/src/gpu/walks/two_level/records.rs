@@ -102,12 +102,10 @@ impl TopLevel {
         let n = u32::try_from(nodes.len()).map_err(|_| Error::InvalidInput("too many instances".into()))?;
         binary::offset_entries(&mut nodes, 0, n)?;
         let mut recs: Vec<TopRec> = nodes.iter().map(|&node| bytemuck::cast(node)).collect();
-        let mut first_answer = Vec::with_capacity(tree.prims.len());
-        let mut next = 0u32;
-        for &i in &tree.prims {
+        let (first_answer, answers) = number_answers(tree.prims.iter().map(|&i| instances[i as usize].mesh), bottoms)?;
+        for (&i, &first_answer) in tree.prims.iter().zip(&first_answer) {
             let inst = &instances[i as usize];
-            let m = inst.mesh as usize;
-            let [first, count] = bottoms.headers[m];
+            let [first, count] = bottoms.headers[inst.mesh as usize];
             let (x, y, z, t) = (
                 inst.to_local.matrix3.x_axis,
                 inst.to_local.matrix3.y_axis,
@@ -118,23 +116,15 @@ impl TopLevel {
                 a: [x.x, x.y, x.z, t.x],
                 b: [y.x, y.y, y.z, t.y],
                 c: [z.x, z.y, z.z, t.z],
-                w: [inst.mask, first, count, next],
+                w: [inst.mask, first, count, first_answer],
             });
-            first_answer.push(next);
-            // MISS (u32::MAX) is no triangle's number.
-            next = next
-                .checked_add(bottoms.tri_counts[m])
-                .filter(|&x| x < u32::MAX)
-                .ok_or_else(|| {
-                    Error::InvalidInput("the scene's instances have more than 2^32 - 2 triangles together".into())
-                })?;
         }
         Ok(TopLevel {
             recs,
             nodes: nodes.len(),
             order: tree.prims.clone(),
             first_answer,
-            answers: next,
+            answers,
         })
     }
 
@@ -149,4 +139,23 @@ impl TopLevel {
     pub fn bytes(&self) -> u64 {
         size_of_val(self.recs.as_slice()) as u64
     }
+}
+
+/// The answers' numbering of the records whose meshes are `meshes`, in record order: each
+/// record's first triangle (its mesh's triangles numbered after the previous record's), and how
+/// many are numbered in all (`TopLevel::first_answer`, `answers`).
+pub fn number_answers(meshes: impl Iterator<Item = u32>, bottoms: &BottomLevels) -> Result<(Vec<u32>, u32)> {
+    let mut first_answer = Vec::with_capacity(meshes.size_hint().0);
+    let mut next = 0u32;
+    for m in meshes {
+        first_answer.push(next);
+        // MISS (u32::MAX) is no triangle's number.
+        next = next
+            .checked_add(bottoms.tri_counts[m as usize])
+            .filter(|&x| x < u32::MAX)
+            .ok_or_else(|| {
+                Error::InvalidInput("the scene's instances have more than 2^32 - 2 triangles together".into())
+            })?;
+    }
+    Ok((first_answer, next))
 }
